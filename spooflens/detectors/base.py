@@ -1,0 +1,76 @@
+"""What every detector returns: statistic series, alarm intervals and anything worth drawing."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """One alarm interval. Times in seconds since the log start."""
+
+    start_s: float
+    end_s: float
+    peak_statistic: float
+    peak_s: float
+    onset_s: float | None = None  # the detector's estimate of when the attack began
+    onset_interval_s: tuple[float, float] | None = None  # credible/confidence interval for the onset
+
+
+@dataclass(frozen=True)
+class Series:
+    """A statistic over time, with its decision threshold when it has one."""
+
+    name: str
+    t: FloatArray
+    values: FloatArray  # (N,) or (N, k) for k named components
+    unit: str = ""
+    threshold: float | None = None
+    components: tuple[str, ...] = ()
+
+
+@dataclass
+class DetectorResult:
+    name: str
+    ran: bool
+    reason: str = ""  # why it did not run, or what it assumed
+    alarms: list[Alarm] = field(default_factory=list)
+    series: list[Series] = field(default_factory=list)
+    extras: dict[str, object] = field(default_factory=dict)  # curves, trajectories, tables for recording
+
+    @classmethod
+    def skipped(cls, name: str, reason: str) -> DetectorResult:
+        return cls(name=name, ran=False, reason=reason)
+
+
+def alarm_intervals(
+    t: FloatArray, statistic: FloatArray, alarm: NDArray[np.bool_], merge_gap_s: float = 0.0
+) -> list[Alarm]:
+    """Contiguous runs of `alarm` as intervals; runs closer than `merge_gap_s` are merged.
+
+    An interval ends at the last alarmed epoch; the peak is the largest statistic inside it.
+    """
+    t = np.asarray(t, dtype=float)
+    a = np.asarray(alarm, dtype=bool)
+    if not a.any():
+        return []
+    edges = np.diff(np.concatenate([[0], a.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1) - 1
+    runs: list[tuple[int, int]] = []
+    for s, e in zip(starts, stops, strict=True):
+        if runs and t[s] - t[runs[-1][1]] <= merge_gap_s:
+            runs[-1] = (runs[-1][0], int(e))
+        else:
+            runs.append((int(s), int(e)))
+    out = []
+    for s, e in runs:
+        seg = np.asarray(statistic[s : e + 1], dtype=float)
+        k = s + int(np.nanargmax(seg)) if np.isfinite(seg).any() else s
+        out.append(Alarm(float(t[s]), float(t[e]), float(statistic[k]), float(t[k])))
+    return out

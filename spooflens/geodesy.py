@@ -1,0 +1,103 @@
+"""WGS84 geodesy: frame conversions through pymap3d, curvature radii and normal gravity.
+
+Angles in radians unless a name says `_deg`. Local-level frame is ENU throughout spooflens.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pymap3d
+from numpy.typing import ArrayLike, NDArray
+
+A_M = 6378137.0  # WGS84 semi-major axis
+F = 1.0 / 298.257223563
+E2 = F * (2.0 - F)  # first eccentricity squared
+B_M = A_M * (1.0 - F)
+OMEGA_IE = 7.292115e-5  # Earth rotation rate, rad/s
+GM = 3.986004418e14  # m^3/s^2
+C_MPS = 299792458.0
+
+# Somigliana normal gravity constants (WGS84)
+_GAMMA_E = 9.7803253359
+_K_SOMIGLIANA = 0.00193185265241
+_M_GEO = OMEGA_IE**2 * A_M**2 * B_M / GM
+
+FloatArray = NDArray[np.float64]
+
+
+def radii(lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Meridian (R_M) and transverse (R_N) radii of curvature at geodetic latitude `lat` (rad)."""
+    s2 = np.sin(np.asarray(lat, dtype=float)) ** 2
+    w = np.sqrt(1.0 - E2 * s2)
+    return A_M * (1.0 - E2) / w**3, A_M / w
+
+
+def normal_gravity(lat: ArrayLike, h: ArrayLike) -> FloatArray:
+    """Magnitude of WGS84 normal gravity (m/s^2) at latitude `lat` (rad) and height `h` (m).
+
+    Somigliana on the ellipsoid with the second-order free-air correction (NIMA TR8350.2 eq. 4-3).
+    """
+    lat = np.asarray(lat, dtype=float)
+    h = np.asarray(h, dtype=float)
+    s2 = np.sin(lat) ** 2
+    g0 = _GAMMA_E * (1.0 + _K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2 * s2)
+    return np.asarray(g0 * (1.0 - 2.0 / A_M * (1.0 + F + _M_GEO - 2.0 * F * s2) * h + 3.0 / A_M**2 * h**2), dtype=float)
+
+
+def earth_rate_enu(lat: ArrayLike) -> FloatArray:
+    """Earth rotation vector in the local ENU frame, shape (..., 3)."""
+    lat = np.asarray(lat, dtype=float)
+    return np.stack([np.zeros_like(lat), OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat)], axis=-1)
+
+
+def transport_rate_enu(lat: ArrayLike, h: ArrayLike, v_enu: ArrayLike) -> FloatArray:
+    """Rotation of ENU relative to the Earth, omega_en^n = [-vN/(RM+h), vE/(RN+h), vE tanL/(RN+h)]."""
+    lat = np.asarray(lat, dtype=float)
+    h = np.asarray(h, dtype=float)
+    v = np.asarray(v_enu, dtype=float)
+    rm, rn = radii(lat)
+    return np.stack([-v[..., 1] / (rm + h), v[..., 0] / (rn + h), v[..., 0] * np.tan(lat) / (rn + h)], axis=-1)
+
+
+def geodetic_to_enu(
+    lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike, lat0_deg: float, lon0_deg: float, h0: float
+) -> FloatArray:
+    """Geodetic (deg, m) to local ENU metres about (lat0, lon0, h0); shape (..., 3)."""
+    e, n, u = pymap3d.geodetic2enu(
+        np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(h, float), lat0_deg, lon0_deg, h0
+    )
+    return np.stack([np.asarray(e), np.asarray(n), np.asarray(u)], axis=-1)
+
+
+def enu_to_geodetic(
+    enu: ArrayLike, lat0_deg: float, lon0_deg: float, h0: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Local ENU metres to geodetic latitude, longitude (deg) and height (m)."""
+    enu = np.asarray(enu, dtype=float)
+    lat, lon, h = pymap3d.enu2geodetic(enu[..., 0], enu[..., 1], enu[..., 2], lat0_deg, lon0_deg, h0)
+    return np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float)
+
+
+def geodetic_to_ecef(lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike) -> FloatArray:
+    x, y, z = pymap3d.geodetic2ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(h, float))
+    return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=-1)
+
+
+def ecef_to_geodetic(xyz: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    xyz = np.asarray(xyz, dtype=float)
+    lat, lon, h = pymap3d.ecef2geodetic(xyz[..., 0], xyz[..., 1], xyz[..., 2])
+    return np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float)
+
+
+def enu_rotation(lat_deg: float, lon_deg: float) -> FloatArray:
+    """Rotation matrix taking ECEF vectors into ENU at (lat, lon)."""
+    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+    sl, cl, sp, cp = np.sin(lon), np.cos(lon), np.sin(lat), np.cos(lat)
+    return np.array([[-sl, cl, 0.0], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]])
+
+
+def metres_per_radian(lat: ArrayLike, h: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Metres per radian of latitude and of longitude at (lat, h): (RM+h, (RN+h) cos lat)."""
+    lat = np.asarray(lat, dtype=float)
+    rm, rn = radii(lat)
+    return rm + h, (rn + h) * np.cos(lat)

@@ -1,0 +1,234 @@
+"""The epoch-table schema: every frame's columns, units, dtypes and frames, written once.
+
+Readers must hand over frames that meet this schema; `EpochTable.validate` checks it at the reader
+boundary. Column names carry their unit (gnss_lib_py style) so a value never travels without it.
+The README's schema section is generated from this module (`spooflens schema`), so the two cannot
+drift apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import pandas as pd
+
+
+@dataclass(frozen=True)
+class Column:
+    name: str
+    dtype: str
+    unit: str
+    description: str
+    required: bool = True
+
+
+class FixType(IntEnum):
+    """Fix quality, mapped from each format's own codes (NavSatStatus, PX4 fix_type, CSV)."""
+
+    UNKNOWN = -2
+    NO_FIX = -1
+    FIX_2D = 1
+    FIX_3D = 2
+    SBAS = 3
+    DGNSS = 4
+    RTK_FLOAT = 5
+    RTK_FIXED = 6
+
+
+class SpoofingFlag(IntEnum):
+    """Receiver's own spoofing indication, gnss_lib_py style fault flag."""
+
+    CLEAR = 0
+    INDICATED = 1
+    UNKNOWN = 2
+
+
+T = Column("t_s", "float64", "s", "time since the log start (one time base for every frame)")
+
+IMU_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("imu_id", "string", "-", "IMU stream id (topic or sensor name)"),
+    Column("ax_mps2", "float64", "m/s^2", "specific force, body x"),
+    Column("ay_mps2", "float64", "m/s^2", "specific force, body y"),
+    Column("az_mps2", "float64", "m/s^2", "specific force, body z"),
+    Column("wx_radps", "float64", "rad/s", "angular rate, body x"),
+    Column("wy_radps", "float64", "rad/s", "angular rate, body y"),
+    Column("wz_radps", "float64", "rad/s", "angular rate, body z"),
+    Column("qw", "float64", "-", "orientation body->local-level quaternion w, NaN if absent", False),
+    Column("qx", "float64", "-", "orientation quaternion x, NaN if absent", False),
+    Column("qy", "float64", "-", "orientation quaternion y, NaN if absent", False),
+    Column("qz", "float64", "-", "orientation quaternion z, NaN if absent", False),
+)
+
+FIX_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("receiver_id", "string", "-", "receiver id (topic or CSV receiver column)"),
+    Column("lat_deg", "float64", "deg", "geodetic latitude, WGS84"),
+    Column("lon_deg", "float64", "deg", "geodetic longitude, WGS84"),
+    Column("height_m", "float64", "m", "height above the WGS84 ellipsoid"),
+    Column("vel_e_mps", "float64", "m/s", "velocity east (ENU), NaN if the log has none", False),
+    Column("vel_n_mps", "float64", "m/s", "velocity north (ENU), NaN if absent", False),
+    Column("vel_u_mps", "float64", "m/s", "velocity up (ENU), NaN if absent", False),
+    Column("h_acc_m", "float64", "m", "reported horizontal accuracy (1 sigma), NaN if absent", False),
+    Column("v_acc_m", "float64", "m", "reported vertical accuracy (1 sigma), NaN if absent", False),
+    Column("vel_acc_mps", "float64", "m/s", "reported speed accuracy (1 sigma), NaN if absent", False),
+    Column("sats_used", "float64", "-", "satellites used in the fix, NaN if absent", False),
+    Column("fix_type", "int8", "FixType", "fix quality (spooflens.schema.FixType)"),
+    Column("spoofing_flag", "int8", "SpoofingFlag", "receiver spoofing indication", False),
+    Column("jamming_indicator", "float64", "-", "receiver jamming indicator (raw), NaN if absent", False),
+)
+
+OBSERVATION_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("receiver_id", "string", "-", "receiver id"),
+    Column("sv_id", "string", "-", "satellite id, RINEX style (G05, E11, C21, R07)"),
+    Column("pseudorange_m", "float64", "m", "pseudorange"),
+    Column("pseudorange_rate_mps", "float64", "m/s", "pseudorange rate, NaN if absent", False),
+    Column("doppler_hz", "float64", "Hz", "Doppler, NaN if absent", False),
+    Column("carrier_phase_cycles", "float64", "cycles", "carrier phase, NaN if absent", False),
+    Column("carrier_freq_hz", "float64", "Hz", "carrier frequency, NaN if absent", False),
+    Column("cn0_dbhz", "float64", "dB-Hz", "carrier to noise density, NaN if absent", False),
+    Column("sv_x_m", "float64", "m", "satellite ECEF x at transmission, NaN if unknown", False),
+    Column("sv_y_m", "float64", "m", "satellite ECEF y, NaN if unknown", False),
+    Column("sv_z_m", "float64", "m", "satellite ECEF z, NaN if unknown", False),
+    Column("sv_vx_mps", "float64", "m/s", "satellite ECEF velocity x, NaN if unknown", False),
+    Column("sv_vy_mps", "float64", "m/s", "satellite ECEF velocity y, NaN if unknown", False),
+    Column("sv_vz_mps", "float64", "m/s", "satellite ECEF velocity z, NaN if unknown", False),
+    Column("sv_clock_bias_m", "float64", "m", "satellite clock bias times c, NaN if unknown", False),
+    Column("sv_clock_drift_mps", "float64", "m/s", "satellite clock drift times c, NaN if unknown", False),
+)
+
+TRUTH_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("lat_deg", "float64", "deg", "true geodetic latitude"),
+    Column("lon_deg", "float64", "deg", "true geodetic longitude"),
+    Column("height_m", "float64", "m", "true ellipsoidal height"),
+    Column("vel_e_mps", "float64", "m/s", "true velocity east", False),
+    Column("vel_n_mps", "float64", "m/s", "true velocity north", False),
+    Column("vel_u_mps", "float64", "m/s", "true velocity up", False),
+    Column("roll_rad", "float64", "rad", "true roll (body FLU w.r.t. ENU), NaN if unknown", False),
+    Column("pitch_rad", "float64", "rad", "true pitch, NaN if unknown", False),
+    Column("yaw_rad", "float64", "rad", "true yaw (ENU, from east, counter-clockwise), NaN if unknown", False),
+)
+
+ODOMETRY_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("odometry_id", "string", "-", "odometry stream id"),
+    Column("x_m", "float64", "m", "position x in the odometry frame"),
+    Column("y_m", "float64", "m", "position y in the odometry frame"),
+    Column("z_m", "float64", "m", "position z in the odometry frame"),
+    Column("vx_mps", "float64", "m/s", "linear velocity x in the child (body) frame"),
+    Column("vy_mps", "float64", "m/s", "linear velocity y in the child frame"),
+    Column("vz_mps", "float64", "m/s", "linear velocity z in the child frame"),
+    Column("wz_radps", "float64", "rad/s", "yaw rate in the child frame"),
+)
+
+FRAMES: dict[str, tuple[Column, ...]] = {
+    "imu": IMU_COLUMNS,
+    "fixes": FIX_COLUMNS,
+    "observations": OBSERVATION_COLUMNS,
+    "truth": TRUTH_COLUMNS,
+    "odometry": ODOMETRY_COLUMNS,
+}
+
+# Which column names the stream a row belongs to, per frame (truth has one stream).
+STREAM_KEY: dict[str, str | None] = {
+    "imu": "imu_id",
+    "fixes": "receiver_id",
+    "observations": "receiver_id",
+    "truth": None,
+    "odometry": "odometry_id",
+}
+
+# Body-frame axis conventions an IMU stream may declare.
+BODY_FRAMES = {
+    "FLU": "x forward, y left, z up (ROS REP-103)",
+    "FRD": "x forward, y right, z down (PX4, aerospace)",
+    "RFU": "x right, y forward, z up (seed 000)",
+}
+
+_MISSING = {"float64": np.nan, "int8": SpoofingFlag.UNKNOWN, "string": pd.NA}
+
+
+def empty_frame(frame: str) -> pd.DataFrame:
+    """A frame with the schema's columns and dtypes and no rows."""
+    return pd.DataFrame({c.name: pd.Series(dtype=c.dtype) for c in FRAMES[frame]})
+
+
+def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> pd.DataFrame:
+    """Build a frame from arrays: schema order and dtypes, absent optional columns filled.
+
+    Absent optional floats become NaN, an absent spoofing flag UNKNOWN. Unknown names are an error,
+    so a reader's typo cannot silently produce a column nobody reads.
+    """
+    spec = FRAMES[frame]
+    known = {c.name for c in spec}
+    unknown = sorted(set(columns) - known)
+    if unknown:
+        raise KeyError(f"{frame}: unknown columns {unknown}; schema has {sorted(known)}")
+    if n is None:
+        n = len(next(iter(columns.values()))) if columns else 0
+    data: dict[str, pd.Series] = {}
+    for col in spec:
+        if col.name in columns:
+            data[col.name] = pd.Series(columns[col.name]).astype(col.dtype)
+        elif col.required:
+            raise KeyError(f"{frame}: required column {col.name!r} missing")
+        else:
+            fill = _MISSING[col.dtype]
+            data[col.name] = pd.Series([fill] * n if col.dtype == "string" else np.full(n, fill)).astype(col.dtype)
+    return pd.DataFrame(data)
+
+
+def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:
+    """Every way `df` breaks the schema of `frame`, all at once (empty list if none)."""
+    problems: list[str] = []
+    spec = FRAMES[frame]
+    names = [c.name for c in spec]
+    missing = [n for n in names if n not in df.columns]
+    extra = [n for n in df.columns if n not in names]
+    if missing:
+        problems.append(f"{frame}: missing columns {missing}")
+    if extra:
+        problems.append(f"{frame}: unexpected columns {extra}")
+    for col in spec:
+        if col.name not in df.columns:
+            continue
+        if str(df[col.name].dtype) != col.dtype and not (
+            col.dtype == "string" and isinstance(df[col.name].dtype, pd.StringDtype)
+        ):
+            problems.append(f"{frame}.{col.name}: dtype {df[col.name].dtype}, schema says {col.dtype}")
+    if "t_s" in df.columns and len(df):
+        t = df["t_s"].to_numpy(dtype=float)
+        if not np.all(np.isfinite(t)):
+            problems.append(f"{frame}.t_s: {int((~np.isfinite(t)).sum())} non-finite times")
+        key = STREAM_KEY[frame]
+        groups = (
+            [t]
+            if key is None or key not in df.columns
+            else [g["t_s"].to_numpy(dtype=float) for _, g in df.groupby(key, sort=False)]
+        )
+        if any(np.any(np.diff(g) < 0) for g in groups):
+            problems.append(f"{frame}.t_s: not increasing within a stream")
+    if frame in ("fixes", "truth") and {"lat_deg", "lon_deg"} <= set(df.columns) and len(df):
+        lat = df["lat_deg"].to_numpy(dtype=float)
+        lon = df["lon_deg"].to_numpy(dtype=float)
+        if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
+            problems.append(f"{frame}: latitude/longitude out of range (radians given as degrees?)")
+        if np.any(~np.isfinite(lat)) or np.any(~np.isfinite(lon)):
+            problems.append(f"{frame}: NaN latitude/longitude rows (readers drop them and report)")
+    return problems
+
+
+def schema_markdown() -> str:
+    """The schema as Markdown tables, for the README."""
+    lines: list[str] = []
+    for frame, spec in FRAMES.items():
+        lines += [f"#### `{frame}`", "", "| column | dtype | unit | meaning |", "|---|---|---|---|"]
+        for c in spec:
+            opt = "" if c.required else " (optional)"
+            lines.append(f"| `{c.name}` | {c.dtype} | {c.unit} | {c.description}{opt} |")
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,80 @@
+"""The epoch table's time base, repairs and schema check."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from spooflens.epoch_table import StreamInfo, build_table
+from spooflens.errors import SchemaError
+from spooflens.schema import FRAMES, empty_frame, make_frame, schema_markdown
+
+
+def _fixes(t_ns: list[int], lat: list[float]) -> pd.DataFrame:
+    n = len(t_ns)
+    return pd.DataFrame(
+        {
+            "t_ns": np.array(t_ns, dtype=np.int64),
+            "receiver_id": ["/fix"] * n,
+            "lat_deg": lat,
+            "lon_deg": [-71.0] * n,
+            "height_m": [10.0] * n,
+            "fix_type": np.full(n, 2, dtype=np.int8),
+        }
+    )
+
+
+def test_time_base_starts_at_the_earliest_stamp_and_maps_back() -> None:
+    t0 = 1_432_235_497_000_000_000
+    table = build_table(
+        Path("x.bag"),
+        "test",
+        "unix",
+        {"fixes": _fixes([t0 + 10**9, t0 + 2 * 10**9], [42.0, 42.1])},
+        [StreamInfo("fix", "/fix", "/fix", "sensor_msgs/NavSatFix", 2)],
+        [],
+        t0_ns=t0,
+    )
+    assert table.fixes["t_s"].tolist() == [1.0, 2.0]
+    assert int(table.absolute_ns(2.0)) == t0 + 2 * 10**9
+    assert table.absolute_iso(0.0).startswith("2015-05-21T19:11:37")
+    assert table.streams[0].count == 2 and table.streams[0].rate_hz == pytest.approx(1.0)
+
+
+def test_backwards_time_duplicates_and_empty_fixes_are_repaired_and_reported() -> None:
+    df = _fixes([3, 1, 2, 2, 4], [42.0, 42.1, float("nan"), 42.2, 0.0])
+    df.loc[4, "lon_deg"] = 0.0
+    table = build_table(Path("x.csv"), "test", "relative", {"fixes": df}, [], [])
+    assert table.fixes["t_s"].tolist() == [0.0, 1e-9, 2e-9]
+    reasons = " | ".join(str(s) for s in table.skipped)
+    assert "backwards" in reasons and "duplicate" in reasons and "NaN or zero" in reasons
+
+
+def test_schema_check_names_every_problem() -> None:
+    table = build_table(Path("x"), "test", "relative", {}, [], [])
+    table.fixes = make_frame(
+        "fixes",
+        {"t_s": [0.0], "receiver_id": ["a"], "lat_deg": [1.2], "lon_deg": [300.0], "height_m": [0.0], "fix_type": [2]},
+    )
+    table.imu = empty_frame("imu").drop(columns=["ax_mps2"])
+    with pytest.raises(SchemaError, match=r"imu: missing columns \['ax_mps2'\].*out of range"):
+        table.validate()
+
+
+def test_make_frame_rejects_unknown_columns_and_fills_optional_ones() -> None:
+    with pytest.raises(KeyError, match="unknown columns"):
+        make_frame("imu", {"t_s": [0.0], "acc_x": [1.0]})
+    df = make_frame(
+        "fixes",
+        {"t_s": [0.0], "receiver_id": ["a"], "lat_deg": [1.0], "lon_deg": [2.0], "height_m": [3.0], "fix_type": [2]},
+    )
+    assert list(df.columns) == [c.name for c in FRAMES["fixes"]]
+    assert np.isnan(df["vel_e_mps"].iloc[0]) and int(df["spoofing_flag"].iloc[0]) == 2
+
+
+def test_schema_markdown_lists_every_column() -> None:
+    md = schema_markdown()
+    assert all(f"`{c.name}`" in md for spec in FRAMES.values() for c in spec)
