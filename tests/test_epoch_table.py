@@ -45,10 +45,11 @@ def test_time_base_starts_at_the_earliest_stamp_and_maps_back() -> None:
 
 
 def test_backwards_time_duplicates_and_empty_fixes_are_repaired_and_reported() -> None:
-    df = _fixes([3, 1, 2, 2, 4], [42.0, 42.1, float("nan"), 42.2, 0.0])
-    df.loc[4, "lon_deg"] = 0.0
+    df = _fixes([3, 1, 2, 2, 5, 5, 6], [42.0, 42.1, float("nan"), 42.2, 42.3, 42.4, 0.0])
+    df.loc[6, "lon_deg"] = 0.0
     table = build_table(Path("x.csv"), "test", "relative", {"fixes": df}, [], [])
-    assert table.fixes["t_s"].tolist() == [0.0, 1e-9, 2e-9]
+    assert table.fixes["t_s"].tolist() == [0.0, 1e-9, 2e-9, 4e-9]
+    assert table.fixes["lat_deg"].tolist() == [42.1, 42.2, 42.0, 42.3]
     reasons = " | ".join(str(s) for s in table.skipped)
     assert "backwards" in reasons and "duplicate" in reasons and "NaN or zero" in reasons
 
