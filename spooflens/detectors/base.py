@@ -34,6 +34,28 @@ class Series:
     components: tuple[str, ...] = ()
 
 
+@dataclass(frozen=True)
+class Curve:
+    """A statistic over something other than time, e.g. l_N(m) over candidate onset times m."""
+
+    name: str
+    x: FloatArray
+    y: FloatArray
+    x_label: str  # e.g. "candidate onset (s)"
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class Track:
+    """A trajectory a detector reconstructed (e.g. the INS solution with spoofed GNSS excluded)."""
+
+    name: str
+    t: FloatArray
+    lat_deg: FloatArray
+    lon_deg: FloatArray
+    height_m: FloatArray
+
+
 @dataclass
 class DetectorResult:
     name: str
@@ -41,7 +63,9 @@ class DetectorResult:
     reason: str = ""  # why it did not run, or what it assumed
     alarms: list[Alarm] = field(default_factory=list)
     series: list[Series] = field(default_factory=list)
-    extras: dict[str, object] = field(default_factory=dict)  # curves, trajectories, tables for recording
+    curves: list[Curve] = field(default_factory=list)
+    tracks: list[Track] = field(default_factory=list)
+    extras: dict[str, object] = field(default_factory=dict)  # JSON-able facts for the summary
 
     @classmethod
     def skipped(cls, name: str, reason: str) -> DetectorResult:
