@@ -16,6 +16,47 @@ import pandas as pd
 from spooflens.errors import SchemaError
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
 
+GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
+# GPS time (ns since the GPS epoch) at which each leap second took effect, and GPS-UTC after it.
+_LEAP_SECONDS = [
+    (ts, n)
+    for ts, n in zip(
+        np.array(
+            [
+                46828800,
+                78364801,
+                109900802,
+                173059203,
+                252028804,
+                315187205,
+                346723206,
+                393984007,
+                425520008,
+                457056009,
+                504489610,
+                551750411,
+                599184012,
+                820108813,
+                914803214,
+                1025136015,
+                1119744016,
+                1167264017,
+            ],
+            dtype=np.int64,
+        )
+        * 1_000_000_000,
+        range(1, 19),
+        strict=True,
+    )
+]
+
+
+def gps_utc_offset_ns(gps_ns: np.ndarray) -> np.ndarray:
+    """GPS minus UTC (leap seconds) at the given GPS times, in ns."""
+    starts = np.array([ts for ts, _ in _LEAP_SECONDS], dtype=np.int64)
+    return np.searchsorted(starts, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * 1_000_000_000
+
+
 TIME_REFERENCES = {
     "unix": "UTC seconds since 1970 (ROS stamps, MCAP log times)",
     "gps": "GPS time, seconds since 1980-01-06",
@@ -111,16 +152,21 @@ class EpochTable:
         """Map table times back to the log's own clock (integer nanoseconds)."""
         return self.t0_ns + np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
 
-    def absolute_iso(self, t_s: float) -> str:
-        """A table time as an ISO-8601 string in the log's clock (UTC for unix/gps clocks)."""
-        ns = int(self.absolute_ns(t_s))
+    def unix_ns(self, t_s: float | np.ndarray) -> np.ndarray | None:
+        """Table times as UTC nanoseconds since 1970, or None if the log has no absolute clock."""
+        ns = self.absolute_ns(t_s)
         if self.time_reference == "unix":
-            return pd.Timestamp(ns, unit="ns", tz="UTC").isoformat()
+            return ns
         if self.time_reference == "gps":
-            # GPS-UTC leap seconds: 18 s since 2017; older logs are off by at most a few seconds,
-            # which is why the raw GPS seconds are reported beside this string.
-            return (pd.Timestamp("1980-01-06", tz="UTC") + pd.Timedelta(ns - 18_000_000_000, "ns")).isoformat()
-        return f"{ns / 1e9:.3f} s ({self.time_reference})"
+            return ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(ns)
+        return None
+
+    def absolute_iso(self, t_s: float) -> str:
+        """A table time as an ISO-8601 string: UTC for unix/gps clocks, seconds otherwise."""
+        unix = self.unix_ns(t_s)
+        if unix is not None:
+            return pd.Timestamp(int(unix), unit="ns", tz="UTC").isoformat()
+        return f"{int(self.absolute_ns(t_s)) / 1e9:.3f} s ({self.time_reference})"
 
 
 def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:

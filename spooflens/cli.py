@@ -1,0 +1,249 @@
+"""The `spooflens` command line.
+
+Commands are typed functions returning an exit code; `main()` is the thin shell that turns every
+spooflens error into one line on stderr (never a traceback) and a non-zero exit.
+
+Exit codes: 0 done; 1 internal error (a bug: rerun with --debug); 2 bad input or usage (nothing
+analysed); 3 the input was damaged and only what could be read was analysed (outputs written).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from spooflens.errors import NoGnssError, SpooflensError
+
+EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
+err_console = Console(stderr=True)
+
+
+def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
+    topics = {}
+    for v in values:
+        role, sep, name = v.partition("=")
+        if not sep or not role or not name:
+            raise click.BadParameter(f"{v!r}: expected ROLE=/topic, e.g. fix=/gps2/fix", param_hint="--topic")
+        topics[role.strip()] = name.strip()
+    return topics
+
+
+@contextmanager
+def _progress(enabled: bool) -> Iterator[Callable[[str, int, int], None]]:
+    """Yields report(task, done, total); draws rich bars on stderr when enabled."""
+    if not enabled:
+        yield lambda task, done, total: None
+        return
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    ) as bar:
+        tasks: dict[str, int] = {}
+
+        def report(task: str, done: int, total: int) -> None:
+            if task not in tasks:
+                tasks[task] = bar.add_task(task, total=max(total, 1))
+            bar.update(tasks[task], completed=done, total=max(total, 1))
+
+        yield report
+
+
+def _read(log: Path, topics: dict[str, str], show_progress: bool):
+    from readers import read_log
+
+    with _progress(show_progress) as report:
+        return read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
+
+
+def _damaged(table) -> list[str]:
+    return [str(s) for s in table.skipped if s.action == "lost"]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="spooflens")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """Forensic analysis of GNSS spoofing in vehicle logs."""
+    ctx.obj = {"debug": debug}
+
+
+topic_option = click.option(
+    "--topic",
+    "topics",
+    multiple=True,
+    metavar="ROLE=/name",
+    help="Assign a topic to a role: fix, fix2, imu, vel, odom, truth. Repeatable.",
+)
+
+
+@cli.command()
+@click.argument("log", type=click.Path(path_type=Path))
+@topic_option
+def inspect(log: Path, topics: tuple[str, ...]) -> int:
+    """List the streams of LOG, what was skipped, and which analyses it supports."""
+    from spooflens.analysis import ANALYSES
+
+    table = _read(log, _parse_topics(topics), sys.stderr.isatty())
+    console = Console()
+    console.print(
+        f"[bold]{table.source}[/]  format {table.format}, {table.duration_s:.1f} s, "
+        f"clock {table.time_reference}, starts {table.absolute_iso(0.0)}"
+    )
+    streams = Table("role", "stream", "topic", "type", "count", "rate (Hz)", "span (s)", "body frame", title="Streams")
+    for s in table.streams:
+        streams.add_row(
+            s.role,
+            s.stream_id,
+            s.topic,
+            s.msgtype,
+            str(s.count),
+            f"{s.rate_hz:.2f}",
+            f"{s.first_s:.1f}-{s.last_s:.1f}",
+            s.body_frame or "",
+        )
+    console.print(streams)
+    if table.skipped:
+        console.print("[bold]Skipped or repaired[/]")
+        for s in table.skipped:
+            console.print(f"  {s}")
+    support = Table("analysis", "can run", "missing", title="Analyses")
+    for spec in ANALYSES:
+        missing = spec.missing(table)
+        support.add_row(spec.name, "yes" if not missing else "no", ", ".join(missing))
+    console.print(support)
+    return EXIT_DAMAGED if _damaged(table) else EXIT_OK
+
+
+@cli.command()
+@click.argument("log", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Rerun recording to write (default: LOG name with .rrd, in the current directory).",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Also write the machine-readable summary here.",
+)
+@topic_option
+@click.option(
+    "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
+)
+@click.option("--quiet", is_flag=True, help="No progress bars or tables; errors only.")
+def analyze(
+    log: Path, output: Path | None, json_path: Path | None, topics: tuple[str, ...], imu_grade: str | None, quiet: bool
+) -> int:
+    """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary."""
+    from spooflens.analysis import AnalyzeOptions, run_analyses
+    from spooflens.recording import write_recording
+    from spooflens.summary import build_summary
+    from spooflens.verdict import decide
+
+    table = _read(log, _parse_topics(topics), not quiet and sys.stderr.isatty())
+    output = output or Path(log.name).with_suffix(".rrd")
+    with _progress(not quiet and sys.stderr.isatty()) as report:
+        steps: list[str] = []
+
+        def on_step(name: str) -> None:
+            steps.append(name)
+            report(f"analysing: {name}", len(steps), len(steps) + 1)
+
+        results = run_analyses(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
+        verdict = decide(results)
+        lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
+        write_recording(output, table, results, lines)
+    summary = build_summary(table, results, verdict)
+    if json_path:
+        json_path.write_text(json.dumps(summary, indent=2))
+    if not quiet:
+        _print_analysis(summary, output, json_path)
+    if not len(table.fixes):
+        raise NoGnssError(
+            log,
+            f"no GNSS fixes found (streams: {_stream_names(table)}); "
+            f"recording written to {output} with what could be read",
+        )
+    damaged = _damaged(table)
+    if damaged:
+        click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
+        return EXIT_DAMAGED
+    return EXIT_OK
+
+
+def _stream_names(table) -> str:
+    return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
+
+
+def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None:
+    console = Console()
+    v = summary["verdict"]
+    console.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
+    for inc in v["incidents"]:
+        when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
+        console.print(
+            f"  incident: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f}-{inc['end_s']:.2f} s, "
+            f"detectors {', '.join(inc['detectors'])}, confidence {inc['confidence']}"
+        )
+    t = Table("analysis", "ran", "alarms", "note")
+    for a in summary["analyses"]:
+        t.add_row(a["name"], "yes" if a["ran"] else "no", str(len(a["alarms"])), a["reason"])
+    console.print(t)
+    for s in summary["skipped"]:
+        console.print(f"  skipped: {s['stream']}: {s['action']} {s['count']} ({s['reason']})")
+    console.print(f"recording: {output}" + (f"   summary: {json_path}" if json_path else ""))
+    console.print(f"view it with: rerun {output}")
+
+
+@cli.command()
+def schema() -> int:
+    """Print the epoch-table schema (columns, units, dtypes) as Markdown."""
+    from spooflens.schema import schema_markdown
+
+    click.echo(schema_markdown())
+    return EXIT_OK
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: run the command, map errors to one line and an exit code."""
+    debug = "--debug" in (argv if argv is not None else sys.argv[1:])
+    try:
+        code = cli.main(args=argv, prog_name="spooflens", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("spooflens: aborted", err=True)
+        return 130
+    except click.ClickException as err:
+        err.show()
+        return EXIT_INPUT
+    except SpooflensError as err:
+        if debug:
+            raise
+        click.echo(f"spooflens: error: {err}", err=True)
+        return EXIT_INPUT
+    except Exception as err:
+        if debug:
+            raise
+        click.echo(f"spooflens: internal error: {type(err).__name__}: {err} (rerun with --debug for details)", err=True)
+        return EXIT_BUG
+    return int(code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

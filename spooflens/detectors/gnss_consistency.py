@@ -1,0 +1,122 @@
+"""GNSS-only consistency check: does the reported position move the way the reported velocity says?
+
+Receivers compute velocity from Doppler and position from code ranges in separate channels, and a
+spoofer that drags the position slowly rarely keeps the two consistent (seed 000's premise). Over a
+sliding window of W seconds the check compares the position change with the integral of the reported
+velocity: D_k = (p_k - p_j) - integral_{t_j}^{t_k} v dt, with t_j the first epoch inside the window.
+D is normalised per ENU axis by a robust scale read off the whole log (so it adapts to each receiver's
+own noise, which is strongly time-correlated in real receivers) and T_k = sum (D/sigma)^2
+is compared with a chi-square(3) threshold.
+
+Without reported velocity the check falls back to kinematic plausibility: the second difference of
+position (an acceleration) normalised the same way. That catches steps and jumps, not slow ramps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from scipy import stats
+
+from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
+from spooflens.geodesy import geodetic_to_enu
+
+FloatArray = NDArray[np.float64]
+NAME = "gnss_consistency"
+
+
+@dataclass(frozen=True)
+class ConsistencyOptions:
+    window_s: float = 10.0
+    p_false_alarm: float = 1e-5  # per epoch, as seed 000's KF test
+    min_scale_m: float = 0.05  # floor on the robust scale: simulated or quantised logs can have MAD 0
+    max_gap_factor: float = 3.0  # a window containing a gap this many median periods long is not judged
+
+
+# 25th percentile of |N(0, 1)|: the scale is read off the quietest quarter of the residuals, which
+# stays right while up to three quarters of the log is attacked (a MAD breaks down at one half).
+_Q25_ABS_NORMAL = float(stats.halfnorm.ppf(0.25))
+
+
+def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
+    """Per-column noise scale of a residual that is zero-mean without attack."""
+    q = np.nanpercentile(np.abs(x), 25, axis=0) if np.isfinite(x).any() else np.full(x.shape[1], np.nan)
+    return np.asarray(np.maximum(np.nan_to_num(q / _Q25_ABS_NORMAL, nan=floor), floor), dtype=float)
+
+
+def _window_velocity_residual(t: FloatArray, p: FloatArray, v: FloatArray, opts: ConsistencyOptions) -> FloatArray:
+    """D_k for every epoch; NaN where the window is incomplete or spans a gap."""
+    dt = np.diff(t)
+    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)])
+    j = np.searchsorted(t, t - opts.window_s, side="left")
+    d = (p - p[j]) - (integral - integral[j])
+    period = np.median(dt) if len(dt) else np.inf
+    gap = np.concatenate([[0.0], np.maximum.accumulate(np.where(dt > opts.max_gap_factor * period, t[1:], 0.0))])
+    incomplete = (t - t[0] < opts.window_s * 0.999) | (gap > t[j]) | ~np.all(np.isfinite(d), axis=1)
+    d[incomplete] = np.nan
+    return d
+
+
+def _second_difference(t: FloatArray, p: FloatArray) -> FloatArray:
+    """Acceleration implied by three consecutive fixes (m/s^2), NaN at the ends."""
+    a = np.full_like(p, np.nan)
+    if len(t) >= 3:
+        v = np.diff(p, axis=0) / np.diff(t)[:, None]
+        a[1:-1] = np.diff(v, axis=0) / (0.5 * (t[2:] - t[:-2]))[:, None]
+    return a
+
+
+def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: float) -> list[Alarm]:
+    """Onset = the last epoch before each alarm where the statistic was at its no-attack level."""
+    out = []
+    for a in alarms:
+        before = np.flatnonzero((t < a.start_s) & (stat <= quiet_level))
+        onset = float(t[before[-1]]) if len(before) else float(t[0])
+        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset))
+    return out
+
+
+def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, FloatArray, FloatArray, FloatArray]:
+    """Run the check on one receiver's fixes: (mode, t, normalised residual (N,3), statistic (N,))."""
+    t = fixes["t_s"].to_numpy(dtype=float)
+    lat0, lon0, h0 = (float(fixes[c].iloc[0]) for c in ("lat_deg", "lon_deg", "height_m"))
+    p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
+    v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+    has_velocity = np.isfinite(v).all(axis=1).mean() >= 0.5
+    if has_velocity:
+        mode = "position change vs reported velocity"
+        good = np.isfinite(v).all(axis=1)
+        t, p, v = t[good], p[good], v[good]
+        r = _window_velocity_residual(t, p, v, opts)
+    else:
+        mode = "kinematic plausibility (no reported velocity)"
+        r = _second_difference(t, p)
+    z = r / _robust_scale(r, opts.min_scale_m)
+    stat = np.sum(z**2, axis=1)
+    return mode, t, z, stat
+
+
+def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = None) -> DetectorResult:
+    """The check for every receiver in a fixes frame (schema `fixes`)."""
+    opts = opts or ConsistencyOptions()
+    threshold = float(stats.chi2.isf(opts.p_false_alarm, 3))
+    result = DetectorResult(name=NAME, ran=True)
+    modes = []
+    for rid, rx in fixes.groupby("receiver_id", sort=False):
+        if len(rx) < 3:
+            continue
+        mode, t, z, stat = check_receiver(rx.reset_index(drop=True), opts)
+        modes.append(f"{rid}: {mode}")
+        alarm = np.nan_to_num(stat, nan=0.0) > threshold
+        alarms = alarm_intervals(t, np.nan_to_num(stat), alarm, merge_gap_s=opts.window_s)
+        result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0)
+        result.series.append(Series(f"{rid}/statistic", t, stat, "chi2(3)", threshold))
+        result.series.append(Series(f"{rid}/normalised_residual", t, z, "sigma", None, ("east", "north", "up")))
+    if not modes:
+        return DetectorResult.skipped(NAME, "no receiver has 3 or more fixes")
+    result.reason = "; ".join(modes)
+    result.alarms.sort(key=lambda a: a.start_s)
+    return result

@@ -1,0 +1,87 @@
+"""The machine-readable summary of an analysis (written by `spooflens analyze --json`).
+
+Every time is given relative to the log start (`*_s`) and in the log's own clock (`*_abs_ns`, integer
+nanoseconds, plus `*_utc` when the log has an absolute clock), so results map back to the raw log.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+from typing import Any
+
+from spooflens import __version__
+from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.verdict import Verdict
+
+
+def _clean(x: Any) -> Any:
+    """JSON cannot carry NaN/inf: they become null."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    return x
+
+
+def _time(table: EpochTable, key: str, t_s: float | None) -> dict[str, Any]:
+    if t_s is None:
+        return {f"{key}_s": None}
+    out: dict[str, Any] = {f"{key}_s": round(t_s, 6), f"{key}_abs_ns": int(table.absolute_ns(t_s))}
+    if table.unix_ns(t_s) is not None:
+        out[f"{key}_utc"] = table.absolute_iso(t_s)
+    return out
+
+
+def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, t in (("start", a.start_s), ("end", a.end_s), ("onset", a.onset_s), ("peak", a.peak_s)):
+        out |= _time(table, key, t)
+    out["peak_statistic"] = a.peak_statistic
+    if a.onset_interval_s is not None:
+        out["onset_interval_s"] = list(a.onset_interval_s)
+    return out
+
+
+def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "name": r.name,
+        "ran": r.ran,
+        "reason": r.reason,
+        "alarms": [_alarm(table, a) for a in r.alarms],
+    }
+    if r.ran:
+        out["series"] = [
+            {"name": s.name, "unit": s.unit, "threshold": s.threshold, "epochs": len(s.t)} for s in r.series
+        ]
+    if r.extras:
+        out["facts"] = r.extras
+    return out
+
+
+def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Verdict) -> dict[str, Any]:
+    incidents = []
+    for inc in verdict.incidents:
+        d: dict[str, Any] = {"detectors": list(inc.detectors), "confidence": inc.confidence}
+        for key, t in (("onset", inc.onset_s), ("start", inc.start_s), ("end", inc.end_s)):
+            d |= _time(table, key, t)
+        if inc.onset_interval_s:
+            d["onset_interval_s"] = list(inc.onset_interval_s)
+        incidents.append(d)
+    summary = {
+        "spooflens_version": __version__,
+        "file": str(table.source),
+        "format": table.format,
+        "time_reference": table.time_reference,
+        "t0_abs_ns": table.t0_ns,
+        "t0_utc": table.absolute_iso(0.0) if table.unix_ns(0.0) is not None else None,
+        "duration_s": round(table.duration_s, 6),
+        "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
+        "skipped": [asdict(s) for s in table.skipped],
+        "verdict": {"spoofed": verdict.spoofed, "headline": verdict.headline, "incidents": incidents},
+        "analyses": [_analysis(table, r) for r in results],
+    }
+    return dict(_clean(summary))

@@ -1,0 +1,61 @@
+"""The GNSS-only consistency check: quiet on consistent fixes, alarms on a position-only ramp."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from spooflens.detectors.gnss_consistency import ConsistencyOptions, run_gnss_consistency
+from spooflens.geodesy import enu_to_geodetic
+from spooflens.schema import make_frame
+
+
+def _fixes(ramp_rate: float, start_s: float, with_velocity: bool = True, seed: int = 1) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 300.0, 1.0)
+    v = np.c_[10 * np.cos(t / 60), 10 * np.sin(t / 60), np.zeros_like(t)]
+    p = np.c_[600 * np.sin(t / 60), 600 * (1 - np.cos(t / 60)), np.zeros_like(t)]
+    noise = np.cumsum(rng.normal(0, 0.3, (len(t), 3)), axis=0) * 0.2 + rng.normal(0, 0.5, (len(t), 3))
+    attack = np.clip(t - start_s, 0, None)[:, None] * ramp_rate * np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    lat, lon, h = enu_to_geodetic(p + noise + attack, 45.0, 7.0, 300.0)
+    cols = {
+        "t_s": t,
+        "receiver_id": ["rx"] * len(t),
+        "lat_deg": lat,
+        "lon_deg": lon,
+        "height_m": h,
+        "fix_type": np.full(len(t), 2),
+    }
+    if with_velocity:
+        vn = v + rng.normal(0, 0.05, v.shape)
+        cols |= {"vel_e_mps": vn[:, 0], "vel_n_mps": vn[:, 1], "vel_u_mps": vn[:, 2]}
+    return make_frame("fixes", cols)
+
+
+def test_consistent_fixes_raise_no_alarm() -> None:
+    result = run_gnss_consistency(_fixes(0.0, 0.0))
+    assert result.ran and result.alarms == []
+    assert "reported velocity" in result.reason
+
+
+def test_position_only_ramp_is_detected_with_onset_near_its_start() -> None:
+    result = run_gnss_consistency(_fixes(2.0, 150.0))
+    assert result.alarms, "a 2 m/s position-only ramp must be detected"
+    first = result.alarms[0]
+    assert 150.0 < first.start_s < 165.0
+    assert first.onset_s is not None and abs(first.onset_s - 150.0) <= 5.0
+
+
+def test_larger_ramps_are_detected_no_later() -> None:
+    starts = [run_gnss_consistency(_fixes(rate, 150.0)).alarms[0].start_s for rate in (1.0, 2.0, 5.0)]
+    assert starts == sorted(starts, reverse=True)
+
+
+def test_without_velocity_a_position_step_is_caught_by_the_kinematic_check() -> None:
+    fixes = _fixes(0.0, 0.0, with_velocity=False)
+    quiet = run_gnss_consistency(fixes, ConsistencyOptions())
+    assert "kinematic" in quiet.reason and quiet.alarms == []
+    lat = fixes["lat_deg"].to_numpy().copy()
+    lat[200:] += 100.0 / 111_000  # a 100 m jump north
+    stepped = run_gnss_consistency(fixes.assign(lat_deg=lat))
+    assert [round(a.peak_s) for a in stepped.alarms] in ([199], [200], [201], [199, 200], [200, 201])

@@ -1,0 +1,58 @@
+"""The Rerun recording and JSON summary of an analysis, read back from disk."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pipeline_support import circling_table
+from rerun.chunk import RrdReader
+
+from spooflens.analysis import run_analyses
+from spooflens.recording import entity, write_recording
+from spooflens.summary import build_summary
+from spooflens.verdict import decide
+
+
+def _rows(path: Path, static: bool = False) -> dict[str, int]:
+    """Rows per entity: time-indexed ones, or the static ones (lines, series names)."""
+    rows: dict[str, int] = {}
+    for chunk in RrdReader(str(path)).store().stream():
+        if chunk.is_static == static:
+            rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    return rows
+
+
+def test_recording_holds_tracks_series_and_alarm_events(tmp_path: Path) -> None:
+    table = circling_table(ramp_mps=3.0)
+    results = run_analyses(table)
+    verdict = decide(results)
+    out = tmp_path / "a.rrd"
+    write_recording(out, table, results, [(0.0, verdict.headline, "WARN")])
+    rows = _rows(out)
+    assert rows["/map/reported/gps/fix/position"] == 300
+    assert rows["/local/reported/gps/fix/position"] == 300
+    assert _rows(out, static=True)["/map/reported/gps/fix/track"] == 1  # the whole line, static
+    assert rows["/imu/imu/specific_force_mps2"] == len(table.imu)
+    assert rows["/detectors/gnss_consistency/gps/fix/statistic"] == 300
+    assert rows["/detectors/gnss_consistency/gps/fix/statistic_threshold"] == 300
+    # verdict + one alarm + its onset estimate
+    assert rows["/events"] == 1 + 2 * len(results[0].alarms) and results[0].alarms
+
+
+def test_summary_gives_times_relative_and_in_the_logs_clock(tmp_path: Path) -> None:
+    table = circling_table(ramp_mps=3.0)
+    results = run_analyses(table)
+    summary = build_summary(table, results, decide(results))
+    json.dumps(summary, allow_nan=False)  # strict JSON
+    a = summary["analyses"][0]
+    assert a["name"] == "gnss_consistency" and a["ran"]
+    alarm = a["alarms"][0]
+    assert alarm["start_abs_ns"] == table.t0_ns + round(alarm["start_s"] * 1e9)
+    assert alarm["start_utc"].startswith("2023-11-14T22:")
+    assert summary["verdict"]["spoofed"] and summary["verdict"]["incidents"][0]["onset_s"] <= alarm["start_s"]
+
+
+def test_entity_paths_from_topics_are_clean() -> None:
+    assert entity("map", "/gps/fix", "track") == "map/gps/fix/track"
+    assert entity("imu", "imu data#1") == "imu/imu_data_1"
