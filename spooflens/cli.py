@@ -20,6 +20,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
@@ -60,14 +61,14 @@ def _progress(enabled: bool) -> Iterator[Callable[[str, int, int], None]]:
         yield report
 
 
-def _read(log: Path, topics: dict[str, str], show_progress: bool):
+def _read(log: Path, topics: dict[str, str], show_progress: bool) -> EpochTable:
     from readers import read_log
 
     with _progress(show_progress) as report:
         return read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
 
 
-def _damaged(table) -> list[str]:
+def _damaged(table: EpochTable) -> list[str]:
     return [str(s) for s in table.skipped if s.action == "lost"]
 
 
@@ -188,7 +189,7 @@ def analyze(
     return EXIT_OK
 
 
-def _stream_names(table) -> str:
+def _stream_names(table: EpochTable) -> str:
     return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
 
 

@@ -1,0 +1,298 @@
+"""Topic roles and the streaming collection of messages into an EpochTable.
+
+Shared by every container (MCAP with ROS1/ROS2/JSON/protobuf channels, ROS1 and ROS2 bags): the
+container reader declares its topics with a decoder each and then only feeds (topic, log time, raw
+bytes); this module decides each topic's role, decodes (fast path where the layout is fixed), buffers
+rows and finally assembles the frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from readers.buffers import RowBuffer
+from readers.ros_messages import (
+    RAW_COLUMNS,
+    ROLE_BY_KIND,
+    decode_cdr,
+    decode_ros1,
+    extract,
+    fix_columns,
+    imu_columns,
+    kind_of,
+    normalise_type,
+    odometry_columns,
+    velocity_columns,
+)
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.errors import ReaderError
+from spooflens.schema import FixType
+
+ROLES = ("fix", "fix2", "imu", "vel", "odom", "truth")
+_ROLE_KINDS = {
+    "fix": ("navsatfix", "gpsfix"),
+    "fix2": ("navsatfix", "gpsfix"),
+    "truth": ("navsatfix", "gpsfix"),
+    "imu": ("imu",),
+    "vel": ("twist", "twist_cov"),
+    "odom": ("odometry",),
+}
+TRUTH_TOPIC_HINTS = ("truth", "ground_truth", "groundtruth")
+
+Deserialize = Callable[[bytes | memoryview, str], Any]
+Decoded = tuple[int, tuple[float, ...]]
+
+
+@dataclass(frozen=True)
+class TopicDecl:
+    """A topic as its container sees it, with the means to decode its messages into raw rows."""
+
+    msgtype: str
+    kind: str | None
+    decode: Callable[[bytes | memoryview], tuple[Decoded, str]] | None = None  # -> ((stamp, values), frame_id)
+    fast: Callable[[bytes | memoryview], Decoded | None] | None = None
+
+
+def ros_topic(msgtype: str, encoding: str, deserialize: Deserialize) -> TopicDecl:
+    """Declaration of a ROS topic ('cdr' or 'ros1' encoded) decoded with `deserialize`."""
+    kind = kind_of(msgtype)
+    if kind is None:
+        return TopicDecl(normalise_type(msgtype), None)
+
+    def decode(raw: bytes | memoryview) -> tuple[Decoded, str]:
+        msg = deserialize(raw, msgtype)
+        return extract(kind, msg), str(msg.header.frame_id)
+
+    fast_decoder = decode_cdr if encoding == "cdr" else decode_ros1
+    return TopicDecl(normalise_type(msgtype), kind, decode, lambda raw: fast_decoder(kind, raw))
+
+
+@dataclass
+class TopicStream:
+    topic: str
+    decl: TopicDecl
+    role: str | None
+    buffer: RowBuffer | None = None
+    seen: int = 0
+    stamp_fallbacks: int = 0
+    bad: int = 0
+    first_error: str = ""
+    frame_id: str = ""
+
+    @property
+    def kind(self) -> str | None:
+        return self.decl.kind
+
+    @property
+    def msgtype(self) -> str:
+        return self.decl.msgtype
+
+
+def assign_roles(
+    path: Path, topics: Mapping[str, str | None], overrides: Mapping[str, str] | None
+) -> dict[str, str | None]:
+    """Role of every topic (None: not used). `topics` maps topic -> kind (None if unsupported)."""
+    overrides = dict(overrides or {})
+    unknown = sorted(set(overrides) - set(ROLES))
+    if unknown:
+        raise ReaderError(path, f"unknown topic role(s) {unknown}; roles are {list(ROLES)}")
+    for role, topic in overrides.items():
+        if topic not in topics:
+            raise ReaderError(path, f"--topic {role}={topic}: no such topic; topics are {sorted(topics)}")
+        if topics[topic] not in _ROLE_KINDS[role]:
+            raise ReaderError(
+                path, f"--topic {role}={topic}: a {topics[topic] or 'unsupported'} topic cannot be a {role}", topic
+            )
+    roles: dict[str, str | None] = {}
+    chosen_fix = {overrides[r] for r in ("fix", "fix2") if r in overrides}
+    for topic, kind in topics.items():
+        role = ROLE_BY_KIND.get(kind) if kind else None
+        if role == "fix":
+            if topic == overrides.get("truth") or (
+                "truth" not in overrides and any(h in topic.lower() for h in TRUTH_TOPIC_HINTS)
+            ):
+                role = "truth"
+            elif chosen_fix and topic not in chosen_fix:
+                role = None
+        elif (
+            (role == "imu" and "imu" in overrides and topic != overrides["imu"])
+            or (role == "vel" and "vel" in overrides and topic != overrides["vel"])
+            or (role == "odom" and "odom" in overrides and topic != overrides["odom"])
+        ):
+            role = None
+        roles[topic] = role
+    return roles
+
+
+@dataclass
+class StreamCollector:
+    """Collects the messages of one log; `finish` builds the EpochTable."""
+
+    path: Path
+    fmt: str
+    overrides: Mapping[str, str] | None = None
+    streams: dict[str, TopicStream] = field(default_factory=dict)
+    skipped: list[Skipped] = field(default_factory=list)
+
+    def add_topics(self, topics: Mapping[str, TopicDecl]) -> None:
+        """Declare every topic of the log (roles depend on all of them, so all at once)."""
+        roles = assign_roles(self.path, {t: d.kind for t, d in topics.items()}, self.overrides)
+        for topic, decl in topics.items():
+            role = roles[topic]
+            buf = RowBuffer(RAW_COLUMNS[decl.kind]) if role and decl.kind and decl.decode else None
+            self.streams[topic] = TopicStream(topic, decl, role, buf)
+
+    def add(self, topic: str, log_time_ns: int, raw: bytes | memoryview) -> None:
+        s = self.streams[topic]
+        s.seen += 1
+        if s.buffer is None or s.decl.decode is None:
+            return
+        try:
+            fast = s.decl.fast(raw) if s.decl.fast is not None and s.seen > 1 else None
+            if fast is None:  # the first message always takes the full decoder: frame_id, and a cross-check
+                (stamp, values), frame_id = s.decl.decode(raw)
+                s.frame_id = s.frame_id or frame_id
+            else:
+                stamp, values = fast
+        except Exception as err:  # noqa: BLE001 - any decoding failure of one message is counted, not fatal
+            s.bad += 1
+            s.first_error = s.first_error or f"{type(err).__name__}: {err}"
+            return
+        if stamp == 0:
+            stamp = log_time_ns
+            s.stamp_fallbacks += 1
+        s.buffer.append(stamp, values)
+
+    def finish(self, time_reference: str = "unix") -> EpochTable:
+        skipped = list(self.skipped)
+        frames: dict[str, list[pd.DataFrame]] = {"fixes": [], "imu": [], "odometry": [], "truth": []}
+        infos: list[StreamInfo] = []
+        velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+        for s in self.streams.values():
+            if s.bad:
+                skipped.append(Skipped(s.topic, f"{s.bad} message(s) could not be decoded ({s.first_error})", s.bad))
+            if s.stamp_fallbacks:
+                skipped.append(Skipped(s.topic, "header stamp zero: used the log time", s.stamp_fallbacks, "repaired"))
+            if s.kind is None:
+                skipped.append(Skipped(s.topic, f"unsupported message type {s.msgtype}", s.seen))
+                continue
+            if s.decl.decode is None:
+                skipped.append(Skipped(s.topic, f"no decoder for {s.msgtype}", s.seen))
+                continue
+            if s.role is None:
+                skipped.append(Skipped(s.topic, f"{s.msgtype} not selected by --topic", s.seen))
+                continue
+            assert s.buffer is not None
+            stamps, values = s.buffer.arrays()
+            if s.role in ("fix", "truth"):
+                cols = fix_columns(s.kind, values)
+                no_fix = cols["fix_type"] == FixType.NO_FIX
+                if no_fix.any():
+                    skipped.append(Skipped(s.topic, "status NO_FIX", int(no_fix.sum())))
+                    stamps, cols = stamps[~no_fix], {k: v[~no_fix] for k, v in cols.items()}
+                if s.role == "truth":
+                    keep = ("lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps")
+                    frames["truth"].append(pd.DataFrame({"t_ns": stamps} | {k: cols[k] for k in keep if k in cols}))
+                else:
+                    frames["fixes"].append(pd.DataFrame({"t_ns": stamps, "receiver_id": s.topic} | cols))
+                infos.append(
+                    StreamInfo(
+                        s.role if s.role == "truth" else "fix",
+                        s.topic,
+                        s.topic,
+                        s.msgtype,
+                        len(stamps),
+                        frame_id=s.frame_id,
+                    )
+                )
+            elif s.role == "imu":
+                frames["imu"].append(pd.DataFrame({"t_ns": stamps, "imu_id": s.topic} | imu_columns(values)))
+                infos.append(
+                    StreamInfo("imu", s.topic, s.topic, s.msgtype, len(stamps), body_frame="FLU", frame_id=s.frame_id)
+                )
+            elif s.role == "vel":
+                velocities[s.topic] = (stamps, velocity_columns(s.kind, values))
+                infos.append(StreamInfo("vel", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+            elif s.role == "odom":
+                frames["odometry"].append(
+                    pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
+                )
+                infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+        fixes = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
+        out = {
+            "fixes": fixes,
+            "imu": _concat(frames["imu"]),
+            "odometry": _concat(frames["odometry"]),
+            "truth": _concat(frames["truth"]),
+        }
+        return build_table(self.path, self.fmt, time_reference, out, infos, skipped)
+
+
+def _concat(parts: list[pd.DataFrame]) -> pd.DataFrame | None:
+    return pd.concat(parts, ignore_index=True) if parts else None
+
+
+def _common_prefix(a: str, b: str) -> int:
+    n = 0
+    for x, y in zip(a, b, strict=False):
+        if x != y:
+            break
+        n += 1
+    return n
+
+
+def merge_velocities(
+    fixes: list[pd.DataFrame],
+    velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]],
+    overrides: Mapping[str, str] | None,
+    skipped: list[Skipped],
+) -> pd.DataFrame | None:
+    """Attach each velocity topic to one receiver and its rows to the nearest fix in time.
+
+    The receiver is the one whose topic shares the longest prefix with the velocity topic, or the primary
+    receiver for `--topic vel=...`. A velocity row attaches to a fix within half the median fix period.
+    """
+    if not fixes:
+        if velocities:
+            skipped += [Skipped(t, "GNSS velocity without any fix stream", len(v[0])) for t, v in velocities.items()]
+        return None
+    by_topic = {str(f["receiver_id"].iloc[0]) if len(f) else "": f for f in fixes}
+    for vtopic, (vt, vcols) in velocities.items():
+        if overrides and "vel" in overrides and "fix" in overrides:
+            target = overrides["fix"]
+        else:
+            target = max(by_topic, key=lambda r: _common_prefix(r, vtopic))
+        f = by_topic[target]
+        ft = f["t_ns"].to_numpy()
+        if not len(ft) or not len(vt):
+            continue
+        order = np.argsort(vt, kind="stable")
+        vt_sorted = vt[order]
+        period = np.median(np.diff(np.sort(ft))) if len(ft) > 1 else 1e9
+        idx = (
+            np.clip(np.searchsorted(vt_sorted, ft), 1, len(vt_sorted) - 1)
+            if len(vt_sorted) > 1
+            else np.zeros(len(ft), dtype=int)
+        )
+        left = vt_sorted[np.maximum(idx - 1, 0)]
+        right = vt_sorted[idx]
+        nearest = np.where(np.abs(ft - left) <= np.abs(right - ft), np.maximum(idx - 1, 0), idx)
+        ok = np.abs(vt_sorted[nearest] - ft) <= period / 2
+        f = f.copy()
+        for name, col in vcols.items():
+            vals = np.full(len(ft), np.nan)
+            vals[ok] = col[order][nearest[ok]]
+            f[name] = vals
+        unmatched = len(vt) - int(ok.sum())
+        if unmatched > 0:
+            skipped.append(
+                Skipped(vtopic, f"velocity rows with no fix of {target} within half a fix period", unmatched)
+            )
+        by_topic[target] = f
+    return pd.concat(list(by_topic.values()), ignore_index=True)
