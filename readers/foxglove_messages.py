@@ -28,7 +28,12 @@ def _get(m: Any, name: str) -> Any:
 def _has(m: Any, name: str) -> bool:
     if isinstance(m, dict):
         return name in m and m[name] is not None
-    return bool(m.HasField(name)) if hasattr(m, "HasField") else hasattr(m, name)
+    if not hasattr(m, "HasField"):
+        return hasattr(m, name)
+    try:
+        return bool(m.HasField(name))
+    except ValueError:  # proto3 scalars and repeated fields have no presence: they are always there
+        return True
 
 
 def _stamp_ns(m: Any) -> int:
@@ -109,13 +114,10 @@ _D = descriptor_pb2.FieldDescriptorProto
 
 
 def _field(name: str, number: int, ftype: int, type_name: str = "", repeated: bool = False) -> _D:
-    return _D(
-        name=name,
-        number=number,
-        type=ftype,
-        type_name=type_name,
-        label=_D.LABEL_REPEATED if repeated else _D.LABEL_OPTIONAL,
-    )
+    field = _D(name=name, number=number, type=ftype, label=_D.LABEL_REPEATED if repeated else _D.LABEL_OPTIONAL)
+    if type_name:  # an empty type_name still counts as set, and protobuf rejects it on scalar fields
+        field.type_name = type_name
+    return field
 
 
 def protobuf_file_descriptor_set(schema_name: str) -> bytes:

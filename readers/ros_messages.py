@@ -289,3 +289,79 @@ def velocity_columns(kind: str, v: FloatArray) -> dict[str, np.ndarray]:
 def odometry_columns(v: FloatArray) -> dict[str, np.ndarray]:
     names = ("x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps", "wz_radps")
     return {n: v[:, i] for i, n in enumerate(names)}
+
+
+# --- the reverse direction, for writers: schema columns -> fixed-layout message bytes ----------------
+
+_FIX_TYPE_TO_NAVSAT = {
+    FixType.NO_FIX: -1,
+    FixType.SBAS: 1,
+    FixType.DGNSS: 2,
+    FixType.RTK_FLOAT: 2,
+    FixType.RTK_FIXED: 2,
+}
+
+
+def navsat_status(fix_type: int) -> int:
+    """NavSatStatus code for a FixType."""
+    return _FIX_TYPE_TO_NAVSAT.get(FixType(int(fix_type)), 0)
+
+
+def navsat_covariance(h_acc: float, v_acc: float) -> tuple[list[float], int]:
+    """Diagonal ENU covariance and its type (2 = DIAGONAL_KNOWN, 0 = UNKNOWN) from 1-sigma accuracies."""
+    if np.isfinite(h_acc) and np.isfinite(v_acc):
+        return [h_acc**2, 0.0, 0.0, 0.0, h_acc**2, 0.0, 0.0, 0.0, v_acc**2], 2
+    return [0.0] * 9, 0
+
+
+def _cdr_header(stamp: int, frame_id: str) -> bytes:
+    fid = frame_id.encode() + b"\0"
+    return b"\x00\x01\x00\x00" + struct.pack("<iII", stamp // 1_000_000_000, stamp % 1_000_000_000, len(fid)) + fid
+
+
+def _ros1_header(stamp: int, frame_id: str, seq: int) -> bytes:
+    fid = frame_id.encode()
+    return struct.pack("<IIII", seq, stamp // 1_000_000_000, stamp % 1_000_000_000, len(fid)) + fid
+
+
+def _pad_to(buf: bytes, align: int) -> bytes:
+    rel = len(buf) - 4
+    return buf + b"\0" * ((-rel) % align)
+
+
+def encode_imu(
+    stamp: int,
+    frame_id: str,
+    q: tuple[float, float, float, float] | None,
+    w: tuple[float, ...],
+    a: tuple[float, ...],
+    encoding: str,
+    seq: int = 0,
+) -> bytes:
+    """A sensor_msgs/Imu (CDR or ROS1), orientation (x, y, z, w) or None (covariance[0] = -1)."""
+    ocov = [0.0] * 9 if q is not None else [-1.0] + [0.0] * 8
+    body = _IMU_BODY.pack(*(q if q is not None else (0.0, 0.0, 0.0, 0.0)), *ocov, *w, *([0.0] * 9), *a, *([0.0] * 9))
+    if encoding == "cdr":
+        return _pad_to(_cdr_header(stamp, frame_id), 8) + body
+    return _ros1_header(stamp, frame_id, seq) + body
+
+
+def encode_navsatfix(
+    stamp: int,
+    frame_id: str,
+    status: int,
+    lat: float,
+    lon: float,
+    alt: float,
+    cov: list[float],
+    cov_type: int,
+    encoding: str,
+    seq: int = 0,
+    service: int = 1,
+) -> bytes:
+    """A sensor_msgs/NavSatFix (CDR or ROS1)."""
+    body = _FIX_BODY.pack(lat, lon, alt, *cov, cov_type)
+    if encoding == "cdr":
+        head = _pad_to(_cdr_header(stamp, frame_id) + struct.pack("<b", status), 2) + struct.pack("<H", service)
+        return _pad_to(head, 8) + body
+    return _ros1_header(stamp, frame_id, seq) + _ROS1_FIX_STATUS.pack(status, service) + body
