@@ -213,6 +213,38 @@ def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None
     console.print(f"view it with: rerun {output}")
 
 
+@cli.group()
+def bench() -> None:
+    """Measure speed, memory and detection performance (figures quoted in the README)."""
+
+
+@bench.command("read")
+@click.option("--duration", default=3600.0, show_default=True, help="Seconds of log to synthesise.")
+@click.option("--workdir", type=click.Path(path_type=Path), default=Path("bench_data"), show_default=True)
+def bench_read(duration: float, workdir: Path) -> int:
+    """Reader speed and memory on a synthetic 200 Hz IMU + 10 Hz fix ROS2 MCAP, beside rosbags."""
+    from spooflens.bench.read_bench import run_read_bench
+
+    workdir.mkdir(parents=True, exist_ok=True)
+    with err_console.status("writing the synthetic MCAP and reading it twice..."):
+        r = run_read_bench(workdir, duration_s=duration)
+    t = Table(
+        "reader",
+        "wall (s)",
+        "messages/s",
+        "peak RSS (MB)",
+        title=f"{r['messages']} messages, {r['file_mb']:.0f} MB MCAP ({r['file']})",
+    )
+    for name, run in r["runs"].items():
+        t.add_row(name, f"{run['wall_s']:.2f}", f"{run['messages_per_s']:,.0f}", f"{run['peak_rss_mb']:.0f}")
+    Console().print(t)
+    verdict = "goal met" if r["ratio_wall"] <= 1.0 else "goal MISSED"
+    click.echo(
+        f"wall-time ratio spooflens/rosbags = {r['ratio_wall']:.2f} (goal <= 1.0: {verdict}); peak RSS goal < 1024 MB"
+    )
+    return EXIT_OK
+
+
 @cli.command()
 def schema() -> int:
     """Print the epoch-table schema (columns, units, dtypes) as Markdown."""

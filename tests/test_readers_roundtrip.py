@@ -27,7 +27,7 @@ def table():
     return circling_table(ramp_mps=2.0, seconds=60.0)
 
 
-@pytest.mark.parametrize("fmt", sorted(WRITERS))
+@pytest.mark.parametrize("fmt", sorted(set(WRITERS) - {"ulog"}))
 def test_write_then_read_gives_the_same_table(fmt: str, table, tmp_path: Path) -> None:
     path = tmp_path / f"log{SUFFIX[fmt]}"
     write_log(table, path, fmt)
@@ -45,3 +45,23 @@ def test_write_then_read_gives_the_same_table(fmt: str, table, tmp_path: Path) -
         ("fix", "/gps/fix", len(table.fixes)),
         ("imu", "/imu", len(table.imu)),
     ]
+
+
+def test_ulog_round_trip_in_px4_conventions(table, tmp_path: Path) -> None:
+    """ULog stores float32, an FRD body frame and NED velocity; the reader maps them back."""
+    path = tmp_path / "log.ulg"
+    write_log(table, path, "ulog")
+    back = read_log(path)
+    assert back.format == "ulog" and back.time_reference == "unix" and back.t0_ns == table.t0_ns
+    imu_info = next(s for s in back.streams if s.role == "imu")
+    assert imu_info.body_frame == "FRD"
+    flu_to_frd = np.array([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(
+        back.imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(),
+        table.imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy() * flu_to_frd,
+        atol=1e-5,
+    )
+    cols = ["lat_deg", "lon_deg", "height_m", "sats_used"]
+    np.testing.assert_allclose(back.fixes[cols].to_numpy(), table.fixes[cols].to_numpy(), rtol=0, atol=1e-7)
+    vel = ["vel_e_mps", "vel_n_mps", "vel_u_mps", "h_acc_m"]
+    np.testing.assert_allclose(back.fixes[vel].to_numpy(), table.fixes[vel].to_numpy(), atol=1e-5)

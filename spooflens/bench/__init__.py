@@ -1,0 +1,1 @@
+"""Benchmarks: commands that measure speed and memory (never timing assertions in tests)."""

@@ -1,0 +1,28 @@
+"""Shared benchmark plumbing: run a function in a fresh interpreter and read its time and peak memory."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+_CHILD = """
+import json, resource, sys, time, importlib
+module, func, args = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+fn = getattr(importlib.import_module(module), func)
+t0 = time.perf_counter()
+extra = fn(*args)
+wall = time.perf_counter() - t0
+rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"wall_s": wall, "peak_rss_mb": rss_mb, "result": extra}))
+"""
+
+
+def measure_in_child(module: str, func: str, *args: Any) -> dict[str, Any]:
+    """Call module.func(*args) in a new Python process; its wall time, peak RSS and JSON-able result."""
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, module, func, json.dumps(list(args))], check=True, capture_output=True, text=True
+    )
+    result: dict[str, Any] = json.loads(out.stdout.strip().splitlines()[-1])
+    return result

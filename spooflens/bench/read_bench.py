@@ -1,0 +1,102 @@
+"""Reader benchmark: one hour of 200 Hz IMU + 10 Hz fixes in a ROS2 MCAP, our reader vs rosbags.
+
+`spooflens bench read` writes the file, then reads it in separate processes (so each peak RSS is its
+own): our `read_log`, and a plain rosbags AnyReader loop that deserialises every message (the
+baseline a ROS user would write). Goal: ours at least as fast (ratio <= 1) and under 1 GB peak RSS.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from spooflens.bench.common import measure_in_child
+from spooflens.epoch_table import StreamInfo, build_table
+from spooflens.geodesy import enu_to_geodetic
+
+T0_NS = 1_750_000_000_000_000_000
+
+
+def synthetic_table(duration_s: float, imu_hz: float, fix_hz: float):
+    rng = np.random.default_rng(0)
+    ti = np.arange(0.0, duration_s, 1.0 / imu_hz)
+    tf = np.arange(0.0, duration_s, 1.0 / fix_hz)
+    m, n = len(ti), len(tf)
+    imu = pd.DataFrame(
+        {
+            "t_ns": T0_NS + np.round(ti * 1e9).astype(np.int64),
+            "imu_id": "/imu/data",
+            "ax_mps2": rng.normal(0, 0.1, m),
+            "ay_mps2": rng.normal(0, 0.1, m),
+            "az_mps2": 9.81 + rng.normal(0, 0.1, m),
+            "wx_radps": rng.normal(0, 0.01, m),
+            "wy_radps": rng.normal(0, 0.01, m),
+            "wz_radps": rng.normal(0, 0.01, m),
+        }
+    )
+    lat, lon, h = enu_to_geodetic(np.c_[10 * tf, 5 * tf, np.zeros(n)], 45.0, 7.0, 100.0)
+    fixes = pd.DataFrame(
+        {
+            "t_ns": T0_NS + np.round(tf * 1e9).astype(np.int64),
+            "receiver_id": "/gps/fix",
+            "lat_deg": lat,
+            "lon_deg": lon,
+            "height_m": h,
+            "h_acc_m": 2.0,
+            "v_acc_m": 3.0,
+            "fix_type": np.full(n, 2, dtype=np.int8),
+        }
+    )
+    streams = [
+        StreamInfo("imu", "/imu/data", "/imu/data", "sensor_msgs/msg/Imu", m, body_frame="FLU"),
+        StreamInfo("fix", "/gps/fix", "/gps/fix", "sensor_msgs/msg/NavSatFix", n),
+    ]
+    return build_table(Path("bench.mcap"), "synthetic", "unix", {"imu": imu, "fixes": fixes}, streams, [])
+
+
+def read_with_spooflens(path: str) -> int:
+    from readers import read_log
+
+    table = read_log(path)
+    return len(table.imu) + len(table.fixes)
+
+
+def read_with_rosbags(path: str) -> int:
+    from rosbags.highlevel import AnyReader
+
+    n = 0
+    with AnyReader([Path(path)]) as reader:
+        for conn, _, raw in reader.messages():
+            reader.deserialize(raw, conn.msgtype)
+            n += 1
+    return n
+
+
+def run_read_bench(
+    workdir: Path, duration_s: float = 3600.0, imu_hz: float = 200.0, fix_hz: float = 10.0
+) -> dict[str, Any]:
+    from spooflens.writers import write_log
+
+    path = Path(workdir) / f"bench_{int(duration_s)}s.mcap"
+    if not path.exists():
+        write_log(synthetic_table(duration_s, imu_hz, fix_hz), path, "mcap-ros2")
+    runs = {
+        name: measure_in_child(__name__, fn, str(path))
+        for name, fn in (
+            ("spooflens read_log", "read_with_spooflens"),
+            ("rosbags deserialise loop", "read_with_rosbags"),
+        )
+    }
+    n = runs["rosbags deserialise loop"]["result"]
+    for r in runs.values():
+        r["messages_per_s"] = n / r["wall_s"]
+    return {
+        "file": str(path),
+        "file_mb": path.stat().st_size / 1e6,
+        "messages": n,
+        "runs": runs,
+        "ratio_wall": runs["spooflens read_log"]["wall_s"] / runs["rosbags deserialise loop"]["wall_s"],
+    }
