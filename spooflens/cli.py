@@ -245,6 +245,33 @@ def bench_read(duration: float, workdir: Path) -> int:
     return EXIT_OK
 
 
+@bench.command("nav")
+@click.option("--duration", default=3600.0, show_default=True, help="Seconds of flight to simulate.")
+def bench_nav(duration: float) -> int:
+    """Filter + smoother time and memory for 200 Hz IMU and 10 Hz GNSS (goal: one hour under 5 s)."""
+    from spooflens.bench.nav_bench import run_nav_bench
+
+    with err_console.status("simulating and running the filter and smoother..."):
+        r = run_nav_bench(duration)
+    t = Table("measure", "value", title=f"{duration:.0f} s: {r['imu_samples']} IMU samples, {r['gnss_epochs']} epochs")
+    for key, fmt in (
+        ("filter_s", "{:.2f} s"),
+        ("smoother_s", "{:.2f} s"),
+        ("filter_plus_smoother_s", "{:.2f} s"),
+        ("compile_and_warmup_s", "{:.1f} s (once per machine; numba caches it)"),
+        ("peak_rss_mb", "{:.0f} MB"),
+        ("nis_mean", "{:.2f} (dof 6)"),
+    ):
+        t.add_row(key, fmt.format(r[key]))
+    Console().print(t)
+    goal = 5.0 * duration / 3600.0
+    click.echo(
+        f"filter + smoother {r['filter_plus_smoother_s']:.2f} s; goal < {goal:.1f} s: "
+        + ("met" if r["filter_plus_smoother_s"] < goal else "MISSED")
+    )
+    return EXIT_OK
+
+
 @cli.command()
 def schema() -> int:
     """Print the epoch-table schema (columns, units, dtypes) as Markdown."""

@@ -1,0 +1,276 @@
+"""Body-frame conventions and initial alignment from the log itself.
+
+Attitude comes from matching velocity changes: over a window after the start, the GNSS-observed
+change of position, minus what the initial velocity and gravity explain, equals C0 times the
+specific-force double integral in the initial body frame (from the preintegration):
+    p(t_i) - p(t_0) - p0 - v0 tau_i - g tau_i^2 / 2  =  C0 dH_i.
+Gravity fixes roll and pitch for ANY mounting (the husky's IMU lies on its side); horizontal
+accelerations fix yaw. p0 and v0 are projected out, which leaves a Wahba problem solved by Kabsch. When the
+window holds too little horizontal acceleration for yaw, the IMU's own orientation yaw is used if the
+log has one, else the course over ground along the levelled body x axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from spooflens.errors import AnalysisError
+from spooflens.geodesy import geodetic_to_enu, normal_gravity
+from spooflens.navigation.rotations import (
+    quat_conjugate,
+    quat_multiply,
+    quat_rotate,
+    quat_to_matrix,
+    rotvec_to_matrix,
+    skew,
+)
+from spooflens.navigation.strapdown import Preintegrated, rates
+
+FloatArray = NDArray[np.float64]
+
+# body axes of each declared convention expressed in FLU: rows map FLU <- declared
+TO_FLU = {
+    "FLU": np.eye(3),
+    "FRD": np.diag([1.0, -1.0, -1.0]),
+    "RFU": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+}
+
+
+def to_flu(values: FloatArray, body_frame: str) -> FloatArray:
+    try:
+        return np.asarray(values, dtype=float) @ TO_FLU[body_frame].T
+    except KeyError:
+        raise AnalysisError(f"unknown IMU body frame {body_frame!r}; known: {sorted(TO_FLU)}") from None
+
+
+@dataclass(frozen=True)
+class Alignment:
+    t0: float
+    C0: FloatArray  # C_b^n (FLU body) at t0
+    v0: FloatArray  # ENU velocity at t0
+    lat0: float  # rad
+    lon0: float
+    h0: float
+    method: str  # how the attitude and heading were found
+    residual_m: float  # RMS position misfit of the alignment window
+    window_s: float
+
+
+def _kabsch(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Rotation R minimising sum |b_i - R a_i|^2."""
+    u, _, vt = np.linalg.svd(b.T @ a)
+    d = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def _imu_orientation(imu: pd.DataFrame, t: float) -> FloatArray | None:
+    q = imu[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float)
+    ok = np.isfinite(q).all(axis=1)
+    if not ok.any():
+        return None
+    k = int(np.argmin(np.abs(imu["t_s"].to_numpy()[ok] - t)))
+    return quat_to_matrix(q[ok][k])
+
+
+def align(
+    pre: Preintegrated,
+    imu: pd.DataFrame,
+    fixes: pd.DataFrame,
+    t_start: float,
+    min_window_s: float = 20.0,
+    max_window_s: float = 180.0,
+    min_excitation_m: float = 10.0,
+    max_yaw_sigma: float = np.radians(2.0),
+    accel_bias_sigma: float = 0.1,
+    gyro_bias_sigma: float = 2e-3,
+) -> Alignment:
+    """Initial state at the first fix at or after `t_start` (fixes: one receiver, schema columns)."""
+    tf = fixes["t_s"].to_numpy(dtype=float)
+    first = int(np.searchsorted(tf, max(t_start, pre.t[0])))
+    if first >= len(tf) - 3:
+        raise AnalysisError("too few GNSS fixes inside the IMU's time span to align the INS")
+    lat0, lon0, h0 = (float(fixes[c].iloc[first]) for c in ("lat_deg", "lon_deg", "height_m"))
+    p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
+    g = float(normal_gravity(np.radians(lat0), h0))
+    s = int(np.clip(np.searchsorted(pre.t, tf[first]), 0, len(pre.t) - 1))
+    qs_inv = quat_conjugate(pre.Qb[s])
+    window = min_window_s
+    while True:
+        sel = (tf >= tf[first]) & (tf <= tf[first] + window) & (tf <= pre.t[-1])
+        idx = np.flatnonzero(sel)
+        k = np.clip(np.searchsorted(pre.t, tf[idx]), 0, len(pre.t) - 1)
+        tau = pre.t[k] - pre.t[s]
+        dH = quat_rotate(qs_inv, pre.H[k] - pre.H[s] - pre.G[s] * tau[:, None])
+        P = p[idx] - p[first]
+        grav = np.outer(0.5 * tau**2, [0.0, 0.0, -g]) + _earth_terms(np.radians(lat0), h0, g, tau, P)
+        # p0 and v0 enter linearly: project them out (onto the complement of [1, tau]), then the
+        # rotation is a single Kabsch problem on the projected vector pairs
+        design = np.c_[np.ones_like(tau), tau]
+        proj = np.eye(len(tau)) - design @ np.linalg.pinv(design)
+        C0 = _kabsch(proj @ dH, proj @ (P - grav))
+        resid = P - grav - dH @ C0.T
+        coef, *_ = np.linalg.lstsq(design, resid, rcond=None)
+        v0 = coef[1]
+        misfit = resid - design @ coef
+        # excitation: horizontal motion the INS sees that a constant velocity does not explain
+        excitation = float(np.sqrt(np.mean(np.sum((proj @ (dH @ C0.T))[:, :2] ** 2, axis=1))))
+        yaw_sigma = float("inf")
+        if excitation >= min_excitation_m:
+            C0, v0, misfit, yaw_sigma = _refine_yaw_with_bias(
+                C0, pre, s, k, tau, dH, P - grav, accel_bias_sigma, gyro_bias_sigma
+            )
+        if yaw_sigma <= max_yaw_sigma or window >= max_window_s or idx[-1] >= len(tf) - 1:
+            break
+        window = min(1.5 * window, max_window_s)
+    method = (
+        f"velocity matching over {window:.0f} s (horizontal excitation {excitation:.1f} m, "
+        f"yaw sigma {np.degrees(yaw_sigma):.1f} deg)"
+    )
+    if excitation < min_excitation_m or yaw_sigma > np.radians(15.0):
+        C0 = _heading_fallback(C0, imu, fixes, tf[first], p, first)
+        method = "levelled from gravity; too little horizontal acceleration for yaw, " + (
+            "yaw from the IMU orientation"
+            if _imu_orientation(imu, tf[first]) is not None
+            else "yaw from the course over ground"
+        )
+    rms = float(np.sqrt(np.mean(np.sum(misfit**2, axis=1))))
+    return Alignment(float(tf[first]), C0, v0, np.radians(lat0), np.radians(lon0), h0, method, rms, window)
+
+
+def _refine_yaw_with_bias(
+    C0: FloatArray,
+    pre: Preintegrated,
+    s: int,
+    k: NDArray[np.int64],
+    tau: FloatArray,
+    dH: FloatArray,
+    target: FloatArray,
+    accel_bias_sigma: float = 0.1,
+    gyro_bias_sigma: float = 2e-3,
+    noise_sigma: float = 3.0,
+) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """Attitude again, with constant accelerometer and gyro biases in the model.
+
+    Over a 40-80 s window a consumer accelerometer bias (0.05 m/s^2) moves the position by tens of
+    metres, and a gyro bias (0.03 deg/s) tilts gravity into the horizontal and moves it by hundreds:
+    both pull the Kabsch attitude. In the initial body frame an accelerometer bias b_a adds B_i b_a
+    (B = double integral of the body rotation R(u) since the start) and a gyro bias b_g adds
+    D_i b_g (D = double integral of [F(s) x] J(s), J = integral of R, F the specific force), so
+        target_i = p0 + v0 tau_i + C0 (dH_i - B_i b_a - D_i b_g),
+    linear in p0, v0, b_a, b_g (biases with weak priors) for a given C0. Yaw is searched on a 1 deg
+    grid, then all three angles are polished by parabolic line searches. Also returns the yaw's
+    standard deviation from the curvature of the misfit (Delta chi^2 = 1).
+    """
+    span = slice(s, k[-1] + 1)
+    rot = quat_to_matrix(quat_multiply(quat_conjugate(pre.Qb[s])[None, :], pre.Qb[span]))
+    dt = np.diff(pre.t[span])
+
+    def cumint(x: FloatArray) -> FloatArray:
+        return np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x[:-1] * dt[:, None, None], axis=0)])
+
+    B = cumint(cumint(rot))[k - s]
+    F = np.einsum("nij,nj->ni", rot, pre.f[span])
+    D = cumint(cumint(np.einsum("nij,njk->nik", skew(F), cumint(rot))))[k - s]
+    n = len(tau)
+    base = np.zeros((n, 3, 6))
+    base[:, :, :3] = np.eye(3)
+    base[:, :, 3:] = tau[:, None, None] * np.eye(3)
+    prior_rows = np.zeros((6, 12))
+    prior_rows[:3, 6:9] = np.eye(3) * (noise_sigma / accel_bias_sigma)
+    prior_rows[3:, 9:] = np.eye(3) * (noise_sigma / gyro_bias_sigma)
+    y_prior = np.zeros(6)
+
+    def fit(C: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+        design = np.concatenate(
+            [base, -np.einsum("ij,njk->nik", C, B), -np.einsum("ij,njk->nik", C, D)], axis=2
+        ).reshape(3 * n, 12)
+        y = (target - dH @ C.T).reshape(3 * n)
+        A = np.vstack([design, prior_rows])
+        coef, *_ = np.linalg.lstsq(A, np.r_[y, y_prior], rcond=None)
+        r = A @ coef - np.r_[y, y_prior]
+        return float(r @ r), coef, (y - design @ coef).reshape(n, 3)
+
+    yaws = np.radians(np.arange(-180.0, 180.0, 1.0))
+    costs = np.array([fit(_rotate_yaw(C0, yaw))[0] for yaw in yaws])
+    best = int(np.argmin(costs))
+    C = _rotate_yaw(C0, yaws[best])
+    step = np.radians(0.5)
+    for _ in range(3):
+        for axis in np.eye(3):
+            c_minus, c0, c_plus = (fit(rotvec_to_matrix(axis * d) @ C)[0] for d in (-step, 0.0, step))
+            curvature = c_plus - 2 * c0 + c_minus
+            if curvature > 0:
+                d = float(np.clip(0.5 * step * (c_minus - c_plus) / curvature, -step, step))
+                C = rotvec_to_matrix(axis * d) @ C
+        step /= 3.0
+    cost, coef, misfit = fit(C)
+    # yaw uncertainty with roll and pitch free: a constant specific force leaves the rotation about
+    # its own direction unobservable, which a yaw-only curvature would not show
+    h = np.radians(1.0)
+    axes = np.eye(3) * h
+
+    def c(d: FloatArray) -> float:
+        return fit(rotvec_to_matrix(d) @ C)[0]
+
+    hess = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            hess[i, j] = hess[j, i] = (
+                c(axes[i] + axes[j]) - c(axes[i] - axes[j]) - c(axes[j] - axes[i]) + c(-axes[i] - axes[j])
+            ) / (4 * h * h)
+    noise_var = cost / max(3 * n - 12, 1)
+    try:
+        cov = 2 * noise_var * np.linalg.inv(hess)
+        yaw_sigma = float(np.sqrt(cov[2, 2])) if cov[2, 2] > 0 else float("inf")
+    except np.linalg.LinAlgError:
+        yaw_sigma = float("inf")
+    return C, coef[3:6], misfit, yaw_sigma
+
+
+def _earth_terms(lat: float, h: float, g: float, tau: FloatArray, P: FloatArray) -> FloatArray:
+    """Position change from the local-level frame's rotation and Coriolis over the window.
+
+    The specific force seen in the initial body frame is, to first order, gravity rotating with the
+    local-level frame at omega_in: -(omega_in x [0, 0, g]) tau^3 / 6; Coriolis adds
+    -double integral of (2 omega_ie + omega_en) x v, with v from the GNSS positions. At aircraft speeds
+    and 40 s windows each is tens of metres, the size of the heading signal itself.
+    """
+    v = np.gradient(P, tau, axis=0) if len(tau) > 2 else np.zeros_like(P)
+    w_ie, w_en, _, _ = rates(lat, h, np.mean(v, axis=0))
+    rotation = -np.outer(tau**3 / 6.0, np.cross(w_ie + w_en, [0.0, 0.0, g]))
+    cor = np.cross(2 * w_ie + w_en, v)
+    first = np.vstack([np.zeros(3), np.cumsum(0.5 * (cor[1:] + cor[:-1]) * np.diff(tau)[:, None], axis=0)])
+    second = np.vstack([np.zeros(3), np.cumsum(0.5 * (first[1:] + first[:-1]) * np.diff(tau)[:, None], axis=0)])
+    return rotation - second
+
+
+def _yaw_of(C: FloatArray, axis: FloatArray) -> float:
+    d = C @ axis
+    return float(np.arctan2(d[1], d[0]))
+
+
+def _rotate_yaw(C: FloatArray, dyaw: float) -> FloatArray:
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ C
+
+
+def _heading_fallback(
+    C_level: FloatArray, imu: pd.DataFrame, fixes: pd.DataFrame, t0: float, p: FloatArray, first: int
+) -> FloatArray:
+    """Keep roll/pitch of C_level; take yaw from the IMU orientation or the course over ground."""
+    C_imu = _imu_orientation(imu, t0)
+    forward = np.array([1.0, 0.0, 0.0])
+    if C_imu is not None:
+        target = _yaw_of(C_imu, forward)
+    else:
+        tf = fixes["t_s"].to_numpy(dtype=float)
+        later = np.flatnonzero((tf > t0) & (np.linalg.norm(p[:, :2] - p[first, :2], axis=1) > 5.0))
+        if not len(later):
+            return C_level
+        d = p[later[0]] - p[first]
+        target = float(np.arctan2(d[1], d[0]))
+    return _rotate_yaw(C_level, target - _yaw_of(C_level, forward))

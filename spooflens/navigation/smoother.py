@@ -1,0 +1,53 @@
+"""Forward-backward smoothing of the loosely coupled filter: the best estimate of where the vehicle
+was at every epoch given ALL the data (before and after), and its covariance.
+
+Rauch-Tung-Striebel for a closed-loop error-state filter (kernels.rts_closed_loop). Between epochs the
+smoothed position correction is interpolated linearly onto the filter's block-rate track for plotting.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spooflens.navigation import kernels
+from spooflens.navigation.kernels import local_radii
+from spooflens.navigation.loosely_coupled import NavSolution
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SmoothedSolution:
+    t: FloatArray  # (M,) GNSS epochs
+    state: FloatArray  # (M, 22) smoothed nominal state (layout of NavSolution.state)
+    delta: FloatArray  # (M, 15) smoothed error of the filtered state
+    P: FloatArray  # (M, 15, 15) smoothed covariance
+    track_t: FloatArray  # (K,) block-rate times
+    track_llh: FloatArray  # (K, 3) smoothed lat, lon (rad), h
+
+
+def smooth(sol: NavSolution) -> SmoothedSolution:
+    delta, P_s = kernels.rts_closed_loop(sol.P_pred, sol.P_upd, sol.Phi, sol.dx)
+    state = np.array([kernels.correct(x, d) for x, d in zip(sol.state, delta, strict=True)])
+    return SmoothedSolution(sol.t, state, delta, P_s, sol.track_t, _smoothed_track(sol, delta))
+
+
+def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
+    """Block-rate track with the smoothed position correction interpolated between epochs."""
+    M = len(sol.t)
+    e = sol.track_epoch
+    # correction known at the start of each inter-epoch segment (after epoch e) and at its end (epoch e+1,
+    # relative to the nominal propagated from e: the filter's update there plus the smoothed error)
+    start = np.where(e[:, None] >= 0, delta[np.clip(e, 0, M - 1)], 0.0)
+    nxt = np.clip(e + 1, 0, M - 1)
+    end = np.where((e + 1 < M)[:, None], sol.dx[nxt] + delta[nxt], start)
+    t0 = np.where(e >= 0, sol.t[np.clip(e, 0, M - 1)], sol.track_t[0])
+    t1 = np.where(e + 1 < M, sol.t[nxt], sol.track_t[-1])
+    w = np.clip((sol.track_t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
+    d = (1 - w) * start + w * end
+    lat, lon, h = sol.track_llh.T
+    rm, rn = np.vectorize(local_radii)(lat)
+    return np.c_[lat - d[:, 7] / (rm + h), lon - d[:, 6] / ((rn + h) * np.cos(lat)), h - d[:, 8]]

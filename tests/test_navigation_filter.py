@@ -1,0 +1,118 @@
+"""The loosely coupled filter and smoother on simulated logs (truth known) and on the real husky bag."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from readers import read_log
+from spooflens.epoch_table import EpochTable
+from spooflens.geodesy import geodetic_to_enu
+from spooflens.navigation.imu_models import grade
+from spooflens.navigation.loosely_coupled import FilterOptions, NavSolution, run_filter
+from spooflens.navigation.smoother import smooth
+from spooflens.simulation.simulate import SCENARIOS, simulate
+
+
+@pytest.fixture(scope="module")
+def ground() -> tuple[EpochTable, NavSolution]:
+    sim = simulate("ground", seed=3)
+    return sim.table, run_filter(sim.table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade))
+
+
+def _errors(table: EpochTable, t: np.ndarray, state: np.ndarray) -> np.ndarray:
+    tr = table.truth
+    k = np.searchsorted(tr["t_s"].to_numpy(), t - 1e-9)
+    ref = tr.iloc[0]
+    truth = geodetic_to_enu(
+        tr["lat_deg"].to_numpy()[k],
+        tr["lon_deg"].to_numpy()[k],
+        tr["height_m"].to_numpy()[k],
+        ref.lat_deg,
+        ref.lon_deg,
+        ref.height_m,
+    )
+    est = geodetic_to_enu(
+        np.degrees(state[:, 0]), np.degrees(state[:, 1]), state[:, 2], ref.lat_deg, ref.lon_deg, ref.height_m
+    )
+    return est - truth
+
+
+@pytest.mark.parametrize("name", ["ground", "aircraft"])
+def test_nis_averages_its_degrees_of_freedom(name: str) -> None:
+    sim = simulate(name, seed=5)
+    sol = run_filter(sim.table, options=FilterOptions(grade=SCENARIOS[name].imu_grade))
+    settled = sol.t > sol.t[0] + 30.0
+    assert np.nanmean(sol.nis[settled]) == pytest.approx(np.mean(sol.dof[settled]), rel=0.10)
+    assert sol.alignment is not None and "velocity matching" in sol.alignment.method
+
+
+def test_smoothed_position_error_is_below_the_filtered_one(ground: tuple[EpochTable, NavSolution]) -> None:
+    table, sol = ground
+    sm = smooth(sol)
+    settled = sol.t > sol.t[0] + 30.0
+    filtered = np.sqrt(np.mean(np.sum(_errors(table, sol.t, sol.state)[settled] ** 2, axis=1)))
+    smoothed = np.sqrt(np.mean(np.sum(_errors(table, sm.t, sm.state)[settled] ** 2, axis=1)))
+    assert smoothed < 0.85 * filtered
+    # and the smoother's covariance tells the truth about its errors (3 sigma per axis almost always)
+    err = _errors(table, sm.t, sm.state)[settled]
+    sigma = np.sqrt(np.diagonal(sm.P[settled][:, 6:9, 6:9], axis1=1, axis2=2))
+    assert np.mean(np.abs(err) < 3 * sigma) > 0.97
+
+
+def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[EpochTable, NavSolution]) -> None:
+    """A textbook KF (filterpy) on the exported linear model gives the same innovations and S."""
+    _, sol = ground
+    model = sol.error_model()
+    kf = KalmanFilter(dim_x=15, dim_z=6)
+    kf.x, kf.P = model.x0.copy(), model.P0.copy()
+    for k in range(min(400, model.n_epochs)):
+        if k > 0:
+            kf.F, kf.Q = model.A[k], model.Q[k]
+            kf.predict()
+        use = np.isfinite(model.y[k])
+        kf.H, kf.R = model.C[k][use], model.R[k][np.ix_(use, use)]
+        kf.dim_z = int(use.sum())
+        kf.update(model.y[k][use])
+        np.testing.assert_allclose(kf.y, sol.z[k][use], rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(kf.S, sol.S[k][np.ix_(use, use)], rtol=1e-6, atol=1e-10)
+
+
+def test_gnss_outage_is_coasted_and_recovered() -> None:
+    sim = simulate("ground", seed=4)
+    table = sim.table
+    t = table.fixes["t_s"].to_numpy()
+    table.fixes = table.fixes[(t < 150.0) | (t > 170.0)].reset_index(drop=True)
+    sol = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade))
+    assert not np.any((sol.t > 150.0) & (sol.t < 170.0))
+    err = np.linalg.norm(_errors(table, sol.t, sol.state), axis=1)
+    after = sol.t > 175.0
+    assert err[after].max() < 2.0
+    first_back = int(np.argmax(sol.t > 170.0))
+    assert sol.nis[first_back] < 40.0  # the coasted INS is still consistent with the first fix back
+
+
+def test_excluding_gnss_coasts_on_the_ins() -> None:
+    sim = simulate("aircraft", seed=2, duration_s=200.0)
+    opts = FilterOptions(grade=SCENARIOS["aircraft"].imu_grade, exclude_after_s=150.0)
+    sol = run_filter(sim.table, options=opts)
+    late = sol.t >= 150.0
+    assert not sol.used[late].any() and np.all(sol.dof[late] == 0)
+    err = np.linalg.norm(_errors(sim.table, sol.t, sol.state)[late], axis=1)
+    assert err.max() < 5.0  # 50 s of tactical-grade coasting
+
+
+def test_husky_bag_end_to_end_with_the_rotated_imu(husky_bag: Path) -> None:
+    table = read_log(husky_bag)
+    sol = run_filter(table, options=FilterOptions(grade=grade("consumer_mems")))
+    assert sol.alignment is not None
+    assert len(sol.t) > 900 and set(np.unique(sol.dof)) == {3}  # NavSatFix: position only
+    nis = sol.nis[sol.t > sol.t[0] + 30.0]
+    # README reports these statistics; bounds are loose on purpose: a real consumer IMU and SBAS fixes
+    assert 1.5 < np.nanmean(nis) < 6.0 and np.nanpercentile(nis, 99) < 30.0
+    # the levelled attitude puts the IMU's +y (where gravity appears) up
+    C = sol.state[0, 6:15].reshape(3, 3)
+    assert (C @ np.array([0.0, 1.0, 0.0]))[2] > 0.95
