@@ -213,6 +213,40 @@ def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None
     console.print(f"view it with: rerun {output}")
 
 
+@cli.command()
+@click.argument("log", type=click.Path(path_type=Path))
+@click.option(
+    "--attack",
+    "attack_text",
+    required=True,
+    metavar="KIND[:param=value,...]",
+    help="e.g. ramp:rate=2,axes=en,start=60  (see README: attack kinds)",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Spoofed copy, in the input's format (its attack truth goes to OUTPUT.attack.json).",
+)
+@topic_option
+def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -> int:
+    """Write a spoofed copy of LOG with an attack injected, plus its ground truth."""
+    from spooflens.attacks import apply_attack, parse_attack, sidecar_path
+    from spooflens.writers.rewrite import rewrite_fixes
+
+    spec = parse_attack(attack_text)
+    table = _read(log, _parse_topics(topics), sys.stderr.isatty())
+    spoofed, truth = apply_attack(table, spec)
+    note = rewrite_fixes(log, output, table, spoofed.fixes, velocities=bool(spec.params.get("vel", 0)))
+    truth.write(sidecar_path(output))
+    click.echo(
+        f"{output}: {spec} on {', '.join(truth.receivers)} from {truth.start_s:.1f} s to {truth.end_s:.1f} s; "
+        f"{note}; truth in {sidecar_path(output)}"
+    )
+    return EXIT_OK
+
+
 @cli.group()
 def bench() -> None:
     """Measure speed, memory and detection performance (figures quoted in the README)."""

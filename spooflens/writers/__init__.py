@@ -35,6 +35,7 @@ SUFFIX = {
     "ros2bag-sqlite3": "",
     "ros2bag-mcap": "",
     "csv": "",
+    "ulog": ".ulg",
 }
 
 

@@ -1,0 +1,186 @@
+"""Attack specifications (`KIND[:param=value,...]`) and the ground truth written beside a spoofed log."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+from spooflens.errors import SpooflensError
+
+
+class AttackError(SpooflensError):
+    """An attack cannot be parsed or applied to this log."""
+
+
+class Kind(Enum):
+    RAMP = "ramp"
+    STEP = "step"
+    HOVER = "hover"
+    VELOCITY_PULL = "velocity_pull"
+    POSITION_PULL = "position_pull"
+    SINGLE_ANTENNA = "single_antenna"
+
+
+@dataclass(frozen=True)
+class KindInfo:
+    seed: str
+    summary: str
+    params: dict[str, str]  # name -> meaning (with unit and default)
+
+
+_WINDOW = {
+    "start": "attack start, s since the log start (default 0)",
+    "end": "attack end, s (default: end of log); the spoofer switches off there",
+    "receiver": "receiver id to attack (default: every receiver)",
+}
+KINDS: dict[Kind, KindInfo] = {
+    Kind.RAMP: KindInfo(
+        "000",
+        "position drifts at `rate` m/s on each chosen axis; velocity untouched",
+        {
+            "rate": "m/s per axis (default 2)",
+            "axes": "subset of e, n, u (default en)",
+            "vel": "1 to move the reported velocity consistently (default 0)",
+            **_WINDOW,
+        },
+    ),
+    Kind.STEP: KindInfo(
+        "000",
+        "position jumps by `offset` m on each chosen axis",
+        {"offset": "m per axis (default 50)", "axes": "default en", "vel": "ignored", **_WINDOW},
+    ),
+    Kind.HOVER: KindInfo(
+        "001",
+        "reported position frozen at its value at `start` (and velocity zero)",
+        {"vel": "1 (default) reports zero velocity, 0 leaves it", **_WINDOW},
+    ),
+    Kind.VELOCITY_PULL: KindInfo(
+        "001",
+        "velocity offset `dv` m/s on the chosen axes; position follows its integral",
+        {
+            "dv": "m/s per axis (default 0.1)",
+            "axes": "default n",
+            "vel": "1 (default) reports the pulled velocity",
+            **_WINDOW,
+        },
+    ),
+    Kind.POSITION_PULL: KindInfo(
+        "001",
+        "position offset grows linearly to `offset` m over `ramp` s, then holds",
+        {
+            "offset": "m per axis (default 100)",
+            "axes": "default e",
+            "ramp": "s to reach the full offset (default 50)",
+            "vel": "default 0",
+            **_WINDOW,
+        },
+    ),
+    Kind.SINGLE_ANTENNA: KindInfo(
+        "003",
+        "one spoofer antenna: every receiver reports the same false position "
+        "(the first receiver's track plus a ramp of `rate` m/s), so the "
+        "baseline between receivers collapses",
+        {
+            "rate": "m/s per axis (default 1)",
+            "axes": "default en",
+            "vel": "default 0",
+            "start": _WINDOW["start"],
+            "end": _WINDOW["end"],
+        },
+    ),
+}
+_DEFAULTS: dict[Kind, dict[str, Any]] = {
+    Kind.RAMP: {"rate": 2.0, "axes": "en", "vel": 0},
+    Kind.STEP: {"offset": 50.0, "axes": "en", "vel": 0},
+    Kind.HOVER: {"vel": 1},
+    Kind.VELOCITY_PULL: {"dv": 0.1, "axes": "n", "vel": 1},
+    Kind.POSITION_PULL: {"offset": 100.0, "axes": "e", "ramp": 50.0, "vel": 0},
+    Kind.SINGLE_ANTENNA: {"rate": 1.0, "axes": "en", "vel": 0},
+}
+
+
+@dataclass(frozen=True)
+class AttackSpec:
+    kind: Kind
+    params: dict[str, Any]
+
+    @property
+    def start_s(self) -> float:
+        return float(self.params.get("start", 0.0))
+
+    @property
+    def end_s(self) -> float | None:
+        end = self.params.get("end")
+        return None if end is None else float(end)
+
+    @property
+    def axes(self) -> str:
+        return str(self.params.get("axes", ""))
+
+    def __str__(self) -> str:
+        return self.kind.value + ":" + ",".join(f"{k}={v}" for k, v in self.params.items())
+
+
+def parse_attack(text: str) -> AttackSpec:
+    """`ramp:rate=2,axes=en,start=10` -> AttackSpec, with errors listing kinds and parameters."""
+    name, _, rest = text.strip().partition(":")
+    try:
+        kind = Kind(name.strip().lower())
+    except ValueError:
+        raise AttackError(f"unknown attack kind {name!r}; kinds are {[k.value for k in Kind]}") from None
+    params: dict[str, Any] = dict(_DEFAULTS[kind])
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        key, sep, value = item.partition("=")
+        key = key.strip().lower()
+        if not sep or key not in KINDS[kind].params:
+            raise AttackError(f"{kind.value}: bad parameter {item!r}; parameters are {sorted(KINDS[kind].params)}")
+        if key in ("axes", "receiver"):
+            params[key] = value.strip()
+        else:
+            try:
+                params[key] = float(value)
+            except ValueError:
+                raise AttackError(f"{kind.value}: {key}={value!r} is not a number") from None
+    axes = str(params.get("axes", ""))
+    if axes and (set(axes) - set("enu") or len(set(axes)) != len(axes)):
+        raise AttackError(f"{kind.value}: axes={axes!r}; use a subset of e, n, u such as en")
+    if "end" in params and params["end"] <= params.get("start", 0.0):
+        raise AttackError(f"{kind.value}: end={params['end']} is not after start={params.get('start', 0.0)}")
+    return AttackSpec(kind, params)
+
+
+@dataclass
+class AttackTruth:
+    """What was injected, for scoring detectors: written as JSON beside the spoofed log."""
+
+    kind: str
+    params: dict[str, Any]
+    start_s: float
+    end_s: float
+    receivers: list[str]
+    seed_paper: str
+    source: str = ""
+    t0_abs_ns: int = 0
+    offsets: dict[str, list[list[float]]] = field(default_factory=dict)  # receiver -> [t_s, de, dn, du]
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=1)
+
+    @classmethod
+    def from_json(cls, text: str) -> AttackTruth:
+        return cls(**json.loads(text))
+
+    def write(self, path: Path) -> None:
+        Path(path).write_text(self.to_json())
+
+    @classmethod
+    def read(cls, path: Path) -> AttackTruth:
+        return cls.from_json(Path(path).read_text())
+
+
+def sidecar_path(log_path: Path) -> Path:
+    """Where the attack truth of a spoofed log lives: `<log>.attack.json`."""
+    return Path(str(log_path).rstrip("/") + ".attack.json")

@@ -1,0 +1,250 @@
+"""Rewrite a log in its own format with new fix values, every other message untouched.
+
+This is how `spooflens inject` makes a spoofed copy of a real log: fix (and, if asked, GNSS velocity)
+messages are matched to rows of the modified fixes frame by the stamp the reader used (header stamp,
+or log time when the stamp is zero), decoded, changed and re-encoded; everything else is copied byte
+for byte, with its original log time. Containers: MCAP (ROS1, ROS2, JSON, protobuf channels), ROS1
+bags, ROS2 bags (sqlite3 or MCAP storage). CSV and ULog logs are rewritten through their writers
+(a ULog keeps only the streams spooflens maps, which the caller reports).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+from readers import foxglove_messages, sniff_format
+from readers.ros_messages import kind_of
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import WriterError
+
+# stamp ns -> (lat, lon, h, ve, vn, vu) per receiver topic
+Replacement = dict[int, tuple[float, float, float, float, float, float]]
+
+
+@dataclasses.dataclass
+class _Plan:
+    fixes: dict[str, Replacement]
+    velocity_of: dict[str, tuple[str, np.ndarray]]  # velocity topic -> (receiver topic, sorted fix stamps)
+    changed: int = 0
+
+
+def _plan(table: EpochTable, spoofed: pd.DataFrame, velocities: bool) -> _Plan:
+    fixes: dict[str, Replacement] = {}
+    for rid, rows in spoofed.groupby("receiver_id", sort=False):
+        t_ns = table.absolute_ns(rows["t_s"].to_numpy())
+        vals = rows[["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(float)
+        fixes[str(rid)] = {int(t): tuple(v) for t, v in zip(t_ns, vals, strict=True)}
+    velocity_of: dict[str, tuple[str, np.ndarray]] = {}
+    if velocities:
+        for s in table.streams:
+            if s.role == "vel":
+                target = max(fixes, key=lambda r: len(_common_prefix(r, s.topic)))
+                velocity_of[s.topic] = (target, np.array(sorted(fixes[target])))
+    return _Plan(fixes, velocity_of)
+
+
+def _common_prefix(a: str, b: str) -> str:
+    n = 0
+    while n < min(len(a), len(b)) and a[n] == b[n]:
+        n += 1
+    return a[:n]
+
+
+def _nearest(stamps: np.ndarray, t: int) -> int | None:
+    if not len(stamps):
+        return None
+    i = int(np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)) if len(stamps) > 1 else 0
+    best = i if len(stamps) == 1 or abs(stamps[i] - t) < abs(stamps[i - 1] - t) else i - 1
+    period = np.median(np.diff(stamps)) if len(stamps) > 1 else 1e9
+    return int(stamps[best]) if abs(stamps[best] - t) <= period / 2 else None
+
+
+def _ros_stamp(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _edit_ros(msg: Any, kind: str, values: tuple[float, ...], velocity: bool) -> Any:
+    lat, lon, h, ve, vn, vu = values
+    if kind in ("navsatfix", "gpsfix"):
+        changes: dict[str, Any] = {"latitude": lat, "longitude": lon, "altitude": h}
+        if kind == "gpsfix" and velocity and np.isfinite(ve):
+            changes |= {
+                "speed": float(np.hypot(ve, vn)),
+                "track": float(np.degrees(np.arctan2(ve, vn)) % 360),
+                "climb": vu,
+            }
+        return dataclasses.replace(msg, **changes)
+    lin = msg.twist.twist.linear if kind == "twist_cov" else msg.twist.linear
+    new_lin = dataclasses.replace(lin, x=ve, y=vn, z=vu)
+    if kind == "twist_cov":
+        inner = dataclasses.replace(msg.twist.twist, linear=new_lin)
+        return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, twist=inner))
+    return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, linear=new_lin))
+
+
+class _RosEditor:
+    """Re-encodes the ROS messages a plan changes; `edit` returns None for messages left alone."""
+
+    def __init__(self, plan: _Plan, deserialize: Callable[[bytes, str], Any], serialize: Callable[[Any, str], Any]):
+        self.plan, self.deserialize, self.serialize = plan, deserialize, serialize
+
+    def edit(self, topic: str, msgtype: str, raw: bytes, log_time: int) -> bytes | None:
+        kind = kind_of(msgtype)
+        if kind in ("navsatfix", "gpsfix") and topic in self.plan.fixes:
+            msg = self.deserialize(raw, msgtype)
+            stamp = _ros_stamp(msg) or log_time
+            values = self.plan.fixes[topic].get(stamp)
+            if values is None:
+                return None
+            self.plan.changed += 1
+            return bytes(self.serialize(_edit_ros(msg, kind, values, bool(self.plan.velocity_of)), msgtype))
+        if kind in ("twist", "twist_cov") and topic in self.plan.velocity_of:
+            msg = self.deserialize(raw, msgtype)
+            target, stamps = self.plan.velocity_of[topic]
+            match = _nearest(stamps, _ros_stamp(msg) or log_time)
+            if match is None:
+                return None
+            self.plan.changed += 1
+            return bytes(self.serialize(_edit_ros(msg, kind, self.plan.fixes[target][match], True), msgtype))
+        return None
+
+
+def _rewrite_bag(src: Path, dst: Path, plan: _Plan) -> None:
+    is_ros1 = src.is_file()
+    with AnyReader([src]) as reader:
+        store = reader.typestore
+        if is_ros1:
+            dst.unlink(missing_ok=True)
+            writer: Any = Writer1(dst)
+            editor = _RosEditor(plan, lambda r, t: store.deserialize_ros1(r, t), store.serialize_ros1)
+        else:
+            if dst.exists():
+                shutil.rmtree(dst)
+            storage = StoragePlugin.MCAP if any(src.glob("*.mcap")) else StoragePlugin.SQLITE3
+            writer = Writer2(dst, version=9, storage_plugin=storage)
+            editor = _RosEditor(plan, lambda r, t: store.deserialize_cdr(r, t), store.serialize_cdr)
+        with writer:
+            conns = {}
+            for c in reader.connections:
+                if c.topic in conns:
+                    continue
+                if is_ros1:
+                    conns[c.topic] = writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                else:
+                    conns[c.topic] = writer.add_connection(c.topic, c.msgtype, typestore=store)
+            for c, t, raw in reader.messages():
+                new = editor.edit(c.topic, c.msgtype, raw, t)
+                writer.write(conns[c.topic], t, new if new is not None else raw)
+
+
+def _rewrite_mcap(src: Path, dst: Path, plan: _Plan) -> None:
+    ros2, ros1 = get_typestore(Stores.EMPTY), get_typestore(Stores.EMPTY)
+    protobuf = ProtobufDecoderFactory()
+    cdr_editor = _RosEditor(plan, lambda r, t: ros2.deserialize_cdr(r, t), ros2.serialize_cdr)
+    ros1_editor = _RosEditor(plan, lambda r, t: ros1.deserialize_ros1(r, t), ros1.serialize_ros1)
+    with src.open("rb") as f, dst.open("wb") as out:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        if summary is None:
+            raise WriterError(
+                f"{src}: MCAP without a summary section cannot be rewritten; "
+                "read it and write a fresh copy with `spooflens simulate`-style writers"
+            )
+        w = Writer(out, compression=CompressionType.ZSTD)
+        header = reader.get_header()
+        w.start(profile=header.profile, library="spooflens inject")
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channel_ids = {
+            cid: w.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
+            for cid, c in summary.channels.items()
+        }
+        for s in summary.schemas.values():
+            if s.encoding in ("ros2msg", "ros2idl"):
+                text = s.data.decode()
+                ros2.register(get_types_from_msg(text, s.name) if s.encoding == "ros2msg" else get_types_from_idl(text))
+            elif s.encoding == "ros1msg":
+                ros1.register(get_types_from_msg(s.data.decode(), s.name))
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            data = message.data
+            if schema is not None:
+                new = None
+                if channel.message_encoding == "cdr":
+                    new = cdr_editor.edit(channel.topic, schema.name, data, message.log_time)
+                elif channel.message_encoding == "ros1":
+                    new = ros1_editor.edit(channel.topic, schema.name, data, message.log_time)
+                elif schema.name == "foxglove.LocationFix" and channel.topic in plan.fixes:
+                    new = _edit_location_fix(plan, channel.topic, channel.message_encoding, schema, data, protobuf)
+                data = new if new is not None else data
+            w.add_message(
+                channel_ids[channel.id],
+                log_time=message.log_time,
+                data=data,
+                publish_time=message.publish_time,
+                sequence=message.sequence,
+            )
+        w.finish()
+
+
+def _edit_location_fix(
+    plan: _Plan, topic: str, encoding: str, schema: Any, data: bytes, protobuf: ProtobufDecoderFactory
+) -> bytes | None:
+    if encoding == "json":
+        msg = json.loads(data)
+        values = plan.fixes[topic].get(foxglove_messages.extract("navsatfix", msg)[0])
+        if values is None:
+            return None
+        msg["latitude"], msg["longitude"], msg["altitude"] = values[:3]
+        plan.changed += 1
+        return json.dumps(msg).encode()
+    if encoding == "protobuf":
+        decoder = protobuf.decoder_for("protobuf", schema)
+        if decoder is None:
+            return None
+        msg = decoder(data)
+        values = plan.fixes[topic].get(foxglove_messages.extract("navsatfix", msg)[0])
+        if values is None:
+            return None
+        msg.latitude, msg.longitude, msg.altitude = values[:3]
+        plan.changed += 1
+        return bytes(msg.SerializeToString())
+    return None
+
+
+def rewrite_fixes(src: Path, dst: Path, table: EpochTable, spoofed_fixes: pd.DataFrame, velocities: bool) -> str:
+    """Write `src` to `dst` in the same format with `spoofed_fixes` in place of its fixes.
+
+    `table` is what the readers made of `src` (it carries the clock that maps rows to stamps). Returns a
+    one-line note on what was written.
+    """
+    src, dst = Path(src), Path(dst)
+    fmt = sniff_format(src)
+    plan = _plan(table, spoofed_fixes, velocities)
+    if fmt in ("csv", "ulog"):
+        from spooflens.writers import write_log
+
+        out = EpochTable(**{**table.__dict__, "fixes": spoofed_fixes})
+        write_log(out, dst, fmt)
+        note = "ULog rewritten with only sensor_combined and sensor_gps" if fmt == "ulog" else "CSV log rewritten"
+        return f"{note}: {len(spoofed_fixes)} fixes"
+    if fmt == "mcap":
+        _rewrite_mcap(src, dst, plan)
+    else:
+        _rewrite_bag(src, dst, plan)
+    expected = sum(len(v) for v in plan.fixes.values())
+    return f"{plan.changed} messages rewritten ({expected} fixes in the table), every other message copied"
