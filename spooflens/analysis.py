@@ -92,12 +92,64 @@ def _gnss_consistency(ctx: AnalysisContext) -> list[DetectorResult]:
     return [run_gnss_consistency(ctx.table.fixes)]
 
 
+def _inertial(ctx: AnalysisContext) -> list[DetectorResult]:
+    """Seed 000: the GNSS/INS filter, its innovation test, GLRT, MLRT and calibrated MLRT."""
+    from spooflens.detectors.base import Series, Track
+    from spooflens.detectors.seed000 import Seed000Options, detect, reconstructed_track
+    from spooflens.navigation.imu_models import grade
+    from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
+    from spooflens.navigation.smoother import smooth
+
+    imu_grade = grade(ctx.options.imu_grade or "consumer_mems")
+    sol = run_filter(ctx.table, ctx.options.imu_id, ctx.options.receiver_id, FilterOptions(grade=imu_grade))
+    sm = smooth(sol)
+    settled = sol.t > sol.t[0] + 20.0
+    nav = DetectorResult(
+        "navigation",
+        True,
+        f"INS {sol.imu_id} + GNSS {sol.receiver_id}, grade {imu_grade.name}; "
+        + (sol.alignment.method if sol.alignment else "initial state given"),
+        series=[Series("nis", sol.t, sol.nis, "chi2(dof)")],
+        tracks=[
+            Track(
+                "ins_smoothed",
+                sm.track_t,
+                np.degrees(sm.track_llh[:, 0]),
+                np.degrees(sm.track_llh[:, 1]),
+                sm.track_llh[:, 2],
+            )
+        ],
+        extras={
+            "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
+            "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
+            "imu_grade": imu_grade.name,
+            "epochs": len(sol.t),
+        },
+    )
+    results = detect(sol.error_model(), Seed000Options())
+    incidents = [a for r in results if r.name == "mlrt_calibrated" for a in r.alarms]
+    if incidents:
+        first = incidents[0]
+        onset = first.onset_s if first.onset_s is not None else first.start_s
+        end = None if first.end_s >= sol.t[-1] - 1e-6 else first.end_s
+        earlier: list[DetectorResult] = ctx.cache.get("results", [])  # type: ignore[assignment]
+        velocity_honest = any(r.name == "gnss_consistency" and any(a.end_s >= onset for a in r.alarms) for r in earlier)
+        nav.tracks.append(reconstructed_track(ctx.table, sol, onset, end, velocity_honest))
+    return [nav, *results]
+
+
 ANALYSES: list[AnalysisSpec] = [
     AnalysisSpec(
         "gnss_consistency",
         "GNSS-only: position change against reported velocity (or kinematic plausibility without velocity)",
         ("fixes",),
         _gnss_consistency,
+    ),
+    AnalysisSpec(
+        "inertial",
+        "seed 000: GNSS/INS filter; KF innovation test, GLRT, MLRT and calibrated MLRT on a position ramp",
+        ("fixes", "imu"),
+        _inertial,
     ),
 ]
 
@@ -126,4 +178,5 @@ def run_analyses(
             results.extend(spec.run(ctx))
         except SpooflensError as err:
             results.append(DetectorResult.skipped(spec.name, str(err)))
+        ctx.cache["results"] = results
     return results

@@ -1,8 +1,10 @@
 """The incident verdict: was GNSS spoofed, from when to when, and how sure.
 
 Alarm intervals of every detector that ran are merged into incidents (overlapping or closer than
-`merge_gap_s`). An incident's onset is the earliest onset estimate inside it (a detector's estimate of
-when the attack began, which precedes the alarm), its end the last alarm end. Confidence says how much
+`merge_gap_s`). An incident's onset is the calibrated MLRT's posterior onset when it took part (it comes
+with a credible interval), else the earliest onset estimate inside it; its end is the last alarm end.
+Detectors marked advisory (an uncalibrated rule such as the paper's "l > 0") are reported but do not
+make incidents. Confidence says how much
 independent evidence there is: detectors that compare GNSS with something GNSS cannot fake (the
 inertial sensors, a second receiver, a known station) count as independent of GNSS-only checks.
 """
@@ -57,9 +59,11 @@ def _confidence(detectors: set[str]) -> str:
 
 
 def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
-    ran = tuple(r.name for r in results if r.ran)
+    ran = tuple(r.name for r in results if r.ran and not r.advisory)
     not_run = tuple(r.name for r in results if not r.ran)
-    alarms = sorted(((a, r.name) for r in results if r.ran for a in r.alarms), key=lambda x: x[0].start_s)
+    alarms = sorted(
+        ((a, r.name) for r in results if r.ran and not r.advisory for a in r.alarms), key=lambda x: x[0].start_s
+    )
     groups: list[list[tuple[Alarm, str]]] = []
     end = float("-inf")
     for a, name in alarms:
@@ -73,8 +77,15 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
     for g in groups:
         items = [a for a, _ in g]
         names = {n for _, n in g}
+        # an onset with a credible interval (the calibrated MLRT's posterior) beats point estimates
+        with_interval = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_interval_s is not None]
         onsets = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None]
-        onset, interval = min(onsets, key=lambda o: o[0]) if onsets else (min(a.start_s for a in items), None)
+        if with_interval:
+            onset, interval = min(with_interval, key=lambda o: o[0])
+        elif onsets:
+            onset, interval = min(onsets, key=lambda o: o[0])
+        else:
+            onset, interval = min(a.start_s for a in items), None
         incidents.append(
             Incident(
                 min(a.start_s for a in items),
@@ -85,4 +96,5 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
                 _confidence(names),
             )
         )
-    return Verdict(bool(incidents), incidents, ran, not_run)
+    # GNSS-only evidence alone (low confidence) is reported, not called spoofing: real receivers jump too
+    return Verdict(any(i.confidence != "low" for i in incidents), incidents, ran, not_run)

@@ -36,8 +36,10 @@ def test_recording_holds_tracks_series_and_alarm_events(tmp_path: Path) -> None:
     assert rows["/imu/imu/specific_force_mps2"] == len(table.imu)
     assert rows["/detectors/gnss_consistency/gps/fix/statistic"] == 300
     assert rows["/detectors/gnss_consistency/gps/fix/statistic_threshold"] == 300
-    # verdict + one alarm + its onset estimate
-    assert rows["/events"] == 1 + 2 * len(results[0].alarms) and results[0].alarms
+    # the verdict, then each alarm and its onset estimate
+    expected = 1 + sum(len(r.alarms) + sum(a.onset_s is not None for a in r.alarms) for r in results)
+    assert rows["/events"] == expected and results[0].alarms
+    assert rows["/detectors/glrt/glr"] == len(next(r for r in results if r.name == "glrt").series[0].t)
 
 
 def test_summary_gives_times_relative_and_in_the_logs_clock(tmp_path: Path) -> None:

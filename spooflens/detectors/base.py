@@ -66,6 +66,7 @@ class DetectorResult:
     curves: list[Curve] = field(default_factory=list)
     tracks: list[Track] = field(default_factory=list)
     extras: dict[str, object] = field(default_factory=dict)  # JSON-able facts for the summary
+    advisory: bool = False  # reported and drawn, but not used for the verdict (an uncalibrated rule)
 
     @classmethod
     def skipped(cls, name: str, reason: str) -> DetectorResult:

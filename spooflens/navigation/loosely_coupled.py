@@ -41,7 +41,8 @@ class FilterOptions:
     min_sigma_vel_mps: float = 0.03
     sigma_pos_m: tuple[float, float, float] | None = None  # overrides the log's accuracies
     sigma_vel_mps: float | None = None
-    exclude_after_s: float | None = None  # ignore GNSS from this time on (coast on the INS)
+    exclude_after_s: float | None = None  # ignore GNSS from this time on (coast on the INS) ...
+    exclude_until_s: float | None = None  # ... up to this time (None: to the end of the log)
     exclude_velocity_too: bool = True
     initial: NavState | None = None  # skip alignment (simulation benchmarks start from truth)
     t_start: float | None = None
@@ -193,7 +194,7 @@ def _run(
     use[:, :3] = True
     use[:, 3:] = has_vel[:, None]
     if opts.exclude_after_s is not None:
-        late = tf >= opts.exclude_after_s
+        late = (tf >= opts.exclude_after_s) & (tf <= (np.inf if opts.exclude_until_s is None else opts.exclude_until_s))
         use[late, :3] = False
         if opts.exclude_velocity_too:
             use[late, 3:] = False

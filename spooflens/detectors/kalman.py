@@ -1,0 +1,226 @@
+"""Kalman filters on a LinearGaussianModel, compiled: the forward filter every detector starts from,
+and the backward information filter of the two-filter methods.
+
+Missing measurement entries (NaN in y) are left out of that epoch's update. Indexing follows
+spooflens.statespace: x_k = A[k] x_{k-1} + w_k (A[0] unused), y_k = C[k] x_k + e_k, x_0 ~ N(x0, P0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from spooflens.statespace import LinearGaussianModel
+
+FloatArray = NDArray[np.float64]
+CACHE = True
+
+
+@dataclass(frozen=True)
+class ForwardResult:
+    eps: FloatArray  # (N, p) innovations, NaN where not measured
+    S: FloatArray  # (N, p, p) innovation covariance (used rows; identity elsewhere)
+    Sinv: FloatArray  # (N, p, p) its inverse on the used rows, zero elsewhere
+    K: FloatArray  # (N, n, p) gains (zero columns for unused rows)
+    x_pred: FloatArray  # (N, n)
+    P_pred: FloatArray  # (N, n, n)
+    x_upd: FloatArray
+    P_upd: FloatArray
+    nis: FloatArray  # (N,)
+    logdet_S: FloatArray  # (N,)
+    dof: NDArray[np.int64]  # (N,)
+
+    @property
+    def V(self) -> FloatArray:
+        """The paper's V^F(t): running sum of normalised innovation squares."""
+        return np.cumsum(np.nan_to_num(self.nis))
+
+    @property
+    def D(self) -> FloatArray:
+        """The paper's D^F(t): running sum of log det S."""
+        return np.cumsum(self.logdet_S)
+
+
+@njit(cache=CACHE)
+def _forward(A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+    N, p = y.shape
+    n = x0.shape[0]
+    eps = np.full((N, p), np.nan)
+    S_out = np.zeros((N, p, p))
+    Sinv_out = np.zeros((N, p, p))
+    K_out = np.zeros((N, n, p))
+    xp = np.zeros((N, n))
+    Pp = np.zeros((N, n, n))
+    xu = np.zeros((N, n))
+    Pu = np.zeros((N, n, n))
+    nis = np.full(N, np.nan)
+    logdet = np.zeros(N)
+    dof = np.zeros(N, dtype=np.int64)
+    x = x0.copy()
+    P = P0.copy()
+    for k in range(N):
+        if k > 0:
+            x = A[k] @ x
+            P = A[k] @ P @ A[k].T + Q[k]
+            P = 0.5 * (P + P.T)
+        xp[k] = x
+        Pp[k] = P
+        m = 0
+        for i in range(p):
+            if not math.isnan(y[k, i]):
+                m += 1
+        for i in range(p):
+            S_out[k, i, i] = 1.0
+        if m > 0:
+            rows = np.empty(m, dtype=np.int64)
+            j = 0
+            for i in range(p):
+                if not math.isnan(y[k, i]):
+                    rows[j] = i
+                    j += 1
+            Ck = np.empty((m, n))
+            Rk = np.empty((m, m))
+            yk = np.empty(m)
+            for a in range(m):
+                Ck[a] = C[k, rows[a]]
+                yk[a] = y[k, rows[a]]
+                for b in range(m):
+                    Rk[a, b] = R[k, rows[a], rows[b]]
+            e = yk - Ck @ x
+            PCt = P @ Ck.T
+            S = Ck @ PCt + Rk
+            S = 0.5 * (S + S.T)
+            Sinv = np.linalg.inv(S)
+            K = PCt @ Sinv
+            x = x + K @ e
+            P = P - K @ PCt.T
+            P = 0.5 * (P + P.T)
+            nis[k] = e @ Sinv @ e
+            _, ld = np.linalg.slogdet(S)
+            logdet[k] = ld
+            dof[k] = m
+            for a in range(m):
+                eps[k, rows[a]] = e[a]
+                K_out[k, :, rows[a]] = K[:, a]
+                for b in range(m):
+                    S_out[k, rows[a], rows[b]] = S[a, b]
+                    Sinv_out[k, rows[a], rows[b]] = Sinv[a, b]
+        xu[k] = x
+        Pu[k] = P
+    return eps, S_out, Sinv_out, K_out, xp, Pp, xu, Pu, nis, logdet, dof
+
+
+def forward_filter(model: LinearGaussianModel) -> ForwardResult:
+    out = _forward(
+        np.ascontiguousarray(model.A),
+        np.ascontiguousarray(model.Q),
+        np.ascontiguousarray(model.C),
+        np.ascontiguousarray(model.R),
+        np.ascontiguousarray(model.y),
+        model.x0.astype(float),
+        np.ascontiguousarray(model.P0),
+    )
+    return ForwardResult(*out)
+
+
+@njit(cache=CACHE)
+def _noise_factor(Q: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Q = B Qr B^T with Qr diagonal and invertible (singular Q: states without process noise)."""
+    w, V = np.linalg.eigh(0.5 * (Q + Q.T))
+    scale = max(np.max(np.abs(w)), 1e-300)
+    keep = w > tol * scale
+    r = 0
+    for i in range(w.shape[0]):
+        if keep[i]:
+            r += 1
+    B = np.zeros((Q.shape[0], r))
+    Qr = np.zeros((r, r))
+    j = 0
+    for i in range(w.shape[0]):
+        if keep[i]:
+            B[:, j] = V[:, i]
+            Qr[j, j] = w[i]
+            j += 1
+    return B, Qr
+
+
+@njit(cache=CACHE)
+def information_predict_back(
+    Lam: np.ndarray, alpha: np.ndarray, A: np.ndarray, Q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """From information on x_k to information on x_{k-1} through x_k = A x_{k-1} + w, w ~ N(0, Q).
+
+    Lambda_{k-1} = A^T (Lambda - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T Lambda) A, and
+    alpha_{k-1}  = A^T (I - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T) alpha, with Q = B Qr B^T.
+    (The paper's printed step computes G and never uses it: this is the standard form it garbled.)
+    """
+    B, Qr = _noise_factor(Q, 1e-12)
+    if B.shape[1] == 0:
+        return A.T @ Lam @ A, A.T @ alpha
+    LB = Lam @ B
+    M = B.T @ LB
+    for i in range(M.shape[0]):
+        M[i, i] += 1.0 / Qr[i, i]
+    G = LB @ np.linalg.inv(M)
+    Lam_m = Lam - G @ LB.T
+    alpha_m = alpha - G @ (B.T @ alpha)
+    out = A.T @ Lam_m @ A
+    return 0.5 * (out + out.T), A.T @ alpha_m
+
+
+@njit(cache=CACHE)
+def information_update(
+    Lam: np.ndarray, alpha: np.ndarray, Ck: np.ndarray, Rk: np.ndarray, yk: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Add one epoch's measurement (used rows only) to the information."""
+    m = 0
+    for i in range(yk.shape[0]):
+        if not math.isnan(yk[i]):
+            m += 1
+    if m == 0:
+        return Lam, alpha
+    rows = np.empty(m, dtype=np.int64)
+    j = 0
+    for i in range(yk.shape[0]):
+        if not math.isnan(yk[i]):
+            rows[j] = i
+            j += 1
+    Cm = np.empty((m, Ck.shape[1]))
+    Rm = np.empty((m, m))
+    ym = np.empty(m)
+    for a in range(m):
+        Cm[a] = Ck[rows[a]]
+        ym[a] = yk[rows[a]]
+        for b in range(m):
+            Rm[a, b] = Rk[rows[a], rows[b]]
+    Ri = np.linalg.inv(Rm)
+    return Lam + Cm.T @ Ri @ Cm, alpha + Cm.T @ Ri @ ym
+
+
+@njit(cache=CACHE)
+def backward_information(
+    A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, last: int, first: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Information (Lambda, alpha) on x_k from y_{k+1..last}, for k = first..last (zero at k = last).
+
+    Lam[k] is the information the FUTURE measurements (after k) carry about x_k: exactly what a
+    forward estimate at k is combined with.
+    """
+    n = A.shape[1]
+    cnt = last - first + 1
+    Lam = np.zeros((cnt, n, n))
+    alpha = np.zeros((cnt, n))
+    L = np.zeros((n, n))
+    a = np.zeros(n)
+    for k in range(last, first - 1, -1):
+        Lam[k - first] = L
+        alpha[k - first] = a
+        if k == first:
+            break
+        L, a = information_update(L, a, C[k], R[k], y[k])
+        L, a = information_predict_back(L, a, A[k], Q[k])
+    return Lam, alpha

@@ -1,0 +1,360 @@
+"""Marginalised likelihood ratio tests (seed 000, after Gustafsson 1996), in two forms.
+
+1. The paper's algorithm exactly (`paper_two_filter`): forward Kalman filter sums V^F, D^F; a backward
+   information filter over the last L samples from zero information; then a backward covariance filter
+   down to the first epoch gives V^B, D^B; l_t(m) = V^F(t)+D^F(t)-V^F(m)-D^F(m)-V^B(m+1)-D^B(m+1).
+   The backward filter starts with NO information on the whole state, so this is the MLR for a jump in
+   the FULL state after epoch m with a flat prior: the segment after m is explained by a state
+   unconnected to the past. Its level (and so the "l > 0, no threshold" rule) depends on the dropped
+   likelihood of the last L samples, the 2 pi terms and the units of the flat prior. Erratum fixed:
+   the printed backward information filter computes G and never uses it; the process-noise step here is
+       Lambda_{i-1} = A^T (Lambda - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T Lambda) A,   Q = B Qr B^T.
+   `full_jump_constants` gives what the paper drops, so that
+       l_t(m) + consts(m) = 2 log p(y | jump after m) - 2 log p(y | no jump)   (flat prior of density 1),
+   which `full_jump_wj` computes independently from the Willsky-Jones signature of a full-state jump
+   (d^T I^-1 d - log det I + n log 2 pi). The two agree to rounding (tests/test_detectors_mlrt.py).
+
+2. The ramp MLR the paper intends (`ramp_two_filter_offline`): the augmented state [x; theta; r] where
+   the integrator theta (in the attacked rows; the paper prints C = [H 0], which would leave theta
+   unobservable, an erratum) accumulates the ramp rate r, and ONLY r jumps, with a Gaussian prior
+   N(0, Sigma) (a proper Bayes factor) or a flat prior of density 1 per (m/s)^q (the paper's l > 0 rule).
+   Offline over all m in one forward and one backward pass: for each m the forward estimate N(mu, P)
+   of the augmented state and the backward information (Lambda, alpha) from the data after m give
+       2 log I(P) = -log det(I + P Lambda) + b^T (I + P Lambda)^-1 P b + const,  b = alpha - Lambda mu,
+   and 2 log BF(m) = 2 log I(P + B Sigma B^T) - 2 log I(P). It equals the Willsky-Jones closed form of
+   ramp.py for every m (tested).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from spooflens.detectors.kalman import (
+    _noise_factor,
+    backward_information,
+    forward_filter,
+    information_predict_back,
+    information_update,
+)
+from spooflens.statespace import LinearGaussianModel
+
+FloatArray = NDArray[np.float64]
+LOG_2PI = math.log(2 * math.pi)
+
+
+# --- 1. the paper's two-filter algorithm (full-state jump) ------------------------------------------
+
+
+@dataclass(frozen=True)
+class PaperMlrt:
+    t_index: int  # the current epoch t
+    L: int
+    m: NDArray[np.int64]  # candidate epochs m = 0 .. t-L-1 (the jump is between m and m+1)
+    ell: FloatArray  # the paper's l_t(m)
+    VF: FloatArray  # V^F, D^F over epochs 0..t
+    DF: FloatArray
+    VB: FloatArray  # V^B(i), D^B(i) for i = 0 .. t-L (sums over i..t-L)
+    DB: FloatArray
+
+
+@njit(cache=True)
+def _backward_covariance(
+    A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, start: int, x: np.ndarray, P: np.ndarray
+):
+    """Paper's backward covariance filter from epoch `start` (prior x, P from later data) down to 0."""
+    p = y.shape[1]
+    VB = np.zeros(start + 2)
+    DB = np.zeros(start + 2)
+    for i in range(start, -1, -1):
+        v, dd = 0.0, 0.0
+        m = 0
+        for a in range(p):
+            if not math.isnan(y[i, a]):
+                m += 1
+        if m > 0:
+            rows = np.empty(m, dtype=np.int64)
+            j = 0
+            for a in range(p):
+                if not math.isnan(y[i, a]):
+                    rows[j] = a
+                    j += 1
+            Ci = np.empty((m, x.shape[0]))
+            Ri = np.empty((m, m))
+            yi = np.empty(m)
+            for a in range(m):
+                Ci[a] = C[i, rows[a]]
+                yi[a] = y[i, rows[a]]
+                for b in range(m):
+                    Ri[a, b] = R[i, rows[a], rows[b]]
+            e = yi - Ci @ x
+            PCt = P @ Ci.T
+            S = Ci @ PCt + Ri
+            Sinv = np.linalg.inv(S)
+            v = e @ Sinv @ e
+            dd = np.linalg.slogdet(S)[1]
+            x = x + PCt @ (Sinv @ e)
+            P = P - PCt @ Sinv @ PCt.T
+        VB[i] = VB[i + 1] + v
+        DB[i] = DB[i + 1] + dd
+        if i > 0:
+            Ainv = np.linalg.inv(A[i])
+            x = Ainv @ x
+            P = Ainv @ (P + Q[i]) @ Ainv.T
+            P = 0.5 * (P + P.T)
+    return VB[: start + 1], DB[: start + 1]
+
+
+def paper_two_filter(model: LinearGaussianModel, t: int, L: int) -> PaperMlrt:
+    """l_t(m) for m = 0..t-L-1, exactly as seed 000 section 3.2 builds it (with the corrected step)."""
+    if not 1 <= L <= t:
+        raise ValueError(f"need 1 <= L <= t, got L={L}, t={t}")
+    w = model.window(0, t + 1)
+    fwd = forward_filter(w)
+    VF, DF = fwd.V, fwd.D
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
+    info_L, info_a = backward_information(A, Q, C, R, y, t, t - L)
+    Lam, alpha = info_L[0], info_a[0]  # information on x_{t-L} from y_{t-L+1..t}
+    if np.linalg.cond(Lam) > 1e10:
+        raise ValueError(
+            f"the last L={L} samples do not observe the whole state (information matrix "
+            f"condition {np.linalg.cond(Lam):.1e}): the paper's backward filter needs a larger L"
+        )
+    P = np.linalg.inv(Lam)
+    x = P @ alpha
+    VB, DB = _backward_covariance(A, Q, C, R, y, t - L, x, P)
+    m = np.arange(0, t - L)
+    ell = VF[t] + DF[t] - VF[m] - DF[m] - VB[m + 1] - DB[m + 1]
+    return PaperMlrt(t, L, m, ell, VF, DF, VB, DB)
+
+
+@njit(cache=True)
+def _info_constant(
+    A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, last: int, first: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Backward information on x_first from y_{first+1..last} WITH the scalar constant c of
+    L(x) = exp(c - x^T Lambda x / 2 + alpha^T x) = p(y_{first+1..last} | x_first)."""
+    n = A.shape[1]
+    Lam = np.zeros((n, n))
+    alpha = np.zeros(n)
+    c = 0.0
+    for k in range(last, first, -1):
+        yk = y[k]
+        m = 0
+        for a in range(yk.shape[0]):
+            if not math.isnan(yk[a]):
+                m += 1
+        if m > 0:
+            rows = np.empty(m, dtype=np.int64)
+            j = 0
+            for a in range(yk.shape[0]):
+                if not math.isnan(yk[a]):
+                    rows[j] = a
+                    j += 1
+            Rm = np.empty((m, m))
+            ym = np.empty(m)
+            for a in range(m):
+                ym[a] = yk[rows[a]]
+                for b in range(m):
+                    Rm[a, b] = R[k, rows[a], rows[b]]
+            c += -0.5 * ym @ np.linalg.solve(Rm, ym) - 0.5 * (m * 1.8378770664093453 + np.linalg.slogdet(Rm)[1])
+        Lam, alpha = information_update(Lam, alpha, C[k], R[k], yk)
+        B, Qr = _noise_factor(Q[k], 1e-12)
+        if B.shape[1] > 0:
+            M = B.T @ Lam @ B
+            for i in range(M.shape[0]):
+                M[i, i] += 1.0 / Qr[i, i]
+            Ba = B.T @ alpha
+            c += (
+                0.5 * Ba @ np.linalg.solve(M, Ba)
+                - 0.5 * np.linalg.slogdet(np.eye(M.shape[0]) + Qr @ (B.T @ Lam @ B))[1]
+            )
+        Lam, alpha = information_predict_back(Lam, alpha, A[k], Q[k])
+    return Lam, alpha, c
+
+
+def full_jump_constants(model: LinearGaussianModel, res: PaperMlrt) -> FloatArray:
+    """What the paper's l_t(m) leaves out, per m: 2 log LR_flat(m) = l_t(m) + constants(m).
+
+    (the L dropped epochs' 2 pi terms) + 2 log Z_L (the flat-prior evidence of the last L samples)
+    - 2 log |det(A_{t-L} ... A_{m+2})| (a density-1 flat prior on x_{m+1} is a density 1/|det| on x_{t-L}).
+    """
+    t, L = res.t_index, res.L
+    w = model.window(0, t + 1)
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
+    Lam, alpha, c = _info_constant(A, Q, C, R, y, t, t - L)
+    n = model.n_states
+    _, logdet_lam = np.linalg.slogdet(Lam)
+    log_z = c + 0.5 * n * LOG_2PI - 0.5 * logdet_lam + 0.5 * alpha @ np.linalg.solve(Lam, alpha)
+    p_dropped = int(np.sum(np.isfinite(y[t - L + 1 : t + 1])))
+    logdet_A = np.array([np.linalg.slogdet(A[k])[1] for k in range(len(A))])
+    # sum over k = m+2 .. t-L of log|det A_k|
+    cum = np.concatenate([[0.0], np.cumsum(logdet_A)])
+    det_term = np.array([cum[t - L + 1] - cum[min(m + 2, t - L + 1)] for m in res.m])
+    return p_dropped * LOG_2PI + 2 * log_z - 2 * det_term
+
+
+@njit(cache=True)
+def _full_jump_wj(
+    A: np.ndarray, C: np.ndarray, K: np.ndarray, Sinv: np.ndarray, eps: np.ndarray, t: int, m: int
+) -> tuple[float, float]:
+    n = A.shape[1]
+    e = np.eye(n)  # effect of the jump on the prior estimate error at m+1
+    d = np.zeros(n)
+    info = np.zeros((n, n))
+    e0 = np.where(np.isnan(eps), 0.0, eps)
+    for k in range(m + 1, t + 1):
+        if k > m + 1:
+            e = A[k] @ e
+        G = C[k] @ e
+        SG = Sinv[k] @ G
+        d += SG.T @ e0[k]
+        info += G.T @ SG
+        e = e - K[k] @ G
+    _, logdet = np.linalg.slogdet(info)
+    return d @ np.linalg.solve(info, d), logdet
+
+
+def full_jump_wj(model: LinearGaussianModel, t: int, m: FloatArray) -> FloatArray:
+    """2 log LR of a full-state jump after m, flat prior of density 1, from Willsky-Jones signatures."""
+    fwd = forward_filter(model.window(0, t + 1))
+    A = np.ascontiguousarray(model.A[: t + 1])
+    C = np.ascontiguousarray(model.C[: t + 1])
+    out = []
+    for mm in m:
+        g, logdet = _full_jump_wj(
+            A, C, np.ascontiguousarray(fwd.K), np.ascontiguousarray(fwd.Sinv), np.ascontiguousarray(fwd.eps), t, int(mm)
+        )
+        out.append(g - logdet + model.n_states * LOG_2PI)
+    return np.array(out)
+
+
+# --- 2. the ramp MLR offline, all m in linear time ---------------------------------------------------
+
+
+def augment_ramp(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGaussianModel:
+    """[x; theta; r]: theta_k = theta_{k-1} + (t_k - t_{k-1}) r_{k-1} on the attacked rows, r constant."""
+    n, q, N = model.n_states, len(rows), model.n_epochs
+    na = n + 2 * q
+    A = np.zeros((N, na, na))
+    A[:, :n, :n] = model.A
+    A[:, n : n + q, n : n + q] = np.eye(q)
+    A[:, n + q :, n + q :] = np.eye(q)
+    dt = np.r_[0.0, np.diff(model.t)]
+    A[:, n : n + q, n + q :] = dt[:, None, None] * np.eye(q)
+    Q = np.zeros((N, na, na))
+    Q[:, :n, :n] = model.Q
+    C = np.zeros((N, model.n_measurements, na))
+    C[:, :, :n] = model.C
+    for j, r in enumerate(rows):
+        C[:, r, n + j] = 1.0
+    P0 = np.zeros((na, na))
+    P0[:n, :n] = model.P0
+    names = (*model.state_names, *[f"theta_{r}" for r in rows], *[f"rate_{r}" for r in rows])
+    return LinearGaussianModel(
+        model.t, A, Q, C, model.R, model.y, np.r_[model.x0, np.zeros(2 * q)], P0, names, model.measurement_names
+    )
+
+
+@njit(cache=True)
+def _gaussian_log_integral2(mu: np.ndarray, P: np.ndarray, Lam: np.ndarray, alpha: np.ndarray) -> float:
+    """2 log of the integral of N(x; mu, P) exp(-x^T Lam x / 2 + alpha^T x) dx (P may be singular)."""
+    n = mu.shape[0]
+    X = np.eye(n) + P @ Lam
+    b = alpha - Lam @ mu
+    _, logdet = np.linalg.slogdet(X)
+    return -logdet + b @ np.linalg.solve(X, P @ b) - mu @ Lam @ mu + 2.0 * alpha @ mu
+
+
+@njit(cache=True)
+def _ramp_offline(
+    x_upd: np.ndarray, P_upd: np.ndarray, Lam: np.ndarray, alpha: np.ndarray, n: int, q: int, Sigma: np.ndarray
+):
+    N = x_upd.shape[0]
+    bf = np.full(N, np.nan)
+    flat = np.full(N, np.nan)
+    na = n + 2 * q
+    Bsel = np.zeros((na, q))
+    for j in range(q):
+        Bsel[n + q + j, j] = 1.0
+    for m in range(N - 1):
+        mu, P, L, a = x_upd[m], P_upd[m], Lam[m], alpha[m]
+        base = _gaussian_log_integral2(mu, P, L, a)
+        P1 = P + Bsel @ Sigma @ Bsel.T
+        bf[m] = _gaussian_log_integral2(mu, P1, L, a) - base
+        X = np.eye(na) + P @ L
+        Xi = np.linalg.inv(X)
+        J = Bsel.T @ L @ Xi @ Bsel
+        sJ, ldJ = np.linalg.slogdet(J)
+        if sJ <= 0:
+            continue
+        Z = Xi - Xi @ Bsel @ np.linalg.solve(J, Bsel.T @ L @ Xi)
+        Minf = Z @ P + Xi @ Bsel @ np.linalg.solve(J, Bsel.T)
+        b = a - L @ mu
+        flat[m] = -ldJ + b @ (Minf - Xi @ P) @ b + q * 1.8378770664093453
+    return bf, flat
+
+
+@dataclass(frozen=True)
+class RampOffline:
+    t: FloatArray  # onset candidates: the ramp starts after epoch m (at t[m])
+    log_bf: FloatArray  # 2 log BF(m), proper prior
+    mlr_flat: FloatArray  # flat-prior MLR (density 1 per (m/s)^q): the paper's l_N(m)
+
+
+def ramp_two_filter_offline(
+    model: LinearGaussianModel, rows: tuple[int, ...], sigma_rate: FloatArray, last: int | None = None
+) -> RampOffline:
+    """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last`."""
+    last = model.n_epochs - 1 if last is None else last
+    aug = augment_ramp(model.window(0, last + 1), rows)
+    fwd = forward_filter(aug)
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
+    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
+    sigma = np.diag(np.asarray(sigma_rate, dtype=float) ** 2)
+    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma)
+    return RampOffline(model.t[: last + 1], bf, flat)
+
+
+def onset_posterior(
+    t: FloatArray, log_bf2: FloatArray, attacks_per_hour: float, credible: float = 0.9
+) -> tuple[FloatArray, float, tuple[float, float], float]:
+    """Posterior over the onset (uniform onset prior at `attacks_per_hour`, plus 'no attack').
+
+    Returns (posterior per candidate, MAP onset time, credible interval, posterior probability of an attack).
+    """
+    dt = np.diff(np.r_[t, t[-1] + (t[-1] - t[-2] if len(t) > 1 else 1.0)])
+    log_prior = np.log(np.clip(attacks_per_hour * dt / 3600.0, 1e-300, 0.5))
+    lw = np.where(np.isfinite(log_bf2), log_prior + 0.5 * log_bf2, -np.inf)
+    top = max(np.max(lw), 0.0)
+    w = np.exp(lw - top)
+    null = np.exp(0.0 - top)  # prior odds of no attack ~ 1
+    total = w.sum() + null
+    post = w / max(w.sum(), 1e-300)
+    k = int(np.argmax(post))
+    order = np.argsort(post)[::-1]
+    mass = np.cumsum(post[order])
+    keep = order[: int(np.searchsorted(mass, credible) + 1)]
+    return post, float(t[k]), (float(t[keep].min()), float(t[keep].max())), float(w.sum() / total)
+
+
+# --- smoothing from the two filters (the paper's last equations) -------------------------------------
+
+
+def two_filter_smoother(model: LinearGaussianModel) -> tuple[FloatArray, FloatArray]:
+    """x_s = P (P_F^-1 x_F + Lambda_B-part), P = (P_F^-1 + Lambda_B)^-1, combining the forward filtered
+    estimate with the backward information from the later data (Lambda_B = (P^B_{t|t+1})^-1)."""
+    fwd = forward_filter(model)
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (model.A, model.Q, model.C, model.R, model.y))
+    Lam, alpha = backward_information(A, Q, C, R, y, model.n_epochs - 1, 0)
+    xs = np.zeros_like(fwd.x_upd)
+    Ps = np.zeros_like(fwd.P_upd)
+    for k in range(model.n_epochs):
+        Pf_inv = np.linalg.inv(fwd.P_upd[k])
+        Ps[k] = np.linalg.inv(Pf_inv + Lam[k])
+        xs[k] = Ps[k] @ (Pf_inv @ fwd.x_upd[k] + alpha[k])
+    return xs, Ps

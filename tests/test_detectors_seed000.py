@@ -1,0 +1,98 @@
+"""Seed 000's detectors on simulated logs: quiet when clean, fast and well-placed on a ramp."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from spooflens.analysis import run_analyses
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.detectors.seed000 import Seed000Options, detect
+from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
+from spooflens.simulation.sensors import GnssNoise
+from spooflens.simulation.simulate import SCENARIOS, simulate
+from spooflens.verdict import decide
+
+
+def _run(rate: float, seed: int = 3, start: float = 120.0, scenario: str = "ground", **kw) -> dict:
+    sim = simulate(scenario, seed=seed, duration_s=240.0)
+    table = sim.table
+    if rate:
+        table, _ = apply_attack(table, parse_attack(f"ramp:rate={rate},axes=en,start={start}"))
+    sol = run_filter(table, options=FilterOptions(grade=SCENARIOS[scenario].imu_grade))
+    return {r.name: r for r in detect(sol.error_model(), Seed000Options(**kw))}
+
+
+def test_clean_log_raises_no_calibrated_alarm() -> None:
+    res = _run(0.0)
+    for name in ("kf_innovation", "glrt", "mlrt_calibrated"):
+        assert res[name].alarms == [], name
+    assert abs(res["glrt"].extras["innovation_whiteness"]) < 0.2
+
+
+def test_ramp_is_detected_with_onset_and_credible_interval() -> None:
+    res = _run(1.0)
+    cal = res["mlrt_calibrated"].alarms[0]
+    assert 120.0 < cal.start_s < 130.0
+    assert cal.onset_interval_s is not None
+    assert cal.onset_interval_s[0] - 1.0 <= 120.0 <= cal.onset_interval_s[1] + 1.0
+    assert abs(cal.onset_s - 120.0) < 3.0
+    glrt = res["glrt"].alarms[0]
+    assert 120.0 < glrt.start_s < 130.0 and abs(glrt.onset_s - 120.0) < 5.0
+    curve = res["mlrt_calibrated"].curves[0]
+    assert abs(curve.x[int(np.nanargmax(curve.y))] - 120.0) < 5.0  # l_N(m) peaks near the true onset
+
+
+def test_larger_ramps_are_detected_no_later() -> None:
+    delays = [_run(rate, offline=False)["glrt"].alarms[0].start_s for rate in (0.5, 1.0, 3.0)]
+    assert delays == sorted(delays, reverse=True)
+
+
+def test_time_correlated_gnss_errors_make_the_ramp_tests_advisory() -> None:
+    sc = replace(SCENARIOS["ground"], gnss=GnssNoise((1.5, 1.5, 3.0), 0.08, correlation_s=30.0))
+    sim = simulate(sc, seed=2, duration_s=200.0)
+    sol = run_filter(sim.table, options=FilterOptions(grade=sc.imu_grade))
+    res = {r.name: r for r in detect(sol.error_model(), Seed000Options(offline=False))}
+    assert res["glrt"].extras["innovation_whiteness"] > 0.5
+    assert res["glrt"].advisory and res["mlrt_calibrated"].advisory and not res["kf_innovation"].advisory
+    assert "MODEL MISMATCH" in res["glrt"].reason
+
+
+def test_analyze_pipeline_reconstructs_the_trajectory_during_the_attack() -> None:
+    sim = simulate("ground", seed=5, duration_s=200.0)
+    spoofed, _ = apply_attack(sim.table, parse_attack("ramp:rate=2,axes=en,start=120"))
+    results = run_analyses(spoofed)
+    verdict = decide(results)
+    assert verdict.spoofed and verdict.incidents[0].confidence == "high"
+    assert abs(verdict.incidents[0].onset_s - 120.0) < 3.0
+    nav = next(r for r in results if r.name == "navigation")
+    rec = next(t for t in nav.tracks if t.name.startswith("reconstructed"))
+    assert "GNSS velocity" in rec.name  # the ramp leaves the velocity honest, so it is used
+    truth = sim.table.truth
+    k = np.searchsorted(truth["t_s"].to_numpy(), rec.t)
+    late = (rec.t > 150) & (k < len(truth))
+    from spooflens.geodesy import geodetic_to_enu
+
+    ref = truth.iloc[0]
+    err = geodetic_to_enu(
+        rec.lat_deg[late], rec.lon_deg[late], rec.height_m[late], ref.lat_deg, ref.lon_deg, ref.height_m
+    ) - geodetic_to_enu(
+        truth["lat_deg"].to_numpy()[k[late]],
+        truth["lon_deg"].to_numpy()[k[late]],
+        truth["height_m"].to_numpy()[k[late]],
+        ref.lat_deg,
+        ref.lon_deg,
+        ref.height_m,
+    )
+    horizontal = np.linalg.norm(err[:, :2], axis=1)
+    spoofed_offset = 2 * np.sqrt(2) * (rec.t[late] - 120)
+    assert np.median(horizontal) < 0.1 * np.median(spoofed_offset)  # the INS keeps the truth
+
+
+@pytest.mark.parametrize("name", ["kf_innovation", "glrt", "mlrt", "mlrt_calibrated"])
+def test_every_detector_reports_its_statistic_and_threshold(name: str) -> None:
+    res = _run(2.0, offline=False)
+    s = res[name].series[0]
+    assert len(s.t) == len(s.values) and s.threshold is not None
