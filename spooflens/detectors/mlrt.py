@@ -109,8 +109,15 @@ def _backward_covariance(
     return VB[: start + 1], DB[: start + 1]
 
 
-def paper_two_filter(model: LinearGaussianModel, t: int, L: int) -> PaperMlrt:
-    """l_t(m) for m = 0..t-L-1, exactly as seed 000 section 3.2 builds it (with the corrected step)."""
+def paper_two_filter(model: LinearGaussianModel, t: int, L: int,
+                     prior_information: FloatArray | None = None) -> PaperMlrt:
+    """l_t(m) for m = 0..t-L-1, exactly as seed 000 section 3.2 builds it (with the corrected step).
+
+    `prior_information` (default none, the paper's zero information) is added to the backward filter's
+    information on x_{t-L}: the INS error model is not observable from a few samples (accelerometer
+    bias and tilt, for one, are inseparable without manoeuvres), so on it the paper's start is singular
+    and a weak prior (e.g. a small multiple of P0^-1) is the only way to run the algorithm.
+    """
     if not 1 <= L <= t:
         raise ValueError(f"need 1 <= L <= t, got L={L}, t={t}")
     w = model.window(0, t + 1)
@@ -119,6 +126,8 @@ def paper_two_filter(model: LinearGaussianModel, t: int, L: int) -> PaperMlrt:
     A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
     info_L, info_a = backward_information(A, Q, C, R, y, t, t - L)
     Lam, alpha = info_L[0], info_a[0]  # information on x_{t-L} from y_{t-L+1..t}
+    if prior_information is not None:
+        Lam = Lam + prior_information
     if np.linalg.cond(Lam) > 1e10:
         raise ValueError(
             f"the last L={L} samples do not observe the whole state (information matrix "
