@@ -27,6 +27,11 @@ EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
 err_console = Console(stderr=True)
 
 
+def _console() -> Console:
+    """Stdout console; wide when not a terminal, so piped tables are not truncated."""
+    return Console() if sys.stdout.isatty() else Console(width=160)
+
+
 def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
     topics = {}
     for v in values:
@@ -98,7 +103,7 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
     from spooflens.analysis import ANALYSES
 
     table = _read(log, _parse_topics(topics), sys.stderr.isatty())
-    console = Console()
+    console = _console()
     console.print(
         f"[bold]{table.source}[/]  format {table.format}, {table.duration_s:.1f} s, "
         f"clock {table.time_reference}, starts {table.absolute_iso(0.0)}"
@@ -194,7 +199,7 @@ def _stream_names(table: EpochTable) -> str:
 
 
 def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None:
-    console = Console()
+    console = _console()
     v = summary["verdict"]
     console.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
     for inc in v["incidents"]:
@@ -271,7 +276,7 @@ def bench_read(duration: float, workdir: Path) -> int:
     )
     for name, run in r["runs"].items():
         t.add_row(name, f"{run['wall_s']:.2f}", f"{run['messages_per_s']:,.0f}", f"{run['peak_rss_mb']:.0f}")
-    Console().print(t)
+    _console().print(t)
     verdict = "goal met" if r["ratio_wall"] <= 1.0 else "goal MISSED"
     click.echo(
         f"wall-time ratio spooflens/rosbags = {r['ratio_wall']:.2f} (goal <= 1.0: {verdict}); peak RSS goal < 1024 MB"
@@ -297,7 +302,7 @@ def bench_nav(duration: float) -> int:
         ("nis_mean", "{:.2f} (dof 6)"),
     ):
         t.add_row(key, fmt.format(r[key]))
-    Console().print(t)
+    _console().print(t)
     goal = 5.0 * duration / 3600.0
     click.echo(
         f"filter + smoother {r['filter_plus_smoother_s']:.2f} s; goal < {goal:.1f} s: "
@@ -348,7 +353,7 @@ def _fmt(v: float | None) -> str:
 def _print_seed000(out: dict, runs: int) -> None:
     from spooflens.bench import seed000_bench as sb
 
-    console = Console()
+    console = _console()
     paper = out["paper"]
     t = Table("method", *[f"{c} m/s" for c in ("2", "3", "5")], "25 m/s up", "clean runs alarmed",
               title=f"Seed 000 scenario, {runs} runs: median delay s [25-75%] (detected %)  | paper Table 1")

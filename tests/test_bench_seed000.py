@@ -11,7 +11,7 @@ from spooflens.detectors.innovation_test import threshold
 
 def test_kf_threshold_is_the_papers() -> None:
     assert threshold(1e-5, 3) == pytest.approx(25.9, abs=0.01)
-    assert sb.KF_THRESHOLD == pytest.approx(25.9, abs=0.01)
+    assert pytest.approx(25.9, abs=0.01) == sb.KF_THRESHOLD
 
 
 def test_paper_scenario_detects_fast_ramps_and_counts_false_alarms() -> None:
