@@ -121,6 +121,7 @@ def _inertial(ctx: AnalysisContext) -> list[DetectorResult]:
         ],
         extras={
             "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
+            "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
             "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
             "imu_grade": imu_grade.name,
             "epochs": len(sol.t),

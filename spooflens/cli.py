@@ -204,8 +204,9 @@ def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None
     console.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
     for inc in v["incidents"]:
         when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
+        label = "incident" if inc["confidence"] != "low" else "GNSS-only anomaly (not called spoofing)"
         console.print(
-            f"  incident: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f}-{inc['end_s']:.2f} s, "
+            f"  {label}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f}-{inc['end_s']:.2f} s, "
             f"detectors {', '.join(inc['detectors'])}, confidence {inc['confidence']}"
         )
     t = Table("analysis", "ran", "alarms", "note")

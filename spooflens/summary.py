@@ -81,7 +81,13 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
         "duration_s": round(table.duration_s, 6),
         "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
         "skipped": [asdict(s) for s in table.skipped],
-        "verdict": {"spoofed": verdict.spoofed, "headline": verdict.headline, "incidents": incidents},
+        "verdict": {
+            "spoofed": verdict.spoofed,
+            "headline": verdict.headline,
+            "incidents": incidents,
+            "detectors_counted": list(verdict.detectors_run),
+            "detectors_advisory": list(verdict.detectors_advisory),
+        },
         "analyses": [_analysis(table, r) for r in results],
     }
     return dict(_clean(summary))

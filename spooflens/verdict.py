@@ -35,13 +35,17 @@ class Verdict:
     incidents: list[Incident] = field(default_factory=list)
     detectors_run: tuple[str, ...] = ()
     detectors_not_run: tuple[str, ...] = ()
+    detectors_advisory: tuple[str, ...] = ()  # ran, but their alarms do not count (see DetectorResult.advisory)
 
     @property
     def headline(self) -> str:
         if not self.detectors_run:
             return "NO VERDICT: no detector could run on this log"
         if not self.spoofed:
-            return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s)"
+            advisory = f" ({len(self.detectors_advisory)} more advisory only)" if self.detectors_advisory else ""
+            anomalies = sum(i.confidence == "low" for i in self.incidents)
+            noted = f"; {anomalies} GNSS-only anomaly(ies) noted, not confirmed" if anomalies else ""
+            return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{noted}"
         first = self.incidents[0]
         return (
             f"SPOOFING DETECTED: {len(self.incidents)} incident(s); first from {first.onset_s:.2f} s "
@@ -60,6 +64,7 @@ def _confidence(detectors: set[str]) -> str:
 
 def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
     ran = tuple(r.name for r in results if r.ran and not r.advisory)
+    advisory = tuple(r.name for r in results if r.ran and r.advisory)
     not_run = tuple(r.name for r in results if not r.ran)
     alarms = sorted(
         ((a, r.name) for r in results if r.ran and not r.advisory for a in r.alarms), key=lambda x: x[0].start_s
@@ -97,4 +102,4 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
             )
         )
     # GNSS-only evidence alone (low confidence) is reported, not called spoofing: real receivers jump too
-    return Verdict(any(i.confidence != "low" for i in incidents), incidents, ran, not_run)
+    return Verdict(any(i.confidence != "low" for i in incidents), incidents, ran, not_run, advisory)
