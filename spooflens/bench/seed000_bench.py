@@ -36,8 +36,11 @@ from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
 METHODS = ("KF", "GLRT", "MLRT (paper two-filter, l>0)", "MLRT (ramp, flat, l>0)", "MLRT calibrated")
-PAPER_TABLE1 = {"KF": {2: None, 3: 3.4, 5: 1.9}, "GLRT": {2: 2.63, 3: 1.59, 5: 1.03},
-                "MLRT": {2: 2.57, 3: 1.57, 5: 0.56}}
+PAPER_TABLE1 = {
+    "KF": {2: None, 3: 3.4, 5: 1.9},
+    "GLRT": {2: 2.63, 3: 1.59, 5: 1.03},
+    "MLRT": {2: 2.57, 3: 1.57, 5: 0.56},
+}
 PAPER_VERTICAL_MLRT = 1.93
 PAPER_MIN_RATE = 1.8
 KF_THRESHOLD = float(stats.chi2.isf(1e-5, 3))  # 25.9, the paper's
@@ -69,14 +72,19 @@ def _paper_model(seed: int, attack: str | None) -> LinearGaussianModel:
     return run_filter(table, options=opts).error_model()
 
 
-def method_statistics(model: LinearGaussianModel, opts: BenchOptions, window_s: float = 15.0,
-                      step_s: float = 1.0, paper: bool = True) -> dict[str, FloatArray]:
+def method_statistics(
+    model: LinearGaussianModel, opts: BenchOptions, window_s: float = 15.0, step_s: float = 1.0, paper: bool = True
+) -> dict[str, FloatArray]:
     """Each method's decision statistic per epoch, oriented so that 'alarm' is 'statistic > threshold'."""
     fwd = forward_filter(model)
     r = ramp_statistics(model, fwd, (0, 1, 2), window_s, step_s, np.array(opts.sigma_rate), opts.attacks_per_hour, 1)
     odds = np.exp(np.clip(r.log_odds, -700, 700))
-    out = {"KF": position_nis(fwd), "GLRT": r.glr, "MLRT (ramp, flat, l>0)": r.mlr,
-           "MLRT calibrated": odds / (1 + odds)}
+    out = {
+        "KF": position_nis(fwd),
+        "GLRT": r.glr,
+        "MLRT (ramp, flat, l>0)": r.mlr,
+        "MLRT calibrated": odds / (1 + odds),
+    }
     if paper:
         prior = np.linalg.inv(model.P0 + 1e-30 * np.eye(model.n_states)) * 1e-6
         vals = np.full(model.n_epochs, np.nan)
@@ -88,8 +96,14 @@ def method_statistics(model: LinearGaussianModel, opts: BenchOptions, window_s: 
 
 
 def default_thresholds(opts: BenchOptions) -> dict[str, float]:
-    return {"KF": KF_THRESHOLD, "GLRT": KF_THRESHOLD, "MLRT (paper two-filter, l>0)": 0.0,
-            "MLRT (ramp, flat, l>0)": 0.0, "MLRT calibrated": opts.posterior_alarm, **opts.thresholds}
+    return {
+        "KF": KF_THRESHOLD,
+        "GLRT": KF_THRESHOLD,
+        "MLRT (paper two-filter, l>0)": 0.0,
+        "MLRT (ramp, flat, l>0)": 0.0,
+        "MLRT calibrated": opts.posterior_alarm,
+        **opts.thresholds,
+    }
 
 
 def first_alarm(t: FloatArray, stat: FloatArray, threshold: float, after: float) -> float | None:
@@ -114,12 +128,16 @@ def paper_scenario(opts: BenchOptions, progress=None) -> dict[str, Any]:
                 delays[m][f"{axes}:{rate:g}"].append(None if hit is None else hit - opts.onset_s)
         if progress:
             progress(i + 1, opts.runs)
-    return {"delays": delays, "false_alarm_fraction": {m: n / opts.runs for m, n in false_alarms.items()},
-            "thresholds": thr}
+    return {
+        "delays": delays,
+        "false_alarm_fraction": {m: n / opts.runs for m, n in false_alarms.items()},
+        "thresholds": thr,
+    }
 
 
-def minimum_rate(opts: BenchOptions, rates: tuple[float, ...] = (0.5, 1.0, 1.5, 1.8, 2.0, 2.5, 3.0),
-                 runs: int = 40) -> dict[str, Any]:
+def minimum_rate(
+    opts: BenchOptions, rates: tuple[float, ...] = (0.5, 1.0, 1.5, 1.8, 2.0, 2.5, 3.0), runs: int = 40
+) -> dict[str, Any]:
     thr = default_thresholds(opts)
     detected = {m: [] for m in opts.methods}
     for rate in rates:
@@ -147,6 +165,7 @@ def summarise(values: list[float | None]) -> tuple[float | None, float | None, f
 
 # --- equal false-alarm rates --------------------------------------------------------------------------
 
+
 def _redraw(model: LinearGaussianModel, rng: np.random.Generator) -> LinearGaussianModel:
     """The same model with fresh noise: y drawn from it under H0 (no attack)."""
     n, N = model.n_states, model.n_epochs
@@ -171,13 +190,19 @@ def _with_ramp(model: LinearGaussianModel, onset: int, rate: float) -> LinearGau
 def equal_false_alarm(opts: BenchOptions, hours: int | None = None, progress=None) -> dict[str, Any]:
     """Thresholds for 1, 10, 100 false alarms per 1000 h from per-hour maxima (Gumbel tail), then delays."""
     hours = hours or opts.equal_fa_hours
-    sc = replace(SCENARIOS["aircraft"], imu_hz=160.0, gnss_hz=1.0, imu_grade=SCENARIOS["seed000"].imu_grade,
-                 gnss=SCENARIOS["seed000"].gnss)
+    sc = replace(
+        SCENARIOS["aircraft"],
+        imu_hz=160.0,
+        gnss_hz=1.0,
+        imu_grade=SCENARIOS["seed000"].imu_grade,
+        gnss=SCENARIOS["seed000"].gnss,
+    )
     sim = simulate(sc, seed=99, duration_s=3600.0)
     tr = sim.truth
     init = NavState(0.0, tr.lat[0], tr.lon[0], tr.h[0], tr.v_enu[0].copy(), tr.C[0].copy())
-    base = run_filter(sim.table, options=FilterOptions(grade=sc.imu_grade, initial=init, min_sigma_pos_m=0.0,
-                                                       min_sigma_vel_mps=0.0)).error_model()
+    base = run_filter(
+        sim.table, options=FilterOptions(grade=sc.imu_grade, initial=init, min_sigma_pos_m=0.0, min_sigma_vel_mps=0.0)
+    ).error_model()
     methods = [m for m in opts.methods if m != "MLRT (paper two-filter, l>0)"]
     rng = np.random.default_rng(7)
     maxima: dict[str, list[float]] = {m: [] for m in methods}
@@ -211,11 +236,16 @@ def equal_false_alarm(opts: BenchOptions, hours: int | None = None, progress=Non
                     hit = first_alarm(base.t, v, thr, base.t[onset])
                     got.append(None if hit is None else hit - base.t[onset])
                 delays[m][f"{ramp:g}"][r_fa] = summarise(got)[0]
-    return {"hours": hours, "thresholds": thresholds, "delays": delays,
-            "note": "MLRT calibrated thresholds are on the log posterior odds"}
+    return {
+        "hours": hours,
+        "thresholds": thresholds,
+        "delays": delays,
+        "note": "MLRT calibrated thresholds are on the log posterior odds",
+    }
 
 
 # --- real data ----------------------------------------------------------------------------------------
+
 
 def husky(path: Path) -> dict[str, Any]:
     from readers import read_log
@@ -224,16 +254,24 @@ def husky(path: Path) -> dict[str, Any]:
 
     table = read_log(path)
     out: dict[str, Any] = {}
-    for label, attack in (("clean", None), ("ramp 2 m/s from 200 s", "ramp:rate=2,axes=en,start=200"),
-                          ("ramp 5 m/s from 200 s", "ramp:rate=5,axes=en,start=200")):
+    for label, attack in (
+        ("clean", None),
+        ("ramp 2 m/s from 200 s", "ramp:rate=2,axes=en,start=200"),
+        ("ramp 5 m/s from 200 s", "ramp:rate=5,axes=en,start=200"),
+    ):
         t = table if attack is None else apply_attack(table, parse_attack(attack))[0]
         sol = run_filter(t, options=FilterOptions(grade=grade("consumer_mems")))
         res = detect(sol.error_model(), Seed000Options(offline=False))
-        out[label] = {r.name: {"alarms": len(r.alarms), "advisory": r.advisory,
-                               "first_alarm_s": r.alarms[0].start_s if r.alarms else None,
-                               "delay_after_200_s": next((a.start_s - 200.0 for a in r.alarms if a.start_s >= 200.0),
-                                                         None),
-                               "whiteness": r.extras.get("innovation_whiteness")} for r in res}
+        out[label] = {
+            r.name: {
+                "alarms": len(r.alarms),
+                "advisory": r.advisory,
+                "first_alarm_s": r.alarms[0].start_s if r.alarms else None,
+                "delay_after_200_s": next((a.start_s - 200.0 for a in r.alarms if a.start_s >= 200.0), None),
+                "whiteness": r.extras.get("innovation_whiteness"),
+            }
+            for r in res
+        }
     return out
 
 
@@ -243,8 +281,9 @@ def runtime() -> dict[str, float]:
     sim = simulate("aircraft", seed=1, duration_s=3600.0)
     sol = run_filter(sim.table, options=FilterOptions(grade=SCENARIOS["aircraft"].imu_grade))
     model = sol.error_model()
-    warm = replace(model, t=model.t[:200], A=model.A[:200], Q=model.Q[:200], C=model.C[:200], R=model.R[:200],
-                   y=model.y[:200])
+    warm = replace(
+        model, t=model.t[:200], A=model.A[:200], Q=model.Q[:200], C=model.C[:200], R=model.R[:200], y=model.y[:200]
+    )
     detect(warm)
     t0 = time.perf_counter()
     detect(model, Seed000Options())

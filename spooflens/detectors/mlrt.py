@@ -109,8 +109,9 @@ def _backward_covariance(
     return VB[: start + 1], DB[: start + 1]
 
 
-def paper_two_filter(model: LinearGaussianModel, t: int, L: int,
-                     prior_information: FloatArray | None = None) -> PaperMlrt:
+def paper_two_filter(
+    model: LinearGaussianModel, t: int, L: int, prior_information: FloatArray | None = None
+) -> PaperMlrt:
     """l_t(m) for m = 0..t-L-1, exactly as seed 000 section 3.2 builds it (with the corrected step).
 
     `prior_information` (default none, the paper's zero information) is added to the backward filter's
