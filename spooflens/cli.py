@@ -66,11 +66,15 @@ def _progress(enabled: bool) -> Iterator[Callable[[str, int, int], None]]:
         yield report
 
 
-def _read(log: Path, topics: dict[str, str], show_progress: bool) -> EpochTable:
+def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: bool = True) -> EpochTable:
+    """The log as an epoch table; with `solve_fixes`, receivers that logged only raw pseudoranges get
+    fixes from their single-point solution (listed among the repairs)."""
     from readers import read_log
+    from spooflens.navigation.single_point import with_solved_fixes
 
     with _progress(show_progress) as report:
-        return read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
+        table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
+    return with_solved_fixes(table) if solve_fixes else table
 
 
 def _damaged(table: EpochTable) -> list[str]:
@@ -239,15 +243,17 @@ def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None
 def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -> int:
     """Write a spoofed copy of LOG with an attack injected, plus its ground truth."""
     from spooflens.attacks import apply_attack, parse_attack, sidecar_path
-    from spooflens.writers.rewrite import rewrite_fixes
+    from spooflens.writers.rewrite import rewrite_log
 
     spec = parse_attack(attack_text)
-    table = _read(log, _parse_topics(topics), sys.stderr.isatty())
+    table = _read(log, _parse_topics(topics), sys.stderr.isatty(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
-    note = rewrite_fixes(log, output, table, spoofed.fixes, velocities=bool(spec.params.get("vel", 0)))
+    note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))
     truth.write(sidecar_path(output))
     click.echo(
-        f"{output}: {spec} on {', '.join(truth.receivers)} from {truth.start_s:.1f} s to {truth.end_s:.1f} s; "
+        f"{output}: {spec} on {', '.join(truth.receivers)}"
+        + (f" (satellites {'+'.join(truth.satellites)})" if truth.satellites else "")
+        + f" from {truth.start_s:.1f} s to {truth.end_s:.1f} s; "
         f"{note}; truth in {sidecar_path(output)}"
     )
     return EXIT_OK
@@ -315,15 +321,26 @@ def bench_nav(duration: float) -> int:
 @bench.command("seed000")
 @click.option("--runs", default=100, show_default=True, help="Monte Carlo runs per case of the paper's scenario.")
 @click.option("--hours", default=200, show_default=True, help="Attack-free hours for the equal false-alarm part.")
-@click.option("--husky", "husky_path", type=click.Path(path_type=Path),
-              default=Path(__file__).resolve().parents[1].parent / "shared/real/ros1_husky_navsat/test1.bag",
-              show_default=True, help="Real clean log for the real-data part (skipped if missing).")
+@click.option(
+    "--husky",
+    "husky_path",
+    type=click.Path(path_type=Path),
+    default=Path(__file__).resolve().parents[1].parent / "shared/real/ros1_husky_navsat/test1.bag",
+    show_default=True,
+    help="Real clean log for the real-data part (skipped if missing).",
+)
 @click.option("--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write all figures here.")
-@click.option("--plot", "plot_path", type=click.Path(path_type=Path), default=None,
-              help="Write a PNG of the delay distributions here.")
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Write a PNG of the delay distributions here.",
+)
 @click.option("--quick", is_flag=True, help="Fewer runs everywhere (a smoke test, not the reported figures).")
-def bench_seed000(runs: int, hours: int, husky_path: Path, json_path: Path | None, plot_path: Path | None,
-                  quick: bool) -> int:
+def bench_seed000(
+    runs: int, hours: int, husky_path: Path, json_path: Path | None, plot_path: Path | None, quick: bool
+) -> int:
     """Seed 000's Table 1 (KF, GLRT, MLRT delays), false alarms, equal-FA delays, real data, runtime."""
     from spooflens.bench import seed000_bench as sb
 
@@ -356,8 +373,13 @@ def _print_seed000(out: dict, runs: int) -> None:
 
     console = _console()
     paper = out["paper"]
-    t = Table("method", *[f"{c} m/s" for c in ("2", "3", "5")], "25 m/s up", "clean runs alarmed",
-              title=f"Seed 000 scenario, {runs} runs: median delay s [25-75%] (detected %)  | paper Table 1")
+    t = Table(
+        "method",
+        *[f"{c} m/s" for c in ("2", "3", "5")],
+        "25 m/s up",
+        "clean runs alarmed",
+        title=f"Seed 000 scenario, {runs} runs: median delay s [25-75%] (detected %)  | paper Table 1",
+    )
     for m, cases in paper["delays"].items():
         cells = []
         for key in ("en:2", "en:3", "en:5", "u:25"):
@@ -369,26 +391,42 @@ def _print_seed000(out: dict, runs: int) -> None:
         t.add_row(f"paper: {name}", *[_fmt(row[r]) for r in (2, 3, 5)], vertical, "")
     console.print(t)
     mr = out["minimum_rate"]
-    console.print(f"smallest east+north ramp detected in >= 50% of runs (paper: MLRT {sb.PAPER_MIN_RATE} m/s): "
-                  + ", ".join(f"{m} {_fmt(v)}" for m, v in mr["minimum_rate"].items()))
+    console.print(
+        f"smallest east+north ramp detected in >= 50% of runs (paper: MLRT {sb.PAPER_MIN_RATE} m/s): "
+        + ", ".join(f"{m} {_fmt(v)}" for m, v in mr["minimum_rate"].items())
+    )
     eq = out["equal_fa"]
-    t = Table("method", *[f"{r} m/s @ {fa:g}/1000h" for r in ("2", "5") for fa in (1.0, 10.0, 100.0)],
-              title=f"Equal false-alarm rates ({eq['hours']} attack-free hours, Gumbel tail): median delay s")
+    t = Table(
+        "method",
+        *[f"{r} m/s @ {fa:g}/1000h" for r in ("2", "5") for fa in (1.0, 10.0, 100.0)],
+        title=f"Equal false-alarm rates ({eq['hours']} attack-free hours, Gumbel tail): median delay s",
+    )
     for m, d in eq["delays"].items():
         t.add_row(m, *[_fmt(d[r][fa]) for r in ("2", "5") for fa in (1.0, 10.0, 100.0)])
     console.print(t)
     if "husky" in out:
-        t = Table("husky bag", *out["husky"]["clean"].keys(),
-                  title="Real data (husky, consumer IMU): alarms when clean, delay (s) of the first alarm after "
-                        "an injected ramp's onset")
+        t = Table(
+            "husky bag",
+            *out["husky"]["clean"].keys(),
+            title="Real data (husky, consumer IMU): alarms when clean, delay (s) of the first alarm after "
+            "an injected ramp's onset",
+        )
         for label, res in out["husky"].items():
             key = "alarms" if label == "clean" else "delay_after_200_s"
-            t.add_row(label, *[(f"{v[key]:.1f}" if isinstance(v[key], float) else f"{v[key]}" if v[key] is not None
-                                else "-") + (" (advisory)" if v["advisory"] else "") for v in res.values()])
+            t.add_row(
+                label,
+                *[
+                    (f"{v[key]:.1f}" if isinstance(v[key], float) else f"{v[key]}" if v[key] is not None else "-")
+                    + (" (advisory)" if v["advisory"] else "")
+                    for v in res.values()
+                ],
+            )
         console.print(t)
     rt = out["runtime"]
-    console.print(f"runtime: all seed-000 detectors (online + offline l_N(m)) over {rt['epochs']:.0f} epochs "
-                  f"(1 h of 10 Hz GNSS): {rt['detectors_s']:.1f} s (goal < 10 s)")
+    console.print(
+        f"runtime: all seed-000 detectors (online + offline l_N(m)) over {rt['epochs']:.0f} epochs "
+        f"(1 h of 10 Hz GNSS): {rt['detectors_s']:.1f} s (goal < 10 s)"
+    )
 
 
 @cli.command()

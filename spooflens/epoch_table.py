@@ -57,6 +57,18 @@ def gps_utc_offset_ns(gps_ns: np.ndarray) -> np.ndarray:
     return np.searchsorted(starts, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * 1_000_000_000
 
 
+def gps_seconds_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
+    """UTC nanoseconds since 1970 -> GPS seconds since 1980-01-06 (leap seconds added)."""
+    gps_ns = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS
+    return (gps_ns + gps_utc_offset_ns(gps_ns)) / 1e9
+
+
+def unix_ns_of_gps_seconds(gps_s: np.ndarray | float) -> np.ndarray:
+    """GPS seconds since 1980-01-06 -> UTC nanoseconds since 1970."""
+    gps_ns = np.round(np.asarray(gps_s, dtype=float) * 1e9).astype(np.int64)
+    return gps_ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(gps_ns)
+
+
 TIME_REFERENCES = {
     "unix": "UTC seconds since 1970 (ROS stamps, MCAP log times)",
     "gps": "GPS time, seconds since 1980-01-06",
@@ -161,6 +173,15 @@ class EpochTable:
             return ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(ns)
         return None
 
+    def gps_seconds(self, t_s: float | np.ndarray) -> np.ndarray | None:
+        """Table times as GPS seconds since 1980-01-06 (what satellite orbits need), None without a clock."""
+        ns = self.absolute_ns(t_s)
+        if self.time_reference == "gps":
+            return ns / 1e9
+        if self.time_reference == "unix":
+            return gps_seconds_of_unix_ns(ns)
+        return None
+
     def absolute_iso(self, t_s: float) -> str:
         """A table time as an ISO-8601 string: UTC for unix/gps clocks, seconds otherwise."""
         unix = self.unix_ns(t_s)
@@ -194,9 +215,12 @@ def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped
         if bad.any():
             skipped.append(Skipped(sid, "NaN specific force or angular rate", int(bad.sum())))
             df = df[~bad]
-    dup = df["t_ns"].duplicated(keep="first").to_numpy()
+    # an observation epoch has one row per satellite: a duplicate is the same satellite twice
+    key = ["t_ns", "sv_id"] if frame == "observations" else ["t_ns"]
+    dup = df.duplicated(subset=key, keep="first").to_numpy()
     if dup.any():
-        skipped.append(Skipped(sid, "duplicate timestamps; kept the first", int(dup.sum())))
+        what = "duplicate (timestamp, satellite) rows" if frame == "observations" else "duplicate timestamps"
+        skipped.append(Skipped(sid, f"{what}; kept the first", int(dup.sum())))
         df = df[~dup]
     return df
 

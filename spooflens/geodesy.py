@@ -101,3 +101,22 @@ def metres_per_radian(lat: ArrayLike, h: ArrayLike) -> tuple[FloatArray, FloatAr
     lat = np.asarray(lat, dtype=float)
     rm, rn = radii(lat)
     return rm + h, (rn + h) * np.cos(lat)
+
+
+def add_enu_offset(
+    lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike, d_enu: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Geodetic position moved by small local ENU offsets (m), each at its own latitude; shapes (...), (..., 3).
+
+    First order in offset/radius: exact to a millimetre for offsets of kilometres, which is what
+    noise, attacks and lever arms are.
+    """
+    lat = np.asarray(lat_deg, dtype=float)
+    h = np.asarray(h, dtype=float)
+    d = np.asarray(d_enu, dtype=float)
+    rm, rn = radii(np.radians(lat))
+    return (
+        lat + np.degrees(d[..., 1] / (rm + h)),
+        np.asarray(lon_deg, dtype=float) + np.degrees(d[..., 0] / ((rn + h) * np.cos(np.radians(lat)))),
+        h + d[..., 2],
+    )

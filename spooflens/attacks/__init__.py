@@ -1,17 +1,29 @@
 """Attack injection: spoofed copies of logs with their ground truth, so detectors can be measured.
 
 `parse_attack("ramp:rate=2,axes=en,start=10")` -> AttackSpec; `apply_attack(table, spec)` -> (spoofed
-table, AttackTruth). Fix-level kinds are in fix_attacks.py.
+table, AttackTruth). Fix-level kinds are in fix_attacks.py, kinds acting on raw pseudoranges in observation_attacks.py.
 """
 
 from __future__ import annotations
 
 from spooflens.attacks.fix_attacks import apply_fix_attack
-from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, Kind, parse_attack, sidecar_path
+from spooflens.attacks.observation_attacks import apply_observation_attack
+from spooflens.attacks.spec import (
+    KINDS,
+    OBSERVATION_KINDS,
+    AttackError,
+    AttackSpec,
+    AttackTruth,
+    Kind,
+    parse_attack,
+    sidecar_path,
+)
 from spooflens.epoch_table import EpochTable
 
 
 def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
+    if spec.kind in OBSERVATION_KINDS:
+        return apply_observation_attack(table, spec)
     return apply_fix_attack(table, spec)
 
 

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, Kind
 from spooflens.epoch_table import EpochTable
-from spooflens.geodesy import geodetic_to_enu, radii
+from spooflens.geodesy import add_enu_offset, geodetic_to_enu
 
 FloatArray = NDArray[np.float64]
 
@@ -55,12 +55,6 @@ def _offsets(
         dp = np.where(inside[:, None], p[first] - p, 0.0)
         dv = np.where(inside[:, None], -np.nan_to_num(v), 0.0)
     return dp, dv
-
-
-def _add_enu(lat: FloatArray, lon: FloatArray, h: FloatArray, d: FloatArray) -> tuple[FloatArray, ...]:
-    lr = np.radians(lat)
-    rm, rn = radii(lr)
-    return (lat + np.degrees(d[:, 1] / (rm + h)), lon + np.degrees(d[:, 0] / ((rn + h) * np.cos(lr))), h + d[:, 2])
 
 
 def apply_fix_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
@@ -104,7 +98,7 @@ def apply_fix_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, A
                 lead["lat_deg"].to_numpy()[idx], lead["lon_deg"].to_numpy()[idx], lead["height_m"].to_numpy()[idx]
             ]
             lat, lon, h = (np.where(inside, src[:, i], x) for i, x in enumerate((lat, lon, h)))
-        new_lat, new_lon, new_h = _add_enu(lat, lon, h, dp)
+        new_lat, new_lon, new_h = add_enu_offset(lat, lon, h, dp)
         if spec.kind == Kind.HOVER:  # frozen exactly, not up to the ENU-to-geodetic round trip
             inside = (t >= spec.start_s) & (t <= end)
             if inside.any():

@@ -22,6 +22,14 @@ class Kind(Enum):
     VELOCITY_PULL = "velocity_pull"
     POSITION_PULL = "position_pull"
     SINGLE_ANTENNA = "single_antenna"
+    PR_DELAY = "pr_delay"
+    MEACONING = "meaconing"
+    BLOCKING = "blocking"
+    SPOOFED_SUBSET = "spoofed_subset"
+
+
+# Kinds that act on raw pseudoranges; the fixes follow through the receiver's single-point solution.
+OBSERVATION_KINDS = frozenset({Kind.PR_DELAY, Kind.MEACONING, Kind.BLOCKING, Kind.SPOOFED_SUBSET})
 
 
 @dataclass(frozen=True)
@@ -31,6 +39,11 @@ class KindInfo:
     params: dict[str, str]  # name -> meaning (with unit and default)
 
 
+_SATELLITES = {
+    "svs": "satellites to attack, e.g. G05+G07 (default: `count` of them, or all)",
+    "count": "how many satellites, chosen at random among those tracked at `start` (default: all)",
+    "seed": "random seed of that choice (default 0)",
+}
 _WINDOW = {
     "start": "attack start, s since the log start (default 0)",
     "end": "attack end, s (default: end of log); the spoofer switches off there",
@@ -91,6 +104,49 @@ KINDS: dict[Kind, KindInfo] = {
             "end": _WINDOW["end"],
         },
     ),
+    Kind.PR_DELAY: KindInfo(
+        "002, 004",
+        "every chosen satellite's signal arrives `delay` m late (growing at `rate` m/s): pseudorange, "
+        "carrier phase and Doppler move together, as for a replayed signal; the same delay on every "
+        "satellite moves only the receiver clock (seed 004's bias injection)",
+        {
+            "delay": "m (default 300, i.e. 1 us)",
+            "rate": "m/s growth of the delay (default 0)",
+            **_SATELLITES,
+            **_WINDOW,
+        },
+    ),
+    Kind.MEACONING: KindInfo(
+        "002, 004",
+        "a meaconer antenna `east`/`north`/`up` m from where the receiver was at `start` re-broadcasts the "
+        "whole sky `delay` m late: every pseudorange becomes the meaconer's, so the fix moves there",
+        {
+            "east": "m (default 500)",
+            "north": "m (default 0)",
+            "up": "m (default 0)",
+            "delay": "m of extra replay delay (default 0)",
+            **_WINDOW,
+        },
+    ),
+    Kind.BLOCKING: KindInfo(
+        "004",
+        "the chosen satellites are not received at all (rows removed); the fix moves with the geometry",
+        {**_SATELLITES, **_WINDOW},
+    ),
+    Kind.SPOOFED_SUBSET: KindInfo(
+        "004",
+        "`keep` satellites stay authentic; every other satellite is replaced by a counterfeit delayed by "
+        "`delay` m (growing at `rate` m/s). On a log this is bias injection on the complement; the truth "
+        "sidecar names the authentic set, whose solution is seed 004's reference position",
+        {
+            "keep": "authentic satellites (default 7), chosen at random with `seed` unless `svs` names the spoofed",
+            "delay": "m (default 300)",
+            "rate": "m/s (default 0)",
+            "svs": _SATELLITES["svs"],
+            "seed": _SATELLITES["seed"],
+            **_WINDOW,
+        },
+    ),
 }
 _DEFAULTS: dict[Kind, dict[str, Any]] = {
     Kind.RAMP: {"rate": 2.0, "axes": "en", "vel": 0},
@@ -99,6 +155,10 @@ _DEFAULTS: dict[Kind, dict[str, Any]] = {
     Kind.VELOCITY_PULL: {"dv": 0.1, "axes": "n", "vel": 1},
     Kind.POSITION_PULL: {"offset": 100.0, "axes": "e", "ramp": 50.0, "vel": 0},
     Kind.SINGLE_ANTENNA: {"rate": 1.0, "axes": "en", "vel": 0},
+    Kind.PR_DELAY: {"delay": 300.0, "rate": 0.0, "seed": 0},
+    Kind.MEACONING: {"east": 500.0, "north": 0.0, "up": 0.0, "delay": 0.0},
+    Kind.BLOCKING: {"count": 2, "seed": 0},
+    Kind.SPOOFED_SUBSET: {"keep": 7, "delay": 300.0, "rate": 0.0, "seed": 0},
 }
 
 
@@ -137,7 +197,7 @@ def parse_attack(text: str) -> AttackSpec:
         key = key.strip().lower()
         if not sep or key not in KINDS[kind].params:
             raise AttackError(f"{kind.value}: bad parameter {item!r}; parameters are {sorted(KINDS[kind].params)}")
-        if key in ("axes", "receiver"):
+        if key in ("axes", "receiver", "svs"):
             params[key] = value.strip()
         else:
             try:
@@ -147,6 +207,11 @@ def parse_attack(text: str) -> AttackSpec:
     axes = str(params.get("axes", ""))
     if axes and (set(axes) - set("enu") or len(set(axes)) != len(axes)):
         raise AttackError(f"{kind.value}: axes={axes!r}; use a subset of e, n, u such as en")
+    for key in ("count", "keep", "seed"):
+        if key in params and (params[key] != int(params[key]) or params[key] < 0):
+            raise AttackError(f"{kind.value}: {key}={params[key]:g} must be a whole number >= 0")
+    if "svs" in params and kind == Kind.BLOCKING:
+        params.pop("count", None)  # named satellites replace the default random choice
     if "end" in params and params["end"] <= params.get("start", 0.0):
         raise AttackError(f"{kind.value}: end={params['end']} is not after start={params.get('start', 0.0)}")
     return AttackSpec(kind, params)
@@ -165,6 +230,8 @@ class AttackTruth:
     source: str = ""
     t0_abs_ns: int = 0
     offsets: dict[str, list[list[float]]] = field(default_factory=dict)  # receiver -> [t_s, de, dn, du]
+    satellites: list[str] = field(default_factory=list)  # raw-observation attacks: the satellites attacked
+    authentic: list[str] = field(default_factory=list)  # spoofed_subset: the satellites left authentic
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=1)

@@ -12,10 +12,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from spooflens.epoch_table import EpochTable, StreamInfo, build_table
+from spooflens.epoch_table import EpochTable, StreamInfo, build_table, gps_seconds_of_unix_ns, unix_ns_of_gps_seconds
+from spooflens.geodesy import add_enu_offset
+from spooflens.gnss.ephemeris import GpsEphemerides, synthetic_constellation
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.rotations import matrix_to_quat, rotvec_to_matrix
 from spooflens.schema import FixType
+from spooflens.simulation.observations import ObservationNoise
 from spooflens.simulation.sensors import GnssNoise, gnss_errors, noisy_imu
 from spooflens.simulation.trajectories import PROFILES, Profile, Truth, generate
 
@@ -34,6 +37,10 @@ class Scenario:
     second_receiver_lever_m: tuple[float, float, float] | None = None  # FLU offset of antenna 2
     imu_orientation: bool = True  # an AHRS quaternion in the IMU messages, as many ROS IMUs publish
     orientation_noise_deg: tuple[float, float] = (0.5, 3.0)  # roll/pitch, yaw (yaw drifts: magnetometer)
+    # Raw observations: with noise settings, each receiver logs pseudoranges, rates, carrier phase and
+    # C/N0, and its fixes are its own single-point solution of them (as a real receiver's are).
+    observations: ObservationNoise | None = None
+    constellation: str = "synthetic"  # or the path of a RINEX navigation file (the log then starts in its span)
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -49,6 +56,14 @@ SCENARIOS: dict[str, Scenario] = {
     "ship": Scenario("ship", PROFILES["ship"], 100.0, 1.0, grade("tactical"), GnssNoise((2.0, 2.0, 4.0), 0.05)),
     "ground": Scenario(
         "ground", PROFILES["ground"], 100.0, 10.0, grade("consumer_mems"), GnssNoise((1.5, 1.5, 3.0), 0.08)
+    ),
+    "ground_raw": Scenario(
+        "ground_raw",
+        PROFILES["ground"],
+        100.0,
+        1.0,
+        grade("consumer_mems"),
+        observations=ObservationNoise(),
     ),
     "dual_receiver": Scenario(
         "dual_receiver",
@@ -85,7 +100,8 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     rng = np.random.default_rng(seed)
     truth = generate(profile, sc.imu_hz)
     imu = noisy_imu(truth, sc.imu_grade, rng)
-    t_ns = T0_UNIX_NS + np.round(truth.t * 1e9).astype(np.int64)
+    eph, t0_unix_ns = _constellation(sc, rng) if sc.observations is not None else (None, T0_UNIX_NS)
+    t_ns = t0_unix_ns + np.round(truth.t * 1e9).astype(np.int64)
     n = len(truth.t)
     imu_cols: dict[str, object] = {"t_ns": t_ns, "imu_id": "/imu/data"}
     for i, a in enumerate("xyz"):
@@ -103,14 +119,20 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     if sc.second_receiver_lever_m is not None:
         receivers.append(("/gps2/fix", np.asarray(sc.second_receiver_lever_m)))
     fix_frames = []
+    obs_frames = []
     for rid, lever in receivers:
+        if eph is not None and sc.observations is not None:
+            obs, fixes = _raw_receiver(rid, truth, lever, g_idx, t_ns, eph, sc.observations, rng)
+            obs_frames.append(obs)
+            fix_frames.append(fixes)
+            continue
         lat, lon, h = (
             truth.offset_geodetic(lever)
             if lever is not None
             else (np.degrees(truth.lat), np.degrees(truth.lon), truth.h)
         )
         dpos, dvel = gnss_errors(len(g_idx), step / sc.imu_hz, sc.gnss, rng)
-        lat_g, lon_g, h_g = _offset(lat[g_idx], lon[g_idx], h[g_idx], dpos)
+        lat_g, lon_g, h_g = add_enu_offset(lat[g_idx], lon[g_idx], h[g_idx], dpos)
         sig = np.asarray(sc.gnss.sigma_enu_m)
         v = truth.v_enu[g_idx] + dvel
         fix_frames.append(
@@ -152,29 +174,67 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     streams += [
         StreamInfo("fix", rid, rid, "sensor_msgs/msg/NavSatFix", len(g_idx), frame_id="gnss") for rid, _ in receivers
     ]
+    streams += (
+        [
+            StreamInfo("observations", rid, rid, "simulated raw GNSS", len(g_idx), frame_id="gnss")
+            for rid, _ in receivers
+        ]
+        if obs_frames
+        else []
+    )
     streams.append(StreamInfo("truth", "truth", "/truth/fix", "simulation", len(g_idx)))
+    frames = {"imu": pd.DataFrame(imu_cols), "fixes": pd.concat(fix_frames, ignore_index=True), "truth": truth_frame}
+    if obs_frames:
+        frames["observations"] = pd.concat(obs_frames, ignore_index=True)
     table = build_table(
-        Path(f"simulated_{sc.name}_seed{seed}"),
-        "simulation",
-        "unix",
-        {"imu": pd.DataFrame(imu_cols), "fixes": pd.concat(fix_frames, ignore_index=True), "truth": truth_frame},
-        streams,
-        [],
-        t0_ns=T0_UNIX_NS,
+        Path(f"simulated_{sc.name}_seed{seed}"), "simulation", "unix", frames, streams, [], t0_ns=t0_unix_ns
     )
     return Simulated(table, truth, imu.gyro_bias, imu.accel_bias)
 
 
-def _offset(lat_deg: np.ndarray, lon_deg: np.ndarray, h: np.ndarray, d_enu: np.ndarray) -> tuple[np.ndarray, ...]:
-    from spooflens.geodesy import radii
+def _constellation(sc: Scenario, rng: np.random.Generator) -> tuple[GpsEphemerides, int]:
+    """The satellites and the log's start (UNIX ns): a synthetic constellation at the fixed start, or a
+    navigation file's satellites with the log starting at its first full hour of valid ephemerides."""
+    if sc.constellation == "synthetic":
+        start_gps = float(gps_seconds_of_unix_ns(T0_UNIX_NS))
+        return synthetic_constellation(start_gps, rng=rng), T0_UNIX_NS
+    from readers.rinex import read_rinex_nav
 
-    lat = np.radians(lat_deg)
-    rm, rn = radii(lat)
-    return (
-        lat_deg + np.degrees(d_enu[:, 1] / (rm + h)),
-        lon_deg + np.degrees(d_enu[:, 0] / ((rn + h) * np.cos(lat))),
-        h + d_enu[:, 2],
-    )
+    eph = read_rinex_nav(Path(sc.constellation))
+    first, _ = eph.span_s()
+    start_gps = float(np.ceil(first / 3600.0) * 3600.0)
+    return eph, int(unix_ns_of_gps_seconds(start_gps))
+
+
+def _raw_receiver(
+    rid: str,
+    truth: Truth,
+    lever: np.ndarray | None,
+    g_idx: np.ndarray,
+    t_ns: np.ndarray,
+    eph: GpsEphemerides,
+    noise: ObservationNoise,
+    rng: np.random.Generator,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """One receiver's observations (t_ns-stamped) and the fixes it computes from them."""
+    from spooflens.navigation.single_point import SinglePointOptions, solve
+    from spooflens.simulation.observations import simulate_observations
+
+    t_s = truth.t[g_idx]
+    t_gps = gps_seconds_of_unix_ns(t_ns[g_idx])
+    rx = truth.ecef(lever)[g_idx]
+    obs = simulate_observations(rid, t_s, t_gps, rx, truth.ecef_velocity()[g_idx], eph, noise, rng)
+    t0_gps = float(gps_seconds_of_unix_ns(t_ns[0])) - truth.t[0]
+    sol = solve(obs, t0_gps + obs["t_s"].to_numpy(), SinglePointOptions(iono=eph.iono))
+    cols = sol.fixes_columns()
+    fixes = pd.DataFrame(cols)
+    fixes["h_acc_m"] = noise.pseudorange_sigma_m * 2.0 * sol.hdop[sol.ok]
+    fixes["v_acc_m"] = noise.pseudorange_sigma_m * 2.0 * sol.vdop[sol.ok]
+    fixes["vel_acc_mps"] = noise.range_rate_sigma_mps * sol.pdop[sol.ok]
+    start = int(t_ns[0])
+    for frame in (obs, fixes):
+        frame.insert(0, "t_ns", start + np.round(frame.pop("t_s").to_numpy() * 1e9).astype(np.int64))
+    return obs, fixes
 
 
 def _truncated(profile: Profile, duration_s: float) -> Profile:

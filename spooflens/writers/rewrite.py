@@ -5,7 +5,8 @@ messages are matched to rows of the modified fixes frame by the stamp the reader
 or log time when the stamp is zero), decoded, changed and re-encoded; everything else is copied byte
 for byte, with its original log time. Containers: MCAP (ROS1, ROS2, JSON, protobuf channels), ROS1
 bags, ROS2 bags (sqlite3 or MCAP storage). CSV and ULog logs are rewritten through their writers
-(a ULog keeps only the streams spooflens maps, which the caller reports).
+(a ULog keeps only the streams spooflens maps, which the caller reports); RINEX observation files by
+editing their fields in place (`rinex_writer.py`), so attacks on raw pseudoranges land too.
 """
 
 from __future__ import annotations
@@ -226,22 +227,26 @@ def _edit_location_fix(
     return None
 
 
-def rewrite_fixes(src: Path, dst: Path, table: EpochTable, spoofed_fixes: pd.DataFrame, velocities: bool) -> str:
-    """Write `src` to `dst` in the same format with `spoofed_fixes` in place of its fixes.
+def rewrite_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """Write `src` to `dst` in the same format with the spoofed table's fixes (and observations) in it.
 
     `table` is what the readers made of `src` (it carries the clock that maps rows to stamps). Returns a
     one-line note on what was written.
     """
     src, dst = Path(src), Path(dst)
     fmt = sniff_format(src)
-    plan = _plan(table, spoofed_fixes, velocities)
     if fmt in ("csv", "ulog"):
         from spooflens.writers import write_log
 
-        out = EpochTable(**{**table.__dict__, "fixes": spoofed_fixes})
-        write_log(out, dst, fmt)
+        write_log(spoofed, dst, fmt)
         note = "ULog rewritten with only sensor_combined and sensor_gps" if fmt == "ulog" else "CSV log rewritten"
-        return f"{note}: {len(spoofed_fixes)} fixes"
+        extra = f", {len(spoofed.observations)} observations" if len(spoofed.observations) else ""
+        return f"{note}: {len(spoofed.fixes)} fixes{extra}"
+    if fmt == "rinex":
+        from spooflens.writers.rinex_writer import rewrite_rinex
+
+        return rewrite_rinex(src, dst, table, spoofed.observations)
+    plan = _plan(table, spoofed.fixes, velocities)
     if fmt == "mcap":
         _rewrite_mcap(src, dst, plan)
     else:

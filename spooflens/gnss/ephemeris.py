@@ -1,0 +1,275 @@
+"""GPS broadcast ephemerides and where each satellite is: IS-GPS-200 (Table 20-IV) orbit and clock.
+
+One code path serves real navigation files (`readers.rinex.read_rinex_nav`) and the simulator's
+synthetic constellation (`synthetic_constellation`: the same Keplerian elements with the harmonic
+corrections set to zero), so a simulated log and a real one meet the same satellite model.
+
+Times are GPS seconds since 1980-01-06 (continuous, no week rollover). Positions come out in the
+ECEF frame of the instant asked for; the rotation of the Earth while the signal travels is the
+receiver side's business (`spooflens.gnss.geometry`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+GM_GPS = 3.986005e14  # m^3/s^2, IS-GPS-200's value (not WGS84's 3.986004418e14)
+OMEGA_E_GPS = 7.2921151467e-5  # rad/s
+C_MPS = 299792458.0
+F_REL = -4.442807633e-10  # s/m^0.5, relativistic clock correction constant
+SECONDS_PER_WEEK = 604800.0
+GPS_L1_HZ = 1575.42e6
+GPS_L2_HZ = 1227.60e6
+FIT_INTERVAL_S = 4 * 3600.0  # a broadcast record is used within +-2 h of its toe; we allow the full fit span
+
+
+@dataclass(frozen=True)
+class Klobuchar:
+    """Broadcast ionosphere model coefficients (RINEX ION ALPHA / ION BETA)."""
+
+    alpha: tuple[float, float, float, float]
+    beta: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class GpsEphemerides:
+    """Broadcast ephemeris records, one entry per record (several per satellite), as parallel arrays.
+
+    Names follow IS-GPS-200; angles in radians, rates in rad/s, `sqrt_a` in m^0.5. `toe_sow` is the
+    time of ephemeris in seconds of GPS week `week`; `toc_s` the clock reference time (GPS seconds).
+    `max_age_s` is how far from toe a record may be used (inf for synthetic orbits, which are exact).
+    """
+
+    sv_id: NDArray[np.str_]
+    week: NDArray[np.int64]
+    toe_sow: FloatArray
+    toc_s: FloatArray
+    af0: FloatArray
+    af1: FloatArray
+    af2: FloatArray
+    tgd: FloatArray
+    sqrt_a: FloatArray
+    e: FloatArray
+    m0: FloatArray
+    delta_n: FloatArray
+    omega: FloatArray
+    i0: FloatArray
+    idot: FloatArray
+    omega0: FloatArray
+    omega_dot: FloatArray
+    cuc: FloatArray
+    cus: FloatArray
+    crc: FloatArray
+    crs: FloatArray
+    cic: FloatArray
+    cis: FloatArray
+    health: NDArray[np.int64]
+    iode: NDArray[np.int64]
+    max_age_s: FloatArray
+    iono: Klobuchar | None = field(default=None, compare=False)
+
+    @classmethod
+    def from_records(cls, records: list[dict[str, float | int | str]], iono: Klobuchar | None = None) -> GpsEphemerides:
+        """Build from one dict per record (keys: the field names; `max_age_s` defaults to the fit interval)."""
+        cols: dict[str, np.ndarray] = {}
+        for f in fields(cls):
+            if f.name == "iono":
+                continue
+            default = FIT_INTERVAL_S / 2 if f.name == "max_age_s" else None
+            values = [r.get(f.name, default) for r in records]
+            if any(v is None for v in values):
+                raise ValueError(f"ephemeris record without {f.name!r}")
+            dtype = {"sv_id": np.str_, "week": np.int64, "health": np.int64, "iode": np.int64}.get(f.name, np.float64)
+            cols[f.name] = np.asarray(values, dtype=dtype)
+        order = np.lexsort((cols["week"] * SECONDS_PER_WEEK + cols["toe_sow"], cols["sv_id"]))
+        return cls(**{k: v[order] for k, v in cols.items()}, iono=iono)
+
+    def __len__(self) -> int:
+        return len(self.sv_id)
+
+    @property
+    def toe_s(self) -> FloatArray:
+        """Time of ephemeris, GPS seconds."""
+        return self.week * SECONDS_PER_WEEK + self.toe_sow
+
+    def satellites(self) -> list[str]:
+        return sorted(set(self.sv_id.tolist()))
+
+    def span_s(self) -> tuple[float, float]:
+        """First and last GPS time any record covers."""
+        return float(np.min(self.toe_s - self.max_age_s)), float(np.max(self.toe_s + self.max_age_s))
+
+    def take(self, idx: NDArray[np.int64]) -> GpsEphemerides:
+        return replace(self, **{f.name: getattr(self, f.name)[idx] for f in fields(self) if f.name != "iono"})
+
+    def select(self, sv_id: NDArray[np.str_], t_s: FloatArray) -> NDArray[np.int64]:
+        """For each (satellite, GPS time): the healthy record with the nearest toe, or -1 if none is valid."""
+        sv_id = np.asarray(sv_id).astype(str)
+        t_s = np.asarray(t_s, dtype=float)
+        out = np.full(len(sv_id), -1, dtype=np.int64)
+        toe = self.toe_s
+        for sv in np.unique(sv_id):
+            rec = np.flatnonzero((self.sv_id == sv) & (self.health == 0))
+            if not len(rec):
+                continue
+            rows = np.flatnonzero(sv_id == sv)
+            # records of one satellite are sorted by toe: the nearest is one of two neighbours
+            k = np.clip(np.searchsorted(toe[rec], t_s[rows]), 1, max(len(rec) - 1, 1))
+            lo, hi = rec[k - 1], rec[np.minimum(k, len(rec) - 1)]
+            best = np.where(np.abs(t_s[rows] - toe[lo]) <= np.abs(t_s[rows] - toe[hi]), lo, hi)
+            ok = np.abs(t_s[rows] - toe[best]) <= self.max_age_s[best]
+            out[rows[ok]] = best[ok]
+        return out
+
+
+@dataclass(frozen=True)
+class SatelliteStates:
+    """Satellite position/velocity (ECEF at the instant asked for), clock bias and drift times c."""
+
+    pos_m: FloatArray  # (n, 3), NaN where no valid record
+    vel_mps: FloatArray  # (n, 3)
+    clock_bias_m: FloatArray  # (n,), includes the relativistic term and L1 group delay (TGD)
+    clock_drift_mps: FloatArray  # (n,)
+    record: NDArray[np.int64]  # index of the record used, -1 if none
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        return self.record >= 0
+
+
+def _kepler(eph: GpsEphemerides, t_s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Orbit position in ECEF at `t_s` for each record, plus the eccentric anomaly (for the clock)."""
+    a = eph.sqrt_a**2
+    tk = t_s - eph.toe_s
+    n = np.sqrt(GM_GPS / a**3) + eph.delta_n
+    m = eph.m0 + n * tk
+    ecc_anomaly = m.copy()
+    for _ in range(12):  # Newton on E - e sin E = M; e < 0.03 for GPS, converges in a few steps
+        ecc_anomaly -= (ecc_anomaly - eph.e * np.sin(ecc_anomaly) - m) / (1.0 - eph.e * np.cos(ecc_anomaly))
+    nu = np.arctan2(np.sqrt(1.0 - eph.e**2) * np.sin(ecc_anomaly), np.cos(ecc_anomaly) - eph.e)
+    phi = nu + eph.omega
+    s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
+    u = phi + eph.cus * s2 + eph.cuc * c2
+    r = a * (1.0 - eph.e * np.cos(ecc_anomaly)) + eph.crs * s2 + eph.crc * c2
+    inc = eph.i0 + eph.cis * s2 + eph.cic * c2 + eph.idot * tk
+    node = eph.omega0 + (eph.omega_dot - OMEGA_E_GPS) * tk - OMEGA_E_GPS * eph.toe_sow
+    xp, yp = r * np.cos(u), r * np.sin(u)
+    pos = np.stack(
+        [
+            xp * np.cos(node) - yp * np.cos(inc) * np.sin(node),
+            xp * np.sin(node) + yp * np.cos(inc) * np.cos(node),
+            yp * np.sin(inc),
+        ],
+        axis=-1,
+    )
+    return pos, ecc_anomaly, n
+
+
+def _clock(eph: GpsEphemerides, t_s: FloatArray, ecc_anomaly: FloatArray) -> FloatArray:
+    dt = t_s - eph.toc_s
+    rel = F_REL * eph.e * eph.sqrt_a * np.sin(ecc_anomaly)
+    return eph.af0 + eph.af1 * dt + eph.af2 * dt**2 + rel - eph.tgd
+
+
+def satellite_states(eph: GpsEphemerides, sv_id: NDArray[np.str_] | list[str], t_s: FloatArray) -> SatelliteStates:
+    """Position, velocity and clock of each satellite at GPS time `t_s` (one row per pair).
+
+    Velocity and clock drift are central differences over +-0.5 s: the orbit is smooth enough that
+    this is exact to far below a mm/s, and it cannot disagree with the position function.
+    """
+    sv_id = np.asarray(sv_id).astype(str)
+    t_s = np.broadcast_to(np.asarray(t_s, dtype=float), sv_id.shape).copy()
+    rec = eph.select(sv_id, t_s)
+    n = len(sv_id)
+    pos = np.full((n, 3), np.nan)
+    vel = np.full((n, 3), np.nan)
+    bias = np.full(n, np.nan)
+    drift = np.full(n, np.nan)
+    ok = rec >= 0
+    if ok.any():
+        sub = eph.take(rec[ok])
+        tt = t_s[ok]
+        p, ecc, _ = _kepler(sub, tt)
+        h = 0.5
+        p_plus, ecc_plus, _ = _kepler(sub, tt + h)
+        p_minus, ecc_minus, _ = _kepler(sub, tt - h)
+        pos[ok] = p
+        vel[ok] = (p_plus - p_minus) / (2 * h)
+        bias[ok] = C_MPS * _clock(sub, tt, ecc)
+        drift[ok] = C_MPS * (_clock(sub, tt + h, ecc_plus) - _clock(sub, tt - h, ecc_minus)) / (2 * h)
+    return SatelliteStates(pos, vel, bias, drift, rec)
+
+
+def synthetic_constellation(
+    t_ref_s: float,
+    planes: int = 6,
+    per_plane: int = 4,
+    inclination_deg: float = 55.0,
+    semi_major_axis_m: float = 26_559_700.0,
+    phasing: int = 1,
+    rng: np.random.Generator | None = None,
+) -> GpsEphemerides:
+    """A Walker constellation (GPS-like 24/6/1 by default) as broadcast records valid at any time.
+
+    Circular orbits, no perturbations; with `rng`, each satellite gets a small clock offset and drift
+    (a few microseconds, 1e-12 s/s) as real ones have, so the receiver must apply the clock model.
+    """
+    total = planes * per_plane
+    week = int(t_ref_s // SECONDS_PER_WEEK)
+    toe_sow = t_ref_s - week * SECONDS_PER_WEEK
+    recs: list[dict[str, float | int | str]] = []
+    for p in range(planes):
+        for s in range(per_plane):
+            k = p * per_plane + s
+            recs.append(
+                {
+                    "sv_id": f"G{k + 1:02d}",
+                    "week": week,
+                    "toe_sow": toe_sow,
+                    "toc_s": t_ref_s,
+                    "af0": float(rng.normal(0.0, 5e-6)) if rng is not None else 0.0,
+                    "af1": float(rng.normal(0.0, 1e-12)) if rng is not None else 0.0,
+                    "af2": 0.0,
+                    "tgd": 0.0,
+                    "sqrt_a": float(np.sqrt(semi_major_axis_m)),
+                    "e": 0.0,
+                    "m0": float(np.radians(360.0 * s / per_plane + 360.0 * phasing * p / total)),
+                    "delta_n": 0.0,
+                    "omega": 0.0,
+                    "i0": float(np.radians(inclination_deg)),
+                    "idot": 0.0,
+                    # broadcast Omega0 is referred to the week start: this puts the node at `360 p / planes`
+                    # degrees of ECEF longitude at t_ref
+                    "omega0": float(np.radians(360.0 * p / planes) + OMEGA_E_GPS * toe_sow),
+                    "omega_dot": 0.0,
+                    "cuc": 0.0,
+                    "cus": 0.0,
+                    "crc": 0.0,
+                    "crs": 0.0,
+                    "cic": 0.0,
+                    "cis": 0.0,
+                    "health": 0,
+                    "iode": 0,
+                    "max_age_s": np.inf,
+                }
+            )
+    return GpsEphemerides.from_records(recs)
+
+
+def states_at_transmission(
+    eph: GpsEphemerides, sv_id: NDArray[np.str_] | list[str], t_rx_s: FloatArray, pseudorange_m: FloatArray
+) -> SatelliteStates:
+    """Satellite states at the transmission time a receiver can infer from its own measurements.
+
+    t_tx = t_rx - pseudorange / c - dt_sv(t_tx): the receiver clock bias inside the pseudorange
+    cancels the one in the receiver's time tag, so no position is needed (RTKLIB's `satposs`).
+    This is how every reader and the simulator fill `sv_x_m` ...: one convention for all logs.
+    """
+    t_tx = np.asarray(t_rx_s, dtype=float) - np.asarray(pseudorange_m, dtype=float) / C_MPS
+    first = satellite_states(eph, sv_id, t_tx)
+    return satellite_states(eph, sv_id, t_tx - np.nan_to_num(first.clock_bias_m) / C_MPS)
