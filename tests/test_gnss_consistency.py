@@ -59,3 +59,15 @@ def test_without_velocity_a_position_step_is_caught_by_the_kinematic_check() -> 
     lat[200:] += 100.0 / 111_000  # a 100 m jump north
     stepped = run_gnss_consistency(fixes.assign(lat_deg=lat))
     assert [round(a.peak_s) for a in stepped.alarms] in ([199], [200], [201], [199, 200], [200, 201])
+
+
+def test_a_long_frozen_stretch_does_not_make_the_honest_part_anomalous() -> None:
+    """A hover spoofer freezes position and zeroes velocity: no noise at all, which must not set the scale."""
+    fixes = _fixes(0.0, 0.0)
+    frozen = fixes["t_s"] >= 120.0  # 60% of the log
+    for col in ("lat_deg", "lon_deg", "height_m"):
+        fixes.loc[frozen, col] = fixes.loc[frozen, col].iloc[0]
+    fixes.loc[frozen, ["vel_e_mps", "vel_n_mps", "vel_u_mps"]] = 0.0
+    result = run_gnss_consistency(fixes)
+    assert result.alarms, "the freeze itself (moving, then suddenly still) is inconsistent"
+    assert all(a.end_s >= 120.0 for a in result.alarms)

@@ -73,8 +73,11 @@ def _meaconing_delta(
     lat0, lon0, h0 = (float(v[ok_epochs[0]]) for v in clean.geodetic())
     offset = np.array([spec.params["east"], spec.params["north"], spec.params["up"]], dtype=float)
     M = geodetic_to_ecef(*add_enu_offset(lat0, lon0, h0, offset))
-    R = clean.ecef_m[clean.row_epoch]
-    v_R = np.nan_to_num(clean.vel_ecef_mps[clean.row_epoch])
+    # Where the receiver really was: its solution smoothed. Its own noisy solution would cancel the
+    # noise of every epoch exactly and leave a receiver that reports the meaconer without any noise.
+    ref_pos, ref_vel = _smoothed_track(clean)
+    R = ref_pos[clean.row_epoch]
+    v_R = np.nan_to_num(ref_vel[clean.row_epoch])
     sv = obs[SV_COLUMNS].to_numpy(float)
     sv_v = np.nan_to_num(obs[SV_VEL_COLUMNS].to_numpy(float))
     M_b = np.broadcast_to(M, R.shape)
@@ -86,6 +89,34 @@ def _meaconing_delta(
         + np.sum(e_MR * v_R, axis=1)
     )
     return d_range, d_rate
+
+
+def _smoothed_track(sol: SinglePointSolution, half_window_s: float = 5.0) -> tuple[FloatArray, FloatArray]:
+    """Each epoch's position and velocity estimated from its neighbours within +-`half_window_s`.
+
+    Position: the mean of the neighbours' positions, each carried to the epoch along the integrated
+    Doppler velocity, so it follows turns and accelerations. Velocity: a local quadratic fit (a plain
+    mean would shorten the velocity in a turn by up to a metre per second).
+    """
+    pos, vel = sol.ecef_m.copy(), sol.vel_ecef_mps.copy()
+    for rid in np.unique(sol.receiver_id):
+        idx = np.flatnonzero((sol.receiver_id == rid) & sol.ok)
+        if len(idx) < 3:
+            continue
+        t, p = sol.t_s[idx], sol.ecef_m[idx]
+        v = sol.vel_ecef_mps[idx]
+        v = np.where(np.isfinite(v), v, np.gradient(p, t, axis=0))
+        travelled = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None], 0)])
+        lo = np.searchsorted(t, t - half_window_s, side="left")
+        hi = np.searchsorted(t, t + half_window_s, side="right")
+        carried = np.cumsum(np.vstack([np.zeros((1, 3)), p - travelled]), axis=0)  # sums of p_j - I_j
+        pos[idx] = travelled + (carried[hi] - carried[lo]) / (hi - lo)[:, None]
+        for k in range(len(idx)):
+            tau = t[lo[k] : hi[k]] - t[k]
+            if len(tau) >= 4:
+                coef = np.linalg.lstsq(np.vander(tau, 3), v[lo[k] : hi[k]], rcond=None)[0]
+                vel[idx[k]] = coef[-1]  # the fit's value at tau = 0
+    return pos, vel
 
 
 def _solution_shift(clean: SinglePointSolution, attacked: SinglePointSolution) -> tuple[FloatArray, ...]:

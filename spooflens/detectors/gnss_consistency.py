@@ -42,8 +42,14 @@ _Q25_ABS_NORMAL = float(stats.halfnorm.ppf(0.25))
 
 
 def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
-    """Per-column noise scale of a residual that is zero-mean without attack."""
-    q = np.nanpercentile(np.abs(x), 25, axis=0) if np.isfinite(x).any() else np.full(x.shape[1], np.nan)
+    """Per-column noise scale of a residual that is zero-mean without attack.
+
+    Exact zeros are left out: a stretch of frozen fixes with zero velocity (a hover spoofer, a receiver
+    repeating its last fix) has no noise at all, and would otherwise become the "quietest quarter" and
+    make the honest rest of the log look anomalous.
+    """
+    a = np.where(np.abs(x) > 1e-9, np.abs(x), np.nan)
+    q = np.nanpercentile(a, 25, axis=0) if np.isfinite(a).any() else np.full(x.shape[1], np.nan)
     return np.asarray(np.maximum(np.nan_to_num(q / _Q25_ABS_NORMAL, nan=floor), floor), dtype=float)
 
 

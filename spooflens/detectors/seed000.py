@@ -11,7 +11,8 @@ Choices where the paper is vague, all options of `Seed000Options`:
 - MLRT: flat prior of density 1 per (m/s)^3 on the ramp rate and the paper's alarm rule l > 0;
 - calibrated MLRT: ramp rate ~ N(0, sigma_rate^2) per axis and `attacks_per_hour` onsets a priori; alarm
   when the posterior probability of an ongoing ramp exceeds `posterior_alarm`; the onset posterior (MAP
-  and 90% credible interval) from the offline two-filter computation up to the alarm's end.
+  and 90% credible interval) from the offline two-filter computation over the data up to a few seconds
+  after the alarm (`onset_horizon_s`).
 """
 
 from __future__ import annotations
@@ -50,6 +51,10 @@ class Seed000Options:
     mlrt_threshold: float = 0.0  # the paper's rule: l > 0
     min_epochs_after_onset: int = 3  # the paper's L: candidate onsets need this many epochs after them
     offline: bool = True  # onset posterior and l_N(m) curves (skip in Monte Carlo delay runs)
+    # The onset posterior uses the data up to this long after the alarm starts. A ramp pins its onset
+    # within seconds; later data only bias it when the attack is not a ramp throughout (a step, a hold,
+    # a meaconer): a 300 m step read with all data placed the onset 26 s early, with 5 s, 3 s.
+    onset_horizon_s: float = 5.0
 
 
 def innovation_whiteness(t: FloatArray, eps: FloatArray, S: FloatArray, window_s: float = 30.0) -> float:
@@ -180,12 +185,12 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
 
 
 def _with_onset_posterior(model: LinearGaussianModel, a: Alarm, opts: Seed000Options) -> Alarm:
-    """MAP onset and credible interval from all the data up to the end of the alarm."""
-    last = int(np.searchsorted(model.t, a.end_s))
+    """MAP onset and credible interval from the data up to `onset_horizon_s` after the alarm starts."""
+    last = int(np.searchsorted(model.t, min(a.end_s, a.start_s + opts.onset_horizon_s)))
     last = min(last, model.n_epochs - 1)
     off = ramp_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last)
     lo = a.start_s - opts.window_s
-    sel = (off.t >= lo) & (off.t <= a.end_s) & np.isfinite(off.log_bf)
+    sel = (off.t >= lo) & (off.t <= model.t[last]) & np.isfinite(off.log_bf)
     if sel.sum() < 2:
         return a
     _, t_map, interval, _ = onset_posterior(off.t[sel], off.log_bf[sel], opts.attacks_per_hour)

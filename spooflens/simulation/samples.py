@@ -70,6 +70,20 @@ SAMPLES: tuple[Sample, ...] = (
     ),
     Sample("ground_csv", "csv", "ground", 60.0, 25.0, 5.0, 1, what="the same car, spooflens CSV log (directory)"),
     Sample(
+        "meaconed_raw",
+        "csv",
+        "ground_raw",
+        180.0,
+        25.0,
+        1.0,
+        5,
+        "meaconing:east=300,north=100,start=120",
+        "car whose receiver logs raw GPS observations (pseudorange, carrier phase, Doppler, C/N0; synthetic "
+        "constellation, satellite positions included) and reports its own single-point solution; from 120 s a "
+        "meaconer 300 m east and 100 m north of it re-broadcasts the sky, so every pseudorange, and the fix, "
+        "becomes the meaconer's",
+    ),
+    Sample(
         "dual_receiver.mcap",
         "mcap-ros2",
         "dual_receiver",
