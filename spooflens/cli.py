@@ -259,6 +259,67 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
     return EXIT_OK
 
 
+@cli.command()
+@click.argument("scenario")
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Log to write.")
+@click.option(
+    "--format",
+    "fmt",
+    default="mcap-ros2",
+    show_default=True,
+    help="mcap-ros2, mcap-ros1, mcap-json, mcap-protobuf, ros1bag, ros2bag-sqlite3, ros2bag-mcap, csv, ulog.",
+)
+@click.option("--seconds", type=float, default=None, help="Duration (default: the scenario's own).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed: same seed, same log.")
+@click.option("--imu-hz", type=float, default=None, help="IMU rate (default: the scenario's).")
+@click.option("--gnss-hz", type=float, default=None, help="GNSS rate (default: the scenario's).")
+@click.option("--raw", is_flag=True, help="Receivers log raw observations and report their own solution of them.")
+@click.option(
+    "--constellation",
+    default="synthetic",
+    show_default=True,
+    help="'synthetic' (GPS-like Walker 24/6/1) or a RINEX navigation file whose satellites to use.",
+)
+def simulate(
+    scenario: str,
+    output: Path,
+    fmt: str,
+    seconds: float | None,
+    seed: int,
+    imu_hz: float | None,
+    gnss_hz: float | None,
+    raw: bool,
+    constellation: str,
+) -> int:
+    """Write a simulated log (scenarios: seed000, aircraft, ship, ground, ground_raw, dual_receiver) and its
+    truth (OUTPUT.truth.csv)."""
+    from dataclasses import replace
+
+    from spooflens.simulation.observations import ObservationNoise
+    from spooflens.simulation.simulate import SCENARIOS, write_with_truth
+    from spooflens.simulation.simulate import simulate as run_simulation
+
+    if scenario not in SCENARIOS:
+        raise click.UsageError(f"unknown scenario {scenario!r}; scenarios are {sorted(SCENARIOS)}")
+    sc = SCENARIOS[scenario]
+    sc = replace(
+        sc,
+        imu_hz=imu_hz or sc.imu_hz,
+        gnss_hz=gnss_hz or sc.gnss_hz,
+        observations=sc.observations or (ObservationNoise() if raw else None),
+        constellation=constellation,
+    )
+    if raw and fmt != "csv":
+        click.echo(f"note: {fmt} has no place for raw observations; only the CSV log keeps them", err=True)
+    table = run_simulation(sc, seed=seed, duration_s=seconds).table
+    truth_path = write_with_truth(table, output, fmt)
+    click.echo(
+        f"{output}: {fmt}, scenario {scenario}, seed {seed}, {table.duration_s:.0f} s, {len(table.imu)} IMU samples, "
+        f"{len(table.fixes)} fixes, {len(table.observations)} observations; truth in {truth_path}"
+    )
+    return EXIT_OK
+
+
 @cli.group()
 def bench() -> None:
     """Measure speed, memory and detection performance (figures quoted in the README)."""

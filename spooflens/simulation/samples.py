@@ -15,8 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from spooflens.attacks import apply_attack, parse_attack, sidecar_path
-from spooflens.simulation.simulate import SCENARIOS, simulate
-from spooflens.writers import write_log
+from spooflens.simulation.simulate import SCENARIOS, simulate, write_with_truth
 
 
 @dataclass(frozen=True)
@@ -107,10 +106,7 @@ def make(sample: Sample, outdir: Path) -> Path:
         table, truth = apply_attack(table, parse_attack(sample.attack))
         truth.source = f"simulation {sample.scenario} seed {sample.seed}"
         truth.write(sidecar_path(path))
-    truth_table = table.truth
-    table.truth = table.truth.iloc[:0]  # the true trajectory goes beside the log, not inside it
-    write_log(table, path, sample.fmt)
-    truth_table.to_csv(outdir / f"{sample.name}.truth.csv", index=False, float_format="%.10f")
+    write_with_truth(table, path, sample.fmt)
     return path
 
 

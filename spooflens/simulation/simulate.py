@@ -6,6 +6,7 @@ downstream treats a simulated log as a real one; `spooflens.writers.write_log` p
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -190,6 +191,22 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
         Path(f"simulated_{sc.name}_seed{seed}"), "simulation", "unix", frames, streams, [], t0_ns=t0_unix_ns
     )
     return Simulated(table, truth, imu.gyro_bias, imu.accel_bias)
+
+
+def write_with_truth(table: EpochTable, path: Path, fmt: str) -> Path:
+    """Write a simulated log with its true trajectory beside it (`<path>.truth.csv`), not inside it.
+
+    A log is what a vehicle recorded; the truth is what the investigator never has, so it is kept apart.
+    Returns the truth file's path.
+    """
+    from spooflens.writers import write_log
+
+    log = copy.copy(table)
+    log.truth = table.truth.iloc[:0]
+    write_log(log, path, fmt)
+    truth_path = Path(str(path).rstrip("/") + ".truth.csv")
+    table.truth.to_csv(truth_path, index=False, float_format="%.10f")
+    return truth_path
 
 
 def _constellation(sc: Scenario, rng: np.random.Generator) -> tuple[GpsEphemerides, int]:
