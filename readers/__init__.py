@@ -30,7 +30,10 @@ READER_PATHS: dict[str, str] = {
     "ulog": "readers.ulog:read_ulog",
     "rinex": "readers.rinex:read_rinex",
 }
-SUPPORTED = "MCAP (.mcap), ROS1 bag (.bag), ROS2 bag directory, spooflens CSV (.csv), PX4 ULog (.ulg), RINEX obs"
+SUPPORTED = (
+    "MCAP (.mcap), ROS1 bag (.bag), ROS2 bag directory, spooflens CSV (.csv), PX4 ULog (.ulg), "
+    "RINEX obs (a file or a directory of them)"
+)
 
 
 def _load(spec: str) -> ReaderFn:
@@ -51,6 +54,13 @@ class _Registry(dict[str, ReaderFn]):
 READERS: dict[str, ReaderFn] = _Registry()
 
 
+def _holds_rinex_obs(directory: Path) -> bool:
+    """A directory with at least one RINEX observation file (by content), read as one multi-receiver log."""
+    from readers.rinex import is_rinex_obs
+
+    return any(p.is_file() and is_rinex_obs(p) for p in sorted(directory.iterdir()))
+
+
 def sniff_format(path: Path) -> str:
     """Format name of `path` from its content; raises ReaderError for what no reader knows."""
     if not path.exists():
@@ -60,7 +70,11 @@ def sniff_format(path: Path) -> str:
             return "ros2bag"
         if any(path.glob("*.csv")):
             return "csv"
-        raise UnsupportedFormatError(path, f"directory is neither a ROS2 bag nor a CSV log; supported: {SUPPORTED}")
+        if _holds_rinex_obs(path):
+            return "rinex"
+        raise UnsupportedFormatError(
+            path, f"directory is neither a ROS2 bag, a CSV log nor RINEX observations; supported: {SUPPORTED}"
+        )
     with path.open("rb") as f:
         head = f.read(512)
     if not head:

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from spooflens.errors import SchemaError
+from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
@@ -125,6 +126,8 @@ class EpochTable:
     odometry: pd.DataFrame = field(default_factory=lambda: empty_frame("odometry"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
+    # broadcast ionosphere coefficients from the log's navigation data, for single-point solutions
+    ionosphere: Klobuchar | None = None
 
     def frame(self, name: str) -> pd.DataFrame:
         if name not in FRAMES:

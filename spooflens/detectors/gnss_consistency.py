@@ -67,11 +67,12 @@ def _window_velocity_residual(t: FloatArray, p: FloatArray, v: FloatArray, opts:
 
 
 def _second_difference(t: FloatArray, p: FloatArray) -> FloatArray:
-    """Acceleration implied by three consecutive fixes (m/s^2), NaN at the ends."""
+    """Acceleration implied by three consecutive fixes (m/s^2), stamped at the last of the three (NaN at the
+    first two): a detector may not alarm before the fix that shows the jump has arrived."""
     a = np.full_like(p, np.nan)
     if len(t) >= 3:
         v = np.diff(p, axis=0) / np.diff(t)[:, None]
-        a[1:-1] = np.diff(v, axis=0) / (0.5 * (t[2:] - t[:-2]))[:, None]
+        a[2:] = np.diff(v, axis=0) / (0.5 * (t[2:] - t[:-2]))[:, None]
     return a
 
 

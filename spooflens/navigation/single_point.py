@@ -298,7 +298,9 @@ def with_solved_fixes(table: EpochTable, options: SinglePointOptions | None = No
     rows = rows[np.isfinite(rows[SV_COLUMNS].to_numpy(float)).all(axis=1)]
     if not len(rows):
         return table
-    sol = solve(rows, table.gps_seconds(rows["t_s"].to_numpy(float)), options)
+    sol = solve(
+        rows, table.gps_seconds(rows["t_s"].to_numpy(float)), options or SinglePointOptions(iono=table.ionosphere)
+    )
     solved = make_frame("fixes", sol.fixes_columns())
     out = copy.copy(table)
     out.fixes = pd.concat([table.fixes, solved], ignore_index=True) if len(table.fixes) else solved

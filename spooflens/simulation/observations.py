@@ -106,13 +106,6 @@ def simulate_observations(
             "carrier_phase_cycles": phase,
             "carrier_freq_hz": GPS_L1_HZ,
             "cn0_dbhz": cn0,
-            "sv_x_m": recorded.pos_m[:, 0],
-            "sv_y_m": recorded.pos_m[:, 1],
-            "sv_z_m": recorded.pos_m[:, 2],
-            "sv_vx_mps": recorded.vel_mps[:, 0],
-            "sv_vy_mps": recorded.vel_mps[:, 1],
-            "sv_vz_mps": recorded.vel_mps[:, 2],
-            "sv_clock_bias_m": recorded.clock_bias_m,
-            "sv_clock_drift_mps": recorded.clock_drift_mps,
+            **recorded.columns(),
         }
     )

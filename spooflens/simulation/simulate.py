@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from spooflens.epoch_table import EpochTable, StreamInfo, build_table, gps_seconds_of_unix_ns, unix_ns_of_gps_seconds
-from spooflens.geodesy import add_enu_offset
-from spooflens.gnss.ephemeris import GpsEphemerides, synthetic_constellation
+from spooflens.geodesy import add_enu_offset, geodetic_to_ecef
+from spooflens.gnss.ephemeris import GpsEphemerides, satellite_states, synthetic_constellation
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.rotations import matrix_to_quat, rotvec_to_matrix
 from spooflens.schema import FixType
@@ -190,6 +190,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     table = build_table(
         Path(f"simulated_{sc.name}_seed{seed}"), "simulation", "unix", frames, streams, [], t0_ns=t0_unix_ns
     )
+    table.ionosphere = eph.iono if eph is not None else None
     return Simulated(table, truth, imu.gyro_bias, imu.accel_bias)
 
 
@@ -211,16 +212,40 @@ def write_with_truth(table: EpochTable, path: Path, fmt: str) -> Path:
 
 def _constellation(sc: Scenario, rng: np.random.Generator) -> tuple[GpsEphemerides, int]:
     """The satellites and the log's start (UNIX ns): a synthetic constellation at the fixed start, or a
-    navigation file's satellites with the log starting at its first full hour of valid ephemerides."""
+    navigation file's satellites with the log starting when the vehicle can see enough of them."""
     if sc.constellation == "synthetic":
         start_gps = float(gps_seconds_of_unix_ns(T0_UNIX_NS))
         return synthetic_constellation(start_gps, rng=rng), T0_UNIX_NS
     from readers.rinex import read_rinex_nav
 
     eph = read_rinex_nav(Path(sc.constellation))
-    first, _ = eph.span_s()
-    start_gps = float(np.ceil(first / 3600.0) * 3600.0)
-    return eph, int(unix_ns_of_gps_seconds(start_gps))
+    return eph, int(unix_ns_of_gps_seconds(_first_sky(eph, sc)))
+
+
+def _first_sky(eph: GpsEphemerides, sc: Scenario, wanted: int = 6, step_s: float = 600.0) -> float:
+    """The first time (GPS s, from the earliest toe on a `step_s` grid) at which `wanted` satellites of
+    the file are above the solver's elevation mask at the trajectory's start.
+
+    A station's navigation file holds only the satellites it tracked, when it tracked them: seen from
+    a vehicle elsewhere, much of the file's day may have too few of them to solve.
+    """
+    from spooflens.gnss.geometry import azimuth_elevation
+    from spooflens.navigation.single_point import SinglePointOptions
+
+    rx = geodetic_to_ecef(sc.profile.lat_deg, sc.profile.lon_deg, sc.profile.height_m)
+    sats = np.array(eph.satellites())
+    mask = np.radians(SinglePointOptions().elevation_mask_deg)  # what the receiver solves with, not tracks
+    start = float(np.ceil(float(np.min(eph.toe_s)) / step_s) * step_s)
+    best, best_n = start, -1
+    for t in np.arange(start, float(np.max(eph.toe_s)) + step_s, step_s):
+        st = satellite_states(eph, sats, np.full(len(sats), t))
+        _, el = azimuth_elevation(st.pos_m, np.broadcast_to(rx, st.pos_m.shape))
+        n = int(np.sum(st.valid & (el > mask)))
+        if n >= wanted:
+            return float(t)
+        if n > best_n:
+            best, best_n = float(t), n
+    return best
 
 
 def _raw_receiver(
