@@ -153,3 +153,23 @@ def test_solution_noise_scales_with_pseudorange_noise(sigma: float) -> None:
     rms = np.sqrt(np.mean(np.sum(horiz**2, axis=1)))
     expected = sigma * np.sqrt(2.0) * np.nanmedian(sol.hdop)  # sigma(el) averages about sqrt(2) x zenith
     assert 0.5 * expected < rms < 2.0 * expected
+
+
+def test_two_raw_receivers_a_set_baseline_apart() -> None:
+    from spooflens.simulation.simulate import SCENARIOS
+
+    sc = replace(SCENARIOS["dual_receiver"], gnss_hz=1.0, observations=ObservationNoise())
+    sim = simulate(sc, seed=6, duration_s=180.0)
+    table = sim.table
+    assert set(table.observations["receiver_id"]) == {"/gps/fix", "/gps2/fix"}
+    one, two = table.fixes_of("/gps/fix"), table.fixes_of("/gps2/fix")
+    ref = tuple(float(one.iloc[0][c]) for c in ("lat_deg", "lon_deg", "height_m"))
+    d = geodetic_to_enu(two["lat_deg"], two["lon_deg"], two["height_m"], *ref) - geodetic_to_enu(
+        one["lat_deg"], one["lon_deg"], one["height_m"], *ref
+    )
+    step = round(sc.imu_hz / sc.gnss_hz)
+    lever = (sim.truth.C[::step] @ np.array(sc.second_receiver_lever_m))[: len(d)]
+    # each receiver has its own noise and clock, yet on average the baseline is the lever arm
+    np.testing.assert_allclose(d.mean(axis=0)[:2], lever.mean(axis=0)[:2], atol=0.5)
+    clocks = table.observations.groupby("receiver_id")["pseudorange_m"].mean()
+    assert abs(clocks["/gps/fix"] - clocks["/gps2/fix"]) > 10.0  # independent receiver clocks
