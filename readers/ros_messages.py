@@ -199,18 +199,18 @@ def decode_ros1(kind: str, raw: bytes | memoryview) -> tuple[int, tuple[float, .
 
 # --- raw rows -> schema columns (vectorised) --------------------------------------------------------
 
-# NavSatStatus: -1 no fix, 0 fix, 1 SBAS, 2 GBAS. GPSStatus adds 18 WAAS, 33 DGPS, 34 RTK float? (we map
-# the documented values and call the rest FIX_3D).
+# NavSatStatus: -1 no fix, 0 fix, 1 SBAS, 2 GBAS. gps_msgs/GPSStatus (gps_umd) keeps those and adds
+# 18 DGPS, 19 RTK fixed integers, 20 RTK float, 33 WAAS; other codes count as a plain fix.
 _NAVSAT_FIX_TYPE = {-1: FixType.NO_FIX, 0: FixType.FIX_3D, 1: FixType.SBAS, 2: FixType.DGNSS}
 _GPSFIX_FIX_TYPE = {
     -1: FixType.NO_FIX,
     0: FixType.FIX_3D,
     1: FixType.SBAS,
     2: FixType.DGNSS,
-    18: FixType.SBAS,
-    33: FixType.DGNSS,
-    34: FixType.RTK_FLOAT,
-    35: FixType.RTK_FIXED,
+    18: FixType.DGNSS,
+    19: FixType.RTK_FIXED,
+    20: FixType.RTK_FLOAT,
+    33: FixType.SBAS,
 }
 # gps_msgs/GPSFix errors are 95 % bounds: 1 sigma is err / 2.45 in 2-D, err / 1.96 in 1-D.
 _CHI_95_2D, _CHI_95_1D = 2.4477, 1.96

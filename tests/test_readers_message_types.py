@@ -1,0 +1,158 @@
+"""Message types the sample logs do not carry: gps_msgs/GPSFix fixes and TwistStamped GNSS velocity."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from readers import read_log
+from spooflens.schema import FixType
+
+# the gps_umd interface definitions (gps_msgs/msg), fields only
+GPS_STATUS = """std_msgs/Header header
+uint16 satellites_used
+int32[] satellite_used_prn
+uint16 satellites_visible
+int32[] satellite_visible_prn
+int32[] satellite_visible_z
+int32[] satellite_visible_azimuth
+int32[] satellite_visible_snr
+int16 status
+uint16 motion_source
+uint16 orientation_source
+uint16 position_source
+"""
+GPS_FIX = """std_msgs/Header header
+GPSStatus status
+float64 latitude
+float64 longitude
+float64 altitude
+float64 track
+float64 speed
+float64 climb
+float64 pitch
+float64 roll
+float64 dip
+float64 time
+float64 gdop
+float64 pdop
+float64 hdop
+float64 vdop
+float64 tdop
+float64 err
+float64 err_horz
+float64 err_vert
+float64 err_track
+float64 err_speed
+float64 err_climb
+float64 err_time
+float64 err_pitch
+float64 err_roll
+float64 err_dip
+float64[9] position_covariance
+uint8 position_covariance_type
+"""
+T0 = 1_700_000_000
+STATUS_CODES = [0, 18, 19, 20, 33, -1]
+
+
+def _bag(path: Path) -> None:
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    ts.register(
+        get_types_from_msg(GPS_STATUS, "gps_msgs/msg/GPSStatus") | get_types_from_msg(GPS_FIX, "gps_msgs/msg/GPSFix")
+    )
+    Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    Status, Fix = ts.types["gps_msgs/msg/GPSStatus"], ts.types["gps_msgs/msg/GPSFix"]
+    Twist, TwistStamped = ts.types["geometry_msgs/msg/Twist"], ts.types["geometry_msgs/msg/TwistStamped"]
+    Vector3 = ts.types["geometry_msgs/msg/Vector3"]
+    empty = np.array([], dtype=np.int32)
+    with Writer(path) as w:
+        fix_conn = w.add_connection("/gps/fix", "gps_msgs/msg/GPSFix", typestore=ts)
+        vel_conn = w.add_connection("/gps/vel", "geometry_msgs/msg/TwistStamped", typestore=ts)
+        for k, code in enumerate(STATUS_CODES):
+            header = Header(seq=k, stamp=Time(sec=T0 + k, nanosec=0), frame_id="gps")
+            status = Status(header, 9, empty, 11, empty, empty, empty, empty, code, 0, 0, 0)
+            values = dict.fromkeys(
+                (
+                    "pitch",
+                    "roll",
+                    "dip",
+                    "time",
+                    "gdop",
+                    "pdop",
+                    "hdop",
+                    "vdop",
+                    "tdop",
+                    "err",
+                    "err_track",
+                    "err_climb",
+                    "err_time",
+                    "err_pitch",
+                    "err_roll",
+                    "err_dip",
+                ),
+                0.0,
+            )
+            fix = Fix(
+                header=header,
+                status=status,
+                latitude=42.0 + k * 1e-5,
+                longitude=-71.0,
+                altitude=30.0,
+                track=90.0,
+                speed=5.0,
+                climb=0.5,
+                err_horz=4.9,
+                err_vert=7.84,
+                err_speed=0.98,
+                position_covariance=np.zeros(9),
+                position_covariance_type=0,
+                **values,
+            )
+            w.write(fix_conn, (T0 + k) * 10**9, ts.serialize_ros1(fix, "gps_msgs/msg/GPSFix"))
+            twist = TwistStamped(header, Twist(Vector3(x=5.0, y=0.1, z=0.5), Vector3(x=0.0, y=0.0, z=0.0)))
+            w.write(vel_conn, (T0 + k) * 10**9, ts.serialize_ros1(twist, "geometry_msgs/msg/TwistStamped"))
+
+
+@pytest.fixture(scope="module")
+def table(tmp_path_factory: pytest.TempPathFactory):
+    path = tmp_path_factory.mktemp("types") / "gpsfix.bag"
+    _bag(path)
+    return read_log(path)
+
+
+def test_gpsfix_positions_velocity_and_accuracies(table) -> None:
+    fx = table.fixes
+    assert len(fx) == len(STATUS_CODES) - 1  # the NO_FIX message is skipped, and said so
+    assert any("NO_FIX" in sk.reason and sk.count == 1 for sk in table.skipped)
+    np.testing.assert_allclose(fx["lat_deg"].iloc[:3], [42.0, 42.00001, 42.00002])
+    # track 90 deg from north at 5 m/s is due east; climb is up
+    np.testing.assert_allclose(fx[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].iloc[0], [5.0, 0.0, 0.5], atol=1e-12)
+    # gps_msgs errors are 95 % bounds: 4.9 m horizontal is 2.0 m (1 sigma, 2-D), 7.84 m vertical 4.0 m
+    assert fx["h_acc_m"].iloc[0] == pytest.approx(2.0, rel=1e-3)
+    assert fx["v_acc_m"].iloc[0] == pytest.approx(4.0, rel=1e-3)
+    assert (fx["sats_used"] == 9).all()
+
+
+def test_gpsfix_status_codes_map_to_fix_types(table) -> None:
+    expected = {
+        0: FixType.FIX_3D,
+        18: FixType.DGNSS,
+        19: FixType.RTK_FIXED,
+        20: FixType.RTK_FLOAT,
+        33: FixType.SBAS,
+        -1: FixType.NO_FIX,
+    }
+    got = dict(zip(table.fixes["t_s"].round().astype(int), table.fixes["fix_type"], strict=True))
+    for k, code in enumerate(STATUS_CODES):
+        if k in got:
+            assert got[k] == expected[code], code
+
+
+def test_twist_stamped_is_gnss_velocity_of_that_receiver(table) -> None:
+    roles = {s.topic: s.role for s in table.streams}
+    assert roles["/gps/vel"] == "vel" and roles["/gps/fix"] == "fix"
