@@ -60,7 +60,7 @@ T0 = 1_700_000_000
 STATUS_CODES = [0, 18, 19, 20, 33, -1]
 
 
-def _bag(path: Path) -> None:
+def _bag(path: Path, with_twist: bool) -> None:
     ts = get_typestore(Stores.ROS1_NOETIC)
     ts.register(
         get_types_from_msg(GPS_STATUS, "gps_msgs/msg/GPSStatus") | get_types_from_msg(GPS_FIX, "gps_msgs/msg/GPSFix")
@@ -114,6 +114,8 @@ def _bag(path: Path) -> None:
                 **values,
             )
             w.write(fix_conn, (T0 + k) * 10**9, ts.serialize_ros1(fix, "gps_msgs/msg/GPSFix"))
+            if not with_twist:
+                continue
             twist = TwistStamped(header, Twist(Vector3(x=5.0, y=0.1, z=0.5), Vector3(x=0.0, y=0.0, z=0.0)))
             w.write(vel_conn, (T0 + k) * 10**9, ts.serialize_ros1(twist, "geometry_msgs/msg/TwistStamped"))
 
@@ -121,7 +123,14 @@ def _bag(path: Path) -> None:
 @pytest.fixture(scope="module")
 def table(tmp_path_factory: pytest.TempPathFactory):
     path = tmp_path_factory.mktemp("types") / "gpsfix.bag"
-    _bag(path)
+    _bag(path, with_twist=False)
+    return read_log(path)
+
+
+@pytest.fixture(scope="module")
+def with_twist(tmp_path_factory: pytest.TempPathFactory):
+    path = tmp_path_factory.mktemp("types") / "gpsfix_twist.bag"
+    _bag(path, with_twist=True)
     return read_log(path)
 
 
@@ -153,6 +162,9 @@ def test_gpsfix_status_codes_map_to_fix_types(table) -> None:
             assert got[k] == expected[code], code
 
 
-def test_twist_stamped_is_gnss_velocity_of_that_receiver(table) -> None:
-    roles = {s.topic: s.role for s in table.streams}
+def test_twist_stamped_is_gnss_velocity_of_that_receiver(with_twist) -> None:
+    roles = {s.topic: s.role for s in with_twist.streams}
     assert roles["/gps/vel"] == "vel" and roles["/gps/fix"] == "fix"
+    # a velocity topic of the receiver is its velocity (ENU, as GNSS drivers publish it)
+    vel = with_twist.fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy()
+    np.testing.assert_allclose(vel, np.tile([5.0, 0.1, 0.5], (len(vel), 1)))
