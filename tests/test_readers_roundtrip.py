@@ -9,6 +9,7 @@ import pytest
 from pipeline_support import circling_table
 
 from readers import read_log
+from spooflens.epoch_table import EpochTable
 from spooflens.writers import SUFFIX, WRITERS, write_log
 
 # What each format cannot carry: NavSatFix has no satellite count; a covariance needs both accuracies;
@@ -65,3 +66,18 @@ def test_ulog_round_trip_in_px4_conventions(table, tmp_path: Path) -> None:
     np.testing.assert_allclose(back.fixes[cols].to_numpy(), table.fixes[cols].to_numpy(), rtol=0, atol=1e-7)
     vel = ["vel_e_mps", "vel_n_mps", "vel_u_mps", "h_acc_m"]
     np.testing.assert_allclose(back.fixes[vel].to_numpy(), table.fixes[vel].to_numpy(), atol=1e-5)
+
+
+def test_ulog_keeps_the_receivers_spoofing_and_jamming_indications(table, tmp_path: Path) -> None:
+    """PX4 logs carry the receiver's own spoofing_state and jamming_indicator: an investigator wants them."""
+    from spooflens.schema import SpoofingFlag
+
+    flagged = table.fixes.copy()
+    later = flagged["t_s"] > flagged["t_s"].median()
+    flagged["spoofing_flag"] = np.where(later, SpoofingFlag.INDICATED, SpoofingFlag.CLEAR).astype(np.int8)
+    flagged["jamming_indicator"] = np.where(later, 80.0, 5.0)
+    path = tmp_path / "flags.ulg"
+    write_log(EpochTable(**{**table.__dict__, "fixes": flagged}), path, "ulog")
+    back = read_log(path).fixes
+    np.testing.assert_array_equal(back["spoofing_flag"], flagged["spoofing_flag"])
+    np.testing.assert_array_equal(back["jamming_indicator"], flagged["jamming_indicator"])
