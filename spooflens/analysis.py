@@ -17,6 +17,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
 
 MIN_FIXES = 3
+ENU = ("east", "north", "up")
 MIN_IMU_SAMPLES = 50
 
 
@@ -104,12 +105,20 @@ def _inertial(ctx: AnalysisContext) -> list[DetectorResult]:
     sol = run_filter(ctx.table, ctx.options.imu_id, ctx.options.receiver_id, FilterOptions(grade=imu_grade))
     sm = smooth(sol)
     settled = sol.t > sol.t[0] + 20.0
+    innovation_sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
     nav = DetectorResult(
         "navigation",
         True,
         f"INS {sol.imu_id} + GNSS {sol.receiver_id}, grade {imu_grade.name}; "
         + (sol.alignment.method if sol.alignment else "initial state given"),
-        series=[Series("nis", sol.t, sol.nis, "chi2(dof)")],
+        series=[
+            Series("nis", sol.t, sol.nis, "chi2(dof)"),
+            # INS minus GNSS with the filter's own 1-sigma: a spoofed channel walks out of its band
+            Series("innovation_position", sol.t, sol.z[:, :3], "m", components=ENU),
+            Series("innovation_position_sigma", sol.t, innovation_sigma[:, :3], "m", components=ENU),
+            Series("innovation_velocity", sol.t, sol.z[:, 3:], "m/s", components=ENU),
+            Series("innovation_velocity_sigma", sol.t, innovation_sigma[:, 3:], "m/s", components=ENU),
+        ],
         tracks=[
             Track(
                 "ins_smoothed",

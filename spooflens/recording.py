@@ -36,10 +36,10 @@ def entity(*parts: str) -> str:
 class RecordingWriter:
     """Writes one .rrd file; `close` writes the footer."""
 
-    def __init__(self, path: Path, table: EpochTable) -> None:
+    def __init__(self, path: Path, table: EpochTable, panels: Sequence[tuple[str, list[str]]] = ()) -> None:
         self.table = table
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
-        self.rec.save(str(path), default_blueprint=default_blueprint())
+        self.rec.save(str(path), default_blueprint=default_blueprint(panels))
         self.origin = _reference_point(table)
 
     def close(self) -> None:
@@ -108,7 +108,34 @@ def _reference_point(table: EpochTable) -> tuple[float, float, float]:
     return 0.0, 0.0, 0.0
 
 
-def default_blueprint() -> rrb.Blueprint:
+def detector_panels(results: Sequence[DetectorResult]) -> list[tuple[str, list[str]]]:
+    """(title, entity paths) of one time-series panel per detector and unit, alarming detectors first.
+
+    A NIS in the thousands, a probability and an innovation in metres on one axis would hide each
+    other; a statistic and its threshold line share a panel.
+    """
+    panels: list[tuple[bool, str, list[str]]] = []
+    for res in results:
+        if not res.ran:
+            continue
+        groups: dict[str, list[str]] = {}
+        for s in res.series:
+            path = "/" + entity("detectors", res.name, s.name)
+            groups.setdefault(s.unit, []).append(path)
+            if s.threshold is not None:
+                groups[s.unit].append(path + "_threshold")
+        for unit, paths in groups.items():
+            title = res.name + (f" ({unit})" if len(groups) > 1 and unit else "")
+            panels.append((bool(res.alarms) and not res.advisory, title, paths))
+    return [(title, paths) for _, title, paths in sorted(panels, key=lambda p: not p[0])]
+
+
+def default_blueprint(panels: Sequence[tuple[str, list[str]]] = ()) -> rrb.Blueprint:
+    detectors: rrb.Tabs | rrb.TimeSeriesView = (
+        rrb.Tabs(*[rrb.TimeSeriesView(origin="/", contents=paths, name=title) for title, paths in panels])
+        if panels
+        else rrb.TimeSeriesView(origin="detectors", name="Detector statistics")
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -116,7 +143,7 @@ def default_blueprint() -> rrb.Blueprint:
                 rrb.Spatial3DView(origin="local", name="Local ENU (m)"),
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="detectors", name="Detector statistics"),
+                detectors,
                 rrb.Tabs(
                     rrb.TimeSeriesView(origin="gnss", name="GNSS quality"),
                     rrb.TimeSeriesView(origin="imu", name="IMU"),
@@ -187,7 +214,7 @@ def write_recording(
     verdict_lines: Sequence[tuple[float, str, str]] = (),
 ) -> None:
     """Write the whole recording of one analysed log."""
-    w = RecordingWriter(path, table)
+    w = RecordingWriter(path, table, detector_panels(results))
     try:
         for rid in table.receivers():
             fx = table.fixes_of(rid)

@@ -58,3 +58,24 @@ def test_summary_gives_times_relative_and_in_the_logs_clock(tmp_path: Path) -> N
 def test_entity_paths_from_topics_are_clean() -> None:
     assert entity("map", "/gps/fix", "track") == "map/gps/fix/track"
     assert entity("imu", "imu data#1") == "imu/imu_data_1"
+
+
+def test_each_detector_and_unit_gets_its_own_panel_of_real_entities(tmp_path: Path) -> None:
+    from spooflens.recording import detector_panels
+
+    table = circling_table(ramp_mps=3.0)
+    results = run_analyses(table)
+    out = tmp_path / "p.rrd"
+    write_recording(out, table, results)
+    written = {str(p) for p in RrdReader(str(out)).store().schema().entity_paths()}
+    panels = dict(detector_panels(results))
+    assert all(path in written for paths in panels.values() for path in paths)
+    # a statistic and its threshold together; NIS, metres and metres per second apart
+    assert panels["kf_innovation"] == [
+        "/detectors/kf_innovation/position_nis",
+        "/detectors/kf_innovation/position_nis_threshold",
+    ]
+    assert {"navigation (chi2(dof))", "navigation (m)", "navigation (m/s)"} <= set(panels)
+    assert "/detectors/navigation/innovation_position_sigma" in panels["navigation (m)"]
+    alarming = [r.name for r in results if r.alarms and not r.advisory]
+    assert next(iter(panels)).split(" ")[0] in alarming  # the first tab shows a detector that alarmed
