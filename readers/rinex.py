@@ -338,17 +338,23 @@ def _obs_types(lines: list[str], version: float) -> dict[str, tuple[str, ...]]:
     return {k: tuple(v) for k, v in types.items()}
 
 
+def _checked_version(path: Path, first: str, kind: str, supported: str) -> float:
+    """The version of a RINEX file from its first line; ReaderError unless it is a RINEX 2 or 3 file."""
+    if "RINEX VERSION / TYPE" not in first:
+        raise ReaderError(path, "first line is not RINEX VERSION / TYPE")
+    version = _version(path, first)
+    if not 2.0 <= version < 4.0:
+        raise ReaderError(path, f"unsupported RINEX {kind}version {version:g}; supported: {supported}")
+    return version
+
+
 def read_obs_header(text: TextLines) -> ObsHeader:
     """Parse the header of an observation file; ReaderError for what is not a supported one."""
     path = text.path
     end = _end_of_header(text)
     lines = [text.line(i) for i in range(end + 1)]
     first = lines[0]
-    if "RINEX VERSION / TYPE" not in first:
-        raise ReaderError(path, "first line is not RINEX VERSION / TYPE")
-    version = _version(path, first)
-    if not 2.0 <= version < 4.0:
-        raise ReaderError(path, f"unsupported RINEX version {version:g}; supported: {SUPPORTED_VERSIONS}")
+    version = _checked_version(path, first, "", SUPPORTED_VERSIONS)
     ftype = first[20:21].upper()
     if ftype != "O":
         kind = "navigation" if ftype in "NGHLCEJI" else f"type {ftype!r}"
@@ -918,11 +924,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
     end = _end_of_header(text)
     lines = [text.line(i) for i in range(len(text))]
     first = lines[0]
-    if "RINEX VERSION / TYPE" not in first:
-        raise ReaderError(path, "first line is not RINEX VERSION / TYPE")
-    version = _version(path, first)
-    if not 2.0 <= version < 4.0:
-        raise ReaderError(path, f"unsupported RINEX navigation version {version:g}; supported: 2.x GPS, 3.x")
+    version = _checked_version(path, first, "navigation ", "2.x GPS, 3.x")
     ftype, fsys = first[20:21].upper(), first[40:41].upper()
     if version < 3 and ftype != "N":
         raise ReaderError(path, f"RINEX 2 navigation type {ftype!r}: only GPS navigation ('N') files carry GPS orbits")
