@@ -419,7 +419,7 @@ def rinex_approx_position(path: Path | str) -> tuple[float, float, float] | None
 class ObsScan:
     """The layout of one observation file's body: data epochs and where each satellite's fields are.
 
-    Shared by the reader and the rewriter (`spooflens.writers.rinex_writer`) so both agree on every
+    Shared by the reader and the rewriter (`spooflens.writers.rinex_rewrite`) so both agree on every
     epoch time and line. Arrays are in file order; `row_*` has one entry per satellite line group.
     """
 
@@ -1174,7 +1174,8 @@ def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> E
             )
             skipped.extend(nav.skipped)
     table = build_table(path, "rinex", "gps", {"observations": pd.DataFrame(cols)}, streams, skipped, t0_ns=t0)
-    table.ionosphere = next((n.ephemerides.iono for p in parts for n in p.navs if n.ephemerides.iono), None)
+    navs = list({n.path: n for p in parts for n in p.navs}.values())
+    table.ephemerides = (navs[0].ephemerides if len(navs) == 1 else _merge(navs)) if navs else None
     return table
 
 

@@ -310,8 +310,12 @@ def simulate(
         observations=sc.observations or (ObservationNoise() if raw else None),
         constellation=constellation,
     )
-    if raw and fmt != "csv":
-        click.echo(f"note: {fmt} has no place for raw observations; only the CSV log keeps them", err=True)
+    if raw and fmt not in ("csv", "rinex"):
+        click.echo(f"note: {fmt} has no place for raw observations; the csv and rinex formats keep them", err=True)
+    if fmt == "rinex":
+        click.echo(
+            "note: RINEX holds only the observations (and a navigation file); IMU and fixes are not written", err=True
+        )
     table = run_simulation(sc, seed=seed, duration_s=seconds).table
     truth_path = write_with_truth(table, output, fmt)
     click.echo(

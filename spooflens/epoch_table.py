@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from spooflens.errors import SchemaError
-from spooflens.gnss.ephemeris import Klobuchar
+from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
@@ -126,8 +126,14 @@ class EpochTable:
     odometry: pd.DataFrame = field(default_factory=lambda: empty_frame("odometry"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
-    # broadcast ionosphere coefficients from the log's navigation data, for single-point solutions
-    ionosphere: Klobuchar | None = None
+    # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
+    # constellation): what a RINEX copy of the log needs, and the ionosphere model for solutions
+    ephemerides: GpsEphemerides | None = None
+
+    @property
+    def ionosphere(self) -> Klobuchar | None:
+        """Broadcast ionosphere coefficients of the log's navigation data, if it has any."""
+        return self.ephemerides.iono if self.ephemerides is not None else None
 
     def frame(self, name: str) -> pd.DataFrame:
         if name not in FRAMES:

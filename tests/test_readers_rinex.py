@@ -31,7 +31,7 @@ from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import ReaderError, WriterError
 from spooflens.gnss.ephemeris import C_MPS, GM_GPS, OMEGA_E_GPS, satellite_states
-from spooflens.writers.rinex_writer import COMMENT, rewrite_rinex
+from spooflens.writers.rinex_rewrite import COMMENT, rewrite_rinex
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
 GSI = REAL / "rinex_gsi_pair"

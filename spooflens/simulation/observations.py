@@ -59,15 +59,18 @@ def simulate_observations(
 ) -> pd.DataFrame:
     """Observation rows (epoch-table columns, `t_s` relative) of every satellite above the mask.
 
-    `t_gps_s` is the true GPS time of each epoch, `rx_ecef`/`rx_vel_ecef` the antenna's true state.
+    `t_gps_s` is each epoch's tag (GPS time by the receiver's clock), `rx_ecef`/`rx_vel_ecef` the
+    antenna's true state at that time.
     """
     bias, drift = receiver_clock(t_s, noise, rng)
     sats = np.array(eph.satellites())
     n_e, n_s = len(t_s), len(sats)
     ep = np.repeat(np.arange(n_e), n_s)
     sv = np.tile(sats, n_e)
-    t_rx = t_gps_s[ep]
-    rx = rx_ecef[ep]
+    # A receiver measures at round times of its own clock (the epoch tag): the true instant is the tag
+    # minus its clock bias, when the antenna was a little behind where it is at the tag.
+    t_rx = t_gps_s[ep] - bias[ep] / C_MPS
+    rx = rx_ecef[ep] - rx_vel_ecef[ep] * (bias[ep] / C_MPS)[:, None]
     # true transmission time: the signal left when the satellite was one light-time away
     t_tx = t_rx - 0.075
     for _ in range(3):
@@ -94,7 +97,7 @@ def simulate_observations(
     phase = (rng_m + bias[ep] - clk + iono_free - iono) / L1_WAVELENGTH_M + np.array([ambiguity[s] for s in sv])
     phase = phase + rng.normal(0.0, noise.phase_sigma_cycles, n)
     cn0 = 32.0 + 16.0 * sin_el + rng.normal(0.0, 1.0, n)
-    recorded = states_at_transmission(eph, sv, t_rx + bias[ep] / C_MPS, pr)
+    recorded = states_at_transmission(eph, sv, t_gps_s[ep], pr)  # as any reader computes them from the tag
     return pd.DataFrame(
         {
             "t_s": t_s[ep],

@@ -190,7 +190,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     table = build_table(
         Path(f"simulated_{sc.name}_seed{seed}"), "simulation", "unix", frames, streams, [], t0_ns=t0_unix_ns
     )
-    table.ionosphere = eph.iono if eph is not None else None
+    table.ephemerides = eph
     return Simulated(table, truth, imu.gyro_bias, imu.accel_bias)
 
 

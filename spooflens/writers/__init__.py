@@ -1,6 +1,7 @@
 """Writers: an EpochTable to any format the readers read (sample logs, simulations, attacked copies).
 
-Format names: mcap-ros2, mcap-ros1, mcap-json, mcap-protobuf, ros1bag, ros2bag-sqlite3, ros2bag-mcap, csv, ulog.
+Format names: mcap-ros2, mcap-ros1, mcap-json, mcap-protobuf, ros1bag, ros2bag-sqlite3, ros2bag-mcap, csv, ulog,
+rinex (observations only, with a navigation file).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from spooflens.errors import WriterError
 from spooflens.writers.bag_writer import write_ros1_bag, write_ros2_bag
 from spooflens.writers.csv_writer import write_csv
 from spooflens.writers.mcap_writer import write_mcap
+from spooflens.writers.rinex_writer import write_rinex
 from spooflens.writers.ulog_writer import write_ulog
 
 WRITERS: dict[str, Callable[[EpochTable, Path], object]] = {
@@ -25,6 +27,7 @@ WRITERS: dict[str, Callable[[EpochTable, Path], object]] = {
     "ros2bag-mcap": lambda t, p: write_ros2_bag(t, p, "mcap"),
     "csv": write_csv,
     "ulog": write_ulog,
+    "rinex": write_rinex,
 }
 SUFFIX = {
     "mcap-ros2": ".mcap",
@@ -36,6 +39,7 @@ SUFFIX = {
     "ros2bag-mcap": "",
     "csv": "",
     "ulog": ".ulg",
+    "rinex": "",
 }
 
 

@@ -6,7 +6,7 @@ or log time when the stamp is zero), decoded, changed and re-encoded; everything
 for byte, with its original log time. Containers: MCAP (ROS1, ROS2, JSON, protobuf channels), ROS1
 bags, ROS2 bags (sqlite3 or MCAP storage). CSV and ULog logs are rewritten through their writers
 (a ULog keeps only the streams spooflens maps, which the caller reports); RINEX observation files by
-editing their fields in place (`rinex_writer.py`), so attacks on raw pseudoranges land too.
+editing their fields in place (`rinex_rewrite.py`), so attacks on raw pseudoranges land too.
 """
 
 from __future__ import annotations
@@ -243,7 +243,7 @@ def rewrite_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
         extra = f", {len(spoofed.observations)} observations" if len(spoofed.observations) else ""
         return f"{note}: {len(spoofed.fixes)} fixes{extra}"
     if fmt == "rinex":
-        from spooflens.writers.rinex_writer import rewrite_rinex
+        from spooflens.writers.rinex_rewrite import rewrite_rinex
 
         return rewrite_rinex(src, dst, table, spoofed.observations)
     plan = _plan(table, spoofed.fixes, velocities)
