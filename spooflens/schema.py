@@ -90,13 +90,26 @@ OBSERVATION_COLUMNS: tuple[Column, ...] = (
     Column("carrier_phase_cycles", "float64", "cycles", "carrier phase, NaN if absent", False),
     Column("carrier_freq_hz", "float64", "Hz", "carrier frequency, NaN if absent", False),
     Column("cn0_dbhz", "float64", "dB-Hz", "carrier to noise density, NaN if absent", False),
-    Column("sv_x_m", "float64", "m", "satellite ECEF x at transmission, NaN if unknown", False),
+    Column(
+        "sv_x_m",
+        "float64",
+        "m",
+        "satellite ECEF x at signal transmission, in the ECEF frame of that instant (Earth rotation during "
+        "the flight not applied), NaN if unknown",
+        False,
+    ),
     Column("sv_y_m", "float64", "m", "satellite ECEF y, NaN if unknown", False),
     Column("sv_z_m", "float64", "m", "satellite ECEF z, NaN if unknown", False),
     Column("sv_vx_mps", "float64", "m/s", "satellite ECEF velocity x, NaN if unknown", False),
     Column("sv_vy_mps", "float64", "m/s", "satellite ECEF velocity y, NaN if unknown", False),
     Column("sv_vz_mps", "float64", "m/s", "satellite ECEF velocity z, NaN if unknown", False),
-    Column("sv_clock_bias_m", "float64", "m", "satellite clock bias times c, NaN if unknown", False),
+    Column(
+        "sv_clock_bias_m",
+        "float64",
+        "m",
+        "satellite clock bias times c (relativistic term and L1 group delay included), NaN if unknown",
+        False,
+    ),
     Column("sv_clock_drift_mps", "float64", "m/s", "satellite clock drift times c, NaN if unknown", False),
 )
 
