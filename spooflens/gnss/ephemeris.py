@@ -101,10 +101,6 @@ class GpsEphemerides:
     def satellites(self) -> list[str]:
         return sorted(set(self.sv_id.tolist()))
 
-    def span_s(self) -> tuple[float, float]:
-        """First and last GPS time any record covers."""
-        return float(np.min(self.toe_s - self.max_age_s)), float(np.max(self.toe_s + self.max_age_s))
-
     def take(self, idx: NDArray[np.int64]) -> GpsEphemerides:
         return replace(self, **{f.name: getattr(self, f.name)[idx] for f in fields(self) if f.name != "iono"})
 

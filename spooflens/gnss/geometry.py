@@ -3,8 +3,9 @@
 pseudorange = range (with Earth rotation during the flight) + c dt_rx - c dt_sv + troposphere
               + ionosphere + noise
 
-`expected_pseudorange` is the one place this sum is written: the simulator uses it to make
-pseudoranges and the single-point solver to explain them, so both meet the same model. Models are
+`expected_pseudorange` writes this sum: the simulator makes pseudoranges with it, and the
+single-point solver explains them with the same pieces (`sagnac_range`, `atmospheric_delay`), so both
+meet one model. Models are
 RTKLIB's (Saastamoinen with a standard atmosphere, broadcast Klobuchar), which is what receivers use.
 """
 

@@ -18,7 +18,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ, GpsEphemerides, satellite_states, states_at_transmission
-from spooflens.gnss.geometry import atmospheric_delay, azimuth_elevation, expected_range_rate, sagnac_range
+from spooflens.gnss.geometry import azimuth_elevation, expected_pseudorange, expected_range_rate, sagnac_range
 
 FloatArray = NDArray[np.float64]
 L1_WAVELENGTH_M = C_MPS / GPS_L1_HZ
@@ -83,18 +83,17 @@ def simulate_observations(
     pos, vel = st.pos_m[seen], st.vel_mps[seen]
     clk, clk_drift = st.clock_bias_m[seen], st.clock_drift_mps[seen]
     n = len(ep)
-    rng_m = sagnac_range(pos, rx)
-    iono_free = atmospheric_delay(rx, pos, t_rx, None)
-    total = atmospheric_delay(rx, pos, t_rx, eph.iono)
-    iono = total - iono_free
+    code = expected_pseudorange(pos, clk, rx, bias[ep], t_rx, eph.iono)
+    # the carrier travels the same path, but the ionosphere advances it: phase = code - 2 x ionosphere
+    iono = code - expected_pseudorange(pos, clk, rx, bias[ep], t_rx, None)
     sin_el = np.sin(np.maximum(el, 0.05))
     pr_sigma = noise.pseudorange_sigma_m * np.sqrt(1.0 + 1.0 / sin_el**2)
-    pr = rng_m + bias[ep] - clk + total + rng.normal(0.0, 1.0, n) * pr_sigma
+    pr = code + rng.normal(0.0, 1.0, n) * pr_sigma
     rate = expected_range_rate(pos, vel, clk_drift, rx, rx_vel_ecef[ep], drift[ep])
     rate = rate + rng.normal(0.0, noise.range_rate_sigma_mps, n)
-    # carrier phase: the ionosphere advances it; each satellite's arc has its own integer ambiguity
+    # each satellite's arc has its own integer ambiguity
     ambiguity = {s: float(rng.integers(-(10**7), 10**7)) for s in sats}
-    phase = (rng_m + bias[ep] - clk + iono_free - iono) / L1_WAVELENGTH_M + np.array([ambiguity[s] for s in sv])
+    phase = (code - 2.0 * iono) / L1_WAVELENGTH_M + np.array([ambiguity[s] for s in sv])
     phase = phase + rng.normal(0.0, noise.phase_sigma_cycles, n)
     cn0 = 32.0 + 16.0 * sin_el + rng.normal(0.0, 1.0, n)
     recorded = states_at_transmission(eph, sv, t_gps_s[ep], pr)  # as any reader computes them from the tag
