@@ -89,11 +89,18 @@ def ecef_to_geodetic(xyz: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray
     return np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float)
 
 
-def enu_rotation(lat_deg: float, lon_deg: float) -> FloatArray:
-    """Rotation matrix taking ECEF vectors into ENU at (lat, lon)."""
-    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+def enu_rotation(lat_deg: ArrayLike, lon_deg: ArrayLike) -> FloatArray:
+    """Rotation matrix taking ECEF vectors into ENU at (lat, lon): (3, 3), or (..., 3, 3) for arrays."""
+    lat, lon = np.radians(np.asarray(lat_deg, dtype=float)), np.radians(np.asarray(lon_deg, dtype=float))
     sl, cl, sp, cp = np.sin(lon), np.cos(lon), np.sin(lat), np.cos(lat)
-    return np.array([[-sl, cl, 0.0], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]])
+    zero = np.zeros_like(sl)
+    rows = [[-sl, cl, zero], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def ecef_to_enu_vectors(lat_deg: ArrayLike, lon_deg: ArrayLike, d_ecef: ArrayLike) -> FloatArray:
+    """ECEF vectors (N, 3) (velocities, displacements) in the local ENU frame of each point."""
+    return np.einsum("...ij,...j->...i", enu_rotation(lat_deg, lon_deg), np.asarray(d_ecef, dtype=float))
 
 
 def metres_per_radian(lat: ArrayLike, h: ArrayLike) -> tuple[FloatArray, FloatArray]:

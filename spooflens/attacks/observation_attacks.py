@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, Kind
 from spooflens.epoch_table import EpochTable
-from spooflens.geodesy import add_enu_offset, ecef_to_geodetic, enu_rotation, geodetic_to_ecef
+from spooflens.geodesy import add_enu_offset, ecef_to_enu_vectors, ecef_to_geodetic, geodetic_to_ecef
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ
 from spooflens.gnss.geometry import line_of_sight, sagnac_range
 from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointOptions, SinglePointSolution, solve
@@ -223,12 +223,7 @@ def _local_offsets(before: FloatArray, after: FloatArray) -> FloatArray:
     d = geodetic_to_ecef(after[:, 0], after[:, 1], after[:, 2]) - geodetic_to_ecef(
         before[:, 0], before[:, 1], before[:, 2]
     )
-    return np.nan_to_num(_ecef_to_enu_vectors(before[:, 0], before[:, 1], d))
-
-
-def _ecef_to_enu_vectors(lat_deg: FloatArray, lon_deg: FloatArray, d: FloatArray) -> FloatArray:
-    rot = np.stack([enu_rotation(a, b) for a, b in zip(lat_deg, lon_deg, strict=True)]) if len(d) else d
-    return np.einsum("nij,nj->ni", rot, d) if len(d) else d
+    return np.nan_to_num(ecef_to_enu_vectors(before[:, 0], before[:, 1], d))
 
 
 def _moved_fixes(
@@ -243,7 +238,7 @@ def _moved_fixes(
     t = fx["t_s"].to_numpy(float)
     lat, lon, h = (fx[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m"))
     new_lat, new_lon, new_h = ecef_to_geodetic(geodetic_to_ecef(lat, lon, h) + d_pos)
-    dv_enu = _ecef_to_enu_vectors(lat, lon, _interp_rows(t, t_e, dv))
+    dv_enu = ecef_to_enu_vectors(lat, lon, _interp_rows(t, t_e, dv))
     cols = fixes.columns
     for c, values in (("lat_deg", new_lat), ("lon_deg", new_lon), ("height_m", new_h)):
         fixes.iloc[rows, cols.get_loc(c)] = values

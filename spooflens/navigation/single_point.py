@@ -21,7 +21,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo
-from spooflens.geodesy import ecef_to_geodetic, enu_rotation
+from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic, enu_rotation
 from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.geometry import (
     atmospheric_delay,
@@ -73,10 +73,7 @@ class SinglePointSolution:
 
     def vel_enu_mps(self) -> FloatArray:
         lat, lon, _ = self.geodetic()
-        out = np.full_like(self.vel_ecef_mps, np.nan)
-        for i in np.flatnonzero(self.ok & np.isfinite(self.vel_ecef_mps).all(axis=1)):
-            out[i] = enu_rotation(lat[i], lon[i]) @ self.vel_ecef_mps[i]
-        return out
+        return ecef_to_enu_vectors(lat, lon, self.vel_ecef_mps)
 
     def fixes_columns(self) -> dict[str, object]:
         """This solution as columns of the `fixes` frame (t_s, not t_ns), solved epochs only."""
@@ -230,7 +227,7 @@ def _dops(
     N[:, np.arange(3, H.shape[-1]), np.arange(3, H.shape[-1])] += 1e-9
     cov = np.linalg.inv(N)[:, :3, :3]
     lat, lon, _ = ecef_to_geodetic(xs)
-    R = np.stack([enu_rotation(a, b) for a, b in zip(lat, lon, strict=True)])
+    R = enu_rotation(lat, lon)
     cov_enu = R @ cov @ np.swapaxes(R, 1, 2)
     d = np.diagonal(cov_enu, axis1=1, axis2=2)
     out[0, good] = np.sqrt(d.sum(axis=1))
