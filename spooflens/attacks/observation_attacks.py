@@ -21,7 +21,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import add_enu_offset, ecef_to_enu_vectors, ecef_to_geodetic, geodetic_to_ecef
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ
 from spooflens.gnss.geometry import line_of_sight, sagnac_range
-from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointOptions, SinglePointSolution, solve
+from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointSolution, solve_logged
 
 FloatArray = NDArray[np.float64]
 
@@ -162,7 +162,6 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
         satellites=attacked_svs,
         authentic=authentic if spec.kind == Kind.SPOOFED_SUBSET else [],
     )
-    spp = SinglePointOptions(iono=table.ionosphere)  # the receiver's own solution, as the log's nav data allow
     new_obs = obs_all.copy()
     drop = np.zeros(len(new_obs), dtype=bool)
     fixes = table.fixes.copy()
@@ -172,7 +171,7 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
         t = obs["t_s"].to_numpy(float)
         inside = (t >= start) & (t <= end)
         hit = inside & obs["sv_id"].astype(str).isin(attacked_svs).to_numpy()
-        clean = solve(obs, table.gps_seconds(t), spp)
+        clean = solve_logged(table, obs)
         if spec.kind == Kind.BLOCKING:
             drop[rows[hit]] = True
         else:
@@ -192,8 +191,7 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
                 ("doppler_hz", -d_rate / lam),
             ):
                 new_obs.iloc[rows, cols.get_loc(col)] = obs[col].to_numpy(float) + delta
-        kept = new_obs.iloc[rows][~drop[rows]]
-        attacked = solve(kept, table.gps_seconds(kept["t_s"].to_numpy(float)), spp)
+        attacked = solve_logged(table, new_obs.iloc[rows][~drop[rows]])
         t_e, dp, dv = _solution_shift(clean, attacked)
         fix_rows = np.flatnonzero(fixes["receiver_id"].astype(str).to_numpy() == rid)
         if len(fix_rows):

@@ -26,6 +26,7 @@ from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.geometry import (
     atmospheric_delay,
     azimuth_elevation,
+    expected_pseudorange,
     expected_range_rate,
     line_of_sight,
     sagnac_range,
@@ -178,8 +179,8 @@ def solve(
             break
     # final residuals and quality at the converged state
     rx = np.broadcast_to(x[:, None, :3], P_sv.shape)
-    pred = sagnac_range(P_sv, rx) + np.einsum("eks,es->ek", SYS, x[:, 3:]) - CLK
-    pred = pred + np.nan_to_num(atmospheric_delay(rx, P_sv, T_GPS, opts.iono if T_GPS is not None else None))
+    clock = np.einsum("eks,es->ek", SYS, x[:, 3:])
+    pred = expected_pseudorange(P_sv, CLK, rx, clock, T_GPS, opts.iono if T_GPS is not None else None)
     used = weight > 0
     res_pad = np.where(used, PR - pred, np.nan)
     n_used = used.sum(axis=1)
@@ -278,7 +279,13 @@ def _velocity(
     return vel, drift
 
 
-def with_solved_fixes(table: EpochTable, options: SinglePointOptions | None = None) -> EpochTable:
+def solve_logged(table: EpochTable, rows: pd.DataFrame) -> SinglePointSolution:
+    """Solve observation rows of `table` as its receiver would: the log's clock gives the ionosphere's
+    local time, its navigation data the broadcast coefficients."""
+    return solve(rows, table.gps_seconds(rows["t_s"].to_numpy(float)), SinglePointOptions(iono=table.ionosphere))
+
+
+def with_solved_fixes(table: EpochTable) -> EpochTable:
     """`table` plus fixes solved from the observations of every receiver that logged none of its own.
 
     A RINEX file, for one, holds pseudoranges and no positions; the analyses need positions. The
@@ -295,9 +302,7 @@ def with_solved_fixes(table: EpochTable, options: SinglePointOptions | None = No
     rows = rows[np.isfinite(rows[SV_COLUMNS].to_numpy(float)).all(axis=1)]
     if not len(rows):
         return table
-    sol = solve(
-        rows, table.gps_seconds(rows["t_s"].to_numpy(float)), options or SinglePointOptions(iono=table.ionosphere)
-    )
+    sol = solve_logged(table, rows)
     solved = make_frame("fixes", sol.fixes_columns())
     out = copy.copy(table)
     out.fixes = pd.concat([table.fixes, solved], ignore_index=True) if len(table.fixes) else solved
