@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.rinex import GPS_EPOCH
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.geodesy import geodetic_to_ecef
 from spooflens.gnss.ephemeris import GM_GPS, OMEGA_E_GPS, SECONDS_PER_WEEK, GpsEphemerides
 
-GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
 OBS_TYPES = (("C1C", "pseudorange_m"), ("L1C", "carrier_phase_cycles"), ("D1C", "doppler_hz"), ("S1C", "cn0_dbhz"))
 REISSUE_S = 7200.0
 
@@ -38,19 +38,25 @@ def _label(text: str, label: str) -> str:
     return f"{text:<60.60}{label}\n"
 
 
+def _program_line() -> str:
+    return _label(
+        f"{'spooflens':<20}{'spooflens':<20}{datetime.now(UTC).strftime('%Y%m%d %H%M%S UTC'):<20}",
+        "PGM / RUN BY / DATE",
+    )
+
+
 def _calendar(gps_s: float) -> datetime:
     return GPS_EPOCH + timedelta(seconds=round(gps_s, 7))
 
 
 def _header(receiver_id: str, systems: list[str], first_gps_s: float, xyz: np.ndarray) -> str:
-    made = datetime.now(UTC).strftime("%Y%m%d %H%M%S UTC")
     t = _calendar(first_gps_s)
     lines = [
         _label(
             f"{3.04:9.2f}{'':11}{'OBSERVATION DATA':<20}{'M' if len(systems) > 1 else systems[0]:<20}",
             "RINEX VERSION / TYPE",
         ),
-        _label(f"{'spooflens':<20}{'spooflens':<20}{made:<20}", "PGM / RUN BY / DATE"),
+        _program_line(),
         _label(receiver_id, "MARKER NAME"),
         _label("NON_GEODETIC", "MARKER TYPE"),
         _label(f"{'unknown':<20}{'unknown':<40}", "OBSERVER / AGENCY"),
@@ -164,10 +170,7 @@ def _reissued(eph: GpsEphemerides, first_s: float, last_s: float, svs: set[str])
 def _nav_file(eph: GpsEphemerides) -> str:
     head = [
         _label(f"{3.04:9.2f}{'':11}{'N: GNSS NAV DATA':<20}{'G':<20}", "RINEX VERSION / TYPE"),
-        _label(
-            f"{'spooflens':<20}{'spooflens':<20}{datetime.now(UTC).strftime('%Y%m%d %H%M%S UTC'):<20}",
-            "PGM / RUN BY / DATE",
-        ),
+        _program_line(),
     ]
     if eph.iono is not None:
         head.append(
