@@ -210,8 +210,8 @@ def parse_attack(text: str) -> AttackSpec:
     for key in ("count", "keep", "seed"):
         if key in params and (params[key] != int(params[key]) or params[key] < 0):
             raise AttackError(f"{kind.value}: {key}={params[key]:g} must be a whole number >= 0")
-    if "svs" in params and kind == Kind.BLOCKING:
-        params.pop("count", None)  # named satellites replace the default random choice
+    if "svs" in params:
+        params.pop("count", None)  # named satellites replace a random choice of them
     if "end" in params and params["end"] <= params.get("start", 0.0):
         raise AttackError(f"{kind.value}: end={params['end']} is not after start={params.get('start', 0.0)}")
     return AttackSpec(kind, params)
