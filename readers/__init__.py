@@ -1,13 +1,19 @@
 """Readers: one module per log format, each turning a file into an EpochTable.
 
-`read_log` sniffs the format from the content (not the extension) and dispatches through `READERS`,
-a plain mapping a test can patch. Readers know nothing of detectors.
+Each reader module declares its formats (`FORMATS`, a tuple of `ReaderFormat`): how to recognise the
+format from content, the function that reads it, and whether `inject` can write a spoofed copy back
+(`rewrite`, "module:function"). The registry below is built from those declarations, in the order of
+`READER_MODULES` (binary formats with a magic number first, then text formats from the most specific
+to the least, the spooflens CSV last). Adding a format is one module plus one line there. Readers
+know nothing of detectors.
 """
 
 from __future__ import annotations
 
 import importlib
+import stat
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 from spooflens.epoch_table import EpochTable
@@ -15,84 +21,81 @@ from spooflens.errors import ReaderError, UnsupportedFormatError
 
 Progress = Callable[[int, int], None]
 ReaderFn = Callable[[Path, Mapping[str, str] | None, Progress | None], EpochTable]
+HEAD_BYTES = 4096
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-ROS1_MAGIC = b"#ROSBAG V2.0\n"
-ULOG_MAGIC = b"ULog\x01\x12\x35"
-SQLITE_MAGIC = b"SQLite format 3\x00"
-
-# format name -> "module:function", imported on first use so a format's dependencies load only when needed
-READER_PATHS: dict[str, str] = {
-    "mcap": "readers.mcap_file:read_mcap",
-    "ros1bag": "readers.rosbag:read_rosbag",
-    "ros2bag": "readers.rosbag:read_rosbag",
-    "csv": "readers.csv_log:read_csv",
-    "ulog": "readers.ulog:read_ulog",
-    "rinex": "readers.rinex:read_rinex",
-}
-SUPPORTED = (
-    "MCAP (.mcap), ROS1 bag (.bag), ROS2 bag directory, spooflens CSV (.csv), PX4 ULog (.ulg), "
-    "RINEX obs (a file or a directory of them)"
+# Sniffed in this order; a module may declare several formats.
+READER_MODULES: tuple[str, ...] = (
+    "readers.mcap_file",
+    "readers.rosbag",
+    "readers.ulog",
+    "readers.rinex",
+    "readers.csv_log",
 )
 
 
-def _load(spec: str) -> ReaderFn:
-    module, _, func = spec.partition(":")
-    fn: ReaderFn = getattr(importlib.import_module(module), func)
-    return fn
+@dataclass(frozen=True)
+class ReaderFormat:
+    """One format a reader module reads.
+
+    `sniff(path, head)` gets the first HEAD_BYTES of a file (b"" for a directory) and says whether this
+    format is it; it must be cheap and must not raise. `rewrite` names the function that writes a spoofed
+    copy in this format ("module:function", signature of `spooflens.writers.rewrite.rewrite_log`), or
+    None when `inject` cannot write it back.
+    """
+
+    name: str
+    description: str
+    read: ReaderFn
+    sniff: Callable[[Path, bytes], bool]
+    rewrite: str | None = None
+
+
+def formats() -> dict[str, ReaderFormat]:
+    """name -> ReaderFormat of every registered format, in sniffing order."""
+    out: dict[str, ReaderFormat] = {}
+    for module in READER_MODULES:
+        for fmt in importlib.import_module(module).FORMATS:
+            if fmt.name in out:
+                raise ValueError(f"reader format {fmt.name!r} declared twice")
+            out[fmt.name] = fmt
+    return out
+
+
+def supported() -> str:
+    return "; ".join(f.description for f in formats().values())
 
 
 class _Registry(dict[str, ReaderFn]):
-    """format -> reader function, imported lazily from READER_PATHS unless a test set one."""
+    """format name -> reader function from the declarations, unless a test put another one in."""
 
-    def __missing__(self, fmt: str) -> ReaderFn:
-        fn = _load(READER_PATHS[fmt])
-        self[fmt] = fn
+    def __missing__(self, name: str) -> ReaderFn:
+        fn = formats()[name].read
+        self[name] = fn
         return fn
 
 
 READERS: dict[str, ReaderFn] = _Registry()
 
 
-def _holds_rinex_obs(directory: Path) -> bool:
-    """A directory with at least one RINEX observation file (by content), read as one multi-receiver log."""
-    from readers.rinex import is_rinex_obs
-
-    return any(p.is_file() and is_rinex_obs(p) for p in sorted(directory.iterdir()))
-
-
 def sniff_format(path: Path) -> str:
     """Format name of `path` from its content; raises ReaderError for what no reader knows."""
+    path = Path(path)
     if not path.exists():
         raise ReaderError(path, "no such file or directory")
-    if path.is_dir():
-        if (path / "metadata.yaml").exists() or any(path.glob("*.db3")) or any(path.glob("*.mcap")):
-            return "ros2bag"
-        if any(path.glob("*.csv")):
-            return "csv"
-        if _holds_rinex_obs(path):
-            return "rinex"
-        raise UnsupportedFormatError(
-            path, f"directory is neither a ROS2 bag, a CSV log nor RINEX observations; supported: {SUPPORTED}"
-        )
-    with path.open("rb") as f:
-        head = f.read(512)
-    if not head:
-        raise ReaderError(path, "file is empty (0 bytes)")
-    if head.startswith(MCAP_MAGIC):
-        return "mcap"
-    if head.startswith(ROS1_MAGIC):
-        return "ros1bag"
-    if head.startswith(ULOG_MAGIC):
-        return "ulog"
-    if head.startswith(SQLITE_MAGIC):
-        raise UnsupportedFormatError(path, "a bare sqlite3 file: give the ROS2 bag directory (with metadata.yaml)")
-    text = head.decode("utf-8", errors="replace")
-    if "RINEX VERSION / TYPE" in text.splitlines()[0] if text else False:
-        return "rinex"
-    if "\ufffd" not in text and ("," in text) and text.lstrip().startswith(("#", *"abcdefghijklmnopqrstuvwxyz")):
-        return "csv"
-    raise UnsupportedFormatError(path, f"unknown format (starts with {head[:12]!r}); supported: {SUPPORTED}")
+    mode = path.stat().st_mode
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise ReaderError(path, "not a regular file or a directory (a pipe, socket or device cannot be analysed)")
+    head = b""
+    if path.is_file():
+        with path.open("rb") as f:
+            head = f.read(HEAD_BYTES)
+        if not head:
+            raise ReaderError(path, "file is empty (0 bytes)")
+    for name, fmt in formats().items():
+        if fmt.sniff(path, head):
+            return name
+    what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
+    raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
 
 
 def read_log(path: Path | str, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:

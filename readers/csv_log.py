@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers import ReaderFormat
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import BODY_FRAMES, FRAMES, FixType
@@ -204,3 +205,21 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
     return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0)
+
+
+def _is_csv(path: Path, head: bytes) -> bool:
+    if path.is_dir():
+        return any(path.glob("*.csv"))
+    text = head.decode("utf-8", errors="replace")
+    return "\ufffd" not in text and "," in text and text.lstrip().startswith(("#", *"abcdefghijklmnopqrstuvwxyz"))
+
+
+FORMATS = (
+    ReaderFormat(
+        "csv",
+        "spooflens CSV log (a .csv file or a directory of them)",
+        read_csv,
+        _is_csv,
+        rewrite="spooflens.writers.rewrite:rewrite_with_writer",
+    ),
+)

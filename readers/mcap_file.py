@@ -26,7 +26,7 @@ from mcap.stream_reader import StreamReader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
-from readers import foxglove_messages
+from readers import ReaderFormat, foxglove_messages
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
@@ -204,3 +204,21 @@ def _declarations(
     decoders: _Decoders, schemas: dict[int, Schema], channels: dict[int, Channel]
 ) -> dict[str, TopicDecl]:
     return {ch.topic: decoders.declare(schemas.get(ch.schema_id), ch) for ch in channels.values()}
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _is_mcap(path: Path, head: bytes) -> bool:
+    return head.startswith(MCAP_MAGIC)
+
+
+FORMATS = (
+    ReaderFormat(
+        "mcap",
+        "MCAP (.mcap) with ROS2 (CDR), ROS1, JSON or protobuf channels",
+        read_mcap,  # type: ignore[arg-type]
+        _is_mcap,
+        rewrite="spooflens.writers.rewrite:rewrite_container",
+    ),
+)

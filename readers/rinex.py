@@ -56,6 +56,7 @@ import pandas as pd
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
+from readers import ReaderFormat
 from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, EpochTable, Skipped, StreamInfo, build_table, gps_utc_offset_ns
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, SECONDS_PER_WEEK, GpsEphemerides, Klobuchar, states_at_transmission
@@ -1199,3 +1200,22 @@ def read_rinex(path: Path, topics: Mapping[str, str] | None = None, progress: Pr
         reasons = "; ".join(str(s) for s in skipped) or "no epochs after the header"
         raise ReaderError(path, f"no usable observation in the file(s): {reasons}", "observations")
     return _assemble(path, parts, skipped)
+
+
+def _is_rinex(path: Path, head: bytes) -> bool:
+    if path.is_dir():
+        # a directory with CSV files is a CSV log, even when RINEX files lie beside them
+        return not any(path.glob("*.csv")) and any(p.is_file() and is_rinex_obs(p) for p in sorted(path.iterdir()))
+    first = head.split(b"\n", 1)[0].decode("latin-1")
+    return "RINEX VERSION / TYPE" in first
+
+
+FORMATS = (
+    ReaderFormat(
+        "rinex",
+        "RINEX observation file (2.10, 2.11, 3.02-3.05) or a directory of them, navigation file beside",
+        read_rinex,
+        _is_rinex,
+        rewrite="spooflens.writers.rinex_rewrite:rewrite_rinex_log",
+    ),
+)

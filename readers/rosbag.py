@@ -16,6 +16,7 @@ import lz4.frame
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from readers import ReaderFormat
 from readers.streams import StreamCollector, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
@@ -171,3 +172,32 @@ def _read_ros1_sequential(path: Path, topics: dict[str, str] | None, progress: P
         if conn in conns:
             collector.add(conns[conn][0], t_ns, data)
     return collector.finish("unix")
+
+
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+
+
+def _is_ros1_bag(path: Path, head: bytes) -> bool:
+    return head.startswith(ROS1_MAGIC)
+
+
+def _is_ros2_bag(path: Path, head: bytes) -> bool:
+    return path.is_dir() and ((path / "metadata.yaml").exists() or any(path.glob("*.db3")) or any(path.glob("*.mcap")))
+
+
+FORMATS = (
+    ReaderFormat(
+        "ros1bag",
+        "ROS1 bag (.bag), also one whose index is missing",
+        read_rosbag,  # type: ignore[arg-type]
+        _is_ros1_bag,
+        rewrite="spooflens.writers.rewrite:rewrite_container",
+    ),
+    ReaderFormat(
+        "ros2bag",
+        "ROS2 bag directory (sqlite3 or MCAP storage)",
+        read_rosbag,  # type: ignore[arg-type]
+        _is_ros2_bag,
+        rewrite="spooflens.writers.rewrite:rewrite_container",
+    ),
+)

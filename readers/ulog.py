@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 from pyulog import ULog
 
+from readers import ReaderFormat
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType, SpoofingFlag
@@ -126,3 +127,21 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     if not frames:
         raise ReaderError(path, f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)}) in this ULog")
     return build_table(path, "ulog", reference, frames, streams, skipped)
+
+
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+
+
+def _is_ulog(path: Path, head: bytes) -> bool:
+    return head.startswith(ULOG_MAGIC)
+
+
+FORMATS = (
+    ReaderFormat(
+        "ulog",
+        "PX4 ULog (.ulg)",
+        read_ulog,
+        _is_ulog,
+        rewrite="spooflens.writers.rewrite:rewrite_with_writer",
+    ),
+)

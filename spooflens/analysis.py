@@ -1,24 +1,41 @@
 """Which analyses a log supports, and running them.
 
-Each analysis declares the inputs it needs; `analyze` runs every analysis whose inputs are present
-and says, for each one it could not run, exactly what was missing.
+An analysis is one module that declares `ANALYSIS` (an `AnalysisSpec`): the streams it needs, the
+detectors it produces with their evidence class, and its run function. `ANALYSIS_MODULES` lists
+them in the order they run; adding a detector is one module plus one line there, and the verdict,
+recording, report and CLI pick it up from the declaration. `run_analyses` runs every analysis whose
+inputs are present and says, for each detector it could not run, exactly what was missing.
+
+Work several analyses share (the GNSS/INS navigation solution) is computed once, on first use,
+through the `AnalysisContext`.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from spooflens.detectors.base import DetectorResult
-from spooflens.detectors.gnss_consistency import run_gnss_consistency
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
+from spooflens.evidence import Evidence
+
+if TYPE_CHECKING:
+    from spooflens.navigation.product import Navigation
 
 MIN_FIXES = 3
-ENU = ("east", "north", "up")
 MIN_IMU_SAMPLES = 50
+
+# Every analysis, in the order it runs. One line per module; the module declares the rest.
+ANALYSIS_MODULES: tuple[str, ...] = (
+    "spooflens.detectors.gnss_consistency",
+    "spooflens.navigation.product",
+    "spooflens.detectors.seed000",
+)
 
 
 def _has_fixes(table: EpochTable) -> str | None:
@@ -32,12 +49,20 @@ def _has_imu(table: EpochTable) -> str | None:
 
 
 def _has_fix_velocity(table: EpochTable) -> str | None:
-    v = table.fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+    v = table.fixes[["vel_e_mps", "vel_n_mps"]].to_numpy(dtype=float)
     return None if len(v) and np.isfinite(v).all(axis=1).any() else "GNSS velocity"
 
 
 def _has_observations(table: EpochTable) -> str | None:
     return None if len(table.observations) else "raw GNSS observations (pseudoranges)"
+
+
+def _has_satellite_states(table: EpochTable) -> str | None:
+    obs = table.observations
+    if not len(obs):
+        return "raw GNSS observations (pseudoranges)"
+    ok = np.isfinite(obs[["sv_x_m", "sv_y_m", "sv_z_m"]].to_numpy(dtype=float)).all(axis=1)
+    return None if ok.any() else "satellite positions (a navigation file or logged ephemerides)"
 
 
 def _has_two_receivers(table: EpochTable) -> str | None:
@@ -50,6 +75,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "imu": _has_imu,
     "fix_velocity": _has_fix_velocity,
     "observations": _has_observations,
+    "satellite_states": _has_satellite_states,
     "two_receivers": _has_two_receivers,
 }
 
@@ -66,16 +92,35 @@ class AnalyzeOptions:
 
 @dataclass
 class AnalysisContext:
-    """What an analysis runs on; shared work (the navigation solution) is computed once and cached."""
+    """What an analysis runs on; shared work is computed once and cached."""
 
     table: EpochTable
     options: AnalyzeOptions
-    cache: dict[str, object] = field(default_factory=dict)
+    cache: dict[str, Any] = field(default_factory=dict)
+    results: list[DetectorResult] = field(default_factory=list)  # of the analyses that ran before
 
-    def cached(self, key: str, make: Callable[[], object]) -> object:
+    def cached(self, key: str, make: Callable[[], Any]) -> Any:
         if key not in self.cache:
             self.cache[key] = make()
         return self.cache[key]
+
+    def navigation(self) -> Navigation:
+        """The GNSS/INS solution of the log's first IMU and receiver (raises AnalysisError if it cannot run)."""
+        from spooflens.navigation.product import solve_navigation
+
+        nav: Navigation = self.cached("navigation", lambda: solve_navigation(self.table, self.options))
+        return nav
+
+
+@dataclass(frozen=True)
+class DetectorInfo:
+    """One detector an analysis produces: its name, evidence class and what it tests."""
+
+    name: str
+    evidence: Evidence | None  # None: an analysis product (not counted in the verdict)
+    summary: str
+    method: str = ""  # a paragraph for the report's method notes (seed paper, false-alarm rate)
+    p_false_alarm: str = ""  # the stated false-alarm rate, e.g. "1e-5 per epoch"
 
 
 @dataclass(frozen=True)
@@ -84,109 +129,59 @@ class AnalysisSpec:
     description: str
     needs: tuple[str, ...]
     run: Callable[[AnalysisContext], list[DetectorResult]]
+    detectors: tuple[DetectorInfo, ...] = ()
 
     def missing(self, table: EpochTable) -> list[str]:
         return [m for need in self.needs if (m := REQUIREMENTS[need](table)) is not None]
 
 
-def _gnss_consistency(ctx: AnalysisContext) -> list[DetectorResult]:
-    return [run_gnss_consistency(ctx.table.fixes)]
+def analyses() -> list[AnalysisSpec]:
+    """Every registered analysis, in run order (each module's `ANALYSIS`)."""
+    specs: list[AnalysisSpec] = []
+    for module in ANALYSIS_MODULES:
+        spec = importlib.import_module(module).ANALYSIS
+        if any(s.name == spec.name for s in specs):
+            raise ValueError(f"analysis {spec.name!r} registered twice")
+        specs.append(spec)
+    return specs
 
 
-def _inertial(ctx: AnalysisContext) -> list[DetectorResult]:
-    """Seed 000: the GNSS/INS filter, its innovation test, GLRT, MLRT and calibrated MLRT."""
-    from spooflens.detectors.base import Series, Track
-    from spooflens.detectors.seed000 import Seed000Options, detect, reconstructed_track
-    from spooflens.navigation.imu_models import grade
-    from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
-    from spooflens.navigation.smoother import smooth
-
-    imu_grade = grade(ctx.options.imu_grade or "consumer_mems")
-    sol = run_filter(ctx.table, ctx.options.imu_id, ctx.options.receiver_id, FilterOptions(grade=imu_grade))
-    sm = smooth(sol)
-    settled = sol.t > sol.t[0] + 20.0
-    innovation_sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
-    nav = DetectorResult(
-        "navigation",
-        True,
-        f"INS {sol.imu_id} + GNSS {sol.receiver_id}, grade {imu_grade.name}; "
-        + (sol.alignment.method if sol.alignment else "initial state given"),
-        series=[
-            Series("nis", sol.t, sol.nis, "chi2(dof)"),
-            # INS minus GNSS with the filter's own 1-sigma: a spoofed channel walks out of its band
-            Series("innovation_position", sol.t, sol.z[:, :3], "m", components=ENU),
-            Series("innovation_position_sigma", sol.t, innovation_sigma[:, :3], "m", components=ENU),
-            Series("innovation_velocity", sol.t, sol.z[:, 3:], "m/s", components=ENU),
-            Series("innovation_velocity_sigma", sol.t, innovation_sigma[:, 3:], "m/s", components=ENU),
-        ],
-        tracks=[
-            Track(
-                "ins_smoothed",
-                sm.track_t,
-                np.degrees(sm.track_llh[:, 0]),
-                np.degrees(sm.track_llh[:, 1]),
-                sm.track_llh[:, 2],
-            )
-        ],
-        extras={
-            "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
-            "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
-            "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
-            "imu_grade": imu_grade.name,
-            "epochs": len(sol.t),
-        },
-    )
-    results = detect(sol.error_model(), Seed000Options())
-    incidents = [a for r in results if r.name == "mlrt_calibrated" for a in r.alarms]
-    if incidents:
-        first = incidents[0]
-        onset = first.onset_s if first.onset_s is not None else first.start_s
-        end = None if first.end_s >= sol.t[-1] - 1e-6 else first.end_s
-        earlier: list[DetectorResult] = ctx.cache.get("results", [])  # type: ignore[assignment]
-        velocity_honest = any(r.name == "gnss_consistency" and any(a.end_s >= onset for a in r.alarms) for r in earlier)
-        nav.tracks.append(reconstructed_track(ctx.table, sol, onset, end, velocity_honest))
-    return [nav, *results]
+def detector_infos() -> dict[str, DetectorInfo]:
+    """name -> DetectorInfo of every detector of every analysis."""
+    return {d.name: d for spec in analyses() for d in spec.detectors}
 
 
-ANALYSES: list[AnalysisSpec] = [
-    AnalysisSpec(
-        "gnss_consistency",
-        "GNSS-only: position change against reported velocity (or kinematic plausibility without velocity)",
-        ("fixes",),
-        _gnss_consistency,
-    ),
-    AnalysisSpec(
-        "inertial",
-        "seed 000: GNSS/INS filter; KF innovation test, GLRT, MLRT and calibrated MLRT on a position ramp",
-        ("fixes", "imu"),
-        _inertial,
-    ),
-]
+def _declared(spec: AnalysisSpec, result: DetectorResult) -> DetectorResult:
+    """A result carries its evidence class from the declaration unless it set one itself."""
+    info = next((d for d in spec.detectors if d.name == result.name), None)
+    if result.evidence is None and info is not None and info.evidence is not None:
+        return replace(result, evidence=info.evidence)
+    return result
 
 
-def register(spec: AnalysisSpec) -> None:
-    """Add an analysis (detector packages call this at import)."""
-    if any(a.name == spec.name for a in ANALYSES):
-        raise ValueError(f"analysis {spec.name!r} registered twice")
-    ANALYSES.append(spec)
+def _not_run(spec: AnalysisSpec, reason: str) -> list[DetectorResult]:
+    if not spec.detectors:
+        return [DetectorResult.skipped(spec.name, reason)]
+    return [DetectorResult.skipped(d.name, reason, d.evidence) for d in spec.detectors]
 
 
 def run_analyses(
     table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
 ) -> list[DetectorResult]:
     """Run every analysis the table supports; the others come back as not run, with the reason."""
-    ctx = AnalysisContext(table, options or AnalyzeOptions())
-    results: list[DetectorResult] = []
-    for spec in ANALYSES:
-        missing = spec.missing(table)
+    return run_with_context(AnalysisContext(table, options or AnalyzeOptions()), on_step)
+
+
+def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
+    for spec in analyses():
+        missing = spec.missing(ctx.table)
         if missing:
-            results.append(DetectorResult.skipped(spec.name, "needs " + ", ".join(missing)))
+            ctx.results.extend(_not_run(spec, "needs " + ", ".join(missing)))
             continue
         if on_step:
             on_step(spec.name)
         try:
-            results.extend(spec.run(ctx))
+            ctx.results.extend(_declared(spec, r) for r in spec.run(ctx))
         except SpooflensError as err:
-            results.append(DetectorResult.skipped(spec.name, str(err)))
-        ctx.cache["results"] = results
-    return results
+            ctx.results.extend(_not_run(spec, str(err)))
+    return ctx.results

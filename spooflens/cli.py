@@ -11,25 +11,20 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import click
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from spooflens.console import LazyGroup, console, progress, show_progress
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError
+from spooflens.evidence import label
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
-err_console = Console(stderr=True)
 
-
-def _console() -> Console:
-    """Stdout console; wide when not a terminal, so piped tables are not truncated."""
-    return Console() if sys.stdout.isatty() else Console(width=160)
+# Commands that live in modules of their own: name -> "module:attribute" (imported when used).
+COMMANDS: dict[str, str] = {}
 
 
 def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
@@ -42,37 +37,13 @@ def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
     return topics
 
 
-@contextmanager
-def _progress(enabled: bool) -> Iterator[Callable[[str, int, int], None]]:
-    """Yields report(task, done, total); draws rich bars on stderr when enabled."""
-    if not enabled:
-        yield lambda task, done, total: None
-        return
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-    ) as bar:
-        tasks: dict[str, int] = {}
-
-        def report(task: str, done: int, total: int) -> None:
-            if task not in tasks:
-                tasks[task] = bar.add_task(task, total=max(total, 1))
-            bar.update(tasks[task], completed=done, total=max(total, 1))
-
-        yield report
-
-
 def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: bool = True) -> EpochTable:
     """The log as an epoch table; with `solve_fixes`, receivers that logged only raw pseudoranges get
     fixes from their single-point solution (listed among the repairs)."""
     from readers import read_log
     from spooflens.navigation.single_point import with_solved_fixes
 
-    with _progress(show_progress) as report:
+    with progress(show_progress) as report:
         table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
     return with_solved_fixes(table) if solve_fixes else table
 
@@ -81,7 +52,7 @@ def _damaged(table: EpochTable) -> list[str]:
     return [str(s) for s in table.skipped if s.action == "lost"]
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=LazyGroup, lazy=COMMANDS, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="spooflens")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 @click.pass_context
@@ -105,11 +76,11 @@ topic_option = click.option(
 @topic_option
 def inspect(log: Path, topics: tuple[str, ...]) -> int:
     """List the streams of LOG, what was skipped, and which analyses it supports."""
-    from spooflens.analysis import ANALYSES
+    from spooflens.analysis import analyses
 
-    table = _read(log, _parse_topics(topics), sys.stderr.isatty())
-    console = _console()
-    console.print(
+    table = _read(log, _parse_topics(topics), show_progress())
+    out = console()
+    out.print(
         f"[bold]{table.source}[/]  format {table.format}, {table.duration_s:.1f} s, "
         f"clock {table.time_reference}, starts {table.absolute_iso(0.0)}"
     )
@@ -125,16 +96,19 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
             f"{s.first_s:.1f}-{s.last_s:.1f}",
             s.body_frame or "",
         )
-    console.print(streams)
+    out.print(streams)
     if table.skipped:
-        console.print("[bold]Skipped or repaired[/]")
-        for s in table.skipped:
-            console.print(f"  {s}")
-    support = Table("analysis", "can run", "missing", title="Analyses")
-    for spec in ANALYSES:
-        missing = spec.missing(table)
-        support.add_row(spec.name, "yes" if not missing else "no", ", ".join(missing))
-    console.print(support)
+        out.print("[bold]Skipped or repaired[/]")
+        for skipped in table.skipped:
+            out.print(f"  {skipped}")
+    support = Table("detector", "evidence", "can run", "missing", title="Analyses")
+    for spec in analyses():
+        missing = ", ".join(spec.missing(table))
+        for d in spec.detectors:
+            support.add_row(
+                d.name, label(d.evidence) if d.evidence else "(product)", "no" if missing else "yes", missing
+            )
+    out.print(support)
     return EXIT_DAMAGED if _damaged(table) else EXIT_OK
 
 
@@ -163,25 +137,25 @@ def analyze(
     log: Path, output: Path | None, json_path: Path | None, topics: tuple[str, ...], imu_grade: str | None, quiet: bool
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary."""
-    from spooflens.analysis import AnalyzeOptions, run_analyses
+    from spooflens.analysis import AnalyzeOptions
+    from spooflens.pipeline import analyze_table
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
-    from spooflens.verdict import decide
 
-    table = _read(log, _parse_topics(topics), not quiet and sys.stderr.isatty())
+    table = _read(log, _parse_topics(topics), not quiet and show_progress())
     output = output or Path(log.name).with_suffix(".rrd")
-    with _progress(not quiet and sys.stderr.isatty()) as report:
+    with progress(not quiet and show_progress()) as report:
         steps: list[str] = []
 
         def on_step(name: str) -> None:
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        results = run_analyses(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
-        verdict = decide(results)
+        result = analyze_table(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
+        verdict = result.verdict
         lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-        write_recording(output, table, results, lines)
-    summary = build_summary(table, results, verdict)
+        write_recording(output, table, result.results, lines)
+    summary = build_summary(table, result.results, verdict)
     if json_path:
         json_path.write_text(json.dumps(summary, indent=2))
     if not quiet:
@@ -204,24 +178,30 @@ def _stream_names(table: EpochTable) -> str:
 
 
 def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None:
-    console = _console()
+    out = console()
     v = summary["verdict"]
-    console.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
+    out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
     for inc in v["incidents"]:
         when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
-        label = "incident" if inc["confidence"] != "low" else "GNSS-only anomaly (not called spoofing)"
-        console.print(
-            f"  {label}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f}-{inc['end_s']:.2f} s, "
-            f"detectors {', '.join(inc['detectors'])}, confidence {inc['confidence']}"
+        kind = "incident" if inc["confidence"] != "low" else "single-class anomaly (not called spoofing)"
+        end = "end of log" if inc.get("ongoing_at_end") else f"{inc['end_s']:.2f} s"
+        sats = f", satellites {'+'.join(inc['satellites'])}" if inc.get("satellites") else ""
+        out.print(
+            f"  {kind}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
+            f"evidence {', '.join(inc['evidence_labels'])} ({', '.join(inc['detectors'])}){sats}, "
+            f"confidence {inc['confidence']}"
         )
-    t = Table("analysis", "ran", "alarms", "note")
+    for f in v.get("findings", []):
+        out.print(f"  finding: {f['text']}")
+    t = Table("analysis", "evidence", "ran", "alarms", "note")
     for a in summary["analyses"]:
-        t.add_row(a["name"], "yes" if a["ran"] else "no", str(len(a["alarms"])), a["reason"])
-    console.print(t)
-    for s in summary["skipped"]:
-        console.print(f"  skipped: {s['stream']}: {s['action']} {s['count']} ({s['reason']})")
-    console.print(f"recording: {output}" + (f"   summary: {json_path}" if json_path else ""))
-    console.print(f"view it with: rerun {output}")
+        alarms = str(len(a["alarms"])) + (" (advisory)" if a.get("advisory") and a["alarms"] else "")
+        t.add_row(a["name"], a.get("evidence_label") or "(product)", "yes" if a["ran"] else "no", alarms, a["reason"])
+    out.print(t)
+    for sk in summary["skipped"]:
+        out.print(f"  skipped: {sk['stream']}: {sk['action']} {sk['count']} ({sk['reason']})")
+    out.print(f"recording: {output}" + (f"   summary: {json_path}" if json_path else ""))
+    out.print(f"view it with: rerun {output}")
 
 
 @cli.command()
@@ -247,7 +227,7 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
     from spooflens.writers.rewrite import rewrite_log
 
     spec = parse_attack(attack_text)
-    table = _read(log, _parse_topics(topics), sys.stderr.isatty(), solve_fixes=False)
+    table = _read(log, _parse_topics(topics), show_progress(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
     note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))
     truth.write(sidecar_path(output))
@@ -325,174 +305,16 @@ def simulate(
     return EXIT_OK
 
 
-@cli.group()
+@cli.group(
+    cls=LazyGroup,
+    lazy={
+        "read": "spooflens.bench.read_bench:command",
+        "nav": "spooflens.bench.nav_bench:command",
+        "seed000": "spooflens.bench.seed000_bench:command",
+    },
+)
 def bench() -> None:
     """Measure speed, memory and detection performance (figures quoted in the README)."""
-
-
-@bench.command("read")
-@click.option("--duration", default=3600.0, show_default=True, help="Seconds of log to synthesise.")
-@click.option("--workdir", type=click.Path(path_type=Path), default=Path("bench_data"), show_default=True)
-def bench_read(duration: float, workdir: Path) -> int:
-    """Reader speed and memory on a synthetic 200 Hz IMU + 10 Hz fix ROS2 MCAP, beside rosbags."""
-    from spooflens.bench.read_bench import run_read_bench
-
-    workdir.mkdir(parents=True, exist_ok=True)
-    with err_console.status("writing the synthetic MCAP and reading it twice..."):
-        r = run_read_bench(workdir, duration_s=duration)
-    t = Table(
-        "reader",
-        "wall (s)",
-        "messages/s",
-        "peak RSS (MB)",
-        title=f"{r['messages']} messages, {r['file_mb']:.0f} MB MCAP ({r['file']})",
-    )
-    for name, run in r["runs"].items():
-        t.add_row(name, f"{run['wall_s']:.2f}", f"{run['messages_per_s']:,.0f}", f"{run['peak_rss_mb']:.0f}")
-    _console().print(t)
-    verdict = "goal met" if r["ratio_wall"] <= 1.0 else "goal MISSED"
-    click.echo(
-        f"wall-time ratio spooflens/rosbags = {r['ratio_wall']:.2f} (goal <= 1.0: {verdict}); peak RSS goal < 1024 MB"
-    )
-    return EXIT_OK
-
-
-@bench.command("nav")
-@click.option("--duration", default=3600.0, show_default=True, help="Seconds of flight to simulate.")
-def bench_nav(duration: float) -> int:
-    """Filter + smoother time and memory for 200 Hz IMU and 10 Hz GNSS (goal: one hour under 5 s)."""
-    from spooflens.bench.nav_bench import run_nav_bench
-
-    with err_console.status("simulating and running the filter and smoother..."):
-        r = run_nav_bench(duration)
-    t = Table("measure", "value", title=f"{duration:.0f} s: {r['imu_samples']} IMU samples, {r['gnss_epochs']} epochs")
-    for key, fmt in (
-        ("filter_s", "{:.2f} s"),
-        ("smoother_s", "{:.2f} s"),
-        ("filter_plus_smoother_s", "{:.2f} s"),
-        ("compile_and_warmup_s", "{:.1f} s (once per machine; numba caches it)"),
-        ("peak_rss_mb", "{:.0f} MB"),
-        ("nis_mean", "{:.2f} (dof 6)"),
-    ):
-        t.add_row(key, fmt.format(r[key]))
-    _console().print(t)
-    goal = 5.0 * duration / 3600.0
-    click.echo(
-        f"filter + smoother {r['filter_plus_smoother_s']:.2f} s; goal < {goal:.1f} s: "
-        + ("met" if r["filter_plus_smoother_s"] < goal else "MISSED")
-    )
-    return EXIT_OK
-
-
-@bench.command("seed000")
-@click.option("--runs", default=100, show_default=True, help="Monte Carlo runs per case of the paper's scenario.")
-@click.option("--hours", default=200, show_default=True, help="Attack-free hours for the equal false-alarm part.")
-@click.option(
-    "--husky",
-    "husky_path",
-    type=click.Path(path_type=Path),
-    default=Path(__file__).resolve().parents[1].parent / "shared/real/ros1_husky_navsat/test1.bag",
-    show_default=True,
-    help="Real clean log for the real-data part (skipped if missing).",
-)
-@click.option("--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write all figures here.")
-@click.option(
-    "--plot",
-    "plot_path",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Write a PNG of the delay distributions here.",
-)
-@click.option("--quick", is_flag=True, help="Fewer runs everywhere (a smoke test, not the reported figures).")
-def bench_seed000(
-    runs: int, hours: int, husky_path: Path, json_path: Path | None, plot_path: Path | None, quick: bool
-) -> int:
-    """Seed 000's Table 1 (KF, GLRT, MLRT delays), false alarms, equal-FA delays, real data, runtime."""
-    from spooflens.bench import seed000_bench as sb
-
-    if quick:
-        runs, hours = min(runs, 5), min(hours, 10)
-    opts = sb.BenchOptions(runs=runs, equal_fa_hours=hours)
-    out: dict[str, object] = {}
-    with _progress(sys.stderr.isatty()) as report:
-        out["paper"] = sb.paper_scenario(opts, lambda d, n: report("paper scenario (Monte Carlo)", d, n))
-        out["minimum_rate"] = sb.minimum_rate(opts, runs=8 if quick else 40)
-        out["equal_fa"] = sb.equal_false_alarm(opts, hours, lambda d, n: report("attack-free hours", d, n))
-    if husky_path.exists():
-        out["husky"] = sb.husky(husky_path)
-    out["runtime"] = sb.runtime()
-    _print_seed000(out, runs)
-    if json_path:
-        json_path.write_text(json.dumps(out, indent=1, default=str))
-    if plot_path:
-        sb.plot(out, plot_path)
-        click.echo(f"plot: {plot_path}")
-    return EXIT_OK
-
-
-def _fmt(v: float | None) -> str:
-    return "-" if v is None else f"{v:.2f}"
-
-
-def _print_seed000(out: dict, runs: int) -> None:
-    from spooflens.bench import seed000_bench as sb
-
-    console = _console()
-    paper = out["paper"]
-    t = Table(
-        "method",
-        *[f"{c} m/s" for c in ("2", "3", "5")],
-        "25 m/s up",
-        "clean runs alarmed",
-        title=f"Seed 000 scenario, {runs} runs: median delay s [25-75%] (detected %)  | paper Table 1",
-    )
-    for m, cases in paper["delays"].items():
-        cells = []
-        for key in ("en:2", "en:3", "en:5", "u:25"):
-            med, lo, hi, frac = sb.summarise(cases[key])
-            cells.append(f"{_fmt(med)} [{_fmt(lo)}-{_fmt(hi)}] ({100 * frac:.0f}%)")
-        t.add_row(m, *cells, f"{100 * paper['false_alarm_fraction'][m]:.0f}%")
-    for name, row in sb.PAPER_TABLE1.items():
-        vertical = f"{sb.PAPER_VERTICAL_MLRT}" if name == "MLRT" else ""
-        t.add_row(f"paper: {name}", *[_fmt(row[r]) for r in (2, 3, 5)], vertical, "")
-    console.print(t)
-    mr = out["minimum_rate"]
-    console.print(
-        f"smallest east+north ramp detected in >= 50% of runs (paper: MLRT {sb.PAPER_MIN_RATE} m/s): "
-        + ", ".join(f"{m} {_fmt(v)}" for m, v in mr["minimum_rate"].items())
-    )
-    eq = out["equal_fa"]
-    t = Table(
-        "method",
-        *[f"{r} m/s @ {fa:g}/1000h" for r in ("2", "5") for fa in (1.0, 10.0, 100.0)],
-        title=f"Equal false-alarm rates ({eq['hours']} attack-free hours, Gumbel tail): median delay s",
-    )
-    for m, d in eq["delays"].items():
-        t.add_row(m, *[_fmt(d[r][fa]) for r in ("2", "5") for fa in (1.0, 10.0, 100.0)])
-    console.print(t)
-    if "husky" in out:
-        t = Table(
-            "husky bag",
-            *out["husky"]["clean"].keys(),
-            title="Real data (husky, consumer IMU): alarms when clean, delay (s) of the first alarm after "
-            "an injected ramp's onset",
-        )
-        for label, res in out["husky"].items():
-            key = "alarms" if label == "clean" else "delay_after_200_s"
-            t.add_row(
-                label,
-                *[
-                    (f"{v[key]:.1f}" if isinstance(v[key], float) else f"{v[key]}" if v[key] is not None else "-")
-                    + (" (advisory)" if v["advisory"] else "")
-                    for v in res.values()
-                ],
-            )
-        console.print(t)
-    rt = out["runtime"]
-    console.print(
-        f"runtime: all seed-000 detectors (online + offline l_N(m)) over {rt['epochs']:.0f} epochs "
-        f"(1 h of 10 Hz GNSS): {rt['detectors_s']:.1f} s (goal < 10 s)"
-    )
 
 
 @cli.command()

@@ -129,6 +129,9 @@ class EpochTable:
     # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
     # constellation): what a RINEX copy of the log needs, and the ionosphere model for solutions
     ephemerides: GpsEphemerides | None = None
+    # provenance a reader found: firmware and receiver versions, and the meaning applied to each logged
+    # enum ("enum.spoofing_state": "PX4 SensorGps >= 1.15: 1 OK, 2 mitigated, 3 detected")
+    metadata: dict[str, str] = field(default_factory=dict)
 
     @property
     def ionosphere(self) -> Klobuchar | None:
@@ -242,6 +245,7 @@ def build_table(
     streams: list[StreamInfo],
     skipped: list[Skipped],
     t0_ns: int | None = None,
+    metadata: dict[str, str] | None = None,
 ) -> EpochTable:
     """Turn frames stamped in absolute nanoseconds (`t_ns` instead of `t_s`) into an EpochTable.
 
@@ -301,6 +305,7 @@ def build_table(
         time_reference=time_reference,
         streams=final_streams,
         skipped=skipped,
+        metadata=dict(metadata or {}),
         **table_frames,
     )
     table.validate()

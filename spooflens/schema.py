@@ -76,8 +76,18 @@ FIX_COLUMNS: tuple[Column, ...] = (
     Column("vel_acc_mps", "float64", "m/s", "reported speed accuracy (1 sigma), NaN if absent", False),
     Column("sats_used", "float64", "-", "satellites used in the fix, NaN if absent", False),
     Column("fix_type", "int8", "FixType", "fix quality (spooflens.schema.FixType)"),
-    Column("spoofing_flag", "int8", "SpoofingFlag", "receiver spoofing indication", False),
+    Column("spoofing_flag", "int8", "SpoofingFlag", "receiver spoofing indication, decoded", False),
     Column("jamming_indicator", "float64", "-", "receiver jamming indicator (raw), NaN if absent", False),
+    # receiver self-report: evidence in its own right (spooflens.detectors.receiver_evidence), kept raw;
+    # the meaning applied to an enum is recorded in EpochTable.metadata ("enum.<column>")
+    Column("hdop", "float64", "-", "horizontal dilution of precision, NaN if absent", False),
+    Column("vdop", "float64", "-", "vertical dilution of precision, NaN if absent", False),
+    Column("noise_per_ms", "float64", "-", "receiver noise level (u-blox noisePerMS, PX4 noise_per_ms), raw", False),
+    Column("agc", "float64", "-", "automatic gain control monitor (u-blox agcCnt, PX4 automatic_gain_control)", False),
+    Column("jamming_state", "float64", "-", "receiver jamming state code as logged (meaning in metadata)", False),
+    Column("spoofing_state", "float64", "-", "receiver spoofing state code as logged (meaning in metadata)", False),
+    Column("authentication_state", "float64", "-", "signal authentication state code (e.g. OSNMA)", False),
+    Column("cn0_mean_dbhz", "float64", "dB-Hz", "mean C/N0 of the satellites tracked at this fix", False),
 )
 
 OBSERVATION_COLUMNS: tuple[Column, ...] = (

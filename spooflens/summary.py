@@ -11,9 +11,10 @@ from dataclasses import asdict
 from typing import Any
 
 from spooflens import __version__
-from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.detectors.base import Alarm, DetectorResult, Finding
 from spooflens.epoch_table import EpochTable
-from spooflens.verdict import Verdict
+from spooflens.evidence import label
+from spooflens.verdict import Incident, Verdict
 
 
 def _clean(x: Any) -> Any:
@@ -43,6 +44,38 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
     out["peak_statistic"] = a.peak_statistic
     if a.onset_interval_s is not None:
         out["onset_interval_s"] = list(a.onset_interval_s)
+    if a.receiver_id:
+        out["receiver_id"] = a.receiver_id
+    if a.satellites:
+        out["satellites"] = list(a.satellites)
+    return out
+
+
+def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "detectors": list(inc.detectors),
+        "confidence": inc.confidence,
+        "spoofing": inc.is_spoofing,
+        "evidence": [str(e) for e in inc.evidence],
+        "evidence_labels": [label(e) for e in inc.evidence],
+        "receivers": list(inc.receivers),
+        "satellites": list(inc.satellites),
+        "ongoing_at_end": inc.ongoing_at_end,
+        "end_method": inc.end_method,
+    }
+    for key, t in (("onset", inc.onset_s), ("start", inc.start_s), ("end", inc.end_s)):
+        d |= _time(table, key, t)
+    if inc.onset_interval_s:
+        d["onset_interval_s"] = list(inc.onset_interval_s)
+    if inc.end_interval_s:
+        d["end_interval_s"] = list(inc.end_interval_s)
+    return d
+
+
+def _finding(table: EpochTable, f: Finding) -> dict[str, Any]:
+    out: dict[str, Any] = {"text": f.text, "satellites": list(f.satellites), "receiver_id": f.receiver_id}
+    for key, t in (("start", f.start_s), ("end", f.end_s)):
+        out |= _time(table, key, t)
     return out
 
 
@@ -50,6 +83,9 @@ def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
     out: dict[str, Any] = {
         "name": r.name,
         "ran": r.ran,
+        "evidence": str(r.evidence) if r.evidence else None,
+        "evidence_label": label(r.evidence) if r.evidence else None,
+        "advisory": r.advisory,
         "reason": r.reason,
         "alarms": [_alarm(table, a) for a in r.alarms],
     }
@@ -59,24 +95,20 @@ def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
         ]
     if r.extras:
         out["facts"] = r.extras
+    if r.findings:
+        out["findings"] = [_finding(table, f) for f in r.findings]
     return out
 
 
 def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Verdict) -> dict[str, Any]:
-    incidents = []
-    for inc in verdict.incidents:
-        d: dict[str, Any] = {"detectors": list(inc.detectors), "confidence": inc.confidence}
-        for key, t in (("onset", inc.onset_s), ("start", inc.start_s), ("end", inc.end_s)):
-            d |= _time(table, key, t)
-        if inc.onset_interval_s:
-            d["onset_interval_s"] = list(inc.onset_interval_s)
-        incidents.append(d)
+    incidents = [_incident(table, inc) for inc in verdict.incidents]
     summary = {
         "spooflens_version": __version__,
         "file": str(table.source),
         "format": table.format,
         "time_reference": table.time_reference,
         "t0_abs_ns": table.t0_ns,
+        "metadata": dict(table.metadata),
         "t0_utc": table.absolute_iso(0.0) if table.unix_ns(0.0) is not None else None,
         "duration_s": round(table.duration_s, 6),
         "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
@@ -87,6 +119,8 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
             "incidents": incidents,
             "detectors_counted": list(verdict.detectors_run),
             "detectors_advisory": list(verdict.detectors_advisory),
+            "detectors_not_run": list(verdict.detectors_not_run),
+            "findings": [_finding(table, f) for f in verdict.findings],
         },
         "analyses": [_analysis(table, r) for r in results],
     }

@@ -7,13 +7,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from spooflens.analysis import run_analyses
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.detectors.seed000 import Seed000Options, detect
+from spooflens.evidence import Evidence
 from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
+from spooflens.pipeline import analyze_table
 from spooflens.simulation.sensors import GnssNoise
 from spooflens.simulation.simulate import SCENARIOS, simulate
-from spooflens.verdict import decide
 
 
 def _run(rate: float, seed: int = 3, start: float = 120.0, scenario: str = "ground", **kw) -> dict:
@@ -63,9 +63,10 @@ def test_time_correlated_gnss_errors_make_the_ramp_tests_advisory() -> None:
 def test_analyze_pipeline_reconstructs_the_trajectory_during_the_attack() -> None:
     sim = simulate("ground", seed=5, duration_s=200.0)
     spoofed, _ = apply_attack(sim.table, parse_attack("ramp:rate=2,axes=en,start=120"))
-    results = run_analyses(spoofed)
-    verdict = decide(results)
+    analysis = analyze_table(spoofed)
+    results, verdict = analysis.results, analysis.verdict
     assert verdict.spoofed and verdict.incidents[0].confidence == "high"
+    assert set(verdict.incidents[0].evidence) == {Evidence.GNSS_ONLY, Evidence.INERTIAL}
     assert abs(verdict.incidents[0].onset_s - 120.0) < 3.0
     nav = next(r for r in results if r.name == "navigation")
     rec = next(t for t in nav.tracks if t.name.startswith("reconstructed"))

@@ -358,7 +358,7 @@ def test_sniff_format_files_and_directories(tmp_path: Path) -> None:
     nav_only = tmp_path / "nav_only"
     nav_only.mkdir()
     shutil.copyfile(NAV_0759, nav_only / "x.05n")
-    with pytest.raises(ReaderError, match="neither a ROS2 bag, a CSV log nor RINEX observations"):
+    with pytest.raises(ReaderError, match="directory holds no log this tool reads"):
         sniff_format(nav_only)
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import click
+
 from spooflens.cli import cli
 from spooflens.schema import schema_markdown
 
@@ -18,8 +20,10 @@ def test_schema_section_is_generated_from_the_schema_module() -> None:
 
 
 def test_every_cli_command_is_documented() -> None:
-    for name, command in cli.commands.items():
-        subs = getattr(command, "commands", {})
+    ctx = click.Context(cli)
+    for name in cli.list_commands(ctx):
+        command = cli.get_command(ctx, name)
+        subs = command.list_commands(ctx) if isinstance(command, click.Group) else []
         for full in [name] if not subs else [f"{name} {s}" for s in subs]:
             assert f"spooflens {full}" in README, full
 

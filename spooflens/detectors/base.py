@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.evidence import Evidence
+
 FloatArray = NDArray[np.float64]
 
 
@@ -20,6 +22,8 @@ class Alarm:
     peak_s: float
     onset_s: float | None = None  # the detector's estimate of when the attack began
     onset_interval_s: tuple[float, float] | None = None  # credible/confidence interval for the onset
+    receiver_id: str | None = None  # the receiver the alarm is about (None: not receiver-specific)
+    satellites: tuple[str, ...] = ()  # satellites found inconsistent, for raw-measurement detectors
 
 
 @dataclass(frozen=True)
@@ -56,8 +60,23 @@ class Track:
     height_m: FloatArray
 
 
+@dataclass(frozen=True)
+class Finding:
+    """Something a detector established that is worth a line of its own in the verdict, e.g. a satellite
+    excluded by RAIM at most epochs, or the receiver's own spoofing flag raised."""
+
+    text: str
+    start_s: float
+    end_s: float
+    satellites: tuple[str, ...] = ()
+    receiver_id: str | None = None
+
+
 @dataclass
 class DetectorResult:
+    """What one detector (or, with `evidence` None, an analysis product such as the navigation solution)
+    returned. Only results with an evidence class count in the verdict."""
+
     name: str
     ran: bool
     reason: str = ""  # why it did not run, or what it assumed
@@ -67,10 +86,16 @@ class DetectorResult:
     tracks: list[Track] = field(default_factory=list)
     extras: dict[str, object] = field(default_factory=dict)  # JSON-able facts for the summary
     advisory: bool = False  # reported and drawn, but not used for the verdict (an uncalibrated rule)
+    evidence: Evidence | None = None  # the class of reference this detector compares GNSS with
+    findings: list[Finding] = field(default_factory=list)
+
+    @property
+    def is_detector(self) -> bool:
+        return self.evidence is not None
 
     @classmethod
-    def skipped(cls, name: str, reason: str) -> DetectorResult:
-        return cls(name=name, ran=False, reason=reason)
+    def skipped(cls, name: str, reason: str, evidence: Evidence | None = None) -> DetectorResult:
+        return cls(name=name, ran=False, reason=reason, evidence=evidence)
 
 
 def alarm_intervals(

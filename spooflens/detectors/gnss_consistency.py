@@ -21,7 +21,9 @@ import pandas as pd
 from numpy.typing import NDArray
 from scipy import stats
 
+from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
+from spooflens.evidence import Evidence
 from spooflens.geodesy import geodetic_to_enu
 
 FloatArray = NDArray[np.float64]
@@ -110,7 +112,7 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
     """The check for every receiver in a fixes frame (schema `fixes`)."""
     opts = opts or ConsistencyOptions()
     threshold = float(stats.chi2.isf(opts.p_false_alarm, 3))
-    result = DetectorResult(name=NAME, ran=True)
+    result = DetectorResult(name=NAME, ran=True, evidence=Evidence.GNSS_ONLY)
     modes = []
     for rid, rx in fixes.groupby("receiver_id", sort=False):
         if len(rx) < 3:
@@ -127,3 +129,26 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
     result.reason = "; ".join(modes)
     result.alarms.sort(key=lambda a: a.start_s)
     return result
+
+
+def _run(ctx: AnalysisContext) -> list[DetectorResult]:
+    return [run_gnss_consistency(ctx.table.fixes)]
+
+
+ANALYSIS = AnalysisSpec(
+    NAME,
+    "GNSS-only: position change against reported velocity (or kinematic plausibility without velocity)",
+    ("fixes",),
+    _run,
+    (
+        DetectorInfo(
+            NAME,
+            Evidence.GNSS_ONLY,
+            "position change over 10 s against the integral of the reported velocity",
+            "A receiver computes velocity from Doppler and position from code ranges; a spoofer dragging the "
+            "position rarely keeps them consistent. Scale from the quietest quarter of the log; chi-square(3) "
+            "at P_FA 1e-5 per epoch.",
+            "1e-5 per epoch",
+        ),
+    ),
+)

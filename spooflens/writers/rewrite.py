@@ -12,6 +12,7 @@ editing their fields in place (`rinex_rewrite.py`), so attacks on raw pseudorang
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import json
 import shutil
 from collections.abc import Callable
@@ -29,7 +30,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
-from readers import foxglove_messages, sniff_format
+from readers import formats, foxglove_messages, sniff_format
 from readers.ros_messages import kind_of
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
@@ -231,23 +232,32 @@ def rewrite_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
     """Write `src` to `dst` in the same format with the spoofed table's fixes (and observations) in it.
 
     `table` is what the readers made of `src` (it carries the clock that maps rows to stamps). Returns a
-    one-line note on what was written.
+    one-line note on what was written. The format's reader declares how (`ReaderFormat.rewrite`).
     """
     src, dst = Path(src), Path(dst)
+    fmt = formats()[sniff_format(src)]
+    if fmt.rewrite is None:
+        raise WriterError(f"{src}: inject cannot write {fmt.description} back; no spoofed copy made")
+    module, _, func = fmt.rewrite.partition(":")
+    note: str = getattr(importlib.import_module(module), func)(src, dst, table, spoofed, velocities)
+    return note
+
+
+def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """Formats spooflens writes whole (CSV, ULog): the spoofed table written anew."""
+    from spooflens.writers import write_log
+
     fmt = sniff_format(src)
-    if fmt in ("csv", "ulog"):
-        from spooflens.writers import write_log
+    write_log(spoofed, dst, fmt)
+    note = "ULog rewritten with only sensor_combined and sensor_gps" if fmt == "ulog" else "CSV log rewritten"
+    extra = f", {len(spoofed.observations)} observations" if len(spoofed.observations) else ""
+    return f"{note}: {len(spoofed.fixes)} fixes{extra}"
 
-        write_log(spoofed, dst, fmt)
-        note = "ULog rewritten with only sensor_combined and sensor_gps" if fmt == "ulog" else "CSV log rewritten"
-        extra = f", {len(spoofed.observations)} observations" if len(spoofed.observations) else ""
-        return f"{note}: {len(spoofed.fixes)} fixes{extra}"
-    if fmt == "rinex":
-        from spooflens.writers.rinex_rewrite import rewrite_rinex
 
-        return rewrite_rinex(src, dst, table, spoofed.observations)
+def rewrite_container(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """MCAP files and ROS bags: every message copied, the fix messages edited in place."""
     plan = _plan(table, spoofed.fixes, velocities)
-    if fmt == "mcap":
+    if sniff_format(src) == "mcap":
         _rewrite_mcap(src, dst, plan)
     else:
         _rewrite_bag(src, dst, plan)

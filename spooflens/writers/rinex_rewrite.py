@@ -280,3 +280,8 @@ def rewrite_rinex(src: Path, dst: Path, table: EpochTable, spoofed_obs: pd.DataF
     if added:
         note += f" ({added:,} added rows not written: RINEX copies only change or remove satellites)"
     return note + ("" if src.is_dir() else _copy_nav_beside(src, dst))
+
+
+def rewrite_rinex_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """`inject`'s entry point (the common rewrite signature): RINEX keeps only observations."""
+    return rewrite_rinex(src, dst, table, spoofed.observations)
