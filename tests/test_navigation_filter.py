@@ -67,7 +67,7 @@ def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[
     """A textbook KF (filterpy) on the exported linear model gives the same innovations and S."""
     _, sol = ground
     model = sol.error_model()
-    kf = KalmanFilter(dim_x=15, dim_z=6)
+    kf = KalmanFilter(dim_x=model.n_states, dim_z=model.n_measurements)
     kf.x, kf.P = model.x0.copy(), model.P0.copy()
     for k in range(min(400, model.n_epochs)):
         if k > 0:
@@ -77,7 +77,7 @@ def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[
         kf.H, kf.R = model.C[k][use], model.R[k][np.ix_(use, use)]
         kf.dim_z = int(use.sum())
         kf.update(model.y[k][use])
-        np.testing.assert_allclose(kf.y, sol.z[k][use], rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(kf.y, sol.nu[k][use], rtol=1e-6, atol=1e-8)
         np.testing.assert_allclose(kf.S, sol.S[k][np.ix_(use, use)], rtol=1e-6, atol=1e-10)
 
 

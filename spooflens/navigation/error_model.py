@@ -18,6 +18,11 @@ F25 = C agree; F13/F23/F32/F33 differ because our position error is in metres. F
 finite-difference Jacobian of the mechanization in tests/test_navigation_error_model.py.
 Measurement: z = INS - GNSS, position (ENU metres) then velocity: H = [0 0 I 0 0; 0 I 0 0 0] (6 x 15;
 the paper prints a 3 x 15 H, an erratum: its text says position AND velocity are measured).
+
+The filter appends six first-order Gauss-Markov states for the receiver's own slowly wandering errors
+(position ENU, velocity ENU: real receivers' errors are time-correlated, and a filter that takes them as
+white has innovations with lag-1 autocorrelation near 1), which enter the GNSS rows with -I, and three
+measurement rows for wheel odometry (`kernels.measurement_matrix`).
 """
 
 from __future__ import annotations
@@ -45,12 +50,17 @@ STATE_NAMES = (
     "ba_x",
     "ba_y",
     "ba_z",
+    "gnss_pos_err_e",
+    "gnss_pos_err_n",
+    "gnss_pos_err_u",
+    "gnss_vel_err_e",
+    "gnss_vel_err_n",
+    "gnss_vel_err_u",
 )
-MEASUREMENT_NAMES = ("pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u")
+MEASUREMENT_NAMES = ("pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "odo_x", "odo_y", "odo_z")
 PHI, DV, DP, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-H_FULL = np.zeros((6, 15))
-H_FULL[0:3, DP] = np.eye(3)
-H_FULL[3:6, DV] = np.eye(3)
+GM_POS, GM_VEL = slice(15, 18), slice(18, 21)
+POS_ROWS, VEL_ROWS, ODO_ROWS = slice(0, 3), slice(3, 6), slice(6, 9)
 
 
 def error_dynamics(s: NavState, f_b: FloatArray) -> FloatArray:

@@ -224,7 +224,35 @@ def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     return out
 
 
-_MEAS_STATE = np.array([6, 7, 8, 3, 4, 5])
+NE = 21  # error states: 15 INS + 3 GNSS position + 3 GNSS velocity Gauss-Markov errors
+NM = 9  # measurement rows: GNSS position (3), GNSS velocity (3), odometry body velocity (3)
+
+
+@njit(cache=CACHE)
+def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
+    """H (9 x 21) at nominal state x: z = INS - measured = H dx + noise.
+
+    GNSS rows see the INS error minus the receiver's Gauss-Markov error; odometry rows compare the INS
+    velocity turned into the vehicle frame, M v~ with M = R_vb C^T, with the wheels' velocity:
+    M~ v~ = M v + M dv - M [v x] phi to first order (C = (I + [phi x]) C~).
+    """
+    Hm = np.zeros((NM, NE))
+    for i in range(3):
+        Hm[i, 6 + i] = 1.0
+        Hm[i, 15 + i] = -1.0
+        Hm[3 + i, 3 + i] = 1.0
+        Hm[3 + i, 18 + i] = -1.0
+    C = x[6:15].copy().reshape(3, 3)
+    M = R_vb @ C.T
+    v = x[3:6]
+    vx = np.zeros((3, 3))
+    vx[0, 1], vx[0, 2], vx[1, 0], vx[1, 2], vx[2, 0], vx[2, 1] = -v[2], v[1], v[2], -v[0], -v[1], v[0]
+    Mv = M @ vx
+    for i in range(3):
+        for j in range(3):
+            Hm[6 + i, j] = -Mv[i, j]
+            Hm[6 + i, 3 + j] = M[i, j]
+    return Hm
 
 
 @njit(cache=CACHE)
@@ -241,41 +269,53 @@ def filter_loop(
     tf: np.ndarray,
     llh: np.ndarray,
     vel: np.ndarray,
-    sigma_pos: np.ndarray,
-    sigma_vel: np.ndarray,
+    odo: np.ndarray,
+    R_vb: np.ndarray,
+    sigma: np.ndarray,
     use: np.ndarray,
+    gm_tau: np.ndarray,
+    gm_sigma: np.ndarray,
 ):
-    """The closed-loop filter over all epochs; returns the per-epoch and per-block records."""
+    """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
+
+    The 15 INS error states are fed back into the nominal state and reset at every update; the six
+    Gauss-Markov receiver-error states are not (they are no error of the INS) and carry their estimate.
+    """
     M = tf.shape[0]
     N = t.shape[0]
-    out_z = np.full((M, 6), np.nan)
-    out_S = np.zeros((M, 6, 6))
-    out_R = np.zeros((M, 6, 6))
+    out_z = np.full((M, NM), np.nan)
+    out_nu = np.full((M, NM), np.nan)
+    out_S = np.zeros((M, NM, NM))
+    out_R = np.zeros((M, NM, NM))
+    out_H = np.zeros((M, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
-    out_Phi = np.zeros((M, 15, 15))
-    out_Qd = np.zeros((M, 15, 15))
-    P_pred = np.zeros((M, 15, 15))
-    P_upd = np.zeros((M, 15, 15))
-    out_dx = np.zeros((M, 15))
+    out_Phi = np.zeros((M, NE, NE))
+    out_Qd = np.zeros((M, NE, NE))
+    P_pred = np.zeros((M, NE, NE))
+    P_upd = np.zeros((M, NE, NE))
+    out_dx = np.zeros((M, NE))
+    gm = np.zeros((M, 6))
     states = np.zeros((M, NX))
     track = np.zeros((N + 1, 7))  # t, lat, lon, h, ve, vn, vu
     track_epoch = np.zeros(N + 1, dtype=np.int64)
     nt = 0
     x = x0.copy()
     P = P0.copy()
+    g = np.zeros(6)  # Gauss-Markov receiver errors, estimated
     k = np.searchsorted(t, x[21])
     if k > N - 1:
         k = N - 1
     x[21] = t[k]
+    qc15 = qc[:15].copy()
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
         if target < k:
             target = k
         if target > N - 1:
             target = N - 1
-        Phi_acc = np.eye(15)
-        Qd_acc = np.zeros((15, 15))
+        Phi_acc = np.eye(NE)
+        Qd_acc = np.zeros((NE, NE))
         while k < target:
             j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
             if j > target:
@@ -284,7 +324,16 @@ def filter_loop(
                 j = k + 1
             dC, dv_b, dp_b, T = increment(t, Qb, G, H, k, j)
             f_mean = dv_b / T - x[18:21] if T > 0 else f[k] - x[18:21]
-            Phi, Qd = discretise(error_dynamics(x, f_mean), qc, T)
+            Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
+            Phi = np.eye(NE)
+            Qd = np.zeros((NE, NE))
+            Phi[:15, :15] = Phi15
+            Qd[:15, :15] = Qd15
+            for i in range(6):
+                a = math.exp(-T / gm_tau[i])
+                Phi[15 + i, 15 + i] = a
+                Qd[15 + i, 15 + i] = gm_sigma[i] ** 2 * (1.0 - a * a)
+                g[i] *= a
             x = propagate(x, dC, dv_b, dp_b, T)
             P = Phi @ P @ Phi.T + Qd
             Phi_acc = Phi @ Phi_acc
@@ -301,55 +350,67 @@ def filter_loop(
         P_pred[e] = P
         lead = tf[e] - x[21]
         rm, rn = local_radii(x[0])
-        z = np.full(6, np.nan)
+        z = np.full(NM, np.nan)
         z[0] = (x[1] - llh[e, 1]) * (rn + x[2]) * math.cos(x[0]) + x[3] * lead
         z[1] = (x[0] - llh[e, 0]) * (rm + x[2]) + x[4] * lead
         z[2] = x[2] - llh[e, 2] + x[5] * lead
-        if not math.isnan(vel[e, 0]):
-            z[3:6] = x[3:6] - vel[e]
-        r = np.empty(6)
-        r[0:3] = sigma_pos[e] ** 2
-        r[3:6] = sigma_vel[e] ** 2
+        for i in range(3):
+            if not math.isnan(vel[e, i]):
+                z[3 + i] = x[3 + i] - vel[e, i]
+        Hm = measurement_matrix(x, R_vb)
+        vb = R_vb @ (x[6:15].copy().reshape(3, 3).T @ x[3:6])
+        for i in range(3):
+            if not math.isnan(odo[e, i]):
+                z[6 + i] = vb[i] - odo[e, i]
+        xp = np.zeros(NE)
+        xp[15:21] = g
+        nu = z - Hm @ xp
         out_z[e] = z
-        for i in range(6):
-            out_R[e, i, i] = r[i]
+        out_nu[e] = nu
+        out_H[e] = Hm
+        for i in range(NM):
+            out_R[e, i, i] = sigma[e, i] ** 2
         n_used = 0
-        for i in range(6):
-            if use[e, i]:
+        for i in range(NM):
+            if use[e, i] and not math.isnan(z[i]):
                 n_used += 1
         if n_used > 0:
             rows = np.empty(n_used, dtype=np.int64)
-            ix = np.empty(n_used, dtype=np.int64)
             m = 0
-            for i in range(6):
-                if use[e, i]:
+            for i in range(NM):
+                if use[e, i] and not math.isnan(z[i]):
                     rows[m] = i
-                    ix[m] = _MEAS_STATE[i]
                     m += 1
-            PHt = np.empty((15, n_used))
+            Hu = np.empty((n_used, NE))
+            nuu = np.empty(n_used)
             for a in range(n_used):
-                PHt[:, a] = P[:, ix[a]]
-            S = np.empty((n_used, n_used))
-            zu = np.empty(n_used)
+                Hu[a] = Hm[rows[a]]
+                nuu[a] = nu[rows[a]]
+            PHt = P @ Hu.T
+            S = Hu @ PHt
             for a in range(n_used):
-                zu[a] = z[rows[a]]
-                for b in range(n_used):
-                    S[a, b] = PHt[ix[a], b]
-                S[a, a] += r[rows[a]]
+                S[a, a] += sigma[e, rows[a]] ** 2
             Sinv = np.linalg.inv(S)
             K = PHt @ Sinv
-            dx = K @ zu
-            P = P - K @ PHt.T
+            dx = K @ nuu
+            IKH = np.eye(NE) - K @ Hu
+            P = IKH @ P @ IKH.T
+            for a in range(n_used):
+                for b in range(NE):
+                    for c in range(NE):
+                        P[b, c] += K[b, a] * K[c, a] * sigma[e, rows[a]] ** 2
             P = 0.5 * (P + P.T)
-            nis[e] = zu @ Sinv @ zu
+            nis[e] = nuu @ Sinv @ nuu
             dof[e] = n_used
             for a in range(n_used):
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
-            x = correct(x, dx)
+            x = correct(x, dx[:15])
+            g = g + dx[15:21]
             out_dx[e] = dx
         P_upd[e] = P
         states[e] = x
+        gm[e] = g
         if nt > 0 and track[nt - 1, 0] == x[21]:
             track[nt - 1, 1:4] = x[0:3]
             track[nt - 1, 4:7] = x[3:6]
@@ -366,7 +427,24 @@ def filter_loop(
         track[nt, 4:7] = x[3:6]
         track_epoch[nt] = M - 1
         nt += 1
-    return (out_z, out_S, out_R, nis, dof, out_Phi, out_Qd, P_pred, P_upd, out_dx, states, track[:nt], track_epoch[:nt])
+    return (
+        out_z,
+        out_nu,
+        out_S,
+        out_R,
+        out_H,
+        nis,
+        dof,
+        out_Phi,
+        out_Qd,
+        P_pred,
+        P_upd,
+        out_dx,
+        gm,
+        states,
+        track[:nt],
+        track_epoch[:nt],
+    )
 
 
 @njit(cache=CACHE)
@@ -378,9 +456,9 @@ def rts_closed_loop(P_pred: np.ndarray, P_upd: np.ndarray, Phi: np.ndarray, dx: 
     is delta_e = A_e (dx[e+1] + delta_{e+1}), A_e = P_upd[e] Phi[e+1]^T P_pred[e+1]^-1, and
     P_s[e] = P_upd[e] + A_e (P_s[e+1] - P_pred[e+1]) A_e^T.
     """
-    M = dx.shape[0]
-    delta = np.zeros((M, 15))
-    P_s = np.zeros((M, 15, 15))
+    M, n = dx.shape
+    delta = np.zeros((M, n))
+    P_s = np.zeros((M, n, n))
     P_s[M - 1] = P_upd[M - 1]
     for e in range(M - 2, -1, -1):
         A = np.linalg.solve(P_pred[e + 1].T, (P_upd[e] @ Phi[e + 1].T).T).T

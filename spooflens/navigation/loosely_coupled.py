@@ -30,6 +30,39 @@ from spooflens.navigation.strapdown import NavState, Preintegrated, preintegrate
 FloatArray = NDArray[np.float64]
 DEFAULT_SIGMA_POS = (3.7, 3.7, 6.0)  # seed 000's R when a log reports no accuracy
 DEFAULT_SIGMA_VEL = 0.1
+GM_FLOOR = 1e-4  # a Gauss-Markov state switched off keeps this much variance (smoother stays invertible)
+
+
+@dataclass(frozen=True)
+class GnssNoise:
+    """The receiver's measurement errors: white noise plus a first-order Gauss-Markov process per axis,
+    (horizontal, vertical) 1-sigma values. `source` says where the numbers came from."""
+
+    white_pos_m: tuple[float, float]
+    gm_pos_m: tuple[float, float] = (0.0, 0.0)
+    tau_pos_s: float = 100.0
+    white_vel_mps: tuple[float, float] = (DEFAULT_SIGMA_VEL, DEFAULT_SIGMA_VEL)
+    gm_vel_mps: tuple[float, float] = (0.0, 0.0)
+    tau_vel_s: float = 10.0
+    source: str = ""
+
+    def gm_arrays(self) -> tuple[FloatArray, FloatArray]:
+        """(tau, sigma) of the six Gauss-Markov states, in the kernel's order (pos ENU, vel ENU)."""
+        tau = np.r_[np.full(3, self.tau_pos_s), np.full(3, self.tau_vel_s)]
+        (ph, pv), (vh, vv) = self.gm_pos_m, self.gm_vel_mps
+        sigma = np.maximum(np.array([ph, ph, pv, vh, vh, vv], dtype=float), GM_FLOOR)
+        return tau, sigma
+
+
+@dataclass(frozen=True)
+class OdometryAiding:
+    """Wheel odometry as a body-velocity measurement: the IMU-to-vehicle rotation and the noise of the
+    forward, lateral and vertical rows (lateral and vertical are the non-holonomic constraint)."""
+
+    R_vb: FloatArray  # vehicle <- IMU body (FLU)
+    sigma_mps: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    odometry_id: str = ""
+    source: str = ""
 
 
 @dataclass(frozen=True)
@@ -41,6 +74,8 @@ class FilterOptions:
     min_sigma_vel_mps: float = 0.03
     sigma_pos_m: tuple[float, float, float] | None = None  # overrides the log's accuracies
     sigma_vel_mps: float | None = None
+    noise: GnssNoise | None = None  # learned noise model; None: reported accuracies, white, as before
+    odometry: OdometryAiding | None = None
     exclude_after_s: float | None = None  # ignore GNSS from this time on (coast on the INS) ...
     exclude_until_s: float | None = None  # ... up to this time (None: to the end of the log)
     exclude_velocity_too: bool = True
@@ -50,35 +85,41 @@ class FilterOptions:
 
 @dataclass
 class NavSolution:
-    """The filter's record. Arrays are per GNSS epoch (M) unless named as per block."""
+    """The filter's record. Arrays are per GNSS epoch (M) unless named as per block. Measurement rows
+    (9): GNSS position ENU, GNSS velocity ENU, odometry body velocity; states (21): 15 INS errors and
+    six Gauss-Markov receiver errors (`error_model.STATE_NAMES`)."""
 
     imu_id: str
     receiver_id: str
     grade: ImuGrade
     alignment: Alignment | None
     t: FloatArray  # (M,)
-    z: FloatArray  # (M, 6) INS - GNSS, NaN where not measured
-    used: NDArray[np.bool_]  # (M, 6)
-    S: FloatArray  # (M, 6, 6) innovation covariance of the used rows (zero elsewhere)
-    R: FloatArray  # (M, 6, 6)
+    z: FloatArray  # (M, 9) INS - measurement, NaN where not measured
+    nu: FloatArray  # (M, 9) innovation: z minus the predicted receiver error
+    used: NDArray[np.bool_]  # (M, 9)
+    S: FloatArray  # (M, 9, 9) innovation covariance of the used rows (zero elsewhere)
+    R: FloatArray  # (M, 9, 9)
+    H: FloatArray  # (M, 9, 21)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
-    Phi: FloatArray  # (M, 15, 15) from the previous epoch (identity at the first)
-    Qd: FloatArray  # (M, 15, 15)
-    P_pred: FloatArray  # (M, 15, 15)
-    P_upd: FloatArray  # (M, 15, 15)
-    dx: FloatArray  # (M, 15) applied correction
+    Phi: FloatArray  # (M, 21, 21) from the previous epoch (identity at the first)
+    Qd: FloatArray  # (M, 21, 21)
+    P_pred: FloatArray  # (M, 21, 21)
+    P_upd: FloatArray  # (M, 21, 21)
+    dx: FloatArray  # (M, 21) update (INS part applied to the nominal state, receiver part kept)
+    gm: FloatArray  # (M, 6) estimated receiver errors after the update
     state: FloatArray  # (M, 22) after the update, columns STATE_COLUMNS (C_b^n row-major)
     track_t: FloatArray  # (K,) block ends
     track_llh: FloatArray  # (K, 3) lat, lon (rad), h
     track_v: FloatArray  # (K, 3)
     track_epoch: NDArray[np.int64]  # (K,) index of the last epoch at or before each block end
+    options: FilterOptions = field(default_factory=FilterOptions)
     state_names: tuple[str, ...] = STATE_NAMES
     measurement_names: tuple[str, ...] = MEASUREMENT_NAMES
 
     @property
     def innovation(self) -> FloatArray:
-        return self.z
+        return self.nu
 
     def error_model(self):
         from spooflens.navigation.solution_model import error_model
@@ -86,26 +127,51 @@ class NavSolution:
         return error_model(self)
 
 
-def _fix_arrays(fixes: pd.DataFrame, opts: FilterOptions) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Per-fix measurement sigmas (position ENU, velocity) and values."""
+def _measurement_sigmas(fixes: pd.DataFrame, opts: FilterOptions) -> FloatArray:
+    """(M, 9) 1-sigma of each measurement row: the learned noise when given, else reported accuracies."""
     n = len(fixes)
+    out = np.zeros((n, 9))
     if opts.sigma_pos_m is not None:
         sp = np.tile(opts.sigma_pos_m, (n, 1))
+    elif opts.noise is not None:
+        (h, v) = opts.noise.white_pos_m
+        sp = np.tile([h, h, v], (n, 1))
     else:
         h = fixes["h_acc_m"].to_numpy(dtype=float)
         v = fixes["v_acc_m"].to_numpy(dtype=float)
-        sp = np.c_[h, h, v]
-        default = np.tile(DEFAULT_SIGMA_POS, (n, 1))
-        sp = np.where(np.isfinite(sp) & (sp > 0), sp, default)
-    sp = np.maximum(sp, opts.min_sigma_pos_m)
-    vel = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+        sp = np.where(
+            np.isfinite(np.c_[h, h, v]) & (np.c_[h, h, v] > 0), np.c_[h, h, v], np.tile(DEFAULT_SIGMA_POS, (n, 1))
+        )
+        sp = np.maximum(sp, opts.min_sigma_pos_m)
     if opts.sigma_vel_mps is not None:
-        sv = np.full(n, opts.sigma_vel_mps)
+        sv = np.full((n, 3), opts.sigma_vel_mps)
+    elif opts.noise is not None:
+        (h, v) = opts.noise.white_vel_mps
+        sv = np.tile([h, h, v], (n, 1))
     else:
-        sv = fixes["vel_acc_mps"].to_numpy(dtype=float)
-        sv = np.where(np.isfinite(sv) & (sv > 0), sv, DEFAULT_SIGMA_VEL)
-    sv = np.maximum(sv, opts.min_sigma_vel_mps)
-    return sp, sv, vel, fixes[["lat_deg", "lon_deg", "height_m"]].to_numpy(dtype=float)
+        a = fixes["vel_acc_mps"].to_numpy(dtype=float)
+        a = np.maximum(np.where(np.isfinite(a) & (a > 0), a, DEFAULT_SIGMA_VEL), opts.min_sigma_vel_mps)
+        sv = np.repeat(a[:, None], 3, axis=1)
+    out[:, 0:3], out[:, 3:6] = sp, sv
+    out[:, 6:9] = opts.odometry.sigma_mps if opts.odometry is not None else 1.0
+    return out
+
+
+def odometry_at(table: EpochTable, odometry_id: str, t: FloatArray, max_gap_s: float = 0.3) -> FloatArray:
+    """(M, 3) vehicle-frame velocity of an odometry stream at times t (linear interpolation between
+    samples at most `max_gap_s` apart; NaN elsewhere)."""
+    od = table.odometry[table.odometry["odometry_id"] == odometry_id]
+    out = np.full((len(t), 3), np.nan)
+    if len(od) < 2:
+        return out
+    to = od["t_s"].to_numpy(dtype=float)
+    v = od[["vx_mps", "vy_mps", "vz_mps"]].to_numpy(dtype=float)
+    k = np.clip(np.searchsorted(to, t), 1, len(to) - 1)
+    t0, t1 = to[k - 1], to[k]
+    ok = (t >= t0 - 1e-9) & (t <= t1 + 1e-9) & (t1 - t0 <= max_gap_s)
+    w = np.clip((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
+    out[ok] = ((1 - w) * v[k - 1] + w * v[k])[ok]
+    return out
 
 
 STATE_COLUMNS = (
@@ -148,11 +214,21 @@ def select_streams(table: EpochTable, imu_id: str | None, receiver_id: str | Non
     return imu_id, receiver_id, (info.body_frame if info and info.body_frame else "FLU")
 
 
-def run_filter(
-    table: EpochTable, imu_id: str | None = None, receiver_id: str | None = None, options: FilterOptions | None = None
-) -> NavSolution:
-    """The closed-loop filter over one IMU and one receiver of `table`."""
-    opts = options or FilterOptions()
+@dataclass(frozen=True)
+class FilterInputs:
+    """What every run of the filter over one IMU and receiver shares: the preintegrated IMU, the fixes,
+    the odometry at the fix times and the initial state (computed once, reused by every pass)."""
+
+    table: EpochTable
+    imu_id: str
+    receiver_id: str
+    pre: Preintegrated
+    imu: pd.DataFrame
+    fixes: pd.DataFrame
+    odometry_ids: tuple[str, ...]
+
+
+def prepare(table: EpochTable, imu_id: str | None = None, receiver_id: str | None = None) -> FilterInputs:
     imu_id, receiver_id, body = select_streams(table, imu_id, receiver_id)
     imu = table.imu_of(imu_id)
     fixes = table.fixes_of(receiver_id)
@@ -161,15 +237,36 @@ def run_filter(
     t_imu = imu["t_s"].to_numpy(dtype=float)
     f_b = to_flu(imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(dtype=float), body)
     w_b = to_flu(imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy(dtype=float), body)
-    pre = preintegrate(t_imu, f_b, w_b)
+    odometry_ids = tuple(dict.fromkeys(table.odometry["odometry_id"].astype(str)))
+    return FilterInputs(table, imu_id, receiver_id, preintegrate(t_imu, f_b, w_b), imu, fixes, odometry_ids)
+
+
+def initial_state(inputs: FilterInputs, opts: FilterOptions) -> tuple[NavState, Alignment | None]:
     if opts.initial is not None:
-        s, alignment = opts.initial.copy(), None
-    else:
-        alignment = align(pre, imu, fixes, opts.t_start if opts.t_start is not None else t_imu[0])
-        s = NavState(
-            alignment.t0, alignment.lat0, alignment.lon0, alignment.h0, alignment.v0.copy(), alignment.C0.copy()
-        )
-    return _run(pre, fixes, s, opts, imu_id, receiver_id, alignment)
+        return opts.initial.copy(), None
+    t0 = opts.t_start if opts.t_start is not None else float(inputs.pre.t[0])
+    alignment = align(inputs.pre, inputs.imu, inputs.fixes, t0)
+    s = NavState(alignment.t0, alignment.lat0, alignment.lon0, alignment.h0, alignment.v0.copy(), alignment.C0.copy())
+    return s, alignment
+
+
+def run_prepared(
+    inputs: FilterInputs, opts: FilterOptions, start: tuple[NavState, Alignment | None] | None = None
+) -> NavSolution:
+    """One pass of the filter over prepared inputs (`start` reuses an alignment already made)."""
+    s, alignment = start if start is not None else initial_state(inputs, opts)
+    odo = None
+    if opts.odometry is not None:
+        odo = odometry_at(inputs.table, opts.odometry.odometry_id, inputs.fixes["t_s"].to_numpy(dtype=float))
+    return _run(inputs.pre, inputs.fixes, s.copy(), opts, inputs.imu_id, inputs.receiver_id, alignment, odo)
+
+
+def run_filter(
+    table: EpochTable, imu_id: str | None = None, receiver_id: str | None = None, options: FilterOptions | None = None
+) -> NavSolution:
+    """The closed-loop filter over one IMU and one receiver of `table`."""
+    opts = options or FilterOptions()
+    return run_prepared(prepare(table, imu_id, receiver_id), opts)
 
 
 def _run(
@@ -180,6 +277,7 @@ def _run(
     imu_id: str,
     receiver_id: str,
     alignment: Alignment | None,
+    odometry: FloatArray | None = None,
 ) -> NavSolution:
     tf = fixes["t_s"].to_numpy(dtype=float)
     keep = (tf >= s.t - 1e-9) & (tf <= pre.t[-1] + 1e-9)
@@ -187,33 +285,43 @@ def _run(
     tf = tf[keep]
     if len(tf) < 2:
         raise AnalysisError(f"fewer than two GNSS fixes of {receiver_id} inside the IMU's time span")
-    sp, sv, vel, llh = _fix_arrays(fixes, opts)
-    has_vel = np.isfinite(vel).all(axis=1) & opts.use_velocity
-    vel = np.where(has_vel[:, None], vel, np.nan)
-    use = np.zeros((len(tf), 6), dtype=np.bool_)
-    use[:, :3] = True
-    use[:, 3:] = has_vel[:, None]
+    sigma = _measurement_sigmas(fixes, opts)
+    vel = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+    if not opts.use_velocity:
+        vel = np.full_like(vel, np.nan)
+    llh = fixes[["lat_deg", "lon_deg", "height_m"]].to_numpy(dtype=float)
+    odo = np.full((len(tf), 3), np.nan) if odometry is None else np.asarray(odometry, dtype=float)[keep]
+    R_vb = opts.odometry.R_vb if opts.odometry is not None else np.eye(3)
+    use = np.ones((len(tf), 9), dtype=np.bool_)
+    use[:, 6:9] = opts.odometry is not None
     if opts.exclude_after_s is not None:
         late = (tf >= opts.exclude_after_s) & (tf <= (np.inf if opts.exclude_until_s is None else opts.exclude_until_s))
         use[late, :3] = False
         if opts.exclude_velocity_too:
-            use[late, 3:] = False
-    (z, S, R, nis, dof, Phi, Qd, P_pred, P_upd, dx, states, track, track_epoch) = kernels.filter_loop(
+            use[late, 3:6] = False
+    noise = opts.noise or GnssNoise(white_pos_m=(1.0, 1.0))
+    gm_tau, gm_sigma = noise.gm_arrays()
+    qc = np.r_[opts.grade.qc_diagonal(), np.zeros(6)]
+    P0 = np.diag(np.r_[opts.grade.p0_diagonal(), gm_sigma**2])
+    (z, nu, S, R, H, nis, dof, Phi, Qd, P_pred, P_upd, dx, gm, states, track, track_epoch) = kernels.filter_loop(
         pre.t,
         pre.Qb,
         pre.G,
         pre.H,
         pre.f,
         s.to_vector(),
-        np.diag(opts.grade.p0_diagonal()),
-        opts.grade.qc_diagonal(),
+        P0,
+        qc,
         float(opts.max_block_s),
         tf,
         np.c_[np.radians(llh[:, 0]), np.radians(llh[:, 1]), llh[:, 2]],
         vel,
-        sp,
-        sv,
+        odo,
+        np.ascontiguousarray(R_vb, dtype=float),
+        sigma,
         use,
+        gm_tau,
+        gm_sigma,
     )
     return NavSolution(
         imu_id,
@@ -222,9 +330,11 @@ def _run(
         alignment,
         tf,
         z,
-        use,
+        nu,
+        use & np.isfinite(z),
         S,
         R,
+        H,
         nis,
         dof,
         Phi,
@@ -232,9 +342,11 @@ def _run(
         P_pred,
         P_upd,
         dx,
+        gm,
         states,
         track[:, 0],
         track[:, 1:4],
         track[:, 4:7],
         track_epoch,
+        opts,
     )

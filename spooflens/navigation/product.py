@@ -46,10 +46,10 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
             series=[
                 Series("nis", sol.t, sol.nis, "chi2(dof)"),
                 # INS minus GNSS with the filter's own 1-sigma: a spoofed channel walks out of its band
-                Series("innovation_position", sol.t, sol.z[:, :3], "m", components=ENU),
+                Series("innovation_position", sol.t, sol.nu[:, :3], "m", components=ENU),
                 Series("innovation_position_sigma", sol.t, sigma[:, :3], "m", components=ENU),
-                Series("innovation_velocity", sol.t, sol.z[:, 3:], "m/s", components=ENU),
-                Series("innovation_velocity_sigma", sol.t, sigma[:, 3:], "m/s", components=ENU),
+                Series("innovation_velocity", sol.t, sol.nu[:, 3:6], "m/s", components=ENU),
+                Series("innovation_velocity_sigma", sol.t, sigma[:, 3:6], "m/s", components=ENU),
             ],
             tracks=[
                 Track(
