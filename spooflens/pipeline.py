@@ -1,6 +1,12 @@
 """The whole analysis of one log, as every front end runs it (CLI analyze, report, batch, fleet):
 
-epoch table -> analyses (navigation, detectors) -> verdict -> reconstruction of each incident.
+    epoch table -> analyses (navigation, detectors) -> verdict -> confirmation and reconstruction of each
+    incident (`spooflens.reconstruction`).
+
+The sensors' noise is learned from the log (`spooflens.navigation.noise_learning`). An attack inside
+the learning window would teach the filter that the attack is noise, so when the first pass finds
+anything suspicious the noise is learned again with those stretches left out, and the analyses run a
+second time on that filter: the noise is kept fixed through a suspected attack.
 """
 
 from __future__ import annotations
@@ -11,7 +17,10 @@ from dataclasses import dataclass
 from spooflens.analysis import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
+from spooflens.errors import SpooflensError
 from spooflens.verdict import Verdict, decide
+
+SUSPECT_MARGIN_S = 10.0
 
 
 @dataclass
@@ -20,17 +29,50 @@ class Analysis:
     options: AnalyzeOptions
     results: list[DetectorResult]
     verdict: Verdict
+    passes: int = 1
+    suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
+
+
+def _one_pass(
+    table: EpochTable, options: AnalyzeOptions, on_step: Callable[[str], None] | None, cache: dict[str, object]
+) -> tuple[AnalysisContext, Verdict]:
+    from spooflens.reconstruction import reconstruct
+
+    ctx = AnalysisContext(table, options, cache=dict(cache))
+    results = run_with_context(ctx, on_step)
+    verdict = decide(results)
+    if on_step and verdict.incidents:
+        on_step("confirmation and reconstruction")
+    return ctx, reconstruct(ctx, verdict)
+
+
+def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
+    """Every incident and anomaly of a verdict, widened by `margin_s`, merged."""
+    spans = sorted((min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s) for i in verdict.incidents)
+    merged: list[tuple[float, float]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+        else:
+            merged.append((a, b))
+    return tuple(merged)
 
 
 def analyze_table(
     table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
 ) -> Analysis:
-    from spooflens.reconstruction import reconstruct
+    from spooflens.navigation.product import solve_navigation
 
-    ctx = AnalysisContext(table, options or AnalyzeOptions())
-    results = run_with_context(ctx, on_step)
-    verdict = decide(results)
-    if on_step and any(i.is_spoofing for i in verdict.incidents):
-        on_step("reconstruction")
-    verdict = reconstruct(ctx, verdict)
-    return Analysis(table, ctx.options, ctx.results, verdict)
+    options = options or AnalyzeOptions()
+    ctx, verdict = _one_pass(table, options, on_step, {})
+    spans = suspected_spans(verdict)
+    if not spans or "navigation" not in ctx.cache:
+        return Analysis(table, options, ctx.results, verdict)
+    if on_step:
+        on_step("learning the noise again without the suspected stretches")
+    try:
+        nav = solve_navigation(table, options, exclude=spans)
+    except SpooflensError:
+        return Analysis(table, options, ctx.results, verdict)
+    ctx, verdict = _one_pass(table, options, on_step, {"navigation": nav})
+    return Analysis(table, options, ctx.results, verdict, 2, spans)

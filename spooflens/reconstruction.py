@@ -1,30 +1,337 @@
-"""Where the vehicle really was during each spoofing incident: the INS solution with the spoofed GNSS
-left out, added to the navigation product's tracks.
+"""Where the vehicle really was during each incident, and how long each incident really lasted.
+
+Detectors on the closed-loop filter alarm when an attack starts; afterwards the filter follows the
+spoofed fixes and the alarms stop, although the attack goes on. So, for every incident with inertial
+evidence, the filter is run again with that receiver's GNSS left out from the onset on: the INS (and
+wheel odometry when the log has it) coasts, and every later fix is compared with this reference
+within its growing uncertainty (`CoastingCheck`):
+
+- the incident is *confirmed* when GNSS departs from the coasted reference beyond that uncertainty
+  (position and velocity NIS over chi-square(dof) at P_FA `p_disagree` per epoch) for at least
+  `min_disagree_s` within `confirm_window_s` of the onset. A receiver glitch (a jump of an SBAS
+  solution, a short wander) does not leave the reference's uncertainty for long and is not confirmed:
+  its inertial evidence does not count, and the incident keeps only its other evidence classes;
+- it *ends* at the first fix after the departure from which GNSS agrees with the reference again for
+  `agree_s` seconds, with an interval from the last disagreeing fix to that one, or at the end of the
+  log when GNSS never agrees again.
+
+The reconstructed track is the INS solution with the GNSS left out over the whole incident (its
+velocity kept when the GNSS-only check showed the receiver's velocity stayed honest: a position-only
+drag), smoothed, so GNSS after a finished attack ties the gap down.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
 from spooflens.analysis import AnalysisContext
+from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
-from spooflens.verdict import Verdict
+from spooflens.evidence import ORDER, Evidence, confidence
+from spooflens.navigation.loosely_coupled import NavSolution, run_prepared
+from spooflens.navigation.product import Navigation
+from spooflens.navigation.smoother import smooth
+from spooflens.navigation.strapdown import NavState
+from spooflens.verdict import Incident, Verdict
+
+FloatArray = NDArray[np.float64]
+GNSS_ROWS = (0, 1, 2, 3, 4, 5)
+# The check compares horizontal position and velocity: receivers' heights wander by tens of metres
+# (an SBAS solution converging), and the vertical channel of a coasting INS diverges.
+HORIZONTAL_ROWS = (0, 1, 3, 4)
+
+
+@dataclass(frozen=True)
+class CoastingOptions:
+    p_disagree: float = 1e-3
+    margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
+    min_disagree_s: float = 2.0
+    min_disagree_epochs: int = 3
+    confirm_window_s: float = 60.0  # after the incident's last alarm
+    agree_s: float = 10.0
+    min_agree_epochs: int = 5
+    margin_s: float = 1.0  # GNSS is left out from this long before the onset estimate
+    placebo_horizon_s: float = 60.0
+    placebo_runs: int = 24
+    settle_s: float = 30.0
+    converge_s: float = 60.0  # a reference younger than this cannot confirm anything (still converging)
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """How far GNSS departs from the coasted reference in this log's clean stretches, per horizon since
+    the coasting began: the largest NIS-over-threshold ratio of `runs` coasts started there (never
+    below 1). A real receiver's jumps and a real IMU's drift make it larger than the model says."""
+
+    horizon_s: FloatArray
+    kappa: FloatArray
+    runs: int
+
+    def at(self, h: FloatArray) -> FloatArray:
+        if not len(self.horizon_s):
+            return np.ones_like(h)
+        return np.interp(h, self.horizon_s, self.kappa, left=self.kappa[0], right=self.kappa[-1])
+
+
+@dataclass(frozen=True)
+class CoastingCheck:
+    excluded_from_s: float
+    t: FloatArray
+    ratio: FloatArray  # GNSS against the coasted reference: NIS / chi-square threshold
+    kappa: FloatArray  # the clean envelope at each epoch's horizon
+    offset_m: FloatArray  # horizontal distance GNSS - reference
+    confirmed: bool
+    departure_s: float | None  # start of the first sustained disagreement
+    end_s: float | None  # first fix of sustained agreement after it (None: never, to the end of the log)
+    end_interval_s: tuple[float, float] | None
+
+
+def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True))
+
+
+def coasting_nis(sol: NavSolution, rows: tuple[int, ...] = GNSS_ROWS) -> tuple[FloatArray, NDArray[np.int64]]:
+    """NIS of the measured GNSS rows against the filter's prediction, whether the rows were used or not."""
+    idx = np.array(rows)
+    present = np.isfinite(sol.z[:, idx])
+    dof = present.sum(axis=1).astype(np.int64)
+    nis = np.full(len(sol.t), np.nan)
+    for pattern in np.unique(present[dof > 0], axis=0):
+        k = np.flatnonzero((present == pattern).all(axis=1))
+        r = idx[pattern]
+        nu = sol.nu[k][:, r]
+        S = sol.S_all[k][:, r][:, :, r]
+        nis[k] = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    return nis, dof
+
+
+def coast(nav: Navigation, t_from: float, t_end: float | None = None) -> NavSolution:
+    """The INS (and odometry) continued from the main solution's last epoch at or before `t_from` with
+    every later GNSS fix left out (each still compared with it), up to `t_end`."""
+    sol = nav.solution
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    if k < 0:
+        opts = nav.options(exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True)
+        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
+    opts = nav.options(
+        initial=NavState.from_vector(sol.state[k]),
+        initial_covariance=sol.P_upd[k],
+        initial_gm=sol.gm[k],
+        exclude_after_s=float(sol.t[k]),
+        exclude_until_s=None,
+        exclude_velocity_too=True,
+    )
+    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+
+
+def _ratio(sol: NavSolution, p: float) -> FloatArray:
+    nis, dof = coasting_nis(sol, HORIZONTAL_ROWS)
+    threshold = np.where(dof > 0, stats.chi2.isf(p, np.maximum(dof, 1)), np.nan)
+    return np.asarray(nis / threshold, dtype=float)
+
+
+@dataclass(frozen=True)
+class Placebo:
+    """Coasts of `placebo_horizon_s` started all over the log: what GNSS-minus-reference looks like
+    where (most likely) nobody attacked. Each incident is judged against those that do not overlap it."""
+
+    starts: FloatArray
+    grid: FloatArray  # horizon, s
+    curves: FloatArray  # (runs, len(grid)) running maximum of the NIS-over-threshold ratio
+
+    def envelope(self, avoid: tuple[float, float], margin_s: float) -> Envelope:
+        H = self.grid[-1] if len(self.grid) else 0.0
+        keep = ~((self.starts - margin_s <= avoid[1]) & (avoid[0] <= self.starts + H))
+        if not keep.any():
+            return Envelope(np.array([]), np.array([]), 0)
+        return Envelope(self.grid, np.maximum(self.curves[keep].max(axis=0), 1.0), int(keep.sum()))
+
+
+def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
+    t = nav.solution.t
+    H = opts.placebo_horizon_s
+    starts = np.arange(t[0] + opts.settle_s, t[-1] - H, H / 2.0)
+    if len(starts) > opts.placebo_runs:
+        starts = starts[np.linspace(0, len(starts) - 1, opts.placebo_runs).round().astype(int)]
+    grid = np.arange(0.0, H + 1.0, 1.0)
+    kept, curves = [], []
+    for s in starts:
+        sol = coast(nav, float(s), float(s) + H)
+        r = _ratio(sol, opts.p_disagree)
+        fine = np.isfinite(r)
+        if fine.sum() < 3:
+            continue
+        running = np.maximum.accumulate(np.where(fine, r, 0.0))
+        kept.append(float(s))
+        curves.append(np.interp(grid, sol.t - s, running))
+    return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
+
+
+def coasting_check(
+    nav: Navigation,
+    onset_s: float,
+    envelope: Envelope,
+    last_alarm_s: float | None = None,
+    opts: CoastingOptions | None = None,
+) -> CoastingCheck:
+    opts = opts or CoastingOptions()
+    t_ex = onset_s - opts.margin_s
+    sol = coast(nav, t_ex)
+    t = sol.t
+    ratio = _ratio(sol, opts.p_disagree)
+    kappa = envelope.at(t - t_ex)
+    offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
+    disagree = np.nan_to_num(ratio) > opts.margin * kappa
+    departure = None
+    deadline = max(onset_s, last_alarm_s or onset_s) + opts.confirm_window_s
+    for a, b in _runs(disagree):
+        if t[a] > deadline:
+            break
+        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
+            departure = int(a)
+            break
+    if departure is None:
+        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None)
+    end = end_interval = None
+    agree = ~disagree & np.isfinite(ratio)
+    for a, b in _runs(agree):
+        if a <= departure:
+            continue
+        if b - a + 1 >= opts.min_agree_epochs and t[b] - t[a] >= opts.agree_s:
+            end = float(t[a])
+            last_bad = np.flatnonzero(disagree[:a])
+            end_interval = (float(t[last_bad[-1]]) if len(last_bad) else float(t[a]), end)
+            break
+    return CoastingCheck(t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval)
+
+
+def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
+    opts = nav.options(exclude_after_s=t_from, exclude_until_s=t_to, exclude_velocity_too=not velocity_honest)
+    sm = smooth(run_prepared(nav.inputs, opts, nav.start))
+    name = (
+        "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
+        if velocity_honest
+        else "reconstructed (INS alone, GNSS excluded)"
+    )
+    if nav.solution.options.odometry is not None:
+        name = name.replace("INS", "INS + odometry", 1)
+    return Track(name, sm.track_t, np.degrees(sm.track_llh[:, 0]), np.degrees(sm.track_llh[:, 1]), sm.track_llh[:, 2])
 
 
 def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
-    from spooflens.detectors.seed000 import reconstructed_track
-
+    """Confirm, extend and reconstruct every incident that has inertial evidence; the verdict anew."""
     nav_result = next((r for r in ctx.results if r.name == "navigation" and r.ran), None)
-    spoofing = [i for i in verdict.incidents if i.is_spoofing]
-    if nav_result is None or not spoofing:
+    candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
+    if nav_result is None or not candidates:
         return verdict
     try:
         nav = ctx.navigation()
     except SpooflensError:
         return verdict
-    first = spoofing[0]
-    sol = nav.solution
-    end = None if first.end_s >= sol.t[-1] - 1e-6 else first.end_s
-    velocity_honest = any(
-        r.name == "gnss_consistency" and any(a.end_s >= first.onset_s for a in r.alarms) for r in ctx.results
-    )
-    nav_result.tracks.append(reconstructed_track(ctx.table, sol, first.onset_s, end, velocity_honest))
-    return verdict
+    t_last = float(nav.solution.t[-1])
+    opts = CoastingOptions()
+    incidents: list[Incident] = []
+    checks: list[tuple[Incident, CoastingCheck]] = []
+    placebo = placebo_coasts(nav, opts)
+    envelopes = []
+    for inc in verdict.incidents:
+        if Evidence.INERTIAL not in inc.evidence:
+            incidents.append(inc)
+            continue
+        envelope = placebo.envelope((_coast_start(inc), inc.end_s + opts.agree_s), opts.margin_s)
+        envelopes.append(envelope)
+        check = coasting_check(nav, _coast_start(inc), envelope, inc.end_s, opts)
+        checks.append((inc, check))
+        young = _coast_start(inc) < float(nav.solution.t[0]) + opts.converge_s
+        if not check.confirmed or young:
+            kept = tuple(e for e in inc.evidence if e != Evidence.INERTIAL)
+            why = (
+                f"inertial alarm not confirmed: the INS reference had run only "
+                f"{_coast_start(inc) - float(nav.solution.t[0]):.0f} s and was still converging"
+                if young
+                else "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty "
+                "and this log's own clean departures (a receiver glitch, not a sustained departure)"
+            )
+            incidents.append(
+                replace(
+                    inc,
+                    evidence=kept,
+                    confidence=confidence(set(kept)) if kept else "low",
+                    end_method=why,
+                    offset_peak_m=float(np.nanmax(check.offset_m)) if len(check.offset_m) else None,
+                )
+            )
+            continue
+        # the coasting comparison says when GNSS agreed again; alarms after that are the closed-loop
+        # filter's recovery from the spoofed track, not more attack
+        end = check.end_s if check.end_s is not None else t_last
+        sel = (check.t >= check.excluded_from_s) & (check.t <= end)
+        offsets = check.offset_m[sel]
+        incidents.append(
+            replace(
+                inc,
+                end_s=end,
+                end_interval_s=check.end_interval_s if check.end_s is not None else (t_last, t_last),
+                ongoing_at_end=check.end_s is None,
+                end_method="GNSS agreed again with the coasted INS reference"
+                if check.end_s is not None
+                else "GNSS never agreed again with the coasted INS reference before the log ended",
+                offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
+                offset_end_m=float(offsets[-1]) if len(offsets) else None,
+            )
+        )
+    incidents = _merge_overlapping(incidents)
+    confirmed = [i for i in incidents if i.is_spoofing]
+    for inc in confirmed:
+        onset = inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s
+        t_to = None if inc.ongoing_at_end else inc.end_s
+        velocity_honest = any(
+            r.name == "gnss_consistency" and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
+            for r in ctx.results
+        )
+        nav_result.tracks.append(_reconstructed_track(nav, onset - CoastingOptions().margin_s, t_to, velocity_honest))
+    nav_result.extras["coasting_checks"] = [
+        {
+            "incident_onset_s": inc.onset_s,
+            "confirmed": c.confirmed,
+            "departure_s": c.departure_s,
+            "end_s": c.end_s,
+            "clean_coasts": e.runs,
+            "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
+            "peak_ratio_over_envelope": float(np.nanmax(c.ratio / c.kappa)) if np.isfinite(c.ratio).any() else None,
+        }
+        for (inc, c), e in zip(checks, envelopes, strict=True)
+    ]
+    return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
+
+
+def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
+    """Incidents whose extended spans overlap are one incident."""
+    out: list[Incident] = []
+    for inc in sorted(incidents, key=lambda i: i.start_s):
+        if out and inc.start_s <= out[-1].end_s and out[-1].is_spoofing and inc.is_spoofing:
+            prev = out[-1]
+            classes = tuple(e for e in ORDER if e in {*prev.evidence, *inc.evidence})
+            out[-1] = replace(
+                prev,
+                end_s=max(prev.end_s, inc.end_s),
+                end_interval_s=inc.end_interval_s if inc.end_s >= prev.end_s else prev.end_interval_s,
+                ongoing_at_end=prev.ongoing_at_end or inc.ongoing_at_end,
+                detectors=tuple(sorted({*prev.detectors, *inc.detectors})),
+                evidence=classes,
+                confidence=confidence(set(classes)),
+                receivers=tuple(sorted({*prev.receivers, *inc.receivers})),
+                satellites=tuple(sorted({*prev.satellites, *inc.satellites})),
+            )
+        else:
+            out.append(inc)
+    return out
+
+
+def _coast_start(inc: Incident) -> float:
+    return min(inc.onset_s, inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s, inc.start_s)

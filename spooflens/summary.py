@@ -62,6 +62,8 @@ def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
         "satellites": list(inc.satellites),
         "ongoing_at_end": inc.ongoing_at_end,
         "end_method": inc.end_method,
+        "gnss_offset_from_reference_peak_m": inc.offset_peak_m,
+        "gnss_offset_from_reference_at_end_m": inc.offset_end_m,
     }
     for key, t in (("onset", inc.onset_s), ("start", inc.start_s), ("end", inc.end_s)):
         d |= _time(table, key, t)

@@ -33,6 +33,8 @@ class Incident:
     end_interval_s: tuple[float, float] | None = None
     ongoing_at_end: bool = False  # still going on when the log ends
     end_method: str = "last alarm"
+    offset_peak_m: float | None = None  # largest horizontal distance GNSS - independent reference
+    offset_end_m: float | None = None  # the same at the incident's end
 
     @property
     def is_spoofing(self) -> bool:

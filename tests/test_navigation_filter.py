@@ -47,7 +47,16 @@ def test_nis_averages_its_degrees_of_freedom(name: str) -> None:
     sol = run_filter(sim.table, options=FilterOptions(grade=SCENARIOS[name].imu_grade))
     settled = sol.t > sol.t[0] + 30.0
     assert np.nanmean(sol.nis[settled]) == pytest.approx(np.mean(sol.dof[settled]), rel=0.10)
+    assert sol.alignment is not None and "attitude from the log's orientation" in sol.alignment.method
+
+
+def test_without_an_orientation_the_ins_aligns_by_velocity_matching() -> None:
+    sim = simulate("aircraft", seed=5, duration_s=200.0)
+    sim.table.imu[["qw", "qx", "qy", "qz"]] = np.nan
+    sol = run_filter(sim.table, options=FilterOptions(grade=SCENARIOS["aircraft"].imu_grade))
     assert sol.alignment is not None and "velocity matching" in sol.alignment.method
+    settled = sol.t > sol.t[0] + 30.0
+    assert np.nanmean(sol.nis[settled]) == pytest.approx(np.mean(sol.dof[settled]), rel=0.15)
 
 
 def test_smoothed_position_error_is_below_the_filtered_one(ground: tuple[EpochTable, NavSolution]) -> None:

@@ -12,7 +12,7 @@ log has one, else the course over ground along the levelled body x axis.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -76,6 +76,38 @@ def _imu_orientation(imu: pd.DataFrame, t: float) -> FloatArray | None:
     return quat_to_matrix(q[ok][k])
 
 
+def align_from_orientation(
+    pre: Preintegrated, imu: pd.DataFrame, fixes: pd.DataFrame, first: int, max_tilt_error_deg: float = 10.0
+) -> Alignment | None:
+    """Initial state from the attitude the log carries (a ROS Imu orientation, PX4 vehicle_attitude),
+    when it agrees with gravity: the mean specific force over the first two seconds, turned into the
+    local level by it, must point up within `max_tilt_error_deg`. Velocity from the receiver's, else
+    from the first fixes' positions. Costs nothing, where velocity matching needs manoeuvres."""
+    tf = fixes["t_s"].to_numpy(dtype=float)
+    t0 = float(tf[first])
+    C = _imu_orientation(imu, t0)
+    if C is None:
+        return None
+    k0 = int(np.clip(np.searchsorted(pre.t, t0), 0, len(pre.t) - 1))
+    k1 = int(np.searchsorted(pre.t, t0 + 2.0))
+    f_up = C @ np.mean(pre.f[k0 : max(k1, k0 + 1)], axis=0)
+    tilt = np.degrees(np.arccos(np.clip(f_up[2] / max(np.linalg.norm(f_up), 1e-9), -1.0, 1.0)))
+    if not tilt <= max_tilt_error_deg:
+        return None
+    lat0, lon0, h0 = (float(fixes[c].iloc[first]) for c in ("lat_deg", "lon_deg", "height_m"))
+    v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)[first]
+    source = "the receiver's velocity"
+    if not np.isfinite(v[:2]).all():
+        p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
+        later = np.flatnonzero((tf > t0 + 0.5) & (tf <= t0 + 3.0))
+        j = int(later[-1]) if len(later) else min(first + 1, len(tf) - 1)
+        v = (p[j] - p[first]) / max(tf[j] - t0, 1e-3) if j > first else np.zeros(3)
+        source = "the first fixes' positions"
+    v = np.where(np.isfinite(v), v, 0.0)
+    method = f"attitude from the log's orientation (tilt against gravity {tilt:.1f} deg), velocity from {source}"
+    return Alignment(t0, C, np.asarray(v, dtype=float), np.radians(lat0), np.radians(lon0), h0, method, 0.0, 0.0)
+
+
 def align(
     pre: Preintegrated,
     imu: pd.DataFrame,
@@ -88,11 +120,15 @@ def align(
     accel_bias_sigma: float = 0.1,
     gyro_bias_sigma: float = 2e-3,
 ) -> Alignment:
-    """Initial state at the first fix at or after `t_start` (fixes: one receiver, schema columns)."""
+    """Initial state at the first fix at or after `t_start` (fixes: one receiver, schema columns): from the
+    log's own attitude when it has one that agrees with gravity, else by velocity matching."""
     tf = fixes["t_s"].to_numpy(dtype=float)
     first = int(np.searchsorted(tf, max(t_start, pre.t[0])))
     if first >= len(tf) - 3:
         raise AnalysisError("too few GNSS fixes inside the IMU's time span to align the INS")
+    from_log = align_from_orientation(pre, imu, fixes, first)
+    if from_log is not None:
+        return from_log
     lat0, lon0, h0 = (float(fixes[c].iloc[first]) for c in ("lat_deg", "lon_deg", "height_m"))
     p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
     g = float(normal_gravity(np.radians(lat0), h0))
@@ -274,3 +310,37 @@ def _heading_fallback(
         d = p[later[0]] - p[first]
         target = float(np.arctan2(d[1], d[0]))
     return _rotate_yaw(C_level, target - _yaw_of(C_level, forward))
+
+
+def heading_from_course(
+    al: Alignment, fixes: pd.DataFrame, forward_b: FloatArray, window_s: float = 60.0, min_speed: float = 0.5
+) -> Alignment | None:
+    """The alignment with its yaw replaced by the course over ground, for a vehicle that moves along its
+    forward axis `forward_b` (body frame; a wheeled vehicle, whose mount the odometry gives): the first
+    fixes within `window_s` of the start that move faster than `min_speed`. None if it never moves."""
+    tf = fixes["t_s"].to_numpy(dtype=float)
+    sel = np.flatnonzero((tf >= al.t0) & (tf <= al.t0 + window_s))
+    if len(sel) < 3:
+        return None
+    p = geodetic_to_enu(
+        fixes["lat_deg"].to_numpy()[sel],
+        fixes["lon_deg"].to_numpy()[sel],
+        fixes["height_m"].to_numpy()[sel],
+        np.degrees(al.lat0),
+        np.degrees(al.lon0),
+        al.h0,
+    )
+    v = fixes[["vel_e_mps", "vel_n_mps"]].to_numpy(dtype=float)[sel]
+    if not np.isfinite(v).all(axis=1).any():
+        dt = np.gradient(tf[sel])
+        v = np.gradient(p[:, :2], axis=0) / np.maximum(dt, 1e-3)[:, None]
+    speed = np.hypot(v[:, 0], v[:, 1])
+    moving = np.flatnonzero(np.isfinite(speed) & (speed > min_speed))
+    if len(moving) < 3:
+        return None
+    k = moving[: max(3, len(moving) // 4)]
+    course = float(np.arctan2(np.mean(v[k, 1]), np.mean(v[k, 0])))
+    C = _rotate_yaw(al.C0, course - _yaw_of(al.C0, forward_b))
+    delta = np.degrees(np.angle(np.exp(1j * (course - _yaw_of(al.C0, forward_b)))))
+    method = al.method + f"; yaw from the course over ground along the odometry's forward axis ({delta:+.0f} deg)"
+    return replace(al, C0=C, method=method)

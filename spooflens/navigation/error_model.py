@@ -19,10 +19,11 @@ finite-difference Jacobian of the mechanization in tests/test_navigation_error_m
 Measurement: z = INS - GNSS, position (ENU metres) then velocity: H = [0 0 I 0 0; 0 I 0 0 0] (6 x 15;
 the paper prints a 3 x 15 H, an erratum: its text says position AND velocity are measured).
 
-The filter appends six first-order Gauss-Markov states for the receiver's own slowly wandering errors
-(position ENU, velocity ENU: real receivers' errors are time-correlated, and a filter that takes them as
-white has innovations with lag-1 autocorrelation near 1), which enter the GNSS rows with -I, and three
-measurement rows for wheel odometry (`kernels.measurement_matrix`).
+The filter appends nine first-order Gauss-Markov states for the sensors' own slowly wandering errors
+(receiver position ENU, receiver velocity ENU: real receivers' errors are time-correlated, and a filter
+that takes them as white has innovations with lag-1 autocorrelation near 1; and wheel odometry's scale
+and skid errors, vehicle frame), which enter their measurement rows with -I, and three measurement
+rows for wheel odometry (`kernels.measurement_matrix`).
 """
 
 from __future__ import annotations
@@ -56,10 +57,13 @@ STATE_NAMES = (
     "gnss_vel_err_e",
     "gnss_vel_err_n",
     "gnss_vel_err_u",
+    "odo_err_x",
+    "odo_err_y",
+    "odo_err_z",
 )
 MEASUREMENT_NAMES = ("pos_e", "pos_n", "pos_u", "vel_e", "vel_n", "vel_u", "odo_x", "odo_y", "odo_z")
 PHI, DV, DP, BG, BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-GM_POS, GM_VEL = slice(15, 18), slice(18, 21)
+GM_POS, GM_VEL, GM_ODO = slice(15, 18), slice(18, 21), slice(21, 24)
 POS_ROWS, VEL_ROWS, ODO_ROWS = slice(0, 3), slice(3, 6), slice(6, 9)
 
 

@@ -224,7 +224,8 @@ def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     return out
 
 
-NE = 21  # error states: 15 INS + 3 GNSS position + 3 GNSS velocity Gauss-Markov errors
+NE = 24  # error states: 15 INS + Gauss-Markov errors of GNSS position (3), GNSS velocity (3), odometry (3)
+NG = NE - 15
 NM = 9  # measurement rows: GNSS position (3), GNSS velocity (3), odometry body velocity (3)
 
 
@@ -234,7 +235,8 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
 
     GNSS rows see the INS error minus the receiver's Gauss-Markov error; odometry rows compare the INS
     velocity turned into the vehicle frame, M v~ with M = R_vb C^T, with the wheels' velocity:
-    M~ v~ = M v + M dv - M [v x] phi to first order (C = (I + [phi x]) C~).
+    M~ v~ = M v + M dv - M [v x] phi to first order (C = (I + [phi x]) C~), minus the odometry's own
+    slowly varying error (wheel-radius scale, skid) as Gauss-Markov states.
     """
     Hm = np.zeros((NM, NE))
     for i in range(3):
@@ -242,6 +244,7 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
         Hm[i, 15 + i] = -1.0
         Hm[3 + i, 3 + i] = 1.0
         Hm[3 + i, 18 + i] = -1.0
+        Hm[6 + i, 21 + i] = -1.0
     C = x[6:15].copy().reshape(3, 3)
     M = R_vb @ C.T
     v = x[3:6]
@@ -253,6 +256,21 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
             Hm[6 + i, j] = -Mv[i, j]
             Hm[6 + i, 3 + j] = M[i, j]
     return Hm
+
+
+@njit(cache=CACHE)
+def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Phi P Phi^T for Phi = blockdiag(Phi15, diag(a))."""
+    out = np.empty_like(P)
+    out[:15, :15] = Phi15 @ np.ascontiguousarray(P[:15, :15]) @ Phi15.T
+    cross = Phi15 @ np.ascontiguousarray(P[:15, 15:])
+    for j in range(a.shape[0]):
+        for i in range(15):
+            out[i, 15 + j] = cross[i, j] * a[j]
+            out[15 + j, i] = cross[i, j] * a[j]
+        for i in range(a.shape[0]):
+            out[15 + i, 15 + j] = P[15 + i, 15 + j] * a[i] * a[j]
+    return out
 
 
 @njit(cache=CACHE)
@@ -275,6 +293,7 @@ def filter_loop(
     use: np.ndarray,
     gm_tau: np.ndarray,
     gm_sigma: np.ndarray,
+    g0: np.ndarray,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
 
@@ -286,6 +305,7 @@ def filter_loop(
     out_z = np.full((M, NM), np.nan)
     out_nu = np.full((M, NM), np.nan)
     out_S = np.zeros((M, NM, NM))
+    out_S_all = np.zeros((M, NM, NM))  # H P H^T + R of every row, used or not (coasting comparisons)
     out_R = np.zeros((M, NM, NM))
     out_H = np.zeros((M, NM, NE))
     nis = np.full(M, np.nan)
@@ -295,14 +315,14 @@ def filter_loop(
     P_pred = np.zeros((M, NE, NE))
     P_upd = np.zeros((M, NE, NE))
     out_dx = np.zeros((M, NE))
-    gm = np.zeros((M, 6))
+    gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
     track = np.zeros((N + 1, 7))  # t, lat, lon, h, ve, vn, vu
     track_epoch = np.zeros(N + 1, dtype=np.int64)
     nt = 0
     x = x0.copy()
     P = P0.copy()
-    g = np.zeros(6)  # Gauss-Markov receiver errors, estimated
+    g = g0.copy()  # Gauss-Markov sensor errors (receiver, odometry), estimated
     k = np.searchsorted(t, x[21])
     if k > N - 1:
         k = N - 1
@@ -325,19 +345,26 @@ def filter_loop(
             dC, dv_b, dp_b, T = increment(t, Qb, G, H, k, j)
             f_mean = dv_b / T - x[18:21] if T > 0 else f[k] - x[18:21]
             Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
-            Phi = np.eye(NE)
-            Qd = np.zeros((NE, NE))
-            Phi[:15, :15] = Phi15
-            Qd[:15, :15] = Qd15
-            for i in range(6):
-                a = math.exp(-T / gm_tau[i])
-                Phi[15 + i, 15 + i] = a
-                Qd[15 + i, 15 + i] = gm_sigma[i] ** 2 * (1.0 - a * a)
-                g[i] *= a
+            decay = np.empty(NG)
+            qg = np.empty(NG)
+            for i in range(NG):
+                decay[i] = math.exp(-T / gm_tau[i])
+                qg[i] = gm_sigma[i] ** 2 * (1.0 - decay[i] * decay[i])
+                g[i] *= decay[i]
             x = propagate(x, dC, dv_b, dp_b, T)
-            P = Phi @ P @ Phi.T + Qd
-            Phi_acc = Phi @ Phi_acc
-            Qd_acc = Phi @ Qd_acc @ Phi.T + Qd
+            # Phi = blockdiag(Phi15, diag(a)): propagate the blocks, not 24 x 24 products
+            P = _propagate_blocks(P, Phi15, decay)
+            Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
+            for r in range(15):
+                for c in range(15):
+                    P[r, c] += Qd15[r, c]
+                    Qd_acc[r, c] += Qd15[r, c]
+            for i in range(NG):
+                P[15 + i, 15 + i] += qg[i]
+                Qd_acc[15 + i, 15 + i] += qg[i]
+            Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
+            for i in range(NG):
+                Phi_acc[15 + i, :] *= decay[i]
             k = j
             track[nt, 0] = x[21]
             track[nt, 1:4] = x[0:3]
@@ -363,13 +390,16 @@ def filter_loop(
             if not math.isnan(odo[e, i]):
                 z[6 + i] = vb[i] - odo[e, i]
         xp = np.zeros(NE)
-        xp[15:21] = g
+        xp[15:] = g
         nu = z - Hm @ xp
         out_z[e] = z
         out_nu[e] = nu
         out_H[e] = Hm
+        S_all = Hm @ P @ Hm.T
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2
+            S_all[i, i] += sigma[e, i] ** 2
+        out_S_all[e] = S_all
         n_used = 0
         for i in range(NM):
             if use[e, i] and not math.isnan(z[i]):
@@ -393,12 +423,7 @@ def filter_loop(
             Sinv = np.linalg.inv(S)
             K = PHt @ Sinv
             dx = K @ nuu
-            IKH = np.eye(NE) - K @ Hu
-            P = IKH @ P @ IKH.T
-            for a in range(n_used):
-                for b in range(NE):
-                    for c in range(NE):
-                        P[b, c] += K[b, a] * K[c, a] * sigma[e, rows[a]] ** 2
+            P = P - K @ PHt.T  # = P - K S K^T
             P = 0.5 * (P + P.T)
             nis[e] = nuu @ Sinv @ nuu
             dof[e] = n_used
@@ -406,7 +431,7 @@ def filter_loop(
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
             x = correct(x, dx[:15])
-            g = g + dx[15:21]
+            g = g + dx[15:]
             out_dx[e] = dx
         P_upd[e] = P
         states[e] = x
@@ -431,6 +456,7 @@ def filter_loop(
         out_z,
         out_nu,
         out_S,
+        out_S_all,
         out_R,
         out_H,
         nis,

@@ -10,7 +10,7 @@ Phi and Qd from the previous epoch, P before and after the update, and the appli
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -46,11 +46,13 @@ class GnssNoise:
     tau_vel_s: float = 10.0
     source: str = ""
 
-    def gm_arrays(self) -> tuple[FloatArray, FloatArray]:
-        """(tau, sigma) of the six Gauss-Markov states, in the kernel's order (pos ENU, vel ENU)."""
-        tau = np.r_[np.full(3, self.tau_pos_s), np.full(3, self.tau_vel_s)]
+    def gm_arrays(self, odometry: OdometryAiding | None = None) -> tuple[FloatArray, FloatArray]:
+        """(tau, sigma) of the nine Gauss-Markov states, in the kernel's order (pos ENU, vel ENU, odometry)."""
+        odo_tau = odometry.tau_s if odometry is not None else 30.0
+        odo_sigma = odometry.gm_mps if odometry is not None else (0.0, 0.0, 0.0)
+        tau = np.r_[np.full(3, self.tau_pos_s), np.full(3, self.tau_vel_s), np.full(3, odo_tau)]
         (ph, pv), (vh, vv) = self.gm_pos_m, self.gm_vel_mps
-        sigma = np.maximum(np.array([ph, ph, pv, vh, vh, vv], dtype=float), GM_FLOOR)
+        sigma = np.maximum(np.array([ph, ph, pv, vh, vh, vv, *odo_sigma], dtype=float), GM_FLOOR)
         return tau, sigma
 
 
@@ -60,8 +62,10 @@ class OdometryAiding:
     forward, lateral and vertical rows (lateral and vertical are the non-holonomic constraint)."""
 
     R_vb: FloatArray  # vehicle <- IMU body (FLU)
-    sigma_mps: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    sigma_mps: tuple[float, float, float] = (0.1, 0.1, 0.1)  # white, forward / lateral / vertical
     odometry_id: str = ""
+    gm_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # Gauss-Markov part (scale, skid)
+    tau_s: float = 30.0
     source: str = ""
 
 
@@ -80,14 +84,17 @@ class FilterOptions:
     exclude_until_s: float | None = None  # ... up to this time (None: to the end of the log)
     exclude_velocity_too: bool = True
     initial: NavState | None = None  # skip alignment (simulation benchmarks start from truth)
+    # continue from another run's epoch: its covariance (24 x 24) and sensor-error estimates (9)
+    initial_covariance: FloatArray | None = None
+    initial_gm: FloatArray | None = None
     t_start: float | None = None
 
 
 @dataclass
 class NavSolution:
     """The filter's record. Arrays are per GNSS epoch (M) unless named as per block. Measurement rows
-    (9): GNSS position ENU, GNSS velocity ENU, odometry body velocity; states (21): 15 INS errors and
-    six Gauss-Markov receiver errors (`error_model.STATE_NAMES`)."""
+    (9): GNSS position ENU, GNSS velocity ENU, odometry body velocity; states (24): 15 INS errors and
+    nine Gauss-Markov sensor errors (`error_model.STATE_NAMES`)."""
 
     imu_id: str
     receiver_id: str
@@ -98,16 +105,17 @@ class NavSolution:
     nu: FloatArray  # (M, 9) innovation: z minus the predicted receiver error
     used: NDArray[np.bool_]  # (M, 9)
     S: FloatArray  # (M, 9, 9) innovation covariance of the used rows (zero elsewhere)
+    S_all: FloatArray  # (M, 9, 9) the same for every measured row, used or not (GNSS left out: coasting)
     R: FloatArray  # (M, 9, 9)
-    H: FloatArray  # (M, 9, 21)
+    H: FloatArray  # (M, 9, 24)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
-    Phi: FloatArray  # (M, 21, 21) from the previous epoch (identity at the first)
-    Qd: FloatArray  # (M, 21, 21)
-    P_pred: FloatArray  # (M, 21, 21)
-    P_upd: FloatArray  # (M, 21, 21)
-    dx: FloatArray  # (M, 21) update (INS part applied to the nominal state, receiver part kept)
-    gm: FloatArray  # (M, 6) estimated receiver errors after the update
+    Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
+    Qd: FloatArray  # (M, 24, 24)
+    P_pred: FloatArray  # (M, 24, 24)
+    P_upd: FloatArray  # (M, 24, 24)
+    dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
+    gm: FloatArray  # (M, 9) estimated sensor errors (receiver, odometry) after the update
     state: FloatArray  # (M, 22) after the update, columns STATE_COLUMNS (C_b^n row-major)
     track_t: FloatArray  # (K,) block ends
     track_llh: FloatArray  # (K, 3) lat, lon (rad), h
@@ -227,6 +235,18 @@ class FilterInputs:
     fixes: pd.DataFrame
     odometry_ids: tuple[str, ...]
 
+    def between(self, t_after: float, t_end: float | None = None) -> FilterInputs:
+        """The inputs from t_after (fixes strictly after it) to t_end: a filter run continued from another
+        run's epoch at t_after (`FilterOptions.initial*`) covers only this span."""
+        pre = self.pre
+        end = np.inf if t_end is None else t_end
+        k0 = max(int(np.searchsorted(pre.t, t_after, side="right")) - 1, 0)
+        k1 = int(np.searchsorted(pre.t, end + 1.0))
+        cut = Preintegrated(pre.t[k0:k1], pre.Qb[k0:k1], pre.G[k0:k1], pre.H[k0:k1], pre.f[k0:k1])
+        t = self.fixes["t_s"].to_numpy(dtype=float)
+        fixes = self.fixes[(t > t_after) & (t <= end)].reset_index(drop=True)
+        return replace(self, pre=cut, fixes=fixes)
+
 
 def prepare(table: EpochTable, imu_id: str | None = None, receiver_id: str | None = None) -> FilterInputs:
     imu_id, receiver_id, body = select_streams(table, imu_id, receiver_id)
@@ -300,10 +320,13 @@ def _run(
         if opts.exclude_velocity_too:
             use[late, 3:6] = False
     noise = opts.noise or GnssNoise(white_pos_m=(1.0, 1.0))
-    gm_tau, gm_sigma = noise.gm_arrays()
-    qc = np.r_[opts.grade.qc_diagonal(), np.zeros(6)]
+    gm_tau, gm_sigma = noise.gm_arrays(opts.odometry)
+    qc = np.r_[opts.grade.qc_diagonal(), np.zeros(len(gm_sigma))]
     P0 = np.diag(np.r_[opts.grade.p0_diagonal(), gm_sigma**2])
-    (z, nu, S, R, H, nis, dof, Phi, Qd, P_pred, P_upd, dx, gm, states, track, track_epoch) = kernels.filter_loop(
+    if opts.initial_covariance is not None:
+        P0 = np.array(opts.initial_covariance, dtype=float)
+    g0 = np.zeros(len(gm_sigma)) if opts.initial_gm is None else np.array(opts.initial_gm, dtype=float)
+    (z, nu, S, S_all, R, H, nis, dof, Phi, Qd, P_pred, P_upd, dx, gm, states, track, track_epoch) = kernels.filter_loop(
         pre.t,
         pre.Qb,
         pre.G,
@@ -322,6 +345,7 @@ def _run(
         use,
         gm_tau,
         gm_sigma,
+        g0,
     )
     return NavSolution(
         imu_id,
@@ -333,6 +357,7 @@ def _run(
         nu,
         use & np.isfinite(z),
         S,
+        S_all,
         R,
         H,
         nis,

@@ -4,16 +4,26 @@ that compares GNSS with the inertial sensors, and drawn in the recording (not it
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo
 from spooflens.detectors.base import DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
+from spooflens.navigation.alignment import Alignment, heading_from_course
 from spooflens.navigation.imu_models import grade
-from spooflens.navigation.loosely_coupled import FilterOptions, NavSolution, run_filter
+from spooflens.navigation.loosely_coupled import (
+    FilterInputs,
+    FilterOptions,
+    NavSolution,
+    initial_state,
+    prepare,
+    run_prepared,
+)
+from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, learn_noise
 from spooflens.navigation.smoother import SmoothedSolution, smooth
+from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
 
 ENU = ("east", "north", "up")
@@ -24,12 +34,35 @@ class Navigation:
     solution: NavSolution
     smoothed: SmoothedSolution
     model: LinearGaussianModel  # the linearised error model the model-based detectors run on
+    learned: LearnedNoise  # the sensor noise learned from this log, and how
+    inputs: FilterInputs  # what every further pass of the filter reuses (reconstruction, coasting)
+    start: tuple[NavState, Alignment | None]
+
+    def options(self, **changes: object) -> FilterOptions:
+        """The filter options of this solution, with changes (e.g. GNSS excluded over an incident)."""
+        return replace(self.solution.options, **changes)  # type: ignore[arg-type]
 
 
-def solve_navigation(table: EpochTable, options: AnalyzeOptions) -> Navigation:
-    imu_grade = grade(options.imu_grade or "consumer_mems")
-    sol = run_filter(table, options.imu_id, options.receiver_id, FilterOptions(grade=imu_grade))
-    return Navigation(sol, smooth(sol), sol.error_model())
+def solve_navigation(
+    table: EpochTable, options: AnalyzeOptions, exclude: tuple[tuple[float, float], ...] = ()
+) -> Navigation:
+    """Align, learn the sensors' noise from the log (leaving `exclude` out), filter and smooth."""
+    preset = grade(options.imu_grade or "consumer_mems")
+    inputs = prepare(table, options.imu_id, options.receiver_id)
+    start = initial_state(inputs, FilterOptions(grade=preset))
+    odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
+    mount = estimate_mount(inputs, odometry_id) if odometry_id is not None else None
+    if mount is not None and start[1] is not None:
+        # a wheeled vehicle moves along its forward axis: its course fixes the yaw, whatever the log's
+        # orientation says (magnetic yaw is often off by a frame convention or a disturbance)
+        by_course = heading_from_course(start[1], inputs.fixes, mount[0])
+        if by_course is not None:
+            a = by_course
+            start = (NavState(a.t0, a.lat0, a.lon0, a.h0, a.v0.copy(), a.C0.copy()), a)
+    learned = learn_noise(inputs, preset, start, odometry_id, exclude)
+    opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry)
+    sol = run_prepared(inputs, opts, start)
+    return Navigation(sol, smooth(sol), sol.error_model(), learned, inputs, start)
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
@@ -41,8 +74,9 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
         DetectorResult(
             "navigation",
             True,
-            f"INS {sol.imu_id} + GNSS {sol.receiver_id}, grade {sol.grade.name}; "
-            + (sol.alignment.method if sol.alignment else "initial state given"),
+            f"INS {sol.imu_id} + GNSS {sol.receiver_id}"
+            + (f" + odometry {sol.options.odometry.odometry_id}" if sol.options.odometry else "")
+            + f"; {(sol.alignment.method if sol.alignment else 'initial state given')}; {nav.learned.describe()}",
             series=[
                 Series("nis", sol.t, sol.nis, "chi2(dof)"),
                 # INS minus GNSS with the filter's own 1-sigma: a spoofed channel walks out of its band
@@ -65,7 +99,9 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
                 "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
                 "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
                 "imu_grade": sol.grade.name,
+                "imu_noise_scale": nav.learned.imu_scale,
                 "epochs": len(sol.t),
+                "noise_filter_runs": nav.learned.evaluations,
             },
         )
     ]

@@ -1,0 +1,349 @@
+"""The log's own noise: measurement and IMU noise learned from the log, never from what the receiver
+says about itself.
+
+Receivers report accuracies that are wrong (5-10x larger than the fixes' real scatter in clean flight)
+and that a capture inflates exactly while the innovation grows, so the filter's measurement noise
+cannot come from them. Instead the parameters of the sensors' error model are chosen by maximum
+likelihood of the filter's own innovations on the quiet part of the log:
+
+- receiver position error = white (sigma_w, horizontal and vertical) + first-order Gauss-Markov
+  (sigma_b, horizontal and vertical, time constant tau);
+- receiver velocity error likewise, when the log has GNSS velocity;
+- wheel odometry (when present): white + Gauss-Markov (scale, skid) per vehicle axis;
+- the IMU preset's noise densities scaled by one factor (the preset is the prior, the log decides).
+
+The likelihood is the sum over epochs of nu^T S^-1 nu + log det S (the innovations' Gaussian negative
+log-likelihood, twice), over a window of the log (the first `max_epochs` epochs, at least
+`min_window_s` long) after the filter has settled, leaving out time ranges suspected of an attack
+(`exclude`: the caller passes the incidents of a first detection pass, so the noise is kept fixed
+through a suspected attack rather than learned from it) and the windows whose first-pass innovations
+are the worst (`trim`), so an attack inside the window cannot inflate the noise it is judged against.
+The search is coordinate-wise on a log scale (factors 3 then sqrt 3, two sweeps), each candidate one
+run of the compiled filter.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spooflens.navigation.alignment import Alignment
+from spooflens.navigation.imu_models import ImuGrade
+from spooflens.navigation.loosely_coupled import (
+    FilterInputs,
+    FilterOptions,
+    GnssNoise,
+    NavSolution,
+    OdometryAiding,
+    run_prepared,
+)
+from spooflens.navigation.strapdown import NavState
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LearnOptions:
+    max_epochs: int = 1500
+    min_window_s: float = 300.0
+    settle_s: float = 20.0
+    trim_window_s: float = 20.0
+    trim_fraction: float = 0.15  # the worst windows of the first pass are left out of the likelihood
+    sweeps: int = 2
+    steps: tuple[float, ...] = (3.0, np.sqrt(3.0))
+    max_block_s: float = 1.0  # tuning runs propagate in blocks up to the next fix (faster, same answer)
+
+
+@dataclass(frozen=True)
+class LearnedNoise:
+    noise: GnssNoise
+    odometry: OdometryAiding | None
+    grade: ImuGrade  # the preset scaled by imu_scale
+    imu_scale: float
+    evaluations: int
+    neg_log_likelihood: float
+    window_s: tuple[float, float]
+    excluded_s: tuple[tuple[float, float], ...]
+
+    def describe(self) -> str:
+        n = self.noise
+        text = (
+            f"noise learned from the log ({self.evaluations} filter runs on {self.window_s[0]:.0f}-"
+            f"{self.window_s[1]:.0f} s): position white {n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m "
+            f"(h/v) + Gauss-Markov {n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, tau {n.tau_pos_s:.0f} s"
+        )
+        if n.white_vel_mps != (0.0, 0.0):
+            text += (
+                f"; velocity white {n.white_vel_mps[0]:.2g}/{n.white_vel_mps[1]:.2g} m/s + Gauss-Markov "
+                f"{n.gm_vel_mps[0]:.2g}/{n.gm_vel_mps[1]:.2g} m/s, tau {n.tau_vel_s:.0f} s"
+            )
+        if self.odometry is not None:
+            o = self.odometry
+            text += f"; odometry white {'/'.join(f'{s:.2g}' for s in o.sigma_mps)} m/s"
+        return text + f"; IMU noise {self.imu_scale:.2g} x preset {self.grade.name}"
+
+
+def scaled_grade(grade: ImuGrade, scale: float) -> ImuGrade:
+    """The grade with every noise density (white and bias random walk) multiplied by sqrt(scale)."""
+    r = float(np.sqrt(scale))
+    return replace(
+        grade,
+        name=grade.name if scale == 1.0 else f"{grade.name} x{scale:.2g}",
+        gyro_arw=grade.gyro_arw * r,
+        accel_vrw=grade.accel_vrw * r,
+        gyro_bias_rw=grade.gyro_bias_rw * r,
+        accel_bias_rw=grade.accel_bias_rw * r,
+    )
+
+
+def _robust_std(x: FloatArray) -> float:
+    x = x[np.isfinite(x)]
+    if len(x) < 5:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def initial_noise(inputs: FilterInputs) -> GnssNoise:
+    """A starting point from the fixes alone: white noise from the scatter of second differences (the
+    vehicle's motion is smooth over three epochs), the wander from the reported accuracy, else 2 m."""
+    from spooflens.geodesy import geodetic_to_enu
+
+    fx = inputs.fixes
+    p = geodetic_to_enu(
+        fx["lat_deg"],
+        fx["lon_deg"],
+        fx["height_m"],
+        *(float(fx[c].iloc[0]) for c in ("lat_deg", "lon_deg", "height_m")),
+    )
+    d2 = np.diff(p, 2, axis=0)
+    wh = np.nanmean([_robust_std(d2[:, 0]), _robust_std(d2[:, 1])]) / np.sqrt(6.0)
+    wv = _robust_std(d2[:, 2]) / np.sqrt(6.0)
+    h_acc = fx["h_acc_m"].to_numpy(dtype=float)
+    wander = float(np.nanmedian(h_acc)) if np.isfinite(h_acc).any() else 2.0
+    v = fx[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+    has_vel = bool(np.isfinite(v[:, :2]).all(axis=1).any())
+    dv = np.diff(v, 2, axis=0)
+    vh = np.nanmean([_robust_std(dv[:, 0]), _robust_std(dv[:, 1])]) / np.sqrt(6.0) if has_vel else 0.0
+    vv = _robust_std(dv[:, 2]) / np.sqrt(6.0) if has_vel and np.isfinite(v[:, 2]).any() else vh
+
+    def ok(x: float, floor: float) -> float:
+        return float(max(x, floor)) if np.isfinite(x) else floor
+
+    return GnssNoise(
+        white_pos_m=(ok(wh, 0.02), ok(wv, 0.04)),
+        gm_pos_m=(max(wander, 0.5), max(2 * wander, 1.0)),
+        tau_pos_s=100.0,
+        white_vel_mps=(ok(vh, 0.01), ok(vv, 0.02)) if has_vel else (0.0, 0.0),
+        gm_vel_mps=(0.05, 0.1) if has_vel else (0.0, 0.0),
+        tau_vel_s=10.0,
+        source="initial guess",
+    )
+
+
+def estimate_mount(inputs: FilterInputs, odometry_id: str, min_correlation: float = 0.2) -> FloatArray | None:
+    """Rotation vehicle <- IMU body from the sensors alone (no heading needed): up is the mean specific
+    force; in the plane across it, the specific force follows the wheels' longitudinal acceleration
+    d(v_x)/dt along the vehicle's forward axis and the turn's centripetal acceleration v_x w_z along its
+    left axis, so with f = f1 + i f2 in a basis of that plane and z = a + i v_x w_z,
+    f = z exp(i psi) gives the forward axis' angle psi by least squares. None when the motion does not
+    determine it (correlation below `min_correlation`)."""
+    od = inputs.table.odometry[inputs.table.odometry["odometry_id"] == odometry_id]
+    pre = inputs.pre
+    if len(od) < 20:
+        return None
+    to = od["t_s"].to_numpy(dtype=float)
+    grid = np.arange(max(pre.t[0], to[0]), min(pre.t[-1], to[-1]), 0.1)
+    if len(grid) < 50:
+        return None
+
+    def smooth(x: FloatArray) -> FloatArray:
+        kernel = np.ones(10) / 10.0  # 1 s: the wheels' and the IMU's clocks and rates differ
+        return np.convolve(x, kernel, mode="same")
+
+    f = np.stack([smooth(np.interp(grid, pre.t, pre.f[:, i])) for i in range(3)], axis=1)
+    vx = smooth(np.interp(grid, to, od["vx_mps"].to_numpy(dtype=float)))
+    wz = smooth(np.interp(grid, to, od["wz_radps"].to_numpy(dtype=float)))
+    up = np.mean(pre.f, axis=0)
+    if np.linalg.norm(up) < 1e-6:
+        return None
+    up = up / np.linalg.norm(up)
+    e1 = np.cross([0.0, 0.0, 1.0], up) if abs(up[2]) < 0.9 else np.cross([1.0, 0.0, 0.0], up)
+    e1 = e1 / np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    fh = f - f.mean(axis=0)
+    z = np.gradient(vx, grid) + 1j * vx * wz
+    y = fh @ e1 + 1j * (fh @ e2)
+    c = np.sum(np.conj(z) * y)
+    norm = np.sqrt(np.sum(np.abs(z) ** 2) * np.sum(np.abs(y) ** 2))
+    if norm <= 0 or abs(c) / norm < min_correlation:
+        return None
+    psi = float(np.angle(c))
+    forward = np.cos(psi) * e1 + np.sin(psi) * e2
+    return np.vstack([forward, np.cross(up, forward), up])
+
+
+@dataclass
+class _Objective:
+    inputs: FilterInputs
+    start: tuple[NavState, Alignment | None]
+    base: FilterOptions
+    score_mask: NDArray[np.bool_] | None = None
+    evaluations: int = 0
+
+    def run(self, opts: FilterOptions) -> NavSolution:
+        self.evaluations += 1
+        return run_prepared(self.inputs, opts, self.start)
+
+    def __call__(self, opts: FilterOptions) -> float:
+        sol = self.run(opts)
+        return score(sol, self.score_mask)
+
+
+def score(sol: NavSolution, mask: NDArray[np.bool_] | None = None) -> float:
+    """Twice the negative log-likelihood of the innovations of the scored epochs (constants dropped)."""
+    sel = np.isfinite(sol.nis) & (sol.dof > 0)
+    if mask is not None:
+        sel &= mask
+    if not sel.any():
+        return float("inf")
+    S = np.where(sol.used[sel][:, :, None] & sol.used[sel][:, None, :], sol.S[sel], np.eye(sol.S.shape[1]))
+    sign, logdet = np.linalg.slogdet(S)
+    if np.any(sign <= 0):
+        return float("inf")
+    return float(np.sum(sol.nis[sel]) + np.sum(logdet))
+
+
+def _scored_epochs(
+    sol: NavSolution, window: tuple[float, float], exclude: Sequence[tuple[float, float]], opts: LearnOptions
+) -> NDArray[np.bool_]:
+    t = sol.t
+    mask = (t >= window[0] + opts.settle_s) & (t <= window[1])
+    for a, b in exclude:
+        mask &= ~((t >= a) & (t <= b))
+    # leave out the windows whose first-pass innovations are the worst (an attack inside the window)
+    edges = np.arange(window[0], window[1] + opts.trim_window_s, opts.trim_window_s)
+    worst: list[tuple[float, float, float]] = []
+    for a, b in itertools.pairwise(edges):
+        w = mask & (t >= a) & (t < b)
+        if w.sum() >= 3:
+            worst.append((float(np.nanmean(sol.nis[w] / np.maximum(sol.dof[w], 1))), a, b))
+    worst.sort(reverse=True)
+    for _, a, b in worst[: int(opts.trim_fraction * len(worst))]:
+        mask &= ~((t >= a) & (t < b))
+    return mask
+
+
+def _search(
+    objective: _Objective,
+    make: Callable[[dict[str, float]], FilterOptions],
+    params: dict[str, float],
+    names: Sequence[str],
+    opts: LearnOptions,
+) -> tuple[float, dict[str, float]]:
+    """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps)."""
+    best = objective(make(params))
+    for _ in range(opts.sweeps):
+        for name in names:
+            lo, hi = BOUNDS.get(name, (1e-4, 1e4))
+            for step in opts.steps:
+                for factor in (step, 1.0 / step):
+                    trial = dict(params)
+                    trial[name] = float(np.clip(params[name] * factor, lo, hi))
+                    if trial[name] == params[name]:
+                        continue
+                    value = objective(make(trial))
+                    if value < best:
+                        best, params = value, trial
+                        break
+    return best, params
+
+
+BOUNDS = {"tau_p": (2.0, 5000.0), "tau_v": (0.5, 1000.0), "tau_o": (1.0, 3000.0), "imu": (1e-3, 1e3)}
+
+
+def learn_noise(
+    inputs: FilterInputs,
+    grade: ImuGrade,
+    start: tuple[NavState, Alignment | None],
+    odometry_id: str | None = None,
+    exclude: Sequence[tuple[float, float]] = (),
+    opts: LearnOptions | None = None,
+) -> LearnedNoise:
+    """Maximum-likelihood sensor noise for this log (see the module docstring).
+
+    GNSS and IMU noise first; then, when the log has wheel odometry and its motion determines the
+    IMU-to-vehicle rotation (`estimate_mount`), the odometry's noise (with the IMU's again) on top."""
+    opts = opts or LearnOptions()
+    tf = inputs.fixes["t_s"].to_numpy(dtype=float)
+    t0 = max(float(start[0].t), float(tf[0]))
+    k_end = min(len(tf) - 1, int(np.searchsorted(tf, t0)) + opts.max_epochs)
+    t_end = max(float(tf[k_end]), t0 + opts.min_window_s)
+    window = (t0, min(t_end, float(tf[-1])))
+    sub = inputs.between(-np.inf, window[1])
+    noise = initial_noise(sub)
+    has_vel = noise.white_vel_mps != (0.0, 0.0)
+    base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s)
+    objective = _Objective(sub, start, base)
+    objective.score_mask = _scored_epochs(objective.run(base), window, exclude, opts)
+    odometry: OdometryAiding | None = None
+
+    params: dict[str, float] = {
+        "imu": 1.0,
+        "w_h": noise.white_pos_m[0],
+        "w_v": noise.white_pos_m[1],
+        "b_h": noise.gm_pos_m[0],
+        "b_v": noise.gm_pos_m[1],
+        "tau_p": noise.tau_pos_s,
+    }
+    if has_vel:
+        params |= {
+            "wv_h": noise.white_vel_mps[0],
+            "wv_v": noise.white_vel_mps[1],
+            "bv_h": noise.gm_vel_mps[0],
+            "bv_v": noise.gm_vel_mps[1],
+            "tau_v": noise.tau_vel_s,
+        }
+
+    def options(p: dict[str, float]) -> FilterOptions:
+        n = GnssNoise(
+            white_pos_m=(p["w_h"], p["w_v"]),
+            gm_pos_m=(p["b_h"], p["b_v"]),
+            tau_pos_s=p["tau_p"],
+            white_vel_mps=(p.get("wv_h", 0.1), p.get("wv_v", 0.1)),
+            gm_vel_mps=(p.get("bv_h", 0.0), p.get("bv_v", 0.0)),
+            tau_vel_s=p.get("tau_v", 10.0),
+            source="learned",
+        )
+        odo = None
+        if odometry is not None:
+            odo = replace(
+                odometry,
+                sigma_mps=(p["o_f"], p["o_l"], p["o_l"]),
+                gm_mps=(p["o_b"], p["o_b"], p["o_b"]),
+                tau_s=p["tau_o"],
+            )
+        return FilterOptions(grade=scaled_grade(grade, p["imu"]), noise=n, odometry=odo, max_block_s=opts.max_block_s)
+
+    best, params = _search(objective, options, params, list(params), opts)
+    if odometry_id is not None:
+        R_vb = estimate_mount(sub, odometry_id)
+        if R_vb is not None:
+            odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
+            params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
+            best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts)
+    final = replace(options(params), max_block_s=FilterOptions().max_block_s)
+    assert final.noise is not None
+    return LearnedNoise(
+        replace(final.noise, source="learned from the log"),
+        final.odometry,
+        final.grade,
+        params["imu"],
+        objective.evaluations,
+        best,
+        window,
+        tuple(exclude),
+    )
