@@ -259,15 +259,20 @@ class Clock:
 
 
 def line_times(file: DecodedFile, anchors: list[tuple[int, int]], clock: Clock) -> dict[int, int]:
-    """Time (ns) of every decoded sentence's line: its logger time, or interpolated by file position."""
+    """Time (ns) of every decoded sentence's line, interpolated by file position between anchors.
+
+    Anchors are the GNSS epochs of the file's main receiver, or with the logger's clock the first line
+    of each run of equal logger times (loggers that stamp whole seconds stamp a burst alike; the lines
+    of a run are spread by their position up to the next stamp).
+    """
     lines = np.array([d.sentence.line for d in file.decoded], dtype=np.int64)
     if clock.logger:
-        known = [(d.sentence.line, d.sentence.host_ns) for d in file.decoded if d.sentence.host_ns is not None]
+        stamped = sorted((d.sentence.line, d.sentence.host_ns) for d in file.decoded if d.sentence.host_ns is not None)
+        known = [(ln, t) for i, (ln, t) in enumerate(stamped) if i == 0 or t != stamped[i - 1][1]]
     else:
-        known = anchors
+        known = sorted(dict(anchors).items())
     if not known:
         return {}
-    known = sorted(dict(known).items())
     x = np.array([k for k, _ in known], dtype=np.float64)
     y = np.maximum.accumulate(np.array([v for _, v in known], dtype=np.float64))
     t = np.interp(lines, x, y)
@@ -344,11 +349,10 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
                 invalid += 1
                 continue
             gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
-            hosts = [d.sentence.host_ns for d in epoch.sentences if d.sentence.host_ns is not None]
             if logger:
-                t_ns = min(hosts) if hosts else line_t.get(epoch.first_line)
-                if hosts and epoch.gnss and math.isfinite(rx.day_anchor_s):
-                    offsets.append((gnss_ns - min(hosts)) / NS)
+                t_ns = line_t.get(epoch.first_line)
+                if t_ns is not None and epoch.gnss and math.isfinite(rx.day_anchor_s):
+                    offsets.append((gnss_ns - t_ns) / NS)
             else:
                 t_ns = gnss_ns
             if t_ns is None:
