@@ -107,13 +107,13 @@ def _handle(state: _State, frame: UbxFrame) -> None:
         return
     state.used[name] += 1
     if name == "RXM-RAWX":
-        epoch = m.rawx(frame)
-        state.rawx.append(epoch)
-        state.gps_refs.append(epoch.gps_s)
+        raw = m.rawx(frame)
+        state.rawx.append(raw)
+        state.gps_refs.append(raw.gps_s)
         return
     if name in ("ESF-RAW", "ESF-MEAS"):
-        for tag, values in m.esf_samples(name, frame):
-            state.esf.append((name, tag, state.current, values))
+        for tag, sample in m.esf_samples(name, frame):
+            state.esf.append((name, tag, state.current, sample))
         return
     msg = m.parse(frame)
     if name == "NAV-PVT":
