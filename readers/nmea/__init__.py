@@ -122,8 +122,6 @@ def looks_like_nmea(head: bytes) -> bool:
     """Most data lines of the head are NMEA sentences (after logger prefixes) with valid checksums."""
     from readers.nmea.lines import scan_sentences as scan
 
-    if b"\x00" in head:
-        return False
     lines = head.split(b"\n")
     if len(lines) > 1 and not head.endswith(b"\n"):
         lines = lines[:-1]  # the head may end inside a line
