@@ -233,15 +233,17 @@ def _imu(state: _State, ref_s: float | None, skipped: list[Skipped]) -> pd.DataF
         slope = np.polyfit(tags[known], epoch_s[known], 1)[0]
         if slope > 0:
             tick = min(ESF_TICKS, key=lambda c: abs(math.log(slope / c)))
-    offset = float(np.median(epoch_s[known] - tags[known] * tick))
+    # a sample is measured after the epoch its message follows (and before the next one): the samples
+    # right after an epoch bound the offset from below, so take the top of the spread (robust quantile)
+    offset = float(np.quantile(epoch_s[known] - tags[known] * tick, 0.95))
     t_ns = np.round((tags * tick + offset) * NS).astype(np.int64)
     frame = pd.DataFrame([v for _, _, _, v in state.esf]).assign(t_ns=t_ns, imu_id="ubx_esf")
     state.metadata["imu.time_tag_unit_s"] = f"{tick:g}"
     skipped.append(
         Skipped(
             "ubx_esf",
-            f"IMU time tags ({tick:g} s per tick) aligned to GPS time by the epochs the messages follow "
-            "(within one navigation epoch)",
+            f"IMU time tags ({tick:g} s per tick) aligned to GPS time by the first samples after each "
+            "navigation epoch (to within the message latency)",
             len(frame),
             "repaired",
         )
