@@ -29,6 +29,8 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rosbag",
     "readers.ulog",
     "readers.rinex",
+    "readers.ubx",
+    "readers.nmea",
     "readers.csv_log",
 )
 

@@ -6,7 +6,8 @@ Supported schemas, in either encoding:
 - `spooflens.Imu`: an IMU sample (timestamp, frame_id, angular_velocity {x,y,z} rad/s,
   linear_acceleration {x,y,z} m/s^2 in a FLU body frame, optional orientation {x,y,z,w} body->ENU).
 JSON timestamps are `{"sec": int, "nsec": int}` (Foxglove's JSON convention); protobuf ones are
-google.protobuf.Timestamp. The writers' schemas for both live here too, so the layout is defined once.
+google.protobuf.Timestamp. The writers' schemas and the row -> message mapping live here too, so each
+layout is defined once, both ways.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 from google.protobuf import descriptor_pb2, timestamp_pb2
 
-from readers.ros_messages import RAW_COLUMNS
+from readers.ros_messages import RAW_COLUMNS, Row, imu_parts, navsat_covariance
 
 KIND_BY_SCHEMA = {"foxglove.LocationFix": "navsatfix", "spooflens.Imu": "imu"}
 
@@ -73,6 +74,35 @@ def extract(kind: str, msg: Any) -> tuple[int, tuple[float, ...]]:
 
 def frame_id(msg: Any) -> str:
     return str(_get(msg, "frame_id")) if _has(msg, "frame_id") else ""
+
+
+# --- the reverse direction: a table row -> the fields of a message (JSON dict; protobuf fills from it) --
+
+
+def fields(kind: str, row: Row, t: int, frame_id: str) -> dict[str, Any]:
+    """The message of `kind` (imu, navsatfix) for a table row stamped `t` ns, as nested fields."""
+    stamp = {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000}
+    if kind == "imu":
+        q, w, a = imu_parts(row)
+        out: dict[str, Any] = {
+            "timestamp": stamp,
+            "frame_id": frame_id,
+            "angular_velocity": dict(zip("xyz", w, strict=True)),
+            "linear_acceleration": dict(zip("xyz", a, strict=True)),
+        }
+        if q is not None:
+            out["orientation"] = dict(zip("xyzw", q, strict=True))
+        return out
+    cov, cov_type = navsat_covariance(row("h_acc_m"), row("v_acc_m"))
+    return {
+        "timestamp": stamp,
+        "frame_id": frame_id,
+        "latitude": row("lat_deg"),
+        "longitude": row("lon_deg"),
+        "altitude": row("height_m"),
+        "position_covariance": cov,
+        "position_covariance_type": cov_type,
+    }
 
 
 # --- schemas for writers -----------------------------------------------------------------------------

@@ -1,16 +1,23 @@
-"""ROS message types -> epoch-table columns: the one place this mapping is written.
+"""ROS message types <-> epoch-table columns: the one place each type's mapping is written, both ways.
 
 Every container that carries ROS messages (MCAP with ROS1 or ROS2 channels, ROS1 bags, ROS2 bags)
-goes through here, so a NavSatFix is a NavSatFix whatever file holds it. Each supported type has a
-*kind* with a fixed tuple of raw values per message. Messages are turned into raw rows either by the
-fast path (fixed-layout Imu and NavSatFix decoded straight from their bytes) or from a deserialised
-message; both give identical rows. Raw rows become schema columns in vectorised `*_columns` functions.
+reads through here, and every writer and the `inject` rewriter write through here, so a NavSatFix is a
+NavSatFix whatever file holds it and whichever way it goes. Each supported type has a *kind*
+(`KINDS`): its ROS type names, its role, a fixed tuple of raw values per message, and the functions
+that take a message apart (`extract`), build one from a table row (`build`), and put spoofed fix
+values into one (`edit`). Reading: messages become raw rows either by the fast path (fixed-layout Imu
+and NavSatFix decoded straight from their bytes) or from a deserialised message, both giving identical
+rows; raw rows become schema columns in vectorised `*_columns` functions. Writing: Imu and NavSatFix
+are encoded straight to bytes (the mirror of the fast path), the other kinds built as typestore
+messages and serialised.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,44 +27,8 @@ from spooflens.schema import FixType
 
 FloatArray = NDArray[np.float64]
 
-KIND_BY_TYPE = {
-    "sensor_msgs/msg/NavSatFix": "navsatfix",
-    "sensor_msgs/msg/Imu": "imu",
-    "geometry_msgs/msg/TwistWithCovarianceStamped": "twist_cov",
-    "geometry_msgs/msg/TwistStamped": "twist",
-    "nav_msgs/msg/Odometry": "odometry",
-    "gps_msgs/msg/GPSFix": "gpsfix",
-    "gps_common/msg/GPSFix": "gpsfix",
-}
-ROLE_BY_KIND = {
-    "navsatfix": "fix",
-    "gpsfix": "fix",
-    "imu": "imu",
-    "twist_cov": "vel",
-    "twist": "vel",
-    "odometry": "odom",
-}
-
-RAW_COLUMNS: dict[str, tuple[str, ...]] = {
-    "navsatfix": ("status", "lat", "lon", "alt", "cov_e", "cov_n", "cov_u", "cov_type"),
-    "gpsfix": (
-        "status",
-        "sats_used",
-        "lat",
-        "lon",
-        "alt",
-        "track_deg",
-        "speed",
-        "climb",
-        "err_horz",
-        "err_vert",
-        "err_speed",
-    ),
-    "imu": ("qx", "qy", "qz", "qw", "ocov0", "wx", "wy", "wz", "wcov0", "ax", "ay", "az", "acov0"),
-    "twist_cov": ("ve", "vn", "vu", "cov_ve", "cov_vn", "cov_vu"),
-    "twist": ("ve", "vn", "vu", "cov_ve", "cov_vn", "cov_vu"),
-    "odometry": ("x", "y", "z", "vx", "vy", "vz", "wz"),
-}
+Row = Callable[[str], float]  # a table row: column name -> value
+FixValues = tuple[float, float, float, float, float, float]  # lat, lon, h, ve, vn, vu
 
 
 def normalise_type(name: str) -> str:
@@ -135,19 +106,9 @@ def _odometry(m: Any) -> tuple[float, ...]:
     return (p.x, p.y, p.z, v.x, v.y, v.z, w.z)
 
 
-EXTRACT: dict[str, Callable[[Any], tuple[float, ...]]] = {
-    "navsatfix": _navsatfix,
-    "gpsfix": _gpsfix,
-    "imu": _imu,
-    "twist_cov": _twist_cov,
-    "twist": _twist,
-    "odometry": _odometry,
-}
-
-
 def extract(kind: str, msg: Any) -> tuple[int, tuple[float, ...]]:
     """(header stamp ns, raw values) of a deserialised message of `kind`."""
-    return stamp_ns(msg.header), EXTRACT[kind](msg)
+    return stamp_ns(msg.header), KINDS[kind].extract(msg)
 
 
 # --- fast path: fixed layouts straight from bytes ----------------------------------------------------
@@ -291,7 +252,7 @@ def odometry_columns(v: FloatArray) -> dict[str, np.ndarray]:
     return {n: v[:, i] for i, n in enumerate(names)}
 
 
-# --- the reverse direction, for writers: schema columns -> fixed-layout message bytes ----------------
+# --- the reverse direction, for writers: table rows -> messages ---------------------------------------
 
 _FIX_TYPE_TO_NAVSAT = {
     FixType.NO_FIX: -1,
@@ -365,3 +326,215 @@ def encode_navsatfix(
         head = _pad_to(_cdr_header(stamp, frame_id) + struct.pack("<b", status), 2) + struct.pack("<H", service)
         return _pad_to(head, 8) + body
     return _ros1_header(stamp, frame_id, seq) + _ROS1_FIX_STATUS.pack(status, service) + body
+
+
+def imu_parts(row: Row) -> tuple[tuple[float, float, float, float] | None, tuple[float, ...], tuple[float, ...]]:
+    """(orientation (x, y, z, w) or None when the row has none, angular rate, specific force) of an IMU row."""
+    q = (row("qx"), row("qy"), row("qz"), row("qw"))
+    w = (row("wx_radps"), row("wy_radps"), row("wz_radps"))
+    a = (row("ax_mps2"), row("ay_mps2"), row("az_mps2"))
+    return (q if np.all(np.isfinite(q)) else None), w, a
+
+
+def _build_twist_cov(T: Any, header: Any, row: Row) -> Any:
+    V = T["geometry_msgs/msg/Vector3"]
+    cov6 = np.zeros(36)
+    acc = row("vel_acc_mps")
+    cov6[[0, 7, 14]] = acc**2 if np.isfinite(acc) else 0.0
+    twist = T["geometry_msgs/msg/Twist"](
+        linear=V(x=row("vel_e_mps"), y=row("vel_n_mps"), z=row("vel_u_mps")),
+        angular=V(x=0.0, y=0.0, z=0.0),
+    )
+    return T["geometry_msgs/msg/TwistWithCovarianceStamped"](
+        header=header, twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=cov6)
+    )
+
+
+def _build_odometry(T: Any, header: Any, row: Row) -> Any:
+    V = T["geometry_msgs/msg/Vector3"]
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=row("x_m"), y=row("y_m"), z=row("z_m")),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    twist = T["geometry_msgs/msg/Twist"](
+        linear=V(x=row("vx_mps"), y=row("vy_mps"), z=row("vz_mps")),
+        angular=V(x=0.0, y=0.0, z=row("wz_radps")),
+    )
+    return T["nav_msgs/msg/Odometry"](
+        header=header,
+        child_frame_id="base_link",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
+    )
+
+
+def _header(T: Any, stamp: int, frame_id: str, seq: int | None) -> Any:
+    """A std_msgs/Header; `seq` only for ROS1 (ROS2 headers have none)."""
+    time = T["builtin_interfaces/msg/Time"](sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+    extra = {"seq": seq} if seq is not None else {}
+    return T["std_msgs/msg/Header"](**extra, stamp=time, frame_id=frame_id)
+
+
+def encode(kind: str, store: Any, ros_version: int, stamp: int, frame_id: str, row: Row, seq: int) -> bytes:
+    """One message of `kind` from a table row, serialised for ROS `ros_version` (1: ROS1, 2: CDR).
+
+    Imu and NavSatFix are packed straight to bytes (the mirror of the fast decode path); the other kinds
+    are built as `store` (a rosbags typestore) messages and serialised. `seq` is the ROS1 header seq.
+    """
+    encoding = "cdr" if ros_version == 2 else "ros1"
+    if kind == "imu":
+        q, w, a = imu_parts(row)
+        return encode_imu(stamp, frame_id, q, w, a, encoding, seq=seq)
+    if kind == "navsatfix":
+        cov, cov_type = navsat_covariance(row("h_acc_m"), row("v_acc_m"))
+        return encode_navsatfix(
+            stamp,
+            frame_id,
+            navsat_status(int(row("fix_type"))),
+            row("lat_deg"),
+            row("lon_deg"),
+            row("height_m"),
+            cov,
+            cov_type,
+            encoding,
+            seq=seq,
+        )
+    spec = KINDS[kind]
+    if spec.build is None:
+        raise KeyError(f"no ROS encoder for {kind!r}; writable kinds are {sorted(writable_kinds())}")
+    msg = spec.build(store.types, _header(store.types, stamp, frame_id, seq if ros_version == 1 else None), row)
+    serialize = store.serialize_cdr if ros_version == 2 else store.serialize_ros1
+    return bytes(serialize(msg, spec.msgtypes[0]))
+
+
+# --- spoofed values into decoded messages (inject) ---------------------------------------------------
+
+
+def _edit_fix(msg: Any, values: FixValues, velocity: bool) -> Any:
+    lat, lon, h, *_ = values
+    return dataclasses.replace(msg, latitude=lat, longitude=lon, altitude=h)
+
+
+def _edit_gpsfix(msg: Any, values: FixValues, velocity: bool) -> Any:
+    lat, lon, h, ve, vn, vu = values
+    changes: dict[str, Any] = {"latitude": lat, "longitude": lon, "altitude": h}
+    if velocity and np.isfinite(ve):
+        changes |= {"speed": float(np.hypot(ve, vn)), "track": float(np.degrees(np.arctan2(ve, vn)) % 360), "climb": vu}
+    return dataclasses.replace(msg, **changes)
+
+
+def _edit_twist_cov(msg: Any, values: FixValues, velocity: bool) -> Any:
+    _, _, _, ve, vn, vu = values
+    lin = dataclasses.replace(msg.twist.twist.linear, x=ve, y=vn, z=vu)
+    inner = dataclasses.replace(msg.twist.twist, linear=lin)
+    return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, twist=inner))
+
+
+def _edit_twist(msg: Any, values: FixValues, velocity: bool) -> Any:
+    _, _, _, ve, vn, vu = values
+    lin = dataclasses.replace(msg.twist.linear, x=ve, y=vn, z=vu)
+    return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, linear=lin))
+
+
+def edit(kind: str, msg: Any, values: FixValues, velocity: bool) -> Any:
+    """A copy of a decoded fix or velocity message carrying spoofed (lat, lon, h, ve, vn, vu).
+
+    A GPSFix gets the velocity too when `velocity` is set (and the values have one); velocity messages
+    always get it.
+    """
+    spec = KINDS[kind]
+    if spec.edit is None:
+        raise KeyError(f"{kind!r} messages carry no fix or velocity to edit")
+    return spec.edit(msg, values, velocity)
+
+
+# --- the kinds --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RosKind:
+    """One kind of ROS message and its mapping both ways.
+
+    `msgtypes`: ROS2-style names this kind reads (ROS1 names are normalised); writers emit the first.
+    `raw_columns`: the tuple `extract` returns per message (the fast path returns the same).
+    `build`: (typestore types, header, row) -> message, for kinds written as typestore messages
+    (Imu and NavSatFix are packed straight to bytes by `encode`). `edit`: spoofed values in.
+    """
+
+    msgtypes: tuple[str, ...]
+    role: str
+    raw_columns: tuple[str, ...]
+    extract: Callable[[Any], tuple[float, ...]]
+    build: Callable[[Any, Any, Row], Any] | None = None
+    edit: Callable[[Any, FixValues, bool], Any] | None = None
+
+
+KINDS: dict[str, RosKind] = {
+    "navsatfix": RosKind(
+        ("sensor_msgs/msg/NavSatFix",),
+        "fix",
+        ("status", "lat", "lon", "alt", "cov_e", "cov_n", "cov_u", "cov_type"),
+        _navsatfix,
+        edit=_edit_fix,
+    ),
+    "gpsfix": RosKind(
+        ("gps_msgs/msg/GPSFix", "gps_common/msg/GPSFix"),
+        "fix",
+        (
+            "status",
+            "sats_used",
+            "lat",
+            "lon",
+            "alt",
+            "track_deg",
+            "speed",
+            "climb",
+            "err_horz",
+            "err_vert",
+            "err_speed",
+        ),
+        _gpsfix,
+        edit=_edit_gpsfix,
+    ),
+    "imu": RosKind(
+        ("sensor_msgs/msg/Imu",),
+        "imu",
+        ("qx", "qy", "qz", "qw", "ocov0", "wx", "wy", "wz", "wcov0", "ax", "ay", "az", "acov0"),
+        _imu,
+    ),
+    "twist_cov": RosKind(
+        ("geometry_msgs/msg/TwistWithCovarianceStamped",),
+        "vel",
+        ("ve", "vn", "vu", "cov_ve", "cov_vn", "cov_vu"),
+        _twist_cov,
+        build=_build_twist_cov,
+        edit=_edit_twist_cov,
+    ),
+    "twist": RosKind(
+        ("geometry_msgs/msg/TwistStamped",),
+        "vel",
+        ("ve", "vn", "vu", "cov_ve", "cov_vn", "cov_vu"),
+        _twist,
+        edit=_edit_twist,
+    ),
+    "odometry": RosKind(
+        ("nav_msgs/msg/Odometry",),
+        "odom",
+        ("x", "y", "z", "vx", "vy", "vz", "wz"),
+        _odometry,
+        build=_build_odometry,
+    ),
+}
+KIND_BY_TYPE = {t: kind for kind, spec in KINDS.items() for t in spec.msgtypes}
+ROLE_BY_KIND = {kind: spec.role for kind, spec in KINDS.items()}
+RAW_COLUMNS = {kind: spec.raw_columns for kind, spec in KINDS.items()}
+
+
+def writable_kinds() -> set[str]:
+    """Kinds `encode` can write."""
+    return {"imu", "navsatfix"} | {k for k, spec in KINDS.items() if spec.build is not None}
+
+
+def msgtype_of(kind: str) -> str:
+    """The ROS type a writer emits for `kind`."""
+    return KINDS[kind].msgtypes[0]

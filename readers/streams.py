@@ -35,14 +35,9 @@ from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
 ROLES = ("fix", "fix2", "imu", "vel", "odom", "truth")
-_ROLE_KINDS = {
-    "fix": ("navsatfix", "gpsfix"),
-    "fix2": ("navsatfix", "gpsfix"),
-    "truth": ("navsatfix", "gpsfix"),
-    "imu": ("imu",),
-    "vel": ("twist", "twist_cov"),
-    "odom": ("odometry",),
-}
+# --topic roles -> the kinds' own role (a second receiver and truth are fix kinds too)
+_BASE_ROLE = {"fix": "fix", "fix2": "fix", "truth": "fix", "imu": "imu", "vel": "vel", "odom": "odom"}
+_ROLE_KINDS = {role: tuple(k for k, r in ROLE_BY_KIND.items() if r == base) for role, base in _BASE_ROLE.items()}
 TRUTH_TOPIC_HINTS = ("truth", "ground_truth", "groundtruth")
 
 Deserialize = Callable[[bytes | memoryview, str], Any]

@@ -148,12 +148,26 @@ ODOMETRY_COLUMNS: tuple[Column, ...] = (
     Column("wz_radps", "float64", "rad/s", "yaw rate in the child frame"),
 )
 
+HEADING_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("heading_id", "string", "-", "heading stream id (sensor: NMEA talker and sentence, e.g. HEHDT)"),
+    Column("heading_deg", "float64", "deg", "true heading of the vessel, clockwise from true north, [0, 360)"),
+    Column(
+        "talker",
+        "string",
+        "-",
+        "NMEA talker of the source (HE gyro, HC/SD magnetic compass made true, II integrated instruments; GP/GN "
+        "a GNSS dual-antenna heading, which a spoofer can move)",
+    ),
+)
+
 FRAMES: dict[str, tuple[Column, ...]] = {
     "imu": IMU_COLUMNS,
     "fixes": FIX_COLUMNS,
     "observations": OBSERVATION_COLUMNS,
     "truth": TRUTH_COLUMNS,
     "odometry": ODOMETRY_COLUMNS,
+    "headings": HEADING_COLUMNS,
 }
 
 # Which column names the stream a row belongs to, per frame (truth has one stream).
@@ -163,6 +177,7 @@ STREAM_KEY: dict[str, str | None] = {
     "observations": "receiver_id",
     "truth": None,
     "odometry": "odometry_id",
+    "headings": "heading_id",
 }
 
 # Body-frame axis conventions an IMU stream may declare.

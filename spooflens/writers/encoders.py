@@ -1,4 +1,9 @@
-"""Message encoders per wire format: ROS2 CDR, ROS1, JSON and protobuf (Foxglove conventions)."""
+"""Message encoders per wire format: ROS2 CDR, ROS1, JSON and protobuf (Foxglove conventions).
+
+What each message holds is mapped where its type is read: ROS types in `readers.ros_messages`, the
+JSON/protobuf schemas in `readers.foxglove_messages`. Here only the wire format: schemas, headers' seq
+numbers, serialisation.
+"""
 
 from __future__ import annotations
 
@@ -11,16 +16,9 @@ import numpy as np
 from google.protobuf import descriptor_pool, message_factory
 from rosbags.typesys import Stores, get_typestore
 
-from readers import foxglove_messages
-from readers.ros_messages import encode_imu, encode_navsatfix, navsat_covariance, navsat_status
+from readers import foxglove_messages, ros_messages
 from spooflens.writers.messages import OutStream
 
-ROS_TYPES = {
-    "imu": "sensor_msgs/msg/Imu",
-    "navsatfix": "sensor_msgs/msg/NavSatFix",
-    "twist_cov": "geometry_msgs/msg/TwistWithCovarianceStamped",
-    "odometry": "nav_msgs/msg/Odometry",
-}
 FOXGLOVE_SCHEMAS = {"imu": "spooflens.Imu", "navsatfix": "foxglove.LocationFix"}
 
 
@@ -36,17 +34,14 @@ class _Columns:
             self._cache[key] = {c: s.rows[c].to_numpy() for c in s.rows.columns}
         return self._cache[key]
 
-
-def _imu_parts(c: dict[str, np.ndarray], i: int) -> tuple[Any, tuple[float, ...], tuple[float, ...]]:
-    q = (c["qx"][i], c["qy"][i], c["qz"][i], c["qw"][i])
-    q = None if not np.all(np.isfinite(q)) else tuple(float(x) for x in q)
-    w = (float(c["wx_radps"][i]), float(c["wy_radps"][i]), float(c["wz_radps"][i]))
-    a = (float(c["ax_mps2"][i]), float(c["ay_mps2"][i]), float(c["az_mps2"][i]))
-    return q, w, a
+    def row(self, s: OutStream, i: int) -> ros_messages.Row:
+        """Row `i` of stream `s` as a column name -> float lookup."""
+        c = self(s)
+        return lambda name: float(c[name][i])
 
 
 class RosEncoder:
-    """ROS1 or ROS2 (CDR) messages; Imu and NavSatFix through the fixed-layout encoders."""
+    """ROS1 or ROS2 (CDR) messages, each kind mapped by `readers.ros_messages` (the one ROS mapping)."""
 
     def __init__(self, ros_version: int) -> None:
         self.ros_version = ros_version
@@ -56,96 +51,18 @@ class RosEncoder:
         self._seq: dict[str, int] = {}
 
     def msgtype(self, kind: str) -> str:
-        return ROS_TYPES[kind]
+        return ros_messages.msgtype_of(kind)
 
     def msgdef(self, kind: str) -> str:
-        return self.store.generate_msgdef(ROS_TYPES[kind], ros_version=self.ros_version)[0]
-
-    def _header(self, t: int, frame_id: str, topic: str) -> Any:
-        T = self.store.types
-        stamp = T["builtin_interfaces/msg/Time"](sec=t // 1_000_000_000, nanosec=t % 1_000_000_000)
-        extra = {"seq": self._next_seq(topic)} if self.ros_version == 1 else {}
-        return T["std_msgs/msg/Header"](**extra, stamp=stamp, frame_id=frame_id)
+        return self.store.generate_msgdef(self.msgtype(kind), ros_version=self.ros_version)[0]
 
     def _next_seq(self, topic: str) -> int:
         self._seq[topic] = self._seq.get(topic, -1) + 1
         return self._seq[topic]
 
     def encode(self, s: OutStream, i: int, t: int) -> bytes:
-        c = self.columns(s)
-        if s.kind == "imu":
-            q, w, a = _imu_parts(c, i)
-            return encode_imu(t, s.frame_id, q, w, a, self.encoding, seq=self._next_seq(s.topic))
-        if s.kind == "navsatfix":
-            cov, cov_type = navsat_covariance(float(c["h_acc_m"][i]), float(c["v_acc_m"][i]))
-            return encode_navsatfix(
-                t,
-                s.frame_id,
-                navsat_status(int(c["fix_type"][i])),
-                float(c["lat_deg"][i]),
-                float(c["lon_deg"][i]),
-                float(c["height_m"][i]),
-                cov,
-                cov_type,
-                self.encoding,
-                seq=self._next_seq(s.topic),
-            )
-        T = self.store.types
-        V = T["geometry_msgs/msg/Vector3"]
-        cov6 = np.zeros(36)
-        if s.kind == "twist_cov":
-            acc = float(c["vel_acc_mps"][i])
-            cov6[[0, 7, 14]] = acc**2 if np.isfinite(acc) else 0.0
-            twist = T["geometry_msgs/msg/Twist"](
-                linear=V(x=float(c["vel_e_mps"][i]), y=float(c["vel_n_mps"][i]), z=float(c["vel_u_mps"][i])),
-                angular=V(x=0.0, y=0.0, z=0.0),
-            )
-            msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](
-                header=self._header(t, s.frame_id, s.topic),
-                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=cov6),
-            )
-        else:
-            pose = T["geometry_msgs/msg/Pose"](
-                position=T["geometry_msgs/msg/Point"](x=float(c["x_m"][i]), y=float(c["y_m"][i]), z=float(c["z_m"][i])),
-                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-            )
-            twist = T["geometry_msgs/msg/Twist"](
-                linear=V(x=float(c["vx_mps"][i]), y=float(c["vy_mps"][i]), z=float(c["vz_mps"][i])),
-                angular=V(x=0.0, y=0.0, z=float(c["wz_radps"][i])),
-            )
-            msg = T["nav_msgs/msg/Odometry"](
-                header=self._header(t, s.frame_id, s.topic),
-                child_frame_id="base_link",
-                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
-            )
-        ser = self.store.serialize_cdr if self.ros_version == 2 else self.store.serialize_ros1
-        return bytes(ser(msg, ROS_TYPES[s.kind]))
-
-
-def _foxglove_fields(c: dict[str, np.ndarray], kind: str, i: int, t: int, frame_id: str) -> dict[str, Any]:
-    stamp = {"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000}
-    if kind == "imu":
-        q, w, a = _imu_parts(c, i)
-        out: dict[str, Any] = {
-            "timestamp": stamp,
-            "frame_id": frame_id,
-            "angular_velocity": dict(zip("xyz", w, strict=True)),
-            "linear_acceleration": dict(zip("xyz", a, strict=True)),
-        }
-        if q is not None:
-            out["orientation"] = dict(zip("xyzw", q, strict=True))
-        return out
-    cov, cov_type = navsat_covariance(float(c["h_acc_m"][i]), float(c["v_acc_m"][i]))
-    return {
-        "timestamp": stamp,
-        "frame_id": frame_id,
-        "latitude": float(c["lat_deg"][i]),
-        "longitude": float(c["lon_deg"][i]),
-        "altitude": float(c["height_m"][i]),
-        "position_covariance": cov,
-        "position_covariance_type": cov_type,
-    }
+        row = self.columns.row(s, i)
+        return ros_messages.encode(s.kind, self.store, self.ros_version, t, s.frame_id, row, self._next_seq(s.topic))
 
 
 class JsonEncoder:
@@ -163,7 +80,7 @@ class JsonEncoder:
         return name, foxglove_messages.JSON_SCHEMAS[name]
 
     def encode(self, s: OutStream, i: int, t: int) -> bytes:
-        return json.dumps(_foxglove_fields(self.columns(s), s.kind, i, t, s.frame_id)).encode()
+        return json.dumps(foxglove_messages.fields(s.kind, self.columns.row(s, i), t, s.frame_id)).encode()
 
 
 class ProtobufEncoder:
@@ -195,7 +112,7 @@ class ProtobufEncoder:
         return classes
 
     def encode(self, s: OutStream, i: int, t: int) -> bytes:
-        fields = _foxglove_fields(self.columns(s), s.kind, i, t, s.frame_id)
+        fields = foxglove_messages.fields(s.kind, self.columns.row(s, i), t, s.frame_id)
         msg = self._classes[s.kind]()
         stamp = fields.pop("timestamp")
         msg.timestamp.seconds, msg.timestamp.nanos = stamp["sec"], stamp["nsec"]

@@ -30,8 +30,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
-from readers import formats, foxglove_messages, sniff_format
-from readers.ros_messages import kind_of
+from readers import formats, foxglove_messages, ros_messages, sniff_format
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 
@@ -78,26 +77,7 @@ def _nearest(stamps: np.ndarray, t: int) -> int | None:
 
 
 def _ros_stamp(msg: Any) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-
-
-def _edit_ros(msg: Any, kind: str, values: tuple[float, ...], velocity: bool) -> Any:
-    lat, lon, h, ve, vn, vu = values
-    if kind in ("navsatfix", "gpsfix"):
-        changes: dict[str, Any] = {"latitude": lat, "longitude": lon, "altitude": h}
-        if kind == "gpsfix" and velocity and np.isfinite(ve):
-            changes |= {
-                "speed": float(np.hypot(ve, vn)),
-                "track": float(np.degrees(np.arctan2(ve, vn)) % 360),
-                "climb": vu,
-            }
-        return dataclasses.replace(msg, **changes)
-    lin = msg.twist.twist.linear if kind == "twist_cov" else msg.twist.linear
-    new_lin = dataclasses.replace(lin, x=ve, y=vn, z=vu)
-    if kind == "twist_cov":
-        inner = dataclasses.replace(msg.twist.twist, linear=new_lin)
-        return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, twist=inner))
-    return dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, linear=new_lin))
+    return ros_messages.stamp_ns(msg.header)
 
 
 class _RosEditor:
@@ -107,7 +87,7 @@ class _RosEditor:
         self.plan, self.deserialize, self.serialize = plan, deserialize, serialize
 
     def edit(self, topic: str, msgtype: str, raw: bytes, log_time: int) -> bytes | None:
-        kind = kind_of(msgtype)
+        kind = ros_messages.kind_of(msgtype)
         if kind in ("navsatfix", "gpsfix") and topic in self.plan.fixes:
             msg = self.deserialize(raw, msgtype)
             stamp = _ros_stamp(msg) or log_time
@@ -115,7 +95,7 @@ class _RosEditor:
             if values is None:
                 return None
             self.plan.changed += 1
-            return bytes(self.serialize(_edit_ros(msg, kind, values, bool(self.plan.velocity_of)), msgtype))
+            return bytes(self.serialize(ros_messages.edit(kind, msg, values, bool(self.plan.velocity_of)), msgtype))
         if kind in ("twist", "twist_cov") and topic in self.plan.velocity_of:
             msg = self.deserialize(raw, msgtype)
             target, stamps = self.plan.velocity_of[topic]
@@ -123,7 +103,7 @@ class _RosEditor:
             if match is None:
                 return None
             self.plan.changed += 1
-            return bytes(self.serialize(_edit_ros(msg, kind, self.plan.fixes[target][match], True), msgtype))
+            return bytes(self.serialize(ros_messages.edit(kind, msg, self.plan.fixes[target][match], True), msgtype))
         return None
 
 

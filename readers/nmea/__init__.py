@@ -1,0 +1,149 @@
+"""NMEA 0183 logs (a ship's voyage record, a receiver's text output) to an EpochTable.
+
+A log is one file of sentences, or a directory of them (each file a source of its own). Sentences are
+split off their logger's wrapping and checked (`lines.py`), decoded with pynmeagps
+(`sentences.py`), and assembled into receivers, epochs and headings on one clock (`assembly.py`):
+
+- `fixes`: one row per receiver epoch, from GGA/GNS/RMC/GLL with VTG, GSA, GSV and GST;
+- `headings`: true headings from HDT, THS and HDG (a gyrocompass is a reference a spoofer cannot move;
+  a GNSS dual-antenna THS can be moved, its talker says which it is).
+
+Time reference `unix` when the log has dates (RMC, ZDA) or logger times, else `relative`. Every
+sentence that is not used is counted by type; bad checksums, cut lines and garbage are counted and
+skipped. `inject` writes a spoofed copy with GGA/GNS/RMC/GLL positions edited in place
+(`spooflens.writers.nmea_rewrite`), every other byte unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+from readers import ReaderFormat
+from readers.nmea.assembly import DecodedFile, build
+from readers.nmea.lines import UNVERIFIED, SentenceScan, scan_sentences
+from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, is_empty
+from spooflens.epoch_table import EpochTable, Skipped
+from spooflens.errors import ReaderError
+
+Progress = Callable[[int, int], None]
+
+# scan counts that mean the file is damaged (listed as "lost"), the others are routine skips
+_LOST = (
+    "file cut inside its last sentence",
+    "sentences with a bad checksum",
+    "sentences with a broken checksum field",
+    "sentences without a checksum (cut short?)",
+    "binary garbage (not text)",
+)
+
+
+def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
+    """Decode the sentences spooflens uses; count every other one by type and every failure."""
+    name = label or scan.path.name
+    skipped = [
+        Skipped(name, reason, n, "lost" if reason in _LOST else "unverified" if reason == UNVERIFIED else "skipped")
+        for reason, n in scan.counts.items()
+        if n
+    ]
+    decoded: list[Decoded] = []
+    unused: dict[str, int] = {}
+    empty: dict[str, int] = {}
+    bad: dict[str, int] = {}
+    first_error = ""
+    for s in scan.sentences:
+        what = f"{s.talker}{s.kind}"
+        if s.kind not in WANTED or s.talker.startswith("P"):
+            unused[what] = unused.get(what, 0) + 1
+            continue
+        if is_empty(s):
+            empty[what] = empty.get(what, 0) + 1
+            continue
+        try:
+            decoded.append(decode(s))
+        except ParseErrors as err:
+            bad[what] = bad.get(what, 0) + 1
+            first_error = first_error or f"line {s.line + 1}: {err}"
+    skipped += [Skipped(w, "sentence type spooflens does not use", n) for w, n in sorted(unused.items())]
+    skipped += [Skipped(w, "empty sentences (no data in their fields)", n) for w, n in sorted(empty.items())]
+    skipped += [Skipped(w, f"sentences pynmeagps cannot decode ({first_error})", n, "lost") for w, n in bad.items()]
+    return DecodedFile(label, scan, decoded, skipped)
+
+
+def nmea_files(path: Path) -> list[Path]:
+    """The NMEA files of a log: the file itself, or every file of a directory that sniffs as NMEA."""
+    if not path.is_dir():
+        return [path]
+    files = [p for p in sorted(path.iterdir()) if p.is_file() and looks_like_nmea(_head(p))]
+    if not files:
+        raise ReaderError(path, "directory holds no NMEA 0183 log")
+    return files
+
+
+def decode_log(path: Path, progress: Progress | None = None) -> tuple[list[DecodedFile], list[Skipped]]:
+    """Every NMEA file of a log scanned and decoded, with what was skipped (shared with `inject`)."""
+    files = nmea_files(path)
+    skipped: list[Skipped] = []
+    if path.is_dir():
+        others = [p.name for p in sorted(path.iterdir()) if p.is_file() and p not in files]
+        if others:
+            skipped.append(Skipped(path.name, f"files that are not NMEA logs: {', '.join(others[:5])}", len(others)))
+    decoded = []
+    for i, f in enumerate(files):
+        part = decode_scan(scan_sentences(f), f.name if path.is_dir() else "")
+        decoded.append(part)
+        skipped.extend(part.skipped)
+        if progress:
+            progress(i + 1, len(files))
+    if not any(p.decoded for p in decoded):
+        reasons = "; ".join(str(s) for s in skipped[:6]) or "no sentences"
+        raise ReaderError(path, f"no usable NMEA sentence (position, heading, satellites): {reasons}", "nmea")
+    return decoded, skipped
+
+
+def read_nmea(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    """Read an NMEA 0183 log (a file, or a directory of files) into an EpochTable."""
+    path = Path(path)
+    decoded, skipped = decode_log(path, progress)
+    if topics:
+        skipped.append(Skipped("<nmea>", f"--topic is not used for NMEA logs ({dict(topics)})", len(topics)))
+    return build(path, decoded, skipped)
+
+
+def _head(path: Path) -> bytes:
+    try:
+        with path.open("rb") as f:
+            return f.read(4096)
+    except OSError:
+        return b""
+
+
+def looks_like_nmea(head: bytes) -> bool:
+    """Most data lines of the head are NMEA sentences (after logger prefixes) with valid checksums."""
+    from readers.nmea.lines import scan_sentences as scan
+
+    lines = head.split(b"\n")
+    if len(lines) > 1 and not head.endswith(b"\n"):
+        lines = lines[:-1]  # the head may end inside a line
+    text = b"\n".join(lines) + b"\n"
+    result = scan(Path("<head>"), text)
+    data_lines = sum(1 for ln in lines if ln.strip() and not ln.startswith(b"#"))
+    good = len(result.sentences)  # verified, or unverified in a head where no sentence has a checksum
+    return good >= 1 and good * 2 >= data_lines
+
+
+def _is_nmea(path: Path, head: bytes) -> bool:
+    if path.is_dir():
+        return not any(path.glob("*.csv")) and any(p.is_file() and looks_like_nmea(_head(p)) for p in path.iterdir())
+    return looks_like_nmea(head)
+
+
+FORMATS = (
+    ReaderFormat(
+        "nmea",
+        "NMEA 0183 log (gpsd, VDR/AIS logger, Signal K, TAG-block and GnssLogger layouts) or a directory of them",
+        read_nmea,
+        _is_nmea,
+        rewrite="spooflens.writers.nmea_rewrite:rewrite_nmea_log",
+    ),
+)

@@ -1,0 +1,440 @@
+"""Decoded NMEA sentences -> receivers, their epochs, fixes and headings on one clock.
+
+**Receivers.** A receiver is a (source, talker) pair of position sentences (GGA, GNS, RMC, GLL): the
+source is the file (in a directory of logs) and a TAG block's `s:`; so `GPGGA` and `GNGGA` in one
+file are two receivers, and so are two files. A sentence without a position of its own (GST, ZDA, VTG,
+GSA, GSV) belongs to the receiver of its source with the same talker, else to that source's `GN`
+receiver (a multi-GNSS receiver sends GPGSV, GLGSV, GAGSV... beside GNGGA), else to the source's only
+receiver; otherwise it is counted and skipped.
+
+**Epochs.** Sentences carrying a UTC time of day (GGA, GNS, RMC, GLL, GST, ZDA) are grouped by that
+time; VTG, GSA and GSV join their receiver's latest position epoch in file order (talkers send an epoch
+as a burst). Per epoch: the position from GGA, else GNS, else RMC, else GLL, among the sentences that
+call it valid; height = GGA/GNS MSL altitude + geoid separation (the MSL altitude alone when the
+separation is blank, the receiver's last known height when the epoch has none, 0 m when the receiver
+never gives one: each listed as a repair); velocity from RMC, else VTG (speed over ground and course,
+no vertical); satellites used from GGA/GNS, else the GSA lists; HDOP/VDOP from GSA, else GGA; 1-sigma
+horizontal accuracy sqrt((sigma_lat^2 + sigma_lon^2)/2) and vertical sigma from GST; `cn0_mean_dbhz`
+the mean over the satellites GSV reports with a C/N0 (per satellite the strongest signal).
+
+**Time.** A time of day becomes a date with the RMC/ZDA dates of its receiver (or, for a receiver
+that sends none, of the log), across midnight by unwrapping the time of day (a drop of more than 12 h
+is the next day). A date that disagrees with that continuous clock is counted ("date jumps"), not
+followed. When most sentences carry a logger's time (see lines.py), the logger's clock is the time
+base (independent of GNSS: a spoofer cannot move it) and the median GNSS-minus-logger offset is kept
+in the metadata; otherwise the GNSS time is. Without any date or logger time, times are seconds of
+the first day (`relative`). Headings have no time field: they take the logger's time of their line or
+one interpolated by their position in the file between the epochs of the file's main receiver (a
+talker sends in real time, so file order is time order).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from readers.nmea.lines import NS, SentenceScan
+from readers.nmea.sentences import (
+    FIX_MEANING,
+    HEADING_KINDS,
+    POSITION_KINDS,
+    Decoded,
+)
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.schema import FixType
+
+DAY_S = 86_400
+GNSS_TALKERS = ("GN", "GP", "GL", "GA", "GB", "BD", "GQ", "QZ", "GI")
+POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3}
+
+
+@dataclass
+class DecodedFile:
+    """One scanned file's decoded sentences (wanted kinds only) and what its scan and decoding skipped."""
+
+    label: str  # "" for a single-file log, the file name in a directory
+    scan: SentenceScan
+    decoded: list[Decoded]
+    skipped: list[Skipped]
+
+
+@dataclass
+class Epoch:
+    """One receiver epoch: its sentences and where it starts in the file."""
+
+    key: int  # unwrapped time of day in ms; logger time in ms when `gnss` is False
+    first_line: int
+    gnss: bool = True  # keyed by the receiver's own time of day (else by the logger's time)
+    sentences: list[Decoded] = field(default_factory=list)
+
+
+@dataclass
+class Receiver:
+    receiver_id: str
+    file: DecodedFile
+    sentences: list[Decoded] = field(default_factory=list)
+    epochs: dict[tuple[bool, int], Epoch] = field(default_factory=dict)
+    day_anchor_s: float = math.nan  # unwrapped time of day + anchor = seconds since 1970
+    date_jumps: int = 0
+
+    def clock_s(self, key_ms: int) -> float:
+        return key_ms / 1000 + (self.day_anchor_s if math.isfinite(self.day_anchor_s) else 0.0)
+
+
+def _source(file: DecodedFile, d: Decoded) -> str:
+    return "/".join(p for p in (file.label, d.sentence.source) if p)
+
+
+def _rid(source: str, talker: str) -> str:
+    return f"{source}/{talker}" if source else talker
+
+
+def receivers_of(files: list[DecodedFile], skipped: list[Skipped]) -> list[Receiver]:
+    """Every receiver of the log with its sentences (file order), by the association rule above."""
+    out: dict[str, Receiver] = {}
+    for f in files:
+        for d in f.decoded:
+            if d.kind in POSITION_KINDS:
+                rid = _rid(_source(f, d), d.talker)
+                out.setdefault(rid, Receiver(rid, f))
+        orphans: Counter[str] = Counter()
+        for d in f.decoded:
+            if d.kind in HEADING_KINDS:
+                continue
+            source = _source(f, d)
+            rid = _rid(source, d.talker)
+            if rid not in out:
+                mine = [r for r in out.values() if r.file is f and r.receiver_id.rpartition("/")[0] == source]
+                gn = _rid(source, "GN")
+                rid = gn if gn in out else (mine[0].receiver_id if len(mine) == 1 else "")
+            if rid:
+                out[rid].sentences.append(d)
+            else:
+                orphans[f"{d.talker}{d.kind}"] += 1
+        for what, n in orphans.items():
+            skipped.append(Skipped(what, "no receiver to attach to (no position sentences from this source)", n))
+    return list(out.values())
+
+
+def _unwrapped_ms(tods: np.ndarray) -> np.ndarray:
+    """Times of day (s, file order) -> ms on a continuous clock: a drop of more than 12 h is midnight."""
+    step = np.diff(tods, prepend=tods[:1])
+    days = np.cumsum(np.where(step < -DAY_S / 2, 1, 0) - np.where(step > DAY_S / 2, 1, 0))
+    return np.round((tods + days * DAY_S) * 1000).astype(np.int64)
+
+
+def assign_epochs(rx: Receiver) -> None:
+    """Group the receiver's sentences into epochs (by unwrapped time of day) and find its date anchor."""
+    timed = [d for d in rx.sentences if math.isfinite(d.tod_s)]
+    keys = _unwrapped_ms(np.array([d.tod_s for d in timed])) if timed else np.zeros(0, dtype=np.int64)
+    key_of = {id(d): int(k) for d, k in zip(timed, keys.tolist(), strict=True)}
+    anchors = [d.day * DAY_S + d.tod_s - key_of[id(d)] / 1000 for d in timed if d.day is not None]
+    if anchors:
+        rounded = Counter(round(a / DAY_S) * DAY_S for a in anchors)
+        rx.day_anchor_s = float(rounded.most_common(1)[0][0])
+        rx.date_jumps = sum(n for a, n in rounded.items() if a != rx.day_anchor_s)
+    current: tuple[bool, int] | None = None
+    pending: list[Decoded] = []
+    for d in rx.sentences:
+        key: tuple[bool, int] | None = None
+        if id(d) in key_of:
+            key = (True, key_of[id(d)])
+        elif d.kind in POSITION_KINDS and d.sentence.host_ns is not None:
+            key = (False, d.sentence.host_ns // 1_000_000)  # a talker that sends no time: logger time
+        if key is None:
+            if current is None:
+                pending.append(d)
+            else:
+                rx.epochs[current].sentences.append(d)
+            continue
+        epoch = rx.epochs.setdefault(key, Epoch(key[1], d.sentence.line, key[0]))
+        epoch.sentences.append(d)
+        if d.kind in POSITION_KINDS:
+            if current is None and pending:
+                epoch.sentences.extend(pending)
+                pending = []
+            current = key
+
+
+@dataclass
+class FixRow:
+    key: int
+    first_line: int
+    host_ns: int | None
+    values: dict[str, float]
+
+
+def _first(values: Iterable[float]) -> float:
+    return next((v for v in values if math.isfinite(v)), math.nan)
+
+
+def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
+    """The fix of one epoch (schema names, height still MSL + separation), or None (no valid position)."""
+    positions = sorted(
+        (d for d in epoch.sentences if d.kind in POSITION_KINDS),
+        key=lambda d: POSITION_PRIORITY[d.kind],
+    )
+    usable = [d for d in positions if d.valid and math.isfinite(d.lat) and math.isfinite(d.lon)]
+    if not usable:
+        return None if not positions else ({}, "invalid")
+    pos = usable[0]
+    by_kind: dict[str, list[Decoded]] = defaultdict(list)
+    for d in epoch.sentences:
+        by_kind[d.kind].append(d)
+    fix_type = pos.fix_type
+    gsa = by_kind["GSA"]
+    if fix_type == FixType.FIX_3D and gsa and all(g.nav_mode == 2 for g in gsa):
+        fix_type = int(FixType.FIX_2D)
+    speed = _first(d.speed_mps for d in by_kind["RMC"] + by_kind["VTG"])
+    course = _first(d.course_deg for d in by_kind["RMC"] + by_kind["VTG"] if math.isfinite(d.speed_mps))
+    if speed == 0.0 and not math.isfinite(course):
+        course = 0.0
+    gga = by_kind["GGA"] + by_kind["GNS"]
+    gsa_used = sum(len(g.used_svids) for g in gsa)
+    gst = by_kind["GST"]
+    std_lat, std_lon = _first(g.std_lat_m for g in gst), _first(g.std_lon_m for g in gst)
+    cn0: dict[tuple[str, int], float] = {}
+    for g in by_kind["GSV"]:
+        for sv, _, _, c, _ in g.satellites:
+            if math.isfinite(c) and c > 0:
+                cn0[(g.talker, sv)] = max(c, cn0.get((g.talker, sv), 0.0))
+    values = {
+        "lat_deg": pos.lat,
+        "lon_deg": pos.lon,
+        "alt_msl_m": _first(d.alt_msl_m for d in gga),
+        "geoid_sep_m": _first(d.geoid_sep_m for d in gga),
+        "vel_e_mps": speed * math.sin(math.radians(course)),
+        "vel_n_mps": speed * math.cos(math.radians(course)),
+        "sats_used": _first([*(d.sats_used for d in gga), float(gsa_used) if gsa_used else math.nan]),
+        "hdop": _first([*(g.hdop for g in gsa), *(d.hdop for d in gga)]),
+        "vdop": _first(g.vdop for g in gsa),
+        "h_acc_m": math.sqrt((std_lat**2 + std_lon**2) / 2),
+        "v_acc_m": _first(g.std_alt_m for g in gst),
+        "cn0_mean_dbhz": float(np.mean(list(cn0.values()))) if cn0 else math.nan,
+        "fix_type": float(fix_type),
+    }
+    return values, pos.kind
+
+
+def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> np.ndarray:
+    """Ellipsoidal heights: MSL altitude + geoid separation, with the repairs the docstring lists."""
+    alt, sep = cols.pop("alt_msl_m"), cols.pop("geoid_sep_m")
+    no_sep = np.isfinite(alt) & ~np.isfinite(sep)
+    if no_sep.any():
+        reason = "no geoid separation: MSL altitude taken as the ellipsoidal height (error up to ~100 m)"
+        skipped.append(Skipped(rid, reason, int(no_sep.sum()), "repaired"))
+    h = alt + np.where(np.isfinite(sep), sep, 0.0)
+    missing = ~np.isfinite(h)
+    if missing.all():
+        skipped.append(
+            Skipped(
+                rid,
+                "no altitude in this receiver's sentences: height set to 0 m (vertical meaningless)",
+                len(h),
+                "repaired",
+            )
+        )
+        return np.zeros(len(h))
+    if missing.any():
+        filled = pd.Series(h).ffill().bfill().to_numpy()
+        skipped.append(
+            Skipped(rid, "epochs without altitude: the receiver's last known height", int(missing.sum()), "repaired")
+        )
+        return filled
+    return h
+
+
+@dataclass
+class Clock:
+    """How table times are made: the logger's clock or GNSS time (`reference` as EpochTable has it)."""
+
+    logger: bool
+    reference: str
+
+
+def line_times(file: DecodedFile, anchors: list[tuple[int, int]], clock: Clock) -> dict[int, int]:
+    """Time (ns) of every decoded sentence's line, interpolated by file position between anchors.
+
+    Anchors are the GNSS epochs of the file's main receiver, or with the logger's clock the first line
+    of each run of equal logger times (loggers that stamp whole seconds stamp a burst alike; the lines
+    of a run are spread by their position up to the next stamp).
+    """
+    lines = np.array([d.sentence.line for d in file.decoded], dtype=np.int64)
+    if clock.logger:
+        stamped = sorted((d.sentence.line, d.sentence.host_ns) for d in file.decoded if d.sentence.host_ns is not None)
+        known = [(ln, t) for i, (ln, t) in enumerate(stamped) if i == 0 or t != stamped[i - 1][1]]
+    else:
+        known = sorted(dict(anchors).items())
+    if not known:
+        return {}
+    x = np.array([k for k, _ in known], dtype=np.float64)
+    y = np.maximum.accumulate(np.array([v for _, v in known], dtype=np.float64))
+    t = np.interp(lines, x, y)
+    if len(x) > 1:  # beyond the first/last anchor: extrapolate at the median seconds per line
+        slope = float(np.median(np.diff(y) / np.maximum(np.diff(x), 1)))
+        t = np.where(lines < x[0], y[0] - (x[0] - lines) * slope, t)
+        t = np.where(lines > x[-1], y[-1] + (lines - x[-1]) * slope, t)
+    return dict(zip(lines.tolist(), np.round(t).astype(np.int64).tolist(), strict=True))
+
+
+@dataclass
+class Assembled:
+    fixes: pd.DataFrame | None
+    headings: pd.DataFrame | None
+    streams: list[StreamInfo]
+    time_reference: str
+    metadata: dict[str, str]
+    # (receiver id, fix time in ns on the log's clock) -> the epoch behind that fix row and its file (inject)
+    fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = field(default_factory=dict)
+
+
+def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
+    """Every file's receivers and headings on one clock (see the module docstring)."""
+    rxs = receivers_of(files, skipped)
+    for rx in rxs:
+        assign_epochs(rx)
+    dated = [rx for rx in rxs if math.isfinite(rx.day_anchor_s)]
+    log_anchor = dated[0].day_anchor_s if dated else math.nan
+    for rx in rxs:
+        if not math.isfinite(rx.day_anchor_s) and dated and rx.epochs:
+            rx.day_anchor_s = log_anchor
+            skipped.append(Skipped(rx.receiver_id, "no RMC/ZDA date: the log's date taken", len(rx.epochs), "repaired"))
+        if rx.date_jumps:
+            skipped.append(
+                Skipped(
+                    rx.receiver_id, "dates that jump against the continuous time of day (not followed)", rx.date_jumps
+                )
+            )
+    all_sentences = [d for f in files for d in f.decoded]
+    with_host = sum(d.sentence.host_ns is not None for d in all_sentences)
+    logger = bool(all_sentences) and with_host >= len(all_sentences) / 2
+    reference = "unix" if (logger or dated) else "relative"
+    clock = Clock(logger, reference)
+    metadata: dict[str, str] = {"enum.fix_type": FIX_MEANING, "time_source": "logger" if logger else "gnss"}
+    comments = [c for f in files for c in f.scan.comments if c][:12]
+    if comments:
+        metadata["log_header"] = " | ".join(comments)
+
+    fix_parts: list[pd.DataFrame] = []
+    fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = {}
+    streams: list[StreamInfo] = []
+    offsets: list[float] = []
+    times_by_file: dict[int, dict[int, int]] = {}
+    for f in files:
+        mine = [rx for rx in rxs if rx.file is f and rx.epochs]
+        main = max(mine, key=lambda r: len(r.epochs), default=None)
+        anchors = (
+            [(e.first_line, round(main.clock_s(e.key) * NS)) for e in main.epochs.values() if e.gnss]
+            if main is not None
+            else []
+        )
+        times_by_file[id(f)] = line_times(f, anchors, clock)
+    for rx in rxs:
+        rows: list[tuple[int, dict[str, float]]] = []
+        invalid = 0
+        kinds = Counter(d.kind for d in rx.sentences)
+        line_t = times_by_file[id(rx.file)]
+        for epoch in rx.epochs.values():
+            got = epoch_fix(epoch)
+            if got is None:
+                continue
+            values, _ = got
+            if not values:
+                invalid += 1
+                continue
+            gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
+            if logger:
+                t_ns = line_t.get(epoch.first_line)
+                if t_ns is not None and epoch.gnss and math.isfinite(rx.day_anchor_s):
+                    offsets.append((gnss_ns - t_ns) / NS)
+            else:
+                t_ns = gnss_ns
+            if t_ns is None:
+                continue
+            rows.append((int(t_ns), values))
+            fix_epochs.setdefault((rx.receiver_id, int(t_ns)), (epoch, rx.file.scan.path))
+        if invalid:
+            skipped.append(
+                Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
+            )
+        msgtype = "NMEA " + " ".join(f"{k}" for k in sorted(kinds))
+        if not rows:
+            streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, 0))
+            continue
+        cols = {k: np.array([v[k] for _, v in rows], dtype=float) for k in rows[0][1]}
+        cols["height_m"] = _heights(rx.receiver_id, cols, skipped)
+        fix_type = cols.pop("fix_type").astype(np.int8)
+        frame = pd.DataFrame({"t_ns": np.array([t for t, _ in rows], dtype=np.int64), "receiver_id": rx.receiver_id})
+        for k, v in cols.items():
+            frame[k] = v
+        frame["fix_type"] = fix_type
+        fix_parts.append(frame)
+        streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, len(rows)))
+    if offsets:
+        metadata["clock.gnss_minus_logger_s"] = f"{float(np.median(offsets)):.3f}"
+
+    heading_parts, heading_streams = _headings(files, times_by_file, skipped)
+    return Assembled(
+        pd.concat(fix_parts, ignore_index=True) if fix_parts else None,
+        heading_parts,
+        streams + heading_streams,
+        reference,
+        metadata,
+        fix_epochs,
+    )
+
+
+def _headings(
+    files: list[DecodedFile], times_by_file: dict[int, dict[int, int]], skipped: list[Skipped]
+) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
+    rows: list[tuple[int, str, float, str]] = []
+    no_value: Counter[str] = Counter()
+    untimed: Counter[str] = Counter()
+    for f in files:
+        line_t = times_by_file[id(f)]
+        for d in f.decoded:
+            if d.kind not in HEADING_KINDS:
+                continue
+            hid = _rid(_source(f, d), f"{d.talker}{d.kind}")
+            if not d.valid or not math.isfinite(d.heading_deg):
+                no_value[hid] += 1
+                continue
+            t = line_t.get(d.sentence.line)
+            if t is None:
+                untimed[hid] += 1
+                continue
+            rows.append((t, hid, d.heading_deg % 360.0, d.talker))
+    for hid, n in no_value.items():
+        reason = "headings without a value (invalid, or magnetic without variation)"
+        skipped.append(Skipped(hid, reason, n))
+    for hid, n in untimed.items():
+        skipped.append(Skipped(hid, "headings in a file with no time at all (no epoch, no logger time)", n))
+    if not rows:
+        return None, []
+    frame = pd.DataFrame(rows, columns=["t_ns", "heading_id", "heading_deg", "talker"])
+    streams = [
+        StreamInfo("heading", str(hid), str(hid), f"NMEA {str(hid)[-3:]}", int(n))
+        for hid, n in frame["heading_id"].value_counts(sort=False).items()
+    ]
+    return frame, streams
+
+
+def build(path: Path, files: list[DecodedFile], skipped: list[Skipped]) -> EpochTable:
+    """The EpochTable of a log's decoded files."""
+    out = assemble(files, skipped)
+    frames = {"fixes": out.fixes, "headings": out.headings}
+    return build_table(
+        path,
+        "nmea",
+        out.time_reference,
+        {k: v for k, v in frames.items() if v is not None},
+        out.streams,
+        skipped,
+        metadata=out.metadata,
+    )

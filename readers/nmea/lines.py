@@ -1,0 +1,253 @@
+"""An NMEA 0183 log as its sentences: logger prefixes taken off, checksums verified, nothing decoded yet.
+
+A line of a log is an NMEA sentence (`$GPGGA,...*hh`, `!AIVDM,...*hh`), possibly wrapped by the
+logger that recorded it:
+
+- `#` comment lines (gpsd test logs start with a header of them): kept as the log's description;
+- NMEA 4 TAG blocks `\\s:GPS1,c:1533064290*hh\\$GPRMC,...`: `c:` the logger's UNIX time (seconds, or
+  milliseconds when the value is that large), `s:` the source, which makes a receiver of its own;
+- a leading logger time: `1533064290.123 $GPRMC...` (space, tab, `,` or `;` after it), Signal K's
+  multiplexed log `1533064290123;N;$GPRMC...`, or an ISO-8601 UTC time `2018-08-20T09:47:36.123Z $GP...`;
+- Android GnssLogger's `NMEA,$GPRMC,...*hh,1699400577561` (a trailing logger time in ms after the
+  checksum; AIS loggers append `,<unix seconds>` the same way).
+
+Checksums are verified for every sentence (vectorised over the file); a sentence whose checksum does
+not match is skipped and counted. A sentence without a checksum is accepted only in a file where no
+sentence carries one (an old talker that never sends them); elsewhere it is most likely cut short.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from spooflens.errors import ReaderError
+
+NS = 1_000_000_000
+UNVERIFIED = "sentences without a checksum, taken unverified (no sentence in the file has one)"
+
+_TIME = rb"(\d{9,19}(?:\.\d*)?)"
+_NUMERIC_PREFIX = re.compile(rb"^" + _TIME + rb"[ \t;,]+(?:[A-Za-z];)?")
+_ISO_PREFIX = re.compile(rb"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(?:\.\d+)?)(?:Z|[+-]00:?00)?[ \t;,]+")
+_TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
+_ADDRESS = re.compile(rb"^[$!]([A-Z][A-Z0-9]{3,5}),")
+_HEX = b"0123456789ABCDEFabcdef"
+_HEX_VALUE = np.full(256, -256, dtype=np.int64)  # byte -> its hex digit value (negative: not one)
+for _i, _c in enumerate(b"0123456789ABCDEF"):
+    _HEX_VALUE[_c] = _i
+    _HEX_VALUE[bytes([_c]).lower()[0]] = _i
+
+
+def logger_ns(text: bytes) -> int | None:
+    """A logger's UNIX time field -> ns: seconds, or ms / us / ns when the number is that large."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    for limit, scale in ((1e11, 1e9), (1e14, 1e6), (1e17, 1e3)):
+        if value < limit:
+            return round(value * scale)
+    return round(value)
+
+
+def _iso_ns(text: bytes) -> int | None:
+    try:
+        stamp = datetime.fromisoformat(text.decode().replace(" ", "T")).replace(tzinfo=UTC)
+    except ValueError:
+        return None
+    return round(stamp.timestamp() * NS)
+
+
+class Sentence(NamedTuple):
+    """One NMEA sentence as found in the file, before decoding.
+
+    `start`/`end`: byte span of the sentence (`$` to the last checksum digit) in the file, which is what
+    the rewriter edits; `line`: the line number (0-based); `host_ns`: the logger's time, if any.
+    """
+
+    line: int
+    start: int
+    end: int
+    text: bytes
+    talker: str
+    kind: str
+    source: str
+    host_ns: int | None
+
+
+@dataclass
+class SentenceScan:
+    """Every sentence of one file with a valid (or, in a checksum-less file, absent) checksum."""
+
+    path: Path
+    data: bytes
+    sentences: list[Sentence]
+    comments: list[str]
+    lines: int
+    counts: Counter[str] = field(default_factory=Counter)  # skipped, by reason
+
+
+@dataclass
+class _Candidate:
+    line: int
+    start: int
+    end: int  # end of the sentence proper (after the checksum, or the end of the line)
+    star: int  # file offset of '*'; -1 no checksum, -2 a '*' without two hex digits
+    source: str
+    host_ns: int | None
+
+
+def _unwrap(line: bytes) -> tuple[int, str, int | None, bool]:
+    """Logger wrapping at the start of a line -> (offset of the sentence, source, logger ns, tag ok)."""
+    pos, source, host, tag_ok = 0, "", None, True
+    if line[:1] in (b"$", b"!"):
+        return pos, source, host, tag_ok
+    for _ in range(4):  # prefixes may be stacked: a time, then a TAG block
+        rest = line[pos:]
+        if rest[:1] == b"\\":
+            close = rest.find(b"\\", 1)
+            if close < 0:
+                break
+            tag = rest[1:close]
+            body, _, check = tag.partition(b"*")
+            tag_ok = not check or _xor(body) == _hex_value(check[:2])
+            for part in body.split(b","):
+                key, _, value = part.partition(b":")
+                if key == b"c" and tag_ok:
+                    host = logger_ns(value) if host is None else host
+                elif key == b"s":
+                    source = value.decode("latin-1")
+            pos += close + 1
+            continue
+        if rest[:5] == b"NMEA,":  # Android GnssLogger
+            pos += 5
+            continue
+        m = _NUMERIC_PREFIX.match(rest) or _ISO_PREFIX.match(rest)
+        if m is None:
+            break
+        t = logger_ns(m.group(1)) if m.re is _NUMERIC_PREFIX else _iso_ns(m.group(1))
+        host = t if host is None else host
+        pos += m.end()
+    return pos, source, host, tag_ok
+
+
+def _xor(body: bytes) -> int:
+    out = 0
+    for b in body:
+        out ^= b
+    return out
+
+
+def _hex_value(text: bytes) -> int:
+    try:
+        return int(text, 16)
+    except ValueError:
+        return -1
+
+
+def scan_sentences(path: Path, data: bytes | None = None) -> SentenceScan:
+    """Split one file into sentences; every line that is not one is counted by why."""
+    if data is None:
+        try:
+            data = path.read_bytes()
+        except OSError as err:
+            raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+    counts: Counter[str] = Counter()
+    comments: list[str] = []
+    candidates: list[_Candidate] = []
+    offset = 0
+    n_lines = 0
+    terminated = data.endswith(b"\n")
+    raw_lines = data.split(b"\n")
+    if terminated:
+        raw_lines.pop()
+    for i, raw in enumerate(raw_lines):
+        n_lines += 1
+        line_start = offset
+        offset += len(raw) + 1
+        line = raw[:-1] if raw.endswith(b"\r") else raw
+        if not line.strip():
+            continue
+        if line[:1] == b"#":
+            comments.append(line[1:].decode("utf-8", errors="replace").strip())
+            continue
+        pos, source, host, tag_ok = _unwrap(line)
+        if not tag_ok:
+            counts["TAG blocks with a bad checksum (their time and source ignored)"] += 1
+        if line[pos : pos + 1] not in (b"$", b"!"):
+            if b"\x00" in line or any(b > 126 for b in line[:64]):
+                counts["binary garbage (not text)"] += 1
+            else:
+                counts["lines that are not NMEA sentences"] += 1
+            continue
+        star = line.find(b"*", pos)
+        end = len(line)
+        if (
+            star >= 0
+            and star + 3 <= len(line)
+            and line[star + 1 : star + 2] in _HEX
+            and line[star + 2 : star + 3] in _HEX
+        ):
+            end = star + 3
+            tail = line[end:]
+            if tail.strip():
+                m = _TRAILING_TIME.match(tail)
+                if m and host is None:
+                    host = logger_ns(m.group(1))
+                elif not m:
+                    counts["text after the checksum (ignored)"] += 1
+        elif star >= 0:
+            star = -2  # a '*' without two hex digits after it: cut inside the checksum
+        cut = i == len(raw_lines) - 1 and not terminated
+        star_at = line_start + star if star >= 0 else star
+        candidates.append(_Candidate(i, line_start + pos, line_start + end, star_at, source, host))
+        if cut and star < 0:
+            counts["file cut inside its last sentence"] += 1
+            candidates.pop()
+    sentences = _verified(data, candidates, counts)
+    return SentenceScan(path, data, sentences, comments, n_lines, counts)
+
+
+def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -> list[Sentence]:
+    """Sentences whose checksum matches (XOR of the bytes between `$` and `*`), vectorised."""
+    with_sum = [c for c in candidates if c.star >= 0]
+    no_sum = [c for c in candidates if c.star == -1]
+    broken = [c for c in candidates if c.star == -2]
+    if broken:
+        counts["sentences with a broken checksum field"] += len(broken)
+    ok: list[_Candidate] = []
+    if with_sum:
+        buf = np.frombuffer(data, dtype=np.uint8)
+        acc = np.bitwise_xor.accumulate(buf)
+        starts = np.array([c.start for c in with_sum], dtype=np.int64)
+        stars = np.array([c.star for c in with_sum], dtype=np.int64)
+        body = acc[stars - 1] ^ acc[starts]
+        given = (_HEX_VALUE[buf[stars + 1]] << 4) | _HEX_VALUE[buf[stars + 2]]
+        good = body.astype(np.int64) == given
+        ok = [c for c, g in zip(with_sum, good.tolist(), strict=True) if g]
+        if (~good).any():
+            counts["sentences with a bad checksum"] += int((~good).sum())
+    if no_sum:
+        if with_sum:
+            counts["sentences without a checksum (cut short?)"] += len(no_sum)
+        else:
+            ok += no_sum
+            counts[UNVERIFIED] += len(no_sum)
+    ok.sort(key=lambda c: c.line)
+    out: list[Sentence] = []
+    for c in ok:
+        text = data[c.start : c.end]
+        m = _ADDRESS.match(text)
+        if m is None:
+            counts["sentences without a valid address field"] += 1
+            continue
+        address = m.group(1).decode()
+        talker, kind = (address[:1], address[1:]) if address[0] == "P" else (address[:2], address[2:])
+        out.append(Sentence(c.line, c.start, c.end, text, talker, kind, c.source, c.host_ns))
+    return out

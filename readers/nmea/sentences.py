@@ -1,0 +1,259 @@
+"""NMEA sentences decoded with pynmeagps into plain values with units (the one NMEA mapping).
+
+Read: GGA and GNS (position, MSL altitude and geoid separation, quality, satellites, HDOP), RMC
+(position, speed, course, date), GLL (position), VTG (speed, course), GSA (satellites used, DOPs),
+GSV (per-satellite elevation, azimuth, C/N0), GST (position error sigmas), ZDA (date), and the
+headings HDT and THS (true) and HDG (magnetic; made true with the deviation and variation it carries).
+Every other sentence type is counted and skipped.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from pynmeagps import NMEAReader
+from pynmeagps.exceptions import NMEAMessageError, NMEAParseError, NMEATypeError
+from pynmeagps.nmeatypes_core import VALNONE
+
+from readers.nmea.lines import Sentence
+from spooflens.schema import FixType
+
+KNOT_MPS = 1852.0 / 3600.0
+POSITION_KINDS = ("GGA", "GNS", "RMC", "GLL")
+TIMED_KINDS = ("GGA", "GNS", "RMC", "GLL", "GST", "ZDA")
+HEADING_KINDS = ("HDT", "THS", "HDG")
+EPOCH_KINDS = ("VTG", "GSA", "GSV")  # no time of their own: they belong to their receiver's current epoch
+WANTED = frozenset(POSITION_KINDS + TIMED_KINDS + HEADING_KINDS + EPOCH_KINDS)
+
+# GGA quality: 0 invalid, 1 GPS, 2 DGPS/SBAS, 3 PPS, 4 RTK fixed, 5 RTK float, 6 estimated (dead
+# reckoning), 7 manual input, 8 simulation. The last three are not a GNSS fix: kept, as UNKNOWN.
+GGA_QUALITY = {
+    0: FixType.NO_FIX,
+    1: FixType.FIX_3D,
+    2: FixType.DGNSS,
+    3: FixType.FIX_3D,
+    4: FixType.RTK_FIXED,
+    5: FixType.RTK_FLOAT,
+    6: FixType.UNKNOWN,
+    7: FixType.UNKNOWN,
+    8: FixType.UNKNOWN,
+}
+# RMC/GLL/VTG/GNS mode indicator (NMEA >= 2.3): A autonomous, D differential, R RTK fixed, F RTK
+# float, P precise, E estimated, M manual, S simulator, N not valid.
+MODE = {
+    "A": FixType.FIX_3D,
+    "D": FixType.DGNSS,
+    "R": FixType.RTK_FIXED,
+    "F": FixType.RTK_FLOAT,
+    "P": FixType.FIX_3D,
+    "E": FixType.UNKNOWN,
+    "M": FixType.UNKNOWN,
+    "S": FixType.UNKNOWN,
+    "N": FixType.NO_FIX,
+}
+FIX_MEANING = (
+    "NMEA GGA quality 0 invalid, 1 GNSS, 2 DGNSS/SBAS, 3 PPS, 4 RTK fixed, 5 RTK float, 6 estimated (dead "
+    "reckoning), 7 manual, 8 simulator; RMC/GLL/GNS mode A autonomous, D differential, R/F RTK, E estimated, "
+    "M manual, S simulator, N invalid. Estimated, manual and simulator positions are kept with fix_type UNKNOWN"
+)
+
+ParseErrors = (NMEAMessageError, NMEAParseError, NMEATypeError, ValueError, TypeError, IndexError, KeyError)
+
+
+@dataclass
+class Decoded:
+    """One sentence's values, in SI units and degrees (NaN where the sentence leaves a field blank)."""
+
+    sentence: Sentence
+    tod_s: float = math.nan  # UTC seconds of day
+    day: int | None = None  # days since 1970-01-01 (RMC, ZDA)
+    lat: float = math.nan
+    lon: float = math.nan
+    valid: bool = True  # the sentence says its position (or heading) is usable
+    fix_type: int = int(FixType.FIX_3D)
+    alt_msl_m: float = math.nan
+    geoid_sep_m: float = math.nan
+    speed_mps: float = math.nan
+    course_deg: float = math.nan
+    sats_used: float = math.nan
+    used_svids: tuple[int, ...] = ()
+    nav_mode: int = 0  # GSA: 1 no fix, 2 2-D, 3 3-D
+    hdop: float = math.nan
+    vdop: float = math.nan
+    std_lat_m: float = math.nan
+    std_lon_m: float = math.nan
+    std_alt_m: float = math.nan
+    heading_deg: float = math.nan
+    satellites: list[tuple[int, float, float, float, int]] = field(default_factory=list)  # svid, el, az, C/N0, sig
+
+    @property
+    def kind(self) -> str:
+        return self.sentence.kind
+
+    @property
+    def talker(self) -> str:
+        return self.sentence.talker
+
+
+def _num(msg: Any, name: str) -> float:
+    v = getattr(msg, name, "")
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else math.nan
+
+
+def _str(msg: Any, name: str) -> str:
+    v = getattr(msg, name, "")
+    return v if isinstance(v, str) else ""
+
+
+def _tod(msg: Any) -> float:
+    t = getattr(msg, "time", None)
+    if not isinstance(t, dt.time):
+        return math.nan
+    return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6
+
+
+def _day(year: int, month: int, day: int) -> int | None:
+    try:
+        return (dt.date(year, month, day) - dt.date(1970, 1, 1)).days
+    except ValueError:
+        return None
+
+
+def _position(d: Decoded, msg: Any) -> None:
+    d.lat, d.lon = _num(msg, "lat"), _num(msg, "lon")
+
+
+def _mode(d: Decoded, mode: str) -> None:
+    if mode[:1] in MODE:  # GNS carries one letter per system: the first (GPS) decides
+        d.fix_type = int(MODE[mode[:1]])
+        d.valid = d.valid and mode[:1] != "N"
+
+
+def _gga(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    _position(d, msg)
+    quality = getattr(msg, "quality", "")
+    if isinstance(quality, int):
+        d.fix_type = int(GGA_QUALITY.get(quality, FixType.UNKNOWN))
+        d.valid = quality != 0
+    d.sats_used, d.hdop = _num(msg, "numSV"), _num(msg, "HDOP")
+    d.alt_msl_m, d.geoid_sep_m = _num(msg, "alt"), _num(msg, "sep")
+
+
+def _gns(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    _position(d, msg)
+    _mode(d, _str(msg, "posMode"))
+    d.sats_used, d.hdop = _num(msg, "numSV"), _num(msg, "HDOP")
+    d.alt_msl_m, d.geoid_sep_m = _num(msg, "alt"), _num(msg, "sep")
+
+
+def _rmc(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    _position(d, msg)
+    d.valid = _str(msg, "status") == "A"
+    _mode(d, _str(msg, "posMode"))
+    d.speed_mps = _num(msg, "spd") * KNOT_MPS
+    d.course_deg = _num(msg, "cog")
+    date = getattr(msg, "date", None)
+    if isinstance(date, dt.date):
+        d.day = (date - dt.date(1970, 1, 1)).days
+
+
+def _gll(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    _position(d, msg)
+    d.valid = _str(msg, "status") == "A"
+    _mode(d, _str(msg, "posMode"))
+
+
+def _vtg(d: Decoded, msg: Any) -> None:
+    knots, kmh = _num(msg, "sogn"), _num(msg, "sogk")
+    d.speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
+    d.course_deg = _num(msg, "cogt")
+    _mode(d, _str(msg, "posMode"))
+
+
+def _gsa(d: Decoded, msg: Any) -> None:
+    svids = [getattr(msg, f"svid_{i:02d}", "") for i in range(1, 13)]
+    d.used_svids = tuple(v for v in svids if isinstance(v, int))
+    nav = getattr(msg, "navMode", "")
+    d.nav_mode = nav if isinstance(nav, int) else 0
+    d.hdop, d.vdop = _num(msg, "HDOP"), _num(msg, "VDOP")
+
+
+def _gsv(d: Decoded, msg: Any) -> None:
+    signal = getattr(msg, "signalID", "")
+    sig = int(signal, 16) if isinstance(signal, str) and signal.strip() else (signal if isinstance(signal, int) else 0)
+    for i in range(1, 5):
+        sv = getattr(msg, f"svid_{i:02d}", "")
+        if isinstance(sv, int):
+            d.satellites.append(
+                (sv, _num(msg, f"elv_{i:02d}"), _num(msg, f"az_{i:02d}"), _num(msg, f"cno_{i:02d}"), int(sig))
+            )
+
+
+def _gst(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    d.std_lat_m, d.std_lon_m, d.std_alt_m = _num(msg, "stdLat"), _num(msg, "stdLong"), _num(msg, "stdAlt")
+
+
+def _zda(d: Decoded, msg: Any) -> None:
+    d.tod_s = _tod(msg)
+    y, m, day = (getattr(msg, k, "") for k in ("year", "month", "day"))
+    if isinstance(y, int) and isinstance(m, int) and isinstance(day, int):
+        d.day = _day(y, m, day)
+
+
+def _hdt(d: Decoded, msg: Any) -> None:
+    d.heading_deg = _num(msg, "headingT")
+
+
+def _ths(d: Decoded, msg: Any) -> None:
+    d.heading_deg = _num(msg, "headt")
+    d.valid = _str(msg, "mi") not in ("V",)  # V: data not valid; A autonomous, E estimated, M manual, S simulator
+
+
+def _hdg(d: Decoded, msg: Any) -> None:
+    """Magnetic sensor heading + deviation + variation (east positive) = true heading; NaN without variation."""
+    heading, deviation, variation = _num(msg, "headingM"), _num(msg, "deviation"), _num(msg, "variation")
+    sign = {"E": 1.0, "W": -1.0}
+    if not math.isfinite(variation) or _str(msg, "variationEW") not in sign:
+        return
+    dev = deviation * sign.get(_str(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
+    d.heading_deg = heading + dev + variation * sign[_str(msg, "variationEW")]
+
+
+_DECODERS = {
+    "GGA": _gga,
+    "GNS": _gns,
+    "RMC": _rmc,
+    "GLL": _gll,
+    "VTG": _vtg,
+    "GSA": _gsa,
+    "GSV": _gsv,
+    "GST": _gst,
+    "ZDA": _zda,
+    "HDT": _hdt,
+    "THS": _ths,
+    "HDG": _hdg,
+}
+
+
+def is_empty(sentence: Sentence) -> bool:
+    """True for a sentence with no digit in its data fields (`$IIHDT,,T*0C`, an empty GSV)."""
+    body = sentence.text[sentence.text.find(b",") : sentence.text.rfind(b"*")]
+    return not any(48 <= b <= 57 for b in body)
+
+
+def decode(sentence: Sentence) -> Decoded:
+    """Values of a sentence of a WANTED kind; raises one of ParseErrors when its fields are not valid."""
+    msg = NMEAReader.parse(sentence.text, validate=VALNONE)  # checksum already verified (lines.py)
+    if msg is None:
+        raise NMEAParseError(f"pynmeagps does not know {sentence.talker}{sentence.kind}")
+    out = Decoded(sentence)
+    _DECODERS[sentence.kind](out, msg)
+    return out

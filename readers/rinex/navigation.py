@@ -1,0 +1,212 @@
+"""RINEX navigation files: GPS broadcast orbits (and the Klobuchar ionosphere), and where to find them."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+
+from readers.rinex.text import GPS_EPOCH, TextLines, checked_version, end_of_header, first_line
+from spooflens.epoch_table import Skipped
+from spooflens.errors import ReaderError
+from spooflens.gnss.ephemeris import SECONDS_PER_WEEK, GpsEphemerides, Klobuchar
+
+
+def is_gps_nav(path: Path) -> bool:
+    """True for a RINEX navigation file that can hold GPS orbits (RINEX 2 'N', RINEX 3 GPS or mixed)."""
+    line = first_line(path)
+    if "RINEX VERSION / TYPE" not in line or line[20:21].upper() != "N":
+        return False
+    return line[:9].strip().startswith("2") or line[40:41].upper() in ("G", "M", " ", "")
+
+
+@dataclass(frozen=True)
+class NavFile:
+    """A navigation file's GPS records, with what was skipped and why."""
+
+    path: Path
+    version: float
+    ephemerides: GpsEphemerides
+    records: int
+    skipped: list[Skipped]
+
+
+_NAV_KEYS = (  # RINEX GPS broadcast orbit lines 1-7, four fields each (None: not used)
+    ("iode", "crs", "delta_n", "m0"),
+    ("cuc", "e", "cus", "sqrt_a"),
+    ("toe_sow", "cic", "omega0", "cis"),
+    ("i0", "crc", "omega", "omega_dot"),
+    ("idot", None, "week", None),
+    (None, "health", "tgd", None),
+    (None, "fit_hours", None, None),
+)
+_OPTIONAL = {"fit_hours"}
+
+
+def _nav_number(text: str) -> float | None:
+    s = text.strip()
+    if not s:
+        return None
+    return float(s.replace("D", "E").replace("d", "e"))
+
+
+def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str]:
+    """One GPS broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records keys."""
+    first = lines[0]
+    if version < 3:
+        sv = f"G{int(first[:2]):02d}"
+        yy, mo, d, h, mi = (int(v) for v in first[2:17].split())
+        sec = float(first[17:22])
+        year = yy + (2000 if yy < 80 else 1900) if yy < 100 else yy
+        head, col0 = first[22:79], 3
+    else:
+        sv = f"G{int(first[1:3]):02d}"
+        year, mo, d, h, mi, isec = (int(v) for v in first[4:23].split())
+        sec = float(isec)
+        head, col0 = first[23:80], 4
+    toc = datetime(year, mo, d, h, mi, tzinfo=UTC) + timedelta(seconds=sec)
+    rec: dict[str, float | int | str] = {"sv_id": sv, "toc_s": (toc - GPS_EPOCH).total_seconds()}
+    for key, k in zip(("af0", "af1", "af2"), range(3), strict=True):
+        v = _nav_number(head[19 * k : 19 * k + 19])
+        if v is None:
+            raise ValueError(f"{key} is blank")
+        rec[key] = v
+    for row, keys in enumerate(_NAV_KEYS):
+        line = lines[row + 1] if row + 1 < len(lines) else ""
+        for k, name in enumerate(keys):
+            if name is None:
+                continue
+            v = _nav_number(line[col0 + 19 * k : col0 + 19 * k + 19])
+            if v is None and name not in _OPTIONAL:
+                raise ValueError(f"{name} is blank")
+            rec[name] = 0.0 if v is None else v
+    fit = float(rec.pop("fit_hours"))
+    if fit > 4.0:
+        rec["max_age_s"] = fit * 3600.0 / 2
+    week = int(rec["week"])
+    toc_week = int(float(rec["toc_s"]) // SECONDS_PER_WEEK)
+    while week + 512 < toc_week:  # a week written modulo 1024
+        week += 1024
+    rec["week"], rec["health"], rec["iode"] = week, int(rec["health"]), int(rec["iode"])
+    values = [float(v) for key, v in rec.items() if key != "sv_id"]
+    if not np.all(np.isfinite(values)) or not 2000.0 < float(rec["sqrt_a"]) < 10000.0 or not 0 <= float(rec["e"]) < 1:
+        raise ValueError("implausible orbit (sqrt(A) or e out of range)")
+    return rec
+
+
+def _klobuchar(lines: list[str]) -> Klobuchar | None:
+    alpha = beta = None
+
+    def four(text: str) -> tuple[float, float, float, float] | None:
+        try:
+            vals = [_nav_number(text[12 * k : 12 * k + 12]) for k in range(4)]
+        except ValueError:
+            return None
+        return None if any(v is None for v in vals) else (vals[0], vals[1], vals[2], vals[3])  # type: ignore[return-value]
+
+    for line in lines:
+        label = line[60:80].strip()
+        if label == "ION ALPHA":
+            alpha = four(line[2:50])
+        elif label == "ION BETA":
+            beta = four(line[2:50])
+        elif label == "IONOSPHERIC CORR" and line[:4] == "GPSA":
+            alpha = four(line[5:53])
+        elif label == "IONOSPHERIC CORR" and line[:4] == "GPSB":
+            beta = four(line[5:53])
+    return Klobuchar(alpha, beta) if alpha and beta else None
+
+
+def read_rinex_nav_file(path: Path | str) -> NavFile:
+    """Read a RINEX 2 GPS or RINEX 3 (GPS or mixed) navigation file, keeping the GPS records.
+
+    Records that are cut short or hold a field that is not a number are skipped and counted; other
+    systems' records are counted as skipped. ReaderError if no GPS record is usable.
+    """
+    path = Path(path)
+    text = TextLines.load(path)
+    end = end_of_header(text)
+    lines = [text.line(i) for i in range(len(text))]
+    first = lines[0]
+    version = checked_version(path, first, "navigation ", "2.x GPS, 3.x")
+    ftype, fsys = first[20:21].upper(), first[40:41].upper()
+    if version < 3 and ftype != "N":
+        raise ReaderError(path, f"RINEX 2 navigation type {ftype!r}: only GPS navigation ('N') files carry GPS orbits")
+    if version >= 3 and fsys not in ("G", "M", " ", ""):
+        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS records")
+    body = lines[end + 1 :]
+    is_start = [(ln[:2].strip() != "") if version < 3 else (ln[:1].strip() != "") for ln in body]
+    starts = [i for i, s in enumerate(is_start) if s]
+    records: list[dict[str, float | int | str]] = []
+    bad, other = 0, 0
+    first_bad: tuple[int, str] | None = None
+    for a, b in zip(starts, [*starts[1:], len(body)][: len(starts)], strict=True):
+        rec_lines = body[a:b]
+        if version >= 3 and rec_lines[0][:1].upper() != "G":
+            other += 1
+            continue
+        try:
+            if len(rec_lines) < 7:
+                raise ValueError(f"record cut short ({len(rec_lines)} of 8 lines)")
+            if b == len(body) and not text.terminated and (len(rec_lines) < 8 or len(rec_lines[-1].rstrip()) < 22):
+                raise ValueError("record cut short (file ends inside it)")
+            records.append(_nav_record(rec_lines, version))
+        except (ValueError, IndexError) as err:
+            bad += 1
+            first_bad = first_bad or (end + 2 + a, str(err))
+    skipped = []
+    if bad and first_bad:
+        skipped.append(
+            Skipped(
+                path.name,
+                f"unreadable or cut navigation records (first at line {first_bad[0]}: {first_bad[1]})",
+                bad,
+                "lost",
+            )
+        )
+    if other:
+        skipped.append(Skipped(path.name, "non-GPS navigation records (only GPS orbits are used)", other))
+    if not records:
+        where = f"; first problem at line {first_bad[0]}: {first_bad[1]}" if first_bad else ""
+        raise ReaderError(path, f"no usable GPS navigation record{where}")
+    unique = {(r["sv_id"], r["week"], r["toe_sow"], r["iode"]): r for r in reversed(records)}
+    if len(unique) < len(records):
+        skipped.append(Skipped(path.name, "duplicate navigation records", len(records) - len(unique)))
+    eph = GpsEphemerides.from_records(list(unique.values()), iono=_klobuchar(lines[: end + 1]))
+    return NavFile(path, version, eph, len(eph), skipped)
+
+
+def read_rinex_nav(path: Path | str) -> GpsEphemerides:
+    """GPS broadcast ephemerides of a RINEX navigation file (`read_rinex_nav_file` for what was skipped)."""
+    return read_rinex_nav_file(path).ephemerides
+
+
+def _nav_siblings(obs: Path) -> list[Path]:
+    """Navigation files named after an observation file (RINEX 2 short names, RINEX 3 long names)."""
+    names: list[str] = []
+    suffix = obs.suffix
+    if len(suffix) >= 2 and suffix[-1] in "oO":
+        names += [obs.stem + suffix[:-1] + ch for ch in "nNpP"]
+    m = re.match(r"(.*_)[A-Z]O(\.rnx.*)$", obs.name, flags=re.IGNORECASE)
+    if m:
+        names += [f"{m.group(1)}{kind}{m.group(2)}" for kind in ("GN", "MN")]
+    if suffix.lower() == ".obs":
+        names += [obs.stem + ".nav"]
+    return [obs.with_name(n) for n in dict.fromkeys(names) if obs.with_name(n).is_file()]
+
+
+def find_nav_files(obs: Path, topics: Mapping[str, str] | None = None) -> list[Path]:
+    """The navigation file(s) for an observation file: `topics['nav']`, a same-named sibling, or the directory's."""
+    if topics and topics.get("nav"):
+        nav = Path(topics["nav"])
+        if not nav.is_file():
+            raise ReaderError(nav, "navigation file given with --topic nav= does not exist", "nav")
+        return [nav]
+    siblings = _nav_siblings(obs)
+    if siblings:
+        return siblings[:1]
+    return sorted(p for p in obs.parent.iterdir() if p.is_file() and p != obs and is_gps_nav(p))

@@ -1,0 +1,431 @@
+"""u-blox UBX captures (a receiver's binary output, often mixed with NMEA and RTCM3) to an EpochTable.
+
+One file is one receiver (`ubx`). The capture is framed (`frames.py`: every checksum verified, what is
+not UBX counted), and each message the reader uses is mapped in `messages.py`:
+
+- `fixes` from NAV-PVT (position, NED velocity, hAcc/vAcc/sAcc, numSV, fixType), with, at the same
+  iTOW, NAV-DOP (hdop, vdop), NAV-SAT (`cn0_mean_dbhz`) and NAV-STATUS (`spoofing_state` raw,
+  `spoofing_flag` decoded); MON-RF (block 0) or MON-HW (`jamming_state`, `agc`, `noise_per_ms`,
+  `jamming_indicator`) and SEC-SIG (jamming/spoofing state per signal) join the epoch they follow in
+  the stream (they carry no time). A capture with no NAV-PVT takes its fixes from the receiver's own
+  NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`); with NAV-PVT that NMEA is the
+  same solution again and is counted, not used.
+- `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
+  pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
+  RINEX-style. No satellite states: broadcast orbits would come from RXM-SFRBX subframes, which pyubx2
+  leaves as raw words and spooflens does not decode, so RAWX rows cannot be solved into positions.
+- `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
+- `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
+
+Time: GPS time from NAV iTOW and the week of RXM-RAWX, NAV-TIMEGPS or a NAV-PVT with a valid date
+(`time_reference` "gps"), else `relative` (seconds of the GPS week). MON-VER (and a gpsd header's
+device line) go into `table.metadata`, with the meaning applied to each receiver enum.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from pyubx2.ubxtypes_core import UBX_MSGIDS
+
+from readers import ReaderFormat
+from readers.ubx import messages as m
+from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
+from spooflens.epoch_table import (
+    GPS_EPOCH_UNIX_NS,
+    EpochTable,
+    Skipped,
+    StreamInfo,
+    build_table,
+    gps_seconds_of_unix_ns,
+    gps_utc_offset_ns,
+)
+from spooflens.errors import ReaderError
+from spooflens.schema import SpoofingFlag
+
+Progress = Callable[[int, int], None]
+RECEIVER = "ubx"
+WEEK_S = 604_800
+NS = 1_000_000_000
+ESF_TICKS = (1e-3, 39.0625e-6, 1e-6)  # candidate sensor time-tag units (s)
+
+
+@dataclass
+class _Epoch:
+    itow_ms: int
+    values: dict[str, float] = field(default_factory=dict)
+    has_pvt: bool = False
+
+
+@dataclass
+class _State:
+    epochs: dict[int, _Epoch] = field(default_factory=dict)
+    current: int | None = None
+    pending: dict[str, float] = field(default_factory=dict)  # untimed values before the first epoch
+    gps_refs: list[float] = field(default_factory=list)  # GPS seconds known from week-bearing messages
+    rawx: list[m.RawxEpoch] = field(default_factory=list)
+    esf: list[tuple[str, int, int | None, dict[str, float]]] = field(default_factory=list)
+    metadata: dict[str, str] = field(default_factory=dict)
+    used: Counter[str] = field(default_factory=Counter)
+    unused: Counter[str] = field(default_factory=Counter)
+    bad: Counter[str] = field(default_factory=Counter)
+    first_error: str = ""
+    no_fix: int = 0
+
+    def epoch(self, itow: int) -> _Epoch:
+        if itow not in self.epochs:
+            self.epochs[itow] = _Epoch(itow, dict(self.pending))
+            self.pending.clear()
+        self.current = itow
+        return self.epochs[itow]
+
+    def untimed(self, values: dict[str, float]) -> None:
+        target = self.epochs[self.current].values if self.current is not None else self.pending
+        target.update(values)
+
+
+def _name(frame: UbxFrame) -> str:
+    key = (frame.msg_class, frame.msg_id)
+    if key in m.MSG:
+        return m.MSG[key]
+    name = UBX_MSGIDS.get(bytes(key))
+    return str(name) if name else f"UBX 0x{frame.msg_class:02x} 0x{frame.msg_id:02x}"
+
+
+def _handle(state: _State, frame: UbxFrame) -> None:
+    name = _name(frame)
+    if name not in m.MSG.values():
+        state.unused[name] += 1
+        return
+    state.used[name] += 1
+    if name == "RXM-RAWX":
+        raw = m.rawx(frame)
+        state.rawx.append(raw)
+        state.gps_refs.append(raw.gps_s)
+        return
+    if name in ("ESF-RAW", "ESF-MEAS"):
+        for tag, sample in m.esf_samples(name, frame):
+            state.esf.append((name, tag, state.current, sample))
+        return
+    msg = m.parse(frame)
+    if name == "NAV-PVT":
+        epoch = state.epoch(int(msg.iTOW))
+        values = m.pvt_values(msg)
+        utc = m.pvt_utc_ns(msg)
+        if utc is not None:
+            state.gps_refs.append(float(gps_seconds_of_unix_ns(utc)))
+        if values is None:
+            state.no_fix += 1
+        else:
+            epoch.values.update(values)
+            epoch.has_pvt = True
+    elif name == "NAV-DOP":
+        state.epoch(int(msg.iTOW)).values.update({"hdop": float(msg.hDOP), "vdop": float(msg.vDOP)})
+    elif name == "NAV-SAT":
+        state.epoch(int(msg.iTOW)).values["cn0_mean_dbhz"] = m.sat_cn0_mean(msg)
+    elif name == "NAV-STATUS":
+        state.epoch(int(msg.iTOW)).values.update(m.status_values(msg))
+    elif name == "NAV-TIMEGPS":
+        state.epoch(int(msg.iTOW))
+        if int(getattr(msg, "weekValid", 0)) and int(getattr(msg, "towValid", 0)):
+            state.gps_refs.append(int(msg.week) * WEEK_S + int(msg.iTOW) / 1000 + int(msg.fTOW) * 1e-9)
+    elif name == "MON-RF":
+        state.untimed(m.mon_rf_values(frame, msg))
+    elif name == "MON-HW":
+        state.untimed(m.mon_hw_values(msg))
+    elif name == "SEC-SIG":
+        state.untimed(m.sec_sig_values(msg))
+    elif name == "MON-VER":
+        state.metadata.update(m.mon_ver(msg))
+
+
+def _gps_of_itow(itows: np.ndarray, ref_s: float) -> np.ndarray:
+    """GPS seconds of iTOWs (ms), each in the week that puts it within half a week of `ref_s`."""
+    week0 = math.floor(ref_s / WEEK_S)
+    t = week0 * WEEK_S + itows / 1000.0
+    return t + WEEK_S * np.round((ref_s - t) / WEEK_S)
+
+
+_FIX_COLUMNS = (
+    "lat_deg",
+    "lon_deg",
+    "height_m",
+    "vel_e_mps",
+    "vel_n_mps",
+    "vel_u_mps",
+    "h_acc_m",
+    "v_acc_m",
+    "vel_acc_mps",
+    "sats_used",
+    "hdop",
+    "vdop",
+    "cn0_mean_dbhz",
+    "spoofing_state",
+)
+
+
+def _first(values: dict[str, float], *names: str) -> float:
+    return next((values[n] for n in names if math.isfinite(values.get(n, math.nan))), math.nan)
+
+
+def _fixes(state: _State, ref_s: float | None) -> pd.DataFrame | None:
+    rows = [e for e in state.epochs.values() if e.has_pvt]
+    if not rows:
+        return None
+    itow = np.array([e.itow_ms for e in rows], dtype=np.float64)
+    t_s = _gps_of_itow(itow, ref_s) if ref_s is not None else itow / 1000.0
+    cols: dict[str, Any] = {"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER}
+    for c in _FIX_COLUMNS:
+        cols[c] = np.array([e.values.get(c, math.nan) for e in rows])
+    cols["fix_type"] = np.array([e.values["fix_type"] for e in rows]).astype(np.int8)
+    sec_spoof = np.array([e.values.get("sec_spoofing_state", math.nan) for e in rows])
+    cols["spoofing_state"] = np.where(np.isfinite(cols["spoofing_state"]), cols["spoofing_state"], sec_spoof)
+    cols["spoofing_flag"] = np.array([int(m.spoofing_flag(s)) for s in cols["spoofing_state"]], dtype=np.int8)
+    for out, names in {
+        "jamming_state": ("sec_jamming_state", "rf_jamming_state", "hw_jamming_state"),
+        "noise_per_ms": ("noise_per_ms", "hw_noise_per_ms"),
+        "agc": ("agc", "hw_agc"),
+        "jamming_indicator": ("jamming_indicator", "hw_jamming_indicator"),
+    }.items():
+        cols[out] = np.array([_first(e.values, *names) for e in rows])
+    return pd.DataFrame(cols)
+
+
+def _observations(state: _State) -> tuple[pd.DataFrame | None, int]:
+    parts = []
+    no_pr = 0
+    for epoch in state.rawx:
+        rows = m.rawx_rows(epoch)
+        keep = np.isfinite(rows["pseudorange_m"])
+        no_pr += int((~keep).sum())
+        parts.append(pd.DataFrame({k: v[keep] for k, v in rows.items()}).assign(t_ns=round(epoch.gps_s * NS)))
+    if not parts:
+        return None, 0
+    df = pd.concat(parts, ignore_index=True)
+    df["receiver_id"] = RECEIVER
+    return df, no_pr
+
+
+def _imu(state: _State, ref_s: float | None, skipped: list[Skipped]) -> pd.DataFrame | None:
+    """ESF samples on GPS time: the tag unit fitted to the navigation epochs the messages follow."""
+    if not state.esf:
+        return None
+    tags = np.array([t for _, t, _, _ in state.esf], dtype=np.float64)
+    tags += np.concatenate(([0], np.cumsum(np.diff(tags) < -(2.0**31)))) * 2.0**32  # counter wrap
+    itow = np.array([math.nan if c is None else c for _, _, c, _ in state.esf], dtype=np.float64)
+    known = np.isfinite(itow)
+    if not known.any():
+        skipped.append(Skipped("ubx_esf", "IMU samples before any navigation epoch: no time", len(tags)))
+        return None
+    epoch_s = np.full(len(tags), np.nan)
+    epoch_s[known] = _gps_of_itow(itow[known], ref_s) if ref_s is not None else itow[known] / 1000.0
+    default = 39.0625e-6 if state.esf[0][0] == "ESF-RAW" else 1e-3
+    tick = default
+    if known.sum() > 2 and np.ptp(epoch_s[known]) > 1.0 and np.ptp(tags[known]) > 0:
+        slope = np.polyfit(tags[known], epoch_s[known], 1)[0]
+        if slope > 0:
+            tick = min(ESF_TICKS, key=lambda c: abs(math.log(slope / c)))
+    # a sample is measured after the epoch its message follows (and before the next one): the samples
+    # right after an epoch bound the offset from below, so take the top of the spread (robust quantile)
+    offset = float(np.quantile(epoch_s[known] - tags[known] * tick, 0.95))
+    t_ns = np.round((tags * tick + offset) * NS).astype(np.int64)
+    frame = pd.DataFrame([v for _, _, _, v in state.esf]).assign(t_ns=t_ns, imu_id="ubx_esf")
+    state.metadata["imu.time_tag_unit_s"] = f"{tick:g}"
+    skipped.append(
+        Skipped(
+            "ubx_esf",
+            f"IMU time tags ({tick:g} s per tick) aligned to GPS time by the first samples after each "
+            "navigation epoch (to within the message latency)",
+            len(frame),
+            "repaired",
+        )
+    )
+    return frame
+
+
+def _nmea_part(
+    frames: Frames, path: Path, reference: str, use_fixes: bool, skipped: list[Skipped]
+) -> tuple[pd.DataFrame | None, pd.DataFrame | None, list[StreamInfo]]:
+    """The receiver's NMEA output in the stream, read by the NMEA reader: fixes if used, headings."""
+    from readers.nmea import decode_scan
+    from readers.nmea.assembly import assemble
+    from readers.nmea.lines import scan_sentences
+
+    if not frames.nmea:
+        return None, None, []
+    blob = b"\n".join(line.text for line in frames.nmea) + b"\n"
+    part = decode_scan(scan_sentences(path, blob), "")
+    out = assemble([part], [] if not use_fixes else skipped)
+    if use_fixes:
+        skipped.extend(s for s in part.skipped if s.reason != "sentence type spooflens does not use")
+    else:
+        skipped.append(
+            Skipped(
+                "NMEA",
+                "NMEA sentences in the stream: the same receiver's solution again (NAV-PVT used)",
+                len(part.decoded),
+            )
+        )
+
+    def retimed(df: pd.DataFrame | None) -> pd.DataFrame | None:
+        if df is None or not len(df):
+            return None
+        if reference == "gps" and out.time_reference == "unix":
+            utc = df["t_ns"].to_numpy(dtype=np.int64)
+            gps = utc - GPS_EPOCH_UNIX_NS
+            df = df.assign(t_ns=gps + gps_utc_offset_ns(gps))
+        return df
+
+    streams = [s for s in out.streams if s.role == "heading" or use_fixes]
+    fixes = retimed(out.fixes) if use_fixes else None
+    if fixes is not None:
+        ids = dict.fromkeys(fixes["receiver_id"].astype(str))
+        rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
+        fixes = fixes.assign(receiver_id=fixes["receiver_id"].map(rename))
+        streams = [
+            StreamInfo(s.role, rename.get(s.stream_id, s.stream_id), "NMEA in the UBX stream", s.msgtype, s.count)
+            for s in streams
+        ]
+    return fixes, retimed(out.headings), streams
+
+
+def _header_metadata(comments: list[str]) -> dict[str, str]:
+    """gpsd's header: its description lines, and the receiver model/firmware from its DEVICE line."""
+    out: dict[str, str] = {}
+    text = [c for c in comments if c and not c.startswith(("[", "{"))]
+    if text:
+        out["log_header"] = " | ".join(text[:12])
+    for c in comments:
+        if not c.startswith("["):
+            continue
+        try:
+            devices = json.loads(c)
+        except ValueError:
+            continue
+        for d in devices if isinstance(devices, list) else []:
+            if isinstance(d, dict) and d.get("driver") == "u-blox":
+                sub = ", ".join(str(d[k]) for k in ("subtype", "subtype1") if d.get(k))
+                if sub:
+                    out["receiver.gpsd_device"] = sub
+    return out
+
+
+def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    """Read a u-blox UBX capture (UBX mixed with NMEA, RTCM3 and text) into an EpochTable."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+    if not data:
+        raise ReaderError(path, "file is empty (0 bytes)")
+    frames = split_frames(data)
+    state = _State()
+    for i, frame in enumerate(frames.ubx):
+        try:
+            _handle(state, frame)
+        except m.ParseErrors as err:
+            name = _name(frame)
+            state.bad[name] += 1
+            state.first_error = state.first_error or f"{name} at byte {frame.offset}: {err}"
+        if progress and i % 2000 == 0:
+            progress(i, len(frames.ubx))
+    skipped: list[Skipped] = []
+    if topics:
+        skipped.append(Skipped("<ubx>", f"--topic is not used for UBX logs ({dict(topics)})", len(topics)))
+    for what, n in frames.bad.items():
+        skipped.append(Skipped("UBX", what, n, "lost"))
+    if frames.garbage_bytes:
+        skipped.append(
+            Skipped("bytes", "bytes that are no UBX, NMEA or RTCM3 frame (cut frames, garbage)", frames.garbage_bytes)
+        )
+    for num, n in sorted(frames.rtcm.items()):
+        skipped.append(Skipped(f"RTCM3 {num}", "RTCM3 corrections fed to the receiver (not used)", n))
+    for name, n in sorted(state.unused.items()):
+        skipped.append(Skipped(name, "UBX message type spooflens does not use", n))
+    for name, n in state.bad.items():
+        skipped.append(Skipped(name, f"UBX messages pyubx2 cannot decode ({state.first_error})", n, "lost"))
+    if state.no_fix:
+        skipped.append(
+            Skipped(RECEIVER, "NAV-PVT without a fix (fixType 0/5, gnssFixOK 0 or invalid position)", state.no_fix)
+        )
+
+    ref_s = state.gps_refs[0] if state.gps_refs else None
+    reference = "gps" if ref_s is not None else "relative"
+    fixes = _fixes(state, ref_s)
+    obs, no_pr = _observations(state)
+    imu = _imu(state, ref_s, skipped)
+    nmea_fixes, headings, nmea_streams = _nmea_part(frames, path, reference, fixes is None, skipped)
+    if fixes is None and nmea_fixes is not None:
+        if reference == "relative":
+            reference = "unix"  # the NMEA dates are the only clock
+        fixes = nmea_fixes
+    streams: list[StreamInfo] = []
+    if fixes is not None and state.used["NAV-PVT"]:
+        kinds = " ".join(
+            k for k in ("NAV-PVT", "NAV-DOP", "NAV-SAT", "NAV-STATUS", "MON-RF", "MON-HW", "SEC-SIG") if state.used[k]
+        )
+        streams.append(StreamInfo("fix", RECEIVER, "UBX", f"UBX {kinds}", len(fixes)))
+    streams += [s for s in nmea_streams if s.role == "heading" or fixes is nmea_fixes]
+    if obs is not None:
+        streams.append(StreamInfo("observations", RECEIVER, "UBX", "UBX RXM-RAWX", len(state.rawx)))
+        if no_pr:
+            skipped.append(Skipped(RECEIVER, "RAWX signals without a valid pseudorange (prValid 0)", no_pr))
+        reason = "RAWX rows: no satellite states (RXM-SFRBX subframes are not decoded); positions cannot be solved"
+        skipped.append(Skipped(RECEIVER, reason, len(obs), "no ephemeris"))
+    if imu is not None:
+        streams.append(StreamInfo("imu", "ubx_esf", "UBX", "UBX ESF-RAW/ESF-MEAS", len(imu), body_frame="FRD"))
+    if fixes is None and obs is None and imu is None:
+        reasons = "; ".join(str(s) for s in skipped[:6]) or "no UBX navigation message"
+        raise ReaderError(path, f"no fix, raw observation or IMU sample in the capture: {reasons}", "ubx")
+    metadata = {**_header_metadata(frames.comments), **state.metadata}
+    metadata |= {
+        "enum.spoofing_state": m.SPOOF_MEANING,
+        "enum.jamming_state": m.JAM_MEANING,
+        "enum.fix_type": m.FIX_MEANING,
+    }
+    metadata["enum.spoofing_flag"] = f"{int(SpoofingFlag.INDICATED)} when spoofing_state >= 2"
+    frames_ns = {"fixes": fixes, "observations": obs, "imu": imu, "headings": headings}
+    return build_table(
+        path,
+        "ubx",
+        reference,
+        {k: v for k, v in frames_ns.items() if v is not None},
+        streams,
+        skipped,
+        metadata=metadata,
+    )
+
+
+def looks_like_ubx(head: bytes) -> bool:
+    """The head holds at least one complete UBX frame with a valid checksum."""
+    pos = head.find(b"\xb5\x62")
+    while 0 <= pos <= len(head) - 8:
+        length = head[pos + 4] | (head[pos + 5] << 8)
+        end = pos + 8 + length
+        if end <= len(head) and fletcher(head[pos + 2 : end - 2]) == head[end - 2 : end]:
+            return True
+        pos = head.find(b"\xb5\x62", pos + 1)
+    return False
+
+
+def _is_ubx(path: Path, head: bytes) -> bool:
+    return path.is_file() and looks_like_ubx(head)
+
+
+FORMATS = (
+    ReaderFormat(
+        "ubx",
+        "u-blox UBX capture (NAV-PVT, NAV-SAT, NAV-STATUS, RXM-RAWX, MON-RF, SEC-SIG, ESF; mixed NMEA/RTCM3 skipped)",
+        read_ubx,
+        _is_ubx,
+    ),
+)

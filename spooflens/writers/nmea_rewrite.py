@@ -1,0 +1,182 @@
+"""A spoofed copy of an NMEA 0183 log: positions edited in place, every other byte unchanged.
+
+The log is read the way the reader reads it (`readers.nmea.decode_log` and `assemble`), so every fix
+row of the table is tied to the sentences of its epoch. For each row the attack changed, every GGA,
+GNS, RMC and GLL sentence of that epoch is moved by the attack's offset of that row (spoofed minus
+clean latitude and longitude; each sentence keeps its own small disagreement with the others, as the
+receiver wrote them), with the same number of decimals and hemisphere letters following the sign;
+GGA/GNS altitudes move by the height offset where the sentence has one; when the attack moves the
+reported velocity, RMC and VTG get their own velocity plus the offset, as speed and course. Each
+edited sentence gets its checksum recomputed; logger prefixes, TAG blocks, line endings and every other
+sentence are copied as they were.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from readers.nmea import decode_log
+from readers.nmea.assembly import Epoch, assemble
+from readers.nmea.sentences import KNOT_MPS, Decoded
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import WriterError
+
+Values = tuple[float, float, float, float, float, float]  # offsets of lat, lon (deg), h, ve, vn, vu
+_COLS = ["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]
+
+
+def _decimals(text: str) -> int:
+    return len(text.partition(".")[2]) if "." in text else 0
+
+
+def _angle(value: float, template: str, degree_digits: int) -> str:
+    """An NMEA ddmm.mmmm / dddmm.mmmm field for |value| degrees, with the template's decimals."""
+    k = _decimals(template)
+    minutes_total = round(abs(value) * 60.0, k)
+    degrees, minutes = divmod(minutes_total, 60.0)
+    width = 3 + k if k else 2
+    return f"{int(degrees):0{degree_digits}d}{minutes:0{width}.{k}f}"
+
+
+def _number(value: float, template: str) -> str:
+    return f"{value:.{_decimals(template)}f}"
+
+
+def _with_checksum(body: str, old: bytes) -> bytes:
+    check = 0
+    for b in body[1:].encode("latin-1"):
+        check ^= b
+    lower = old[-2:].decode("latin-1").islower()
+    return f"{body}*{check:02x}".encode("latin-1") if lower else f"{body}*{check:02X}".encode("latin-1")
+
+
+def _fields(d: Decoded) -> list[str]:
+    text = d.sentence.text.decode("latin-1")
+    star = text.rfind("*")
+    return (text[:star] if star >= 0 else text).split(",")
+
+
+def _degrees(field: str, hemisphere: str, degree_digits: int) -> float:
+    value = float(field[:degree_digits]) + float(field[degree_digits:]) / 60.0
+    return -value if hemisphere in ("S", "W") else value
+
+
+def _move_position(f: list[str], i_lat: int, dlat: float, dlon: float) -> None:
+    if f[i_lat] and f[i_lat + 2]:
+        lat = _degrees(f[i_lat], f[i_lat + 1], 2) + dlat
+        lon = (_degrees(f[i_lat + 2], f[i_lat + 3], 3) + dlon + 180.0) % 360.0 - 180.0
+        f[i_lat] = _angle(lat, f[i_lat], 2)
+        f[i_lat + 1] = "N" if lat >= 0 else "S"
+        f[i_lat + 2] = _angle(lon, f[i_lat + 2], 3)
+        f[i_lat + 3] = "E" if lon >= 0 else "W"
+
+
+def _moved_velocity(speed_knots: str, course: str, dve: float, dvn: float) -> tuple[float, float]:
+    """(speed m/s, course deg) of a sentence's own speed and course plus a velocity offset."""
+    v = float(speed_knots) * KNOT_MPS
+    c = math.radians(float(course)) if course else 0.0
+    return _speed_course(v * math.sin(c) + dve, v * math.cos(c) + dvn)
+
+
+def _speed_course(ve: float, vn: float) -> tuple[float, float]:
+    return math.hypot(ve, vn), math.degrees(math.atan2(ve, vn)) % 360.0
+
+
+def edited(d: Decoded, offsets: Values, velocity: bool) -> bytes | None:
+    """The sentence moved by the attack's offsets, or None when it carries none of those values."""
+    dlat, dlon, dh, dve, dvn, _ = offsets
+    f = _fields(d)
+    kind = d.kind
+    try:
+        if kind in ("GGA", "GNS"):
+            _move_position(f, 2, dlat, dlon)
+            if f[9] and dh:
+                f[9] = _number(float(f[9]) + dh, f[9])
+        elif kind == "RMC":
+            _move_position(f, 3, dlat, dlon)
+            if velocity and f[7]:
+                speed, course = _moved_velocity(f[7], f[8], dve, dvn)
+                f[7] = _number(speed / KNOT_MPS, f[7])
+                if f[8]:
+                    f[8] = _number(course, f[8])
+        elif kind == "GLL":
+            _move_position(f, 1, dlat, dlon)
+        elif kind == "VTG" and velocity and (f[5] or f[7]):
+            knots = f[5] if f[5] else str(float(f[7]) / 3.6 / KNOT_MPS)
+            speed, course = _moved_velocity(knots, f[1], dve, dvn)
+            if f[1] and f[3]:  # the magnetic course turns with the true one
+                f[3] = _number((float(f[3]) + course - float(f[1])) % 360.0, f[3])
+            if f[1]:
+                f[1] = _number(course, f[1])
+            if f[5]:
+                f[5] = _number(speed / KNOT_MPS, f[5])
+            if f[7]:
+                f[7] = _number(speed * 3.6, f[7])
+        else:
+            return None
+    except (ValueError, IndexError):
+        return None
+    new = _with_checksum(",".join(f), d.sentence.text)
+    return None if new == d.sentence.text else new
+
+
+def _changed_rows(table: EpochTable, spoofed: EpochTable) -> dict[tuple[str, int], tuple[Values, bool]]:
+    """(receiver, fix ns) -> (spoofed minus clean values, velocity changed) for every fix the attack moved."""
+    out: dict[tuple[str, int], tuple[Values, bool]] = {}
+    for rid, rows in spoofed.fixes.groupby("receiver_id", sort=False):
+        orig = table.fixes_of(str(rid))
+        t_ns = table.absolute_ns(rows["t_s"].to_numpy())
+        before = orig.set_index(table.absolute_ns(orig["t_s"].to_numpy()))[_COLS]
+        after = pd.DataFrame(rows[_COLS].to_numpy(float), index=t_ns, columns=_COLS)
+        common = after.index.intersection(before.index)
+        a, b = after.loc[common].to_numpy(float), before.loc[common].to_numpy(float)
+        same = (a == b) | (np.isnan(a) & np.isnan(b))
+        delta = np.where(same, 0.0, a - b)
+        for t, row, eq in zip(common.tolist(), delta, same, strict=True):
+            if not eq.all():
+                d = np.nan_to_num(row, nan=0.0).tolist()
+                out[(str(rid), int(t))] = ((d[0], d[1], d[2], d[3], d[4], d[5]), not eq[3:].all())
+    return out
+
+
+def rewrite_nmea_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """Write `src` (a file or a directory of NMEA logs) to `dst` with the spoofed fixes in it."""
+    src, dst = Path(src), Path(dst)
+    files, skipped = decode_log(src)
+    epochs: dict[tuple[str, int], tuple[Epoch, Path]] = assemble(files, list(skipped)).fix_epochs
+    edits: dict[Path, list[tuple[int, int, bytes]]] = {f.scan.path: [] for f in files}
+    changed = _changed_rows(table, spoofed)
+    missing = 0
+    for key, (values, velocity) in changed.items():
+        found = epochs.get(key)
+        if found is None:
+            missing += 1
+            continue
+        epoch, path = found
+        for d in epoch.sentences:
+            new = edited(d, values, velocity and velocities)
+            if new is not None:
+                edits[path].append((d.sentence.start, d.sentence.end, new))
+    n = 0
+    if src.is_dir():
+        dst.mkdir(parents=True, exist_ok=True)
+    for f in files:
+        data = f.scan.data
+        out = bytearray()
+        pos = 0
+        for start, end, new in sorted(set(edits[f.scan.path])):
+            out += data[pos:start] + new
+            pos = end
+            n += 1
+        out += data[pos:]
+        target = dst / f.scan.path.name if src.is_dir() else dst
+        try:
+            target.write_bytes(bytes(out))
+        except OSError as err:
+            raise WriterError(f"{target}: cannot write: {err}") from err
+    note = f"{n} sentences rewritten for {len(changed) - missing} spoofed fixes, every other byte copied"
+    return note + (f"; {missing} spoofed fixes matched no epoch of the log" if missing else "")
