@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from readers import ReaderFormat
+from readers import ReaderFormat, px4_csv
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import BODY_FRAMES, FRAMES, FixType
@@ -61,7 +61,7 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "vel_u_mps": ("vu", "vel_u", "v_up", "vu_mps"),
     "h_acc_m": ("hacc", "h_acc", "eph", "horizontal_accuracy_m"),
     "v_acc_m": ("vacc", "v_acc", "epv", "vertical_accuracy_m"),
-    "vel_acc_mps": ("sacc", "speed_acc", "speed_accuracy_mps"),
+    "vel_acc_mps": ("sacc", "speed_acc", "speed_accuracy_mps", "s_variance_m_s"),
     "sats_used": ("sats", "num_sats", "nsat", "satellites_used"),
     "fix_type": ("fix",),
     "spoofing_flag": ("spoofing", "spoofed_flag"),
@@ -178,6 +178,15 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     skipped: list[Skipped] = []
     frames: dict[str, list[pd.DataFrame]] = {}
     references, t0s, streams = set(), set(), []
+    metadata: dict[str, str] = {}
+    px4_files, files = px4_csv.split(files)
+    if px4_files:
+        part = px4_csv.read_px4(px4_files, skipped)
+        for name, df in part.frames.items():
+            frames.setdefault(name, []).append(df)
+        references.add(part.reference)
+        streams += part.streams
+        metadata |= part.metadata
     body_frame = "FLU"
     for i, f in enumerate(files):
         frame, df, reference, t0, meta = _read_one(f, skipped)
@@ -204,7 +213,7 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     merged = {k: pd.concat(v, ignore_index=True) for k, v in frames.items()}
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
-    return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0)
+    return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)
 
 
 def _is_csv(path: Path, head: bytes) -> bool:
