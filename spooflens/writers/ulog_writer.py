@@ -135,41 +135,79 @@ def _dtype(fields: Fields) -> np.dtype:
     return np.dtype(parts)
 
 
-def _format_message(name: str, fields: Fields) -> bytes:
-    size = _dtype(fields).itemsize - 2
-    pad = (-size) % 8
-    body = "".join(f"{t} {n};" for t, n in fields) + (f"uint8_t[{pad}] _padding0;" if pad else "")
-    return _msg(b"F", f"{name}:{body}".encode())
-
-
 def _msg(kind: bytes, payload: bytes) -> bytes:
     return struct.pack("<HB", len(payload), kind[0]) + payload
 
 
-def _info(key: str, type_: str, value: bytes) -> bytes:
-    k = f"{type_} {key}".encode()
-    return _msg(b"I", struct.pack("<B", len(k)) + k + value)
+class ULogFile:
+    """A ULog being built: info messages, topics with their rows, text messages; `write` encodes it.
 
+    `topic(name, fields, n, multi_id)` declares a topic instance and returns its rows (a numpy
+    structured array named by field) for the caller to fill; data messages are written in timestamp
+    order across topics, as PX4's logger interleaves them.
+    """
 
-class _Stream:
-    """One topic instance's messages as packed rows (msg_id first), with their timestamps."""
+    def __init__(self) -> None:
+        self.header = bytearray(_MAGIC + struct.pack("<Q", 0))
+        self.header += _msg(b"B", bytes(40))
+        self.formats: dict[str, Fields] = {}
+        self.subscriptions: list[tuple[str, int]] = []
+        self.rows: list[np.ndarray] = []
+        self.texts: list[tuple[int, bytes]] = []
 
-    def __init__(self, msg_id: int, fields: Fields, n: int) -> None:
-        self.rows = np.zeros(n, dtype=_dtype(fields))
-        self.rows["msg_id"] = msg_id
+    def info(self, key: str, value: str | int) -> None:
+        """An 'I' message: strings as char[n], integers as uint32_t (as PX4 writes ver_sw_release)."""
+        if isinstance(value, str):
+            raw, type_ = value.encode(), f"char[{len(value.encode())}]"
+        else:
+            raw, type_ = struct.pack("<I", value), "uint32_t"
+        k = f"{type_} {key}".encode()
+        self.header += _msg(b"I", struct.pack("<B", len(k)) + k + raw)
 
-    def payloads(self) -> list[bytes]:
-        raw = self.rows.view(np.uint8).reshape(len(self.rows), -1)
-        head = struct.pack("<HB", raw.shape[1], ord("D"))
-        return [head + r.tobytes() for r in raw]
+    def topic(self, name: str, fields: Fields, n: int, multi_id: int = 0) -> np.ndarray:
+        if self.formats.setdefault(name, fields) != fields:
+            raise ValueError(f"topic {name!r} declared twice with different fields")
+        rows = np.zeros(n, dtype=_dtype(fields))
+        rows["msg_id"] = len(self.subscriptions)
+        self.subscriptions.append((name, multi_id))
+        self.rows.append(rows)
+        return rows
+
+    def text(self, timestamp_us: int, message: str, level: str = "4") -> None:
+        """An 'L' logged string (level '0' emergency .. '4' warning .. '7' debug)."""
+        body = level.encode()[:1] + struct.pack("<Q", timestamp_us) + message.encode()
+        self.texts.append((timestamp_us, _msg(b"L", body)))
+
+    def write(self, path: Path) -> None:
+        out = bytearray(self.header)
+        for name, fields in self.formats.items():
+            size = _dtype(fields).itemsize - 2
+            pad = (-size) % 8  # PX4 declares the struct's trailing padding and does not log it
+            body = "".join(f"{t} {n};" for t, n in fields) + (f"uint8_t[{pad}] _padding0;" if pad else "")
+            out += _msg(b"F", f"{name}:{body}".encode())
+        for msg_id, (name, multi_id) in enumerate(self.subscriptions):
+            out += _msg(b"A", struct.pack("<BH", multi_id, msg_id) + name.encode())
+        payloads: list[bytes] = []
+        stamps: list[np.ndarray] = []
+        for rows in self.rows:
+            raw = rows.view(np.uint8).reshape(len(rows), -1)
+            head = struct.pack("<HB", raw.shape[1], ord("D"))
+            payloads += [head + r.tobytes() for r in raw]
+            stamps.append(rows["timestamp"].astype(np.int64))
+        payloads += [b for _, b in self.texts]
+        stamps.append(np.array([t for t, _ in self.texts], dtype=np.int64))
+        order = np.argsort(np.concatenate(stamps), kind="stable")
+        out += b"".join(payloads[i] for i in order)
+        Path(path).write_bytes(bytes(out))
 
 
 def _finite(values: np.ndarray, fill: float) -> np.ndarray:
     return np.where(np.isfinite(values), values, fill)
 
 
-def _gps_rows(s: _Stream, fx: pd.DataFrame, t_us: np.ndarray, utc_us: np.ndarray, legacy: bool, device_id: int) -> None:
-    r = s.rows
+def _gps_rows(
+    r: np.ndarray, fx: pd.DataFrame, t_us: np.ndarray, utc_us: np.ndarray, legacy: bool, device_id: int
+) -> None:
     c = {name: fx[name].to_numpy(dtype=float) for name in fx.columns if fx[name].dtype.kind == "f"}
     r["timestamp"] = r["timestamp_sample"] = t_us
     r["time_utc_usec"] = utc_us
@@ -209,62 +247,34 @@ def write_ulog(table: EpochTable, path: Path, boot_offset_s: float = 10.0) -> No
     boot_us = int(table.t0_ns // 1000) - int(boot_offset_s * 1e6)
     clock = table.unix_ns(np.zeros(1)) is not None
     legacy = legacy_meaning(table.metadata)
-    gps_fields = SENSOR_GPS_V1_14 if legacy else SENSOR_GPS
-    receivers = table.receivers() if len(table.fixes) else []
-    imu = table.imu_of(table.imus()[0]) if len(table.imu) else None
-    q = imu[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float) if imu is not None else np.zeros((0, 4))
-    with_q = np.isfinite(q).all(axis=1)
-    out = bytearray(_MAGIC + struct.pack("<Q", 0))
-    out += _msg(b"B", bytes(40))
-    out += _info("sys_name", "char[3]", b"PX4")
+    log = ULogFile()
+    log.info("sys_name", "PX4")
     release = table.metadata.get("px4.ver_sw_release")
     if release:
-        out += _info("ver_sw_release", "uint32_t", struct.pack("<I", int(release, 16)))
-    topics: list[tuple[str, int, Fields]] = []
-    if imu is not None:
-        topics.append(("sensor_combined", 0, SENSOR_COMBINED))
-        if with_q.any():
-            topics.append(("vehicle_attitude", 0, VEHICLE_ATTITUDE))
-    topics += [("sensor_gps", k, gps_fields) for k in range(len(receivers))]
-    for name, fields in dict((n, f) for n, _, f in topics).items():
-        out += _format_message(name, fields)
-    for msg_id, (name, multi_id, _) in enumerate(topics):
-        out += _msg(b"A", struct.pack("<BH", multi_id, msg_id) + name.encode())
-    payloads: list[bytes] = []
-    stamps: list[np.ndarray] = []
-    msg_id = 0
-    if imu is not None:
+        log.info("ver_sw_release", int(release, 16))
+    if len(table.imu):
+        imu = table.imu_of(table.imus()[0])
         flu = next((s.body_frame for s in table.streams if s.role == "imu"), "FLU") != "FRD"
         sign = np.array([1.0, -1.0, -1.0]) if flu else np.ones(3)
         t_us = (table.absolute_ns(imu["t_s"].to_numpy()) // 1000 - boot_us).astype(np.int64)
-        s = _Stream(msg_id, SENSOR_COMBINED, len(imu))
-        s.rows["timestamp"] = t_us
-        s.rows["gyro_rad"] = imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy() * sign
-        s.rows["accelerometer_m_s2"] = imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy() * sign
-        dt = int(np.median(np.diff(t_us))) if len(t_us) > 1 else 0
-        s.rows["gyro_integral_dt"] = s.rows["accelerometer_integral_dt"] = dt
-        payloads += s.payloads()
-        stamps.append(t_us)
-        msg_id += 1
+        r = log.topic("sensor_combined", SENSOR_COMBINED, len(imu))
+        r["timestamp"] = t_us
+        r["gyro_rad"] = imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy() * sign
+        r["accelerometer_m_s2"] = imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy() * sign
+        r["gyro_integral_dt"] = r["accelerometer_integral_dt"] = int(np.median(np.diff(t_us))) if len(t_us) > 1 else 0
+        q = imu[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float)
+        with_q = np.isfinite(q).all(axis=1)
         if with_q.any():
-            a = _Stream(msg_id, VEHICLE_ATTITUDE, int(with_q.sum()))
-            a.rows["timestamp"] = a.rows["timestamp_sample"] = t_us[with_q]
-            a.rows["q"] = enu_flu_to_ned_frd(q[with_q])
-            a.rows["delta_q_reset"] = [1.0, 0.0, 0.0, 0.0]
-            payloads += a.payloads()
-            stamps.append(t_us[with_q])
-            msg_id += 1
-    for rid in receivers:
+            a = log.topic("vehicle_attitude", VEHICLE_ATTITUDE, int(with_q.sum()))
+            a["timestamp"] = a["timestamp_sample"] = t_us[with_q]
+            a["q"] = enu_flu_to_ned_frd(q[with_q])
+            a["delta_q_reset"] = [1.0, 0.0, 0.0, 0.0]
+    for k, rid in enumerate(table.receivers() if len(table.fixes) else []):
         fx = table.fixes_of(rid)
         t_us = (table.absolute_ns(fx["t_s"].to_numpy()) // 1000 - boot_us).astype(np.int64)
         utc = table.unix_ns(fx["t_s"].to_numpy())
         utc_us = (utc // 1000).astype(np.int64) if clock and utc is not None else np.zeros(len(fx), np.int64)
         device_id = int(table.metadata.get(f"px4.device_id.{rid}", "0"))
-        g = _Stream(msg_id, gps_fields, len(fx))
+        g = log.topic("sensor_gps", SENSOR_GPS_V1_14 if legacy else SENSOR_GPS, len(fx), multi_id=k)
         _gps_rows(g, fx, t_us, utc_us, legacy, device_id)
-        payloads += g.payloads()
-        stamps.append(t_us)
-        msg_id += 1
-    order = np.argsort(np.concatenate(stamps), kind="stable") if stamps else np.array([], dtype=int)
-    out += b"".join(payloads[i] for i in order)
-    Path(path).write_bytes(bytes(out))
+    log.write(path)
