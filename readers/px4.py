@@ -522,7 +522,8 @@ def interpolate_attitude(t: np.ndarray, t_att: np.ndarray, q_att: FloatArray, ma
         return out
     i = np.clip(np.searchsorted(t_att, t, side="right") - 1, 0, len(t_att) - 2)
     t0, t1 = t_att[i], t_att[i + 1]
-    inside = (t >= t_att[0]) & (t <= t_att[-1]) & ((t1 - t0) <= max_gap)
+    # a time on a sample takes it, even beside a gap
+    inside = (t >= t_att[0]) & (t <= t_att[-1]) & (((t1 - t0) <= max_gap) | (t == t0) | (t == t1))
     q0, q1 = q_att[i], q_att[i + 1]
     q1 = np.where(np.sum(q0 * q1, axis=1, keepdims=True) < 0, -q1, q1)  # the short way round
     span = np.where(t1 > t0, (t1 - t0).astype(float), 1.0)

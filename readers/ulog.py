@@ -45,6 +45,8 @@ from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
 Progress = Callable[[int, int], None]
+# ULog info messages kept in the table's metadata as `px4.<key>`
+INFO_KEYS = ("sys_name", "ver_sw_release", "ver_sw", "ver_sw_branch", "ver_hw")
 # a fix takes the mean C/N0 of the satellite_info message nearest in time within this
 SATELLITE_MAX_DT_US = 1_000_000
 # attitude samples further apart than this are not interpolated across (PX4 logs it at 20-250 Hz)
@@ -78,8 +80,12 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     info = ulog.msg_info_dict
     firmware = firmware_description(info)
     metadata: dict[str, str] = {"firmware": firmware}
-    if isinstance(info.get("ver_sw_release"), int):
-        metadata["px4.ver_sw_release"] = f"0x{info['ver_sw_release']:08X}"
+    # the info messages behind it, as logged (a ULog written from this table carries them again)
+    for key in INFO_KEYS:
+        if isinstance(info.get(key), int):
+            metadata[f"px4.{key}"] = f"0x{info[key]:08X}"
+        elif isinstance(info.get(key), str) and info[key]:
+            metadata[f"px4.{key}"] = info[key]
     gps_records: dict[tuple[str, int], Record] = {
         k: canonical_record(v) for k, v in data.items() if k[0] in GPS_TOPICS and len(v["timestamp"])
     }

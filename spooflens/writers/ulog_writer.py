@@ -248,10 +248,12 @@ def write_ulog(table: EpochTable, path: Path, boot_offset_s: float = 10.0) -> No
     clock = table.unix_ns(np.zeros(1)) is not None
     legacy = legacy_meaning(table.metadata)
     log = ULogFile()
-    log.info("sys_name", "PX4")
-    release = table.metadata.get("px4.ver_sw_release")
-    if release:
-        log.info("ver_sw_release", int(release, 16))
+    # the firmware's info messages as the source log had them (readers.ulog keeps them as px4.<key>)
+    log.info("sys_name", table.metadata.get("px4.sys_name", "PX4"))
+    for key in ("ver_sw_release", "ver_sw", "ver_sw_branch", "ver_hw"):
+        value = table.metadata.get(f"px4.{key}")
+        if value:
+            log.info(key, int(value, 16) if key == "ver_sw_release" else value)
     if len(table.imu):
         imu = table.imu_of(table.imus()[0])
         flu = next((s.body_frame for s in table.streams if s.role == "imu"), "FLU") != "FRD"
