@@ -13,7 +13,10 @@ Time, in seconds, from the first of these columns present:
 - `gps_time_s` (aliases `gps_time`, `gpst`, `tow_abs_s`): GPS seconds since 1980-01-06;
 - `unix_time_s` (aliases `unix_time`, `utc_s`, `timestamp`): UNIX seconds.
 Header comments `# key: value` before the header row may also declare `body_frame: FLU|FRD|RFU`
-for IMU files (default FLU). Satellite ids may be RINEX style (G05) or bare PRN numbers (taken as GPS).
+for IMU files (default FLU), and `# metadata <key>: <value>` lines carry the table's metadata (the
+firmware, the meaning applied to each logged enum). Tables with PX4's own field names (ulog2csv
+exports) are the PX4 dialect, read by `readers.px4_csv`. Satellite ids may be RINEX style (G05) or
+bare PRN numbers (taken as GPS).
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "pitch_rad": ("pitch",),
     "yaw_rad": ("yaw", "heading_rad"),
 }
+METADATA_PREFIX = "metadata "
 _TIME_COLUMNS = {"t_s": "relative", "gps_time_s": "gps", "unix_time_s": "unix"}
 
 
@@ -190,6 +194,8 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     body_frame = "FLU"
     for i, f in enumerate(files):
         frame, df, reference, t0, meta = _read_one(f, skipped)
+        # provenance a writer kept: `# metadata <key>: <value>` (firmware, the meaning of enum codes)
+        metadata |= {k.removeprefix(METADATA_PREFIX): v for k, v in meta.items() if k.startswith(METADATA_PREFIX)}
         if meta.get("body_frame", "FLU").upper() in BODY_FRAMES:
             body_frame = meta.get("body_frame", "FLU").upper()
         frames.setdefault(frame, []).append(df)

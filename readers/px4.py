@@ -400,6 +400,22 @@ def dominant_device_id(ids: np.ndarray) -> int:
     return int(values[np.argmax(counts)])
 
 
+def receiver_metadata(sources: list[tuple[GpsSource, Mapping[str, np.ndarray]]]) -> dict[str, str]:
+    """`receiver` (each receiver's device decoded) and `px4.device_id.<receiver>` where device_id is known."""
+    out: dict[str, str] = {}
+    described = []
+    for s, rec in sources:
+        if "device_id" not in rec:
+            continue
+        dev = dominant_device_id(np.nan_to_num(np.asarray(rec["device_id"], dtype=float)[s.rows]))
+        if dev:
+            described.append(f"{s.receiver_id}: {device_description(dev)}")
+            out[f"px4.device_id.{s.receiver_id}"] = str(dev)
+    if described:
+        out["receiver"] = "; ".join(described)
+    return out
+
+
 def _device_ids(rec: Mapping[str, np.ndarray]) -> np.ndarray | None:
     return np.asarray(rec["device_id"]).astype(np.int64) if "device_id" in rec else None
 
@@ -438,6 +454,13 @@ def select_receivers(records: Mapping[tuple[str, int], Record]) -> tuple[list[Gp
             mine = _rows_of_receiver(sel, rec, m, len(raws))
             if mine is not None and mine.sum() > own.sum():
                 taken |= mine
+                skipped.append(
+                    Skipped(
+                        f"{raw_topic}/{m}",
+                        f"not read: this receiver's {int(mine.sum())} rows in {sel_topic} were read instead",
+                        int(own.sum()),
+                    )
+                )
                 choice = GpsSource(
                     f"{raw_topic}/{m}",
                     sel_topic,

@@ -45,6 +45,7 @@ from readers.px4 import (
     nearest_values,
     ned_frd_to_enu_flu,
     position_units,
+    receiver_metadata,
     select_receivers,
 )
 from spooflens.epoch_table import Skipped, StreamInfo
@@ -260,6 +261,7 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
         columns = {c for _, rec, _ in sources for c in rec}
         basis = "the columns of " + ", ".join(sorted({f.name for _, _, f in sources}))
         part.metadata |= enum_metadata(columns, basis)
+        part.metadata |= receiver_metadata([(s, rec) for s, rec, _ in sources])
         part.metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s, _, _ in sources)
     imu_files = [f for f, k in files.items() if k == "imu"]
     att_files = [f for f, k in files.items() if k == "attitude"]
@@ -272,8 +274,9 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
             skipped.append(Skipped("<csv>", f"more than one sensor_combined table; read {f.name}", len(imu_files) - 1))
     elif att_files:
         skipped.append(Skipped(att_files[0].name, "no sensor_combined table to attach the orientation to", 1))
+    read = {f for _, _, f in sources} | set(imu_files[:1]) | set(att_files[:1] if imu_files else []) | set(sats)
     for f, what in notes.items():
-        if f in records and (files[f] != "topic"):
+        if f in read:
             unit = [] if any(w.startswith("timestamp") for w in what) else ["timestamp µs since boot"]
             text = "; ".join(["PX4 CSV dialect", *unit, *what, clock])
             skipped.append(Skipped(f.name, text, len(records[f]["timestamp"]), "repaired"))

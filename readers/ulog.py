@@ -28,8 +28,6 @@ from readers.px4 import (
     Record,
     canonical_record,
     cn0_mean,
-    device_description,
-    dominant_device_id,
     enum_metadata,
     firmware_description,
     gps_columns,
@@ -37,6 +35,7 @@ from readers.px4 import (
     nearest_values,
     ned_frd_to_enu_flu,
     position_units,
+    receiver_metadata,
     select_receivers,
     utc_offset_us,
 )
@@ -110,16 +109,7 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
             firmware if "ver_sw_release" in info else "",
         )
         metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s in sources)
-        receivers = []
-        for s in sources:
-            rec = gps_records[(s.topic, s.multi_id)]
-            if "device_id" in rec:
-                dev = dominant_device_id(np.asarray(rec["device_id"])[s.rows])
-                if dev:
-                    receivers.append(f"{s.receiver_id}: {device_description(dev)}")
-                    metadata[f"px4.device_id.{s.receiver_id}"] = str(dev)
-        if receivers:
-            metadata["receiver"] = "; ".join(receivers)
+        metadata |= receiver_metadata([(s, gps_records[(s.topic, s.multi_id)]) for s in sources])
     if (IMU_TOPIC, 0) in data:
         imu, info_ = _imu(data[(IMU_TOPIC, 0)], data.get((ATTITUDE_TOPIC, 0)), offset_us, skipped)
         frames["imu"] = imu

@@ -100,6 +100,7 @@ def test_two_receivers_each_from_the_topic_that_logged_it_most(logs: Path) -> No
     assert fixes["sensor_gps/0"].topic == "vehicle_gps_position" and fixes["sensor_gps/0"].count == 150 - 3
     assert fixes["sensor_gps/1"].topic == "sensor_gps" and fixes["sensor_gps/1"].count == 30
     assert any(s.stream == "vehicle_gps_position" and s.count == 3 for s in table.skipped)
+    assert any(s.stream == "sensor_gps/0" and s.reason.startswith("not read") and s.count == 30 for s in table.skipped)
     rx0 = table.fixes_of("sensor_gps/0")
     keep = np.ones(150, bool)
     keep[[40, 41, 42]] = False
