@@ -191,3 +191,17 @@ def test_inject_into_an_export_keeps_indicators_and_their_meaning(exported: tupl
     np.testing.assert_array_equal(spoofed.fixes[INDICATORS], original.fixes[INDICATORS])
     for key in ("enum.spoofing_state", "enum.jamming_state", "receiver", "firmware"):
         assert spoofed.metadata.get(key) == original.metadata.get(key), key
+
+
+def test_single_gps_table_with_timestamps_in_seconds(tmp_path: Path) -> None:
+    f = flight(np.round(np.arange(2.0, 12.0, 0.5), 6))
+    path = tmp_path / "gps_seconds.csv"
+    _single(path, f, lat_scale=1e-7, alt_scale=1e-3, utc=False)
+    df = pd.read_csv(path)
+    df["timestamp"] = df["timestamp"] / 1e6
+    df.to_csv(path, index=False)
+    table = read_log(path)
+    note = next(s for s in table.skipped if s.stream == "gps_seconds.csv").reason
+    assert "timestamp in seconds (sample spacing under 100): scaled to µs" in note
+    assert table.time_reference == "boot" and table.t0_ns == 2_000_000_000
+    np.testing.assert_allclose(table.fixes["t_s"], f["t_s"] - 2.0, atol=1e-9)
