@@ -475,7 +475,7 @@ def select_receivers(records: Mapping[tuple[str, int], Record]) -> tuple[list[Gp
         reason = (
             f"selected/blended output of the receivers; {raw_topic} instances read instead"
             if not used
-            else f"rows not attributable to one receiver (blended, or the receiver read from {raw_topic})"
+            else "rows not read: a blend of the receivers, or a receiver read from its own instance"
         )
         skipped.append(Skipped(sel_topic, reason, int((~taken).sum())))
     return out, skipped

@@ -105,7 +105,7 @@ def _bag(path: Path, with_twist: bool) -> None:
                 altitude=30.0,
                 track=90.0,
                 speed=5.0,
-                climb=0.5,
+                climb=float("nan") if k == 2 else 0.5,  # a receiver without vertical velocity
                 err_horz=4.9,
                 err_vert=7.84,
                 err_speed=0.98,
@@ -147,6 +147,12 @@ def test_gpsfix_positions_velocity_and_accuracies(table) -> None:
     assert fx["h_acc_m"].iloc[0] == pytest.approx(2.0, rel=1e-3)
     assert fx["v_acc_m"].iloc[0] == pytest.approx(4.0, rel=1e-3)
     assert (fx["sats_used"] == 9).all()
+
+
+def test_gpsfix_east_north_velocity_without_climb_is_kept(table) -> None:
+    row = table.fixes.iloc[2]
+    assert np.isnan(row["vel_u_mps"])
+    assert row["vel_e_mps"] == pytest.approx(5.0) and row["vel_n_mps"] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_gpsfix_dops_and_mean_cn0_are_receiver_evidence(table) -> None:
