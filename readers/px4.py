@@ -265,37 +265,37 @@ def position_units(rec: Mapping[str, np.ndarray], by_magnitude: bool) -> Positio
             notes.append("lat/lon in 1e-7 deg (|lat| > 90)" if big else "lat/lon in degrees (|lat| <= 90)")
         lat, lon, scaled_1e7 = ("lat", scale), ("lon", scale), scale == 1e-7
 
-    def height_field(names_m: tuple[str, ...], name_mm: str) -> tuple[str, float] | None:
-        for n in names_m:
-            if n in rec:
-                return (n, 1.0)
+    def height_field(name_m: str, name_mm: str) -> tuple[str, float, str] | None:
+        """(field, scale to metres, why that unit) of an altitude, None if the record has neither."""
+        if name_m in rec:
+            return (name_m, 1.0, "")
         if name_mm not in rec:
             return None
         if not by_magnitude:
-            return (name_mm, 1e-3)
+            return (name_mm, 1e-3, "")
         v = rec[name_mm].astype(float)
         v = v[np.isfinite(v) & (v != 0)]
         if len(v) and np.any(v != np.round(v)):
-            notes.append(f"{name_mm} in metres (fractional values)")
-            return (name_mm, 1.0)
+            return (name_mm, 1.0, f"{name_mm} in metres (fractional values)")
         if scaled_1e7:
-            notes.append(f"{name_mm} in mm (integers beside 1e-7 deg positions)")
-            return (name_mm, 1e-3)
-        if len(v) and abs(float(np.median(v))) > 20_000.0:
-            notes.append(f"{name_mm} in mm (|median| {abs(float(np.median(v))):.0f} is not a plausible height in m)")
-            return (name_mm, 1e-3)
-        notes.append(f"{name_mm} in metres (integer values of plausible size)")
-        return (name_mm, 1.0)
+            return (name_mm, 1e-3, f"{name_mm} in mm (integers beside 1e-7 deg positions)")
+        median = abs(float(np.median(v))) if len(v) else 0.0
+        if median > 20_000.0:
+            return (name_mm, 1e-3, f"{name_mm} in mm (|median| {median:.0f} is not a plausible height in m)")
+        return (name_mm, 1.0, f"{name_mm} in metres (integer values of plausible size)")
 
-    ellipsoid = height_field(("altitude_ellipsoid_m",), "alt_ellipsoid")
-    msl = height_field(("altitude_msl_m",), "alt")
+    ellipsoid = height_field("altitude_ellipsoid_m", "alt_ellipsoid")
+    msl = height_field("altitude_msl_m", "alt")
     if ellipsoid is None and msl is None:
         return None
     if ellipsoid is None:
         assert msl is not None
+        notes += [msl[2]] if msl[2] else []
         notes.append(f"no ellipsoidal altitude: height is {msl[0]} (above mean sea level, geoid not applied)")
-        return PositionUnits(lat, lon, msl, None, tuple(notes))
-    return PositionUnits(lat, lon, ellipsoid, msl, tuple(notes))
+        return PositionUnits(lat, lon, msl[:2], None, tuple(notes))
+    notes += [ellipsoid[2]] if ellipsoid[2] else []
+    # the MSL altitude's unit is said where it is used (gps_columns' repair note)
+    return PositionUnits(lat, lon, ellipsoid[:2], msl[:2] if msl else None, tuple(notes))
 
 
 def _codes(values: np.ndarray | None, table: Mapping[int, int], default: int, n: int) -> NDArray[np.int8]:
@@ -336,7 +336,7 @@ def gps_columns(rec: Mapping[str, np.ndarray], units: PositionUnits) -> GpsColum
             notes.append(
                 (
                     f"{units.height[0]} is 0 (the driver does not fill it): height from {units.msl_fallback[0]} "
-                    "above mean sea level",
+                    f"({'mm' if units.msl_fallback[1] == 1e-3 else 'm'}) above mean sea level",
                     int(missing.sum()),
                 )
             )
