@@ -59,11 +59,6 @@ def _topics_defined(ulog: ULog) -> set[str]:
     return set(formats) - nested
 
 
-def _fields(ulog: ULog, topic: str) -> set[str]:
-    fmt = ulog.message_formats.get(topic)
-    return {name for (_, _, name) in fmt.fields} if fmt is not None else set()
-
-
 def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
     try:
