@@ -373,3 +373,15 @@ def test_the_writer_receivers_keep_their_device(logs: Path) -> None:
     current_log(path)
     table = read_log(path)
     assert table.metadata["px4.device_id.sensor_gps/0"] == str(M8N_SERIAL2)
+
+
+def test_px4_versions_devices_and_renamed_fields_decode() -> None:
+    from readers.px4 import canonical_record, device_description, release_name
+
+    assert release_name(0x010E00FF) == "v1.14.0 (release)"
+    assert release_name(0x010F02C1) == "v1.15.2 (RC)" and release_name(0x01100000) == "v1.16.0 (dev)"
+    assert device_description(M8N_SERIAL2) == "u-blox 8 (M8) on serial bus 2 (device_id 0xA80015)"
+    assert device_description(0x85 << 16 | 0x7D << 8 | 3 << 3 | 3).startswith("DroneCAN GNSS node on DroneCAN bus 3")
+    # the proposed vehicle_gnss nests the receiver's sample; its unit-free names map to SensorGps's
+    rec = canonical_record({"timestamp": np.zeros(1), "receiver.latitude": np.ones(1), "receiver.noise": np.ones(1)})
+    assert set(rec) == {"timestamp", "latitude_deg", "noise_per_ms"}
