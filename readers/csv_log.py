@@ -13,7 +13,10 @@ Time, in seconds, from the first of these columns present:
 - `gps_time_s` (aliases `gps_time`, `gpst`, `tow_abs_s`): GPS seconds since 1980-01-06;
 - `unix_time_s` (aliases `unix_time`, `utc_s`, `timestamp`): UNIX seconds.
 Header comments `# key: value` before the header row may also declare `body_frame: FLU|FRD|RFU`
-for IMU files (default FLU). Satellite ids may be RINEX style (G05) or bare PRN numbers (taken as GPS).
+for IMU files (default FLU), and `# metadata <key>: <value>` lines carry the table's metadata (the
+firmware, the meaning applied to each logged enum). Tables with PX4's own field names (ulog2csv
+exports) are the PX4 dialect, read by `readers.px4_csv`. Satellite ids may be RINEX style (G05) or
+bare PRN numbers (taken as GPS).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from readers import ReaderFormat
+from readers import ReaderFormat, px4_csv
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import BODY_FRAMES, FRAMES, FixType
@@ -61,7 +64,7 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "vel_u_mps": ("vu", "vel_u", "v_up", "vu_mps"),
     "h_acc_m": ("hacc", "h_acc", "eph", "horizontal_accuracy_m"),
     "v_acc_m": ("vacc", "v_acc", "epv", "vertical_accuracy_m"),
-    "vel_acc_mps": ("sacc", "speed_acc", "speed_accuracy_mps"),
+    "vel_acc_mps": ("sacc", "speed_acc", "speed_accuracy_mps", "s_variance_m_s"),
     "sats_used": ("sats", "num_sats", "nsat", "satellites_used"),
     "fix_type": ("fix",),
     "spoofing_flag": ("spoofing", "spoofed_flag"),
@@ -76,6 +79,7 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "pitch_rad": ("pitch",),
     "yaw_rad": ("yaw", "heading_rad"),
 }
+METADATA_PREFIX = "metadata "
 _TIME_COLUMNS = {"t_s": "relative", "gps_time_s": "gps", "unix_time_s": "unix"}
 
 
@@ -178,9 +182,20 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     skipped: list[Skipped] = []
     frames: dict[str, list[pd.DataFrame]] = {}
     references, t0s, streams = set(), set(), []
+    metadata: dict[str, str] = {}
+    px4_files, files = px4_csv.split(files)
+    if px4_files:
+        part = px4_csv.read_px4(px4_files, skipped)
+        for name, df in part.frames.items():
+            frames.setdefault(name, []).append(df)
+        references.add(part.reference)
+        streams += part.streams
+        metadata |= part.metadata
     body_frame = "FLU"
     for i, f in enumerate(files):
         frame, df, reference, t0, meta = _read_one(f, skipped)
+        # provenance a writer kept: `# metadata <key>: <value>` (firmware, the meaning of enum codes)
+        metadata |= {k.removeprefix(METADATA_PREFIX): v for k, v in meta.items() if k.startswith(METADATA_PREFIX)}
         if meta.get("body_frame", "FLU").upper() in BODY_FRAMES:
             body_frame = meta.get("body_frame", "FLU").upper()
         frames.setdefault(frame, []).append(df)
@@ -204,7 +219,7 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     merged = {k: pd.concat(v, ignore_index=True) for k, v in frames.items()}
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
-    return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0)
+    return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)
 
 
 def _is_csv(path: Path, head: bytes) -> bool:

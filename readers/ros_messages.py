@@ -57,6 +57,8 @@ def _navsatfix(m: Any) -> tuple[float, ...]:
 
 def _gpsfix(m: Any) -> tuple[float, ...]:
     s = m.status
+    snr = np.asarray(s.satellite_visible_snr, dtype=float)
+    tracked = snr[snr > 0]  # gpsd's per-satellite signal strength, dB-Hz; 0 for a satellite not tracked
     return (
         s.status,
         s.satellites_used,
@@ -69,6 +71,9 @@ def _gpsfix(m: Any) -> tuple[float, ...]:
         m.err_horz,
         m.err_vert,
         m.err_speed,
+        m.hdop,
+        m.vdop,
+        float(tracked.mean()) if len(tracked) else np.nan,
     )
 
 
@@ -207,6 +212,10 @@ def fix_columns(kind: str, v: FloatArray) -> dict[str, np.ndarray]:
             "v_acc_m": c("err_vert") / _CHI_95_1D,
             "vel_acc_mps": c("err_speed") / _CHI_95_1D,
             "sats_used": c("sats_used"),
+            # gpsd leaves a DOP it does not know at 0 (or NaN); a real DOP is positive
+            "hdop": np.where(c("hdop") > 0, c("hdop"), np.nan),
+            "vdop": np.where(c("vdop") > 0, c("vdop"), np.nan),
+            "cn0_mean_dbhz": c("cn0_mean"),
             "fix_type": _map_codes(c("status"), _GPSFIX_FIX_TYPE),
         }
     return out
@@ -492,6 +501,9 @@ KINDS: dict[str, RosKind] = {
             "err_horz",
             "err_vert",
             "err_speed",
+            "hdop",
+            "vdop",
+            "cn0_mean",
         ),
         _gpsfix,
         edit=_edit_gpsfix,

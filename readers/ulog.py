@@ -1,8 +1,11 @@
-"""PX4 ULog through pyulog: sensor_combined (IMU) and sensor_gps / vehicle_gps_position (fixes).
+"""PX4 ULog through pyulog: sensor_combined (IMU), vehicle_attitude (its orientation) and the GPS topics.
 
-PX4 conventions: IMU body frame FRD; velocities NED (turned into ENU here); timestamps in
-microseconds since boot. When the GPS topic carries `time_utc_usec`, the log is put on the UNIX clock
-(median offset between the two clocks); otherwise the time reference is "boot".
+PX4 conventions (`readers.px4`): IMU body frame FRD; velocities NED (turned into ENU here); timestamps
+in microseconds since boot. When a GPS topic carries `time_utc_usec`, the log is put on the UNIX clock
+(median offset between the two clocks); otherwise the time reference is "boot". Every receiver
+indicator the GPS topic defines is read (accuracies, DOPs, satellites, noise, AGC, jamming indicator and
+state, spoofing and authentication state); the meaning of the state codes is taken from the message
+definition written in the log and recorded in the table's metadata with the firmware version.
 """
 
 from __future__ import annotations
@@ -15,46 +18,51 @@ import pandas as pd
 from pyulog import ULog
 
 from readers import ReaderFormat
+from readers.px4 import (
+    ATTITUDE_TOPIC,
+    BARO_TOPIC,
+    GPS_TOPICS,
+    IMU_TOPIC,
+    SATELLITE_TOPIC,
+    GpsSource,
+    Record,
+    canonical_record,
+    cn0_mean,
+    enum_metadata,
+    firmware_description,
+    gps_columns,
+    interpolate_attitude,
+    nearest_values,
+    ned_frd_to_enu_flu,
+    position_units,
+    receiver_metadata,
+    select_receivers,
+    utc_offset_us,
+)
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
-from spooflens.schema import FixType, SpoofingFlag
+from spooflens.schema import FixType
 
 Progress = Callable[[int, int], None]
-GPS_TOPICS = ("sensor_gps", "vehicle_gps_position")
-IMU_TOPIC = "sensor_combined"
-# PX4 fix_type: 0-1 none, 2 2D, 3 3D, 4 DGPS/SBAS, 5 RTK float, 6 RTK fixed
-_FIX = {
-    0: FixType.NO_FIX,
-    1: FixType.NO_FIX,
-    2: FixType.FIX_2D,
-    3: FixType.FIX_3D,
-    4: FixType.DGNSS,
-    5: FixType.RTK_FLOAT,
-    6: FixType.RTK_FIXED,
-}
-# PX4 spoofing_state: 0 unknown, 1 none, 2 indicated, 3 multiple indications
-_SPOOF = {0: SpoofingFlag.UNKNOWN, 1: SpoofingFlag.CLEAR, 2: SpoofingFlag.INDICATED, 3: SpoofingFlag.INDICATED}
+# ULog info messages kept in the table's metadata as `px4.<key>`
+INFO_KEYS = ("sys_name", "ver_sw_release", "ver_sw", "ver_sw_branch", "ver_hw")
+# a fix takes the mean C/N0 of the satellite_info message nearest in time within this
+SATELLITE_MAX_DT_US = 1_000_000
+# attitude samples further apart than this are not interpolated across (PX4 logs it at 20-250 Hz)
+ATTITUDE_MAX_GAP_US = 500_000
 
 
-def _field(d: dict[str, np.ndarray], *names: str, scale: float = 1.0) -> np.ndarray | None:
-    for n in names:
-        if n in d:
-            return d[n].astype(float) * scale
-    return None
-
-
-def _codes(values: np.ndarray | None, table: dict[int, int], default: int, n: int) -> np.ndarray:
-    out = np.full(n, default, dtype=np.int8)
-    if values is not None:
-        for code, mapped in table.items():
-            out[values == code] = mapped
-    return out
+def _topics_defined(ulog: ULog) -> set[str]:
+    """Topic names with a definition in the log (format names that are not only nested types)."""
+    formats = ulog.message_formats
+    nested = {t for f in formats.values() for (t, _, _) in f.fields if t in formats}
+    return set(formats) - nested
 
 
 def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
     try:
-        ulog = ULog(str(path), [IMU_TOPIC, *GPS_TOPICS], disable_str_exceptions=True)
+        ulog = ULog(str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True)
     except Exception as err:
         raise ReaderError(path, f"not a readable ULog: {type(err).__name__}: {err}") from err
     skipped: list[Skipped] = []
@@ -63,70 +71,138 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
             Skipped("<file>", "pyulog found corrupt data and re-synchronised; some messages lost", 0, "lost")
         )
     data = {(d.name, d.multi_id): d.data for d in ulog.data_list}
-    gps_key = next(((n, m) for n in GPS_TOPICS for (dn, m) in data if dn == n and m == 0), None)
-    streams: list[StreamInfo] = []
+    info = ulog.msg_info_dict
+    firmware = firmware_description(info)
+    metadata: dict[str, str] = {"firmware": firmware}
+    # the info messages behind it, as logged (a ULog written from this table carries them again)
+    for key in INFO_KEYS:
+        if isinstance(info.get(key), int):
+            metadata[f"px4.{key}"] = f"0x{info[key]:08X}"
+        elif isinstance(info.get(key), str) and info[key]:
+            metadata[f"px4.{key}"] = info[key]
+    gps_records: dict[tuple[str, int], Record] = {
+        k: canonical_record(v) for k, v in data.items() if k[0] in GPS_TOPICS and len(v["timestamp"])
+    }
+    sources, notes = select_receivers(gps_records)
+    skipped += notes
+    offset = utc_offset_us([gps_records[(s.topic, s.multi_id)] for s in sources])
+    offset_us, reference = (offset, "unix") if offset is not None else (0, "boot")
     frames: dict[str, pd.DataFrame] = {}
-    offset_us = 0
-    reference = "boot"
-    if gps_key is not None:
-        g = data[gps_key]
-        utc = _field(g, "time_utc_usec")
-        ts = g["timestamp"].astype(np.int64)
-        if utc is not None and np.any(utc > 0):
-            offset_us = int(np.median(utc[utc > 0].astype(np.int64) - ts[utc > 0]))
-            reference = "unix"
-        lat = _field(g, "latitude_deg")
-        lat = lat if lat is not None else _field(g, "lat", scale=1e-7)
-        lon = _field(g, "longitude_deg")
-        lon = lon if lon is not None else _field(g, "lon", scale=1e-7)
-        alt = _field(g, "altitude_ellipsoid_m")
-        alt = alt if alt is not None else _field(g, "alt_ellipsoid", scale=1e-3)
-        if lat is None or lon is None or alt is None:
-            raise ReaderError(path, f"{gps_key[0]} has no latitude/longitude/ellipsoid height fields", gps_key[0])
-        n = len(ts)
-        vn, ve, vd = (_field(g, f"vel_{a}_m_s") for a in "ned")
-        cols: dict[str, object] = {
-            "t_ns": (ts + offset_us) * 1000,
-            "receiver_id": gps_key[0],
-            "lat_deg": lat,
-            "lon_deg": lon,
-            "height_m": alt,
-            "h_acc_m": _field(g, "eph"),
-            "v_acc_m": _field(g, "epv"),
-            "vel_acc_mps": _field(g, "s_variance_m_s"),
-            "sats_used": _field(g, "satellites_used"),
-            "jamming_indicator": _field(g, "jamming_indicator"),
-            "fix_type": _codes(g.get("fix_type"), _FIX, FixType.FIX_3D, n),
-            "spoofing_flag": _codes(g.get("spoofing_state"), _SPOOF, SpoofingFlag.UNKNOWN, n),
-        }
-        if vn is not None and ve is not None and vd is not None:
-            cols |= {"vel_e_mps": ve, "vel_n_mps": vn, "vel_u_mps": -vd}
-        fixes = pd.DataFrame({k: v for k, v in cols.items() if v is not None})
-        no_fix = fixes["fix_type"].to_numpy() == FixType.NO_FIX
-        if no_fix.any():
-            skipped.append(Skipped(gps_key[0], "fix_type no fix", int(no_fix.sum())))
-            fixes = fixes[~no_fix]
-        frames["fixes"] = fixes
-        streams.append(StreamInfo("fix", gps_key[0], gps_key[0], f"px4/{gps_key[0]}", len(fixes)))
+    streams: list[StreamInfo] = []
+    fixes = [
+        _fixes(path, s, gps_records[(s.topic, s.multi_id)], data.get((SATELLITE_TOPIC, k)), offset_us, skipped)
+        for k, s in enumerate(sources)
+    ]
+    if fixes:
+        frames["fixes"] = pd.concat([f for f, _ in fixes], ignore_index=True)
+        streams += [info_ for _, info_ in fixes]
+        used_topics = {s.topic for s in sources}
+        definition = next(t for t in GPS_TOPICS if t in used_topics)
+        metadata |= enum_metadata(
+            {c for s in sources for c in gps_records[(s.topic, s.multi_id)]},
+            f"the log's {definition} definition",
+            firmware if "ver_sw_release" in info else "",
+        )
+        metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s in sources)
+        metadata |= receiver_metadata([(s, gps_records[(s.topic, s.multi_id)]) for s in sources])
     if (IMU_TOPIC, 0) in data:
-        d = data[(IMU_TOPIC, 0)]
-        t = (d["timestamp"].astype(np.int64) + offset_us) * 1000
-        cols = {"t_ns": t, "imu_id": IMU_TOPIC}
-        for i, axis in enumerate("xyz"):
-            cols[f"a{axis}_mps2"] = d[f"accelerometer_m_s2[{i}]"].astype(float)
-            cols[f"w{axis}_radps"] = d[f"gyro_rad[{i}]"].astype(float)
-        frames["imu"] = pd.DataFrame(cols)
-        streams.append(StreamInfo("imu", IMU_TOPIC, IMU_TOPIC, "px4/sensor_combined", len(t), body_frame="FRD"))
-    others = sorted({d.name for d in ulog.data_list} - {IMU_TOPIC, *GPS_TOPICS})
+        imu, info_ = _imu(data[(IMU_TOPIC, 0)], data.get((ATTITUDE_TOPIC, 0)), offset_us, skipped)
+        frames["imu"] = imu
+        streams.append(info_)
+    elif (ATTITUDE_TOPIC, 0) in data:
+        skipped.append(
+            Skipped(ATTITUDE_TOPIC, "no sensor_combined to attach the orientation to", len(data[(ATTITUDE_TOPIC, 0)]))
+        )
+    defined = _topics_defined(ulog)
+    if BARO_TOPIC in defined:
+        skipped.append(Skipped(BARO_TOPIC, "barometric altitude not used (no schema column for it yet)", 1))
+    used = {IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS, BARO_TOPIC}
+    others = sorted(defined - used)
     if others:
         skipped.append(Skipped("<ulog>", f"topics not used: {others}", len(others)))
+    warnings = _gnss_log_messages(ulog)
+    if warnings:
+        metadata["px4.gnss_log_messages"] = warnings
     if topics:
         skipped.append(Skipped("<ulog>", f"--topic ignored for ULog ({dict(topics)})", len(topics)))
     if progress:
         progress(1, 1)
     if not frames:
         raise ReaderError(path, f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)}) in this ULog")
-    return build_table(path, "ulog", reference, frames, streams, skipped)
+    return build_table(path, "ulog", reference, frames, streams, skipped, metadata=metadata)
+
+
+def _fixes(
+    path: Path,
+    source: GpsSource,
+    rec: Record,
+    satellites: Mapping[str, np.ndarray] | None,
+    offset_us: int,
+    skipped: list[Skipped],
+) -> tuple[pd.DataFrame, StreamInfo]:
+    rid = source.receiver_id
+    units = position_units(rec, by_magnitude=False)
+    if units is None:
+        raise ReaderError(path, f"{source.topic} has no latitude/longitude/altitude fields", source.topic)
+    rows = {k: np.asarray(v)[source.rows] for k, v in rec.items()}
+    mapped = gps_columns(rows, units)
+    skipped += [Skipped(rid, what, n, "repaired") for what, n in mapped.notes]
+    ts = rows["timestamp"].astype(np.int64)
+    description = source.description
+    cn0 = cn0_mean(satellites) if satellites is not None and len(satellites["timestamp"]) else None
+    if satellites is not None and cn0 is not None:
+        t_sat = satellites["timestamp"].astype(np.int64)
+        mapped.columns["cn0_mean_dbhz"] = nearest_values(ts, t_sat, cn0, SATELLITE_MAX_DT_US)
+        description += f" + {SATELLITE_TOPIC} (mean C/N0)"
+    fixes = pd.DataFrame({"t_ns": (ts + offset_us) * 1000, "receiver_id": rid} | mapped.columns)
+    no_fix = fixes["fix_type"].to_numpy() == FixType.NO_FIX
+    if no_fix.any():
+        skipped.append(Skipped(rid, "fix_type 0-1 (no fix)", int(no_fix.sum())))
+        fixes = fixes[~no_fix]
+    return fixes, StreamInfo("fix", rid, source.topic, description, len(fixes))
+
+
+def _imu(
+    d: Mapping[str, np.ndarray], att: Mapping[str, np.ndarray] | None, offset_us: int, skipped: list[Skipped]
+) -> tuple[pd.DataFrame, StreamInfo]:
+    ts = d["timestamp"].astype(np.int64)
+    cols: dict[str, object] = {"t_ns": (ts + offset_us) * 1000, "imu_id": IMU_TOPIC}
+    for i, axis in enumerate("xyz"):
+        cols[f"a{axis}_mps2"] = d[f"accelerometer_m_s2[{i}]"].astype(float)
+        cols[f"w{axis}_radps"] = d[f"gyro_rad[{i}]"].astype(float)
+    msgtype = f"px4/{IMU_TOPIC}"
+    if att is not None and all(f"q[{i}]" in att for i in range(4)):
+        q = ned_frd_to_enu_flu(np.stack([att[f"q[{i}]"].astype(float) for i in range(4)], axis=1))
+        t_att = att["timestamp"].astype(np.int64)
+        q_imu = interpolate_attitude(ts, t_att, q, ATTITUDE_MAX_GAP_US)
+        cols |= {"qw": q_imu[:, 0], "qx": q_imu[:, 1], "qy": q_imu[:, 2], "qz": q_imu[:, 3]}
+        msgtype += f" + {ATTITUDE_TOPIC} (PX4's estimate, body FLU -> ENU, slerped onto the IMU times)"
+        lost = int(np.isnan(q_imu[:, 0]).sum())
+        if lost:
+            skipped.append(
+                Skipped(
+                    ATTITUDE_TOPIC,
+                    f"IMU samples outside the attitude's span or in a gap over {ATTITUDE_MAX_GAP_US / 1e6:g} s: "
+                    "no orientation",
+                    lost,
+                    "repaired",
+                )
+            )
+    return pd.DataFrame(cols), StreamInfo("imu", IMU_TOPIC, IMU_TOPIC, msgtype, len(ts), body_frame="FRD")
+
+
+def _gnss_log_messages(ulog: ULog, limit: int = 20) -> str:
+    """The log's own text messages about GPS spoofing or jamming (PX4 v1.14-v1.15 GPS drivers print them)."""
+    hits = [
+        m
+        for m in ulog.logged_messages
+        if ("spoof" in m.message.lower() or "jamm" in m.message.lower()) and "gps" in m.message.lower()
+    ]
+    if not hits:
+        return ""
+    shown = "; ".join(f"boot {m.timestamp / 1e6:.3f} s [{m.log_level_str()}] {m.message}" for m in hits[:limit])
+    more = f"; ... {len(hits) - limit} more" if len(hits) > limit else ""
+    return f"{len(hits)} message(s): {shown}{more}"
 
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"

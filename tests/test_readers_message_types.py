@@ -75,7 +75,9 @@ def _bag(path: Path, with_twist: bool) -> None:
         vel_conn = w.add_connection("/gps/vel", "geometry_msgs/msg/TwistStamped", typestore=ts)
         for k, code in enumerate(STATUS_CODES):
             header = Header(seq=k, stamp=Time(sec=T0 + k, nanosec=0), frame_id="gps")
-            status = Status(header, 9, empty, 11, empty, empty, empty, empty, code, 0, 0, 0)
+            # 11 visible, 2 of them not tracked (snr 0): the mean C/N0 is over the 9 tracked
+            snr = np.array([0, 0, *range(38, 47)], dtype=np.int32)
+            status = Status(header, 9, empty, 11, empty, empty, empty, snr, code, 0, 0, 0)
             values = dict.fromkeys(
                 (
                     "pitch",
@@ -84,8 +86,6 @@ def _bag(path: Path, with_twist: bool) -> None:
                     "time",
                     "gdop",
                     "pdop",
-                    "hdop",
-                    "vdop",
                     "tdop",
                     "err",
                     "err_track",
@@ -105,10 +105,12 @@ def _bag(path: Path, with_twist: bool) -> None:
                 altitude=30.0,
                 track=90.0,
                 speed=5.0,
-                climb=0.5,
+                climb=float("nan") if k == 2 else 0.5,  # a receiver without vertical velocity
                 err_horz=4.9,
                 err_vert=7.84,
                 err_speed=0.98,
+                hdop=1.1 + 0.1 * k,
+                vdop=0.0 if k == 1 else 1.7,  # gpsd writes 0 for a DOP it does not know
                 position_covariance=np.zeros(9),
                 position_covariance_type=0,
                 **values,
@@ -145,6 +147,19 @@ def test_gpsfix_positions_velocity_and_accuracies(table) -> None:
     assert fx["h_acc_m"].iloc[0] == pytest.approx(2.0, rel=1e-3)
     assert fx["v_acc_m"].iloc[0] == pytest.approx(4.0, rel=1e-3)
     assert (fx["sats_used"] == 9).all()
+
+
+def test_gpsfix_east_north_velocity_without_climb_is_kept(table) -> None:
+    row = table.fixes.iloc[2]
+    assert np.isnan(row["vel_u_mps"])
+    assert row["vel_e_mps"] == pytest.approx(5.0) and row["vel_n_mps"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_gpsfix_dops_and_mean_cn0_are_receiver_evidence(table) -> None:
+    fx = table.fixes
+    np.testing.assert_allclose(fx["hdop"], 1.1 + 0.1 * np.arange(len(fx)))
+    assert np.isnan(fx["vdop"].iloc[1]) and (fx["vdop"].drop(index=1) == 1.7).all()
+    np.testing.assert_allclose(fx["cn0_mean_dbhz"], np.mean(np.arange(38, 47)))
 
 
 def test_gpsfix_status_codes_map_to_fix_types(table) -> None:

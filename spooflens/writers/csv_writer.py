@@ -27,4 +27,6 @@ def write_csv(table: EpochTable, path: Path) -> None:
             )
             if frame == "imu":
                 f.write(f"# body_frame: {body}\n")
+            if frame == "fixes":  # provenance: firmware, receiver, the meaning of the state codes
+                f.writelines(f"# metadata {k}: {v}\n" for k, v in table.metadata.items() if "\n" not in v)
             df.to_csv(f, index=False, float_format="%.17g")

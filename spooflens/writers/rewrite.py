@@ -229,7 +229,11 @@ def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochT
 
     fmt = sniff_format(src)
     write_log(spoofed, dst, fmt)
-    note = "ULog rewritten with only sensor_combined and sensor_gps" if fmt == "ulog" else "CSV log rewritten"
+    note = (
+        "ULog rewritten with only sensor_combined, vehicle_attitude and sensor_gps"
+        if fmt == "ulog"
+        else "CSV log rewritten"
+    )
     extra = f", {len(spoofed.observations)} observations" if len(spoofed.observations) else ""
     return f"{note}: {len(spoofed.fixes)} fixes{extra}"
 
