@@ -29,6 +29,9 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rosbag",
     "readers.ulog",
     "readers.rinex",
+    "readers.ardupilot",
+    "readers.tlog",
+    "readers.gnsslogger",
     "readers.csv_log",
 )
 

@@ -124,6 +124,7 @@ class EpochTable:
     observations: pd.DataFrame = field(default_factory=lambda: empty_frame("observations"))
     truth: pd.DataFrame = field(default_factory=lambda: empty_frame("truth"))
     odometry: pd.DataFrame = field(default_factory=lambda: empty_frame("odometry"))
+    autopilot_ekf: pd.DataFrame = field(default_factory=lambda: empty_frame("autopilot_ekf"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
     # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
@@ -277,6 +278,7 @@ def build_table(
             "truth": "truth",
             "odometry": "odometry",
             "observations": "observations",
+            "autopilot_ekf": "autopilot_ekf",
         }.get(s.role)
         if frame is None or frame not in table_frames:
             final_streams.append(s)
