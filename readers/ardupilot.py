@@ -85,10 +85,10 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
         cols = log.columns(name)
         if cols is None:
             continue
-        df = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S"})
+        df = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k != "_ofs"})
         df["inst"] = inst if inst is not None else _instance(cols)
         df["msg"] = name
-        df["ofs"] = log.offsets(name)[: len(df)]  # where each row sits in the file (inject patches it there)
+        df["ofs"] = cols["_ofs"]  # where each row sits in the file (inject patches it there)
         parts.append(df)
     if not parts:
         return None
@@ -102,7 +102,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
         cols = log.columns(name)
         if cols is None:
             continue
-        g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k != "I"})
+        g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k not in ("I", "_ofs")})
         g["inst"] = inst if inst is not None else _instance(cols)
         gpa_parts.append(g.add_prefix("gpa_").rename(columns={"gpa_TimeUS": "TimeUS", "gpa_inst": "inst"}))
     if gpa_parts:
@@ -360,7 +360,7 @@ def _raw_observations(
     hdr, sat = log.columns("GRXH"), log.columns("GRXS")
     if hdr is None or sat is None:
         return None, [], None
-    h_ofs, s_ofs = log.offsets("GRXH")[: len(hdr["TimeUS"])], log.offsets("GRXS")[: len(sat["TimeUS"])]
+    h_ofs, s_ofs = hdr["_ofs"], sat["_ofs"]
     # each GRXS belongs to the GRXH written just before it in the file
     k = np.searchsorted(h_ofs, s_ofs, side="right") - 1
     orphan = k < 0

@@ -11,8 +11,11 @@ are interpreted, through pymavlink's fixed table of format letters.
 from __future__ import annotations
 
 import contextlib
-import io
+import os
 import re
+import sys
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,8 +51,20 @@ class DataFlash:
         t = self.reader.name_to_id[name]
         return np.asarray(self.reader.offsets[t], dtype=np.int64)
 
+    def plausible(self, name: str, time_us: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Rows whose TimeUS fits the rest of the type's rows (a flipped byte can make it years off)."""
+        if len(time_us) < 3:
+            return np.ones(len(time_us), dtype=bool)
+        lo, hi = np.percentile(time_us, [5, 95])
+        margin = (hi - lo) + 600e6
+        ok = (time_us >= lo - margin) & (time_us <= hi + margin)
+        if not ok.all():
+            self.skipped.append(Skipped(name, "implausible TimeUS (corrupt message)", int((~ok).sum()), "lost"))
+        return np.asarray(ok)
+
     def columns(self, name: str) -> Columns | None:
-        """Every row of message `name` as arrays (strings as bytes), or None if the log has none."""
+        """Every row of message `name` as arrays (strings as bytes), or None if the log has none; `_ofs` is
+        each row's offset in the file."""
         if name not in self._cache:
             self._cache[name] = self._decode(name)
         return self._cache[name]
@@ -92,7 +107,10 @@ class DataFlash:
             ofs = ofs[whole]
         buf = np.frombuffer(self.data, dtype=np.uint8)
         rows = buf[ofs[:, None] + 3 + np.arange(dt.itemsize)].view(dt).ravel()
-        out: Columns = {}
+        if "TimeUS" in (dt.names or ()):
+            keep = self.plausible(name, rows["TimeUS"].astype(np.int64))
+            rows, ofs = rows[keep], ofs[keep]
+        out: Columns = {"_ofs": ofs}  # where each row sits in the file
         for col in dt.names or ():
             values = rows[col]
             if col in scale:
@@ -108,31 +126,87 @@ class DataFlash:
         return [v.split(b"\0", 1)[0].decode("utf-8", errors="replace") for v in cols[column]]
 
 
-_BAD = re.compile(r"bad header|Skipped (\d+) bad bytes|unknown msg type")
+@contextlib.contextmanager
+def _captured_output() -> Iterator[list[str]]:
+    """Capture what pymavlink prints, from Python and from its compiled indexer (file descriptors 1, 2)."""
+    out: list[str] = []
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        try:
+            os.dup2(tmp.fileno(), 1)
+            os.dup2(tmp.fileno(), 2)
+            yield out
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            tmp.seek(0)
+            out.append(tmp.read().decode("utf-8", errors="replace"))
+
+
+def _resume_index(log: DataFlash, start: int) -> int:
+    """Index the messages after `start`, where pymavlink's indexer stopped at a message of undefined type.
+
+    Walks message by message with the lengths of the formats the log defined, skipping to the next
+    A3 95 + known type after anything else. Returns how many messages it found.
+    """
+    r, data = log.reader, log.data
+    buf = np.frombuffer(data, dtype=np.uint8)
+    lengths = {t: f.len for t, f in r.formats.items() if f.len > 3}
+    known = np.zeros(256, dtype=bool)
+    known[list(lengths)] = True
+    head = buf[start:]
+    cand = np.flatnonzero((head[:-2] == 0xA3) & (head[1:-1] == 0x95) & known[head[2:]]) + start
+    found = 0
+    pos = int(cand[0]) if len(cand) else len(data)
+    while pos + 3 <= len(data):
+        t = data[pos + 2]
+        if data[pos] == 0xA3 and data[pos + 1] == 0x95 and t in lengths and pos + lengths[t] <= len(data):
+            r.offsets[t].append(pos)
+            r.counts[t] += 1
+            found += 1
+            pos += lengths[t]
+            continue
+        k = int(np.searchsorted(cand, pos + 1))
+        if k >= len(cand):
+            break
+        pos = int(cand[k])
+    return found
 
 
 def open_dataflash(path: Path) -> DataFlash:
     """Index a DataFlash log with pymavlink (its console chatter captured and counted, never printed)."""
-    chatter = io.StringIO()
     try:
         data = path.read_bytes()
-        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+        with _captured_output() as chatter:
             reader = DFReader_binary(str(path))
     except OSError as err:
         raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
     except Exception as err:  # pymavlink raises bare Exception for an unknown format letter
         raise ReaderError(path, f"not a readable DataFlash log: {type(err).__name__}: {err}") from err
+    text = "".join(chatter)
     log = DataFlash(path, data, reader)
-    bad = [m for m in _BAD.finditer(chatter.getvalue())]
+    bad = len(re.findall(r"bad header", text))
     if bad:
         log.skipped.append(
-            Skipped(
-                "<dataflash>", "corrupt bytes between messages; re-synchronised on the next header", len(bad), "lost"
-            )
+            Skipped("<dataflash>", "corrupt bytes between messages; re-synchronised on the next header", bad, "lost")
         )
-    if "unknown msg type" in chatter.getvalue():
+    stop = re.search(r"unknown msg type 0x[0-9a-f]+ \(\d+\) at (\d+)", text)
+    if stop:
+        found = _resume_index(log, int(stop.group(1)) + 1)
         log.skipped.append(
-            Skipped("<dataflash>", "a message of undefined type: pymavlink's index stops there", 1, "lost")
+            Skipped(
+                "<dataflash>",
+                f"a message of undefined type at byte {stop.group(1)}; "
+                f"{found} messages after it found by re-synchronising",
+                1,
+                "lost",
+            )
         )
     return log
 
