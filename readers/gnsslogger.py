@@ -86,7 +86,7 @@ RECORDS = (
     "Mag",
     "UncalMag",
 )
-USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDeg"}
+USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDeg", "Agc"}
 
 # GnssMeasurement.State bits
 TOW_DECODED, MSEC_AMBIGUOUS, GLO_TOD_DECODED, TOW_KNOWN, GLO_TOD_KNOWN = 8, 16, 128, 16384, 32768
@@ -173,7 +173,7 @@ def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records],
         name, _, why = reason.partition(": ")
         skipped.append(Skipped(name, why, n, "lost"))
     for name, n in unused.items():
-        skipped.append(Skipped(name, "record type not used (Agc is read from the Raw lines' AgcDb)", n))
+        skipped.append(Skipped(name, "record type not used", n))
     if unknown:
         total = sum(unknown.values())
         skipped.append(
@@ -311,6 +311,19 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
     return RawResult(good[~dup].reset_index(drop=True), epochs)
 
 
+def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:
+    """Agc records (v3: one per band and constellation) -> mean L1-band AgcDb per epoch (GPS t_ns)."""
+    n = len(agc)
+    time_nanos, ok_t = _int64(_col(agc, "TimeNanos"), n)
+    full_bias, ok_b = _int64(_col(agc, "FullBiasNanos"), n)
+    bias = np.nan_to_num(_float(_col(agc, "BiasNanos"), n))
+    freq = _float(_col(agc, "CarrierFrequencyHz"), n)
+    db = _float(_col(agc, "AgcDb"), n)
+    keep = ok_t & ok_b & (freq >= L1_BAND_HZ[0]) & (freq <= L1_BAND_HZ[1]) & np.isfinite(db)
+    t_ns = time_nanos - full_bias - np.round(bias).astype(np.int64)
+    return pd.DataFrame({"t_ns": t_ns[keep], "agc_rec": db[keep]}).groupby("t_ns", as_index=False).mean()
+
+
 def _unix_to_gps_ns(unix_ns: IntArray) -> IntArray:
     gps = unix_ns - GPS_EPOCH_UNIX_NS
     return gps + gps_utc_offset_ns(gps + gps_utc_offset_ns(gps))
@@ -424,9 +437,13 @@ def read_gnsslogger(
         fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=t_ns)
         if raw is not None and len(raw.epochs):
             ep = raw.epochs.sort_values("t_ns")
+            if "Agc" in records:
+                rec = agc_epochs(records["Agc"].frame())
+                ep = pd.merge_asof(ep, rec, on="t_ns", direction="nearest", tolerance=500_000_000)
+                ep["agc"] = ep["agc"].fillna(ep.pop("agc_rec"))
             joined = pd.merge_asof(fx.sort_values("t_ns"), ep, on="t_ns", direction="nearest", tolerance=1_000_000_000)
             fx = joined.rename(columns={"cn0": "cn0_mean_dbhz", "agc": "agc"})
-            meta["units.agc"] = "dB (Android AgcDb, mean over the L1 band)"
+            meta["units.agc"] = "dB (Android AgcDb of the Raw or Agc records, mean over the L1 band)"
         frames["fixes"] = fx
         streams.append(StreamInfo("fix", RECEIVER, "Fix (GPS provider)", "gnsslogger/Fix", len(fx)))
     nav = None
