@@ -31,6 +31,9 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rinex",
     "readers.ubx",
     "readers.nmea",
+    "readers.ardupilot",
+    "readers.tlog",
+    "readers.gnsslogger",
     "readers.csv_log",
 )
 

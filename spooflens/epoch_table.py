@@ -125,6 +125,7 @@ class EpochTable:
     truth: pd.DataFrame = field(default_factory=lambda: empty_frame("truth"))
     odometry: pd.DataFrame = field(default_factory=lambda: empty_frame("odometry"))
     headings: pd.DataFrame = field(default_factory=lambda: empty_frame("headings"))
+    autopilot_ekf: pd.DataFrame = field(default_factory=lambda: empty_frame("autopilot_ekf"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
     # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
@@ -279,6 +280,7 @@ def build_table(
             "odometry": "odometry",
             "observations": "observations",
             "heading": "headings",
+            "autopilot_ekf": "autopilot_ekf",
         }.get(s.role)
         if frame is None or frame not in table_frames:
             final_streams.append(s)

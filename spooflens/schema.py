@@ -56,7 +56,14 @@ IMU_COLUMNS: tuple[Column, ...] = (
     Column("wx_radps", "float64", "rad/s", "angular rate, body x"),
     Column("wy_radps", "float64", "rad/s", "angular rate, body y"),
     Column("wz_radps", "float64", "rad/s", "angular rate, body z"),
-    Column("qw", "float64", "-", "orientation body->local-level quaternion w, NaN if absent", False),
+    Column(
+        "qw",
+        "float64",
+        "-",
+        "orientation quaternion w: rotates vectors from the stream's declared body frame to local-level ENU, "
+        "NaN if absent",
+        False,
+    ),
     Column("qx", "float64", "-", "orientation quaternion x, NaN if absent", False),
     Column("qy", "float64", "-", "orientation quaternion y, NaN if absent", False),
     Column("qz", "float64", "-", "orientation quaternion z, NaN if absent", False),
@@ -161,6 +168,37 @@ HEADING_COLUMNS: tuple[Column, ...] = (
     ),
 )
 
+# The autopilot's own navigation filter, as it logged it (ArduPilot XKF3/XKF4, EKF2 NKF3/NKF4): evidence
+# from a second, independent GNSS/INS filter to draw beside ours. Innovations keep the autopilot's sign
+# (its state minus the measurement) and its NED axes; test ratios are innovation^2 / (gate^2 * variance),
+# so 1.0 is where the autopilot rejects the measurement.
+AUTOPILOT_EKF_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("source", "string", "-", "which filter and core logged the row, e.g. 'EKF3 core 0'"),
+    Column("vel_innov_n_mps", "float64", "m/s", "GNSS velocity innovation north (state - measurement)", False),
+    Column("vel_innov_e_mps", "float64", "m/s", "GNSS velocity innovation east", False),
+    Column("vel_innov_d_mps", "float64", "m/s", "GNSS velocity innovation down", False),
+    Column("pos_innov_n_m", "float64", "m", "GNSS position innovation north (state - measurement)", False),
+    Column("pos_innov_e_m", "float64", "m", "GNSS position innovation east", False),
+    Column("pos_innov_d_m", "float64", "m", "height innovation, down (from the height source in use)", False),
+    Column("mag_innov_x_ut", "float64", "uT", "magnetometer innovation, body x (logged in mGauss)", False),
+    Column("mag_innov_y_ut", "float64", "uT", "magnetometer innovation, body y", False),
+    Column("mag_innov_z_ut", "float64", "uT", "magnetometer innovation, body z", False),
+    Column("yaw_innov_rad", "float64", "rad", "yaw innovation", False),
+    Column("airspeed_innov_mps", "float64", "m/s", "true airspeed innovation", False),
+    Column("vel_test_ratio", "float64", "-", "velocity innovation test ratio (> 1: measurement rejected)", False),
+    Column("pos_test_ratio", "float64", "-", "horizontal position innovation test ratio", False),
+    Column("hgt_test_ratio", "float64", "-", "height innovation test ratio", False),
+    Column("mag_test_ratio", "float64", "-", "magnetometer innovation test ratio", False),
+    Column("airspeed_test_ratio", "float64", "-", "airspeed innovation test ratio", False),
+    Column("tilt_error_rad", "float64", "rad", "filtered roll/pitch error estimate", False),
+    Column("fault_status", "float64", "-", "filter fault bitmask as logged (FS)", False),
+    Column("timeout_status", "float64", "-", "measurement timeout bitmask as logged (TS)", False),
+    Column("solution_status", "float64", "-", "solution status bitmask as logged (SS)", False),
+    Column("gps_check_status", "float64", "-", "GNSS quality check failure bitmask as logged (GPS)", False),
+    Column("primary_core", "float64", "-", "index of the core the autopilot used at the time (PI)", False),
+)
+
 FRAMES: dict[str, tuple[Column, ...]] = {
     "imu": IMU_COLUMNS,
     "fixes": FIX_COLUMNS,
@@ -168,6 +206,7 @@ FRAMES: dict[str, tuple[Column, ...]] = {
     "truth": TRUTH_COLUMNS,
     "odometry": ODOMETRY_COLUMNS,
     "headings": HEADING_COLUMNS,
+    "autopilot_ekf": AUTOPILOT_EKF_COLUMNS,
 }
 
 # Which column names the stream a row belongs to, per frame (truth has one stream).
@@ -178,6 +217,7 @@ STREAM_KEY: dict[str, str | None] = {
     "truth": None,
     "odometry": "odometry_id",
     "headings": "heading_id",
+    "autopilot_ekf": "source",
 }
 
 # Body-frame axis conventions an IMU stream may declare.
@@ -185,6 +225,7 @@ BODY_FRAMES = {
     "FLU": "x forward, y left, z up (ROS REP-103)",
     "FRD": "x forward, y right, z down (PX4, aerospace)",
     "RFU": "x right, y forward, z up (seed 000)",
+    "ANDROID": "x right, y toward the top of the screen, z out of the screen (Android sensors; RFU when lying flat)",
 }
 
 _MISSING = {"float64": np.nan, "int8": SpoofingFlag.UNKNOWN, "string": pd.NA}

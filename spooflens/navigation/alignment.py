@@ -37,6 +37,9 @@ TO_FLU = {
     "FLU": np.eye(3),
     "FRD": np.diag([1.0, -1.0, -1.0]),
     "RFU": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+    # Android SensorEvent axes: x right, y toward the top of the screen, z out of the screen; a phone
+    # lying flat with its top forward is RFU, so the same rows (forward = the top of the screen)
+    "ANDROID": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
 }
 
 

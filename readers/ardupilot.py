@@ -1,0 +1,502 @@
+"""ArduPilot DataFlash logs (`.bin`) into an EpochTable.
+
+**Fixes.** `GPS` rows (instance `I`: `GPS[0]`, `GPS[1]`; an older log's `GPS2` message is `GPS[1]`;
+instance 2, the autopilot's blended solution, is not a receiver and is skipped). Lat/Lng as logged;
+height above the ellipsoid from `GPA.AEl` (4.5+) or `GPS.Alt - GPA.Und` (ArduPilot's undulation is
+h_msl - h_ellipsoid); without either the AMSL `Alt` is kept and the metadata says so. Velocity ENU from
+ground speed, course and `VZ` (down): ve = Spd sin(GCrs), vn = Spd cos(GCrs), vu = -VZ. `NSats`,
+`HDop` (99.99 = unknown), `Status` -> FixType (0-1 no fix: dropped, 2 2D, 3 3D, 4 DGPS, 5-6 RTK).
+`GPA` (same instance and TimeUS) gives `VDop`, `HAcc`, `VAcc`, `SAcc`. `UBX1` (u-blox MON-HW) gives
+`noise_per_ms` (noisePerMS), `jamming_indicator` (jamInd) and `agc` (agcCnt): the latest report of
+the same receiver at or before the fix, within 5 s.
+
+**IMU.** `IMU` rows per instance (`IMU[0]`, `IMU[1]`, ...; older logs `IMU`, `IMU2`, `IMU3`), body
+frame FRD (the autopilot has applied the board orientation). The primary is instance 0, the IMU
+ArduPilot uses while it is healthy, unless `--topic imu=IMU[1]` names another; it is listed first, so
+the navigation uses it (metadata `imu.primary`). `ATT` roll/pitch/yaw (NED Euler angles of the FRD
+body, degrees) become the quaternion columns: q = q(ENU<-NED) * qz(yaw) * qy(pitch) * qx(roll), with
+q(ENU<-NED) = (0, 1/sqrt2, 1/sqrt2, 0), so q rotates FRD body vectors into ENU; interpolated (nlerp)
+to the IMU stamps within 0.5 s of an ATT row.
+
+**Raw observations.** `GRXH`/`GRXS` (u-blox RXM-RAWX logged by the autopilot): pseudorange, carrier
+phase, Doppler, C/N0 per satellite of valid pseudoranges (trkStat bit 0), stamped with the receiver's
+own time (GRXH week and rcvTime) when the log has the GPS clock; satellite states from a navigation
+file given with `--topic nav=FILE`.
+
+**The autopilot's EKF.** `XKF3`/`XKF4` (EKF3) and `NKF3`/`NKF4` (EKF2) innovations and test ratios
+per core go to the `autopilot_ekf` frame (source `EKF3 core 0`, ...), in SI units.
+
+**Time.** TimeUS is time since boot. The GPS rows' week (`GWk`) and ms of week (`GMS`) give the GPS
+clock: the log goes on it with the median offset between the two clocks over 3D fixes. A log whose
+GPS rows never carry a week (GWk 0, as some do) stays on the boot clock.
+
+**Metadata.** Firmware (`VER.FWS`, else the first `MSG` naming the vehicle), board and receivers
+(`MSG` lines), and the choices above.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from readers import ReaderFormat
+from readers.dataflash import Columns, DataFlash, is_dataflash, open_dataflash
+from readers.raw_states import add_satellite_states, nav_stream, navigation_for
+from readers.rinex import NavFile
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.errors import ReaderError
+from spooflens.gnss.ephemeris import C_MPS, SECONDS_PER_WEEK
+from spooflens.navigation.rotations import quat_multiply
+from spooflens.schema import FixType
+
+Progress = Callable[[int, int], None]
+FloatArray = NDArray[np.float64]
+
+# ArduPilot GPS_Status: 0 no GPS, 1 no fix, 2 2D, 3 3D, 4 3D DGPS, 5 RTK float, 6 RTK fixed
+_FIX = {2: FixType.FIX_2D, 3: FixType.FIX_3D, 4: FixType.DGNSS, 5: FixType.RTK_FLOAT, 6: FixType.RTK_FIXED}
+BLENDED_INSTANCE = 2  # GPS_MAX_RECEIVERS: the blended solution is logged as this instance
+UBX_MAX_AGE_S = 5.0
+ATT_MAX_GAP_S = 0.5
+Q_ENU_NED = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])
+# u-blox gnssId -> RINEX system letter
+_UBX_SYSTEM = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
+_L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "E": 1575.42e6, "J": 1575.42e6, "C": 1561.098e6, "I": 1176.45e6}
+
+
+def _instance(cols: Columns, key: str = "I") -> NDArray[np.int64]:
+    n = len(cols["TimeUS"])
+    return cols[key].astype(np.int64) if key in cols else np.zeros(n, dtype=np.int64)
+
+
+def _f(cols: Columns | None, name: str, n: int) -> FloatArray:
+    if cols is None or name not in cols:
+        return np.full(n, np.nan)
+    return cols[name].astype(np.float64)
+
+
+def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
+    """Every GPS row with its instance (GPS2 messages as instance 1), GPA and UBX1 columns joined."""
+    parts = []
+    for name, inst in (("GPS", None), ("GPS2", 1)):
+        cols = log.columns(name)
+        if cols is None:
+            continue
+        df = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k != "_ofs"})
+        df["inst"] = inst if inst is not None else _instance(cols)
+        df["msg"] = name
+        df["ofs"] = cols["_ofs"]  # where each row sits in the file (inject patches it there)
+        parts.append(df)
+    if not parts:
+        return None
+    gps = pd.concat(parts, ignore_index=True)
+    blended = gps["inst"] == BLENDED_INSTANCE
+    if blended.any():
+        skipped.append(Skipped("GPS[2]", "the autopilot's blended GPS solution (not a receiver)", int(blended.sum())))
+        gps = gps[~blended]
+    gpa_parts = []
+    for name, inst in (("GPA", None), ("GPA2", 1)):
+        cols = log.columns(name)
+        if cols is None:
+            continue
+        g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k not in ("I", "_ofs")})
+        g["inst"] = inst if inst is not None else _instance(cols)
+        gpa_parts.append(g.add_prefix("gpa_").rename(columns={"gpa_TimeUS": "TimeUS", "gpa_inst": "inst"}))
+    if gpa_parts:
+        gpa = pd.concat(gpa_parts, ignore_index=True).drop_duplicates(["TimeUS", "inst"])
+        gps = gps.merge(gpa, on=["TimeUS", "inst"], how="left")
+    ubx = log.columns("UBX1")
+    if ubx is not None:
+        u = pd.DataFrame(
+            {
+                "TimeUS": ubx["TimeUS"].astype(np.int64),
+                "inst": _instance(ubx, "Instance"),
+                "ubx_noise": ubx["noisePerMS"].astype(float),
+                "ubx_jam": ubx["jamInd"].astype(float),
+                "ubx_agc": ubx["agcCnt"].astype(float),
+            }
+        ).sort_values("TimeUS")
+        gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
+        gps = pd.merge_asof(
+            gps.sort_values("TimeUS"),
+            u,
+            on="TimeUS",
+            by="inst",
+            direction="backward",
+            tolerance=int(UBX_MAX_AGE_S * 1e6),
+        )
+    return gps.sort_values(["inst", "TimeUS"], kind="stable").reset_index(drop=True)
+
+
+def gps_clock(gps: pd.DataFrame | None) -> tuple[str, int, str]:
+    """(time reference, offset ns added to TimeUS * 1000, how it was found)."""
+    if gps is None or "GWk" not in gps or "GMS" not in gps:
+        return "boot", 0, "no GPS week/ms in the log: boot clock (TimeUS)"
+    ok = (gps["GWk"] > 0) & (gps["Status"] >= 3)
+    if not ok.any():
+        return "boot", 0, "GPS rows carry no week number (GWk 0): boot clock (TimeUS)"
+    gps_ns = (gps.loc[ok, "GWk"].astype(np.int64) * 604_800_000 + gps.loc[ok, "GMS"].astype(np.int64)) * 1_000_000
+    offset = int(np.median(gps_ns.to_numpy() - gps.loc[ok, "TimeUS"].to_numpy(np.int64) * 1000))
+    return "gps", offset, f"GPS clock from GPS week/ms of {int(ok.sum())} 3D fixes (median offset to TimeUS)"
+
+
+def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: dict[str, str]) -> pd.DataFrame:
+    """Fix rows (schema columns, t_ns) of the GPS rows with a fix, plus `msg` and `ofs`: the message each
+    row came from and its offset in the file."""
+    n = len(gps)
+    status = gps["Status"].to_numpy(np.int64)
+    fix_type = np.full(n, FixType.NO_FIX, dtype=np.int8)
+    for code, mapped in _FIX.items():
+        fix_type[status == code] = mapped
+    alt = gps["Alt"].to_numpy(float)
+    ael = gps["gpa_AEl"].to_numpy(float) if "gpa_AEl" in gps else np.full(n, np.nan)
+    und = gps["gpa_Und"].to_numpy(float) if "gpa_Und" in gps else np.full(n, np.nan)
+    ael_ok = np.isfinite(ael) & (ael != 0) & (ael != alt)
+    und_ok = np.isfinite(und) & (und != 0)
+    height = np.where(ael_ok, ael, np.where(und_ok, alt - und, alt))
+    amsl = ~(ael_ok | und_ok)
+    meta["height"] = (
+        "ellipsoidal: GPA.AEl"
+        if ael_ok.all()
+        else "ellipsoidal: GPS.Alt - GPA.Und (ArduPilot undulation = h_msl - h_ellipsoid)"
+        if (ael_ok | und_ok).all()
+        else f"{int(amsl.sum())} of {n} GPS rows have no undulation: their height_m is AMSL (GPS.Alt)"
+    )
+    spd, crs = gps["Spd"].to_numpy(float), np.radians(gps["GCrs"].to_numpy(float))
+    hdop = gps["HDop"].to_numpy(float)
+    names = np.array([f"GPS[{i}]" for i in gps["inst"].to_numpy(np.int64)], dtype=object)
+    cols: dict[str, object] = {
+        "t_ns": gps["TimeUS"].to_numpy(np.int64) * 1000 + offset_ns,
+        "receiver_id": names,
+        "lat_deg": gps["Lat"].to_numpy(float),
+        "lon_deg": gps["Lng"].to_numpy(float),
+        "height_m": height,
+        "vel_e_mps": spd * np.sin(crs),
+        "vel_n_mps": spd * np.cos(crs),
+        "vel_u_mps": -gps["VZ"].to_numpy(float),
+        "sats_used": gps["NSats"].to_numpy(float),
+        "hdop": np.where(hdop >= 99.99, np.nan, hdop),
+        "fix_type": fix_type,
+        "msg": gps["msg"].to_numpy(),
+        "ofs": gps["ofs"].to_numpy(np.int64),
+    }
+    for col, src in (
+        ("vdop", "gpa_VDop"),
+        ("h_acc_m", "gpa_HAcc"),
+        ("v_acc_m", "gpa_VAcc"),
+        ("vel_acc_mps", "gpa_SAcc"),
+        ("noise_per_ms", "ubx_noise"),
+        ("jamming_indicator", "ubx_jam"),
+        ("agc", "ubx_agc"),
+    ):
+        if src in gps:
+            cols[col] = gps[src].to_numpy(float)
+    fixes = pd.DataFrame(cols)
+    no_fix = fix_type == FixType.NO_FIX
+    for rid in dict.fromkeys(names[no_fix]):
+        skipped.append(Skipped(str(rid), "GPS Status 0-1 (no fix)", int((names[no_fix] == rid).sum())))
+    return fixes[~no_fix].reset_index(drop=True)
+
+
+def attitude_quaternion(roll_deg: FloatArray, pitch_deg: FloatArray, yaw_deg: FloatArray) -> FloatArray:
+    """ArduPilot's NED Euler angles (ZYX, degrees) -> quaternion (w, x, y, z) rotating FRD body to ENU."""
+    r, p, y = (np.radians(np.asarray(a, dtype=float)) / 2 for a in (roll_deg, pitch_deg, yaw_deg))
+    z = np.zeros_like(r)
+    qx = np.stack([np.cos(r), np.sin(r), z, z], axis=-1)
+    qy = np.stack([np.cos(p), z, np.sin(p), z], axis=-1)
+    qz = np.stack([np.cos(y), z, z, np.sin(y)], axis=-1)
+    q_ned_frd = quat_multiply(quat_multiply(qz, qy), qx)
+    return quat_multiply(np.broadcast_to(Q_ENU_NED, q_ned_frd.shape), q_ned_frd)
+
+
+def _attitude_at(att: Columns | None, t_us: NDArray[np.int64]) -> FloatArray:
+    """ATT attitude at the IMU stamps (normalised linear interpolation), NaN far from any ATT row."""
+    out = np.full((len(t_us), 4), np.nan)
+    if att is None or not len(att["TimeUS"]):
+        return out
+    ta = att["TimeUS"].astype(np.int64)
+    order = np.argsort(ta, kind="stable")
+    ta = ta[order]
+    q = attitude_quaternion(att["Roll"][order], att["Pitch"][order], att["Yaw"][order])
+    # one hemisphere along the track, so neighbours interpolate the short way
+    flip = np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=1) < 0, -1.0, 1.0))
+    q[1:] *= flip[:, None]
+    k = np.clip(np.searchsorted(ta, t_us), 1, max(len(ta) - 1, 1))
+    if len(ta) == 1:
+        near = np.abs(t_us - ta[0]) <= ATT_MAX_GAP_S * 1e6
+        out[near] = q[0]
+        return out
+    lo, hi = k - 1, k
+    span = (ta[hi] - ta[lo]).astype(float)
+    w = np.clip((t_us - ta[lo]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+    qi = q[lo] * (1 - w)[:, None] + q[hi] * w[:, None]
+    qi /= np.linalg.norm(qi, axis=1, keepdims=True)
+    gap = np.minimum(np.abs(t_us - ta[lo]), np.abs(t_us - ta[hi]))
+    ok = gap <= ATT_MAX_GAP_S * 1e6
+    out[ok] = qi[ok]
+    return out
+
+
+def _imu(
+    log: DataFlash, offset_ns: int, primary: str | None, skipped: list[Skipped], meta: dict[str, str]
+) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
+    """Every IMU instance (primary first) with the ATT attitude as its quaternion columns."""
+    parts: dict[str, Columns] = {}
+    for name in ("IMU", "IMU2", "IMU3"):
+        cols = log.columns(name)
+        if cols is None:
+            continue
+        if name == "IMU" and "I" in cols:
+            inst = _instance(cols)
+            for i in np.unique(inst):
+                parts[f"IMU[{i}]"] = {k: v[inst == i] for k, v in cols.items()}
+        else:
+            parts[f"IMU[{int(name[3:] or 1) - 1}]"] = cols
+    if not parts:
+        return None, []
+    ids = sorted(parts)
+    first = primary if primary in parts else ids[0]
+    if primary and primary not in parts:
+        skipped.append(Skipped("<ardupilot>", f"--topic imu={primary} is not in the log (IMUs {ids})", 1))
+    ids = [first, *[i for i in ids if i != first]]
+    meta["imu.primary"] = (
+        f"{first} (named with --topic imu=)"
+        if primary == first
+        else f"{first} (ArduPilot's first IMU, primary while healthy)"
+    )
+    att = log.columns("ATT")
+    frames, streams = [], []
+    for iid in ids:
+        c = parts[iid]
+        t_us = c["TimeUS"].astype(np.int64)
+        q = _attitude_at(att, t_us)
+        frames.append(
+            pd.DataFrame(
+                {
+                    "t_ns": t_us * 1000 + offset_ns,
+                    "imu_id": iid,
+                    "ax_mps2": c["AccX"].astype(float),
+                    "ay_mps2": c["AccY"].astype(float),
+                    "az_mps2": c["AccZ"].astype(float),
+                    "wx_radps": c["GyrX"].astype(float),
+                    "wy_radps": c["GyrY"].astype(float),
+                    "wz_radps": c["GyrZ"].astype(float),
+                    "qw": q[:, 0],
+                    "qx": q[:, 1],
+                    "qy": q[:, 2],
+                    "qz": q[:, 3],
+                }
+            )
+        )
+        streams.append(StreamInfo("imu", iid, "IMU", "ardupilot/IMU", len(t_us), body_frame="FRD"))
+    return pd.concat(frames, ignore_index=True), streams
+
+
+_EKF_FIELDS = {
+    "IVN": ("vel_innov_n_mps", 1.0),
+    "IVE": ("vel_innov_e_mps", 1.0),
+    "IVD": ("vel_innov_d_mps", 1.0),
+    "IPN": ("pos_innov_n_m", 1.0),
+    "IPE": ("pos_innov_e_m", 1.0),
+    "IPD": ("pos_innov_d_m", 1.0),
+    "IMX": ("mag_innov_x_ut", 0.1),  # mGauss -> uT
+    "IMY": ("mag_innov_y_ut", 0.1),
+    "IMZ": ("mag_innov_z_ut", 0.1),
+    "IYAW": ("yaw_innov_rad", np.pi / 180),
+    "IVT": ("airspeed_innov_mps", 1.0),
+    "SV": ("vel_test_ratio", 1.0),
+    "SP": ("pos_test_ratio", 1.0),
+    "SH": ("hgt_test_ratio", 1.0),
+    "SM": ("mag_test_ratio", 1.0),
+    "SVT": ("airspeed_test_ratio", 1.0),
+    "errRP": ("tilt_error_rad", 1.0),
+    "FS": ("fault_status", 1.0),
+    "TS": ("timeout_status", 1.0),
+    "SS": ("solution_status", 1.0),
+    "GPS": ("gps_check_status", 1.0),
+    "PI": ("primary_core", 1.0),
+}
+
+
+def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
+    frames, streams = [], []
+    for filt, innov, ratio in (("EKF3", "XKF3", "XKF4"), ("EKF2", "NKF3", "NKF4")):
+        parts = []
+        for name in (innov, ratio):
+            cols = log.columns(name)
+            if cols is None:
+                continue
+            df = pd.DataFrame({"TimeUS": cols["TimeUS"].astype(np.int64), "core": _instance(cols, "C")})
+            for src, (dst, scale) in _EKF_FIELDS.items():
+                if src in cols:
+                    df[dst] = cols[src].astype(float) * scale
+            parts.append(df.drop_duplicates(["TimeUS", "core"]))
+        if not parts:
+            continue
+        df = parts[0] if len(parts) == 1 else parts[0].merge(parts[1], on=["TimeUS", "core"], how="outer")
+        df = df.sort_values(["core", "TimeUS"], kind="stable")
+        df["source"] = [f"{filt} core {c}" for c in df["core"]]
+        df["t_ns"] = df["TimeUS"].to_numpy(np.int64) * 1000 + offset_ns
+        frames.append(df.drop(columns=["TimeUS", "core"]))
+        for src in dict.fromkeys(df["source"]):
+            n = int((df["source"] == src).sum())
+            streams.append(StreamInfo("autopilot_ekf", src, f"{innov}/{ratio}", f"ardupilot/{innov}+{ratio}", n))
+    if not frames:
+        return None, []
+    return pd.concat(frames, ignore_index=True), streams
+
+
+def _raw_observations(
+    log: DataFlash,
+    offset_ns: int,
+    reference: str,
+    topics: Mapping[str, str] | None,
+    skipped: list[Skipped],
+) -> tuple[pd.DataFrame | None, list[StreamInfo], NavFile | None]:
+    """GRXH/GRXS (u-blox RXM-RAWX as logged) -> observation rows of receiver GPS[0]."""
+    hdr, sat = log.columns("GRXH"), log.columns("GRXS")
+    if hdr is None or sat is None:
+        return None, [], None
+    h_ofs, s_ofs = hdr["_ofs"], sat["_ofs"]
+    # each GRXS belongs to the GRXH written just before it in the file
+    k = np.searchsorted(h_ofs, s_ofs, side="right") - 1
+    orphan = k < 0
+    if orphan.any():
+        skipped.append(Skipped("GRXS", "raw measurement before any GRXH header", int(orphan.sum())))
+    k = np.where(orphan, 0, k)
+    gnss = sat["gnss"].astype(np.int64)
+    system = np.array([_UBX_SYSTEM.get(int(g), "") for g in gnss])
+    pr_valid = (sat["trk"].astype(np.int64) & 1) == 1
+    keep = ~orphan & pr_valid & (system != "") & np.isfinite(sat["prMes"]) & (sat["prMes"] > 0)
+    if (~pr_valid & ~orphan).any():
+        skipped.append(Skipped("GRXS", "pseudorange not valid (trkStat bit 0 clear)", int((~pr_valid & ~orphan).sum())))
+    svn = sat["sv"].astype(np.int64)
+    sv_id = np.array([f"{s}{(n - 100 if s == 'S' else n):02d}" for s, n in zip(system, svn, strict=True)])
+    if reference == "gps":
+        t_gps_ns = np.round(
+            (hdr["week"].astype(np.int64)[k] * SECONDS_PER_WEEK + hdr["rcvTime"].astype(float)[k]) * 1e9
+        ).astype(np.int64)
+    else:
+        t_gps_ns = hdr["TimeUS"].astype(np.int64)[k] * 1000 + offset_ns
+    freq = np.array([_L1_HZ.get(s, np.nan) for s in system])
+    glo = system == "R"
+    freq[glo] = 1602.0e6 + (sat["freq"].astype(float)[glo] - 7.0) * 0.5625e6
+    doppler = sat["doMes"].astype(float)
+    cp_valid = (sat["trk"].astype(np.int64) & 2) == 2
+    rows = pd.DataFrame(
+        {
+            "t_ns": t_gps_ns,
+            "receiver_id": "GPS[0]",
+            "sv_id": sv_id,
+            "pseudorange_m": sat["prMes"].astype(float),
+            "pseudorange_rate_mps": -doppler * C_MPS / freq,
+            "doppler_hz": doppler,
+            "carrier_phase_cycles": np.where(cp_valid, sat["cpMes"].astype(float), np.nan),
+            "carrier_freq_hz": freq,
+            "cn0_dbhz": sat["cno"].astype(float),
+        }
+    )[keep].reset_index(drop=True)
+    nav = None
+    if len(rows) and reference == "gps":
+        nav = navigation_for(log.path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
+        rows = add_satellite_states(rows, nav, "GPS[0]", skipped)
+    elif len(rows):
+        skipped.append(Skipped("GPS[0]", "raw observations on the boot clock: no satellite states", len(rows)))
+    epochs = int(rows["t_ns"].nunique())
+    return rows, [StreamInfo("observations", "GPS[0]", "GRXH/GRXS", "ardupilot/GRXS (u-blox RXM-RAWX)", epochs)], nav
+
+
+def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
+    messages = log.strings("MSG", "Message")
+    fws = log.strings("VER", "FWS")
+    vehicle = next((m for m in messages if m.startswith("Ardu") or (" V" in m[:20] and m.startswith("Ardu"))), "")
+    if fws and fws[0]:
+        meta["firmware"] = fws[0]
+    elif vehicle:
+        meta["firmware"] = vehicle
+    if vehicle and vehicle in messages:
+        i = messages.index(vehicle)
+        board = [m for m in messages[i + 1 : i + 3] if not m.startswith(("ChibiOS", "Param", "RC"))]
+        if board:
+            meta["board"] = board[0]
+    gps_lines = [m for m in messages if m.startswith(("GPS ", "u-blox", "GPS:"))]
+    if gps_lines:
+        meta["receivers"] = "; ".join(gps_lines)
+
+
+def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    path = Path(path)
+    log = open_dataflash(path)
+    skipped: list[Skipped] = []
+    meta: dict[str, str] = {}
+    gps = gps_rows(log, skipped)
+    reference, offset_ns, how = gps_clock(gps)
+    meta["clock"] = how
+    frames: dict[str, pd.DataFrame] = {}
+    streams: list[StreamInfo] = []
+    if gps is not None:
+        fixes = gps_fixes(gps, offset_ns, skipped, meta)
+        frames["fixes"] = fixes.drop(columns=["msg", "ofs"])
+        for rid in dict.fromkeys(gps["inst"]):
+            name = f"GPS[{rid}]"
+            streams.append(
+                StreamInfo("fix", name, "GPS", "ardupilot/GPS+GPA", int((fixes["receiver_id"] == name).sum()))
+            )
+    if progress:
+        progress(1, 4)
+    primary = (topics or {}).get("imu")
+    imu, imu_streams = _imu(log, offset_ns, primary, skipped, meta)
+    if imu is not None:
+        frames["imu"] = imu
+        streams += imu_streams
+    elif log.count("ATT"):
+        skipped.append(
+            Skipped("ATT", "attitude without a raw IMU message to attach it to (IMU not logged)", log.count("ATT"))
+        )
+    if progress:
+        progress(2, 4)
+    ekf, ekf_streams = _ekf(log, offset_ns)
+    if ekf is not None:
+        frames["autopilot_ekf"] = ekf
+        streams += ekf_streams
+    obs, obs_streams, nav = _raw_observations(log, offset_ns, reference, topics, skipped)
+    if obs is not None and len(obs):
+        frames["observations"] = obs
+        streams += obs_streams
+    if progress:
+        progress(3, 4)
+    if log.count("UBX2"):
+        skipped.append(Skipped("UBX2", "u-blox I/Q imbalance (no schema column)", log.count("UBX2")))
+    _metadata(log, meta)
+    unknown = sorted(set(topics or {}) - {"imu", "nav"})
+    if unknown:
+        skipped.append(
+            Skipped("<ardupilot>", f"--topic ignored for DataFlash logs except imu=, nav= ({unknown})", len(unknown))
+        )
+    if not frames:
+        raise ReaderError(path, f"no GPS, IMU or EKF message in this DataFlash log (messages: {sorted(log.names())})")
+    table = build_table(path, "ardupilot", reference, frames, streams, [*log.skipped, *skipped], metadata=meta)
+    if nav is not None:
+        table.ephemerides = nav.ephemerides
+        table.streams.append(nav_stream(nav, table.t0_ns))
+    if progress:
+        progress(4, 4)
+    return table
+
+
+def _is_dataflash(path: Path, head: bytes) -> bool:
+    return is_dataflash(head)
+
+
+FORMATS = (
+    ReaderFormat(
+        "ardupilot",
+        "ArduPilot DataFlash log (.bin)",
+        read_ardupilot,
+        _is_dataflash,
+        rewrite="spooflens.writers.dataflash_rewrite:rewrite_dataflash",
+    ),
+)

@@ -1,0 +1,215 @@
+"""ArduPilot DataFlash binary logs, decoded column-wise.
+
+pymavlink's `DFReader_binary` finds the messages (its indexer re-synchronises on the A3 95 header
+after damage) and parses the FMT/FMTU records; the rows of each message type are then cut out of the
+file's bytes and viewed through a numpy structured dtype built from the FMT format string, so a long
+log decodes at numpy speed, not one Python object per message. Format letters carry pymavlink's
+multipliers (`c`/`C`/`e`/`E` x 0.01, `L` x 1e-7). Nothing in the file is executed: only FMT strings
+are interpreted, through pymavlink's fixed table of format letters.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from pymavlink.DFReader import FORMAT_TO_STRUCT, DFReader_binary
+
+from spooflens.epoch_table import Skipped
+from spooflens.errors import ReaderError
+
+HEADER = b"\xa3\x95\x80"  # every DataFlash binary log starts with the FMT of FMT
+Columns = dict[str, NDArray]
+
+
+@dataclass
+class DataFlash:
+    """The decodable content of one log: message name -> column arrays, plus what was lost."""
+
+    path: Path
+    data: bytes
+    reader: DFReader_binary
+    skipped: list[Skipped] = field(default_factory=list)
+    _cache: dict[str, Columns | None] = field(default_factory=dict)
+
+    def names(self) -> set[str]:
+        return {n for n, t in self.reader.name_to_id.items() if self.reader.counts[t] > 0}
+
+    def count(self, name: str) -> int:
+        t = self.reader.name_to_id.get(name)
+        return 0 if t is None else int(self.reader.counts[t])
+
+    def offsets(self, name: str) -> NDArray[np.int64]:
+        t = self.reader.name_to_id[name]
+        return np.asarray(self.reader.offsets[t], dtype=np.int64)
+
+    def plausible(self, name: str, time_us: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Rows whose TimeUS fits the rest of the type's rows (a flipped byte can make it years off)."""
+        if len(time_us) < 3:
+            return np.ones(len(time_us), dtype=bool)
+        lo, hi = np.percentile(time_us, [5, 95])
+        margin = (hi - lo) + 600e6
+        ok = (time_us >= lo - margin) & (time_us <= hi + margin)
+        if not ok.all():
+            self.skipped.append(Skipped(name, "implausible TimeUS (corrupt message)", int((~ok).sum()), "lost"))
+        return np.asarray(ok)
+
+    def columns(self, name: str) -> Columns | None:
+        """Every row of message `name` as arrays (strings as bytes), or None if the log has none; `_ofs` is
+        each row's offset in the file."""
+        if name not in self._cache:
+            self._cache[name] = self._decode(name)
+        return self._cache[name]
+
+    def dtype(self, name: str) -> tuple[np.dtype, dict[str, float]]:
+        """The structured dtype of a message body and the multiplier of each scaled column."""
+        fmt = self.reader.formats[self.reader.name_to_id[name]]
+        if len(fmt.columns) != len(fmt.format):
+            raise ValueError(f"FMT of {name} has {len(fmt.columns)} columns for {len(fmt.format)} format letters")
+        names, formats, scale = [], [], {}
+        for col, letter in zip(fmt.columns, fmt.format, strict=True):
+            code, mult, _ = FORMAT_TO_STRUCT[letter]
+            if letter == "a":
+                np_type: object = ("<i2", (32,))
+            elif code.endswith("s"):
+                np_type = f"S{code[:-1]}"
+            else:
+                np_type = "<" + code
+            names.append(col)
+            formats.append(np_type)
+            if mult is not None:
+                scale[col] = mult
+        dt = np.dtype({"names": names, "formats": formats})  # packed, as struct "<..." is
+        if dt.itemsize != fmt.len - 3:
+            raise ValueError(f"FMT of {name} says {fmt.len - 3} bytes, its format string {dt.itemsize}")
+        return dt, scale
+
+    def _decode(self, name: str) -> Columns | None:
+        if self.count(name) == 0:
+            return None
+        try:
+            dt, scale = self.dtype(name)
+        except (KeyError, ValueError) as err:
+            self.skipped.append(Skipped(name, f"message format unusable: {err}", self.count(name), "lost"))
+            return None
+        ofs = self.offsets(name)
+        whole = ofs + 3 + dt.itemsize <= len(self.data)
+        if not whole.all():
+            self.skipped.append(Skipped(name, "message cut off at the end of the file", int((~whole).sum()), "lost"))
+            ofs = ofs[whole]
+        buf = np.frombuffer(self.data, dtype=np.uint8)
+        rows = buf[ofs[:, None] + 3 + np.arange(dt.itemsize)].view(dt).ravel()
+        if "TimeUS" in (dt.names or ()):
+            keep = self.plausible(name, rows["TimeUS"].astype(np.int64))
+            rows, ofs = rows[keep], ofs[keep]
+        out: Columns = {"_ofs": ofs}  # where each row sits in the file
+        for col in dt.names or ():
+            values = rows[col]
+            if col in scale:
+                # dividing by 100 or 1e7 rounds like pymavlink (and like the autopilot's own tools)
+                values = values.astype(np.float64) / round(1.0 / scale[col])
+            out[col] = values
+        return out
+
+    def strings(self, name: str, column: str) -> list[str]:
+        cols = self.columns(name)
+        if cols is None or column not in cols:
+            return []
+        return [v.split(b"\0", 1)[0].decode("utf-8", errors="replace") for v in cols[column]]
+
+
+@contextlib.contextmanager
+def _captured_output() -> Iterator[list[str]]:
+    """Capture what pymavlink prints, from Python and from its compiled indexer (file descriptors 1, 2)."""
+    out: list[str] = []
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        try:
+            os.dup2(tmp.fileno(), 1)
+            os.dup2(tmp.fileno(), 2)
+            yield out
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            tmp.seek(0)
+            out.append(tmp.read().decode("utf-8", errors="replace"))
+
+
+def _resume_index(log: DataFlash, start: int) -> int:
+    """Index the messages after `start`, where pymavlink's indexer stopped at a message of undefined type.
+
+    Walks message by message with the lengths of the formats the log defined, skipping to the next
+    A3 95 + known type after anything else. Returns how many messages it found.
+    """
+    r, data = log.reader, log.data
+    buf = np.frombuffer(data, dtype=np.uint8)
+    lengths = {t: f.len for t, f in r.formats.items() if f.len > 3}
+    known = np.zeros(256, dtype=bool)
+    known[list(lengths)] = True
+    head = buf[start:]
+    cand = np.flatnonzero((head[:-2] == 0xA3) & (head[1:-1] == 0x95) & known[head[2:]]) + start
+    found = 0
+    pos = int(cand[0]) if len(cand) else len(data)
+    while pos + 3 <= len(data):
+        t = data[pos + 2]
+        if data[pos] == 0xA3 and data[pos + 1] == 0x95 and t in lengths and pos + lengths[t] <= len(data):
+            r.offsets[t].append(pos)
+            r.counts[t] += 1
+            found += 1
+            pos += lengths[t]
+            continue
+        k = int(np.searchsorted(cand, pos + 1))
+        if k >= len(cand):
+            break
+        pos = int(cand[k])
+    return found
+
+
+def open_dataflash(path: Path) -> DataFlash:
+    """Index a DataFlash log with pymavlink (its console chatter captured and counted, never printed)."""
+    try:
+        data = path.read_bytes()
+        with _captured_output() as chatter:
+            reader = DFReader_binary(str(path))
+    except OSError as err:
+        raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+    except Exception as err:  # pymavlink raises bare Exception for an unknown format letter
+        raise ReaderError(path, f"not a readable DataFlash log: {type(err).__name__}: {err}") from err
+    text = "".join(chatter)
+    log = DataFlash(path, data, reader)
+    bad = len(re.findall(r"bad header", text))
+    if bad:
+        log.skipped.append(
+            Skipped("<dataflash>", "corrupt bytes between messages; re-synchronised on the next header", bad, "lost")
+        )
+    stop = re.search(r"unknown msg type 0x[0-9a-f]+ \(\d+\) at (\d+)", text)
+    if stop:
+        found = _resume_index(log, int(stop.group(1)) + 1)
+        log.skipped.append(
+            Skipped(
+                "<dataflash>",
+                f"a message of undefined type at byte {stop.group(1)}; "
+                f"{found} messages after it found by re-synchronising",
+                1,
+                "lost",
+            )
+        )
+    return log
+
+
+def is_dataflash(head: bytes) -> bool:
+    return head.startswith(HEADER)

@@ -1,0 +1,565 @@
+"""Android GnssLogger text logs (every version since 1.4) into an EpochTable.
+
+A log is comma-separated records, one per line, named by their first field (`Raw`, `Fix`, `Accel`,
+...); `# Raw,...` header comments give each record's columns for this file's version, so the parser
+reads fields by name (v1.4's `Fix,Provider,Latitude,...,(UTC)TimeInMs` and v3's
+`Fix,Provider,LatitudeDegrees,...,UnixTimeMillis,...` alike). Lines whose field count does not match
+their header are skipped and counted. A lean parser of our own: gnss_lib_py pins pandas < 3.
+
+**Raw -> observations** (receiver `phone`; the GnssMeasurement clock model of Android's
+GnssClock/GnssMeasurement documentation, as Google's gps-measurement-tools apply it):
+- receive time t_rx = TimeNanos + TimeOffsetNanos - (FullBiasNanos + BiasNanos), in GPS nanoseconds,
+  with each epoch's own FullBiasNanos/BiasNanos (integer arithmetic for the 1e18-ns terms). The epoch
+  tag is TimeNanos - FullBiasNanos - BiasNanos rounded to the nanosecond; the table is on the GPS clock.
+- ReceivedSvTimeNanos is per constellation: time of week for GPS, Galileo, QZSS, SBAS, NavIC; BeiDou
+  time of week (GPS - 14 s); GLONASS time of day (UTC + 3 h, leap seconds from the log's LeapSecond
+  field or the table). pseudorange = c * (t_rx in that scale - ReceivedSvTimeNanos), folded across the
+  week (day) rollover.
+- a measurement is kept only when its State says the time is known: TOW decoded/known (GPS, Galileo,
+  BeiDou, QZSS, SBAS, NavIC) or time of day decoded/known (GLONASS), not millisecond-ambiguous, with
+  ReceivedSvTimeUncertaintyNanos <= 500 ns and a pseudorange between 1e7 and 5e7 m; each reason to skip
+  is counted. One L1-band signal per satellite (L5/E5a rows are counted and left out), as for RINEX.
+- pseudorange rate: PseudorangeRateMetersPerSecond; Doppler = -rate * f / c; carrier phase (cycles)
+  = AccumulatedDeltaRangeMeters * f / c where AccumulatedDeltaRangeState is valid and not reset or
+  cycle-slipped; C/N0: Cn0DbHz. Satellite ids RINEX style (SBAS svid - 100, QZSS svid - 192; GLONASS
+  rows without a known slot are skipped).
+- GPS satellite states from a RINEX navigation file: `--topic nav=FILE`, else one in the log's
+  directory that covers its time (`readers.raw_states`).
+
+**Fix -> fixes.** Only `GPS`-provider fixes are the receiver's own (FLP fuses Wi-Fi and sensors, NLP is
+network location): the others are counted as skipped. Android altitude is above the WGS84 ellipsoid;
+AccuracyMeters (68 % horizontal radius) -> h_acc_m, VerticalAccuracyMeters -> v_acc_m,
+SpeedAccuracyMps -> vel_acc_mps; velocity from speed and bearing (horizontal only); MockLocation 1 ->
+spoofing_flag INDICATED (the OS says an app supplied the location). Each fix gets the mean C/N0 of the
+raw measurements and the mean AgcDb of the L1 band at the nearest raw epoch within 1 s.
+
+**IMU.** Accel + Gyro (calibrated) when logged, else UncalAccel + UncalGyro as measured (the navigation
+filter estimates biases); the gyro is interpolated to the accelerometer's stamps. Body frame ANDROID
+(x right, y toward the top of the screen, z out of the screen). OrientationDeg (yaw = azimuth, pitch,
+roll of SensorManager.getOrientation) -> quaternion device->ENU, R = Rz(-azimuth) Rx(-pitch) Ry(roll),
+the inverse of getOrientation's formulas; nearest within 0.5 s. Sensor stamps are elapsedRealtimeNanos,
+put on UTC with the median offset to the GPS fixes' UnixTimeMillis (else the lines' utcTimeMillis).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from readers import ReaderFormat
+from readers.raw_states import add_satellite_states, nav_stream, navigation_for
+from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, EpochTable, Skipped, StreamInfo, build_table, gps_utc_offset_ns
+from spooflens.errors import ReaderError
+from spooflens.gnss.ephemeris import C_MPS
+from spooflens.navigation.rotations import matrix_to_quat
+from spooflens.schema import FixType, SpoofingFlag
+
+Progress = Callable[[int, int], None]
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+RECEIVER = "phone"
+WEEK_NS = 604_800 * 1_000_000_000
+DAY_NS = 86_400 * 1_000_000_000
+BDS_GPS_NS = 14 * 1_000_000_000
+GLO_UTC_NS = 3 * 3600 * 1_000_000_000
+MAX_TIME_UNCERTAINTY_NS = 500.0
+PR_RANGE_M = (1.0e7, 5.0e7)
+L1_BAND_HZ = (1559.0e6, 1610.0e6)
+RECORDS = (
+    "Raw",
+    "Fix",
+    "Accel",
+    "Gyro",
+    "UncalAccel",
+    "UncalGyro",
+    "OrientationDeg",
+    "Agc",
+    "Status",
+    "Nav",
+    "Mag",
+    "UncalMag",
+)
+USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDeg", "Agc"}
+
+# GnssMeasurement.State bits
+TOW_DECODED, MSEC_AMBIGUOUS, GLO_TOD_DECODED, TOW_KNOWN, GLO_TOD_KNOWN = 8, 16, 128, 16384, 32768
+# AccumulatedDeltaRangeState bits
+ADR_VALID, ADR_RESET, ADR_CYCLE_SLIP = 1, 2, 4
+# GnssStatus constellation types -> RINEX letter
+SYSTEM = {1: "G", 2: "S", 3: "R", 4: "J", 5: "C", 6: "E", 7: "I"}
+DEFAULT_L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "J": 1575.42e6, "E": 1575.42e6, "C": 1561.098e6}
+
+# Column names that changed between versions: canonical name -> names in the file
+FIX_NAMES = {
+    "lat": ("LatitudeDegrees", "Latitude"),
+    "lon": ("LongitudeDegrees", "Longitude"),
+    "alt": ("AltitudeMeters", "Altitude"),
+    "speed": ("SpeedMps", "Speed"),
+    "accuracy": ("AccuracyMeters", "Accuracy"),
+    "bearing": ("BearingDegrees", "Bearing"),
+    "time_ms": ("UnixTimeMillis", "(UTC)TimeInMs", "TimeInMs"),
+    "elapsed_ns": ("elapsedRealtimeNanos",),
+    "v_acc": ("VerticalAccuracyMeters",),
+    "speed_acc": ("SpeedAccuracyMps",),
+    "mock": ("MockLocation",),
+}
+
+
+@dataclass
+class Records:
+    """The lines of one record type, split, with the column names its header gave."""
+
+    columns: list[str]
+    rows: list[list[str]] = field(default_factory=list)
+
+    def frame(self) -> pd.DataFrame:
+        return pd.DataFrame(self.rows, columns=self.columns, dtype=object)
+
+
+def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records], dict[str, str]]:
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as err:
+        raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+    headers: dict[str, list[str]] = {}
+    meta: dict[str, str] = {}
+    records: dict[str, Records] = {}
+    bad: dict[str, int] = {}
+    unknown: dict[str, int] = {}
+    unused: dict[str, int] = {}
+    lines = text.splitlines()
+    cut = bool(text) and not text.endswith(("\n", "\r"))
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        if line.startswith("#"):
+            body = line[1:].strip()
+            name = body.split(",", 1)[0].strip()
+            if (name in RECORDS or re.fullmatch(r"[A-Za-z]\w*", name)) and "," in body:
+                headers[name] = [c.strip() for c in body.split(",")][1:]
+            elif body.startswith("Version:"):
+                meta["firmware"] = body[len("Version:") :].strip()
+            continue
+        fields = line.split(",")
+        name = fields[0].strip()
+        if name not in RECORDS and name not in headers:
+            unknown[name[:20]] = unknown.get(name[:20], 0) + 1
+            continue
+        if name not in USED:
+            unused[name] = unused.get(name, 0) + 1
+            continue
+        cols = headers.get(name)
+        if cols is None:
+            bad[f"{name}: no '# {name},...' header line defines its columns"] = (
+                bad.get(f"{name}: no '# {name},...' header line defines its columns", 0) + 1
+            )
+            continue
+        values = [f.strip() for f in fields[1:]]
+        if len(values) > len(cols) and not any(values[len(cols) :]):
+            values = values[: len(cols)]
+        if len(values) != len(cols) or (cut and i == len(lines) - 1):
+            reason = f"{name}: {len(values)} fields where its header has {len(cols)} (cut or damaged line)"
+            bad[reason] = bad.get(reason, 0) + 1
+            continue
+        records.setdefault(name, Records(cols)).rows.append(values)
+    for reason, n in bad.items():
+        name, _, why = reason.partition(": ")
+        skipped.append(Skipped(name, why, n, "lost"))
+    for name, n in unused.items():
+        skipped.append(Skipped(name, "record type not used", n))
+    if unknown:
+        total = sum(unknown.values())
+        skipped.append(
+            Skipped("<gnsslogger>", f"lines that are no GnssLogger record ({sorted(unknown)[:5]})", total, "lost")
+        )
+    return records, meta
+
+
+def _col(df: pd.DataFrame, *names: str) -> pd.Series | None:
+    return next((df[n] for n in names if n in df.columns), None)
+
+
+def _float(s: pd.Series | None, n: int) -> FloatArray:
+    if s is None:
+        return np.full(n, np.nan)
+    return pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
+
+
+def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Integer fields exactly (TimeNanos, FullBiasNanos ~1e18 do not fit a float); (values, present)."""
+    if s is None:
+        return np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
+    text = s.astype(str).str.strip()
+    whole = text.str.fullmatch(r"[-+]?\d+").to_numpy(dtype=bool)
+    out = np.zeros(n, dtype=np.int64)
+    if whole.any():
+        out[whole] = text[whole].astype(np.int64).to_numpy()
+    # a value written as a float ("1.2E18", "72076939000000.0") is taken as well as a float can hold it
+    other = ~whole & (text != "").to_numpy(dtype=bool)
+    as_float = pd.to_numeric(text[other], errors="coerce").to_numpy(dtype=float)
+    ok_float = np.isfinite(as_float)
+    idx = np.flatnonzero(other)
+    out[idx[ok_float]] = np.round(as_float[ok_float]).astype(np.int64)
+    present = whole.copy()
+    present[idx[ok_float]] = True
+    return out, present
+
+
+@dataclass
+class RawResult:
+    rows: pd.DataFrame  # observation rows with t_ns (GPS clock)
+    epochs: pd.DataFrame  # per epoch: t_ns, cn0 mean, agc mean
+
+
+def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
+    """Observation rows (GPS-clock t_ns) from Raw records, each skipped measurement counted by reason."""
+    n = len(raw)
+    time_nanos, has_time = _int64(_col(raw, "TimeNanos"), n)
+    full_bias, has_bias = _int64(_col(raw, "FullBiasNanos"), n)
+    rx_sv_time, has_sv_time = _int64(_col(raw, "ReceivedSvTimeNanos"), n)
+    bias = np.nan_to_num(_float(_col(raw, "BiasNanos"), n))
+    offset = np.nan_to_num(_float(_col(raw, "TimeOffsetNanos"), n))
+    leap_logged = _float(_col(raw, "LeapSecond"), n)
+    svid = _float(_col(raw, "Svid"), n)
+    constellation = _float(_col(raw, "ConstellationType"), n)
+    state = np.nan_to_num(_float(_col(raw, "State"), n)).astype(np.int64)
+    uncertainty = _float(_col(raw, "ReceivedSvTimeUncertaintyNanos"), n)
+    freq = _float(_col(raw, "CarrierFrequencyHz"), n)
+    system = np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
+    reasons: dict[str, NDArray[np.bool_]] = {}
+
+    def reject(reason: str, mask: NDArray[np.bool_]) -> None:
+        new = mask & ~np.any(list(reasons.values()), axis=0) if reasons else mask
+        if new.any():
+            reasons[reason] = new
+
+    reject(
+        "no TimeNanos/FullBiasNanos/ReceivedSvTimeNanos (receiver clock not set)", ~(has_time & has_bias & has_sv_time)
+    )
+    reject("unknown constellation type", system == "")
+    glo = system == "R"
+    # GLONASS svid 93-106 is a frequency channel (slot unknown): no RINEX id
+    reject("GLONASS satellite without a known slot (svid is a frequency channel)", glo & ((svid < 1) | (svid > 24)))
+    fill = np.where(np.isfinite(freq), freq, [DEFAULT_L1_HZ.get(s, np.nan) for s in system])
+    in_l1 = (fill >= L1_BAND_HZ[0]) & (fill <= L1_BAND_HZ[1])
+    reject("signal outside the L1 band (L5/E5a/B2a): one L1 signal per satellite is used", np.isfinite(fill) & ~in_l1)
+    known = np.where(glo, (state & (GLO_TOD_DECODED | GLO_TOD_KNOWN)) != 0, (state & (TOW_DECODED | TOW_KNOWN)) != 0)
+    reject("State: time of week/day not decoded (measurement not locked)", ~known | ((state & MSEC_AMBIGUOUS) != 0))
+    reject(
+        f"ReceivedSvTimeUncertaintyNanos above {MAX_TIME_UNCERTAINTY_NS:.0f} ns",
+        ~(uncertainty <= MAX_TIME_UNCERTAINTY_NS),
+    )
+    # GPS nanoseconds of the epoch tag; the sub-nanosecond rest stays a float
+    bias_int = np.round(bias).astype(np.int64)
+    tag_ns = time_nanos - full_bias - bias_int
+    rest_ns = (bias_int - bias) + offset
+    leap_ns = np.where(np.isfinite(leap_logged), np.nan_to_num(leap_logged) * 1e9, gps_utc_offset_ns(tag_ns)).astype(
+        np.int64
+    )
+    period = np.where(glo, DAY_NS, WEEK_NS)
+    scale_ns = np.where(glo, tag_ns - leap_ns + GLO_UTC_NS, np.where(system == "C", tag_ns - BDS_GPS_NS, tag_ns))
+    rx_in_scale = np.mod(scale_ns, period)
+    pr_ns = (rx_in_scale - rx_sv_time).astype(np.float64) + rest_ns
+    pr_ns = np.where(pr_ns > period / 2, pr_ns - period, np.where(pr_ns < -period / 2, pr_ns + period, pr_ns))
+    pr_m = pr_ns * C_MPS / 1e9
+    reject(
+        f"pseudorange outside {PR_RANGE_M[0]:.0e}-{PR_RANGE_M[1]:.0e} m",
+        ~((pr_m >= PR_RANGE_M[0]) & (pr_m <= PR_RANGE_M[1])),
+    )
+    prn = np.where(system == "S", svid - 100, np.where(system == "J", svid - 192, svid))
+    sv_id = np.array([f"{s}{int(p):02d}" if s and np.isfinite(p) else "" for s, p in zip(system, prn, strict=True)])
+    rate = _float(_col(raw, "PseudorangeRateMetersPerSecond"), n)
+    adr = _float(_col(raw, "AccumulatedDeltaRangeMeters"), n)
+    adr_state = np.nan_to_num(_float(_col(raw, "AccumulatedDeltaRangeState"), n)).astype(np.int64)
+    adr_ok = ((adr_state & ADR_VALID) != 0) & ((adr_state & (ADR_RESET | ADR_CYCLE_SLIP)) == 0)
+    carrier_hz = np.where(glo & ~np.isfinite(freq), np.nan, fill)
+    cn0 = _float(_col(raw, "Cn0DbHz"), n)
+    agc = _float(_col(raw, "AgcDb"), n)
+    rows = pd.DataFrame(
+        {
+            "t_ns": tag_ns,
+            "receiver_id": RECEIVER,
+            "sv_id": sv_id,
+            "pseudorange_m": pr_m,
+            "pseudorange_rate_mps": rate,
+            "doppler_hz": -rate * carrier_hz / C_MPS,
+            "carrier_phase_cycles": np.where(adr_ok, adr * carrier_hz / C_MPS, np.nan),
+            "carrier_freq_hz": carrier_hz,
+            "cn0_dbhz": cn0,
+        }
+    )
+    bad = np.any(list(reasons.values()), axis=0) if reasons else np.zeros(n, dtype=bool)
+    for reason, mask in reasons.items():
+        skipped.append(Skipped(RECEIVER, reason, int(mask.sum())))
+    # one row per satellite and epoch: the first L1 signal (two L1 codes of one satellite are rare)
+    good = rows[~bad]
+    dup = good.duplicated(["t_ns", "sv_id"], keep="first").to_numpy()
+    if dup.any():
+        skipped.append(Skipped(RECEIVER, "second L1 signal of the same satellite in an epoch", int(dup.sum())))
+    epochs = (
+        pd.DataFrame({"t_ns": tag_ns, "cn0": cn0, "agc": np.where(in_l1, agc, np.nan)})[has_time & has_bias]
+        .groupby("t_ns", as_index=False)
+        .mean()
+    )
+    return RawResult(good[~dup].reset_index(drop=True), epochs)
+
+
+def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:
+    """Agc records (v3: one per band and constellation) -> mean L1-band AgcDb per epoch (GPS t_ns)."""
+    n = len(agc)
+    time_nanos, ok_t = _int64(_col(agc, "TimeNanos"), n)
+    full_bias, ok_b = _int64(_col(agc, "FullBiasNanos"), n)
+    bias = np.nan_to_num(_float(_col(agc, "BiasNanos"), n))
+    freq = _float(_col(agc, "CarrierFrequencyHz"), n)
+    db = _float(_col(agc, "AgcDb"), n)
+    keep = ok_t & ok_b & (freq >= L1_BAND_HZ[0]) & (freq <= L1_BAND_HZ[1]) & np.isfinite(db)
+    t_ns = time_nanos - full_bias - np.round(bias).astype(np.int64)
+    return pd.DataFrame({"t_ns": t_ns[keep], "agc_rec": db[keep]}).groupby("t_ns", as_index=False).mean()
+
+
+def _unix_to_gps_ns(unix_ns: IntArray) -> IntArray:
+    gps = unix_ns - GPS_EPOCH_UNIX_NS
+    return gps + gps_utc_offset_ns(gps + gps_utc_offset_ns(gps))
+
+
+def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
+    n = len(fix)
+    provider = _col(fix, "Provider")
+    prov = provider.astype(str).str.strip().str.upper().to_numpy() if provider is not None else np.full(n, "GPS")
+    others = prov != "GPS"
+    for p in sorted(set(prov[others])):
+        skipped.append(
+            Skipped(
+                f"Fix/{p}",
+                "not the receiver's own fix (FLP fuses Wi-Fi/sensors, NLP is network location)",
+                int((prov == p).sum()),
+            )
+        )
+    f = {k: (_col(fix, *names)) for k, names in FIX_NAMES.items()}
+    time_ms, has_time = _int64(f["time_ms"], n)
+    if not has_time[~others].any():
+        raise ReaderError(path, "Fix records without a time column (UnixTimeMillis or (UTC)TimeInMs)", "Fix")
+    speed, bearing = _float(f["speed"], n), np.radians(_float(f["bearing"], n))
+    still = speed == 0
+    ve = np.where(np.isfinite(bearing), speed * np.sin(bearing), np.where(still, 0.0, np.nan))
+    vn = np.where(np.isfinite(bearing), speed * np.cos(bearing), np.where(still, 0.0, np.nan))
+    mock = _float(f["mock"], n)
+    out = pd.DataFrame(
+        {
+            "unix_ms": time_ms,
+            "elapsed_ns": _int64(f["elapsed_ns"], n)[0] if f["elapsed_ns"] is not None else np.zeros(n, np.int64),
+            "receiver_id": RECEIVER,
+            "lat_deg": _float(f["lat"], n),
+            "lon_deg": _float(f["lon"], n),
+            "height_m": _float(f["alt"], n),
+            "vel_e_mps": ve,
+            "vel_n_mps": vn,
+            "h_acc_m": _float(f["accuracy"], n),
+            "v_acc_m": _float(f["v_acc"], n),
+            "vel_acc_mps": _float(f["speed_acc"], n),
+            "fix_type": np.full(n, FixType.UNKNOWN, dtype=np.int8),
+            "spoofing_flag": np.where(
+                mock == 1, SpoofingFlag.INDICATED, np.where(mock == 0, SpoofingFlag.CLEAR, SpoofingFlag.UNKNOWN)
+            ).astype(np.int8),
+        }
+    )
+    keep = ~others & has_time
+    if (~others & ~has_time).any():
+        skipped.append(Skipped("Fix/GPS", "fix without a time", int((~others & ~has_time).sum()), "lost"))
+    return out[keep].reset_index(drop=True)
+
+
+def _sensor(rec: Records | None, value_cols: tuple[str, ...]) -> pd.DataFrame | None:
+    if rec is None:
+        return None
+    df = rec.frame()
+    n = len(df)
+    elapsed, has_elapsed = _int64(_col(df, "elapsedRealtimeNanos"), n)
+    utc, has_utc = _int64(_col(df, "utcTimeMillis"), n)
+    out = pd.DataFrame({"elapsed_ns": elapsed, "utc_ms": utc, "has_elapsed": has_elapsed, "has_utc": has_utc})
+    for i, c in enumerate(value_cols):
+        out[f"v{i}"] = _float(_col(df, c), n)
+    return out
+
+
+def _orientation_quaternion(yaw_deg: FloatArray, roll_deg: FloatArray, pitch_deg: FloatArray) -> FloatArray:
+    """getOrientation's azimuth/pitch/roll -> quaternion rotating device axes into ENU."""
+    a, p, r = (np.radians(x) for x in (yaw_deg, pitch_deg, roll_deg))
+    n = len(a)
+
+    def rot(axis: int, ang: FloatArray) -> FloatArray:
+        c, s = np.cos(ang), np.sin(ang)
+        m = np.zeros((n, 3, 3))
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        m[:, axis, axis] = 1.0
+        m[:, i, i], m[:, i, j], m[:, j, i], m[:, j, j] = c, -s, s, c
+        return m
+
+    R = rot(2, -a) @ rot(0, -p) @ rot(1, r)
+    return np.asarray(matrix_to_quat(R), dtype=float)
+
+
+def read_gnsslogger(
+    path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None
+) -> EpochTable:
+    path = Path(path)
+    skipped: list[Skipped] = []
+    records, meta = _split_file(path, skipped)
+    if progress:
+        progress(1, 3)
+    frames: dict[str, pd.DataFrame] = {}
+    streams: list[StreamInfo] = []
+    raw = pseudoranges(records["Raw"].frame(), skipped) if "Raw" in records else None
+    have_raw = raw is not None and len(raw.rows) > 0
+    reference = "gps" if have_raw else "unix"
+
+    def from_unix_ns(unix_ns: IntArray) -> IntArray:
+        return _unix_to_gps_ns(unix_ns) if reference == "gps" else unix_ns
+
+    fixes = _fixes(path, records["Fix"].frame(), skipped) if "Fix" in records else None
+    # elapsedRealtimeNanos -> UTC: the GPS fixes carry both clocks
+    clock_offset: int | None = None
+    if fixes is not None and len(fixes) and (fixes["elapsed_ns"] > 0).any():
+        good = fixes[fixes["elapsed_ns"] > 0]
+        clock_offset = int(
+            np.median(good["unix_ms"].to_numpy(np.int64) * 1_000_000 - good["elapsed_ns"].to_numpy(np.int64))
+        )
+        meta["sensor_clock"] = f"elapsedRealtimeNanos + median offset to {len(good)} GPS fixes' UnixTimeMillis"
+    if fixes is not None and len(fixes):
+        t_ns = from_unix_ns(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000)
+        fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=t_ns)
+        if raw is not None and len(raw.epochs):
+            ep = raw.epochs.sort_values("t_ns")
+            if "Agc" in records:
+                rec = agc_epochs(records["Agc"].frame())
+                ep = pd.merge_asof(ep, rec, on="t_ns", direction="nearest", tolerance=500_000_000)
+                ep["agc"] = ep["agc"].fillna(ep.pop("agc_rec"))
+            joined = pd.merge_asof(fx.sort_values("t_ns"), ep, on="t_ns", direction="nearest", tolerance=1_000_000_000)
+            fx = joined.rename(columns={"cn0": "cn0_mean_dbhz", "agc": "agc"})
+            meta["units.agc"] = "dB (Android AgcDb of the Raw or Agc records, mean over the L1 band)"
+        frames["fixes"] = fx
+        streams.append(StreamInfo("fix", RECEIVER, "Fix (GPS provider)", "gnsslogger/Fix", len(fx)))
+    nav = None
+    if have_raw and raw is not None:
+        rows = raw.rows
+        nav = navigation_for(path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
+        rows = add_satellite_states(rows, nav, RECEIVER, skipped)
+        frames["observations"] = rows
+        streams.append(StreamInfo("observations", RECEIVER, "Raw", "gnsslogger/Raw", int(rows["t_ns"].nunique())))
+    if progress:
+        progress(2, 3)
+    imu = _imu(records, clock_offset, from_unix_ns, skipped, meta)
+    if imu is not None:
+        frames["imu"] = imu[0]
+        streams.append(imu[1])
+    if topics and set(topics) - {"nav"}:
+        other = {k: v for k, v in topics.items() if k != "nav"}
+        skipped.append(
+            Skipped("<gnsslogger>", f"--topic ignored for GnssLogger logs except nav= ({other})", len(other))
+        )
+    if not frames:
+        raise ReaderError(path, "no Raw, Fix or sensor record could be read from this GnssLogger log")
+    meta["receiver"] = "phone: the GPS-provider fixes and the Raw measurements of one phone"
+    table = build_table(path, "gnsslogger", reference, frames, streams, skipped, metadata=meta)
+    if nav is not None:
+        table.ephemerides = nav.ephemerides
+        table.streams.append(nav_stream(nav, table.t0_ns))
+    if progress:
+        progress(3, 3)
+    return table
+
+
+def _imu(
+    records: dict[str, Records],
+    clock_offset: int | None,
+    from_unix_ns: Callable[[IntArray], IntArray],
+    skipped: list[Skipped],
+    meta: dict[str, str],
+) -> tuple[pd.DataFrame, StreamInfo] | None:
+    if "Accel" in records and "Gyro" in records:
+        kind, acc_name, gyro_name = "calibrated", "Accel", "Gyro"
+        acc_cols, gyro_cols = (
+            ("AccelXMps2", "AccelYMps2", "AccelZMps2"),
+            ("GyroXRadPerSec", "GyroYRadPerSec", "GyroZRadPerSec"),
+        )
+    elif "UncalAccel" in records and "UncalGyro" in records:
+        kind, acc_name, gyro_name = "uncalibrated (biases left in)", "UncalAccel", "UncalGyro"
+        acc_cols = ("UncalAccelXMps2", "UncalAccelYMps2", "UncalAccelZMps2")
+        gyro_cols = ("UncalGyroXRadPerSec", "UncalGyroYRadPerSec", "UncalGyroZRadPerSec")
+    else:
+        for name in ("Accel", "Gyro", "UncalAccel", "UncalGyro"):
+            if name in records:
+                skipped.append(
+                    Skipped(name, "accelerometer and gyro are both needed for an IMU stream", len(records[name].rows))
+                )
+        return None
+    acc, gyro = _sensor(records[acc_name], acc_cols), _sensor(records[gyro_name], gyro_cols)
+    assert acc is not None and gyro is not None
+
+    def stamps(df: pd.DataFrame) -> IntArray:
+        if clock_offset is not None and df["has_elapsed"].all():
+            return df["elapsed_ns"].to_numpy(np.int64) + clock_offset
+        return df["utc_ms"].to_numpy(np.int64) * 1_000_000
+
+    if clock_offset is None:
+        meta["sensor_clock"] = "utcTimeMillis of each sensor line (no GPS fix to tie elapsedRealtimeNanos to)"
+    ta, tg = stamps(acc), stamps(gyro)
+    order = np.argsort(tg, kind="stable")
+    tg = tg[order]
+    inside = (ta >= tg[0]) & (ta <= tg[-1]) if len(tg) else np.zeros(len(ta), dtype=bool)
+    if (~inside).any():
+        skipped.append(Skipped(acc_name, "accelerometer samples outside the gyro's time span", int((~inside).sum())))
+    cols: dict[str, object] = {"imu_id": "phone_imu"}
+    for i, axis in enumerate("xyz"):
+        cols[f"a{axis}_mps2"] = acc[f"v{i}"].to_numpy()[inside]
+        g = gyro[f"v{i}"].to_numpy()[order]
+        cols[f"w{axis}_radps"] = np.interp(ta[inside].astype(float), tg.astype(float), g)
+    t_unix = ta[inside]
+    if "OrientationDeg" in records:
+        o = _sensor(records["OrientationDeg"], ("yawDeg", "rollDeg", "pitchDeg"))
+        assert o is not None
+        to = stamps(o)
+        q = _orientation_quaternion(o["v0"].to_numpy(), o["v1"].to_numpy(), o["v2"].to_numpy())
+        k = np.clip(np.searchsorted(to, t_unix), 0, len(to) - 1)
+        k = np.where((k > 0) & (np.abs(to[k - 1] - t_unix) < np.abs(to[k] - t_unix)), k - 1, k)
+        near = np.abs(to[k] - t_unix) <= 500_000_000
+        for j, c in enumerate(("qw", "qx", "qy", "qz")):
+            cols[c] = np.where(near, q[k, j], np.nan)
+    meta["imu"] = f"{acc_name} + {gyro_name} ({kind}); gyro interpolated to the accelerometer stamps"
+    df = pd.DataFrame(cols)
+    df["t_ns"] = from_unix_ns(t_unix)
+    info = StreamInfo(
+        "imu", "phone_imu", f"{acc_name}+{gyro_name}", "gnsslogger/sensors", len(df), body_frame="ANDROID"
+    )
+    return df, info
+
+
+_RECORD_LINE = re.compile(rb"^(?:#\s*)?(Raw|Fix|UncalAccel|UncalGyro|Accel|Gyro|OrientationDeg|Agc|Status|Nav),", re.M)
+
+
+def _is_gnsslogger(path: Path, head: bytes) -> bool:
+    if path.is_dir() or b"\0" in head:
+        return False
+    return (
+        b"Header Description" in head
+        or len(_RECORD_LINE.findall(head)) >= 2
+        or (head.lstrip().startswith(b"#") and bool(_RECORD_LINE.search(head)))
+    )
+
+
+FORMATS = (
+    ReaderFormat(
+        "gnsslogger",
+        "Android GnssLogger text log (v1.4 and later: Raw, Fix, sensors)",
+        read_gnsslogger,
+        _is_gnsslogger,
+        rewrite="spooflens.writers.gnsslogger_rewrite:rewrite_gnsslogger",
+    ),
+)

@@ -1,0 +1,287 @@
+"""MAVLink telemetry logs (`.tlog`, as Mission Planner and QGroundControl record them) into an EpochTable.
+
+A tlog is the ground station's copy of the vehicle's telemetry: each MAVLink packet (v1 or v2) is
+preceded by the 8-byte big-endian UNIX microsecond time the ground station received it. pymavlink's
+`mavlogfile` parses it (built directly: `mavutil.mavlink_connection` would execute a path that looks
+like a program). Only the vehicle that sent most GPS_RAW_INT messages is read.
+
+- `GPS_RAW_INT` (receiver `GPS_RAW_INT`) and `GPS2_RAW` (receiver `GPS2_RAW`) -> fixes: lat/lon 1e-7
+  deg, `alt_ellipsoid` (mm) when sent, else the AMSL `alt` (metadata says which), ground speed and
+  course -> horizontal ENU velocity, `eph`/`epv` -> hdop/vdop, `h_acc`/`v_acc`/`vel_acc`,
+  `satellites_visible`, `fix_type` (0-1 no fix: dropped).
+- `SCALED_IMU`, `SCALED_IMU2`, `SCALED_IMU3` (mG, mrad/s; ArduPilot's `RAW_IMU` carries the same
+  scaled values and is used when no SCALED_IMU is there) -> IMU, body FRD; `ATTITUDE` (NED Euler
+  angles) -> the quaternion columns, as for DataFlash ATT.
+- `GLOBAL_POSITION_INT` is the autopilot's fused estimate, not a receiver: counted as not used.
+
+Time: the messages' own boot-time stamps (`time_boot_ms`, or `time_usec` when it is not a UNIX time),
+put on UTC with `SYSTEM_TIME` (the vehicle's own GPS-derived UNIX time, median offset) when it was
+sent, else with the ground station's receive times (median offset; link latency included).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import struct
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from readers import ReaderFormat
+from readers.ardupilot import _attitude_at
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.errors import ReaderError
+from spooflens.schema import FixType
+
+Progress = Callable[[int, int], None]
+G0 = 9.80665
+UNIX_US_MIN = 946_684_800_000_000  # 2000-01-01: a time_usec above this is a UNIX time
+_FIX = {
+    2: FixType.FIX_2D,
+    3: FixType.FIX_3D,
+    4: FixType.DGNSS,
+    5: FixType.RTK_FLOAT,
+    6: FixType.RTK_FIXED,
+    7: FixType.FIX_3D,
+    8: FixType.DGNSS,
+}
+WANTED = [
+    "GPS_RAW_INT",
+    "GPS2_RAW",
+    "SCALED_IMU",
+    "SCALED_IMU2",
+    "SCALED_IMU3",
+    "RAW_IMU",
+    "ATTITUDE",
+    "SYSTEM_TIME",
+    "HEARTBEAT",
+    "GLOBAL_POSITION_INT",
+    "BAD_DATA",
+]
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_TYPE_GCS = 6
+
+
+def _messages(path: Path) -> tuple[dict[str, list[tuple[float, int, dict]]], int]:
+    """type -> [(ground station time s, source system, fields)], and how many bad packets were met."""
+    os.environ.setdefault("MAVLINK20", "1")  # the v2 dialect parses v1 and v2 packets alike
+    from pymavlink import mavutil
+
+    mavutil.set_dialect("ardupilotmega")
+    out: dict[str, list[tuple[float, int, dict]]] = {}
+    bad = 0
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            log = mavutil.mavlogfile(str(path), robust_parsing=True)
+            while True:
+                m = log.recv_match(type=WANTED)
+                if m is None:
+                    break
+                kind = m.get_type()
+                if kind == "BAD_DATA":
+                    bad += 1
+                    continue
+                out.setdefault(kind, []).append((float(m._timestamp), int(m.get_srcSystem()), m.to_dict()))
+            log.close()
+    except OSError as err:
+        raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+    except Exception as err:  # pymavlink raises its own and struct errors on damaged packets
+        raise ReaderError(path, f"not a readable MAVLink telemetry log: {type(err).__name__}: {err}") from err
+    return out, bad
+
+
+def _boot_us(fields: dict) -> int | None:
+    if "time_boot_ms" in fields:
+        return int(fields["time_boot_ms"]) * 1000
+    t = int(fields.get("time_usec", 0))
+    return t if 0 < t < UNIX_US_MIN else None
+
+
+def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    path = Path(path)
+    msgs, bad = _messages(path)
+    skipped: list[Skipped] = []
+    meta: dict[str, str] = {}
+    if bad:
+        skipped.append(Skipped("<tlog>", "bytes that are no valid MAVLink packet (bad CRC, cut, garbage)", bad, "lost"))
+    gps_count: dict[int, int] = {}
+    for _, sysid, _ in msgs.get("GPS_RAW_INT", []) + msgs.get("GPS2_RAW", []):
+        gps_count[sysid] = gps_count.get(sysid, 0) + 1
+    beats = [(s, f) for _, s, f in msgs.get("HEARTBEAT", []) if f.get("type") != MAV_TYPE_GCS]
+    vehicle = max(gps_count, key=lambda s: gps_count[s]) if gps_count else (beats[0][0] if beats else None)
+    if vehicle is None:
+        raise ReaderError(path, f"no vehicle GPS or heartbeat in this telemetry log (messages: {sorted(msgs)})")
+    others = sum(1 for v in msgs.values() for _, s, _ in v if s != vehicle)
+    if others:
+        skipped.append(Skipped("<tlog>", f"messages of other systems than vehicle {vehicle}", others))
+    msgs = {k: [(t, s, f) for t, s, f in v if s == vehicle] for k, v in msgs.items()}
+    ardupilot = any(f.get("autopilot") == MAV_AUTOPILOT_ARDUPILOTMEGA for s, f in beats if s == vehicle)
+    meta["vehicle"] = f"system {vehicle}" + (" (ArduPilot)" if ardupilot else "")
+    # boot clock -> UNIX
+    sys_time = [f for _, _, f in msgs.get("SYSTEM_TIME", []) if f["time_unix_usec"] > 0 and f["time_boot_ms"] > 0]
+    if sys_time:
+        offset_ns = int(np.median([f["time_unix_usec"] * 1000 - f["time_boot_ms"] * 1_000_000 for f in sys_time]))
+        meta["clock"] = f"vehicle boot time + SYSTEM_TIME offset (median of {len(sys_time)})"
+    else:
+        pairs = [(t, _boot_us(f)) for v in msgs.values() for t, _, f in v]
+        diffs = [t * 1e9 - b * 1000 for t, b in pairs if b is not None and t > 0]
+        if not diffs:
+            raise ReaderError(path, "no message carries a boot-time stamp the log can be timed by")
+        offset_ns = int(np.median(diffs))
+        meta["clock"] = (
+            "vehicle boot time + median offset to the ground station's receive times (link latency included)"
+        )
+
+    def stamp_ns(t_gcs: float, fields: dict) -> int:
+        b = _boot_us(fields)
+        if b is not None:
+            return b * 1000 + offset_ns
+        t = int(fields.get("time_usec", 0))
+        return t * 1000 if t >= UNIX_US_MIN else round(t_gcs * 1e9)
+
+    frames: dict[str, pd.DataFrame] = {}
+    streams: list[StreamInfo] = []
+    fix_rows = []
+    for kind in ("GPS_RAW_INT", "GPS2_RAW"):
+        for t_gcs, _, f in msgs.get(kind, []):
+            fix_type = _FIX.get(int(f["fix_type"]), FixType.NO_FIX)
+            ell = int(f.get("alt_ellipsoid", 0) or 0)
+            vel = f["vel"] / 100.0 if f["vel"] != 65535 else np.nan
+            cog = np.radians(f["cog"] / 100.0) if f["cog"] != 65535 else np.nan
+            fix_rows.append(
+                {
+                    "t_ns": stamp_ns(t_gcs, f),
+                    "receiver_id": kind,
+                    "lat_deg": f["lat"] * 1e-7,
+                    "lon_deg": f["lon"] * 1e-7,
+                    "height_m": (ell if ell else f["alt"]) / 1000.0,
+                    "ell": bool(ell),
+                    "vel_e_mps": vel * np.sin(cog) if np.isfinite(cog) else (0.0 if vel == 0 else np.nan),
+                    "vel_n_mps": vel * np.cos(cog) if np.isfinite(cog) else (0.0 if vel == 0 else np.nan),
+                    "hdop": f["eph"] / 100.0 if f["eph"] != 65535 else np.nan,
+                    "vdop": f["epv"] / 100.0 if f["epv"] != 65535 else np.nan,
+                    "h_acc_m": f.get("h_acc", 0) / 1000.0 if f.get("h_acc", 0) else np.nan,
+                    "v_acc_m": f.get("v_acc", 0) / 1000.0 if f.get("v_acc", 0) else np.nan,
+                    "vel_acc_mps": f.get("vel_acc", 0) / 1000.0 if f.get("vel_acc", 0) else np.nan,
+                    "sats_used": f["satellites_visible"] if f["satellites_visible"] != 255 else np.nan,
+                    "fix_type": fix_type,
+                }
+            )
+    if fix_rows:
+        fixes = pd.DataFrame(fix_rows)
+        no_fix = fixes["fix_type"] == FixType.NO_FIX
+        for rid in fixes.loc[no_fix, "receiver_id"].unique():
+            skipped.append(
+                Skipped(str(rid), "fix_type 0-1 (no fix)", int((no_fix & (fixes["receiver_id"] == rid)).sum()))
+            )
+        fixes = fixes[~no_fix]
+        meta["height"] = (
+            "ellipsoidal (alt_ellipsoid)" if fixes["ell"].all() else "AMSL (alt): the vehicle sent no alt_ellipsoid"
+        )
+        frames["fixes"] = fixes.drop(columns=["ell"]).astype({"fix_type": np.int8})
+        for rid in fixes["receiver_id"].unique():
+            streams.append(
+                StreamInfo("fix", str(rid), str(rid), f"mavlink/{rid}", int((fixes["receiver_id"] == rid).sum()))
+            )
+    if progress:
+        progress(1, 2)
+    imu_kinds = [k for k in ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3") if msgs.get(k)]
+    if not imu_kinds and msgs.get("RAW_IMU"):
+        if ardupilot:
+            imu_kinds = ["RAW_IMU"]
+        else:
+            skipped.append(
+                Skipped(
+                    "RAW_IMU", "raw sensor units of an unknown autopilot (ArduPilot's are scaled)", len(msgs["RAW_IMU"])
+                )
+            )
+    att = msgs.get("ATTITUDE", [])
+    att_cols = None
+    if att:
+        att_cols = {
+            "TimeUS": np.array([(stamp_ns(t, f) - offset_ns) // 1000 for t, _, f in att], dtype=np.int64),
+            "Roll": np.degrees([f["roll"] for _, _, f in att]),
+            "Pitch": np.degrees([f["pitch"] for _, _, f in att]),
+            "Yaw": np.degrees([f["yaw"] for _, _, f in att]),
+        }
+    imu_parts = []
+    for kind in imu_kinds:
+        rows = msgs[kind]
+        t_ns = np.array([stamp_ns(t, f) for t, _, f in rows], dtype=np.int64)
+        q = _attitude_at(att_cols, (t_ns - offset_ns) // 1000)
+        df = pd.DataFrame(
+            {
+                "t_ns": t_ns,
+                "imu_id": kind,
+                "ax_mps2": [f["xacc"] * G0 / 1000 for _, _, f in rows],
+                "ay_mps2": [f["yacc"] * G0 / 1000 for _, _, f in rows],
+                "az_mps2": [f["zacc"] * G0 / 1000 for _, _, f in rows],
+                "wx_radps": [f["xgyro"] / 1000 for _, _, f in rows],
+                "wy_radps": [f["ygyro"] / 1000 for _, _, f in rows],
+                "wz_radps": [f["zgyro"] / 1000 for _, _, f in rows],
+                "qw": q[:, 0],
+                "qx": q[:, 1],
+                "qy": q[:, 2],
+                "qz": q[:, 3],
+            }
+        )
+        imu_parts.append(df)
+        streams.append(StreamInfo("imu", kind, kind, f"mavlink/{kind}", len(df), body_frame="FRD"))
+    if imu_parts:
+        frames["imu"] = pd.concat(imu_parts, ignore_index=True)
+    if msgs.get("GLOBAL_POSITION_INT"):
+        skipped.append(
+            Skipped(
+                "GLOBAL_POSITION_INT",
+                "the autopilot's fused position, not a GNSS receiver",
+                len(msgs["GLOBAL_POSITION_INT"]),
+            )
+        )
+    if topics:
+        skipped.append(Skipped("<tlog>", f"--topic ignored for telemetry logs ({dict(topics)})", len(topics)))
+    if not frames:
+        raise ReaderError(
+            path, f"no GPS_RAW_INT, GPS2_RAW or IMU message in this telemetry log (messages: {sorted(msgs)})"
+        )
+    table = build_table(path, "tlog", "unix", frames, streams, skipped, metadata=meta)
+    if progress:
+        progress(2, 2)
+    return table
+
+
+def _packet_length(head: bytes, at: int) -> int | None:
+    """Length of the MAVLink packet starting at `at` (v1 0xFE or v2 0xFD), None if there is none."""
+    if at + 3 > len(head):
+        return None
+    stx, n = head[at], head[at + 1]
+    if stx == 0xFE:
+        return 6 + n + 2
+    if stx == 0xFD:
+        return 10 + n + 2 + (13 if head[at + 2] & 1 else 0)
+    return None
+
+
+def _is_tlog(path: Path, head: bytes) -> bool:
+    """Two consecutive records: a plausible UNIX microsecond time, then a MAVLink packet."""
+    if path.is_dir() or len(head) < 16:
+        return False
+    at = 0
+    for _ in range(2):
+        if at + 8 > len(head):
+            return at > 0
+        (t_us,) = struct.unpack(">Q", head[at : at + 8])
+        if not UNIX_US_MIN <= t_us <= 4_102_444_800_000_000:  # 2000 - 2100
+            return False
+        n = _packet_length(head, at + 8)
+        if n is None:
+            return False
+        at += 8 + n
+    return True
+
+
+FORMATS = (ReaderFormat("tlog", "MAVLink telemetry log (.tlog)", read_tlog, _is_tlog),)

@@ -1,0 +1,82 @@
+"""Spoofed copies of Android GnssLogger logs: GPS-provider Fix lines edited, every other line kept.
+
+Each fix row of the table came from one `Fix` line of the GPS provider; its latitude, longitude and
+altitude fields are replaced by the spoofed values (and, with `velocities`, its speed and bearing), in
+the field positions the file's own `# Fix,...` header gives. Raw measurement lines are left as logged:
+an attack on the fixes only is what a location-spoofing app does; attacks on raw pseudoranges are
+written to RINEX or CSV copies (see the README).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from readers.gnsslogger import FIX_NAMES, _unix_to_gps_ns
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import WriterError
+
+
+def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    text = Path(src).read_bytes().decode("utf-8", errors="replace")
+    lines = text.splitlines(keepends=True)
+    header: list[str] | None = None
+    for line in lines:
+        body = line.lstrip("#").strip()
+        if line.startswith("#") and body.split(",", 1)[0].strip() == "Fix":
+            header = [c.strip() for c in body.split(",")][1:]
+    if header is None:
+        raise WriterError(f"{src}: no '# Fix,...' header line: cannot place the spoofed fixes")
+
+    def index(key: str) -> int | None:
+        return next((header.index(n) for n in FIX_NAMES[key] if n in header), None)
+
+    i_lat, i_lon, i_alt, i_time = index("lat"), index("lon"), index("alt"), index("time_ms")
+    i_speed, i_bearing = index("speed"), index("bearing")
+    if i_lat is None or i_lon is None or i_alt is None or i_time is None:
+        raise WriterError(f"{src}: Fix header without latitude, longitude, altitude or time: {header}")
+    if len(table.observations) and not spoofed.observations.equals(table.observations):
+        raise WriterError(
+            f"{src}: an attack on raw pseudoranges cannot be written back into a GnssLogger log (its Raw lines "
+            "keep the receiver's clock fields); inject it into a RINEX or CSV copy instead"
+        )
+    fixes = spoofed.fixes
+    stamps = table.absolute_ns(fixes["t_s"].to_numpy())
+    values = dict(
+        zip(
+            stamps.tolist(),
+            fixes[["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps"]].to_numpy(float).tolist(),
+            strict=True,
+        )
+    )
+    changed = 0
+    out = []
+    for line in lines:
+        if not line.startswith("Fix,"):
+            out.append(line)
+            continue
+        end = line[len(line.rstrip("\r\n")) :]
+        fields = line.rstrip("\r\n").split(",")
+        if fields[1].strip().upper() != "GPS":
+            out.append(line)
+            continue
+        try:
+            unix_ns = int(fields[1 + i_time]) * 1_000_000
+        except ValueError:
+            out.append(line)
+            continue
+        t_ns = int(_unix_to_gps_ns(np.array([unix_ns]))[0]) if table.time_reference == "gps" else unix_ns
+        v = values.get(t_ns)
+        if v is None:
+            out.append(line)
+            continue
+        lat, lon, h, ve, vn = v
+        fields[1 + i_lat], fields[1 + i_lon], fields[1 + i_alt] = f"{lat:.10f}", f"{lon:.10f}", repr(h)
+        if velocities and i_speed is not None and i_bearing is not None and np.isfinite([ve, vn]).all():
+            fields[1 + i_speed] = repr(float(np.hypot(ve, vn)))
+            fields[1 + i_bearing] = repr(float(np.degrees(np.arctan2(ve, vn)) % 360.0))
+        out.append(",".join(fields) + end)
+        changed += 1
+    Path(dst).write_text("".join(out), encoding="utf-8")
+    return f"{changed} GPS Fix lines rewritten ({len(fixes)} fixes in the table), Raw and every other line copied"
