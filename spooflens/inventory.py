@@ -12,7 +12,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+import pandas as pd
+
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo
+from spooflens.schema import FIX_COLUMNS, SpoofingFlag
 
 COMPUTED = "computed"
 
@@ -80,3 +84,27 @@ def skipped_or_repaired(table: EpochTable) -> list[Skipped]:
 
 def computed(table: EpochTable) -> list[Skipped]:
     return [s for s in table.skipped if s.action == COMPUTED]
+
+
+# fixes columns that are not receiver quality (time, identity, position, velocity): every other column the
+# schema declares is what the receiver says about itself, drawn when the log has it, so a receiver-evidence
+# column added to the schema appears in the recording and the report by itself
+_NOT_QUALITY = {"t_s", "receiver_id", "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"}
+
+
+def quality_columns(fixes: pd.DataFrame) -> list[tuple[str, str]]:
+    """(column, label with unit) of the receiver-quality columns this receiver's fixes actually hold."""
+    out = []
+    for col in FIX_COLUMNS:
+        if col.name in _NOT_QUALITY or col.name not in fixes.columns:
+            continue
+        v = fixes[col.name].to_numpy(dtype=float)
+        if not np.isfinite(v).any():
+            continue
+        if col.name == "spoofing_flag" and np.all(v == SpoofingFlag.UNKNOWN):
+            continue  # the log has no spoofing flag
+        if col.name == "fix_type" and np.nanmin(v) == np.nanmax(v):
+            continue  # one fix type throughout says nothing over time
+        unit = "" if col.unit in ("-", "FixType", "SpoofingFlag") else f" ({col.unit})"
+        out.append((col.name, col.description.split(", NaN")[0].split(" (")[0] + unit))
+    return out

@@ -67,6 +67,8 @@ class Page:
     browser: Browser
     session: str
     requests: list[str] = field(default_factory=list)  # every URL the page asked for
+    blocked: list[str] = field(default_factory=list)  # of those, refused by the browser before sending
+    _ids: dict[str, str] = field(default_factory=dict)
     errors: list[str] = field(default_factory=list)  # console errors, exceptions, failed loads
 
     def call(self, method: str, **params: Any) -> dict[str, Any]:
@@ -186,8 +188,11 @@ class Browser:
             match e["method"]:
                 case "Network.requestWillBeSent":
                     page.requests.append(p["request"]["url"])
+                    page._ids[p["requestId"]] = p["request"]["url"]
+                case "Network.loadingFailed" if p.get("blockedReason"):
+                    page.blocked.append(page._ids.get(p["requestId"], "?"))
                 case "Network.loadingFailed":
-                    page.errors.append(f"load failed: {p.get('errorText')}")
+                    page.errors.append(f"load failed: {page._ids.get(p['requestId'], '?')}: {p.get('errorText')}")
                 case "Runtime.exceptionThrown":
                     page.errors.append(f"exception: {p['exceptionDetails'].get('text')}")
                 case "Runtime.consoleAPICalled" if p.get("type") in ("error", "assert"):

@@ -34,8 +34,8 @@ from spooflens.detectors.base import Curve, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.evidence import ORDER, Evidence, label
 from spooflens.geodesy import geodetic_to_enu
+from spooflens.inventory import quality_columns
 from spooflens.report.decimate import minmax, stride
-from spooflens.schema import FIX_COLUMNS, SpoofingFlag
 from spooflens.verdict import Incident, Verdict
 
 FloatArray = NDArray[np.float64]
@@ -47,9 +47,6 @@ INCIDENT_COLOURS = ("#d9480f", "#7048e8", "#c2255c", "#1098ad", "#5c940d", "#e67
 # one colour per evidence class, in ORDER; a class added later is drawn dark grey until it gets one
 _CLASS_PALETTE = ("#0ca678", "#e67700", "#7048e8", "#2b8a3e", "#1c7ed6", "#0b7285", "#c2255c", "#5f3dc4")
 CLASS_COLOURS = dict(zip(ORDER, _CLASS_PALETTE, strict=False))
-# fixes columns that are not receiver quality (position, velocity, identity): everything else the schema
-# declares optional is drawn when the log has it, so a new receiver-evidence column appears by itself
-_NOT_QUALITY = {"t_s", "receiver_id", "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"}
 STYLE = {
     "svg.fonttype": "none",  # text stays text: small, searchable, selectable
     "font.size": 8.5,
@@ -422,26 +419,6 @@ def _curve(res: DetectorResult, c: Curve, what: str) -> Plot:
 # ------------------------------------------------------------------------------------- receiver quality
 
 
-def _quality_columns(fx: object) -> list[tuple[str, str]]:
-    import pandas as pd
-
-    assert isinstance(fx, pd.DataFrame)
-    out = []
-    for col in FIX_COLUMNS:
-        if col.name in _NOT_QUALITY or col.name not in fx.columns:
-            continue
-        v = fx[col.name].to_numpy(dtype=float)
-        if not np.isfinite(v).any():
-            continue
-        if col.name == "spoofing_flag" and np.all(v == SpoofingFlag.UNKNOWN):
-            continue  # the log has no spoofing flag
-        if col.name == "fix_type" and np.nanmin(v) == np.nanmax(v):
-            continue  # one fix type throughout says nothing over time
-        unit = "" if col.unit in ("-",) else f" ({col.unit})"
-        out.append((col.name, col.description.split(", NaN")[0].split(" (")[0] + unit))
-    return out
-
-
 def _outside(t: FloatArray, incidents: Sequence[Incident]) -> NDArray[np.bool_]:
     keep = np.ones(len(t), dtype=bool)
     for inc in incidents:
@@ -464,7 +441,7 @@ def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
     obs = table.observations
     for rid in table.receivers():
         fx = table.fixes_of(rid)
-        cols = _quality_columns(fx)
+        cols = quality_columns(fx)
         raw = obs[obs["receiver_id"].astype(str) == rid] if len(obs) else obs
         cn0 = raw["cn0_dbhz"].to_numpy(dtype=float) if len(raw) else np.array([])
         has_raw = len(raw) > 0
