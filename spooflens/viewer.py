@@ -22,6 +22,7 @@ from __future__ import annotations
 import http.client
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -141,9 +142,14 @@ def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float = 
     raise ViewerError(f"the Rerun web server did not start on {LOOPBACK}:{port}")
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def serve_web(recording: Path, port: int, grpc_port: int) -> int:
     """Rerun's web server on a private loopback port, our policy-adding proxy on `port`, until Ctrl-C."""
     upstream = free_port()
+    signal.signal(signal.SIGTERM, _interrupt)  # a terminated `view` still stops its viewer
     with private_rerun_config() as env:
         proc = subprocess.Popen(rerun_command(recording, upstream, grpc_port), env=env)
         server = ThreadingHTTPServer((LOOPBACK, port), _proxy_handler(upstream, content_security_policy(grpc_port)))

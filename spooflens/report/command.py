@@ -54,6 +54,6 @@ def report(
     if quiet:
         click.echo(analysis.verdict.headline)
     else:
-        _print_analysis(summary, None, json_path, output)
+        _print_analysis(summary, None, json_path)
         click.echo(f"report: {output} ({size / 1e6:.2f} MB); open it in any browser, no network needed")
     return finish(log, analysis, fail_on_spoof)

@@ -385,7 +385,8 @@ def _banded(res: DetectorResult, s: Series, sigma: Series, table: EpochTable, wh
         # a band is a filled polygon (never simplified by the renderer): fewer, wider buckets, drawn at
         # each bucket's largest sigma so the band is never narrower than it was
         tb, sig = minmax(t, sd[:, k], BAND_POINTS)
-        sig = np.fmax(sig[0::2], sig[1::2]).repeat(2)
+        if len(t) > BAND_POINTS:  # decimated: (min, max) pairs
+            sig = np.fmax(sig[0::2], sig[1::2]).repeat(2)
         ax.fill_between(tb, -3 * sig, 3 * sig, color="#adb5bd", alpha=0.25, lw=0, label="+-3 sigma")
         ax.fill_between(tb, -sig, sig, color="#74c0fc", alpha=0.35, lw=0, label="+-1 sigma")
         ax.plot(*minmax(t, v[:, k]), color="#1c1c1c", lw=0.8, label=names[k])
