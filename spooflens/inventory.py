@@ -71,7 +71,7 @@ def _span(s: StreamInfo) -> str:
 def stream_rows(table: EpochTable) -> list[StreamRow]:
     rows = []
     for s in table.streams:
-        source = "computed (single-point solution of its observations)" if s.frame_id == COMPUTED else s.topic
+        source = "computed" if s.frame_id == COMPUTED else s.topic  # type says how: "single-point solution"
         rows.append(
             StreamRow(s.role, s.stream_id, source, s.msgtype, _count(table, s), _rate(s), _span(s), s.body_frame or "")
         )

@@ -22,6 +22,7 @@ from __future__ import annotations
 import http.client
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -70,9 +71,25 @@ def private_rerun_config(base: Mapping[str, str] | None = None) -> Iterator[dict
         yield env
 
 
+def rerun_binary() -> str:
+    """The viewer executable rerun-sdk ships. Started directly, not through `python -m rerun`, whose
+    wrapper process would leave the viewer running when it is itself stopped."""
+    import rerun_cli.__main__ as cli
+
+    here = Path(cli.__file__).parent
+    bundled = here / "Rerun.app" / "Contents" / "MacOS" / "Rerun"
+    for candidate in (os.environ.get("RERUN_CLI_PATH"), bundled if sys.platform == "darwin" else None, here / "rerun"):
+        if candidate and Path(candidate).exists():
+            return str(candidate)
+    found = shutil.which("rerun")
+    if found is None:
+        raise ViewerError("the Rerun viewer executable was not found (pip install rerun-sdk)")
+    return found
+
+
 def rerun_command(recording: Path, web_port: int | None = None, grpc_port: int = 9876) -> list[str]:
     """The viewer's command line: a native window, or with `web_port` Rerun's web server on loopback."""
-    cmd = [sys.executable, "-m", "rerun"]
+    cmd = [rerun_binary()]
     if web_port is not None:
         cmd += ["--serve-web", "--bind", LOOPBACK, "--web-viewer-port", str(web_port), "--port", str(grpc_port)]
     return [*cmd, str(recording)]
