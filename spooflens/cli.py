@@ -366,6 +366,7 @@ def simulate(
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
+        "report": "spooflens.bench.report_bench:command",
     },
 )
 def bench() -> None:

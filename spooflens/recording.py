@@ -304,8 +304,8 @@ def write_recording(
     incidents too)."""
     w = RecordingWriter(path, table, detector_panels(results), key_statistics(results))
     try:
-        for name, t, level in overview_lanes(results, verdict, table.duration_s):
-            w.scalars(entity("overview", name), t, level, [name])
+        for lane, lane_t, lane_level in overview_lanes(results, verdict, table.duration_s):
+            w.scalars(entity("overview", lane), lane_t, lane_level, [lane])
         for oid in dict.fromkeys(table.odometry["odometry_id"].astype(str)):
             _odometry(w, oid, table.odometry[table.odometry["odometry_id"].astype(str) == oid])
         for rid in table.receivers():
@@ -340,10 +340,10 @@ def write_recording(
             ev_t += t
             ev_text += text
             ev_level += level
-        for t_s, text, level in verdict_lines:
-            ev_t.append(t_s)
-            ev_text.append(text)
-            ev_level.append(level)
+        for line_t, line_text, line_level in verdict_lines:
+            ev_t.append(line_t)
+            ev_text.append(line_text)
+            ev_level.append(line_level)
         w.events(ev_t, ev_text, ev_level)
     finally:
         w.close()

@@ -74,7 +74,7 @@ def private_rerun_config(base: Mapping[str, str] | None = None) -> Iterator[dict
 def rerun_binary() -> str:
     """The viewer executable rerun-sdk ships. Started directly, not through `python -m rerun`, whose
     wrapper process would leave the viewer running when it is itself stopped."""
-    import rerun_cli.__main__ as cli
+    import rerun_cli.__main__ as cli  # type: ignore[import-untyped]
 
     here = Path(cli.__file__).parent
     bundled = here / "Rerun.app" / "Contents" / "MacOS" / "Rerun"

@@ -21,6 +21,7 @@ import re
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import matplotlib as mpl
 import numpy as np
@@ -47,7 +48,7 @@ INCIDENT_COLOURS = ("#d9480f", "#7048e8", "#c2255c", "#1098ad", "#5c940d", "#e67
 # one colour per evidence class, in ORDER; a class added later is drawn dark grey until it gets one
 _CLASS_PALETTE = ("#0ca678", "#e67700", "#7048e8", "#2b8a3e", "#1c7ed6", "#0b7285", "#c2255c", "#5f3dc4")
 CLASS_COLOURS = dict(zip(ORDER, _CLASS_PALETTE, strict=False))
-STYLE = {
+STYLE: Any = {
     "svg.fonttype": "none",  # text stays text: small, searchable, selectable
     "font.size": 8.5,
     "axes.titlesize": 9.5,
@@ -360,8 +361,8 @@ def detector_plots(res: DetectorResult, table: EpochTable) -> list[Plot]:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper left", ncols=3)
         key = f"{res.name}:{unit}"
-        names = ", ".join(s.name for s in series)
-        title = f"{res.name} ({what}): {names}" + (f" [{unit}]" if unit else "")
+        listed = ", ".join(s.name for s in series)
+        title = f"{res.name} ({what}): {listed}" + (f" [{unit}]" if unit else "")
         caption = (
             "Alarms shaded"
             + (" grey (advisory, not counted)" if res.advisory else " red")
