@@ -169,6 +169,7 @@ class StreamCollector:
         frames: dict[str, list[pd.DataFrame]] = {"fixes": [], "imu": [], "odometry": [], "truth": []}
         infos: list[StreamInfo] = []
         velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+        spans: dict[tuple[str, str], tuple[int, int]] = {}  # streams merged into another frame
         for s in self.streams.values():
             if s.bad:
                 skipped.append(Skipped(s.topic, f"{s.bad} message(s) could not be decoded ({s.first_error})", s.bad))
@@ -214,6 +215,8 @@ class StreamCollector:
             elif s.role == "vel":
                 velocities[s.topic] = (stamps, velocity_columns(s.kind, values))
                 infos.append(StreamInfo("vel", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+                if len(stamps):
+                    spans[("vel", s.topic)] = (int(np.min(stamps)), int(np.max(stamps)))
             elif s.role == "odom":
                 frames["odometry"].append(
                     pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
@@ -226,7 +229,7 @@ class StreamCollector:
             "odometry": _concat(frames["odometry"]),
             "truth": _concat(frames["truth"]),
         }
-        return build_table(self.path, self.fmt, time_reference, out, infos, skipped)
+        return build_table(self.path, self.fmt, time_reference, out, infos, skipped, stream_spans_ns=spans)
 
 
 def _concat(parts: list[pd.DataFrame]) -> pd.DataFrame | None:

@@ -4,7 +4,8 @@ Commands are typed functions returning an exit code; `main()` is the thin shell 
 spooflens error into one line on stderr (never a traceback) and a non-zero exit.
 
 Exit codes: 0 done; 1 internal error (a bug: rerun with --debug); 2 bad input or usage (nothing
-analysed); 3 the input was damaged and only what could be read was analysed (outputs written).
+analysed, nothing written); 3 the input was damaged and only what could be read was analysed (outputs
+written); 4 the verdict is spoofing and --fail-on-spoof was given.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.table import Table
@@ -21,10 +23,16 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError
 from spooflens.evidence import label
 
-EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
+if TYPE_CHECKING:
+    from spooflens.pipeline import Analysis
+
+EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {
+    "report": "spooflens.report.command:report",
+    "view": "spooflens.viewer:view",
+}
 
 
 def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
@@ -38,14 +46,16 @@ def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
 
 
 def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: bool = True) -> EpochTable:
-    """The log as an epoch table; with `solve_fixes`, receivers that logged only raw pseudoranges get
-    fixes from their single-point solution (listed among the repairs)."""
+    """The log as an epoch table; with `solve_fixes` (every command but `inject`), receivers that logged
+    only raw pseudoranges get fixes from their single-point solution (listed as computed), and the truth
+    file beside the log, if any, fills the truth frame (drawn, never analysed)."""
     from readers import read_log
     from spooflens.navigation.single_point import with_solved_fixes
+    from spooflens.truth import with_truth_beside
 
     with progress(show_progress) as report:
         table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
-    return with_solved_fixes(table) if solve_fixes else table
+    return with_truth_beside(with_solved_fixes(table), log) if solve_fixes else table
 
 
 def _damaged(table: EpochTable) -> list[str]:
@@ -77,6 +87,7 @@ topic_option = click.option(
 def inspect(log: Path, topics: tuple[str, ...]) -> int:
     """List the streams of LOG, what was skipped, and which analyses it supports."""
     from spooflens.analysis import analyses
+    from spooflens.inventory import computed, skipped_or_repaired, stream_rows
 
     table = _read(log, _parse_topics(topics), show_progress())
     out = console()
@@ -84,24 +95,21 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
         f"[bold]{table.source}[/]  format {table.format}, {table.duration_s:.1f} s, "
         f"clock {table.time_reference}, starts {table.absolute_iso(0.0)}"
     )
-    streams = Table("role", "stream", "topic", "type", "count", "rate (Hz)", "span (s)", "body frame", title="Streams")
-    for s in table.streams:
-        streams.add_row(
-            s.role,
-            s.stream_id,
-            s.topic,
-            s.msgtype,
-            str(s.count),
-            f"{s.rate_hz:.2f}",
-            f"{s.first_s:.1f}-{s.last_s:.1f}",
-            s.body_frame or "",
-        )
+    streams = Table("role", "stream", "source", "type", "count", "rate (Hz)", "span (s)", "body frame", title="Streams")
+    for row in stream_rows(table):
+        streams.add_row(row.role, row.stream, row.source, row.type, row.count, row.rate, row.span, row.body_frame)
     out.print(streams)
-    if table.skipped:
+    lost, made = skipped_or_repaired(table), computed(table)
+    if lost:
         out.print("[bold]Skipped or repaired[/]")
-        for skipped in table.skipped:
+        for skipped in lost:
             out.print(f"  {skipped}")
-    support = Table("detector", "evidence", "can run", "missing", title="Analyses")
+    if made:
+        out.print("[bold]Computed[/]")
+        for c in made:
+            out.print(f"  {c.stream}: {c.count} ({c.reason})")
+    # the names `analyze` reports its results under: each detector, and each analysis product
+    support = Table("analysis", "evidence", "can run", "missing", title="Analyses")
     for spec in analyses():
         missing = ", ".join(spec.missing(table))
         for d in spec.detectors:
@@ -110,6 +118,46 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
             )
     out.print(support)
     return EXIT_DAMAGED if _damaged(table) else EXIT_OK
+
+
+def analyse_log(log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet: bool) -> Analysis:
+    """Read and analyse LOG (its truth file beside it joins the table, for drawing only).
+
+    A log without GNSS raises NoGnssError before anything is written: a failed analysis leaves no files.
+    """
+    from spooflens.analysis import AnalyzeOptions
+    from spooflens.pipeline import analyze_table
+
+    table = _read(log, _parse_topics(topics), not quiet and show_progress())
+    if not len(table.fixes):
+        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}); nothing written")
+    with progress(not quiet and show_progress()) as report:
+        steps: list[str] = []
+
+        def on_step(name: str) -> None:
+            steps.append(name)
+            report(f"analysing: {name}", len(steps), len(steps) + 1)
+
+        return analyze_table(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
+
+
+def finish(log: Path, analysis: Analysis, fail_on_spoof: bool) -> int:
+    """The exit code of an analysis that ran: 4 spoofed (with --fail-on-spoof), 3 damaged input, else 0."""
+    damaged = _damaged(analysis.table)
+    if damaged:
+        click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
+    if fail_on_spoof and analysis.verdict.spoofed:
+        return EXIT_SPOOFED
+    return EXIT_DAMAGED if damaged else EXIT_OK
+
+
+quiet_option = click.option("--quiet", is_flag=True, help="Print only the one-line verdict (no progress, no tables).")
+fail_on_spoof_option = click.option(
+    "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
+)
+imu_grade_option = click.option(
+    "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
+)
 
 
 @cli.command()
@@ -128,56 +176,55 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
     default=None,
     help="Also write the machine-readable summary here.",
 )
-@topic_option
 @click.option(
-    "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
+    "--html",
+    "html_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Also write the operator report (one self-contained HTML page) here.",
 )
-@click.option("--quiet", is_flag=True, help="No progress bars or tables; errors only.")
+@topic_option
+@imu_grade_option
+@quiet_option
+@fail_on_spoof_option
 def analyze(
-    log: Path, output: Path | None, json_path: Path | None, topics: tuple[str, ...], imu_grade: str | None, quiet: bool
+    log: Path,
+    output: Path | None,
+    json_path: Path | None,
+    html_path: Path | None,
+    topics: tuple[str, ...],
+    imu_grade: str | None,
+    quiet: bool,
+    fail_on_spoof: bool,
 ) -> int:
-    """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary."""
-    from spooflens.analysis import AnalyzeOptions
-    from spooflens.pipeline import analyze_table
+    """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary and HTML report."""
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
-    table = _read(log, _parse_topics(topics), not quiet and show_progress())
-    output = output or Path(log.name).with_suffix(".rrd")
-    with progress(not quiet and show_progress()) as report:
-        steps: list[str] = []
-
-        def on_step(name: str) -> None:
-            steps.append(name)
-            report(f"analysing: {name}", len(steps), len(steps) + 1)
-
-        result = analyze_table(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
-        verdict = result.verdict
-        lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-        write_recording(output, table, result.results, lines)
-    summary = build_summary(table, result.results, verdict)
+    analysis = analyse_log(log, topics, imu_grade, quiet)
+    table, verdict = analysis.table, analysis.verdict
+    output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
+    lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
+    write_recording(output, table, analysis.results, lines, verdict)
+    summary = build_summary(table, analysis.results, verdict)
     if json_path:
         json_path.write_text(json.dumps(summary, indent=2))
-    if not quiet:
-        _print_analysis(summary, output, json_path)
-    if not len(table.fixes):
-        raise NoGnssError(
-            log,
-            f"no GNSS fixes found (streams: {_stream_names(table)}); "
-            f"recording written to {output} with what could be read",
-        )
-    damaged = _damaged(table)
-    if damaged:
-        click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
-        return EXIT_DAMAGED
-    return EXIT_OK
+    if html_path:
+        from spooflens.report import write_report
+
+        write_report(html_path, analysis)
+    if quiet:
+        click.echo(verdict.headline)
+    else:
+        _print_analysis(summary, output, json_path, html_path)
+    return finish(log, analysis, fail_on_spoof)
 
 
 def _stream_names(table: EpochTable) -> str:
     return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
 
 
-def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None:
+def _print_analysis(summary: dict, output: Path | None, json_path: Path | None, html_path: Path | None = None) -> None:
     out = console()
     v = summary["verdict"]
     out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
@@ -200,8 +247,16 @@ def _print_analysis(summary: dict, output: Path, json_path: Path | None) -> None
     out.print(t)
     for sk in summary["skipped"]:
         out.print(f"  skipped: {sk['stream']}: {sk['action']} {sk['count']} ({sk['reason']})")
-    out.print(f"recording: {output}" + (f"   summary: {json_path}" if json_path else ""))
-    out.print(f"view it with: rerun {output}")
+    for made in summary.get("computed", []):
+        out.print(f"  computed: {made['stream']}: {made['count']} ({made['reason']})")
+    written = [
+        f"{what}: {path}"
+        for what, path in (("recording", output), ("summary", json_path), ("report", html_path))
+        if path is not None
+    ]
+    out.print("   ".join(written))
+    if output is not None:
+        out.print(f"view it with: spooflens view {output}")
 
 
 @cli.command()
@@ -311,6 +366,7 @@ def simulate(
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
+        "report": "spooflens.bench.report_bench:command",
     },
 )
 def bench() -> None:

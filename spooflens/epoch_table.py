@@ -7,7 +7,8 @@ drops unusable rows and records each repair. So every format gets the same treat
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -248,11 +249,16 @@ def build_table(
     skipped: list[Skipped],
     t0_ns: int | None = None,
     metadata: dict[str, str] | None = None,
+    stream_spans_ns: Mapping[tuple[str, str], tuple[int, int]] | None = None,
 ) -> EpochTable:
     """Turn frames stamped in absolute nanoseconds (`t_ns` instead of `t_s`) into an EpochTable.
 
     The log start (t_s = 0) is the earliest stamp of any stream unless `t0_ns` is given. Each stream
-    is repaired independently; stream infos get their first/last time and final row count.
+    is repaired independently; stream infos get their first/last time and final row count (for an
+    observation stream: its epochs, one per receiver time, whatever the satellites per epoch).
+    `stream_spans_ns` gives the first and last stamp, in the same clock, of streams that fill no
+    frame of their own ((role, stream_id) -> (first_ns, last_ns); e.g. a velocity topic merged into
+    the fixes), so their span and rate are on the table's time base too.
     """
     skipped = list(skipped)
     repaired: dict[str, pd.DataFrame] = {}
@@ -283,6 +289,9 @@ def build_table(
             "autopilot_ekf": "autopilot_ekf",
         }.get(s.role)
         if frame is None or frame not in table_frames:
+            span = (stream_spans_ns or {}).get((s.role, s.stream_id))
+            if span is not None:
+                s = replace(s, first_s=(span[0] - t0_ns) / 1e9, last_s=(span[1] - t0_ns) / 1e9)
             final_streams.append(s)
             continue
         df = table_frames[frame]
@@ -295,7 +304,7 @@ def build_table(
                 s.stream_id,
                 s.topic,
                 s.msgtype,
-                s.count if s.role == "observations" else len(rows),
+                len(np.unique(t)) if s.role == "observations" else len(rows),
                 float(t[0]) if len(t) else float("nan"),
                 float(t[-1]) if len(t) else float("nan"),
                 s.body_frame,

@@ -1,5 +1,9 @@
 """The Rerun recording: trajectories on the map and in local metres, sensor and detector series, events.
 
+The viewer opens on an Overview tab: the map, the incident timeline (one lane per evidence class,
+raised while its counted detectors alarm, and the spoofing incidents below), the key statistic of each
+evidence class with its threshold, and the event log; one tab per detector panel follows.
+
 Everything time-indexed is sent column-wise with `send_columns` (one call per entity, never a
 per-sample `log`), on two timelines: `time` (seconds since the log start, every log has it) and
 `log_time` (the log's own UTC clock, when it has one). Statistics over candidate onsets are sent on a
@@ -10,6 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +25,10 @@ from numpy.typing import NDArray
 
 from spooflens.detectors.base import Alarm, DetectorResult, Track
 from spooflens.epoch_table import EpochTable
+from spooflens.evidence import ORDER, Evidence, label
 from spooflens.geodesy import geodetic_to_enu
+from spooflens.inventory import quality_columns
+from spooflens.verdict import Verdict
 
 APP_ID = "spooflens"
 COLOURS = {"reported": (230, 60, 50), "reconstructed": (40, 180, 90), "truth": (60, 120, 230)}
@@ -36,10 +44,16 @@ def entity(*parts: str) -> str:
 class RecordingWriter:
     """Writes one .rrd file; `close` writes the footer."""
 
-    def __init__(self, path: Path, table: EpochTable, panels: Sequence[tuple[str, list[str]]] = ()) -> None:
+    def __init__(
+        self,
+        path: Path,
+        table: EpochTable,
+        panels: Sequence[tuple[str, list[str]]] = (),
+        keys: Sequence[KeyStatistic] = (),
+    ) -> None:
         self.table = table
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
-        self.rec.save(str(path), default_blueprint=default_blueprint(panels))
+        self.rec.save(str(path), default_blueprint=default_blueprint(panels, keys))
         self.origin = _reference_point(table)
 
     def close(self) -> None:
@@ -130,49 +144,115 @@ def detector_panels(results: Sequence[DetectorResult]) -> list[tuple[str, list[s
     return [(title, paths) for _, title, paths in sorted(panels, key=lambda p: not p[0])]
 
 
-def default_blueprint(panels: Sequence[tuple[str, list[str]]] = ()) -> rrb.Blueprint:
-    detectors: rrb.Tabs | rrb.TimeSeriesView = (
-        rrb.Tabs(*[rrb.TimeSeriesView(origin="/", contents=paths, name=title) for title, paths in panels])
-        if panels
-        else rrb.TimeSeriesView(origin="detectors", name="Detector statistics")
+@dataclass(frozen=True)
+class KeyStatistic:
+    """The statistic that speaks for one evidence class on the Overview tab."""
+
+    evidence: Evidence
+    detector: str
+    paths: tuple[str, ...]  # the series and its threshold line
+
+
+def key_statistics(results: Sequence[DetectorResult]) -> list[KeyStatistic]:
+    """Per evidence class that ran, in ORDER: the first counted detector that alarmed (else the first that
+    ran) and its first series with a threshold (else its first series)."""
+    out = []
+    for c in ORDER:
+        ran = [r for r in results if r.ran and r.evidence == c and r.series]
+        if not ran:
+            continue
+        lead = next((r for r in ran if r.alarms and not r.advisory), ran[0])
+        s = next((x for x in lead.series if x.threshold is not None), lead.series[0])
+        path = "/" + entity("detectors", lead.name, s.name)
+        out.append(KeyStatistic(c, lead.name, (path, path + "_threshold") if s.threshold is not None else (path,)))
+    return out
+
+
+def default_blueprint(panels: Sequence[tuple[str, list[str]]] = (), keys: Sequence[KeyStatistic] = ()) -> rrb.Blueprint:
+    """Tabs: Overview first (map, incident timeline, the key statistic of each evidence class, events),
+    then one tab per detector panel, then local metres, GNSS quality, IMU, odometry and curves."""
+    key_views = [
+        rrb.TimeSeriesView(origin="/", contents=list(k.paths), name=f"{label(k.evidence)}: {k.detector}") for k in keys
+    ]
+    overview = rrb.Horizontal(
+        rrb.Vertical(
+            rrb.MapView(origin="map", name="Map: reported (red), reconstructed (green), truth (blue)"),
+            rrb.TextLogView(origin="events", name="Events"),
+            row_shares=[3, 1],
+        ),
+        rrb.Vertical(
+            rrb.TimeSeriesView(origin="overview", name="Incidents and alarms by evidence class"),
+            *key_views,
+        ),
+        column_shares=[1, 1],
+        name="Overview",
     )
+    detector_tabs = [rrb.TimeSeriesView(origin="/", contents=paths, name=title) for title, paths in panels]
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.MapView(origin="map", name="Map: reported (red), reconstructed (green), truth (blue)"),
-                rrb.Spatial3DView(origin="local", name="Local ENU (m)"),
+        rrb.Tabs(
+            overview,
+            *detector_tabs,
+            rrb.Spatial3DView(origin="local", name="Local ENU (m)"),
+            rrb.TimeSeriesView(origin="gnss", name="GNSS quality"),
+            rrb.TimeSeriesView(origin="imu", name="IMU"),
+            rrb.Horizontal(
+                rrb.TimeSeriesView(origin="odometry", contents="$origin/**/speed_mps", name="Wheel speed (m/s)"),
+                rrb.Spatial3DView(origin="odometry", name="Odometry path (its own frame)"),
+                name="Odometry",
             ),
-            rrb.Vertical(
-                detectors,
-                rrb.Tabs(
-                    rrb.TimeSeriesView(origin="gnss", name="GNSS quality"),
-                    rrb.TimeSeriesView(origin="imu", name="IMU"),
-                    rrb.TimeSeriesView(origin="curves", name="Statistic over candidate onsets", time_ranges=None),
-                ),
-                rrb.TextLogView(origin="events", name="Events"),
-                row_shares=[3, 2, 1],
-            ),
-            column_shares=[1, 1],
+            rrb.TimeSeriesView(origin="curves", name="Statistic over candidate onsets", time_ranges=None),
+            active_tab=0,
         ),
         collapse_panels=False,
     )
 
 
+def overview_lanes(
+    results: Sequence[DetectorResult], verdict: Verdict | None, duration_s: float
+) -> list[tuple[str, NDArray[np.float64], NDArray[np.float64]]]:
+    """(name, t, level) step series for the Overview timeline: one lane per evidence class that ran, at
+    height i, raised by 0.8 while any of its counted detectors alarms; incidents on the lane below 0."""
+    lanes = []
+
+    def steps(intervals: Sequence[tuple[float, float]], base: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        t, v = [0.0], [base]
+        for a, b in sorted(intervals):
+            t += [a, a, b, b]
+            v += [base, base + 0.8, base + 0.8, base]
+        t.append(max(duration_s, t[-1]))
+        v.append(base)
+        return np.asarray(t, dtype=float), np.asarray(v, dtype=float)
+
+    classes = [c for c in ORDER if any(r.ran and r.evidence == c for r in results)]
+    for i, c in enumerate(classes):
+        counted = [r for r in results if r.ran and r.evidence == c and not r.advisory]
+        alarms = [(a.start_s, a.end_s) for r in counted for a in r.alarms]
+        lanes.append((label(c), *steps(alarms, float(i))))
+    if verdict is not None:
+        spans = [(inc.onset_s, inc.end_s) for inc in verdict.incidents if inc.is_spoofing]
+        lanes.append(("spoofing incidents", *steps(spans, -1.0)))
+    return lanes
+
+
 def _fix_series(w: RecordingWriter, rid: str, fx: pd.DataFrame) -> None:
     t = fx["t_s"].to_numpy(dtype=float)
-    for col, label in (
-        ("h_acc_m", "horizontal accuracy (m)"),
-        ("v_acc_m", "vertical accuracy (m)"),
-        ("sats_used", "satellites used"),
-        ("jamming_indicator", "jamming indicator"),
-    ):
-        v = fx[col].to_numpy(dtype=float)
-        if np.isfinite(v).any():
-            w.scalars(entity("gnss", rid, col), t, v, [label])
-    w.scalars(entity("gnss", rid, "fix_type"), t, fx["fix_type"].to_numpy(dtype=float), ["fix type"])
+    for col, text in quality_columns(fx):
+        w.scalars(entity("gnss", rid, col), t, fx[col].to_numpy(dtype=float), [text])
     vel = fx[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
     if np.isfinite(vel).any():
         w.scalars(entity("gnss", rid, "velocity_mps"), t, vel, ["east", "north", "up"])
+
+
+def _odometry(w: RecordingWriter, oid: str, od: pd.DataFrame) -> None:
+    """Wheel odometry: its speed over ground, and its path in its own (not geo-referenced) frame."""
+    t = od["t_s"].to_numpy(dtype=float)
+    speed = np.hypot(od["vx_mps"].to_numpy(dtype=float), od["vy_mps"].to_numpy(dtype=float))
+    w.scalars(entity("odometry", oid, "speed_mps"), t, speed, [f"wheel speed {oid} (m/s)"])
+    w.scalars(entity("odometry", oid, "yaw_rate_radps"), t, od["wz_radps"].to_numpy(dtype=float), ["yaw rate (rad/s)"])
+    xyz = od[["x_m", "y_m", "z_m"]].to_numpy(dtype=float)
+    if len(xyz) and np.isfinite(xyz).all(axis=1).any():
+        path = xyz[np.isfinite(xyz).all(axis=1)]
+        w.rec.log(entity("odometry", oid, "path"), rr.LineStrips3D([path], colors=[(40, 140, 60)]), static=True)
 
 
 def _imu_series(w: RecordingWriter, iid: str, imu: pd.DataFrame) -> None:
@@ -191,19 +271,25 @@ def _imu_series(w: RecordingWriter, iid: str, imu: pd.DataFrame) -> None:
     )
 
 
-def _alarm_events(name: str, alarms: Sequence[Alarm]) -> tuple[list[float], list[str], list[str]]:
+def _alarm_events(
+    name: str, alarms: Sequence[Alarm], advisory: bool = False
+) -> tuple[list[float], list[str], list[str]]:
+    """Event-log lines of one detector's alarms. An advisory rule's alarms (drawn, not counted in the
+    verdict) say so, at INFO level, so they cannot be read as a warning."""
     t, text, level = [], [], []
+    kind = "ADVISORY alarm (not counted in the verdict)" if advisory else "ALARM"
+    lvl = "INFO" if advisory else "WARN"
     for a in alarms:
         t.append(a.start_s)
         text.append(
-            f"{name}: ALARM from {a.start_s:.2f} s to {a.end_s:.2f} s, peak {a.peak_statistic:.3g} at {a.peak_s:.2f} s"
+            f"{name}: {kind} from {a.start_s:.2f} s to {a.end_s:.2f} s, peak {a.peak_statistic:.3g} at {a.peak_s:.2f} s"
         )
-        level.append("WARN")
+        level.append(lvl)
         if a.onset_s is not None:
             t.append(a.onset_s)
             ci = f" (interval {a.onset_interval_s[0]:.2f}-{a.onset_interval_s[1]:.2f} s)" if a.onset_interval_s else ""
-            text.append(f"{name}: estimated attack onset {a.onset_s:.2f} s{ci}")
-            level.append("WARN")
+            text.append(f"{name}: {'advisory: ' if advisory else ''}estimated attack onset {a.onset_s:.2f} s{ci}")
+            level.append(lvl)
     return t, text, level
 
 
@@ -212,10 +298,16 @@ def write_recording(
     table: EpochTable,
     results: Sequence[DetectorResult],
     verdict_lines: Sequence[tuple[float, str, str]] = (),
+    verdict: Verdict | None = None,
 ) -> None:
-    """Write the whole recording of one analysed log."""
-    w = RecordingWriter(path, table, detector_panels(results))
+    """Write the whole recording of one analysed log (with the verdict, the Overview timeline shows its
+    incidents too)."""
+    w = RecordingWriter(path, table, detector_panels(results), key_statistics(results))
     try:
+        for lane, lane_t, lane_level in overview_lanes(results, verdict, table.duration_s):
+            w.scalars(entity("overview", lane), lane_t, lane_level, [lane])
+        for oid in dict.fromkeys(table.odometry["odometry_id"].astype(str)):
+            _odometry(w, oid, table.odometry[table.odometry["odometry_id"].astype(str) == oid])
         for rid in table.receivers():
             fx = table.fixes_of(rid)
             w.track(
@@ -244,14 +336,14 @@ def write_recording(
         ev_level = ["INFO"] * len(table.skipped)
         for res in results:
             _detector(w, res)
-            t, text, level = _alarm_events(res.name, res.alarms)
+            t, text, level = _alarm_events(res.name, res.alarms, res.advisory)
             ev_t += t
             ev_text += text
             ev_level += level
-        for t_s, text, level in verdict_lines:
-            ev_t.append(t_s)
-            ev_text.append(text)
-            ev_level.append(level)
+        for line_t, line_text, line_level in verdict_lines:
+            ev_t.append(line_t)
+            ev_text.append(line_text)
+            ev_level.append(line_level)
         w.events(ev_t, ev_text, ev_level)
     finally:
         w.close()

@@ -11,9 +11,11 @@ from dataclasses import asdict
 from typing import Any
 
 from spooflens import __version__
+from spooflens.departure import gnss_departure
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
 from spooflens.epoch_table import EpochTable
 from spooflens.evidence import label
+from spooflens.inventory import computed, skipped_or_repaired
 from spooflens.verdict import Incident, Verdict
 
 
@@ -48,6 +50,16 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
         out["receiver_id"] = a.receiver_id
     if a.satellites:
         out["satellites"] = list(a.satellites)
+    return out
+
+
+def _departure(table: EpochTable, results: list[DetectorResult], inc: Incident) -> list[dict[str, Any]]:
+    """How far GNSS went from the reconstructed track: peak and at the end, per receiver."""
+    out = []
+    for d in gnss_departure(table, results, inc):
+        item: dict[str, Any] = {"receiver_id": d.receiver_id, "track": d.track, "peak_m": round(d.peak_m, 2)}
+        item |= _time(table, "peak", d.peak_s) | {"end_m": round(d.end_m, 2)} | _time(table, "at_end", d.end_s)
+        out.append(item)
     return out
 
 
@@ -104,6 +116,12 @@ def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
 
 def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Verdict) -> dict[str, Any]:
     incidents = [_incident(table, inc) for inc in verdict.incidents]
+    # the reconstruction leaves GNSS out during the incident that made the verdict; during any other
+    # incident the track still follows GNSS, so a distance from it would mean nothing
+    deciding = verdict.deciding_incident
+    for inc, d in zip(verdict.incidents, incidents, strict=True):
+        if inc is deciding and inc.is_spoofing:
+            d["gnss_departure"] = _departure(table, results, inc)
     summary = {
         "spooflens_version": __version__,
         "file": str(table.source),
@@ -114,7 +132,8 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
         "t0_utc": table.absolute_iso(0.0) if table.unix_ns(0.0) is not None else None,
         "duration_s": round(table.duration_s, 6),
         "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
-        "skipped": [asdict(s) for s in table.skipped],
+        "skipped": [asdict(s) for s in skipped_or_repaired(table)],
+        "computed": [asdict(s) for s in computed(table)],
         "verdict": {
             "spoofed": verdict.spoofed,
             "headline": verdict.headline,

@@ -137,17 +137,18 @@ def test_cli_gives_one_line_and_nonzero_exit(tmp_path: Path, capsys: pytest.Capt
     assert err == [f"spooflens: error: {tmp_path / 'empty.bag'}: file is empty (0 bytes)"]
 
 
-def test_cli_on_a_log_without_gnss_still_writes_what_it_read(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_cli_on_a_log_without_gnss_fails_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table = circling_table(seconds=20.0)
     table.fixes = table.fixes.iloc[:0]
     path = tmp_path / "imu_only.mcap"
     write_log(table, path, "mcap-ros2")
-    code = main(["analyze", str(path), "-o", str(tmp_path / "imu.rrd"), "--quiet"])
+    outputs = [tmp_path / "imu.rrd", tmp_path / "imu.json", tmp_path / "imu.html"]
+    code = main(
+        ["analyze", str(path), "-o", str(outputs[0]), "--json", str(outputs[1]), "--html", str(outputs[2]), "--quiet"]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "no GNSS fixes found" in err[0] and "imu_only.mcap" in err[0]
-    assert (tmp_path / "imu.rrd").stat().st_size > 0
+    assert "nothing written" in err[0] and not any(p.exists() for p in outputs)
 
 
 def test_cli_on_a_truncated_log_analyses_and_exits_3(
