@@ -3,7 +3,9 @@
 Everything time-indexed is sent column-wise with `send_columns` (one call per entity, never a
 per-sample `log`), on two timelines: `time` (seconds since the log start, every log has it) and
 `log_time` (the log's own UTC clock, when it has one). Statistics over candidate onsets are sent on a
-timeline of their own, `candidate_onset`.
+timeline of their own, `candidate_onset`. Histograms are static bar charts under `histograms/`, one
+bar-chart view per histogram, each set of bars (data or a fitted distribution's expected counts) an
+entity of its own with its own colour.
 """
 
 from __future__ import annotations
@@ -18,12 +20,14 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Alarm, DetectorResult, Track
+from spooflens.detectors.base import Alarm, DetectorResult, Histogram, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
 
 APP_ID = "spooflens"
 COLOURS = {"reported": (230, 60, 50), "reconstructed": (40, 180, 90), "truth": (60, 120, 230)}
+# bars of a histogram in order: data sets first (clean, flagged), fitted distributions after
+BAR_COLOURS = ((60, 120, 230), (230, 60, 50), (120, 120, 120), (200, 160, 40), (40, 180, 90), (150, 80, 200))
 _UNSAFE = re.compile(r"[^A-Za-z0-9_\-./]")
 
 
@@ -36,10 +40,16 @@ def entity(*parts: str) -> str:
 class RecordingWriter:
     """Writes one .rrd file; `close` writes the footer."""
 
-    def __init__(self, path: Path, table: EpochTable, panels: Sequence[tuple[str, list[str]]] = ()) -> None:
+    def __init__(
+        self,
+        path: Path,
+        table: EpochTable,
+        panels: Sequence[tuple[str, list[str]]] = (),
+        bar_views: Sequence[tuple[str, str]] = (),
+    ) -> None:
         self.table = table
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
-        self.rec.save(str(path), default_blueprint=default_blueprint(panels))
+        self.rec.save(str(path), default_blueprint=default_blueprint(panels, bar_views))
         self.origin = _reference_point(table)
 
     def close(self) -> None:
@@ -90,6 +100,24 @@ class RecordingWriter:
             entity("local", name, "position"), indexes=self._indexes(t), columns=rr.Points3D.columns(positions=enu)
         )
 
+    def histogram(self, origin: str, hist: Histogram) -> None:
+        """Each set of bars of `hist` as a static bar chart under `origin`."""
+        edges = np.asarray(hist.edges, dtype=float)
+        if len(edges) < 2:
+            return
+        centres, widths = 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)
+        for i, bars in enumerate(hist.bars):
+            self.rec.log(
+                entity(origin, bars.label),
+                rr.BarChart(
+                    np.asarray(bars.counts, dtype=float),
+                    abscissa=centres,
+                    widths=widths,
+                    color=BAR_COLOURS[i % len(BAR_COLOURS)],
+                ),
+                static=True,
+            )
+
     def events(self, t: Sequence[float], texts: Sequence[str], levels: Sequence[str]) -> None:
         if not t:
             return
@@ -130,7 +158,23 @@ def detector_panels(results: Sequence[DetectorResult]) -> list[tuple[str, list[s
     return [(title, paths) for _, title, paths in sorted(panels, key=lambda p: not p[0])]
 
 
-def default_blueprint(panels: Sequence[tuple[str, list[str]]] = ()) -> rrb.Blueprint:
+def histogram_origin(detector: str, hist: Histogram) -> str:
+    return entity("histograms", detector, hist.name)
+
+
+def histogram_views(results: Sequence[DetectorResult]) -> list[tuple[str, str]]:
+    """(title, origin) of one bar-chart view per histogram of every detector that ran."""
+    return [
+        (f"{res.name}: {h.x_label}", "/" + histogram_origin(res.name, h))
+        for res in results
+        if res.ran
+        for h in res.histograms
+    ]
+
+
+def default_blueprint(
+    panels: Sequence[tuple[str, list[str]]] = (), bar_views: Sequence[tuple[str, str]] = ()
+) -> rrb.Blueprint:
     detectors: rrb.Tabs | rrb.TimeSeriesView = (
         rrb.Tabs(*[rrb.TimeSeriesView(origin="/", contents=paths, name=title) for title, paths in panels])
         if panels
@@ -148,6 +192,7 @@ def default_blueprint(panels: Sequence[tuple[str, list[str]]] = ()) -> rrb.Bluep
                     rrb.TimeSeriesView(origin="gnss", name="GNSS quality"),
                     rrb.TimeSeriesView(origin="imu", name="IMU"),
                     rrb.TimeSeriesView(origin="curves", name="Statistic over candidate onsets", time_ranges=None),
+                    *[rrb.BarChartView(origin=origin, name=title) for title, origin in bar_views],
                 ),
                 rrb.TextLogView(origin="events", name="Events"),
                 row_shares=[3, 2, 1],
@@ -214,7 +259,7 @@ def write_recording(
     verdict_lines: Sequence[tuple[float, str, str]] = (),
 ) -> None:
     """Write the whole recording of one analysed log."""
-    w = RecordingWriter(path, table, detector_panels(results))
+    w = RecordingWriter(path, table, detector_panels(results), histogram_views(results))
     try:
         for rid in table.receivers():
             fx = table.fixes_of(rid)
@@ -278,6 +323,8 @@ def _detector(w: RecordingWriter, res: DetectorResult) -> None:
             )
     for tr in res.tracks:
         _track(w, res.name, tr)
+    for h in res.histograms:
+        w.histogram(histogram_origin(res.name, h), h)
 
 
 def _track(w: RecordingWriter, detector: str, tr: Track) -> None:
