@@ -216,7 +216,9 @@ def calibrate(
     """Fit the null distribution on the clean part of `x` and return (calibration, window scale, alarm).
 
     The clean part is found by iteration: fit on every sample, flag the windows beyond the threshold,
-    refit on the samples outside them, until the flagged set stops changing. A collapse test (the
+    refit on the samples outside them, until the flagged set stops changing. A collapse pulls the fit
+    towards zero, which only lowers the first threshold; for `upper` the first fit is read off the lowest
+    quarter of the samples, since an attack there inflates the scale. A collapse test (the
     default) alarms when the window scale falls below the threshold; `upper` alarms above it (the
     baseline-error test). `rayleigh_only` fixes nu = 0 (a statistic known to be Rayleigh).
     """
@@ -229,7 +231,14 @@ def calibrate(
     for it in range(1, max_iterations + 1):
         calibrated = int(clean.sum()) >= max(min_clean, 3 * k)
         use = clean if calibrated else finite
-        nu, sigma = (0.0, rayleigh_scale(x[use])) if rayleigh_only else rice_fit(x[use])
+        if upper and it == 1:
+            # an attack makes this statistic large: start from the quietest quarter (Rayleigh quantile),
+            # which holds while up to three quarters of the log are attacked
+            nu, sigma = 0.0, float(np.percentile(x[use], 25) / np.sqrt(-2.0 * np.log(0.75)))
+        elif rayleigh_only:
+            nu, sigma = 0.0, rayleigh_scale(x[use])
+        else:
+            nu, sigma = rice_fit(x[use])
         if not np.isfinite(sigma) or sigma <= 0:
             sigma = max(float(sigma) if np.isfinite(sigma) else 0.0, 1e-9)
         k_eff = effective_window(x, use, k)

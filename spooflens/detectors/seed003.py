@@ -26,7 +26,7 @@ Choices where the paper is vague, all options of `Seed003Options`:
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -38,7 +38,6 @@ from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Ser
 from spooflens.detectors.rayleigh import (
     Calibration,
     calibrate,
-    flagged_samples,
     paper_boundary,
     rayleigh_scale,
     scale_changepoint,
@@ -66,7 +65,6 @@ class Seed003Options:
     epoch_tolerance_s: float = 0.02  # receivers' epoch tags of one instant differ by their clocks' ms
     min_common_satellites: int = 4
     site_tolerance_m: float = 100.0  # a RINEX header position is the site when the fixes stay this close
-    static_spread_m: float = 50.0  # a receiver whose fixes stay within this of their median is static
     merge_gap_s: float = 5.0
 
 
@@ -151,31 +149,24 @@ def surveyed_sites(table: EpochTable) -> dict[str, FloatArray]:
     return out
 
 
-def _static(ecef: FloatArray, lat: FloatArray, lon: FloatArray, spread_m: float) -> bool:
-    d = ecef_to_enu_vectors(lat, lon, ecef - np.median(ecef, axis=0))
-    return bool(len(d) and np.max(np.linalg.norm(d[:, :2], axis=1)) <= spread_m)
+def _near_fraction(ecef: FloatArray, site: FloatArray, tolerance_m: float) -> float:
+    return float(np.mean(np.linalg.norm(ecef - site, axis=1) <= tolerance_m)) if len(ecef) else 0.0
 
 
-def known_baseline(
-    table: EpochTable, pair: AlignedPair, opts: Seed003Options
-) -> tuple[FloatArray | None, str, BoolArray]:
+def known_baseline(table: EpochTable, pair: AlignedPair, opts: Seed003Options) -> tuple[FloatArray | None, str]:
     """The baseline vector p_a - p_b in ENU per epoch when it is known: from the surveyed sites of two
-    static stations (checked against their fixes), or None. Returns (b_enu, source, static flags)."""
-    static = np.array(
-        [_static(e, pair.lat, pair.lon, opts.static_spread_m) for e in (pair.ecef_a, pair.ecef_b)], dtype=bool
-    )
+    static stations (RINEX headers), each accepted when most of its receiver's fixes lie within
+    `site_tolerance_m` of it (most, not all: a spoofer moves the fixes, never the survey). Else None."""
     sites = surveyed_sites(table)
-    if static.all() and pair.a in sites and pair.b in sites:
+    if pair.a in sites and pair.b in sites:
         near = [
-            float(np.linalg.norm(np.median(e, axis=0) - sites[r]))
+            _near_fraction(e, sites[r], opts.site_tolerance_m)
             for e, r in ((pair.ecef_a, pair.a), (pair.ecef_b, pair.b))
         ]
-        if max(near) <= opts.site_tolerance_m:
-            b = ecef_to_enu_vectors(
-                pair.lat, pair.lon, np.broadcast_to(sites[pair.a] - sites[pair.b], pair.ecef_a.shape)
-            )
-            return b, "surveyed sites (RINEX APPROX POSITION)", static
-    return None, "", static
+        if min(near) >= 0.5:
+            b = np.broadcast_to(sites[pair.a] - sites[pair.b], pair.ecef_a.shape)
+            return ecef_to_enu_vectors(pair.lat, pair.lon, b), "surveyed sites (RINEX APPROX POSITION)"
+    return None, ""
 
 
 def pseudorange_differences(
@@ -236,6 +227,15 @@ def window_samples(t: FloatArray, opts: Seed003Options) -> int:
 
 
 @dataclass(frozen=True)
+class Episode:
+    """One alarm interval of a rule: the alarm and the estimated onset of the change."""
+
+    alarm: Alarm
+    onset_index: int
+    end_index: int
+
+
+@dataclass(frozen=True)
 class RuleResult:
     """One windowed rule on one pair: the statistic, its calibration and alarm, and the per-epoch rule."""
 
@@ -245,9 +245,27 @@ class RuleResult:
     cal: Calibration
     alarm: BoolArray
     per_epoch: Calibration  # the same statistic one sample at a time (rule 1 or 2)
-    flagged: BoolArray  # samples inside alarmed windows
+    episodes: tuple[Episode, ...]
+    flagged: BoolArray  # samples from each episode's onset to its end
     sigma_s: float  # Rayleigh scale of the flagged samples (0 without any, eq. 14)
     boundary: float  # the paper's (sigma_GNSS - sigma_S)/2
+
+
+def _episodes(
+    t: FloatArray, x: FloatArray, scale: FloatArray, alarm: BoolArray, k: int, upper: bool, gap: float
+) -> tuple[Episode, ...]:
+    """Alarm intervals with the onset where the scale changed (two-segment ML over the 3K samples before)."""
+    # the peak of a collapse is the smallest window scale, of a baseline error the largest
+    stat = np.nan_to_num(scale if upper else -scale, nan=-np.inf)
+    out = []
+    for a in alarm_intervals(t, stat, alarm, gap):
+        j = int(np.searchsorted(t, a.start_s))
+        lo = max(j - 3 * k, 0)
+        onset = scale_changepoint(x, lo, j) if j - lo >= 3 else max(j - k, 0)
+        peak = float(scale[int(np.searchsorted(t, a.peak_s))])
+        end = int(np.searchsorted(t, a.end_s))
+        out.append(Episode(replace(a, peak_statistic=peak, onset_s=float(t[onset])), onset, end))
+    return tuple(out)
 
 
 def collapse_rule(t: FloatArray, x: FloatArray, opts: Seed003Options, upper: bool = False) -> RuleResult:
@@ -261,25 +279,18 @@ def collapse_rule(t: FloatArray, x: FloatArray, opts: Seed003Options, upper: boo
         alarm &= np.nan_to_num(scale) > opts.min_baseline_error_m
     else:
         alarm &= np.nan_to_num(scale, nan=np.inf) <= opts.max_collapse_ratio * clean_scale
-    flagged = flagged_samples(alarm, k, include_current=False)
+    episodes = _episodes(t, x, scale, alarm, k, upper, opts.merge_gap_s)
+    flagged = np.zeros(len(t), dtype=bool)
+    for ep in episodes:
+        flagged[ep.onset_index : ep.end_index + 1] = True
     sigma_s = rayleigh_scale(x[flagged]) if flagged.any() else 0.0
-    return RuleResult(t, x, scale, cal, alarm, per_epoch, flagged, sigma_s, paper_boundary(cal.rayleigh_sigma, sigma_s))
+    boundary = paper_boundary(cal.rayleigh_sigma, sigma_s)
+    return RuleResult(t, x, scale, cal, alarm, per_epoch, episodes, flagged, sigma_s, boundary)
 
 
-def _alarms(rule: RuleResult, receivers: tuple[str, ...], opts: Seed003Options) -> list[Alarm]:
-    """Alarm intervals of a rule, with the onset where the scale changed (two-segment ML), one per receiver."""
-    t = rule.t
-    out = []
-    # the peak of a collapse is the smallest window scale
-    for a in alarm_intervals(t, np.nan_to_num(-rule.scale, nan=-np.inf), rule.alarm, opts.merge_gap_s):
-        j = int(np.searchsorted(t, a.start_s))
-        k = rule.cal.k
-        lo = max(j - 3 * k, 0)
-        onset = float(t[scale_changepoint(rule.x, lo, j)]) if j - lo >= 3 else float(t[max(j - k, 0)])
-        peak = float(rule.scale[int(np.searchsorted(t, a.peak_s))])
-        for rid in receivers:
-            out.append(Alarm(a.start_s, a.end_s, peak, a.peak_s, onset_s=onset, receiver_id=rid))
-    return out
+def _alarms(rule: RuleResult, receivers: tuple[str, ...]) -> list[Alarm]:
+    """The rule's alarms, one per receiver of the pair (a single spoofer feeds both)."""
+    return [replace(ep.alarm, receiver_id=rid) for ep in rule.episodes for rid in receivers]
 
 
 def _histogram_bars(
@@ -374,7 +385,7 @@ def detect(table: EpochTable, opts: Seed003Options | None = None) -> list[Detect
         rule = collapse_rule(pair.t, dist, opts)
         collapse.series += _rule_series(pair.label, rule, "baseline_distance", "rule 1")
         collapse.series.append(Series(f"{pair.label}/baseline_distance_3d", pair.t, np.linalg.norm(d_enu, axis=1), "m"))
-        collapse.alarms += _alarms(rule, (a, b), opts)
+        collapse.alarms += _alarms(rule, (a, b))
         collapse.histograms += rule_histograms(rule, f"{pair.label}/baseline_distance", "baseline distance (m)")
         collapse.extras[pair.label] = _facts(rule)
         notes[COLLAPSE].append(
@@ -409,7 +420,7 @@ def _pseudorange_rule(
     rule = collapse_rule(t, sd, opts)
     res.series += _rule_series(pair.label, rule, "difference_sd", "rule 2")
     res.series.append(Series(f"{pair.label}/common_satellites", t, n.astype(float), "satellites"))
-    res.alarms += _alarms(rule, (pair.a, pair.b), opts)
+    res.alarms += _alarms(rule, (pair.a, pair.b))
     res.histograms += rule_histograms(rule, f"{pair.label}/difference_sd", "SD of pseudorange differences (m)")
     res.extras[pair.label] = _facts(rule)
     notes.append(
@@ -421,15 +432,14 @@ def _pseudorange_rule(
 def _baseline_error_rule(
     table: EpochTable, pair: AlignedPair, d_enu: FloatArray, opts: Seed003Options, res: DetectorResult, notes: list[str]
 ) -> None:
-    b_enu, source, static = known_baseline(table, pair, opts)
+    b_enu, source = known_baseline(table, pair, opts)
     if b_enu is None:
-        why = "static" if static.all() else "moving"
-        notes.append(f"{pair.label}: baseline vector unknown (receivers {why}, no surveyed sites)")
+        notes.append(f"{pair.label}: baseline vector unknown (no surveyed sites of static stations)")
         return
     e = np.linalg.norm((d_enu - b_enu)[:, :2], axis=1)
     rule = collapse_rule(pair.t, e, opts, upper=True)
     res.series += _rule_series(pair.label, rule, "baseline_error", "rule 1 on the error")[:2]
-    res.alarms += _alarms_upper(rule, (pair.a, pair.b), opts)
+    res.alarms += _alarms(rule, (pair.a, pair.b))
     res.histograms += rule_histograms(rule, f"{pair.label}/baseline_error", "horizontal baseline error (m)")
     res.extras[pair.label] = _facts(rule) | {
         "baseline_source": source,
@@ -439,18 +449,6 @@ def _baseline_error_rule(
         f"{pair.label}: baseline {np.linalg.norm(b_enu[0]):.2f} m from {source}; error scale "
         f"{rule.cal.sigma:.3g} m, alarm above {max(rule.cal.threshold, opts.min_baseline_error_m):.3g} m"
     )
-
-
-def _alarms_upper(rule: RuleResult, receivers: tuple[str, ...], opts: Seed003Options) -> list[Alarm]:
-    t = rule.t
-    out = []
-    for a in alarm_intervals(t, np.nan_to_num(rule.scale), rule.alarm, opts.merge_gap_s):
-        j = int(np.searchsorted(t, a.start_s))
-        lo = max(j - 3 * rule.cal.k, 0)
-        onset = float(t[scale_changepoint(rule.x, lo, j)]) if j - lo >= 3 else float(t[max(j - rule.cal.k, 0)])
-        for rid in receivers:
-            out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=rid))
-    return out
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
