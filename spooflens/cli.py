@@ -24,7 +24,7 @@ from spooflens.evidence import label
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED = 0, 1, 2, 3
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {"fleet": "spooflens.fleet.command:command"}
 
 
 def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:

@@ -97,7 +97,7 @@ def solve_sets(snap: Snapshot, use: BoolArray, bias_m: FloatArray | None = None,
 
     The elevation mask is off by default: the sets are chosen by the attack, not by the solver.
     """
-    M, R, N = use.shape
+    M, R, _ = use.shape
     m, r, n = np.nonzero(use)
     pr = snap.pseudorange_m[r, n] + (bias_m[m, r, n] if bias_m is not None else 0.0)
     frame = pd.DataFrame(
