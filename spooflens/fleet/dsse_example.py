@@ -122,11 +122,14 @@ class PrintedGains:
 
 
 def evaluate_printed(
-    agents: Agents = PAPER_AGENTS, rtol: float = RANK_RTOL, starts: int = 3, n_variants: bool = True
+    agents: Agents = PAPER_AGENTS,
+    rtol: float = RANK_RTOL,
+    starts: int = 3,
+    pairs: list[tuple[int, int]] | None = None,
 ) -> PrintedGains:
-    """The printed L_i in every basis variant; the printed N_1, N_2 in every variant of the two unobservable
-    bases (or only our SVD basis, `n_variants=False`), N_3 designed for each (the printed one has the
-    wrong shape)."""
+    """The printed L_i in every basis variant; the printed N_1, N_2 in every pair of variants of the two
+    unobservable bases (or the `pairs` of variant indices given), N_3 designed for each (the printed one
+    has the wrong shape)."""
     decs = decompositions(agents, rtol)
     l_rad = []
     for A, C, d, L in zip(agents.A, agents.C, decs, PRINTED_L, strict=True):
@@ -135,17 +138,16 @@ def evaluate_printed(
         r = [spectral_radius(g.T @ A @ g - L @ (C @ g)) for g in basis_variants(d.gamma_o)]
         l_rad.append((min(r), max(r)))
     n_rad, t2_rad = [], []
-    variants = basis_variants if n_variants else (lambda g: [g])
-    for g1 in variants(decs[0].gamma_obar):
-        for g2 in variants(decs[1].gamma_obar):
-            ds = [
-                _rebased(decs[0], agents.A[0], agents.Ca[0], g1),
-                _rebased(decs[1], agents.A[1], agents.Ca[1], g2),
-                decs[2],
-            ]
-            N, _ = design_n(ds, agents.P, fixed={0: PRINTED_N[0], 1: PRINTED_N[1]}, starts=starts)
-            n_rad.append(spectral_radius(error_matrix(ds, N, agents.P)))
-            t2_rad.append(spectral_radius(theorem2_matrix(ds, N, agents.P)))
+    v1, v2 = basis_variants(decs[0].gamma_obar), basis_variants(decs[1].gamma_obar)
+    for i, j in pairs if pairs is not None else itertools.product(range(len(v1)), range(len(v2))):
+        ds = [
+            _rebased(decs[0], agents.A[0], agents.Ca[0], v1[i]),
+            _rebased(decs[1], agents.A[1], agents.Ca[1], v2[j]),
+            decs[2],
+        ]
+        N, _ = design_n(ds, agents.P, fixed={0: PRINTED_N[0], 1: PRINTED_N[1]}, starts=starts)
+        n_rad.append(spectral_radius(error_matrix(ds, N, agents.P)))
+        t2_rad.append(spectral_radius(theorem2_matrix(ds, N, agents.P)))
     return PrintedGains(
         tuple(l_rad),
         (min(n_rad), max(n_rad)),
