@@ -144,6 +144,12 @@ def test_align_pair_interpolates_the_denser_receiver_within_its_gap_bound():
     assert 0.3 < np.median(d) < 5.0
 
 
+def test_the_clean_sample_pair_stays_clean():
+    # sample_logs/dual_receiver.mcap before its attack: scenario dual_receiver, seed 2, 90 s, 5 Hz
+    res = {r.name: r for r in detect(_dual(2, 90.0))}
+    assert res[COLLAPSE].ran and not res[COLLAPSE].alarms
+
+
 def test_simulated_pair_clean_then_single_antenna():
     table = _dual(3)
     clean = {r.name: r for r in detect(table)}
