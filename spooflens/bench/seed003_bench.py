@@ -80,9 +80,8 @@ def simulated_pair(runs: int, tracking_noise: float, report) -> dict[str, Any]:
         rng = np.random.default_rng(run)
         inside = fx["t_s"].to_numpy(float) >= 150.0
         noise = rng.normal(0.0, tracking_noise, (int(inside.sum()), 3))
-        lat, lon, h = add_enu_offset(
-            *(fx.loc[inside, c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m")), noise
-        )
+        lat0, lon0, h0 = (fx.loc[inside, c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m"))
+        lat, lon, h = add_enu_offset(lat0, lon0, h0, noise)
         fx.loc[inside, "lat_deg"], fx.loc[inside, "lon_deg"], fx.loc[inside, "height_m"] = lat, lon, h
         a, b = spoofed_table.receivers()
         pair = align_pair(spoofed_table.fixes_of(a), spoofed_table.fixes_of(b), a, b, Seed003Options())

@@ -123,8 +123,8 @@ def spectral_radius(M: FloatArray) -> float:
 
 def upsilon(P: FloatArray, s: int) -> FloatArray:
     """Upsilon_s = (P - I) kron I_s."""
-    P = np.asarray(P, dtype=float)
-    out: FloatArray = np.kron(P - np.eye(len(P)), np.eye(s))
+    weights = np.asarray(P, dtype=float)
+    out: FloatArray = np.kron(weights - np.eye(len(weights)), np.eye(s)).astype(float)
     return out
 
 

@@ -226,8 +226,8 @@ def fleet_homology(vehicles: list[VehicleOffsets], opts: FleetOptions) -> FleetH
     povs = {v.name: _on_grid(v, grid, opts.max_gap_factor * step) for v in vehicles}
     names = list(povs)
     stack = np.stack([povs[n] for n in names], axis=1)  # (T, V, 2)
-    have = np.isfinite(stack).all(axis=2)
-    sig = have & (np.linalg.norm(np.nan_to_num(stack), axis=2) > opts.min_offset_m)
+    have: BoolArray = np.asarray(np.isfinite(stack).all(axis=2), dtype=bool)
+    sig: BoolArray = have & (np.linalg.norm(np.nan_to_num(stack), axis=2) > opts.min_offset_m)
     quantiles: dict[int, float] = {}
     theta_all = np.full(len(grid), np.nan)
     theta = np.full(len(grid), np.nan)
