@@ -36,6 +36,8 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
     "spooflens.detectors.innovation_tests",
+    "spooflens.detectors.seed003",
+    "spooflens.detectors.fleet",
 )
 
 
@@ -71,6 +73,11 @@ def _has_two_receivers(table: EpochTable) -> str | None:
     return None if n >= 2 else f"two GNSS receivers ({n} found)"
 
 
+def _has_fleet(table: EpochTable) -> str | None:
+    """One log is never a fleet: `spooflens fleet` runs the fleet analysis with the other vehicles' logs."""
+    return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
+
+
 REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "fixes": _has_fixes,
     "imu": _has_imu,
@@ -78,6 +85,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "observations": _has_observations,
     "satellite_states": _has_satellite_states,
     "two_receivers": _has_two_receivers,
+    "fleet": _has_fleet,
 }
 
 

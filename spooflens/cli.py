@@ -32,6 +32,7 @@ EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
 COMMANDS: dict[str, str] = {
     "report": "spooflens.report.command:report",
     "view": "spooflens.viewer:view",
+    "fleet": "spooflens.fleet.command:command",
 }
 
 
@@ -367,6 +368,8 @@ def simulate(
         "nav": "spooflens.bench.nav_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
         "report": "spooflens.bench.report_bench:command",
+        "seed003": "spooflens.bench.seed003_bench:command",
+        "seed004": "spooflens.bench.seed004_bench:command",
     },
 )
 def bench() -> None:

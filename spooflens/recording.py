@@ -7,7 +7,9 @@ evidence class with its threshold, and the event log; one tab per detector panel
 Everything time-indexed is sent column-wise with `send_columns` (one call per entity, never a
 per-sample `log`), on two timelines: `time` (seconds since the log start, every log has it) and
 `log_time` (the log's own UTC clock, when it has one). Statistics over candidate onsets are sent on a
-timeline of their own, `candidate_onset`.
+timeline of their own, `candidate_onset`. Histograms are static bar charts under `histograms/`, one
+bar-chart view per histogram, each set of bars (data or a fitted distribution's expected counts) an
+entity of its own with its own colour.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Alarm, DetectorResult, Track
+from spooflens.detectors.base import Alarm, DetectorResult, Histogram, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.evidence import ORDER, Evidence, label
 from spooflens.geodesy import geodetic_to_enu
@@ -32,6 +34,8 @@ from spooflens.verdict import Verdict
 
 APP_ID = "spooflens"
 COLOURS = {"reported": (230, 60, 50), "reconstructed": (40, 180, 90), "truth": (60, 120, 230)}
+# bars of a histogram in order: data sets first (clean, flagged), fitted distributions after
+BAR_COLOURS = ((60, 120, 230), (230, 60, 50), (120, 120, 120), (200, 160, 40), (40, 180, 90), (150, 80, 200))
 _UNSAFE = re.compile(r"[^A-Za-z0-9_\-./]")
 
 
@@ -50,10 +54,11 @@ class RecordingWriter:
         table: EpochTable,
         panels: Sequence[tuple[str, list[str]]] = (),
         keys: Sequence[KeyStatistic] = (),
+        bar_views: Sequence[tuple[str, str]] = (),
     ) -> None:
         self.table = table
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
-        self.rec.save(str(path), default_blueprint=default_blueprint(panels, keys))
+        self.rec.save(str(path), default_blueprint=default_blueprint(panels, keys, bar_views))
         self.origin = _reference_point(table)
 
     def close(self) -> None:
@@ -104,6 +109,24 @@ class RecordingWriter:
             entity("local", name, "position"), indexes=self._indexes(t), columns=rr.Points3D.columns(positions=enu)
         )
 
+    def histogram(self, origin: str, hist: Histogram) -> None:
+        """Each set of bars of `hist` as a static bar chart under `origin`."""
+        edges = np.asarray(hist.edges, dtype=float)
+        if len(edges) < 2:
+            return
+        centres, widths = 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)
+        for i, bars in enumerate(hist.bars):
+            self.rec.log(
+                entity(origin, bars.label),
+                rr.BarChart(
+                    np.asarray(bars.counts, dtype=float),
+                    abscissa=centres,
+                    widths=widths,
+                    color=BAR_COLOURS[i % len(BAR_COLOURS)],
+                ),
+                static=True,
+            )
+
     def events(self, t: Sequence[float], texts: Sequence[str], levels: Sequence[str]) -> None:
         if not t:
             return
@@ -144,6 +167,20 @@ def detector_panels(results: Sequence[DetectorResult]) -> list[tuple[str, list[s
     return [(title, paths) for _, title, paths in sorted(panels, key=lambda p: not p[0])]
 
 
+def histogram_origin(detector: str, hist: Histogram) -> str:
+    return entity("histograms", detector, hist.name)
+
+
+def histogram_views(results: Sequence[DetectorResult]) -> list[tuple[str, str]]:
+    """(title, origin) of one bar-chart view per histogram of every detector that ran."""
+    return [
+        (f"{res.name}: {h.x_label}", "/" + histogram_origin(res.name, h))
+        for res in results
+        if res.ran
+        for h in res.histograms
+    ]
+
+
 @dataclass(frozen=True)
 class KeyStatistic:
     """The statistic that speaks for one evidence class on the Overview tab."""
@@ -168,9 +205,14 @@ def key_statistics(results: Sequence[DetectorResult]) -> list[KeyStatistic]:
     return out
 
 
-def default_blueprint(panels: Sequence[tuple[str, list[str]]] = (), keys: Sequence[KeyStatistic] = ()) -> rrb.Blueprint:
+def default_blueprint(
+    panels: Sequence[tuple[str, list[str]]] = (),
+    keys: Sequence[KeyStatistic] = (),
+    bar_views: Sequence[tuple[str, str]] = (),
+) -> rrb.Blueprint:
     """Tabs: Overview first (map, incident timeline, the key statistic of each evidence class, events),
-    then one tab per detector panel, then local metres, GNSS quality, IMU, odometry and curves."""
+    then one tab per detector panel, then local metres, GNSS quality, IMU, odometry, curves and
+    histograms."""
     key_views = [
         rrb.TimeSeriesView(origin="/", contents=list(k.paths), name=f"{label(k.evidence)}: {k.detector}") for k in keys
     ]
@@ -201,6 +243,7 @@ def default_blueprint(panels: Sequence[tuple[str, list[str]]] = (), keys: Sequen
                 name="Odometry",
             ),
             rrb.TimeSeriesView(origin="curves", name="Statistic over candidate onsets", time_ranges=None),
+            *[rrb.BarChartView(origin=origin, name=title) for title, origin in bar_views],
             active_tab=0,
         ),
         collapse_panels=False,
@@ -302,7 +345,7 @@ def write_recording(
 ) -> None:
     """Write the whole recording of one analysed log (with the verdict, the Overview timeline shows its
     incidents too)."""
-    w = RecordingWriter(path, table, detector_panels(results), key_statistics(results))
+    w = RecordingWriter(path, table, detector_panels(results), key_statistics(results), histogram_views(results))
     try:
         for lane, lane_t, lane_level in overview_lanes(results, verdict, table.duration_s):
             w.scalars(entity("overview", lane), lane_t, lane_level, [lane])
@@ -370,6 +413,8 @@ def _detector(w: RecordingWriter, res: DetectorResult) -> None:
             )
     for tr in res.tracks:
         _track(w, res.name, tr)
+    for h in res.histograms:
+        w.histogram(histogram_origin(res.name, h), h)
 
 
 def _track(w: RecordingWriter, detector: str, tr: Track) -> None:

@@ -50,6 +50,27 @@ class Curve:
 
 
 @dataclass(frozen=True)
+class Bars:
+    """One set of bars of a histogram: counts of values, or a fitted distribution's expected counts."""
+
+    label: str  # e.g. "clean windows", "Rayleigh fit, sigma 2.10 m"
+    counts: FloatArray  # (B,) one value per bin of the histogram's edges
+    fitted: bool = False  # expected counts of a fitted distribution, not data
+
+
+@dataclass(frozen=True)
+class Histogram:
+    """A statistic's distribution: bin edges and one or more sets of bars over them (e.g. the baseline
+    distance in clean and in flagged windows, each with its fitted density as expected counts per bin)."""
+
+    name: str
+    edges: FloatArray  # (B + 1,)
+    bars: tuple[Bars, ...]
+    x_label: str  # e.g. "baseline distance (m)"
+    unit: str = ""
+
+
+@dataclass(frozen=True)
 class Track:
     """A trajectory a detector reconstructed (e.g. the INS solution with spoofed GNSS excluded)."""
 
@@ -88,6 +109,7 @@ class DetectorResult:
     advisory: bool = False  # reported and drawn, but not used for the verdict (an uncalibrated rule)
     evidence: Evidence | None = None  # the class of reference this detector compares GNSS with
     findings: list[Finding] = field(default_factory=list)
+    histograms: list[Histogram] = field(default_factory=list)
 
     @property
     def is_detector(self) -> bool:
