@@ -33,6 +33,7 @@ MIN_IMU_SAMPLES = 50
 # Every analysis, in the order it runs. One line per module; the module declares the rest.
 ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
+    "spooflens.detectors.receiver_evidence",
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
     "spooflens.detectors.innovation_tests",

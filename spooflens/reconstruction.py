@@ -51,11 +51,13 @@ class CoastingOptions:
     margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
     min_disagree_s: float = 2.0
     min_disagree_epochs: int = 3
-    confirm_window_s: float = 60.0  # after the incident's last alarm
+    confirm_window_s: float = 20.0  # after the incident's last alarm (and before the next incident)
     agree_s: float = 10.0
     min_agree_epochs: int = 5
     margin_s: float = 1.0  # GNSS is left out from this long before the onset estimate
-    placebo_horizon_s: float = 60.0
+    resolution: float = 3.0  # agreement counts while the reference's sigma is below the departure / this
+    placebo_horizon_s: tuple[float, float] = (60.0, 60.0)  # half the log, within these bounds
+    placebo_trim: float = 0.1  # the largest tenth of the clean coasts is left out (another attack, if any)
     placebo_runs: int = 24
     settle_s: float = 30.0
     converge_s: float = 60.0  # a reference younger than this cannot confirm anything (still converging)
@@ -88,6 +90,7 @@ class CoastingCheck:
     departure_s: float | None  # start of the first sustained disagreement
     end_s: float | None  # first fix of sustained agreement after it (None: never, to the end of the log)
     end_interval_s: tuple[float, float] | None
+    inconclusive_from_s: float | None = None  # the reference became too uncertain to see an end from here
 
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -110,15 +113,17 @@ def coasting_nis(sol: NavSolution, rows: tuple[int, ...] = GNSS_ROWS) -> tuple[F
     return nis, dof
 
 
-def coast(nav: Navigation, t_from: float, t_end: float | None = None) -> NavSolution:
-    """The INS (and odometry) continued from the main solution's last epoch at or before `t_from` with
-    every later GNSS fix left out (each still compared with it), up to `t_end`."""
-    sol = nav.solution
+def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None) -> NavSolution:
+    """The INS (and odometry) continued from a solution's last epoch at or before `t_from` (the main one,
+    or `base`: one that left the incidents already confirmed out) with every later GNSS fix left out
+    (each still compared with it), up to `t_end`."""
+    sol = base if base is not None else nav.solution
     k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
     if k < 0:
-        opts = nav.options(exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True)
+        opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True)
         return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
-    opts = nav.options(
+    opts = replace(
+        sol.options,
         initial=NavState.from_vector(sol.state[k]),
         initial_covariance=sol.P_upd[k],
         initial_gm=sol.gm[k],
@@ -137,25 +142,62 @@ def _ratio(sol: NavSolution, p: float) -> FloatArray:
 
 @dataclass(frozen=True)
 class Placebo:
-    """Coasts of `placebo_horizon_s` started all over the log: what GNSS-minus-reference looks like
-    where (most likely) nobody attacked. Each incident is judged against those that do not overlap it."""
+    """Coasts started all over the log: what GNSS-minus-reference looks like where (most likely) nobody
+    attacked. A coast counts for an incident only up to where it reaches a suspected stretch."""
 
     starts: FloatArray
     grid: FloatArray  # horizon, s
     curves: FloatArray  # (runs, len(grid)) running maximum of the NIS-over-threshold ratio
 
-    def envelope(self, avoid: tuple[float, float], margin_s: float) -> Envelope:
-        H = self.grid[-1] if len(self.grid) else 0.0
-        keep = ~((self.starts - margin_s <= avoid[1]) & (avoid[0] <= self.starts + H))
-        if not keep.any():
+    def envelope(
+        self,
+        own: tuple[float, float],
+        confirmed: list[tuple[float, float]],
+        margin_s: float,
+        trim: float = 0.1,
+        min_runs: int = 4,
+    ) -> Envelope:
+        """The largest clean departure per horizon over the coasts (and the part of each) before this
+        incident, away from the incidents already confirmed; with fewer than `min_runs` of those, the
+        coasts anywhere away from them, leaving out the largest `trim` (a later attack the loop has not
+        reached yet). Beyond the longest clean horizon the last value holds."""
+        if not len(self.starts):
             return Envelope(np.array([]), np.array([]), 0)
-        return Envelope(self.grid, np.maximum(self.curves[keep].max(axis=0), 1.0), int(keep.sum()))
+        usable = self._clean(own, margin_s)
+        for span in confirmed:
+            usable = np.minimum(usable, self._clean(span, margin_s))
+        # the stretch before the incident is the baseline a later attack or its end cannot spoil
+        earlier = np.minimum(usable, np.clip(own[0] - self.starts, 0.0, None))
+        if (earlier > 0).sum() >= min_runs:
+            usable = earlier
+        runs = np.flatnonzero(usable > 0)
+        if not len(runs):
+            return Envelope(np.array([]), np.array([]), 0)
+        valid = self.grid[None, :] <= usable[:, None]
+        peaks = np.where(valid, self.curves, -np.inf).max(axis=1)
+        drop = runs[np.argsort(peaks[runs])[::-1][: int(trim * len(runs))]]
+        valid[drop] = False
+        kappa = np.where(valid, self.curves, -np.inf).max(axis=0)
+        if not np.isfinite(kappa).any():
+            return Envelope(np.array([]), np.array([]), 0)
+        reach = self.grid[np.isfinite(kappa)].max()
+        kappa = np.where(self.grid <= reach, kappa, kappa[np.isfinite(kappa)][-1])
+        return Envelope(self.grid, np.maximum(kappa, 1.0), int(len(runs) - len(drop)))
+
+    def _clean(self, span: tuple[float, float], margin_s: float) -> FloatArray:
+        """How long each coast runs before it reaches `span` (its full horizon if it never does, 0 if it
+        starts inside it)."""
+        H = float(self.grid[-1])
+        a, b = span[0] - margin_s, span[1] + margin_s
+        inside = (self.starts >= a) & (self.starts <= b)
+        before = self.starts < a
+        return np.where(inside, 0.0, np.where(before, np.minimum(H, a - self.starts), H))
 
 
 def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
     t = nav.solution.t
-    H = opts.placebo_horizon_s
-    starts = np.arange(t[0] + opts.settle_s, t[-1] - H, H / 2.0)
+    H = float(np.clip(0.5 * (t[-1] - t[0]), *opts.placebo_horizon_s))
+    starts = np.arange(t[0] + opts.settle_s, t[-1] - H, min(H / 2.0, 30.0))
     if len(starts) > opts.placebo_runs:
         starts = starts[np.linspace(0, len(starts) - 1, opts.placebo_runs).round().astype(int)]
     grid = np.arange(0.0, H + 1.0, 1.0)
@@ -176,19 +218,22 @@ def coasting_check(
     nav: Navigation,
     onset_s: float,
     envelope: Envelope,
-    last_alarm_s: float | None = None,
+    deadline_s: float | None = None,
     opts: CoastingOptions | None = None,
+    base: NavSolution | None = None,
 ) -> CoastingCheck:
+    """Coast from `onset_s` and judge GNSS against the reference: confirmed when a sustained departure
+    begins by `deadline_s` (default `confirm_window_s` after the onset); then when it ends."""
     opts = opts or CoastingOptions()
     t_ex = onset_s - opts.margin_s
-    sol = coast(nav, t_ex)
+    sol = coast(nav, t_ex, base=base)
     t = sol.t
     ratio = _ratio(sol, opts.p_disagree)
     kappa = envelope.at(t - t_ex)
     offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
     disagree = np.nan_to_num(ratio) > opts.margin * kappa
     departure = None
-    deadline = max(onset_s, last_alarm_s or onset_s) + opts.confirm_window_s
+    deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
     for a, b in _runs(disagree):
         if t[a] > deadline:
             break
@@ -198,16 +243,29 @@ def coasting_check(
     if departure is None:
         return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None)
     end = end_interval = None
-    agree = ~disagree & np.isfinite(ratio)
+    # the reference can tell agreement only while its own uncertainty is well below the departure seen so
+    # far beyond that uncertainty; a consumer INS coasting for minutes cannot
+    sigma_ref = np.sqrt(np.maximum(sol.S_all[:, 0, 0], sol.S_all[:, 1, 1]))
+    # the departure seen so far beyond what the reference's own drift explains
+    beyond = np.clip(np.nan_to_num(offset) - 3.0 * sigma_ref, 0.0, None)
+    peak = np.maximum.accumulate(np.where(np.arange(len(t)) >= departure, beyond, 0.0))
+    # judged against the departure reached up to `agree_s` later: a growing one keeps ahead of the drift
+    ahead = peak[np.minimum(np.searchsorted(t, t + opts.agree_s), len(t) - 1)]
+    conclusive = sigma_ref < ahead / opts.resolution
+    agree = ~disagree & np.isfinite(ratio) & conclusive
+    lost_at = next((i for i in range(departure, len(t)) if not conclusive[i]), None)
     for a, b in _runs(agree):
         if a <= departure:
             continue
+        if lost_at is not None and a > lost_at:
+            break
         if b - a + 1 >= opts.min_agree_epochs and t[b] - t[a] >= opts.agree_s:
             end = float(t[a])
             last_bad = np.flatnonzero(disagree[:a])
             end_interval = (float(t[last_bad[-1]]) if len(last_bad) else float(t[a]), end)
             break
-    return CoastingCheck(t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval)
+    inconclusive_from = float(t[lost_at]) if end is None and lost_at is not None else None
+    return CoastingCheck(t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from)
 
 
 def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
@@ -239,13 +297,25 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
     checks: list[tuple[Incident, CoastingCheck]] = []
     placebo = placebo_coasts(nav, opts)
     envelopes = []
-    for inc in verdict.incidents:
+    base: NavSolution | None = None  # the filter with the incidents confirmed so far left out
+    ordered = sorted(verdict.incidents, key=lambda i: i.start_s)
+    for n, inc in enumerate(ordered):
+        current = incidents[-1] if incidents and incidents[-1].is_spoofing else None
+        if current is not None and inc.start_s <= current.end_s:
+            # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
+            # start there; its alarms belong to the incident, and inside the stretch where the reference
+            # could no longer tell, they are how the receiver's return to the real sky shows
+            incidents[-1] = _absorb(current, inc)
+            continue
         if Evidence.INERTIAL not in inc.evidence:
             incidents.append(inc)
             continue
-        envelope = placebo.envelope((_coast_start(inc), inc.end_s + opts.agree_s), opts.margin_s)
+        confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
+        envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
         envelopes.append(envelope)
-        check = coasting_check(nav, _coast_start(inc), envelope, inc.end_s, opts)
+        later = [i.start_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
+        deadline = min([inc.end_s + opts.confirm_window_s, *later])
+        check = coasting_check(nav, _coast_start(inc), envelope, deadline, opts, base)
         checks.append((inc, check))
         young = _coast_start(inc) < float(nav.solution.t[0]) + opts.converge_s
         if not check.confirmed or young:
@@ -272,19 +342,36 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         end = check.end_s if check.end_s is not None else t_last
         sel = (check.t >= check.excluded_from_s) & (check.t <= end)
         offsets = check.offset_m[sel]
+        if check.end_s is not None:
+            interval, method = check.end_interval_s, "GNSS agreed again with the coasted INS reference"
+        elif check.inconclusive_from_s is not None:
+            interval = (check.inconclusive_from_s, t_last)
+            method = (
+                f"GNSS still departed from the coasted INS reference at {check.inconclusive_from_s:.1f} s, when the "
+                "reference became too uncertain to tell an end: the end lies in the interval"
+            )
+        else:
+            interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
+        onset, onset_interval = _onset_before(ctx, inc, check.departure_s)
         incidents.append(
             replace(
                 inc,
+                onset_s=onset,
+                onset_interval_s=onset_interval,
                 end_s=end,
-                end_interval_s=check.end_interval_s if check.end_s is not None else (t_last, t_last),
+                end_interval_s=interval,
                 ongoing_at_end=check.end_s is None,
-                end_method="GNSS agreed again with the coasted INS reference"
-                if check.end_s is not None
-                else "GNSS never agreed again with the coasted INS reference before the log ended",
+                end_method=method,
                 offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
                 offset_end_m=float(offsets[-1]) if len(offsets) else None,
             )
         )
+        # later coasts start from a filter that left this incident out, not from one that followed the
+        # spoofed fixes and then had to recover from their jump back
+        windows = tuple(
+            (_coast_start(i) - opts.margin_s, None if i.ongoing_at_end else i.end_s) for i in incidents if i.is_spoofing
+        )
+        base = run_prepared(nav.inputs, nav.options(exclude_windows=windows), nav.start)
     incidents = _merge_overlapping(incidents)
     confirmed = [i for i in incidents if i.is_spoofing]
     for inc in confirmed:
@@ -308,6 +395,41 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         for (inc, c), e in zip(checks, envelopes, strict=True)
     ]
     return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
+
+
+def _absorb(current: Incident, inc: Incident) -> Incident:
+    """`inc` (alarms inside a confirmed incident) merged into it; when it starts where the reference could
+    no longer tell whether GNSS agreed, it marks the end: a spoofer switching off makes the receiver lose
+    and re-acquire the real sky, which the detectors see as a new transient."""
+    classes = tuple(e for e in ORDER if e in {*current.evidence, *inc.evidence})
+    merged = replace(
+        current,
+        detectors=tuple(sorted({*current.detectors, *inc.detectors})),
+        evidence=classes,
+        confidence=confidence(set(classes)),
+        receivers=tuple(sorted({*current.receivers, *inc.receivers})),
+        satellites=tuple(sorted({*current.satellites, *inc.satellites})),
+    )
+    window = current.end_interval_s
+    # the return shows in evidence that does not depend on the filter that followed the spoofed fixes
+    independent_of_filter = any(e != Evidence.INERTIAL for e in inc.evidence)
+    if (
+        current.ongoing_at_end
+        and independent_of_filter
+        and window is not None
+        and window[0] < window[1]
+        and window[0] <= inc.start_s
+    ):
+        before = inc.onset_s if inc.onset_s < inc.start_s else inc.start_s - 2.0
+        return replace(
+            merged,
+            end_s=inc.start_s,
+            end_interval_s=(max(window[0], before), inc.start_s),
+            ongoing_at_end=False,
+            end_method=f"the reference could no longer tell after {window[0]:.1f} s; the transient at "
+            f"{inc.start_s:.1f} s ({', '.join(inc.detectors)}) is the receiver returning to the real signals",
+        )
+    return merged
 
 
 def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
@@ -335,3 +457,33 @@ def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
 
 def _coast_start(inc: Incident) -> float:
     return min(inc.onset_s, inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s, inc.start_s)
+
+
+def _span(inc: Incident, opts: CoastingOptions) -> tuple[float, float]:
+    return (_coast_start(inc) - opts.margin_s, inc.end_s + opts.agree_s)
+
+
+def _onset_before(
+    ctx: AnalysisContext, inc: Incident, departure_s: float | None
+) -> tuple[float, tuple[float, float] | None]:
+    """The incident's onset: of the counted detectors' onset estimates in it that precede the confirmed
+    departure, the latest (an estimate with an interval first). Alarms merged into an incident from a
+    glitch just before the attack carry earlier onsets that the departure does not support."""
+    if departure_s is None:
+        return inc.onset_s, inc.onset_interval_s
+    found = [
+        (a.onset_s, a.onset_interval_s)
+        for r in ctx.results
+        if r.is_detector and r.ran and not r.advisory and r.name in inc.detectors
+        for a in r.alarms
+        if a.onset_s is not None
+        and a.onset_s <= departure_s + 1.0
+        and a.end_s >= inc.start_s
+        and a.start_s <= inc.end_s
+    ]
+    with_interval = [f for f in found if f[1] is not None]
+    pool = with_interval or found
+    if not pool:
+        return inc.onset_s, inc.onset_interval_s
+    onset, interval = max(pool, key=lambda f: f[0])
+    return float(onset), interval  # type: ignore[arg-type]

@@ -6,6 +6,7 @@ table, AttackTruth). Fix-level kinds are in fix_attacks.py, kinds acting on raw 
 
 from __future__ import annotations
 
+from spooflens.attacks.capture import apply_capture
 from spooflens.attacks.fix_attacks import apply_fix_attack
 from spooflens.attacks.observation_attacks import apply_observation_attack
 from spooflens.attacks.spec import (
@@ -22,6 +23,8 @@ from spooflens.epoch_table import EpochTable
 
 
 def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
+    if spec.kind == Kind.CAPTURE:
+        return apply_capture(table, spec)
     if spec.kind in OBSERVATION_KINDS:
         return apply_observation_attack(table, spec)
     return apply_fix_attack(table, spec)

@@ -26,6 +26,7 @@ class Kind(Enum):
     MEACONING = "meaconing"
     BLOCKING = "blocking"
     SPOOFED_SUBSET = "spoofed_subset"
+    CAPTURE = "capture"
 
 
 # Kinds that act on raw pseudoranges; the fixes follow through the receiver's single-point solution.
@@ -147,6 +148,27 @@ KINDS: dict[Kind, KindInfo] = {
             **_WINDOW,
         },
     ),
+    Kind.CAPTURE: KindInfo(
+        "real captures",
+        "a spoofer takeover as real receivers log it: satellites lost and re-acquired over `lost` s (the fix "
+        "drops out for a moment), reported accuracies and DOP inflated, noise and jamming indicator up, C/N0 "
+        "down then `cn0` dB above its old level, a velocity transient of `jump` m/s; then the drag: the "
+        "position pulled at `rate` m/s (`drag=ramp`), moved by `offset` m (`step`) or pulled to `offset` m "
+        "over 60 s (`pull`), the reported velocity consistent with it; when the spoofer switches off at "
+        "`end`, the receiver loses and re-acquires the real sky again",
+        {
+            "drag": "ramp, step or pull (default ramp)",
+            "rate": "m/s per axis of the ramp (default 3)",
+            "offset": "m per axis of a step or pull (default 200)",
+            "axes": "default en",
+            "lost": "s of the takeover transient (default 4)",
+            "jump": "m/s of the velocity transient (default 3)",
+            "acc": "reported accuracy inflation at the worst of the takeover (default 4)",
+            "cn0": "dB the spoofed signals are stronger than the real ones (default 4)",
+            "seed": "random seed of the transient (default 0)",
+            **_WINDOW,
+        },
+    ),
 }
 _DEFAULTS: dict[Kind, dict[str, Any]] = {
     Kind.RAMP: {"rate": 2.0, "axes": "en", "vel": 0},
@@ -159,6 +181,17 @@ _DEFAULTS: dict[Kind, dict[str, Any]] = {
     Kind.MEACONING: {"east": 500.0, "north": 0.0, "up": 0.0, "delay": 0.0},
     Kind.BLOCKING: {"count": 2, "seed": 0},
     Kind.SPOOFED_SUBSET: {"keep": 7, "delay": 300.0, "rate": 0.0, "seed": 0},
+    Kind.CAPTURE: {
+        "drag": "ramp",
+        "rate": 3.0,
+        "offset": 200.0,
+        "axes": "en",
+        "lost": 4.0,
+        "jump": 3.0,
+        "acc": 4.0,
+        "cn0": 4.0,
+        "seed": 0,
+    },
 }
 
 
@@ -197,13 +230,15 @@ def parse_attack(text: str) -> AttackSpec:
         key = key.strip().lower()
         if not sep or key not in KINDS[kind].params:
             raise AttackError(f"{kind.value}: bad parameter {item!r}; parameters are {sorted(KINDS[kind].params)}")
-        if key in ("axes", "receiver", "svs"):
+        if key in ("axes", "receiver", "svs", "drag"):
             params[key] = value.strip()
         else:
             try:
                 params[key] = float(value)
             except ValueError:
                 raise AttackError(f"{kind.value}: {key}={value!r} is not a number") from None
+    if kind == Kind.CAPTURE and params["drag"] not in ("ramp", "step", "pull"):
+        raise AttackError(f"capture: drag={params['drag']!r}; use ramp, step or pull")
     axes = str(params.get("axes", ""))
     if axes and (set(axes) - set("enu") or len(set(axes)) != len(axes)):
         raise AttackError(f"{kind.value}: axes={axes!r}; use a subset of e, n, u such as en")

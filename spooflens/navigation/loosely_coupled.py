@@ -83,6 +83,8 @@ class FilterOptions:
     exclude_after_s: float | None = None  # ignore GNSS from this time on (coast on the INS) ...
     exclude_until_s: float | None = None  # ... up to this time (None: to the end of the log)
     exclude_velocity_too: bool = True
+    # more stretches to leave GNSS out of (incidents already confirmed), (start, end or None)
+    exclude_windows: tuple[tuple[float, float | None], ...] = ()
     initial: NavState | None = None  # skip alignment (simulation benchmarks start from truth)
     # continue from another run's epoch: its covariance (24 x 24) and sensor-error estimates (9)
     initial_covariance: FloatArray | None = None
@@ -314,8 +316,11 @@ def _run(
     R_vb = opts.odometry.R_vb if opts.odometry is not None else np.eye(3)
     use = np.ones((len(tf), 9), dtype=np.bool_)
     use[:, 6:9] = opts.odometry is not None
+    windows = list(opts.exclude_windows)
     if opts.exclude_after_s is not None:
-        late = (tf >= opts.exclude_after_s) & (tf <= (np.inf if opts.exclude_until_s is None else opts.exclude_until_s))
+        windows.append((opts.exclude_after_s, opts.exclude_until_s))
+    for a, b in windows:
+        late = (tf >= a) & (tf <= (np.inf if b is None else b))
         use[late, :3] = False
         if opts.exclude_velocity_too:
             use[late, 3:6] = False

@@ -97,3 +97,92 @@ def gnss_errors(n: int, dt: float, noise: GnssNoise, rng: np.random.Generator) -
         pos = white
     vel = rng.normal(0.0, noise.sigma_vel_mps, (n, 3))
     return pos * sigma, vel
+
+
+@dataclass(frozen=True)
+class ReceiverModel:
+    """A receiver as real ones behave: errors with a white part and a slowly wandering first-order
+    Gauss-Markov part (30-300 s), accuracies it reports that misstate its real scatter by a factor, and
+    the indicators it logs beside each fix (satellites used, DOP, noise, jamming indicator, AGC, mean
+    C/N0), each with its own small fluctuation. `realistic_receiver` draws one."""
+
+    white_m: tuple[float, float] = (0.3, 0.6)  # horizontal, vertical 1 sigma
+    gm_m: tuple[float, float] = (1.5, 3.0)
+    gm_tau_s: float = 120.0
+    vel_white_mps: float = 0.05
+    vel_gm_mps: float = 0.03
+    vel_tau_s: float = 5.0
+    accuracy_factor: float = 3.0  # reported accuracy / real 1 sigma
+    sats: float = 12.0
+    hdop: float = 0.9
+    noise_per_ms: float = 95.0
+    jamming_indicator: float = 25.0
+    agc: float = 3200.0
+    cn0_dbhz: float = 41.0
+
+
+def realistic_receiver(rng: np.random.Generator) -> ReceiverModel:
+    """One draw of the receivers the real-world benchmark tries: correlated errors of 30-300 s, reported
+    accuracies 0.2-5 times the real scatter."""
+    tau = float(np.exp(rng.uniform(np.log(30.0), np.log(300.0))))
+    gm_h = float(rng.uniform(0.5, 3.0))
+    white_h = float(rng.uniform(0.05, 0.5))
+    return ReceiverModel(
+        white_m=(white_h, 2 * white_h),
+        gm_m=(gm_h, 2 * gm_h),
+        gm_tau_s=tau,
+        vel_white_mps=float(rng.uniform(0.02, 0.1)),
+        vel_gm_mps=float(rng.uniform(0.01, 0.08)),
+        vel_tau_s=float(rng.uniform(1.0, 20.0)),
+        accuracy_factor=float(np.exp(rng.uniform(np.log(0.2), np.log(5.0)))),
+        sats=float(rng.integers(8, 16)),
+        hdop=float(rng.uniform(0.6, 1.6)),
+        noise_per_ms=float(rng.uniform(70.0, 120.0)),
+        jamming_indicator=float(rng.uniform(5.0, 60.0)),
+        agc=float(rng.uniform(1500.0, 6000.0)),
+        cn0_dbhz=float(rng.uniform(36.0, 45.0)),
+    )
+
+
+def _gauss_markov(n: int, dt: float, sigma: FloatArray, tau: float, rng: np.random.Generator) -> FloatArray:
+    """(n, k) first-order Gauss-Markov series of standard deviations `sigma`, started stationary."""
+    a = np.exp(-dt / tau)
+    s = np.sqrt(1.0 - a * a)
+    white = rng.normal(0.0, 1.0, (n, len(sigma)))
+    x, _ = lfilter([s], [1.0, -a], white, axis=0, zi=((1.0 - s) * white[0])[None, :])
+    return np.asarray(x) * sigma
+
+
+def receiver_fix_errors(
+    n: int, dt: float, model: ReceiverModel, rng: np.random.Generator
+) -> tuple[FloatArray, FloatArray, dict[str, FloatArray]]:
+    """(position error ENU (n, 3), velocity error (n, 3), reported columns) of one receiver."""
+    wh, wv = model.white_m
+    gh, gv = model.gm_m
+    pos = rng.normal(0.0, 1.0, (n, 3)) * [wh, wh, wv] + _gauss_markov(
+        n, dt, np.array([gh, gh, gv]), model.gm_tau_s, rng
+    )
+    vel = rng.normal(0.0, model.vel_white_mps, (n, 3)) + _gauss_markov(
+        n, dt, np.full(3, model.vel_gm_mps), model.vel_tau_s, rng
+    )
+    h_sigma = float(np.hypot(wh, gh))
+    v_sigma = float(np.hypot(wv, gv))
+    vel_sigma = float(np.hypot(model.vel_white_mps, model.vel_gm_mps))
+    slow = _gauss_markov(n, dt, np.ones(6), 60.0, rng)  # indicators wander a little, slowly
+    sats = np.clip(np.round(model.sats + 1.5 * slow[:, 0]), 4, 32)
+    hdop = np.clip(model.hdop * (1.0 + 0.1 * slow[:, 1]) * (model.sats / sats), 0.5, None)
+    reported = {
+        "h_acc_m": model.accuracy_factor * h_sigma * hdop / model.hdop,
+        "v_acc_m": model.accuracy_factor * v_sigma * hdop / model.hdop,
+        "vel_acc_mps": model.accuracy_factor * vel_sigma * (1.0 + 0.05 * slow[:, 2]),
+        "sats_used": sats,
+        "hdop": hdop,
+        "vdop": 1.5 * hdop,
+        "noise_per_ms": np.round(model.noise_per_ms * (1.0 + 0.03 * slow[:, 3]) + rng.normal(0.0, 2.0, n)),
+        "jamming_indicator": np.clip(
+            np.round(model.jamming_indicator + 3.0 * slow[:, 4] + rng.normal(0, 2, n)), 0, 255
+        ),
+        "agc": np.round(model.agc * (1.0 + 0.02 * slow[:, 5]) + rng.normal(0.0, 10.0, n)),
+        "cn0_mean_dbhz": model.cn0_dbhz + 0.5 * slow[:, 0] + rng.normal(0.0, 0.3, n),
+    }
+    return pos, vel, reported

@@ -20,7 +20,7 @@ from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.rotations import matrix_to_quat, rotvec_to_matrix
 from spooflens.schema import FixType
 from spooflens.simulation.observations import ObservationNoise
-from spooflens.simulation.sensors import GnssNoise, gnss_errors, noisy_imu
+from spooflens.simulation.sensors import GnssNoise, ReceiverModel, gnss_errors, noisy_imu, receiver_fix_errors
 from spooflens.simulation.trajectories import PROFILES, Profile, Truth, generate
 
 # 2026-03-01T12:00:00Z: a fixed start so simulated logs are byte-for-byte reproducible
@@ -42,6 +42,9 @@ class Scenario:
     # C/N0, and its fixes are its own single-point solution of them (as a real receiver's are).
     observations: ObservationNoise | None = None
     constellation: str = "synthetic"  # or the path of a RINEX navigation file (the log then starts in its span)
+    # A receiver as real ones behave (correlated errors, misstated accuracies, indicators); None: the
+    # plain `gnss` noise model with honest accuracies
+    receiver: ReceiverModel | None = None
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -65,6 +68,14 @@ SCENARIOS: dict[str, Scenario] = {
         1.0,
         grade("consumer_mems"),
         observations=ObservationNoise(),
+    ),
+    "multirotor": Scenario(
+        "multirotor",
+        PROFILES["multirotor"],
+        200.0,
+        5.0,
+        grade("consumer_mems"),
+        receiver=ReceiverModel(),
     ),
     "dual_receiver": Scenario(
         "dual_receiver",
@@ -132,9 +143,18 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
             if lever is not None
             else (np.degrees(truth.lat), np.degrees(truth.lon), truth.h)
         )
-        dpos, dvel = gnss_errors(len(g_idx), step / sc.imu_hz, sc.gnss, rng)
+        if sc.receiver is not None:
+            dpos, dvel, reported = receiver_fix_errors(len(g_idx), step / sc.imu_hz, sc.receiver, rng)
+        else:
+            dpos, dvel = gnss_errors(len(g_idx), step / sc.imu_hz, sc.gnss, rng)
+            sig = np.asarray(sc.gnss.sigma_enu_m)
+            reported = {
+                "h_acc_m": np.full(len(g_idx), float(np.sqrt(0.5 * (sig[0] ** 2 + sig[1] ** 2)))),
+                "v_acc_m": np.full(len(g_idx), float(sig[2])),
+                "vel_acc_mps": np.full(len(g_idx), sc.gnss.sigma_vel_mps),
+                "sats_used": 9.0 + (np.arange(len(g_idx)) // 200) % 3,
+            }
         lat_g, lon_g, h_g = add_enu_offset(lat[g_idx], lon[g_idx], h[g_idx], dpos)
-        sig = np.asarray(sc.gnss.sigma_enu_m)
         v = truth.v_enu[g_idx] + dvel
         fix_frames.append(
             pd.DataFrame(
@@ -147,10 +167,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
                     "vel_e_mps": v[:, 0],
                     "vel_n_mps": v[:, 1],
                     "vel_u_mps": v[:, 2],
-                    "h_acc_m": float(np.sqrt(0.5 * (sig[0] ** 2 + sig[1] ** 2))),
-                    "v_acc_m": float(sig[2]),
-                    "vel_acc_mps": sc.gnss.sigma_vel_mps,
-                    "sats_used": 9.0 + (np.arange(len(g_idx)) // 200) % 3,
+                    **reported,
                     "fix_type": np.full(len(g_idx), FixType.FIX_3D, dtype=np.int8),
                 }
             )

@@ -189,6 +189,30 @@ PROFILES: dict[str, Profile] = {
         banked_turns=False,
         blend_s=30.0,
     ),
+    # Multirotor: climb out, hover, cruise with turns at 8 m/s, hover, cruise back (10 min).
+    "multirotor": Profile(
+        47.3977,
+        8.5456,
+        450.0,
+        0.0,
+        20.0,
+        _seg(
+            (20.0, 0.0, 0.0, 2.0),
+            (60.0, 0.0, 0.0, 0.0),
+            (8.0, 1.0, 0.0, 0.0),
+            (90.0, 0.0, 0.0, 0.0),
+            (12.0, 0.0, 15.0, 0.0),
+            (120.0, 0.0, 0.0, 0.0),
+            (8.0, -1.0, 0.0, 0.0),
+            (60.0, 0.0, 0.0, 0.0),
+            (8.0, 1.0, 12.0, 0.0),
+            (150.0, 0.0, 0.0, 0.0),
+            (8.0, -1.0, 0.0, -1.0),
+            (56.0, 0.0, 0.0, 0.0),
+        ),
+        banked_turns=False,
+        blend_s=2.0,
+    ),
     # Ground vehicle: accelerate, turn, brake, stop, go again (5 min).
     "ground": Profile(
         42.3765,

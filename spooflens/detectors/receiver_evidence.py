@@ -1,0 +1,236 @@
+"""Receiver self-report as evidence: what the receiver logs about itself, against its own baseline in
+the log and the documented normal ranges.
+
+A receiver under a takeover says so in many small ways before and while its fixes move: it loses
+satellites several at once and re-acquires them, its DOP and reported accuracies inflate, its noise and
+jamming indicators rise, its AGC moves (a strong signal at the antenna), its C/N0 drops during the
+takeover and then sits above its old level (a spoofer is louder than the sky), its own spoofing or
+jamming state goes up. None of these is proof (a bridge, a tunnel, a turn away from the sky do some of
+them too), so this class alone never makes a spoofing verdict; with the GNSS-only or an independent
+class it does (`spooflens.evidence.confidence`).
+
+Per receiver and indicator the baseline is the log's own median and a robust scale (1.4826 MAD, with a
+floor per indicator so a constant indicator is not infinitely sensitive). Each epoch gets a directional
+robust z-score per indicator (positive = the suspicious direction). The detector alarms on:
+
+- a joint change: at least `min_indicators` indicators beyond `z_alarm` within `window_s` of each other
+  (indicators of one event change within seconds of each other, not at the same epoch), lasting
+  `min_duration_s`;
+- the receiver's own flags: its decoded spoofing flag, or a jamming state of warning/critical
+  (mitigated/detected) for `min_duration_s`;
+- documented normal ranges, so a log attacked from its first fix still shows it: a mean C/N0 above
+  `max_plausible_cn0_dbhz` (the sky gives 30-50 dB-Hz to a small antenna).
+
+Losses of fix (gaps longer than `gap_factor` median periods) count as an indicator too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.evidence import Evidence
+from spooflens.schema import SpoofingFlag
+
+FloatArray = NDArray[np.float64]
+NAME = "receiver_evidence"
+
+
+@dataclass(frozen=True)
+class Indicator:
+    column: str
+    label: str
+    direction: int  # +1 rise is suspicious, -1 drop is, 0 any change
+    floor: float  # smallest robust scale (absolute)
+    relative_floor: float = 0.0  # ... or this fraction of the median, whichever is larger
+
+
+INDICATORS: tuple[Indicator, ...] = (
+    Indicator("h_acc_m", "reported horizontal accuracy", +1, 0.05, 0.15),
+    Indicator("v_acc_m", "reported vertical accuracy", +1, 0.05, 0.15),
+    Indicator("vel_acc_mps", "reported speed accuracy", +1, 0.01, 0.15),
+    Indicator("sats_used", "satellites used", -1, 1.0),
+    Indicator("hdop", "HDOP", +1, 0.05, 0.1),
+    Indicator("vdop", "VDOP", +1, 0.05, 0.1),
+    Indicator("noise_per_ms", "noise level", +1, 2.0, 0.03),
+    Indicator("jamming_indicator", "jamming indicator", +1, 3.0, 0.1),
+    Indicator("agc", "AGC", 0, 10.0, 0.03),
+    Indicator("cn0_mean_dbhz", "mean C/N0", 0, 1.0),
+)
+
+
+@dataclass(frozen=True)
+class ReceiverEvidenceOptions:
+    z_alarm: float = 6.0
+    z_clip: float = 20.0
+    min_indicators: int = 2
+    window_s: float = 5.0
+    min_duration_s: float = 1.0
+    merge_gap_s: float = 10.0
+    gap_factor: float = 4.0
+    max_plausible_cn0_dbhz: float = 50.0
+
+
+def robust_z(x: FloatArray, direction: int, floor: float, relative_floor: float) -> FloatArray:
+    """Directional robust z-score of a series against its own median (NaN where x is NaN)."""
+    ok = np.isfinite(x)
+    if ok.sum() < 5:
+        return np.full(len(x), np.nan)
+    med = float(np.median(x[ok]))
+    scale = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor, relative_floor * abs(med))
+    z = (x - med) / scale
+    return np.abs(z) if direction == 0 else direction * z
+
+
+def _windowed_max(t: FloatArray, z: FloatArray, half_s: float) -> FloatArray:
+    """max of z over [t - half_s, t + half_s] (NaN-aware), for indicators that change seconds apart."""
+    lo = np.searchsorted(t, t - half_s, side="left")
+    hi = np.searchsorted(t, t + half_s, side="right")
+    zz = np.nan_to_num(z, nan=-np.inf)
+    out = np.array([zz[a:b].max() if b > a else -np.inf for a, b in zip(lo, hi, strict=True)])
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def _fix_gaps(t: FloatArray, factor: float) -> FloatArray:
+    """Gap before each fix in median periods minus one (0 for a regular fix): a lost fix shows here."""
+    if len(t) < 3:
+        return np.zeros(len(t))
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    return np.r_[0.0, np.clip(dt / max(period, 1e-9) - 1.0, 0.0, None)] * (6.0 / max(factor - 1.0, 1e-9))
+
+
+def _onsets(t: FloatArray, quiet: NDArray[np.bool_], alarms: list[Alarm], rid: str) -> list[Alarm]:
+    out = []
+    for a in alarms:
+        before = np.flatnonzero((t < a.start_s) & quiet)
+        onset = float(t[before[-1]]) if len(before) else float(t[0])
+        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=rid))
+    return out
+
+
+def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> DetectorResult | None:
+    t = fx["t_s"].to_numpy(dtype=float)
+    if len(t) < 10:
+        return None
+    z_cols: dict[str, FloatArray] = {}
+    labels: dict[str, str] = {}
+    for ind in INDICATORS:
+        x = fx[ind.column].to_numpy(dtype=float)
+        if np.isfinite(x).sum() < 10 or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
+            continue
+        z_cols[ind.column] = np.clip(
+            robust_z(x, ind.direction, ind.floor, ind.relative_floor), -opts.z_clip, opts.z_clip
+        )
+        labels[ind.column] = ind.label
+    gaps = _fix_gaps(t, opts.gap_factor)
+    if gaps.any():
+        z_cols["fix_gap"] = np.clip(gaps, 0, opts.z_clip)
+        labels["fix_gap"] = "fix lost (gap)"
+    flags = fx["spoofing_flag"].to_numpy()
+    spoof_flag = flags == SpoofingFlag.INDICATED
+    jam_state = fx["jamming_state"].to_numpy(dtype=float) >= 2
+    cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
+    too_strong = np.nan_to_num(cn0) > opts.max_plausible_cn0_dbhz
+    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any():
+        return None
+    names = list(z_cols)
+    Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
+    Zw = np.stack([_windowed_max(t, Z[:, i], opts.window_s / 2) for i in range(Z.shape[1])], axis=1) if names else Z
+    beyond = np.nan_to_num(Zw, nan=0.0) > opts.z_alarm
+    count = beyond.sum(axis=1).astype(float)
+    joint = count >= opts.min_indicators
+    # the score: the second largest windowed z (the weaker of the two strongest agreeing indicators)
+    score = np.sort(np.nan_to_num(Zw, nan=0.0), axis=1)[:, -2] if Z.shape[1] >= 2 else np.zeros(len(t))
+    raised = joint | spoof_flag | jam_state | too_strong
+    alarms = [
+        a
+        for a in alarm_intervals(t, np.maximum(score, count), raised, opts.merge_gap_s)
+        if a.end_s - a.start_s >= opts.min_duration_s or spoof_flag[(t >= a.start_s) & (t <= a.end_s)].sum() >= 2
+    ]
+    quiet = (count == 0) & ~spoof_flag & ~jam_state
+    result = DetectorResult(
+        NAME,
+        True,
+        f"{rid}: {len(names)} indicator(s) against the log's own baseline"
+        + (f" ({', '.join(labels[n] for n in names)})" if names else "")
+        + "; receiver flags and documented ranges",
+        _onsets(t, quiet, alarms, rid),
+        [
+            Series(f"{rid}/joint_score", t, score, "robust z", opts.z_alarm),
+            Series(f"{rid}/indicators_beyond", t, count, "count", float(opts.min_indicators)),
+        ],
+        evidence=Evidence.RECEIVER,
+    )
+    if names:
+        result.series.append(Series(f"{rid}/robust_z", t, Z, "robust z", None, tuple(labels[n] for n in names)))
+    for a in result.alarms:
+        inside = (t >= a.start_s) & (t <= a.end_s)
+        moved = [labels[n] for i, n in enumerate(names) if beyond[inside, i].any()]
+        what = []
+        if moved:
+            what.append("indicators out of their baseline: " + ", ".join(moved))
+        if spoof_flag[inside].any():
+            what.append("the receiver's own spoofing flag raised")
+        if jam_state[inside].any():
+            what.append("the receiver's jamming state at warning or worse")
+        if too_strong[inside].any():
+            what.append(f"mean C/N0 above {opts.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives)")
+        result.findings.append(
+            Finding(f"{rid}: {'; '.join(what)} ({a.start_s:.1f}-{a.end_s:.1f} s)", a.start_s, a.end_s, receiver_id=rid)
+        )
+    return result
+
+
+def run_receiver_evidence(fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | None = None) -> DetectorResult:
+    opts = opts or ReceiverEvidenceOptions()
+    merged = DetectorResult(NAME, True, evidence=Evidence.RECEIVER)
+    notes = []
+    for rid, fx in fixes.groupby("receiver_id", sort=False):
+        r = check_receiver(str(rid), fx.reset_index(drop=True), opts)
+        if r is None:
+            continue
+        merged.alarms += r.alarms
+        merged.series += r.series
+        merged.findings += r.findings
+        notes.append(r.reason)
+    if not notes:
+        return DetectorResult.skipped(
+            NAME,
+            "the receiver logs no quality indicators (accuracy, satellites, DOP, "
+            "noise, jamming, AGC, C/N0, spoofing state)",
+            Evidence.RECEIVER,
+        )
+    merged.reason = "; ".join(notes)
+    merged.alarms.sort(key=lambda a: a.start_s)
+    return merged
+
+
+def _run(ctx: AnalysisContext) -> list[DetectorResult]:
+    return [run_receiver_evidence(ctx.table.fixes)]
+
+
+ANALYSIS = AnalysisSpec(
+    NAME,
+    "receiver self-report: indicators against the log's own baseline, the receiver's flags, documented ranges",
+    ("fixes",),
+    _run,
+    (
+        DetectorInfo(
+            NAME,
+            Evidence.RECEIVER,
+            "the receiver's own indicators changing together, its spoofing/jamming state, implausible C/N0",
+            "Each indicator the receiver logs (reported accuracies, satellites used, DOP, noise, jamming "
+            "indicator, AGC, mean C/N0, losses of fix) against its own median and robust scale in this log; "
+            "an alarm needs two indicators beyond 6 robust sigma within 5 s of each other for 1 s, the "
+            "receiver's own spoofing flag or jamming state, or a mean C/N0 above 50 dB-Hz. Evidence alone is "
+            "never a spoofing verdict.",
+            "two independent indicators beyond 6 robust sigma at once",
+        ),
+    ),
+)
