@@ -70,6 +70,8 @@ NS = 1_000_000_000
 GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
 SYSTEMS = "GRESCJI"
 SUPPORTED_VERSIONS = "2.10, 2.11 and 3.02-3.05 observation files"
+# table.metadata key (+ ".<receiver id>") holding the header's APPROX POSITION XYZ, "x y z" in ECEF metres
+APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"
 DEFAULT_TIME_SYSTEM = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS"}  # single-system files without one
 
 CODE_PRIORITY_V2: tuple[str, ...] = ("C1", "P1")
@@ -1038,6 +1040,7 @@ class _FileResult:
     stream: StreamInfo
     navs: list[NavFile]
     skipped: list[Skipped]
+    approx_xyz: tuple[float, float, float] | None = None
 
 
 def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -> dict[str, np.ndarray]:
@@ -1137,7 +1140,8 @@ def _read_obs_file(
     _add_satellite_states(rows, navs, path.name, receiver_id, skipped)
     epochs = len(np.unique(rows["t_ns"]))
     stream = StreamInfo("observations", receiver_id, path.name, f"RINEX {scan.version:.2f} obs", epochs)
-    return _FileResult(rows, stream, navs, skipped)
+    xyz = scan.header.approx_xyz
+    return _FileResult(rows, stream, navs, skipped, None if xyz is None or not any(xyz) else xyz)
 
 
 def _merge(navs: list[NavFile]) -> GpsEphemerides:
@@ -1174,7 +1178,16 @@ def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> E
                 )
             )
             skipped.extend(nav.skipped)
-    table = build_table(path, "rinex", "gps", {"observations": pd.DataFrame(cols)}, streams, skipped, t0_ns=t0)
+    # The header's APPROX POSITION: a static station's surveyed site (the known-station detectors decide
+    # whether the receiver really stayed there; a moving receiver's header is only where it started).
+    metadata = {
+        f"{APPROX_POSITION_KEY}.{p.stream.stream_id}": " ".join(f"{v:.4f}" for v in p.approx_xyz)
+        for p in parts
+        if p.approx_xyz is not None
+    }
+    table = build_table(
+        path, "rinex", "gps", {"observations": pd.DataFrame(cols)}, streams, skipped, t0_ns=t0, metadata=metadata
+    )
     navs = list({n.path: n for p in parts for n in p.navs}.values())
     table.ephemerides = (navs[0].ephemerides if len(navs) == 1 else _merge(navs)) if navs else None
     return table

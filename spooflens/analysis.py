@@ -35,6 +35,7 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
+    "spooflens.detectors.seed001",
 )
 
 
