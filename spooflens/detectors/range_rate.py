@@ -43,9 +43,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, stats
 
+from spooflens.detectors.references import Reference
 from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.grid import ObservationGrid, epoch_change, predicted, predicted_rate
-from spooflens.detectors.references import Reference
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -164,7 +164,9 @@ def rate_residuals(
         y = grid.rate_mps - predicted_rate(grid, ref.pos, ref.vel)
     usable = grid.usable & ref.valid[:, None] & (now.elevation_rad >= np.radians(opts.elevation_mask_deg))
     y = np.where(usable & np.isfinite(y), y, np.nan)
-    return RateResiduals(grid.t_s, source, y, now.los_enu, now.elevation_rad, slip & usable, delay_step & usable, step_m)
+    return RateResiduals(
+        grid.t_s, source, y, now.los_enu, now.elevation_rad, slip & usable, delay_step & usable, step_m
+    )
 
 
 @dataclass(frozen=True)

@@ -78,7 +78,9 @@ def parse_station(text: str) -> tuple[str | None, float, float, float]:
     try:
         lat, lon, h = (float(p) for p in parts)
     except ValueError:
-        raise ValueError(f"{text!r}: expected LAT,LON,H in degrees, degrees, metres (optionally RECEIVER=...)") from None
+        raise ValueError(
+            f"{text!r}: expected LAT,LON,H in degrees, degrees, metres (optionally RECEIVER=...)"
+        ) from None
     if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 360.0 and -1000.0 < h < 1e5):
         raise ValueError(f"{text!r}: latitude, longitude or height out of range")
     return (rid.strip() or None) if sep else None, lat, lon, h

@@ -25,7 +25,7 @@ each other on a wrong velocity).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ class Seed001Options:
     p_detect: float = 0.9
     k_max: int = 60  # longest t-test window, epochs
     max_whiteness: float = 0.5
-    rate: RateOptions = RateOptions()
+    rate: RateOptions = field(default_factory=RateOptions)
 
 
 @dataclass(frozen=True)
@@ -134,7 +134,9 @@ def _alarms(st: ReceiverStatistics, stat: FloatArray, alarm: NDArray[np.bool_], 
         # the change happened between the last quiet epoch and the first alarmed one
         prev = np.flatnonzero(st.t < a.start_s)
         interval = (float(st.t[prev[-1]]), a.start_s) if len(prev) else None
-        out.append(replace(a, receiver_id=st.receiver_id, satellites=sats, onset_s=a.start_s, onset_interval_s=interval))
+        out.append(
+            replace(a, receiver_id=st.receiver_id, satellites=sats, onset_s=a.start_s, onset_interval_s=interval)
+        )
     return out
 
 
@@ -224,7 +226,10 @@ def detect(stats_list: list[ReceiverStatistics], opts: Seed001Options) -> list[D
 
 
 def _skipped(reason: str) -> list[DetectorResult]:
-    return [DetectorResult.skipped(NAME, reason, Evidence.INERTIAL), DetectorResult.skipped(TTEST, reason, Evidence.INERTIAL)]
+    return [
+        DetectorResult.skipped(NAME, reason, Evidence.INERTIAL),
+        DetectorResult.skipped(TTEST, reason, Evidence.INERTIAL),
+    ]
 
 
 def run(ctx: AnalysisContext, opts: Seed001Options | None = None) -> list[DetectorResult]:
@@ -238,7 +243,9 @@ def run(ctx: AnalysisContext, opts: Seed001Options | None = None) -> list[Detect
             return _skipped(f"needs the INS reference, which could not be computed: {err}")
         rid = nav.solution.receiver_id
         if rid not in with_obs:
-            return _skipped(f"the navigation receiver {rid!r} has no raw observations (receivers with them: {with_obs})")
+            return _skipped(
+                f"the navigation receiver {rid!r} has no raw observations (receivers with them: {with_obs})"
+            )
         chosen = [(rid, lambda g: ins_reference(ctx, g, opts.window_s))]
     else:
         found, why = stations(table, ctx.options.extra)

@@ -62,8 +62,8 @@ class ObservationGrid:
     @property
     def usable(self) -> NDArray[np.bool_]:
         """Cells with a pseudorange and a satellite state."""
-        return np.isfinite(self.pseudorange_m) & np.isfinite(self.sv_pos).all(axis=-1) & np.isfinite(
-            self.sv_clock_bias_m
+        return (
+            np.isfinite(self.pseudorange_m) & np.isfinite(self.sv_pos).all(axis=-1) & np.isfinite(self.sv_clock_bias_m)
         )
 
     @property
