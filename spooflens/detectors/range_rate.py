@@ -75,14 +75,33 @@ class RateResiduals:
     step_m: FloatArray  # (E, S) size of that jump (carrier change minus what was expected), m
 
 
+_CLIP = 3.0
+_CLIPPED_VARIANCE = 1.0 - 2.0 * _CLIP * stats.norm.pdf(_CLIP) / (2.0 * stats.norm.cdf(_CLIP) - 1.0)
+
+
 def robust_scale(x: FloatArray, floor: float = 0.0) -> float:
-    """Scale of a zero-mean residual from its quietest quarter (25th percentile of |x|), which stays
-    right while up to three quarters of the samples are disturbed; exact zeros left out."""
+    """Standard deviation of a zero-mean residual that outliers (attacks) may contaminate.
+
+    Started from the quietest quarter (25th percentile of |x|, right while up to three quarters of the
+    samples are disturbed), then refined to the RMS of the samples within 3 scales (corrected for the
+    clipping) until it settles: the quietest quarter alone is noisy for a smooth, time-correlated residual
+    (an INS drift), which picks its quietest stretch. Exact zeros are left out.
+    """
     a = np.abs(np.asarray(x, float))
     a = a[np.isfinite(a) & (a > 1e-12)]
     if not len(a):
         return floor
-    return max(float(np.percentile(a, 25) / stats.halfnorm.ppf(0.25)), floor)
+    s = float(np.percentile(a, 25) / stats.halfnorm.ppf(0.25))
+    for _ in range(100):
+        inside = a[a < _CLIP * s]
+        if len(inside) < 3:
+            break
+        new = float(np.sqrt(np.mean(inside**2) / _CLIPPED_VARIANCE))
+        if abs(new - s) <= 1e-6 * s:
+            s = new
+            break
+        s = new
+    return max(s, floor)
 
 
 def row_median(x: FloatArray, mask: BoolArray | None = None) -> FloatArray:
@@ -279,9 +298,9 @@ def fit_velocity_error(
 
 
 def normalised_components(d: FloatArray, cov_unit: FloatArray, sigma_unit: float) -> tuple[FloatArray, FloatArray]:
-    """Each ENU component of d over its scale sqrt(sigma_unit^2 cov_ii + sigma_ref_i^2), where sigma_ref_i
-    (the reference's own error, e.g. the free INS drift) is what makes the robust scale of the
-    normalised component 1. Returns (normalised (E, 3), sigma_ref (3,))."""
+    """Each ENU component of d over its scale sqrt(sigma_unit^2 cov_ii + sigma_ref_i^2): the least-squares
+    geometry and the reference's own error (e.g. the free INS drift over its window), sigma_ref_i being
+    what makes the robust scale of the normalised component 1. Returns (normalised (E, 3), sigma_ref (3,))."""
     geometric = sigma_unit**2 * np.diagonal(cov_unit, axis1=1, axis2=2)
     z = np.full_like(d, np.nan)
     sigma_ref = np.zeros(3)
@@ -289,14 +308,15 @@ def normalised_components(d: FloatArray, cov_unit: FloatArray, sigma_unit: float
         ok = np.isfinite(d[:, i]) & np.isfinite(geometric[:, i])
         if ok.sum() < 4:
             continue
+        x, g = d[ok, i], geometric[ok, i]
 
-        def scale(s_ref: float, i: int = i, ok: NDArray[np.bool_] = ok) -> float:
-            return robust_scale(d[ok, i] / np.sqrt(geometric[ok, i] + s_ref**2)) - 1.0
+        def excess(s_ref: float, x: FloatArray = x, g: FloatArray = g) -> float:
+            return robust_scale(x / np.sqrt(g + s_ref**2)) - 1.0
 
-        if scale(0.0) > 0:
-            hi = max(robust_scale(d[ok, i]), 1e-9) * 10.0
-            sigma_ref[i] = optimize.brentq(scale, 0.0, hi, xtol=1e-9) if scale(hi) < 0 else hi
-        z[ok, i] = d[ok, i] / np.sqrt(geometric[ok, i] + sigma_ref[i] ** 2)
+        if excess(0.0) > 0:
+            hi = 10.0 * max(robust_scale(x), 1e-9)
+            sigma_ref[i] = optimize.brentq(excess, 0.0, hi, xtol=1e-9) if excess(hi) < 0 else hi
+        z[ok, i] = x / np.sqrt(g + sigma_ref[i] ** 2)
     return z, sigma_ref
 
 

@@ -65,6 +65,13 @@ class Reference:
     pos_prev: FloatArray  # (E, 3) ECEF, NaN where unknown
     pos: FloatArray  # (E, 3)
     vel: FloatArray  # (E, 3) ECEF velocity at epoch k
+    # (E,) when the GNSS last touched the reference used at epoch k (the INS restart state's time; -inf for
+    # a station): after an alarm, references restarted later have seen the spoofed fixes
+    informed_s: FloatArray | None = None
+
+    def contaminated(self, k: int, since_s: float) -> bool:
+        """Whether epoch k's reference was informed by the GNSS at or after `since_s`."""
+        return self.informed_s is not None and bool(self.informed_s[k] >= since_s)
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -162,8 +169,15 @@ def station_reference(grid: ObservationGrid, station: Station) -> Reference:
     )
 
 
-def ins_reference(ctx: AnalysisContext, grid: ObservationGrid, window_s: float, block_s: float = 1.0) -> Reference:
-    """The free INS restarted at least `window_s` before each epoch (module notes)."""
+def ins_reference(
+    ctx: AnalysisContext, grid: ObservationGrid, window_s: float, settle_s: float = 20.0, block_s: float = 1.0
+) -> Reference:
+    """The free INS restarted at least `window_s` before each epoch (module notes).
+
+    Restarts only from states after the filter has settled: `settle_s` after its start and not before the
+    alignment's window ends (until then the heading is not known to its stated accuracy and a free run
+    from it drifts by metres per second in the first turn).
+    """
     from spooflens.navigation.alignment import to_flu
     from spooflens.navigation.strapdown import NavState, preintegrate, propagate
 
@@ -181,12 +195,16 @@ def ins_reference(ctx: AnalysisContext, grid: ObservationGrid, window_s: float, 
     )
     states = np.asarray(sol.state, dtype=float)
     t_state = states[:, -1]  # the IMU sample time each post-update state refers to
+    settled = float(sol.t[0]) + settle_s
+    if sol.alignment is not None:
+        settled = max(settled, sol.alignment.t0 + sol.alignment.window_s)
     E = grid.n_epochs
     out_prev = np.full((E, 3), np.nan)
     out_pos = np.full((E, 3), np.nan)
     out_vel_enu = np.full((E, 3), np.nan)
     llh_prev = np.full((E, 3), np.nan)
     llh = np.full((E, 3), np.nan)
+    informed = np.full(E, np.nan)
 
     def to_sample(t: float) -> int:
         return int(np.clip(np.searchsorted(pre.t, t, side="right") - 1, 0, len(pre.t) - 1))
@@ -202,9 +220,10 @@ def ins_reference(ctx: AnalysisContext, grid: ObservationGrid, window_s: float, 
         t_prev, t_now = grid.t_s[e - 1], grid.t_s[e]
         latest = min(t_now - window_s, t_prev)
         j = int(np.searchsorted(t_state, latest + 1e-9, side="right") - 1)
-        if j < 0 or t_now > pre.t[-1] + 1.0:
+        if j < 0 or t_state[j] < settled or t_now > pre.t[-1] + 1.0:
             continue
         s = NavState.from_vector(states[j])
+        informed[e] = sol.t[j]
         i = to_sample(s.t)
         for target_t, out in ((t_prev, llh_prev), (t_now, llh)):
             k = to_sample(target_t)
@@ -221,11 +240,13 @@ def ins_reference(ctx: AnalysisContext, grid: ObservationGrid, window_s: float, 
     vel[ok] = np.einsum("eji,ej->ei", R, out_vel_enu[ok])  # ENU -> ECEF: R^T v
     return Reference(
         "ins",
-        f"INS {sol.imu_id} propagated alone from the GNSS/INS state {window_s:g} s before each epoch",
+        f"INS {sol.imu_id} propagated alone from the GNSS/INS state {window_s:g} s before each epoch "
+        f"(from {settled:.0f} s, once the filter settled)",
         Evidence.INERTIAL,
         out_prev,
         out_pos,
         vel,
+        informed,
     )
 
 
