@@ -36,6 +36,7 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
     "spooflens.detectors.seed001",
+    "spooflens.detectors.seed002",
 )
 
 

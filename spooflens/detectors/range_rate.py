@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from spooflens.detectors.references import Reference
+from spooflens.detectors.scales import robust_scale
 from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.grid import ObservationGrid, epoch_change, predicted, predicted_rate
 
@@ -73,35 +74,6 @@ class RateResiduals:
     slip: BoolArray  # (E, S) carrier slipped (replaced by Doppler, or dropped)
     delay_step: BoolArray  # (E, S) code and carrier jumped together (a change of the signal's delay)
     step_m: FloatArray  # (E, S) size of that jump (carrier change minus what was expected), m
-
-
-_CLIP = 3.0
-_CLIPPED_VARIANCE = 1.0 - 2.0 * _CLIP * stats.norm.pdf(_CLIP) / (2.0 * stats.norm.cdf(_CLIP) - 1.0)
-
-
-def robust_scale(x: FloatArray, floor: float = 0.0) -> float:
-    """Standard deviation of a zero-mean residual that outliers (attacks) may contaminate.
-
-    Started from the quietest quarter (25th percentile of |x|, right while up to three quarters of the
-    samples are disturbed), then refined to the RMS of the samples within 3 scales (corrected for the
-    clipping) until it settles: the quietest quarter alone is noisy for a smooth, time-correlated residual
-    (an INS drift), which picks its quietest stretch. Exact zeros are left out.
-    """
-    a = np.abs(np.asarray(x, float))
-    a = a[np.isfinite(a) & (a > 1e-12)]
-    if not len(a):
-        return floor
-    s = float(np.percentile(a, 25) / stats.halfnorm.ppf(0.25))
-    for _ in range(100):
-        inside = a[a < _CLIP * s]
-        if len(inside) < 3:
-            break
-        new = float(np.sqrt(np.mean(inside**2) / _CLIPPED_VARIANCE))
-        if abs(new - s) <= 1e-6 * s:
-            s = new
-            break
-        s = new
-    return max(s, floor)
 
 
 def row_median(x: FloatArray, mask: BoolArray | None = None) -> FloatArray:

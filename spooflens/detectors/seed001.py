@@ -28,7 +28,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
@@ -42,6 +41,7 @@ from spooflens.detectors.range_rate import (
     window_for_bias,
 )
 from spooflens.detectors.references import Reference, ins_reference, station_reference, stations
+from spooflens.detectors.scales import lag1_autocorrelation, threshold
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
 from spooflens.gnss.grid import observation_grid
@@ -105,30 +105,6 @@ def receiver_statistics(
         res.step_m,
         res.source,
     )
-
-
-def lag1_autocorrelation(z: FloatArray, clip: float = 5.0) -> float:
-    """Lag-1 autocorrelation of normalised components (E, k), averaged over the components, from the pairs of
-    consecutive epochs both inside +-`clip` (an attack's outliers would make any series look smooth)."""
-    values = []
-    for i in range(z.shape[1]):
-        a, b = z[:-1, i], z[1:, i]
-        ok = np.isfinite(a) & np.isfinite(b) & (np.abs(a) <= clip) & (np.abs(b) <= clip)
-        if ok.sum() >= 8:
-            a, b = a[ok] - a[ok].mean(), b[ok] - b[ok].mean()
-            den = np.sqrt(np.sum(a * a) * np.sum(b * b))
-            values.append(float(np.sum(a * b) / den) if den > 0 else 0.0)
-    return float(np.mean(values)) if values else float("nan")
-
-
-def threshold(p_false_alarm: float, n_samples: int, rho: float, dof: int = 3) -> tuple[float, float]:
-    """Threshold on the sum of `dof` squared components whose scales were estimated from `n_samples`
-    epochs with lag-1 autocorrelation `rho`: dof x F(dof, n_eff) at `p_false_alarm`, n_eff = n (1 - rho) /
-    (1 + rho) (at least 5). Chi-square(dof) when the scale is known; the F tail adds the uncertainty of a
-    scale read off a short or smooth series. Returns (threshold, n_eff)."""
-    r = float(np.clip(np.nan_to_num(rho), 0.0, 0.99))
-    n_eff = max(n_samples * (1.0 - r) / (1.0 + r), 5.0)
-    return float(dof * stats.f.isf(p_false_alarm, dof, n_eff)), n_eff
 
 
 def _alarms(st: ReceiverStatistics, stat: FloatArray, alarm: NDArray[np.bool_], merge_gap_s: float) -> list[Alarm]:
