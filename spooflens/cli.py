@@ -132,17 +132,43 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
 @click.option(
     "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
 )
+@click.option(
+    "--station",
+    "station_texts",
+    multiple=True,
+    metavar="[RX=]LAT,LON,H",
+    help="A receiver's known position (deg, deg, m above the ellipsoid) for the known-station detectors; "
+    "without RX= the first receiver with observations. Repeatable.",
+)
 @click.option("--quiet", is_flag=True, help="No progress bars or tables; errors only.")
 def analyze(
-    log: Path, output: Path | None, json_path: Path | None, topics: tuple[str, ...], imu_grade: str | None, quiet: bool
+    log: Path,
+    output: Path | None,
+    json_path: Path | None,
+    topics: tuple[str, ...],
+    imu_grade: str | None,
+    station_texts: tuple[str, ...],
+    quiet: bool,
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary."""
     from spooflens.analysis import AnalyzeOptions
+    from spooflens.detectors.references import STATION_OPTION, parse_station
     from spooflens.pipeline import analyze_table
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
+    try:
+        given_stations = [parse_station(text) for text in station_texts]
+    except ValueError as err:
+        raise click.BadParameter(str(err), param_hint="--station") from None
     table = _read(log, _parse_topics(topics), not quiet and show_progress())
+    with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
+    for rid, *_ in given_stations:
+        if rid is not None and rid not in with_obs:
+            raise click.BadParameter(
+                f"no receiver {rid!r} with raw observations in {log}; receivers with them: {with_obs or 'none'}",
+                param_hint="--station",
+            )
     output = output or Path(log.name).with_suffix(".rrd")
     with progress(not quiet and show_progress()) as report:
         steps: list[str] = []
@@ -151,7 +177,8 @@ def analyze(
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        result = analyze_table(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
+        options = AnalyzeOptions(imu_grade=imu_grade, extra={STATION_OPTION: given_stations} if given_stations else {})
+        result = analyze_table(table, options, on_step)
         verdict = result.verdict
         lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
         write_recording(output, table, result.results, lines)
@@ -311,6 +338,8 @@ def simulate(
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
+        "seed001": "spooflens.bench.seed001_bench:command",
+        "seed002": "spooflens.bench.seed002_bench:command",
     },
 )
 def bench() -> None:
