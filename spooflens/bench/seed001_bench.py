@@ -188,7 +188,7 @@ def spoofed(obs: pd.DataFrame, t: FloatArray, on: NDArray[np.bool_], p, v, pf, v
 
 
 def _table(obs: pd.DataFrame, start_gps: float, eph: GpsEphemerides) -> EpochTable:
-    t = EpochTable(Path("seed001-bench"), "simulation", int(round(start_gps * 1e9)), "gps", observations=obs)
+    t = EpochTable(Path("seed001-bench"), "simulation", round(start_gps * 1e9), "gps", observations=obs)
     t.ephemerides = eph
     return t
 
@@ -265,7 +265,7 @@ def windowed_reference(truth: Truth, imu: ImuSamples, g_idx: NDArray[np.int64], 
     whose aiding stopped a few seconds ago gives (ideal aiding: the restart state is exact)."""
     pre = preintegrate(truth.t, imu.f_b, imu.w_b)
     step = int(g_idx[1] - g_idx[0])
-    back = int(round(window_s * step / (truth.t[g_idx[1]] - truth.t[g_idx[0]])))
+    back = round(window_s * step / (truth.t[g_idx[1]] - truth.t[g_idx[0]]))
     E = len(g_idx)
     llh_prev, llh, v_enu = (np.full((E, 3), np.nan) for _ in range(3))
     for e in range(1, E):
@@ -414,8 +414,8 @@ def summarise(evals: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def product_rule(opts: BenchOptions) -> dict[str, Any]:
-    """`spooflens analyze`'s range_rate detector (default settings) on the main trajectory simulated as a full log (IMU, raw
-    observations, the receiver's own fixes), clean and with all four schemes, for both grades."""
+    """`spooflens analyze`'s range_rate detector (default settings) on the main trajectory simulated as a full
+    log (IMU, raw observations, the receiver's own fixes), clean and with all four schemes, for both grades."""
     from spooflens.analysis import AnalysisContext, AnalyzeOptions
     from spooflens.detectors.seed001 import run as run_seed001
     from spooflens.navigation.single_point import solve_logged

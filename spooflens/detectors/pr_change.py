@@ -144,24 +144,55 @@ def pseudorange_changes(
     return PseudorangeChanges(grid.t_s, grid.sv_id, z, common, zm, sigma * factor, arc_start, resets, d_rho, zp)
 
 
-def clock_model_residual(ch: PseudorangeChanges, outlier_sigmas: float = 5.0) -> tuple[FloatArray, FloatArray]:
-    """The clock-model variant: z minus the common clock change predicted from earlier epochs (linear
-    extrapolation of the last two accepted medians; an epoch whose median jumps more than
-    `outlier_sigmas` prediction scales is not accepted). Returns (residual (E, S), prediction (E,))."""
-    m = ch.common
+def _clock_filter(m: FloatArray, r: float, q: float, gate: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Local linear trend Kalman filter on the common change m(k) (receiver clock change per epoch and its
+    rate): predictions, their variances and the innovations. An epoch whose innovation exceeds `gate`
+    sigmas is not learnt from (a common delay step is not the clock)."""
+    F = np.array([[1.0, 1.0], [0.0, 1.0]])
+    Q = q * np.array([[1 / 3, 1 / 2], [1 / 2, 1.0]])
     E = len(m)
-    pred = np.full(E, np.nan)
-    accepted = m.copy()
-    d2 = accepted[2:] - 2 * accepted[1:-1] + accepted[:-2]
-    scale = robust_scale(d2, 1e-3)
-    for k in range(2, E):
-        a, b = accepted[k - 1], accepted[k - 2]
-        if not (np.isfinite(a) and np.isfinite(b)):
-            pred[k] = a if np.isfinite(a) else np.nan
-        else:
-            pred[k] = 2 * a - b
-        if np.isfinite(pred[k]) and np.isfinite(m[k]) and abs(m[k] - pred[k]) > outlier_sigmas * scale:
-            accepted[k] = pred[k]
+    pred, var, innov = np.full(E, np.nan), np.full(E, np.nan), np.full(E, np.nan)
+    x: FloatArray | None = None
+    P = np.diag([r, r])
+    for k in range(E):
+        if not np.isfinite(m[k]):
+            continue
+        if x is None:
+            x = np.array([m[k], 0.0])
+            P = np.diag([r, 1e6 * r])
+            continue
+        x = F @ x
+        P = F @ P @ F.T + Q
+        S = P[0, 0] + r
+        pred[k], var[k], innov[k] = x[0], S, m[k] - x[0]
+        if innov[k] ** 2 > gate**2 * S and np.isfinite(pred[k - 1] if k else np.nan):
+            continue
+        K = P[:, 0] / S
+        x = x + K * innov[k]
+        P = P - np.outer(K, P[0, :])
+    return pred, var, innov
+
+
+def clock_model_residual(ch: PseudorangeChanges, gate: float = 5.0) -> tuple[FloatArray, FloatArray]:
+    """The clock-model variant: z minus the common clock change predicted from the earlier epochs by a
+    local-linear-trend Kalman filter on the cross-satellite medians. Its measurement noise is the median's
+    (1.25 sigma / sqrt(n) of the satellites' noise); its process noise is the one of a grid (1e-4 to 1e2
+    times that) that maximises the innovations' likelihood (each term capped, so attack epochs do not
+    decide it). Returns (residual (E, S), predicted common change (E,))."""
+    m = ch.common
+    n = np.maximum(np.isfinite(ch.z).sum(axis=1), 1)
+    noise = np.nanmedian(ch.sigma_m, axis=1) if np.isfinite(ch.sigma_m).any() else np.ones(len(m))
+    r = float(np.nanmedian((1.25 * noise) ** 2 / n)) if np.isfinite(noise).any() else 1.0
+    best: tuple[float, FloatArray] | None = None
+    for ratio in 10.0 ** np.arange(-4, 3):
+        pred, var, innov = _clock_filter(m, r, ratio * r, gate)
+        ok = np.isfinite(innov)
+        if not ok.any():
+            continue
+        cost = float(np.sum(np.log(var[ok]) + np.minimum(innov[ok] ** 2 / var[ok], 25.0)))
+        if best is None or cost < best[0]:
+            best = (cost, pred)
+    pred = best[1] if best is not None else np.full(len(m), np.nan)
     return ch.z - pred[:, None], pred
 
 
