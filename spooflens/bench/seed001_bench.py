@@ -76,7 +76,7 @@ SCHEMES: dict[str, tuple[float, float, int, str]] = {
     "4 position ramp": (1500.0, 1550.0, 0, "east position pulled at 2 m/s to 100 m"),
 }
 BINS = (0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0, 1500.0)  # Fig. 11: false alarms over time, 250 s bins
-PAPER = {
+PAPER: dict[str, Any] = {
     "threshold_rate_mps": {"E": 0.2071, "N": 0.1366},
     "threshold_pseudorange_m": {"E": 58.5951, "N": 58.1481},
     "false_alarms": {  # Table 5, out of 1500
@@ -324,7 +324,8 @@ def evaluate(run: dict[str, Any], opts: BenchOptions) -> dict[str, Any]:
             alarm = np.stack([np.abs(clean[:, i] - band[i][0]) > band[i][1] for i in range(2)], axis=1)
             late = alarm & count_win[:, None]
             first = [float(t[np.flatnonzero(late[:, i])[0]]) if late[:, i].any() else None for i in range(2)]
-            bins = [float(np.mean(alarm[(t > lo) & (t <= lo + 250.0)].any(axis=1))) for lo in BINS]
+            in_bin = [(t > lo) & (t <= lo + 250.0) for lo in BINS]
+            bins = [float(np.mean(alarm[m].any(axis=1))) if m.any() else float("nan") for m in in_bin]
             gout[model] = {
                 "threshold": [band[0][1], band[1][1]],
                 "false_alarms": fa,
@@ -388,7 +389,7 @@ def summarise(evals: list[dict[str, Any]]) -> dict[str, Any]:
                 ]
                 known = [x for x in first if x is not None]
                 m["first_false_alarm_median_s"] = float(np.median(known)) if known else None
-                m["false_alarm_fraction_by_time"] = np.mean(
+                m["false_alarm_fraction_by_time"] = np.nanmean(
                     [e[g][model]["false_alarm_fraction_by_time"] for e in evals], axis=0
                 ).tolist()
             else:

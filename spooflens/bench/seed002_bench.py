@@ -123,7 +123,7 @@ def evaluate(
         per_sat = np.isfinite(ch.z_median).sum(axis=0)
         thr = threshold(opts.p_false_alarm, int(max(np.median(per_sat[per_sat > 0]), 20)), 0.0, dof=1)[0]
         preds = {"kalman": kalman_predictor(ch, thr, KalmanOptions())}
-        clean_epochs = ~preds["kalman"].alarm.any(axis=1)
+        clean_epochs = np.asarray(~preds["kalman"].alarm.any(axis=1), dtype=bool)
         try:
             net = train_esn(
                 ch.z_median / ch.sigma_m,

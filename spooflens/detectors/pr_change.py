@@ -120,9 +120,9 @@ def pseudorange_changes(
     common = _row_median(z)
     # millisecond resets: the common change jumps by a whole number of c x 1 ms against its usual value
     typical = np.nanmedian(common) if np.isfinite(common).any() else 0.0
-    resets = np.round((common - typical) / MS_M)
-    resets = np.where(np.isfinite(resets) & (np.abs(common - typical - resets * MS_M) < 0.05 * MS_M), resets, 0)
-    resets = resets.astype(np.int64)
+    whole = np.round((common - typical) / MS_M)
+    whole = np.where(np.isfinite(whole) & (np.abs(common - typical - whole * MS_M) < 0.05 * MS_M), whole, 0.0)
+    resets = whole.astype(np.int64)
     z = z - (resets * MS_M)[:, None]
     common = common - resets * MS_M
     zm = z - common[:, None]

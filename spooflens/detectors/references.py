@@ -75,7 +75,7 @@ class Reference:
 
     @property
     def valid(self) -> NDArray[np.bool_]:
-        return np.isfinite(self.pos).all(axis=1)
+        return np.asarray(np.isfinite(self.pos).all(axis=1), dtype=bool)
 
 
 def parse_station(text: str) -> tuple[str | None, float, float, float]:

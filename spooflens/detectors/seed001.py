@@ -24,7 +24,9 @@ each other on a wrong velocity).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +46,7 @@ from spooflens.detectors.references import Reference, ins_reference, station_ref
 from spooflens.detectors.scales import lag1_autocorrelation, threshold
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
-from spooflens.gnss.grid import observation_grid
+from spooflens.gnss.grid import ObservationGrid, observation_grid
 
 FloatArray = NDArray[np.float64]
 ENU = ("east", "north", "up")
@@ -80,10 +82,10 @@ class ReceiverStatistics:
 
 
 def receiver_statistics(
-    ctx: AnalysisContext, receiver_id: str, ref_of: object, opts: Seed001Options
+    ctx: AnalysisContext, receiver_id: str, ref_of: Callable[[ObservationGrid], Reference], opts: Seed001Options
 ) -> ReceiverStatistics:
     grid = observation_grid(ctx.table, receiver_id)
-    ref: Reference = ref_of(grid)  # type: ignore[operator]
+    ref = ref_of(grid)
     res = rate_residuals(grid, ref, ctx.table.ionosphere, opts.rate)
     fit = fit_velocity_error(res, grid.systems)
     z, sigma_ref = normalised_components(fit.fit.d_enu, fit.fit.cov_unit, fit.sigma_unit)
@@ -232,13 +234,15 @@ def run(ctx: AnalysisContext, opts: Seed001Options | None = None) -> list[Detect
             return _skipped(
                 f"the navigation receiver {rid!r} has no raw observations (receivers with them: {with_obs})"
             )
-        chosen = [(rid, lambda g: ins_reference(ctx, g, opts.window_s))]
+        chosen: list[tuple[str, Callable[[ObservationGrid], Reference]]] = [
+            (rid, lambda g: ins_reference(ctx, g, opts.window_s))
+        ]
     else:
         found, why = stations(table, ctx.options.extra)
         if not found:
             reason = "; ".join(f"{r}: {w}" for r, w in why.items())
             return _skipped(f"needs an independent velocity: an IMU, or a known station ({reason})")
-        chosen = [(rid, lambda g, s=st: station_reference(g, s)) for rid, st in found.items()]
+        chosen = [(rid, partial(station_reference, station=st)) for rid, st in found.items()]
     computed = [receiver_statistics(ctx, rid, ref, opts) for rid, ref in chosen]
     computed = [c for c in computed if np.isfinite(c.chi2).any()]
     if not computed:

@@ -38,7 +38,8 @@ from spooflens.detectors.references import Reference, ins_reference, station_ref
 from spooflens.detectors.scales import threshold
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
-from spooflens.gnss.grid import observation_grid
+from spooflens.gnss.ephemeris import Klobuchar
+from spooflens.gnss.grid import ObservationGrid, observation_grid
 
 FloatArray = NDArray[np.float64]
 KF, RNN = "pr_change_kf", "pr_change_rnn"
@@ -72,12 +73,14 @@ def _threshold(ch: PseudorangeChanges, p: float) -> float:
     return threshold(p, int(max(n, 20)), 0.0, dof=1)[0]
 
 
-def run_receiver(grid_ref: tuple[object, Reference], iono: object, opts: Seed002Options) -> ReceiverRun:
+def run_receiver(
+    grid_ref: tuple[ObservationGrid, Reference], iono: Klobuchar | None, opts: Seed002Options
+) -> ReceiverRun:
     grid, ref = grid_ref
-    ch = pseudorange_changes(grid, ref, iono, opts.mask_deg)  # type: ignore[arg-type]
+    ch = pseudorange_changes(grid, ref, iono, opts.mask_deg)
     thr = _threshold(ch, opts.p_false_alarm)
     kf = kalman_predictor(ch, thr, opts.kalman)
-    clean = ~kf.alarm.any(axis=1)
+    clean = np.asarray(~kf.alarm.any(axis=1), dtype=bool)
     for _ in range(opts.clean_margin):
         clean[1:] &= clean[:-1]
         clean[:-1] &= clean[1:]
@@ -90,13 +93,13 @@ def run_receiver(grid_ref: tuple[object, Reference], iono: object, opts: Seed002
         note = f"network trained on {int(clean.sum())} clean epochs, residual variance {net.residual_var:.2f} of z's"
     except ValueError as err:
         note = str(err)
-    return ReceiverRun(grid.receiver_id, ref, ch, thr, kf, rnn, note)  # type: ignore[attr-defined]
+    return ReceiverRun(grid.receiver_id, ref, ch, thr, kf, rnn, note)
 
 
 def _alarms(run: ReceiverRun, pred: Prediction) -> list[Alarm]:
     ch = run.changes
     epoch_stat = np.nanmax(np.where(np.isfinite(pred.statistic), pred.statistic, -np.inf), axis=1)
-    alarm = pred.alarm.any(axis=1)
+    alarm = np.asarray(pred.alarm.any(axis=1), dtype=bool)
     dt = float(np.nanmedian(np.diff(ch.t))) if len(ch.t) > 1 else 1.0
     out: list[Alarm] = []
     for a in alarm_intervals(ch.t, epoch_stat, alarm, 2.5 * dt):
@@ -189,7 +192,7 @@ def _skipped(reason: str) -> list[DetectorResult]:
     ]
 
 
-def references(ctx: AnalysisContext, window_s: float) -> tuple[list[tuple[object, Reference]], str]:
+def references(ctx: AnalysisContext, window_s: float) -> tuple[list[tuple[ObservationGrid, Reference]], str]:
     """(grid, reference) per receiver to run on, or ([], why not)."""
     table = ctx.table
     found, why = stations(table, ctx.options.extra)

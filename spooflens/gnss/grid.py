@@ -71,16 +71,6 @@ class ObservationGrid:
         """(S,) satellite system letter of each column (G, E, C, R, J, ...)."""
         return np.array([s[:1] for s in self.sv_id.astype(str)])
 
-    def take_epochs(self, keep: NDArray[np.bool_]) -> ObservationGrid:
-        fields = {k: v for k, v in self.__dict__.items()}
-        out = {}
-        for k, v in fields.items():
-            if isinstance(v, np.ndarray) and k != "sv_id" and v.shape[:1] == (self.n_epochs,):
-                out[k] = v[keep]
-            else:
-                out[k] = v
-        return ObservationGrid(**out)
-
 
 def observation_grid(table: EpochTable, receiver_id: str) -> ObservationGrid:
     """The receiver's observation rows as matrices (epochs sorted by time, satellites by id)."""
