@@ -6,7 +6,8 @@ improvements, 45 % with the Kalman filter and 65 % with the recurrent network; n
 false-alarm figure):
 1. a 1 Hz static station simulated at the GSI site 0759 with the GPS satellites of its real navigation
    file (the paper's 12-satellite receiver data are not public), 1200 epochs, `runs` Monte Carlo runs;
-2. the real GSI pair (30 s, 120 epochs), the attack at the same proportion of the log (epochs 50-90).
+2. the real GSI pair (30 s, 120 epochs), the attack at the same proportion of the log (epochs 50-90); the
+   gradual rise keeps its 10 epochs (the same 10 m per epoch), which at 30 s spans 300 s.
 
 The attack, on `n_satellites` satellites chosen at random among those tracked through the whole window
 (the paper does not say how many; its Fig. 8 suggests three): the signal is delayed by an offset that
@@ -207,7 +208,7 @@ def real_pair(opts: BenchOptions, tries: int = 10) -> list[dict[str, Any]]:
     found, _ = stations(table, {})
     scale = 120 / opts.epochs
     window = (round(opts.window[0] * scale), round(opts.window[1] * scale))
-    ropts = replace(opts, rise_epochs=max(1, round(opts.rise_epochs * scale)))
+    ropts = opts  # the rise keeps its 10 epochs (10 m per epoch), not its share of the log (1 epoch here)
     out = []
     for rid, st in found.items():
         grid = observation_grid(table, rid)

@@ -269,27 +269,47 @@ def fit_velocity_error(
     return VelocityErrorFit(full, sigma, excluded, chi2, ~failing(fit))
 
 
-def normalised_components(d: FloatArray, cov_unit: FloatArray, sigma_unit: float) -> tuple[FloatArray, FloatArray]:
-    """Each ENU component of d over its scale sqrt(sigma_unit^2 cov_ii + sigma_ref_i^2): the least-squares
-    geometry and the reference's own error (e.g. the free INS drift over its window), sigma_ref_i being
-    what makes the robust scale of the normalised component 1. Returns (normalised (E, 3), sigma_ref (3,))."""
+def normalised_components(
+    d: FloatArray, cov_unit: FloatArray, sigma_unit: float, dynamics: FloatArray | None = None, cap: float = 4.0
+) -> tuple[FloatArray, FloatArray, float]:
+    """Each ENU component of d over its scale, and the scale's parameters.
+
+    scale_i(k)^2 = sigma_unit^2 cov_ii(k) + sigma_ref_i^2 + [i horizontal] (b dynamics(k))^2: the
+    least-squares geometry, the reference's own error (the free INS drift over its window) and, for an
+    INS reference, a heading error b (rad) times the horizontal velocity change over the free run (a
+    turn or an acceleration). sigma_ref and b maximise a Gaussian likelihood of d whose terms are capped
+    at `cap` sigmas, so a minority of attacked epochs does not inflate them. Returns (normalised (E, 3),
+    sigma_ref (3,), b).
+    """
     geometric = sigma_unit**2 * np.diagonal(cov_unit, axis1=1, axis2=2)
-    z = np.full_like(d, np.nan)
+    ok = np.isfinite(d).all(axis=1) & np.isfinite(geometric).all(axis=1)
+    dyn = np.zeros(len(d)) if dynamics is None else np.nan_to_num(np.asarray(dynamics, float))
     sigma_ref = np.zeros(3)
-    for i in range(3):
-        ok = np.isfinite(d[:, i]) & np.isfinite(geometric[:, i])
-        if ok.sum() < 4:
-            continue
-        x, g = d[ok, i], geometric[ok, i]
+    b = 0.0
+    if ok.sum() >= 8:
+        x, g, D = d[ok], geometric[ok], dyn[ok]
+        start = np.array([max(robust_scale(x[:, i]), 1e-6) for i in range(3)])
 
-        def excess(s_ref: float, x: FloatArray = x, g: FloatArray = g) -> float:
-            return robust_scale(x / np.sqrt(g + s_ref**2)) - 1.0
+        def variance(params: FloatArray) -> FloatArray:
+            s_ref, bb = np.exp(params[:3]), (np.exp(params[3]) if dynamics is not None else 0.0)
+            extra = np.zeros_like(g)
+            extra[:, :2] = (bb * D[:, None]) ** 2
+            return np.asarray(g + s_ref**2 + extra, dtype=float)
 
-        if excess(0.0) > 0:
-            hi = 10.0 * max(robust_scale(x), 1e-9)
-            sigma_ref[i] = optimize.brentq(excess, 0.0, hi, xtol=1e-9) if excess(hi) < 0 else hi
-        z[ok, i] = x / np.sqrt(g + sigma_ref[i] ** 2)
-    return z, sigma_ref
+        def cost(params: FloatArray) -> float:
+            var = variance(params)
+            return float(np.sum(np.log(var) + np.minimum(x**2 / var, cap**2)))
+
+        p0 = np.r_[np.log(start), np.log(1e-3)]
+        best = optimize.minimize(
+            cost, p0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-3, "maxiter": 2000}
+        )
+        sigma_ref = np.exp(best.x[:3])
+        b = float(np.exp(best.x[3])) if dynamics is not None else 0.0
+    extra = np.zeros((len(d), 3))
+    extra[:, :2] = (b * dyn[:, None]) ** 2
+    z = d / np.sqrt(geometric + sigma_ref**2 + extra)
+    return z, sigma_ref, b
 
 
 # --- the paper's decision rules -----------------------------------------------------------------------

@@ -68,6 +68,9 @@ class Reference:
     # (E,) when the GNSS last touched the reference used at epoch k (the INS restart state's time; -inf for
     # a station): after an alarm, references restarted later have seen the spoofed fixes
     informed_s: FloatArray | None = None
+    # (E,) horizontal velocity change over the free run, m/s: a heading error turns it into a velocity error,
+    # so the reference's error grows with it in turns and accelerations; None for a station
+    dynamics_mps: FloatArray | None = None
 
     def contaminated(self, k: int, since_s: float) -> bool:
         """Whether epoch k's reference was informed by the GNSS at or after `since_s`."""
@@ -205,6 +208,7 @@ def ins_reference(
     llh_prev = np.full((E, 3), np.nan)
     llh = np.full((E, 3), np.nan)
     informed = np.full(E, np.nan)
+    dynamics = np.full(E, np.nan)
 
     def to_sample(t: float) -> int:
         return int(np.clip(np.searchsorted(pre.t, t, side="right") - 1, 0, len(pre.t) - 1))
@@ -224,6 +228,7 @@ def ins_reference(
             continue
         s = NavState.from_vector(states[j])
         informed[e] = sol.t[j]
+        v_restart = s.v[:2].copy()
         i = to_sample(s.t)
         for target_t, out in ((t_prev, llh_prev), (t_now, llh)):
             k = to_sample(target_t)
@@ -232,6 +237,7 @@ def ins_reference(
             lead = target_t - pre.t[k]  # the epoch is a little after the last IMU sample
             out[e] = _extrapolated(s, lead)
         out_vel_enu[e] = s.v
+        dynamics[e] = float(np.linalg.norm(s.v[:2] - v_restart))
     ok = np.isfinite(llh).all(axis=1)
     out_prev[ok] = geodetic_to_ecef(np.degrees(llh_prev[ok, 0]), np.degrees(llh_prev[ok, 1]), llh_prev[ok, 2])
     out_pos[ok] = geodetic_to_ecef(np.degrees(llh[ok, 0]), np.degrees(llh[ok, 1]), llh[ok, 2])
@@ -247,6 +253,7 @@ def ins_reference(
         out_pos,
         vel,
         informed,
+        dynamics,
     )
 
 
