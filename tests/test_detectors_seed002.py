@@ -142,7 +142,7 @@ def test_echo_state_network_predicts_differenced_noise_better_than_the_kalman_fi
 
 def test_clock_model_variant_predicts_the_common_change(station_log) -> None:
     _, ch = _changes(station_log)
-    zc, pred = clock_model_residual(ch)
+    _, pred = clock_model_residual(ch)
     ok = np.isfinite(pred) & np.isfinite(ch.common)
     assert np.sqrt(np.mean((pred[ok] - ch.common[ok]) ** 2)) < 1.0  # m per epoch, a clock drifting ~tens of m/s
 

@@ -175,12 +175,19 @@ def station_reference(grid: ObservationGrid, station: Station) -> Reference:
 def ins_reference(
     ctx: AnalysisContext, grid: ObservationGrid, window_s: float, settle_s: float = 20.0, block_s: float = 1.0
 ) -> Reference:
-    """The free INS restarted at least `window_s` before each epoch (module notes).
+    """The free INS restarted at least `window_s` before each epoch (module notes); computed once per
+    analysis and receiver (both raw-observation detectors use it)."""
+    key = f"ins_reference/{grid.receiver_id}/{window_s:g}/{settle_s:g}/{block_s:g}/{grid.n_epochs}"
+    ref: Reference = ctx.cached(key, lambda: _ins_reference(ctx, grid, window_s, settle_s, block_s))
+    return ref
 
-    Restarts only from states after the filter has settled: `settle_s` after its start and not before the
+
+def _ins_reference(
+    ctx: AnalysisContext, grid: ObservationGrid, window_s: float, settle_s: float, block_s: float
+) -> Reference:
+    """Restarts only from states after the filter has settled: `settle_s` after its start and not before the
     alignment's window ends (until then the heading is not known to its stated accuracy and a free run
-    from it drifts by metres per second in the first turn).
-    """
+    from it drifts by metres per second in the first turn)."""
     from spooflens.navigation.alignment import to_flu
     from spooflens.navigation.strapdown import NavState, preintegrate, propagate
 
