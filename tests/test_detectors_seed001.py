@@ -24,6 +24,7 @@ from spooflens.detectors.range_rate import (
 from spooflens.detectors.references import Reference, ins_reference
 from spooflens.detectors.scales import lag1_autocorrelation, robust_scale, threshold
 from spooflens.evidence import Evidence
+from spooflens.gnss.geometry import azimuth_elevation
 from spooflens.gnss.grid import observation_grid
 from spooflens.pipeline import analyze_table
 from spooflens.simulation.simulate import simulate
@@ -32,6 +33,12 @@ from spooflens.simulation.simulate import simulate
 @pytest.fixture(scope="module")
 def ground_raw():
     return simulate("ground_raw", seed=1)  # yaw aligned from motion over the first 68 s
+
+
+@pytest.fixture(scope="module")
+def clean_context(ground_raw) -> AnalysisContext:
+    """One analysis context for the clean log: its navigation solution is computed once."""
+    return AnalysisContext(ground_raw.table, AnalyzeOptions())
 
 
 def _truth_reference(sim, grid, dv_enu=(0.0, 0.0, 0.0)) -> Reference:
@@ -145,8 +152,8 @@ def test_carrier_slip_is_screened_and_a_delay_step_is_named(ground_raw) -> None:
 # --- the detector on logs ---------------------------------------------------------------------------------
 
 
-def test_windowed_ins_reference_is_close_to_the_truth(ground_raw) -> None:
-    ctx = AnalysisContext(ground_raw.table, AnalyzeOptions())
+def test_windowed_ins_reference_is_close_to_the_truth(ground_raw, clean_context) -> None:
+    ctx = clean_context
     grid = observation_grid(ground_raw.table, "/gps/fix")
     ref = ins_reference(ctx, grid, 5.0)
     truth = _truth_reference(ground_raw, grid)
@@ -157,8 +164,8 @@ def test_windowed_ins_reference_is_close_to_the_truth(ground_raw) -> None:
     assert (ref.informed_s[ok] <= grid.t_s[ok] - 5.0 + 1e-6).all()
 
 
-def test_clean_simulated_log_stays_clean_and_a_delayed_pair_is_named(ground_raw) -> None:
-    clean = seed001.run(AnalysisContext(ground_raw.table, AnalyzeOptions()))
+def test_clean_simulated_log_stays_clean_and_a_delayed_pair_is_named(ground_raw, clean_context) -> None:
+    clean = seed001.run(clean_context)
     assert [r.name for r in clean] == ["range_rate", "range_rate_ttest"]
     assert clean[0].ran and clean[0].evidence == Evidence.INERTIAL and not clean[0].alarms
     spoofed, truth = apply_attack(ground_raw.table, parse_attack("pr_delay:delay=300,count=2,seed=4,start=150"))
@@ -170,9 +177,20 @@ def test_clean_simulated_log_stays_clean_and_a_delayed_pair_is_named(ground_raw)
     assert any("code and carrier jumped together" in f.text for f in res.findings)
 
 
-def test_meaconed_simulated_log_is_an_incident_at_once(ground_raw) -> None:
-    spoofed, _ = apply_attack(ground_raw.table, parse_attack("meaconing:east=500,start=120"))
+@pytest.mark.parametrize("attack", ["meaconing:east=500,start=120", "spoofed_subset:keep=5,start=120"])
+def test_raw_attacks_on_the_simulated_log_are_incidents_at_once(ground_raw, attack: str) -> None:
+    spoofed, truth = apply_attack(ground_raw.table, parse_attack(attack))
     analysis = analyze_table(spoofed)
     inc = next(i for i in analysis.verdict.incidents if i.is_spoofing)
-    assert inc.start_s <= 122.0 and inc.confidence in ("medium", "high")
-    assert "range_rate" in inc.detectors and len(inc.satellites) >= 4
+    assert 120.0 <= inc.start_s <= 122.0 and inc.confidence in ("medium", "high")
+    assert {"range_rate", "pr_change_kf"} <= set(inc.detectors)
+    obs = spoofed.observations
+    rows = obs[obs["t_s"] == 120.0]
+    tr = ground_raw.truth
+    k = int(np.searchsorted(tr.t, 120.0))
+    _, el = azimuth_elevation(rows[["sv_x_m", "sv_y_m", "sv_z_m"]].to_numpy(), tr.ecef()[k])
+    tracked = set(rows["sv_id"][el >= np.radians(10.0)])  # the detectors' elevation mask
+    if attack.startswith("meaconing"):
+        assert len(inc.satellites) >= 4 and set(inc.satellites) <= tracked
+    else:
+        assert set(inc.satellites) == set(truth.satellites) & tracked
