@@ -39,6 +39,8 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.innovation_tests",
     "spooflens.detectors.seed003",
     "spooflens.detectors.fleet",
+    "spooflens.detectors.seed001",
+    "spooflens.detectors.seed002",
 )
 
 

@@ -121,17 +121,32 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
     return EXIT_DAMAGED if _damaged(table) else EXIT_OK
 
 
-def analyse_log(log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet: bool) -> Analysis:
+def analyse_log(
+    log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet: bool, station_texts: tuple[str, ...] = ()
+) -> Analysis:
     """Read and analyse LOG (its truth file beside it joins the table, for drawing only).
 
     A log without GNSS raises NoGnssError before anything is written: a failed analysis leaves no files.
     """
     from spooflens.analysis import AnalyzeOptions
+    from spooflens.detectors.references import STATION_OPTION, parse_station
     from spooflens.pipeline import analyze_table
 
+    try:
+        given_stations = [parse_station(text) for text in station_texts]
+    except ValueError as err:
+        raise click.BadParameter(str(err), param_hint="--station") from None
     table = _read(log, _parse_topics(topics), not quiet and show_progress())
     if not len(table.fixes):
         raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}); nothing written")
+    with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
+    for rid, *_ in given_stations:
+        if rid is not None and rid not in with_obs:
+            raise click.BadParameter(
+                f"no receiver {rid!r} with raw observations in {log}; receivers with them: {with_obs or 'none'}",
+                param_hint="--station",
+            )
+    options = AnalyzeOptions(imu_grade=imu_grade, extra={STATION_OPTION: given_stations} if given_stations else {})
     with progress(not quiet and show_progress()) as report:
         steps: list[str] = []
 
@@ -139,7 +154,7 @@ def analyse_log(log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        return analyze_table(table, AnalyzeOptions(imu_grade=imu_grade), on_step)
+        return analyze_table(table, options, on_step)
 
 
 def finish(log: Path, analysis: Analysis, fail_on_spoof: bool) -> int:
@@ -152,6 +167,14 @@ def finish(log: Path, analysis: Analysis, fail_on_spoof: bool) -> int:
     return EXIT_DAMAGED if damaged else EXIT_OK
 
 
+station_option = click.option(
+    "--station",
+    "station_texts",
+    multiple=True,
+    metavar="[RX=]LAT,LON,H",
+    help="A receiver's known position (deg, deg, m above the ellipsoid) for the known-station detectors; "
+    "without RX= the first receiver with observations. Repeatable.",
+)
 quiet_option = click.option("--quiet", is_flag=True, help="Print only the one-line verdict (no progress, no tables).")
 fail_on_spoof_option = click.option(
     "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
@@ -185,6 +208,7 @@ imu_grade_option = click.option(
     help="Also write the operator report (one self-contained HTML page) here.",
 )
 @topic_option
+@station_option
 @imu_grade_option
 @quiet_option
 @fail_on_spoof_option
@@ -194,6 +218,7 @@ def analyze(
     json_path: Path | None,
     html_path: Path | None,
     topics: tuple[str, ...],
+    station_texts: tuple[str, ...],
     imu_grade: str | None,
     quiet: bool,
     fail_on_spoof: bool,
@@ -202,7 +227,7 @@ def analyze(
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
-    analysis = analyse_log(log, topics, imu_grade, quiet)
+    analysis = analyse_log(log, topics, imu_grade, quiet, station_texts)
     table, verdict = analysis.table, analysis.verdict
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
@@ -370,6 +395,8 @@ def simulate(
         "report": "spooflens.bench.report_bench:command",
         "seed003": "spooflens.bench.seed003_bench:command",
         "seed004": "spooflens.bench.seed004_bench:command",
+        "seed001": "spooflens.bench.seed001_bench:command",
+        "seed002": "spooflens.bench.seed002_bench:command",
     },
 )
 def bench() -> None:

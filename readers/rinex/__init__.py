@@ -48,7 +48,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from readers import ReaderFormat
-from readers.rinex.assembly import obs_files, read_rinex
+from readers.rinex.assembly import APPROX_POSITION_KEY, obs_files, read_rinex
 from readers.rinex.navigation import NavFile, find_nav_files, is_gps_nav, read_rinex_nav, read_rinex_nav_file
 from readers.rinex.observation import (
     BAND_HZ,

@@ -41,12 +41,17 @@ def obs_files(path: Path) -> list[tuple[Path, str]]:
     return [(f, f"{m}_{f.name}" if m in dup else m) for f, m in zip(files, markers, strict=True)]
 
 
+# table.metadata key (+ ".<receiver id>") holding the header's APPROX POSITION XYZ, "x y z" in ECEF metres
+APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"
+
+
 @dataclass
 class _FileResult:
     rows: dict[str, np.ndarray]
     stream: StreamInfo
     navs: list[NavFile]
     skipped: list[Skipped]
+    approx_xyz: tuple[float, float, float] | None = None
 
 
 def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -> dict[str, np.ndarray]:
@@ -146,7 +151,8 @@ def _read_obs_file(
     _add_satellite_states(rows, navs, path.name, receiver_id, skipped)
     epochs = len(np.unique(rows["t_ns"]))
     stream = StreamInfo("observations", receiver_id, path.name, f"RINEX {scan.version:.2f} obs", epochs)
-    return _FileResult(rows, stream, navs, skipped)
+    xyz = scan.header.approx_xyz
+    return _FileResult(rows, stream, navs, skipped, None if xyz is None or not any(xyz) else xyz)
 
 
 def merge_navs(navs: list[NavFile]) -> GpsEphemerides:
@@ -183,7 +189,16 @@ def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> E
                 )
             )
             skipped.extend(nav.skipped)
-    table = build_table(path, "rinex", "gps", {"observations": pd.DataFrame(cols)}, streams, skipped, t0_ns=t0)
+    # The header's APPROX POSITION: a static station's surveyed site (the known-station detectors decide
+    # whether the receiver really stayed there; a moving receiver's header is only where it started).
+    metadata = {
+        f"{APPROX_POSITION_KEY}.{p.stream.stream_id}": " ".join(f"{v:.4f}" for v in p.approx_xyz)
+        for p in parts
+        if p.approx_xyz is not None
+    }
+    table = build_table(
+        path, "rinex", "gps", {"observations": pd.DataFrame(cols)}, streams, skipped, t0_ns=t0, metadata=metadata
+    )
     navs = list({n.path: n for p in parts for n in p.navs}.values())
     table.ephemerides = (navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)) if navs else None
     return table
