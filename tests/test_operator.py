@@ -122,15 +122,16 @@ def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
     # one key statistic per evidence class that ran, from a detector that alarmed
     assert [(k.evidence.value, k.detector) for k in keys] == [
         ("gnss_only", "gnss_consistency"),
+        ("receiver", "receiver_evidence"),
         ("inertial", "kf_innovation"),
     ]
-    assert keys[1].paths == ("/detectors/kf_innovation/position_nis", "/detectors/kf_innovation/position_nis_threshold")
+    assert keys[2].paths == ("/detectors/kf_innovation/position_nis", "/detectors/kf_innovation/position_nis_threshold")
     panels = detector_panels(results)
     tabs = default_blueprint(panels, keys).root_container
     assert tabs.active_tab is not None and tabs.contents[0].name == "Overview"
     assert [c.name for c in tabs.contents[1 : 1 + len(panels)]] == [title for title, _ in panels]
     lanes = {name: level for name, _, level in overview_lanes(results, decide(results), 300.0)}
-    assert set(lanes) == {"GNSS-only consistency", "inertial reference", "spoofing incidents"}
+    assert set(lanes) == {"GNSS-only consistency", "receiver self-report", "inertial reference", "spoofing incidents"}
     assert lanes["inertial reference"].max() == pytest.approx(1.8) and lanes["spoofing incidents"].max() == 0.8 - 1
 
 

@@ -66,6 +66,7 @@ from readers.rinex.observation import (
 from readers.rinex.text import GPS_EPOCH, SUPPORTED_VERSIONS, TextLines, parse_fixed
 
 __all__ = [
+    "APPROX_POSITION_KEY",
     "BAND_HZ",
     "CODE_PRIORITY",
     "CODE_PRIORITY_V2",
