@@ -132,7 +132,7 @@ def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
     assert [c.name for c in tabs.contents[1 : 1 + len(panels)]] == [title for title, _ in panels]
     lanes = {name: level for name, _, level in overview_lanes(results, decide(results), 300.0)}
     assert set(lanes) == {"GNSS-only consistency", "receiver self-report", "inertial reference", "spoofing incidents"}
-    assert lanes["inertial reference"].max() == pytest.approx(1.8) and lanes["spoofing incidents"].max() == 0.8 - 1
+    assert lanes["inertial reference"].max() == pytest.approx(2.8) and lanes["spoofing incidents"].max() == 0.8 - 1
 
 
 def test_viewer_runs_with_rerun_analytics_disabled(tmp_path: Path) -> None:
