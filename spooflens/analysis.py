@@ -34,6 +34,7 @@ MIN_IMU_SAMPLES = 50
 ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
+    "spooflens.detectors.raim",
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
     "spooflens.detectors.innovation_tests",

@@ -128,6 +128,13 @@ OBSERVATION_COLUMNS: tuple[Column, ...] = (
         False,
     ),
     Column("sv_clock_drift_mps", "float64", "m/s", "satellite clock drift times c, NaN if unknown", False),
+    Column(
+        "fault_flag",
+        "int8",
+        "FaultFlag",
+        "RAIM's verdict on this row when fixes were solved from it: 0 clear, 1 fault (excluded), 2 unknown",
+        False,
+    ),
 )
 
 TRUTH_COLUMNS: tuple[Column, ...] = (

@@ -64,8 +64,8 @@ def test_each_raw_attack_is_an_incident_within_two_epochs_with_its_satellites(tm
     attacked = set(truth.satellites) & tracked
     if attack.startswith("meaconing"):
         assert len(named) >= 6 and named <= attacked  # a meaconer relays every satellite
-    else:
-        assert named == attacked
+    else:  # RAIM also names attacked satellites that rose later in the attack
+        assert attacked <= named <= set(truth.satellites)
     alarms = [a for r in summary["analyses"] if r["name"] in SEED_DETECTORS for a in r["alarms"]]
     assert {a["receiver_id"] for a in alarms} == {"0759", "3040"}
 

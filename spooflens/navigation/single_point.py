@@ -64,6 +64,7 @@ class SinglePointSolution:
     residual_m: FloatArray  # per input row, NaN where the row was not used
     row_epoch: NDArray[np.int64]
     systems: tuple[str, ...]
+    residual_all_m: FloatArray | None = None  # per input row against the solution, used or left out
 
     @property
     def ok(self) -> NDArray[np.bool_]:
@@ -118,12 +119,15 @@ def _padded(epoch: NDArray[np.int64], n_epochs: int) -> tuple[NDArray[np.int64],
 
 
 def solve(
-    obs: pd.DataFrame, t_gps_s: FloatArray | None = None, options: SinglePointOptions | None = None
+    obs: pd.DataFrame,
+    t_gps_s: FloatArray | None = None,
+    options: SinglePointOptions | None = None,
+    exclude: NDArray[np.bool_] | None = None,
 ) -> SinglePointSolution:
     """Solve every (receiver, epoch) of an observations frame.
 
     `t_gps_s`: GPS seconds of each row (for the ionosphere model's local time); without it the
-    ionosphere is not modelled.
+    ionosphere is not modelled. `exclude`: rows to leave out (satellites RAIM found faulty).
     """
     opts = options or SinglePointOptions()
     epoch, t_e, rx_e = _epochs(obs)
@@ -133,6 +137,8 @@ def solve(
     pr = obs["pseudorange_m"].to_numpy(float)
     sv_clk = obs["sv_clock_bias_m"].to_numpy(float)
     usable = np.isfinite(pr) & np.isfinite(sv).all(axis=1) & np.isfinite(sv_clk)
+    if exclude is not None:
+        usable &= ~exclude
     systems = tuple(sorted({s[:1] for s in obs["sv_id"].astype(str)[usable]}, key=lambda s: (s != "G", s)))
     sys_idx = np.array([systems.index(s[:1]) if s[:1] in systems else 0 for s in obs["sv_id"].astype(str)])
     n_x = 3 + len(systems)
@@ -183,6 +189,7 @@ def solve(
     pred = expected_pseudorange(P_sv, CLK, rx, clock, T_GPS, opts.iono if T_GPS is not None else None)
     used = weight > 0
     res_pad = np.where(used, PR - pred, np.nan)
+    res_all = np.where(np.isfinite(PR), PR - pred, np.nan)
     n_used = used.sum(axis=1)
     solved = (_redundancy(used, SYS) >= 0) & np.isfinite(x).all(axis=1)
     rms = np.sqrt(np.sum(np.where(used, res_pad, 0.0) ** 2, axis=1) / np.maximum(n_used, 1))
@@ -204,6 +211,7 @@ def solve(
         residual_m=res_pad[epoch, slot],
         row_epoch=epoch,
         systems=systems,
+        residual_all_m=res_all[epoch, slot],
     )
 
 
@@ -302,9 +310,18 @@ def with_solved_fixes(table: EpochTable) -> EpochTable:
     rows = rows[np.isfinite(rows[SV_COLUMNS].to_numpy(float)).all(axis=1)]
     if not len(rows):
         return table
-    sol = solve_logged(table, rows)
+    from spooflens.navigation.raim import solve_with_fde
+
+    # a receiver excludes satellites that disagree with the others (RAIM FDE); so do the fixes solved here
+    fde = solve_with_fde(
+        rows, table.gps_seconds(rows["t_s"].to_numpy(float)), SinglePointOptions(iono=table.ionosphere)
+    )
+    sol = fde.solution
     solved = make_frame("fixes", sol.fixes_columns())
     out = copy.copy(table)
+    flags = pd.Series(fde.flag, index=rows.index, dtype="int8")
+    out.observations = table.observations.copy()
+    out.observations.loc[flags.index, "fault_flag"] = flags
     out.fixes = pd.concat([table.fixes, solved], ignore_index=True) if len(table.fixes) else solved
     out.streams = [*table.streams]
     out.skipped = [*table.skipped]
