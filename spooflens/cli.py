@@ -123,14 +123,15 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
 
 def analyse_log(
     log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet: bool, station_texts: tuple[str, ...] = ()
-) -> Analysis:
-    """Read and analyse LOG (its truth file beside it joins the table, for drawing only).
+) -> list[Analysis]:
+    """Read and analyse LOG (its truth file beside it joins the table, for drawing only): one analysis per
+    recording the log joins (usually one).
 
     A log without GNSS raises NoGnssError before anything is written: a failed analysis leaves no files.
     """
     from spooflens.analysis import AnalyzeOptions
     from spooflens.detectors.references import STATION_OPTION, parse_station
-    from spooflens.pipeline import analyze_table
+    from spooflens.pipeline import analyze_segments
 
     try:
         given_stations = [parse_station(text) for text in station_texts]
@@ -154,17 +155,35 @@ def analyse_log(
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        return analyze_table(table, options, on_step)
+        return analyze_segments(table, options, on_step)
 
 
-def finish(log: Path, analysis: Analysis, fail_on_spoof: bool) -> int:
+def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool) -> int:
     """The exit code of an analysis that ran: 4 spoofed (with --fail-on-spoof), 3 damaged input, else 0."""
-    damaged = _damaged(analysis.table)
+    damaged = list(dict.fromkeys(d for a in analyses for d in _damaged(a.table)))
     if damaged:
         click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
-    if fail_on_spoof and analysis.verdict.spoofed:
+    if fail_on_spoof and any(a.verdict.spoofed for a in analyses):
         return EXIT_SPOOFED
     return EXIT_DAMAGED if damaged else EXIT_OK
+
+
+def segment_path(path: Path, k: int, n: int) -> Path:
+    """An output's path for recording k of n (unchanged for a log of one recording)."""
+    return path if n < 2 else path.with_name(f"{path.stem}.seg{k + 1}{path.suffix}")
+
+
+def segments_summary(summaries: list[dict]) -> dict:
+    """The JSON of a log that joins recordings: each recording's summary, and the verdict over all."""
+    if len(summaries) == 1:
+        return summaries[0]
+    spoofed = [i + 1 for i, s in enumerate(summaries) if s["verdict"]["spoofed"]]
+    headline = (
+        f"SPOOFING DETECTED in recording(s) {', '.join(map(str, spoofed))} of {len(summaries)}"
+        if spoofed
+        else f"NO SPOOFING DETECTED in any of {len(summaries)} recordings"
+    )
+    return {"segments": summaries, "verdict": {"spoofed": bool(spoofed), "headline": headline}}
 
 
 station_option = click.option(
@@ -227,23 +246,31 @@ def analyze(
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
-    analysis = analyse_log(log, topics, imu_grade, quiet, station_texts)
-    table, verdict = analysis.table, analysis.verdict
+    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
-    lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-    write_recording(output, table, analysis.results, lines, verdict)
-    summary = build_summary(table, analysis.results, verdict)
-    if json_path:
-        json_path.write_text(json.dumps(summary, indent=2))
-    if html_path:
-        from spooflens.report import write_report
+    n = len(analyses)
+    summaries = []
+    for k, analysis in enumerate(analyses):
+        table, verdict = analysis.table, analysis.verdict
+        rec = segment_path(output, k, n)
+        lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
+        write_recording(rec, table, analysis.results, lines, verdict)
+        summary = build_summary(table, analysis.results, verdict)
+        summaries.append(summary)
+        html = segment_path(html_path, k, n) if html_path else None
+        if html:
+            from spooflens.report import write_report
 
-        write_report(html_path, analysis)
-    if quiet:
-        click.echo(verdict.headline)
-    else:
-        _print_analysis(summary, output, json_path, html_path)
-    return finish(log, analysis, fail_on_spoof)
+            write_report(html, analysis)
+        if n > 1 and not quiet:
+            console().print(f"[bold]recording {k + 1} of {n}[/] (the log joins {n}; its clock starts again)")
+        if quiet:
+            click.echo((f"recording {k + 1} of {n}: " if n > 1 else "") + verdict.headline)
+        else:
+            _print_analysis(summary, rec, json_path, html)
+    if json_path:
+        json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
+    return finish(log, analyses, fail_on_spoof)
 
 
 def _stream_names(table: EpochTable) -> str:

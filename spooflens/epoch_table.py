@@ -112,9 +112,26 @@ class Skipped:
         return f"{self.stream}: {self.action} {self.count} ({self.reason})"
 
 
+@dataclass(frozen=True)
+class Segment:
+    """One recording of a log that joins several (its clock jumped back): where it sits on the table's
+    time axis, and where its own clock starts."""
+
+    index: int
+    start_s: float
+    end_s: float
+    t0_ns: int  # the recording's own clock at start_s
+
+
+SEGMENT_GAP_S = 60.0  # recordings are laid out one after another on the time axis, this far apart
+
+
 @dataclass
 class EpochTable:
-    """All frames of one log, times in seconds since `t0_ns` of the log's own clock."""
+    """All frames of one log, times in seconds since `t0_ns` of the log's own clock.
+
+    A log that joins several recordings (its time jumps back) keeps them apart as `segments`: each lies
+    on the time axis after the one before, and maps back to its own clock (`absolute_ns`)."""
 
     source: Path
     format: str
@@ -135,6 +152,40 @@ class EpochTable:
     # provenance a reader found: firmware and receiver versions, and the meaning applied to each logged
     # enum ("enum.spoofing_state": "PX4 SensorGps >= 1.15: 1 OK, 2 mitigated, 3 detected")
     metadata: dict[str, str] = field(default_factory=dict)
+    segments: list[Segment] = field(default_factory=list)
+
+    def segment(self, index: int) -> EpochTable:
+        """One recording of a joined log as a table of its own (time from its start, its own clock)."""
+        seg = self.segments[index]
+        out = EpochTable(
+            self.source,
+            self.format,
+            seg.t0_ns,
+            self.time_reference,
+            streams=[],
+            skipped=[x for x in self.skipped if x.action != "segmented"],
+            ephemerides=self.ephemerides,
+            metadata={**self.metadata, "segment": f"{index + 1} of {len(self.segments)}"},
+        )
+        for name in FRAMES:
+            df = self.frame(name)
+            sel = (df["t_s"] >= seg.start_s - 1e-9) & (df["t_s"] <= seg.end_s + 1e-9)
+            part = df[sel].reset_index(drop=True)
+            part["t_s"] = part["t_s"] - seg.start_s
+            setattr(out, name, part)
+        for st in self.streams:
+            frame = _ROLE_FRAME.get(st.role)
+            if frame is None:
+                out.streams.append(st)
+                continue
+            df = out.frame(frame)
+            key = STREAM_KEY[frame]
+            rows = df if key is None else df[df[key] == st.stream_id]
+            t = rows["t_s"].to_numpy()
+            count = len(np.unique(t)) if st.role == "observations" else len(rows)
+            if count:
+                out.streams.append(replace(st, count=count, first_s=float(t[0]), last_s=float(t[-1])))
+        return out
 
     @property
     def ionosphere(self) -> Klobuchar | None:
@@ -176,8 +227,14 @@ class EpochTable:
         return next((s for s in self.streams if s.role == role and s.stream_id == stream_id), None)
 
     def absolute_ns(self, t_s: float | np.ndarray) -> np.ndarray:
-        """Map table times back to the log's own clock (integer nanoseconds)."""
-        return self.t0_ns + np.round(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
+        """Map table times back to the log's own clock (integer nanoseconds), each segment to its own."""
+        t = np.asarray(t_s, dtype=float)
+        if len(self.segments) < 2:
+            return self.t0_ns + np.round(t * 1e9).astype(np.int64)
+        starts = np.array([sg.start_s for sg in self.segments])
+        t0s = np.array([sg.t0_ns for sg in self.segments], dtype=np.int64)
+        k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(starts) - 1)
+        return np.asarray(t0s[k] + np.round((t - starts[k]) * 1e9).astype(np.int64))
 
     def unix_ns(self, t_s: float | np.ndarray) -> np.ndarray | None:
         """Table times as UTC nanoseconds since 1970, or None if the log has no absolute clock."""
@@ -240,6 +297,107 @@ def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped
     return df
 
 
+_ROLE_FRAME = {
+    "imu": "imu",
+    "fix": "fixes",
+    "truth": "truth",
+    "odometry": "odometry",
+    "observations": "observations",
+    "heading": "headings",
+    "autopilot_ekf": "autopilot_ekf",
+}
+
+
+def _runs_of(t_ns: np.ndarray, min_jump_ns: int = 2_000_000_000, periods: float = 20.0) -> np.ndarray:
+    """Run index of every row (in the order read): a new run where the clock jumps back by more than
+    `min_jump_ns` and `periods` typical steps. Smaller steps back are jitter, repaired by sorting."""
+    if len(t_ns) < 2:
+        return np.zeros(len(t_ns), dtype=np.int64)
+    d = np.diff(t_ns.astype(np.int64))
+    pos = d[d > 0]
+    step = int(np.median(pos)) if len(pos) else 0
+    back = d < -max(min_jump_ns, int(periods * step))
+    return np.r_[0, np.cumsum(back)].astype(np.int64)
+
+
+def _segment_frames(
+    frames_ns: dict[str, pd.DataFrame], skipped: list[Skipped]
+) -> tuple[dict[str, pd.DataFrame], list[tuple[int, int, int]]]:
+    """Split a log that joins recordings at each time reversal: the frames with the stamps of recording
+    k moved after recording k-1 (gap SEGMENT_GAP_S), and (offset_ns, own t0_ns, end_ns) per recording.
+    Streams are matched recording by recording in the order read; a stream with fewer recordings than
+    the most-split one goes to those its time span overlaps."""
+    runs: dict[tuple[str, str], np.ndarray] = {}
+    for name, df in frames_ns.items():
+        if df is None or not len(df):
+            continue
+        key = STREAM_KEY[name]
+        groups = [("truth", df.index)] if key is None else list(df.groupby(key, sort=False).groups.items())
+        for sid, idx in groups:
+            runs[(name, str(sid))] = _runs_of(df.loc[idx, "t_ns"].to_numpy())
+    n_seg = 1 + max((int(r.max()) for r in runs.values() if len(r)), default=0)
+    if n_seg == 1:
+        return frames_ns, []
+    ref_key = max((k for k, r in runs.items() if len(r) and r.max() == n_seg - 1), key=lambda k: len(runs[k]))
+    ref_df = frames_ns[ref_key[0]]
+    ref_t = (
+        ref_df["t_ns"]
+        if STREAM_KEY[ref_key[0]] is None
+        else ref_df.loc[ref_df[STREAM_KEY[ref_key[0]]].astype(str) == ref_key[1], "t_ns"]
+    ).to_numpy()
+    ref_ranges = [(ref_t[runs[ref_key] == k].min(), ref_t[runs[ref_key] == k].max()) for k in range(n_seg)]
+    seg_of: dict[str, np.ndarray] = {
+        name: np.zeros(len(df), dtype=np.int64) for name, df in frames_ns.items() if df is not None
+    }
+    for (name, sid), r in runs.items():
+        df = frames_ns[name]
+        key = STREAM_KEY[name]
+        pos = np.arange(len(df)) if key is None else np.flatnonzero(df[key].astype(str).to_numpy() == sid)
+        if int(r.max()) == n_seg - 1:
+            seg_of[name][pos] = r
+            continue
+        t = df["t_ns"].to_numpy()[pos]
+        for k in range(int(r.max()) + 1):
+            a, b = t[r == k].min(), t[r == k].max()
+            overlap = [min(b, hi) - max(a, lo) for lo, hi in ref_ranges]
+            seg_of[name][pos[r == k]] = int(np.argmax(overlap))
+    starts = np.full(n_seg, np.iinfo(np.int64).max, dtype=np.int64)
+    ends = np.full(n_seg, np.iinfo(np.int64).min, dtype=np.int64)
+    for name, df in frames_ns.items():
+        if df is None or not len(df):
+            continue
+        t = df["t_ns"].to_numpy().astype(np.int64)
+        for k in range(n_seg):
+            sel = seg_of[name] == k
+            if sel.any():
+                starts[k] = min(starts[k], t[sel].min())
+                ends[k] = max(ends[k], t[sel].max())
+    layout = []
+    offset = int(starts[0])
+    for k in range(n_seg):
+        layout.append((offset, int(starts[k]), int(ends[k])))
+        offset += int(ends[k] - starts[k]) + int(SEGMENT_GAP_S * 1e9)
+    out = {}
+    for name, df in frames_ns.items():
+        if df is None or not len(df):
+            out[name] = df
+            continue
+        df = df.copy()
+        t = df["t_ns"].to_numpy().astype(np.int64)
+        shift = np.array([layout[k][0] - layout[k][1] for k in range(n_seg)], dtype=np.int64)
+        df["t_ns"] = t + shift[seg_of[name]]
+        out[name] = df
+    skipped.append(
+        Skipped(
+            "<log>",
+            f"time jumps back: the log joins {n_seg} recordings; each is analysed on its own",
+            n_seg,
+            "segmented",
+        )
+    )
+    return out, layout
+
+
 def build_table(
     source: Path,
     fmt: str,
@@ -261,6 +419,7 @@ def build_table(
     the fixes), so their span and rate are on the table's time base too.
     """
     skipped = list(skipped)
+    frames_ns, layout = _segment_frames(frames_ns, skipped)
     repaired: dict[str, pd.DataFrame] = {}
     for name, df in frames_ns.items():
         if df is None or not len(df):
@@ -269,6 +428,8 @@ def build_table(
         parts = [("truth", df)] if key is None else [(str(sid), g) for sid, g in df.groupby(key, sort=False)]
         fixed = [_repair_stream(name, sid, g, skipped) for sid, g in parts]
         repaired[name] = pd.concat(fixed, ignore_index=True) if fixed else df.iloc[:0]
+    if layout:
+        t0_ns = layout[0][0]
     if t0_ns is None:
         firsts = [int(df["t_ns"].min()) for df in repaired.values() if len(df)]
         t0_ns = min(firsts) if firsts else 0
@@ -279,15 +440,7 @@ def build_table(
         table_frames[name] = make_frame(name, cols, len(df))
     final_streams: list[StreamInfo] = []
     for s in streams:
-        frame = {
-            "imu": "imu",
-            "fix": "fixes",
-            "truth": "truth",
-            "odometry": "odometry",
-            "observations": "observations",
-            "heading": "headings",
-            "autopilot_ekf": "autopilot_ekf",
-        }.get(s.role)
+        frame = _ROLE_FRAME.get(s.role)
         if frame is None or frame not in table_frames:
             span = (stream_spans_ns or {}).get((s.role, s.stream_id))
             if span is not None:
@@ -319,6 +472,10 @@ def build_table(
         streams=final_streams,
         skipped=skipped,
         metadata=dict(metadata or {}),
+        segments=[
+            Segment(k, (offset - t0_ns) / 1e9, (offset + end - start - t0_ns) / 1e9, start)
+            for k, (offset, start, end) in enumerate(layout)
+        ],
         **table_frames,
     )
     table.validate()

@@ -76,3 +76,13 @@ def analyze_table(
         return Analysis(table, options, ctx.results, verdict)
     ctx, verdict = _one_pass(table, options, on_step, {"navigation": nav})
     return Analysis(table, options, ctx.results, verdict, 2, spans)
+
+
+def analyze_segments(
+    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+) -> list[Analysis]:
+    """One analysis per recording: a log that joins several (its clock jumped back) is never analysed
+    as one interleaved stream."""
+    if len(table.segments) < 2:
+        return [analyze_table(table, options, on_step)]
+    return [analyze_table(table.segment(k), options, on_step) for k in range(len(table.segments))]

@@ -94,17 +94,25 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
     lat0, lon0, h0 = (float(fixes[c].iloc[0]) for c in ("lat_deg", "lon_deg", "height_m"))
     p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
     v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
-    has_velocity = np.isfinite(v).all(axis=1).mean() >= 0.5
+    has_velocity = np.isfinite(v[:, :2]).all(axis=1).mean() >= 0.5
     if has_velocity:
-        mode = "position change vs reported velocity"
-        good = np.isfinite(v).all(axis=1)
+        # a receiver that reports east/north velocity only is checked horizontally (not discarded)
+        vertical = np.isfinite(v[:, 2]).mean() >= 0.5
+        mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
+        good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
         t, p, v = t[good], p[good], v[good]
+        if not vertical:
+            v = v.copy()
+            v[:, 2] = 0.0
         r = _window_velocity_residual(t, p, v, opts)
+        if not vertical:
+            r[:, 2] = np.nan
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, p)
-    z = r / _robust_scale(r, opts.min_scale_m)
-    stat = np.sum(z**2, axis=1)
+    scale = _robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m)
+    z = r / scale
+    stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
     return mode, t, z, stat
 
 
@@ -119,7 +127,10 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
             continue
         mode, t, z, stat = check_receiver(rx.reset_index(drop=True), opts)
         modes.append(f"{rid}: {mode}")
-        alarm = np.nan_to_num(stat, nan=0.0) > threshold
+        dof = np.isfinite(z).sum(axis=1)
+        alarm = np.nan_to_num(stat, nan=0.0) > np.where(
+            dof > 0, stats.chi2.isf(opts.p_false_alarm, np.maximum(dof, 1)), np.inf
+        )
         alarms = alarm_intervals(t, np.nan_to_num(stat), alarm, merge_gap_s=opts.window_s)
         result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0)
         result.series.append(Series(f"{rid}/statistic", t, stat, "chi2(3)", threshold))

@@ -41,19 +41,24 @@ def report(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG and write the operator report: one self-contained HTML page (opens offline anywhere)."""
-    from spooflens.cli import _print_analysis
+    from spooflens.cli import _print_analysis, segment_path, segments_summary
     from spooflens.report import write_report
     from spooflens.summary import build_summary
 
-    analysis = analyse_log(log, topics, imu_grade, quiet)
+    analyses = analyse_log(log, topics, imu_grade, quiet)
     output = output or Path(log.name.rstrip("/")).with_suffix(".html")
-    size = write_report(output, analysis)
-    summary = build_summary(analysis.table, analysis.results, analysis.verdict)
+    summaries = []
+    for k, analysis in enumerate(analyses):
+        path = segment_path(output, k, len(analyses))
+        size = write_report(path, analysis)
+        summary = build_summary(analysis.table, analysis.results, analysis.verdict)
+        summaries.append(summary)
+        prefix = f"recording {k + 1} of {len(analyses)}: " if len(analyses) > 1 else ""
+        if quiet:
+            click.echo(prefix + analysis.verdict.headline)
+        else:
+            _print_analysis(summary, None, json_path)
+            click.echo(f"{prefix}report: {path} ({size / 1e6:.2f} MB); open it in any browser, no network needed")
     if json_path:
-        json_path.write_text(json.dumps(summary, indent=2))
-    if quiet:
-        click.echo(analysis.verdict.headline)
-    else:
-        _print_analysis(summary, None, json_path)
-        click.echo(f"report: {output} ({size / 1e6:.2f} MB); open it in any browser, no network needed")
-    return finish(log, analysis, fail_on_spoof)
+        json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
+    return finish(log, analyses, fail_on_spoof)
