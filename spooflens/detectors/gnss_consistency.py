@@ -51,7 +51,7 @@ def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
     make the honest rest of the log look anomalous.
     """
     a = np.where(np.abs(x) > 1e-9, np.abs(x), np.nan)
-    q = np.nanpercentile(a, 25, axis=0) if np.isfinite(a).any() else np.full(x.shape[1], np.nan)
+    q = np.array([np.nanpercentile(c, 25) if np.isfinite(c).any() else np.nan for c in a.T])
     return np.asarray(np.maximum(np.nan_to_num(q / _Q25_ABS_NORMAL, nan=floor), floor), dtype=float)
 
 
