@@ -60,7 +60,10 @@ class CoastingOptions:
     placebo_trim: float = 0.1  # the largest tenth of the clean coasts is left out (another attack, if any)
     placebo_runs: int = 24
     settle_s: float = 30.0
-    converge_s: float = 60.0  # a reference younger than this cannot confirm anything (still converging)
+    converge_s: float = 20.0  # a reference younger than this cannot confirm anything (still converging)
+    # GNSS must also have moved this far from the reference: real receivers wander and jump by metres
+    # (an SBAS solution converging, a correction switching), which no spoofing verdict should rest on
+    min_departure_m: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -231,7 +234,7 @@ def coasting_check(
     ratio = _ratio(sol, opts.p_disagree)
     kappa = envelope.at(t - t_ex)
     offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
-    disagree = np.nan_to_num(ratio) > opts.margin * kappa
+    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & (np.nan_to_num(offset) > opts.min_departure_m)
     departure = None
     deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
     for a, b in _runs(disagree):

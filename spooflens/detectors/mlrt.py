@@ -282,15 +282,22 @@ def _gaussian_log_integral2(mu: np.ndarray, P: np.ndarray, Lam: np.ndarray, alph
 
 @njit(cache=True)
 def _ramp_offline(
-    x_upd: np.ndarray, P_upd: np.ndarray, Lam: np.ndarray, alpha: np.ndarray, n: int, q: int, Sigma: np.ndarray
+    x_upd: np.ndarray,
+    P_upd: np.ndarray,
+    Lam: np.ndarray,
+    alpha: np.ndarray,
+    n: int,
+    q: int,
+    Sigma: np.ndarray,
+    first: int = -1,
 ):
     N = x_upd.shape[0]
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
-    na = n + 2 * q
+    na = x_upd.shape[1]
     Bsel = np.zeros((na, q))
     for j in range(q):
-        Bsel[n + q + j, j] = 1.0
+        Bsel[(n + q if first < 0 else first) + j, j] = 1.0
     for m in range(N - 1):
         mu, P, L, a = x_upd[m], P_upd[m], Lam[m], alpha[m]
         base = _gaussian_log_integral2(mu, P, L, a)
@@ -327,6 +334,42 @@ def ramp_two_filter_offline(
     Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
     sigma = np.diag(np.asarray(sigma_rate, dtype=float) ** 2)
     bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma)
+    return RampOffline(model.t[: last + 1], bf, flat)
+
+
+def augment_step(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGaussianModel:
+    """[x; b]: a constant offset b on the attacked rows, which jumps once (a step, a meaconer switched on)."""
+    n, q, N = model.n_states, len(rows), model.n_epochs
+    na = n + q
+    A = np.zeros((N, na, na))
+    A[:, :n, :n] = model.A
+    A[:, n:, n:] = np.eye(q)
+    Q = np.zeros((N, na, na))
+    Q[:, :n, :n] = model.Q
+    C = np.zeros((N, model.n_measurements, na))
+    C[:, :, :n] = model.C
+    for j, r in enumerate(rows):
+        C[:, r, n + j] = 1.0
+    P0 = np.zeros((na, na))
+    P0[:n, :n] = model.P0
+    names = (*model.state_names, *[f"step_{r}" for r in rows])
+    return LinearGaussianModel(
+        model.t, A, Q, C, model.R, model.y, np.r_[model.x0, np.zeros(q)], P0, names, model.measurement_names
+    )
+
+
+def step_two_filter_offline(
+    model: LinearGaussianModel, rows: tuple[int, ...], sigma_step: FloatArray, last: int | None = None
+) -> RampOffline:
+    """2 log BF of a step of the attacked rows after every epoch m (offset ~ N(0, sigma_step^2) per row),
+    from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp."""
+    last = model.n_epochs - 1 if last is None else last
+    aug = augment_step(model.window(0, last + 1), rows)
+    fwd = forward_filter(aug)
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
+    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
+    sigma = np.diag(np.asarray(sigma_step, dtype=float) ** 2)
+    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma, model.n_states)
     return RampOffline(model.t[: last + 1], bf, flat)
 
 

@@ -27,7 +27,7 @@ from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, Curve, DetectorResult, Series, Track, alarm_intervals
 from spooflens.detectors.innovation_test import position_nis, threshold
 from spooflens.detectors.kalman import forward_filter
-from spooflens.detectors.mlrt import onset_posterior, ramp_two_filter_offline
+from spooflens.detectors.mlrt import onset_posterior, ramp_two_filter_offline, step_two_filter_offline
 from spooflens.detectors.ramp import RampStatistics, ramp_statistics
 from spooflens.evidence import Evidence
 from spooflens.statespace import LinearGaussianModel
@@ -43,6 +43,7 @@ class Seed000Options:
     window_s: float = 30.0
     step_s: float = 1.0
     sigma_rate_mps: tuple[float, float, float] = (3.0, 3.0, 3.0)
+    sigma_step_m: tuple[float, float, float] = (100.0, 100.0, 100.0)  # step prior of the onset posterior
     attacks_per_hour: float = 0.1
     posterior_alarm: float = 0.99
     settle_s: float = 20.0  # no alarms while the filter converges after its start
@@ -59,7 +60,9 @@ class Seed000Options:
     onset_horizon_s: float = 5.0
 
 
-def innovation_whiteness(t: FloatArray, eps: FloatArray, S: FloatArray, window_s: float = 30.0) -> float:
+def innovation_whiteness(
+    t: FloatArray, eps: FloatArray, S: FloatArray, window_s: float = 30.0, suspected: NDArray[np.bool_] | None = None
+) -> float:
     """Median over `window_s` windows of the lag-1 autocorrelation of the normalised position innovations.
 
     Near 0 when the model fits the log; the median over windows stays near 0 even if an attack (which
@@ -71,7 +74,10 @@ def innovation_whiteness(t: FloatArray, eps: FloatArray, S: FloatArray, window_s
     edges = np.arange(t[0], t[-1] + window_s, window_s)
     values = []
     for a, b in itertools.pairwise(edges):
-        w = z[(t >= a) & (t < b)]
+        inside = (t >= a) & (t < b)
+        if suspected is not None and suspected[inside].any():
+            continue  # an attack correlates the innovations: the model is judged outside suspected stretches
+        w = z[inside]
         w = w[np.isfinite(w).all(axis=1)]
         if len(w) < 8:
             continue
@@ -89,6 +95,8 @@ class Seed000Statistics:
     ramp: RampStatistics
     posterior: FloatArray  # P(ramp ongoing | data so far)
     whiteness: float  # innovation_whiteness: near 0 when the model fits
+    eps: FloatArray  # the forward filter's innovations and their covariance (for the whiteness check)
+    S: FloatArray
 
 
 def statistics(model: LinearGaussianModel, opts: Seed000Options) -> Seed000Statistics:
@@ -105,7 +113,13 @@ def statistics(model: LinearGaussianModel, opts: Seed000Options) -> Seed000Stati
     )
     odds = np.exp(np.clip(ramp.log_odds, -700, 700))
     return Seed000Statistics(
-        model.t, position_nis(fwd), ramp, odds / (1.0 + odds), innovation_whiteness(model.t, fwd.eps, fwd.S)
+        model.t,
+        position_nis(fwd),
+        ramp,
+        odds / (1.0 + odds),
+        innovation_whiteness(model.t, fwd.eps, fwd.S),
+        fwd.eps,
+        fwd.S,
     )
 
 
@@ -177,6 +191,15 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
         results[2].curves.append(Curve("l_N_over_onset", off.t, off.mlr_flat, "candidate onset (s)"))
         cal.curves.append(Curve("two_log_bf_N_over_onset", off.t, off.log_bf, "candidate onset (s)"))
     results.append(cal)
+    suspected = np.zeros(len(t), dtype=bool)
+    for res in results:
+        for al in res.alarms:
+            suspected |= (t >= al.start_s - opts.window_s) & (t <= al.end_s + opts.window_s)
+    fwd_eps, fwd_S = st.eps, st.S
+    whiteness = innovation_whiteness(t, fwd_eps, fwd_S, suspected=suspected)
+    if not np.isfinite(whiteness):  # every window suspected: judge on all of them
+        whiteness = st.whiteness
+    st = replace(st, whiteness=whiteness)
     if not st.whiteness <= opts.max_whiteness:  # NaN counts as not white
         note = (
             f"; MODEL MISMATCH: position innovations are not white on this log (lag-1 autocorrelation "
@@ -194,12 +217,17 @@ def _with_onset_posterior(model: LinearGaussianModel, a: Alarm, opts: Seed000Opt
     """MAP onset and credible interval from the data up to `onset_horizon_s` after the alarm starts."""
     last = int(np.searchsorted(model.t, min(a.end_s, a.start_s + opts.onset_horizon_s)))
     last = min(last, model.n_epochs - 1)
-    off = ramp_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last)
+    ramp = ramp_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last)
+    step = step_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_step_m), last=last)
+    # a ramp or a step, equally likely a priori: the onset's evidence is the mixture of both
+    both = np.logaddexp(0.5 * np.nan_to_num(ramp.log_bf, nan=-np.inf), 0.5 * np.nan_to_num(step.log_bf, nan=-np.inf))
+    both = both + np.log(0.5)
+    log_bf = np.where(np.isfinite(ramp.log_bf) | np.isfinite(step.log_bf), 2.0 * both, np.nan)
     lo = a.start_s - opts.window_s
-    sel = (off.t >= lo) & (off.t <= model.t[last]) & np.isfinite(off.log_bf)
+    sel = (ramp.t >= lo) & (ramp.t <= model.t[last]) & np.isfinite(log_bf)
     if sel.sum() < 2:
         return a
-    _, t_map, interval, _ = onset_posterior(off.t[sel], off.log_bf[sel], opts.attacks_per_hour)
+    _, t_map, interval, _ = onset_posterior(ramp.t[sel], log_bf[sel], opts.attacks_per_hour)
     return replace(a, onset_s=t_map, onset_interval_s=interval)
 
 

@@ -56,6 +56,8 @@ class LearnOptions:
     sweeps: int = 2
     steps: tuple[float, ...] = (3.0, np.sqrt(3.0))
     max_block_s: float = 1.0  # tuning runs propagate in blocks up to the next fix (faster, same answer)
+    min_scored_epochs: int = 50  # with fewer clean epochs than this, the prior stands (nothing to learn from)
+    min_scored_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,12 @@ class LearnedNoise:
 
     def describe(self) -> str:
         n = self.noise
+        if n.source.startswith("prior"):
+            return (
+                f"too little clean data to learn the noise from: prior used (position white "
+                f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m from the fixes' scatter + Gauss-Markov "
+                f"{n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, IMU preset {self.grade.name})"
+            )
         text = (
             f"noise learned from the log ({self.evaluations} filter runs on {self.window_s[0]:.0f}-"
             f"{self.window_s[1]:.0f} s): position white {n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m "
@@ -107,12 +115,19 @@ def _robust_std(x: FloatArray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
-def initial_noise(inputs: FilterInputs) -> GnssNoise:
-    """A starting point from the fixes alone: white noise from the scatter of second differences (the
-    vehicle's motion is smooth over three epochs), the wander from the reported accuracy, else 2 m."""
+def initial_noise(inputs: FilterInputs, exclude: Sequence[tuple[float, float]] = ()) -> GnssNoise:
+    """A starting point from the fixes alone (away from suspected stretches): white noise from the scatter
+    of second differences (the vehicle's motion is smooth over three epochs; exact repeats, a frozen
+    receiver or a hover spoofer, left out), the wander from the reported accuracy, else 2 m."""
     from spooflens.geodesy import geodetic_to_enu
 
     fx = inputs.fixes
+    t = fx["t_s"].to_numpy(dtype=float)
+    keep = np.ones(len(t), dtype=bool)
+    for a, b in exclude:
+        keep &= ~((t >= a) & (t <= b))
+    if keep.sum() >= 10:
+        fx = fx[keep].reset_index(drop=True)
     p = geodetic_to_enu(
         fx["lat_deg"],
         fx["lon_deg"],
@@ -120,6 +135,7 @@ def initial_noise(inputs: FilterInputs) -> GnssNoise:
         *(float(fx[c].iloc[0]) for c in ("lat_deg", "lon_deg", "height_m")),
     )
     d2 = np.diff(p, 2, axis=0)
+    d2 = np.where(np.abs(d2) > 1e-6, d2, np.nan)
     wh = np.nanmean([_robust_std(d2[:, 0]), _robust_std(d2[:, 1])]) / np.sqrt(6.0)
     wv = _robust_std(d2[:, 2]) / np.sqrt(6.0)
     h_acc = fx["h_acc_m"].to_numpy(dtype=float)
@@ -127,6 +143,7 @@ def initial_noise(inputs: FilterInputs) -> GnssNoise:
     v = fx[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
     has_vel = bool(np.isfinite(v[:, :2]).all(axis=1).any())
     dv = np.diff(v, 2, axis=0)
+    dv = np.where(np.abs(dv) > 1e-9, dv, np.nan)
     vh = np.nanmean([_robust_std(dv[:, 0]), _robust_std(dv[:, 1])]) / np.sqrt(6.0) if has_vel else 0.0
     vv = _robust_std(dv[:, 2]) / np.sqrt(6.0) if has_vel and np.isfinite(v[:, 2]).any() else vh
 
@@ -284,12 +301,29 @@ def learn_noise(
     t_end = max(float(tf[k_end]), t0 + opts.min_window_s)
     window = (t0, min(t_end, float(tf[-1])))
     sub = inputs.between(-np.inf, window[1])
-    noise = initial_noise(sub)
+    noise = initial_noise(sub, exclude)
     has_vel = noise.white_vel_mps != (0.0, 0.0)
     base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s)
     objective = _Objective(sub, start, base)
-    objective.score_mask = _scored_epochs(objective.run(base), window, exclude, opts)
+    first = objective.run(base)
+    objective.score_mask = _scored_epochs(first, window, exclude, opts)
     odometry: OdometryAiding | None = None
+    scored_t = first.t[objective.score_mask]
+    if len(scored_t) < opts.min_scored_epochs or float(scored_t[-1] - scored_t[0]) < opts.min_scored_s:
+        # too little clean data (a short log, or one suspected almost throughout): the prior stands
+        mount = estimate_mount(sub, odometry_id) if odometry_id is not None else None
+        if mount is not None and odometry_id is not None:
+            odometry = OdometryAiding(mount, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "prior")
+        return LearnedNoise(
+            replace(noise, source="prior (too little clean data to learn from)"),
+            odometry,
+            grade,
+            1.0,
+            objective.evaluations,
+            float("nan"),
+            window,
+            tuple(exclude),
+        )
 
     params: dict[str, float] = {
         "imu": 1.0,
