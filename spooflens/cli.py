@@ -419,6 +419,7 @@ def simulate(
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
+        "realworld": "spooflens.bench.realworld_bench:command",
         "report": "spooflens.bench.report_bench:command",
         "seed003": "spooflens.bench.seed003_bench:command",
         "seed004": "spooflens.bench.seed004_bench:command",

@@ -294,6 +294,7 @@ def filter_loop(
     gm_tau: np.ndarray,
     gm_sigma: np.ndarray,
     g0: np.ndarray,
+    record: bool = True,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
 
@@ -305,15 +306,18 @@ def filter_loop(
     out_z = np.full((M, NM), np.nan)
     out_nu = np.full((M, NM), np.nan)
     out_S = np.zeros((M, NM, NM))
-    out_S_all = np.zeros((M, NM, NM))  # H P H^T + R of every row, used or not (coasting comparisons)
+    # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need; a noise-
+    # learning run keeps only what its likelihood reads (record=False), most of the memory traffic
+    Mr = M if record else 1
+    out_S_all = np.zeros((Mr, NM, NM))  # H P H^T + R of every row, used or not (coasting comparisons)
     out_R = np.zeros((M, NM, NM))
-    out_H = np.zeros((M, NM, NE))
+    out_H = np.zeros((Mr, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
-    out_Phi = np.zeros((M, NE, NE))
-    out_Qd = np.zeros((M, NE, NE))
-    P_pred = np.zeros((M, NE, NE))
-    P_upd = np.zeros((M, NE, NE))
+    out_Phi = np.zeros((Mr, NE, NE))
+    out_Qd = np.zeros((Mr, NE, NE))
+    P_pred = np.zeros((Mr, NE, NE))
+    P_upd = np.zeros((Mr, NE, NE))
     out_dx = np.zeros((M, NE))
     gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
@@ -372,9 +376,10 @@ def filter_loop(
             track_epoch[nt] = e - 1
             nt += 1
         P = 0.5 * (P + P.T)
-        out_Phi[e] = Phi_acc
-        out_Qd[e] = Qd_acc
-        P_pred[e] = P
+        if record:
+            out_Phi[e] = Phi_acc
+            out_Qd[e] = Qd_acc
+            P_pred[e] = P
         lead = tf[e] - x[21]
         rm, rn = local_radii(x[0])
         z = np.full(NM, np.nan)
@@ -394,12 +399,15 @@ def filter_loop(
         nu = z - Hm @ xp
         out_z[e] = z
         out_nu[e] = nu
-        out_H[e] = Hm
-        S_all = Hm @ P @ Hm.T
+        if record:
+            out_H[e] = Hm
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2
-            S_all[i, i] += sigma[e, i] ** 2
-        out_S_all[e] = S_all
+        if record:
+            S_all = Hm @ P @ Hm.T
+            for i in range(NM):
+                S_all[i, i] += sigma[e, i] ** 2
+            out_S_all[e] = S_all
         n_used = 0
         for i in range(NM):
             if use[e, i] and not math.isnan(z[i]):
@@ -433,7 +441,8 @@ def filter_loop(
             x = correct(x, dx[:15])
             g = g + dx[15:]
             out_dx[e] = dx
-        P_upd[e] = P
+        if record:
+            P_upd[e] = P
         states[e] = x
         gm[e] = g
         if nt > 0 and track[nt - 1, 0] == x[21]:

@@ -89,6 +89,7 @@ class FilterOptions:
     # continue from another run's epoch: its covariance (24 x 24) and sensor-error estimates (9)
     initial_covariance: FloatArray | None = None
     initial_gm: FloatArray | None = None
+    record: bool = True  # keep the per-epoch matrices (off for noise-learning runs, which need only S)
     t_start: float | None = None
 
 
@@ -351,6 +352,7 @@ def _run(
         gm_tau,
         gm_sigma,
         g0,
+        opts.record,
     )
     return NavSolution(
         imu_id,

@@ -56,6 +56,7 @@ class LearnOptions:
     sweeps: int = 2
     steps: tuple[float, ...] = (3.0, np.sqrt(3.0))
     max_block_s: float = 1.0  # tuning runs propagate in blocks up to the next fix (faster, same answer)
+    min_gain: float = 2.0  # 2 NLL a sweep must gain to be worth another
     min_scored_epochs: int = 50  # with fewer clean epochs than this, the prior stands (nothing to learn from)
     min_scored_s: float = 30.0
 
@@ -264,6 +265,7 @@ def _search(
     """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps)."""
     best = objective(make(params))
     for _ in range(opts.sweeps):
+        before = best
         for name in names:
             lo, hi = BOUNDS.get(name, (1e-4, 1e4))
             for step in opts.steps:
@@ -276,6 +278,8 @@ def _search(
                     if value < best:
                         best, params = value, trial
                         break
+        if before - best < opts.min_gain:  # a sweep that bought almost nothing: converged
+            break
     return best, params
 
 
@@ -303,7 +307,7 @@ def learn_noise(
     sub = inputs.between(-np.inf, window[1])
     noise = initial_noise(sub, exclude)
     has_vel = noise.white_vel_mps != (0.0, 0.0)
-    base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s)
+    base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False)
     objective = _Objective(sub, start, base)
     first = objective.run(base)
     objective.score_mask = _scored_epochs(first, window, exclude, opts)
@@ -360,7 +364,9 @@ def learn_noise(
                 gm_mps=(p["o_b"], p["o_b"], p["o_b"]),
                 tau_s=p["tau_o"],
             )
-        return FilterOptions(grade=scaled_grade(grade, p["imu"]), noise=n, odometry=odo, max_block_s=opts.max_block_s)
+        return FilterOptions(
+            grade=scaled_grade(grade, p["imu"]), noise=n, odometry=odo, max_block_s=opts.max_block_s, record=False
+        )
 
     best, params = _search(objective, options, params, list(params), opts)
     if odometry_id is not None:
@@ -369,7 +375,7 @@ def learn_noise(
             odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
             params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
             best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts)
-    final = replace(options(params), max_block_s=FilterOptions().max_block_s)
+    final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True)
     assert final.noise is not None
     return LearnedNoise(
         replace(final.noise, source="learned from the log"),
