@@ -283,12 +283,15 @@ def _print_analysis(summary: dict, output: Path | None, json_path: Path | None, 
     out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
     for inc in v["incidents"]:
         when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
-        kind = "incident" if inc["confidence"] != "low" else "single-class anomaly (not called spoofing)"
+        kind = "incident" if inc["confidence"] != "low" else "anomaly (no second class at the same time: not spoofing)"
+        apart = [e for e in inc["evidence"] if e not in inc.get("corroborating_evidence", inc["evidence"])]
+        also = f"; at other times {', '.join(apart)}" if apart else ""
         end = "end of log" if inc.get("ongoing_at_end") else f"{inc['end_s']:.2f} s"
         sats = f", satellites {'+'.join(inc['satellites'])}" if inc.get("satellites") else ""
         out.print(
             f"  {kind}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
-            f"evidence {', '.join(inc['evidence_labels'])} ({', '.join(inc['detectors'])}){sats}, "
+            f"evidence {', '.join(inc.get('corroborating_evidence') or inc['evidence']) or 'none confirmed'}{also} "
+            f"({', '.join(inc['detectors'])}){sats}, "
             f"confidence {inc['confidence']}"
         )
     for f in v.get("findings", []):

@@ -12,6 +12,7 @@ attacker.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -79,3 +80,24 @@ def confidence(classes: set[Evidence]) -> str:
     if independent or len(classes) == 2:
         return "medium"
     return "low"
+
+
+RANK = {"low": 0, "medium": 1, "high": 2}
+# Classes corroborate each other only when their alarms point at the same time: a receiver complaining
+# while it converges at power-on and a GNSS-only glitch a minute later are two unrelated events.
+CORROBORATION_S = 10.0
+
+# an evidence class's alarm interval: (class, start s, end s)
+Span = tuple[Evidence, float, float]
+
+
+def corroborated(spans: Iterable[Span], window_s: float = CORROBORATION_S) -> set[Evidence]:
+    """The classes that agree in time: for each alarm interval, the classes with an interval within
+    `window_s` of it; of those sets, the one of highest confidence (then the most classes)."""
+    spans = list(spans)
+    best: set[Evidence] = set()
+    for _, a0, a1 in spans:
+        near = {c for c, b0, b1 in spans if b0 <= a1 + window_s and a0 <= b1 + window_s}
+        if (RANK[confidence(near)], len(near)) > (RANK[confidence(best)] if best else -1, len(best)):
+            best = near
+    return best

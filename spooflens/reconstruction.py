@@ -25,13 +25,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 from scipy import stats
 
 from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
-from spooflens.evidence import ORDER, Evidence, confidence
+from spooflens.evidence import Evidence
 from spooflens.navigation.loosely_coupled import NavSolution, run_prepared
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
@@ -51,7 +52,9 @@ class CoastingOptions:
     margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
     min_disagree_s: float = 2.0
     min_disagree_epochs: int = 3
-    confirm_window_s: float = 20.0  # after the incident's last alarm (and before the next incident)
+    # after the incident's last alarm (and before the next incident), within the clean envelope's reach: a
+    # slow pull (0.5 m/s) is 10 m off only after 20 s
+    confirm_window_s: float = 60.0
     agree_s: float = 10.0
     min_agree_epochs: int = 5
     margin_s: float = 1.0  # GNSS is left out from this long before the onset estimate
@@ -137,10 +140,16 @@ def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavS
     return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
 
 
-def _ratio(sol: NavSolution, p: float) -> FloatArray:
+def _ratio(sol: NavSolution, p: float, window_s: float = 1.0) -> FloatArray:
+    """NIS over its chi-square threshold, as a centred running median over `window_s`: a single fix's
+    NIS is mostly receiver noise, so a slow pull (ratio near the margin) would break into short runs."""
     nis, dof = coasting_nis(sol, HORIZONTAL_ROWS)
     threshold = np.where(dof > 0, stats.chi2.isf(p, np.maximum(dof, 1)), np.nan)
-    return np.asarray(nis / threshold, dtype=float)
+    ratio = pd.Series(nis / threshold)
+    dt = np.diff(sol.t)
+    n = round(window_s / float(np.median(dt))) if len(dt) and np.median(dt) > 0 else 1
+    n = max(1, n) | 1
+    return np.asarray(ratio.rolling(n, center=True, min_periods=1).median().where(ratio.notna()), dtype=float)
 
 
 @dataclass(frozen=True)
@@ -317,12 +326,12 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
         envelopes.append(envelope)
         later = [i.start_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
-        deadline = min([inc.end_s + opts.confirm_window_s, *later])
+        reach = _coast_start(inc) + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
+        deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
         check = coasting_check(nav, _coast_start(inc), envelope, deadline, opts, base)
         checks.append((inc, check))
         young = _coast_start(inc) < float(nav.solution.t[0]) + opts.converge_s
         if not check.confirmed or young:
-            kept = tuple(e for e in inc.evidence if e != Evidence.INERTIAL)
             why = (
                 f"inertial alarm not confirmed: the INS reference had run only "
                 f"{_coast_start(inc) - float(nav.solution.t[0]):.0f} s and was still converging"
@@ -333,11 +342,9 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             incidents.append(
                 replace(
                     inc,
-                    evidence=kept,
-                    confidence=confidence(set(kept)) if kept else "low",
                     end_method=why,
                     offset_peak_m=float(np.nanmax(check.offset_m)) if len(check.offset_m) else None,
-                )
+                ).with_spans(tuple(sp for sp in inc.spans if sp[0] != Evidence.INERTIAL))
             )
             continue
         # the coasting comparison says when GNSS agreed again; alarms after that are the closed-loop
@@ -356,6 +363,8 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         else:
             interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
         onset, onset_interval = _onset_before(ctx, inc, check.departure_s)
+        # the departure itself is the inertial evidence: whatever else alarmed while it lasted agrees
+        departure_span = (Evidence.INERTIAL, _coast_start(inc), end)
         incidents.append(
             replace(
                 inc,
@@ -367,7 +376,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
                 end_method=method,
                 offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
                 offset_end_m=float(offsets[-1]) if len(offsets) else None,
-            )
+            ).with_spans((*inc.spans, departure_span))
         )
         # later coasts start from a filter that left this incident out, not from one that followed the
         # spoofed fixes and then had to recover from their jump back
@@ -404,15 +413,12 @@ def _absorb(current: Incident, inc: Incident) -> Incident:
     """`inc` (alarms inside a confirmed incident) merged into it; when it starts where the reference could
     no longer tell whether GNSS agreed, it marks the end: a spoofer switching off makes the receiver lose
     and re-acquire the real sky, which the detectors see as a new transient."""
-    classes = tuple(e for e in ORDER if e in {*current.evidence, *inc.evidence})
     merged = replace(
         current,
         detectors=tuple(sorted({*current.detectors, *inc.detectors})),
-        evidence=classes,
-        confidence=confidence(set(classes)),
         receivers=tuple(sorted({*current.receivers, *inc.receivers})),
         satellites=tuple(sorted({*current.satellites, *inc.satellites})),
-    )
+    ).with_spans((*current.spans, *inc.spans))
     window = current.end_interval_s
     # the return shows in evidence that does not depend on the filter that followed the spoofed fixes
     independent_of_filter = any(e != Evidence.INERTIAL for e in inc.evidence)
@@ -441,18 +447,15 @@ def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
     for inc in sorted(incidents, key=lambda i: i.start_s):
         if out and inc.start_s <= out[-1].end_s and out[-1].is_spoofing and inc.is_spoofing:
             prev = out[-1]
-            classes = tuple(e for e in ORDER if e in {*prev.evidence, *inc.evidence})
             out[-1] = replace(
                 prev,
                 end_s=max(prev.end_s, inc.end_s),
                 end_interval_s=inc.end_interval_s if inc.end_s >= prev.end_s else prev.end_interval_s,
                 ongoing_at_end=prev.ongoing_at_end or inc.ongoing_at_end,
                 detectors=tuple(sorted({*prev.detectors, *inc.detectors})),
-                evidence=classes,
-                confidence=confidence(set(classes)),
                 receivers=tuple(sorted({*prev.receivers, *inc.receivers})),
                 satellites=tuple(sorted({*prev.satellites, *inc.satellites})),
-            )
+            ).with_spans((*prev.spans, *inc.spans))
         else:
             out.append(inc)
     return out

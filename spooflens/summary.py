@@ -70,6 +70,8 @@ def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
         "spoofing": inc.is_spoofing,
         "evidence": [str(e) for e in inc.evidence],
         "evidence_labels": [label(e) for e in inc.evidence],
+        # the classes that alarmed at the same time: what the confidence counts
+        "corroborating_evidence": [str(e) for e in inc.corroborating],
         "receivers": list(inc.receivers),
         "satellites": list(inc.satellites),
         "ongoing_at_end": inc.ongoing_at_end,

@@ -6,17 +6,19 @@ part, else the earliest onset estimate inside it; its end is the last alarm end 
 stage, `spooflens.reconstruction`, refines it). Detectors marked advisory (an uncalibrated rule, a test
 whose model does not fit the log) are reported but do not make incidents.
 
-Confidence counts the distinct evidence classes whose detectors alarmed in the incident
-(`spooflens.evidence.confidence`): several tests on one filter's innovations are one class. A
-low-confidence incident (one GNSS-internal class alone) is an anomaly, never a spoofing verdict.
+Confidence counts the distinct evidence classes whose detectors alarmed in the incident at the same
+time (`spooflens.evidence.corroborated`, `confidence`): several tests on one filter's innovations are
+one class, and classes whose alarms lie minutes apart inside one long incident do not corroborate each
+other. A low-confidence incident (one GNSS-internal class alone) is an anomaly, never a spoofing
+verdict.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
-from spooflens.evidence import ORDER, Evidence, confidence
+from spooflens.evidence import ORDER, Evidence, Span, confidence, corroborated
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,23 @@ class Incident:
     end_method: str = "last alarm"
     offset_peak_m: float | None = None  # largest horizontal distance GNSS - independent reference
     offset_end_m: float | None = None  # the same at the incident's end
+    spans: tuple[Span, ...] = ()  # each class's alarm intervals: what corroborates what
+
+    def with_spans(self, spans: tuple[Span, ...]) -> Incident:
+        """This incident with these evidence intervals: its classes and confidence follow from them."""
+        classes = {c for c, _, _ in spans}
+        return replace(
+            self,
+            spans=spans,
+            evidence=tuple(c for c in ORDER if c in classes),
+            confidence=confidence(corroborated(spans)) if spans else "low",
+        )
+
+    @property
+    def corroborating(self) -> tuple[Evidence, ...]:
+        """The classes that agree in time, the ones the confidence counts."""
+        found = corroborated(self.spans)
+        return tuple(c for c in ORDER if c in found)
 
     @property
     def is_spoofing(self) -> bool:
@@ -63,7 +82,7 @@ class Verdict:
         if not self.spoofed:
             advisory = f" ({len(self.detectors_advisory)} more advisory only)" if self.detectors_advisory else ""
             anomalies = sum(not i.is_spoofing for i in self.incidents)
-            noted = f"; {anomalies} single-class anomaly(ies) noted, not confirmed" if anomalies else ""
+            noted = f"; {anomalies} anomaly(ies) of one evidence class noted, not confirmed" if anomalies else ""
             return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{noted}"
         spoofing = [i for i in self.incidents if i.is_spoofing]
         first = spoofing[0]
@@ -89,7 +108,7 @@ def _group(alarms: list[tuple[Alarm, DetectorResult]], merge_gap_s: float) -> li
 
 def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     items = [a for a, _ in group]
-    classes = {r.evidence for _, r in group if r.evidence is not None}
+    spans = tuple(sorted({(r.evidence, a.start_s, a.end_s) for a, r in group if r.evidence is not None}))
     # an onset with a credible interval beats point estimates
     with_interval = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_interval_s is not None]
     onsets = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None]
@@ -105,11 +124,10 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
         float(onset),  # type: ignore[arg-type]
         interval,
         tuple(sorted({r.name for _, r in group})),
-        confidence(classes),
-        tuple(c for c in ORDER if c in classes),
-        tuple(sorted({a.receiver_id for a in items if a.receiver_id})),
-        tuple(sorted({s for a in items for s in a.satellites})),
-    )
+        "low",
+        receivers=tuple(sorted({a.receiver_id for a in items if a.receiver_id})),
+        satellites=tuple(sorted({s for a in items for s in a.satellites})),
+    ).with_spans(spans)
 
 
 def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:

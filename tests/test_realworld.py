@@ -13,7 +13,7 @@ import pytest
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.detectors.receiver_evidence import run_receiver_evidence
-from spooflens.evidence import Evidence, confidence
+from spooflens.evidence import Evidence, confidence, corroborated
 from spooflens.geodesy import ecef_to_geodetic, geodetic_to_enu
 from spooflens.pipeline import analyze_table
 from spooflens.simulation.sensors import ReceiverModel
@@ -29,6 +29,17 @@ def test_confidence_counts_evidence_classes_not_detectors() -> None:
     assert confidence({Evidence.GNSS_ONLY, Evidence.RECEIVER}) == "medium"
     assert confidence({Evidence.INERTIAL, Evidence.GNSS_ONLY}) == "high"
     assert confidence({Evidence.RAW_MEASUREMENT}) == "medium"
+
+
+def test_classes_corroborate_only_when_their_alarms_meet_in_time() -> None:
+    # a receiver complaining at power-on and a GNSS-only glitch 34 s later (the clean husky bag)
+    apart = [(Evidence.RECEIVER, 16.0, 20.8), (Evidence.GNSS_ONLY, 54.9, 54.9)]
+    assert confidence(corroborated(apart)) == "low"
+    near = [(Evidence.RECEIVER, 16.0, 20.8), (Evidence.GNSS_ONLY, 28.0, 29.0)]
+    assert corroborated(near) == {Evidence.RECEIVER, Evidence.GNSS_ONLY}
+    # a long confirmed inertial departure meets everything inside it
+    departure = [(Evidence.INERTIAL, 100.0, 400.0), (Evidence.RECEIVER, 350.0, 351.0), (Evidence.GNSS_ONLY, 10.0, 11.0)]
+    assert corroborated(departure) == {Evidence.INERTIAL, Evidence.RECEIVER}
 
 
 @pytest.fixture(scope="module")
@@ -97,6 +108,13 @@ def test_an_injected_ramp_on_the_real_husky_bag_is_an_incident_that_ends_with_th
     assert Evidence.INERTIAL in inc.evidence and 199.0 <= inc.start_s <= 203.0
     assert abs(inc.end_s - 300.0) < 5.0 and not inc.ongoing_at_end
     assert inc.end_interval_s is not None and inc.end_interval_s[0] - 1.0 <= 300.0 <= inc.end_interval_s[1] + 1.0
+
+
+def test_the_clean_real_husky_bag_is_not_called_spoofed(husky_bag: Path) -> None:
+    verdict = analyze_table(read_log(husky_bag)).verdict
+    assert not verdict.spoofed, verdict.incidents
+    # its start (SBAS converging: receiver flags, then a GNSS-only jump half a minute later) is noted
+    assert verdict.incidents and all(i.confidence == "low" for i in verdict.incidents)
 
 
 def test_a_log_that_joins_two_recordings_is_analysed_as_two(tmp_path: Path) -> None:

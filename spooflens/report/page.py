@@ -98,10 +98,18 @@ def _departures(deps: Sequence[Departure]) -> str:
     )
 
 
+def _evidence_text(inc: Incident) -> str:
+    """The classes that agreed in time, then any that alarmed in the incident at another time."""
+    agreeing = inc.corroborating
+    text = ", ".join(label(e) for e in agreeing)
+    apart = [label(e) for e in inc.evidence if e not in agreeing]
+    return (text or "none confirmed") + (f" (also, at other times: {', '.join(apart)})" if apart else "")
+
+
 def _incident_sentence(table: EpochTable, inc: Incident, n: int, deps: Sequence[Departure]) -> str:
     onset = _when(table, inc.onset_s)
     iv = f" (interval {_interval(inc.onset_interval_s)})" if inc.onset_interval_s else ""
-    evidence = ", ".join(label(e) for e in inc.evidence)
+    evidence = _evidence_text(inc)
     sats = f" Satellites found inconsistent: {', '.join(inc.satellites)}." if inc.satellites else ""
     rx = f" Receivers: {', '.join(inc.receivers)}." if inc.receivers else ""
     far = ""
@@ -141,13 +149,13 @@ def verdict_section(analysis: Analysis) -> str:
             rows.append(
                 (
                     i,
-                    "spoofing" if inc.is_spoofing else "anomaly (one GNSS-internal class: not called spoofing)",
+                    "spoofing" if inc.is_spoofing else "anomaly (no second class at the same time: not spoofing)",
                     _when(table, inc.onset_s)
                     + (f", interval {_interval(inc.onset_interval_s)}" if inc.onset_interval_s else ""),
                     f"{inc.start_s:.2f} s",
                     _end(table, inc),
                     ", ".join(inc.detectors),
-                    ", ".join(label(e) for e in inc.evidence),
+                    _evidence_text(inc),
                     inc.confidence,
                     ", ".join(inc.receivers) or "-",
                     ", ".join(inc.satellites) or "-",
