@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "report": "spooflens.report.command:report",
     "view": "spooflens.viewer:view",
     "fleet": "spooflens.fleet.command:command",
+    "batch": "spooflens.batch:command",
 }
 
 
@@ -199,12 +200,24 @@ def analyze(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary and HTML report."""
+    analysis = analyse_log(log, topics, imu_grade, quiet)
+    verdict = analysis.verdict
+    output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
+    summary = write_outputs(analysis, output, json_path, html_path)
+    if quiet:
+        click.echo(verdict.headline)
+    else:
+        _print_analysis(summary, output, json_path, html_path)
+    return finish(log, analysis, fail_on_spoof)
+
+
+def write_outputs(analysis: Analysis, output: Path, json_path: Path | None, html_path: Path | None) -> dict:
+    """Write the recording (always), the JSON summary and the operator report of an analysis, as `analyze`
+    does (`batch` writes through here too); returns the summary."""
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
-    analysis = analyse_log(log, topics, imu_grade, quiet)
     table, verdict = analysis.table, analysis.verdict
-    output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
     write_recording(output, table, analysis.results, lines, verdict)
     summary = build_summary(table, analysis.results, verdict)
@@ -214,11 +227,7 @@ def analyze(
         from spooflens.report import write_report
 
         write_report(html_path, analysis)
-    if quiet:
-        click.echo(verdict.headline)
-    else:
-        _print_analysis(summary, output, json_path, html_path)
-    return finish(log, analysis, fail_on_spoof)
+    return summary
 
 
 def _stream_names(table: EpochTable) -> str:
@@ -370,6 +379,7 @@ def simulate(
         "report": "spooflens.bench.report_bench:command",
         "seed003": "spooflens.bench.seed003_bench:command",
         "seed004": "spooflens.bench.seed004_bench:command",
+        "e2e": "spooflens.bench.e2e_bench:command",
     },
 )
 def bench() -> None:
