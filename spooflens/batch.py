@@ -246,7 +246,8 @@ class BatchResult:
     analysed: list[dict[str, Any]]  # this run's records (done, damaged, failed)
     skipped: list[dict[str, Any]]  # logs whose content was analysed before
     not_logs: list[Path]
-    wall_s: float
+    wall_s: float  # the whole run, cluster start and fleet tables included
+    tasks_s: float  # from the first task submitted to the last result
     workers: int
     incidents_path: Path
     logs_path: Path
@@ -270,15 +271,21 @@ def run_batch(
     results_dir = results.resolve()
     logs = [p for p in logs if results_dir not in p.parents and p != results_dir]  # never our own outputs
     before = done_records(results)
-    jobs, skipped = [], []
+    jobs: list[LogJob] = []
+    skipped: list[dict[str, Any]] = []
+    first_of: dict[str, Path] = {}
     for p in logs:
         job = LogJob(p, content_hash(p))
         if job.digest in before:
             skipped.append(before[job.digest])
+        elif job.digest in first_of:  # the same bytes twice in this batch: analysed once
+            same = {"log": str(p), "sha256": job.digest, "headline": f"same content as {first_of[job.digest]}"}
+            skipped.append(same)
         else:
+            first_of[job.digest] = p
             jobs.append(job)
     analysed: list[dict[str, Any]] = []
-    n_workers = 0
+    n_workers, tasks_s = 0, 0.0
     if jobs:
         cluster = None
         if scheduler is None:
@@ -293,6 +300,7 @@ def run_batch(
         client = Client(cluster if cluster is not None else scheduler, set_as_default=False)
         try:
             n_workers = len(client.scheduler_info(n_workers=-1)["workers"])
+            t_submit = time.perf_counter()
             futures = [
                 client.submit(
                     analyse_one, str(j.path), j.digest, str(results / j.name), imu_grade, key=f"spooflens-{j.digest}"
@@ -304,13 +312,15 @@ def run_batch(
                 for done, future in enumerate(as_completed(futures, loop=client.loop), start=1):
                     analysed.append(future.result())
                     report("analysing logs", done, len(futures))
+            tasks_s = time.perf_counter() - t_submit
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
     records = list(done_records(results).values()) + [r for r in analysed if r["status"] == "failed"]
     incidents_path, logs_path = write_fleet_tables(results, records)
-    return BatchResult(analysed, skipped, not_logs, time.perf_counter() - t0, n_workers, incidents_path, logs_path)
+    wall_s = time.perf_counter() - t0
+    return BatchResult(analysed, skipped, not_logs, wall_s, tasks_s, n_workers, incidents_path, logs_path)
 
 
 def _print(result: BatchResult) -> None:

@@ -380,6 +380,7 @@ def simulate(
         "seed003": "spooflens.bench.seed003_bench:command",
         "seed004": "spooflens.bench.seed004_bench:command",
         "e2e": "spooflens.bench.e2e_bench:command",
+        "batch": "spooflens.bench.batch_bench:command",
     },
 )
 def bench() -> None:
