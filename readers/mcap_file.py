@@ -50,6 +50,7 @@ _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, 
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
 _MSG_FIELDS = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time (then the payload)
 _PROGRESS_EVERY = 20000
+_GROUP_BYTES = 16 << 20  # decompressed chunk bytes decoded together
 
 
 class _Decoders:
@@ -209,8 +210,10 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         if progress and n_read % _PROGRESS_EVERY == 0:
             progress(n_read, total)
 
+    group: list[tuple[np.ndarray, np.ndarray]] = []  # (chunk bytes, message record offsets) not decoded yet
+
     def chunk_messages(chunk: Chunk, indexes: list[bytes]) -> None:
-        """Every message of a chunk: each channel's messages decoded together (fixed layouts at once)."""
+        """A chunk's message records, queued for `decode_group` (without a summary: kept per message)."""
         nonlocal n_read
         try:
             data = _decompress(chunk)
@@ -234,19 +237,37 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
             return
         if not len(offsets):
             return
+        if not declared:
+            lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
+            channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
+            log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
+            for cid, t, s0, n in zip(channel_ids, log_times, offsets + 31, lengths, strict=True):
+                pending.append((int(cid), int(t), data[s0 : s0 + n]))
+            n_read += len(offsets)
+            return
+        group.append((buf, offsets))
+        if sum(len(b) for b, _ in group) >= _GROUP_BYTES:
+            decode_group()
+
+    def decode_group() -> None:
+        """The messages of the chunks read so far, each channel's decoded together: numpy's per-call cost
+        is paid once per group of chunks, not once per chunk."""
+        nonlocal n_read
+        if not group:
+            return
+        shifts = np.cumsum([0] + [len(b) for b, _ in group[:-1]])
+        buf = np.concatenate([b for b, _ in group]) if len(group) > 1 else group[0][0]
+        offsets = np.concatenate([o + shift for (_, o), shift in zip(group, shifts, strict=True)])
+        group.clear()
         lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
         channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
         log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
         starts = offsets + 31
-        if not declared:
-            for cid, t, s0, n in zip(channel_ids, log_times, starts, lengths, strict=True):
-                pending.append((int(cid), int(t), data[s0 : s0 + n]))
-        else:
-            for cid in np.unique(channel_ids):
-                ch = channels.get(int(cid))
-                if ch is not None:
-                    sel = channel_ids == cid
-                    collector.add_batch(ch.topic, log_times[sel], buf, starts[sel], lengths[sel])
+        for cid in np.unique(channel_ids):
+            ch = channels.get(int(cid))
+            if ch is not None:
+                sel = channel_ids == cid
+                collector.add_batch(ch.topic, log_times[sel], buf, starts[sel], lengths[sel])
         n_read += len(offsets)
         if progress:
             progress(n_read, total)
@@ -277,6 +298,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         problem = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
     if chunk is not None:  # the last chunk, complete even when what follows it is not
         chunk_messages(chunk, indexes)
+    decode_group()
     if problem:
         if n_read == 0 and not channels:
             raise ReaderError(path, f"not a readable MCAP file ({problem})")

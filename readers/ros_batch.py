@@ -43,15 +43,27 @@ def gather(buf: ByteArray, offsets: IntArray, dtype: str) -> NDArray[np.generic]
         return buf[offsets].view(dt)
     # a typed view of the buffer per byte alignment, indexed by whole items: one index per value, not per byte
     residue = offsets % size
-    classes = np.flatnonzero(np.bincount(residue.ravel(), minlength=size))
-    if len(classes) == 1:  # the common case: every value equally aligned
-        r = int(classes[0])
-        return np.frombuffer(buf, dtype=dt, count=(len(buf) - r) // size, offset=r)[(offsets - r) // size]
+    rows = residue if residue.ndim == 1 else residue[:, 0]
+    if residue.ndim > 1 and np.any(residue != rows[:, None]):
+        rows = None  # values of one message differently aligned: sort value by value
     out = np.empty(offsets.shape, dtype=dt)
-    for r in classes:
+    for r in np.flatnonzero(np.bincount(residue.ravel(), minlength=size)):
         view = np.frombuffer(buf, dtype=dt, count=(len(buf) - int(r)) // size, offset=int(r))
-        sel = residue == r
+        sel = np.flatnonzero(rows == r) if rows is not None else residue == r  # whole messages when we can
         out[sel] = view[(offsets[sel] - r) // size]
+    return out
+
+
+def _gather_rows(buf: ByteArray, first: IntArray, items: IntArray, dtype: str) -> FloatArray:
+    """Values at first[i] + items[j] * itemsize for every message i and pick j, as float64 (m, k)."""
+    dt = np.dtype(dtype).newbyteorder("<")
+    size = dt.itemsize
+    out = np.empty((len(first), len(items)))
+    residue = first % size
+    for r in np.flatnonzero(np.bincount(residue, minlength=size)):
+        view = np.frombuffer(buf, dtype=dt, count=(len(buf) - int(r)) // size, offset=int(r))
+        rows = np.flatnonzero(residue == r)
+        out[rows] = view[((first[rows] - r) // size)[:, None] + items]
     return out
 
 
@@ -118,6 +130,12 @@ def decode_batch(
         cols = [i for i, p in enumerate(picks) if p is not None and dtypes[p[0]] == dtype]
         size = np.dtype(dtype).itemsize
         rel = np.stack([offsets[picks[i][0]] + size * picks[i][1] for i in cols], axis=1)  # type: ignore[index]
-        absolute = np.where(safe, base[:, None] + rel, 0)
-        values[:, cols] = gather(buf, absolute, dtype).astype(np.float64)
+        step = rel[0] - rel[0, 0]
+        if size > 1 and np.all(step % size == 0) and np.all(rel - rel[:, :1] == step):
+            # the usual case: every value a whole number of items after the first, in every message
+            first = np.where(ok, base + rel[:, 0], 0)
+            values[:, cols] = _gather_rows(buf, first, step // size, dtype)
+        else:
+            absolute = np.where(safe, base[:, None] + rel, 0)
+            values[:, cols] = gather(buf, absolute, dtype).astype(np.float64)
     return np.where(ok, stamps, 0), values, ok

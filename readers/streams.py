@@ -248,7 +248,7 @@ class StreamCollector:
         if zero.any():
             stamps = np.where(zero, log_times_ns, stamps)
             s.stamp_fallbacks += int(zero.sum())
-        s.buffer.extend(stamps[keep], values[keep])
+        s.buffer.extend(*((stamps, values) if keep.all() else (stamps[keep], values[keep])))
 
     def finish(self, time_reference: str = "unix") -> EpochTable:
         skipped = list(self.skipped)

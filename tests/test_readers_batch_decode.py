@@ -182,7 +182,7 @@ def test_vectorised_decoding_gives_the_per_message_table(ros: int, tmp_path: Pat
     with mock.patch.object(readers.ros_messages, "decode_batch", wraps=readers.ros_messages.decode_batch) as spy:
         fast = read_log(path)
     batched = {len(c.args[4]) for c in spy.call_args_list}  # messages per call
-    assert spy.call_count > 10 and max(batched) > 1  # the whole-chunk path ran, many messages a call
+    assert max(batched) >= N // 2  # the whole-chunk path ran, many messages a call
     with mock.patch.object(readers.streams, "batch_decoder", lambda kind, encoding: None):
         slow = read_log(path)
     for name in ("imu", "fixes", "odometry", "truth"):
