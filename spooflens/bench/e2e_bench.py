@@ -227,7 +227,13 @@ def _met(value: float, goal: float) -> str:
 @click.option("--hours", default="1,4,24", show_default=True, help="Voyage lengths to analyse (comma separated).")
 @click.option("--skip-voyage", is_flag=True, help="Only the 1 h aircraft log and the first run.")
 @click.option("--profile", "profile_file", type=click.Path(path_type=Path), default=None, help="cProfile text here.")
-def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | None) -> int:
+@click.option(
+    "--memory-limit-mb",
+    default=12000.0,
+    show_default=True,
+    help="A voyage analysis that needs more memory stops (MemoryError) instead of pressing on the machine.",
+)
+def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | None, memory_limit_mb: float) -> int:
     """The 1 h aircraft log end to end (stages, peak RSS, vs rosbags), a voyage at 1/4/24 h, the first run."""
     workdir.mkdir(parents=True, exist_ok=True)
     out = console()
@@ -275,7 +281,7 @@ def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | N
             held.add_row(k, f"{v:.0f}")
         out.print(held)
     if not skip_voyage:
-        _voyage(workdir, [float(h) for h in hours.split(",") if h.strip()])
+        _voyage(workdir, [float(h) for h in hours.split(",") if h.strip()], memory_limit_mb)
     err_console.print("first run of `spooflens analyze` on the sample log ...")
     as_installed = first_run(str(SAMPLE), cold_cache=False)
     cold = first_run(str(SAMPLE), cold_cache=True)
@@ -291,7 +297,7 @@ def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | N
     return 0
 
 
-def _voyage(workdir: Path, hours: list[float]) -> None:
+def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> None:
     out = console()
     t = Table(
         "voyage",
