@@ -222,7 +222,10 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
             if offsets is None:
                 walked, other = _walk_chunk(data)
                 for rec in other:
-                    (schemas if isinstance(rec, Schema) else channels)[rec.id] = rec  # type: ignore[index]
+                    if isinstance(rec, Schema):
+                        schemas[rec.id] = rec
+                    else:
+                        channels[rec.id] = rec
                 offsets = np.asarray(walked, dtype=np.int64)
         except (ValueError, zstandard.ZstdError, RuntimeError, struct.error) as err:
             collector.skipped.append(

@@ -43,8 +43,8 @@ def gather(buf: ByteArray, offsets: IntArray, dtype: str) -> NDArray[np.generic]
         return buf[offsets].view(dt)
     # a typed view of the buffer per byte alignment, indexed by whole items: one index per value, not per byte
     residue = offsets % size
-    rows = residue if residue.ndim == 1 else residue[:, 0]
-    if residue.ndim > 1 and np.any(residue != rows[:, None]):
+    rows: IntArray | None = residue if residue.ndim == 1 else residue[:, 0]
+    if residue.ndim > 1 and rows is not None and np.any(residue != rows[:, None]):
         rows = None  # values of one message differently aligned: sort value by value
     out = np.empty(offsets.shape, dtype=dt)
     for r in np.flatnonzero(np.bincount(residue.ravel(), minlength=size)):

@@ -181,7 +181,7 @@ class StreamCollector:
         if s.queue:
             self._flush(s)
         first = 0
-        view = memoryview(buf)
+        view = memoryview(buf.data)
         while first < len(starts) and (s.decl.batch is None or self._wants_frame_id(s)):
             s.seen += 1
             self._decode_one(s, int(log_times_ns[first]), view[starts[first] : starts[first] + lengths[first]])
@@ -239,7 +239,7 @@ class StreamCollector:
         stamps, values, ok = s.decl.batch(buf, starts, lengths)
         keep = ok.copy()
         if not ok.all():
-            view = memoryview(buf)
+            view = memoryview(buf.data)
             for i in np.flatnonzero(~ok):
                 row = self._decoded(s, view[starts[i] : starts[i] + lengths[i]])
                 if row is not None:
