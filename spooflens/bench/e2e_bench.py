@@ -167,12 +167,17 @@ def rosbags_loop(log: str) -> dict[str, Any]:
     return {"messages": n, "cpu_s": _cpu_s() - c0}
 
 
-def write_aircraft_hour(path: str) -> int:
+def write_aircraft_hour(path: str, attack: str = "") -> int:
+    """`spooflens simulate aircraft --seconds 3600` (seed 0), with `attack` injected when given."""
     from spooflens.simulation.simulate import simulate, write_with_truth
 
-    sim = simulate("aircraft", seed=0, duration_s=3600.0)
-    write_with_truth(sim.table, Path(path), "mcap-ros2")
-    return len(sim.table.imu)
+    table = simulate("aircraft", seed=0, duration_s=3600.0).table
+    if attack:
+        from spooflens.attacks import apply_attack, parse_attack
+
+        table, _ = apply_attack(table, parse_attack(attack))
+    write_with_truth(table, Path(path), "mcap-ros2")
+    return len(table.imu)
 
 
 def write_voyage(path: str, hours: float, block_h: float = 2.0) -> int:
@@ -228,12 +233,19 @@ def _met(value: float, goal: float) -> str:
 @click.option("--skip-voyage", is_flag=True, help="Only the 1 h aircraft log and the first run.")
 @click.option("--profile", "profile_file", type=click.Path(path_type=Path), default=None, help="cProfile text here.")
 @click.option(
+    "--spoofed",
+    is_flag=True,
+    help="Also the same hour with GNSS dragged 2 m/s from 30 min (incident confirmation and second pass timed).",
+)
+@click.option(
     "--memory-limit-mb",
     default=12000.0,
     show_default=True,
     help="A voyage analysis that needs more memory stops (MemoryError) instead of pressing on the machine.",
 )
-def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | None, memory_limit_mb: float) -> int:
+def command(
+    workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | None, spoofed: bool, memory_limit_mb: float
+) -> int:
     """The 1 h aircraft log end to end (stages, peak RSS, vs rosbags), a voyage at 1/4/24 h, the first run."""
     workdir.mkdir(parents=True, exist_ok=True)
     out = console()
@@ -273,6 +285,18 @@ def command(workdir: Path, hours: str, skip_voyage: bool, profile_file: Path | N
     for row in rows:
         t.add_row(*row)
     out.print(t)
+    if spoofed:
+        ramp = workdir / "aircraft_1h_ramp.mcap"
+        _ensure(ramp, "write_aircraft_hour", "ramp:rate=2,axes=en,start=1800")
+        with tempfile.TemporaryDirectory() as tmp:
+            err_console.print("analysing the spoofed 1 h aircraft log end to end ...")
+            run = measure_in_child(__name__, "analyse_end_to_end", str(ramp), tmp)
+        rs = run["result"]
+        title = f"1 h aircraft log, ramp from 30 min: {rs['verdict']} ({rs['passes']} passes)"
+        out.print(_stage_table(title, rs["stages"]))
+        out.print(
+            f"end to end {run['wall_s']:.1f} s wall, {rs['cpu_s']:.1f} s CPU, peak RSS {run['peak_rss_mb']:.0f} MB"
+        )
     if profile_file is not None:
         err_console.print(f"profiling the analysis into {profile_file} ...")
         prof = measure_in_child(__name__, "profile_analysis", str(hour), str(profile_file))
