@@ -55,11 +55,20 @@ class RowBuffer:
         self.count += len(stamps)
 
     def arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """All rows, in order; the buffer is emptied (each block is freed as soon as it is copied, so
+        the rows exist about once, not twice)."""
         self._close()
-        if not self._stamps:
-            return np.empty(0, dtype=np.int64), np.empty((0, len(self.columns)), dtype=np.float64)
-        stamps, values = np.concatenate(self._stamps), np.concatenate(self._values)
-        self._stamps, self._values = [stamps], [values]  # one block from now on: a second call copies nothing
+        n = sum(len(b) for b in self._stamps)
+        stamps = np.empty(n, dtype=np.int64)
+        values = np.empty((n, len(self.columns)), dtype=np.float64)
+        pos = 0
+        while self._stamps:
+            block_t, block_v = self._stamps.pop(0), self._values.pop(0)
+            stamps[pos : pos + len(block_t)] = block_t
+            values[pos : pos + len(block_t)] = block_v
+            pos += len(block_t)
+            del block_t, block_v
+        self.count = 0
         return stamps, values
 
     def column(self, values: NDArray[np.float64], name: str) -> NDArray[np.float64]:

@@ -311,6 +311,7 @@ class StreamCollector:
                     pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
                 )
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+            del values  # the raw rows are in the frame now: free them before the next stream and build_table
         fixes = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
         out = {
             "fixes": fixes,
