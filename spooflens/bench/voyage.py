@@ -4,9 +4,10 @@ The ship scenario (100 Hz IMU, 1 Hz GNSS, tactical IMU) is simulated block by bl
 is the scenario itself (an hour of slow course changes, then straight on), every later block a straight
 leg starting exactly where, when, at the speed and on the course the previous one ended (the scenario's
 own trajectory continued: after its first hour the ship goes straight). Each block's messages are
-appended to one ROS2 MCAP. Sensor errors are drawn per block (seeded by the block number): biases
-restart at new turn-on values at each block start, a small step a real IMU would not make, harmless
-for what this log is for (timing and memory at scale). The truth is not written.
+appended to one ROS2 MCAP. Sensor errors are drawn per block (seeded by the block number); each
+block's IMU samples are shifted so its gyro and accelerometer biases start where the previous block's
+ended (the bias random walk goes on across blocks, no step). The receiver's time-correlated errors do
+restart at each block (a step of the order of their 2 m sigma). The truth is not written.
 """
 
 from __future__ import annotations
@@ -37,9 +38,17 @@ def _next_profile(first: Profile, lat_rad: float, lon_rad: float, h: float, v_en
     )
 
 
-def _shifted(table: EpochTable, offset_s: float, drop_first: bool) -> EpochTable:
-    """The block's table on the voyage's clock; a later block's first instant is the previous block's last."""
+def _shifted(
+    table: EpochTable, offset_s: float, drop_first: bool, d_gyro: np.ndarray, d_accel: np.ndarray
+) -> EpochTable:
+    """The block's table on the voyage's clock (a later block's first instant is the previous block's
+    last), its IMU biases moved by (d_gyro, d_accel) to continue the previous block's."""
     table.t0_ns += round(offset_s * 1e9)
+    imu = table.imu.copy()
+    for i, axis in enumerate("xyz"):
+        imu[f"w{axis}_radps"] += d_gyro[i]
+        imu[f"a{axis}_mps2"] += d_accel[i]
+    table.imu = imu
     if drop_first:
         table.imu = table.imu[table.imu["t_s"] > 0].reset_index(drop=True)
         table.fixes = table.fixes[table.fixes["t_s"] > 0].reset_index(drop=True)
@@ -59,10 +68,17 @@ def write_blocks(path: Path, hours: float, block_h: float = 2.0) -> int:
         channels: dict[str, int] = {}
         schemas: dict[str, int] = {}
         profile, start_s, block = scenario.profile, 0.0, 0
+        end_bias: tuple[np.ndarray, np.ndarray] | None = None  # (gyro, accel) at the previous block's end
         while start_s < total_s - 1e-9:
             length = min(block_s, total_s - start_s)
             sim = simulate(replace(scenario, profile=profile), seed=block, duration_s=length)
-            table = _shifted(sim.table, start_s, drop_first=block > 0)
+            d_gyro, d_accel = (
+                (end_bias[0] - sim.imu_gyro_bias[0], end_bias[1] - sim.imu_accel_bias[0])
+                if end_bias is not None
+                else (np.zeros(3), np.zeros(3))
+            )
+            end_bias = (sim.imu_gyro_bias[-1] + d_gyro, sim.imu_accel_bias[-1] + d_accel)
+            table = _shifted(sim.table, start_s, block > 0, d_gyro, d_accel)
             streams = out_streams(table)
             for s in streams:
                 if s.kind not in schemas:
