@@ -63,7 +63,8 @@ def _gather_rows(buf: ByteArray, first: IntArray, items: IntArray, dtype: str) -
     for r in np.flatnonzero(np.bincount(residue, minlength=size)):
         view = np.frombuffer(buf, dtype=dt, count=(len(buf) - int(r)) // size, offset=int(r))
         rows = np.flatnonzero(residue == r)
-        out[rows] = view[((first[rows] - r) // size)[:, None] + items]
+        # rows of messages that did not fit start at 0: clipped, their values are never used
+        out[rows] = view[np.minimum(((first[rows] - r) // size)[:, None] + items, len(view) - 1)]
     return out
 
 
@@ -129,13 +130,17 @@ def decode_batch(
     for dtype in dict.fromkeys(dtypes[p[0]] for p in picks if p is not None):
         cols = [i for i, p in enumerate(picks) if p is not None and dtypes[p[0]] == dtype]
         size = np.dtype(dtype).itemsize
-        rel = np.stack([offsets[picks[i][0]] + size * picks[i][1] for i in cols], axis=1)  # type: ignore[index]
-        step = rel[0] - rel[0, 0]
-        if size > 1 and np.all(step % size == 0) and np.all(rel - rel[:, :1] == step):
-            # the usual case: every value a whole number of items after the first, in every message
-            first = np.where(ok, base + rel[:, 0], 0)
-            values[:, cols] = _gather_rows(buf, first, step // size, dtype)
+        fields = list(dict.fromkeys(picks[i][0] for i in cols))  # type: ignore[index]
+        lead = offsets[fields[0]]
+        shift = {f: int(offsets[f][0] - lead[0]) for f in fields}  # each field's place after the first field
+        if size > 1 and all(
+            shift[f] % size == 0 and (f == fields[0] or bool(np.all(offsets[f] - lead == shift[f]))) for f in fields
+        ):
+            # the usual case: every value a whole number of items after the first field, in every message
+            items = np.array([(shift[picks[i][0]] + size * picks[i][1]) // size for i in cols])  # type: ignore[index]
+            values[:, cols] = _gather_rows(buf, np.where(ok, base + lead, 0), items, dtype)
         else:
+            rel = np.stack([offsets[picks[i][0]] + size * picks[i][1] for i in cols], axis=1)  # type: ignore[index]
             absolute = np.where(safe, base[:, None] + rel, 0)
             values[:, cols] = gather(buf, absolute, dtype).astype(np.float64)
     return np.where(ok, stamps, 0), values, ok
