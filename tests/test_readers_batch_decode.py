@@ -14,6 +14,8 @@ from unittest import mock
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from test_readers_message_types import GPS_FIX, GPS_STATUS
@@ -198,3 +200,38 @@ def test_vectorised_decoding_gives_the_per_message_table(ros: int, tmp_path: Pat
     assert fast.fixes["vel_n_mps"].notna().sum() > 0 and len(fast.odometry) == N // 4
     no_orientation = np.delete(np.arange(N) % 5 == 0, 250)  # orientation covariance -1: no orientation
     np.testing.assert_array_equal(np.isnan(fast.imu["qw"].to_numpy()), no_orientation)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    frames=st.lists(st.text(alphabet="abc_/", max_size=11), min_size=1, max_size=12),
+    cuts=st.lists(st.integers(0, 400), max_size=4),
+    encoding=st.sampled_from(["cdr", "ros1"]),
+    noise=st.binary(min_size=0, max_size=64),
+)
+def test_batch_decoding_of_any_bytes_never_raises_and_reads_whole_messages(frames, cuts, encoding, noise) -> None:
+    """Whole Imu messages (every frame id length) decode to their values; messages cut anywhere, and
+    garbage, are only marked not ok (their container then decodes them one by one and counts them)."""
+    from readers.ros_messages import batch_decoder, encode_imu
+
+    msgs = [
+        encode_imu(10**9 * (k + 1), f, (0.0, 0.0, 0.0, 1.0), (0.1 * k, 0.2, 0.3), (1.0, 2.0, 9.8 + k), encoding)
+        for k, f in enumerate(frames)
+    ]
+    cut = set(cuts)
+    parts = [
+        m[: min(len(m) - 1, c)] if (c := next((c for c in cut if c % len(frames) == k), None)) is not None else m
+        for k, m in enumerate(msgs)
+    ] + [noise]
+    lengths = np.array([len(p) for p in parts], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    buf = np.frombuffer(b"".join(parts), dtype=np.uint8)
+    decode = batch_decoder("imu", encoding)
+    assert decode is not None
+    stamps, values, ok = decode(buf, starts, lengths)
+    for k, m in enumerate(msgs):
+        if parts[k] == m:
+            assert ok[k] and stamps[k] == 10**9 * (k + 1)
+            assert values[k, 5] == pytest.approx(0.1 * k) and values[k, 11] == pytest.approx(9.8 + k)
+        else:
+            assert not ok[k]
