@@ -5,7 +5,9 @@ MCAP, `--seconds` each, seeds 0..N-1; made once into `--workdir`), then runs the
 fresh results folder with 1 worker and with 2 workers. Throughput is logs per hour of the tasks' wall
 time (first task submitted to last result: what adding workers changes); the whole run's wall time,
 with the cluster's start and the fleet tables, is printed beside it. Goal: 2 workers >= 1.8 x 1 worker.
-On a machine shared with other work the second core is not free: the load average is printed.
+On a machine shared with other work the second core is not free: the load average is printed, and the
+mean time each log took inside its task (equal for 1 and 2 workers when the cores are free; longer
+with 2 workers when they compete for the CPU with other work).
 """
 
 from __future__ import annotations
