@@ -25,6 +25,7 @@ import glob
 import hashlib
 import json
 import logging
+import os
 import re
 import time
 from dataclasses import dataclass
@@ -290,7 +291,7 @@ def run_batch(
         cluster = None
         if scheduler is None:
             cluster = LocalCluster(
-                n_workers=workers or 2,
+                n_workers=workers or max(1, min(os.cpu_count() or 1, len(jobs))),
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
@@ -358,7 +359,12 @@ def _print(result: BatchResult) -> None:
 @click.argument("patterns", nargs=-1, required=True)
 @click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Results folder.")
 @click.option("--scheduler", default=None, help="Address of a running dask scheduler (default: a LocalCluster).")
-@click.option("--workers", type=int, default=None, help="LocalCluster worker processes (default 2).")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="LocalCluster worker processes (default: one per core, at most one per log).",
+)
 @click.option("--imu-grade", default=None, help="IMU noise preset for every log (default: from each log).")
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def command(
