@@ -10,8 +10,9 @@ own; two are extended:
   version, so a cache made by the same numba release on the same machine is used as it is).
 
 A warm-up that fails or runs out of time only says so: the install goes on, and the first analysis
-compiles what it needs. `SPOOFLENS_NO_WARMUP=1` skips it. A wheel (`pip install .`) is built without it
-(its sources move to site-packages): run `python -m spooflens.warmup` once after installing one.
+compiles what it needs. `SPOOFLENS_NO_WARMUP=1` skips it (and the build environment's extra
+packages). A wheel (`pip install .`) is built without it (its sources move to site-packages): run
+`python -m spooflens.warmup` once after installing one.
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ def _runtime_requirements() -> list[str]:
 
 
 def get_requires_for_build_editable(config_settings: dict | None = None) -> list[str]:
-    return [*_setuptools.get_requires_for_build_editable(config_settings), *_runtime_requirements()]
+    extra = [] if os.environ.get("SPOOFLENS_NO_WARMUP") else _runtime_requirements()
+    return [*_setuptools.get_requires_for_build_editable(config_settings), *extra]
 
 
 def build_editable(
