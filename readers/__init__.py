@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import importlib
 import stat
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,12 +58,18 @@ class ReaderFormat:
 def formats() -> dict[str, ReaderFormat]:
     """name -> ReaderFormat of every registered format, in sniffing order."""
     out: dict[str, ReaderFormat] = {}
-    for module in READER_MODULES:
-        for fmt in importlib.import_module(module).FORMATS:
-            if fmt.name in out:
-                raise ValueError(f"reader format {fmt.name!r} declared twice")
-            out[fmt.name] = fmt
+    for fmt in _declared():
+        if fmt.name in out:
+            raise ValueError(f"reader format {fmt.name!r} declared twice")
+        out[fmt.name] = fmt
     return out
+
+
+def _declared() -> Iterator[ReaderFormat]:
+    """Every declared format in sniffing order, importing each reader module only when reached (an MCAP
+    file, sniffed first, never imports the readers of a dozen other formats and their libraries)."""
+    for module in READER_MODULES:
+        yield from importlib.import_module(module).FORMATS
 
 
 def supported() -> str:
@@ -74,9 +80,11 @@ class _Registry(dict[str, ReaderFn]):
     """format name -> reader function from the declarations, unless a test put another one in."""
 
     def __missing__(self, name: str) -> ReaderFn:
-        fn = formats()[name].read
-        self[name] = fn
-        return fn
+        fmt = next((f for f in _declared() if f.name == name), None)
+        if fmt is None:
+            raise KeyError(name)
+        self[name] = fmt.read
+        return fmt.read
 
 
 READERS: dict[str, ReaderFn] = _Registry()
@@ -96,9 +104,9 @@ def sniff_format(path: Path) -> str:
             head = f.read(HEAD_BYTES)
         if not head:
             raise ReaderError(path, "file is empty (0 bytes)")
-    for name, fmt in formats().items():
+    for fmt in _declared():
         if fmt.sniff(path, head):
-            return name
+            return fmt.name
     what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
 

@@ -15,34 +15,60 @@ _BLOCK_ROWS = 65536
 
 
 class RowBuffer:
-    """Appends (stamp_ns, values...) rows; `arrays()` returns them as one int64 and one float64 array."""
+    """Appends (stamp_ns, values...) rows one at a time (`append`) or many at once (`extend`);
+    `arrays()` returns them as one int64 and one float64 array."""
 
     def __init__(self, columns: Sequence[str]) -> None:
         self.columns = tuple(columns)
-        self._stamps: list[NDArray[np.int64]] = []
+        self._stamps: list[NDArray[np.int64]] = []  # closed blocks, each exactly as long as its rows
         self._values: list[NDArray[np.float64]] = []
-        self._fill = _BLOCK_ROWS  # forces a block on first append
+        self._open_stamps: NDArray[np.int64] | None = None  # the block `append` fills
+        self._open_values: NDArray[np.float64] | None = None
+        self._fill = 0
         self.count = 0
 
-    def _new_block(self) -> None:
-        self._stamps.append(np.empty(_BLOCK_ROWS, dtype=np.int64))
-        self._values.append(np.empty((_BLOCK_ROWS, len(self.columns)), dtype=np.float64))
+    def _close(self) -> None:
+        if self._open_stamps is not None and self._open_values is not None and self._fill:
+            self._stamps.append(self._open_stamps[: self._fill])
+            self._values.append(self._open_values[: self._fill])
+        self._open_stamps = self._open_values = None
         self._fill = 0
 
     def append(self, stamp_ns: int, values: Sequence[float]) -> None:
-        if self._fill == _BLOCK_ROWS:
-            self._new_block()
-        self._stamps[-1][self._fill] = stamp_ns
-        self._values[-1][self._fill] = values
+        if self._open_stamps is None or self._fill == _BLOCK_ROWS:
+            self._close()
+            self._open_stamps = np.empty(_BLOCK_ROWS, dtype=np.int64)
+            self._open_values = np.empty((_BLOCK_ROWS, len(self.columns)), dtype=np.float64)
+        assert self._open_values is not None
+        self._open_stamps[self._fill] = stamp_ns
+        self._open_values[self._fill] = values
         self._fill += 1
         self.count += 1
 
+    def extend(self, stamps: NDArray[np.int64], values: NDArray[np.float64]) -> None:
+        """Append many rows at once, after the rows appended so far."""
+        if not len(stamps):
+            return
+        self._close()
+        self._stamps.append(np.asarray(stamps, dtype=np.int64))
+        self._values.append(np.asarray(values, dtype=np.float64).reshape(len(stamps), len(self.columns)))
+        self.count += len(stamps)
+
     def arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        if not self._stamps:
-            return np.empty(0, dtype=np.int64), np.empty((0, len(self.columns)), dtype=np.float64)
-        last = self._fill
-        stamps = np.concatenate([*self._stamps[:-1], self._stamps[-1][:last]])
-        values = np.concatenate([*self._values[:-1], self._values[-1][:last]])
+        """All rows, in order; the buffer is emptied (each block is freed as soon as it is copied, so
+        the rows exist about once, not twice)."""
+        self._close()
+        n = sum(len(b) for b in self._stamps)
+        stamps = np.empty(n, dtype=np.int64)
+        values = np.empty((n, len(self.columns)), dtype=np.float64)
+        pos = 0
+        while self._stamps:
+            block_t, block_v = self._stamps.pop(0), self._values.pop(0)
+            stamps[pos : pos + len(block_t)] = block_t
+            values[pos : pos + len(block_t)] = block_v
+            pos += len(block_t)
+            del block_t, block_v
+        self.count = 0
         return stamps, values
 
     def column(self, values: NDArray[np.float64], name: str) -> NDArray[np.float64]:

@@ -2,7 +2,10 @@
 
 Read as a stream of records, so memory holds only the decoded columns. Chunks are decompressed and
 their CRC checked one at a time: a corrupt chunk costs its own messages, not the rest of the file; a
-file cut short keeps everything before the cut. Without a summary section (a recording that was
+file cut short keeps everything before the cut. A chunk's message records are found from the message
+index records after it (checked to tile the chunk exactly, else the records are walked), and each
+channel's messages of the chunk are decoded together: fixed-layout ROS types straight into numpy
+(`readers.ros_batch`), others one by one. Without a summary section (a recording that was
 never closed) the channels are learnt while reading, and the messages are buffered until the end.
 """
 
@@ -10,32 +13,44 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import struct
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import lz4.frame
+import numpy as np
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, Schema
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from readers import ReaderFormat, foxglove_messages
+from readers.ros_batch import gather
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
 
 Progress = Callable[[int, int], None]
 _RECORD_SIZE_LIMIT = 1 << 30  # a corrupt length field must not make us allocate more than this
-_OP_MESSAGE = 0x05
-_MSG_HEAD = struct.Struct("<BQHIQQ")  # opcode, length, channel id, sequence, log time, publish time
+_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_DATA_END = (
+    0x02,
+    0x03,
+    0x04,
+    0x05,
+    0x06,
+    0x07,
+    0x0F,
+)
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
+_MSG_FIELDS = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time (then the payload)
 _PROGRESS_EVERY = 20000
+_GROUP_BYTES = 16 << 20  # decompressed chunk bytes decoded together
 
 
 class _Decoders:
@@ -89,26 +104,76 @@ def _decompress(chunk: Chunk) -> bytes:
     return data
 
 
-def _chunk_messages(data: bytes) -> tuple[list[tuple[int, int, memoryview]], list[Schema | Channel]]:
-    """(channel id, log time, payload) of every message in a chunk, plus any schema/channel records."""
-    view = memoryview(data)
-    out: list[tuple[int, int, memoryview]] = []
+def _walk_chunk(data: bytes) -> tuple[list[int], list[Schema | Channel]]:
+    """Offsets of the message records of a chunk, plus any schema/channel records, by walking its records."""
+    offsets: list[int] = []
     other: list[Schema | Channel] = []
     pos, end = 0, len(data)
-    unpack = _MSG_HEAD.unpack_from
+    head = _RECORD_HEAD.unpack_from
     while pos + 9 <= end:
-        op = data[pos]
-        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        op, length = head(data, pos)
         if pos + 9 + length > end:
             raise ValueError("record in chunk cut short")
         if op == _OP_MESSAGE:
-            _, _, channel_id, _, log_time, _ = unpack(data, pos)
-            out.append((channel_id, log_time, view[pos + 31 : pos + 9 + length]))
-        elif op in (0x03, 0x04):  # schema, channel inside the chunk
+            offsets.append(pos)
+        elif op in (_OP_SCHEMA, _OP_CHANNEL):  # schema, channel inside the chunk
             stream = ReadDataStream(io.BytesIO(data[pos + 9 : pos + 9 + length]))
-            other.append(Schema.read(stream) if op == 0x03 else Channel.read(stream))
+            other.append(Schema.read(stream) if op == _OP_SCHEMA else Channel.read(stream))
         pos += 9 + length
-    return out, other
+    return offsets, other
+
+
+def _indexed_offsets(buf: np.ndarray, indexes: list[bytes]) -> np.ndarray | None:
+    """Offsets of a chunk's message records from the message index records after it, if each is a whole
+    message record inside the chunk and none overlaps the next (else None: walk the chunk). Saves walking
+    records in Python. Only for files with a summary: records between messages (a chunk may repeat its
+    schemas and channels) are not looked at."""
+    parts = []
+    for body in indexes:
+        if len(body) < 6:
+            return None
+        (n_bytes,) = struct.unpack_from("<I", body, 2)
+        if n_bytes % 16 or 6 + n_bytes > len(body):
+            return None
+        parts.append(np.frombuffer(body, dtype="<u8", count=n_bytes // 8, offset=6)[1::2])  # (log time, offset)
+    if not parts:
+        return None
+    offsets = np.sort(np.concatenate(parts).astype(np.int64))
+    if not len(offsets) or offsets[-1] + 31 > len(buf):
+        return None
+    if np.any(buf[offsets] != _OP_MESSAGE):
+        return None
+    ends = offsets + 9 + gather(buf, offsets + 1, "u8").astype(np.int64)
+    if np.any(ends[:-1] > offsets[1:]) or ends[-1] > len(buf):
+        return None
+    return offsets
+
+
+def _top_level_records(f: BinaryIO) -> Iterator[tuple[int, bytes]]:
+    """(opcode, body) of the data section's schema, channel, message, chunk and message index records;
+    other records, and the summary section, are skipped unread. ValueError where the file is cut."""
+    size = os.fstat(f.fileno()).st_size
+    if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+        raise ValueError("no MCAP magic at the start")
+    in_data = True
+    while True:
+        head = f.read(9)
+        if len(head) < 9:
+            raise ValueError("file cut short: no footer")
+        op, length = _RECORD_HEAD.unpack(head)
+        if length > _RECORD_SIZE_LIMIT:
+            raise ValueError(f"record length {length} over the {_RECORD_SIZE_LIMIT}-byte limit (corrupt length)")
+        if op == _OP_FOOTER:
+            return
+        if op == _OP_DATA_END:
+            in_data = False  # the summary section repeats what was read; skipped, but a cut in it is damage
+        if in_data and op in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX):
+            body = f.read(length)
+            if len(body) < length:
+                raise ValueError("record cut short")
+            yield op, body
+        elif f.seek(length, io.SEEK_CUR) > size:
+            raise ValueError("record cut short")
 
 
 def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
@@ -145,39 +210,98 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         if progress and n_read % _PROGRESS_EVERY == 0:
             progress(n_read, total)
 
+    group: list[tuple[np.ndarray, np.ndarray]] = []  # (chunk bytes, message record offsets) not decoded yet
+
+    def chunk_messages(chunk: Chunk, indexes: list[bytes]) -> None:
+        """A chunk's message records, queued for `decode_group` (without a summary: kept per message)."""
+        nonlocal n_read
+        try:
+            data = _decompress(chunk)
+            buf = np.frombuffer(data, dtype=np.uint8)
+            offsets = _indexed_offsets(buf, indexes) if declared else None
+            if offsets is None:
+                walked, other = _walk_chunk(data)
+                for rec in other:
+                    if isinstance(rec, Schema):
+                        schemas[rec.id] = rec
+                    else:
+                        channels[rec.id] = rec
+                offsets = np.asarray(walked, dtype=np.int64)
+        except (ValueError, zstandard.ZstdError, RuntimeError, struct.error) as err:
+            collector.skipped.append(
+                Skipped(
+                    "<file>",
+                    f"chunk starting at log time {chunk.message_start_time} unreadable ({err}); its "
+                    "messages were skipped",
+                    0,
+                    "lost",
+                )
+            )
+            return
+        if not len(offsets):
+            return
+        if not declared:
+            lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
+            channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
+            log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
+            for cid, t, s0, n in zip(channel_ids, log_times, offsets + 31, lengths, strict=True):
+                pending.append((int(cid), int(t), data[s0 : s0 + n]))
+            n_read += len(offsets)
+            return
+        group.append((buf, offsets))
+        if sum(len(b) for b, _ in group) >= _GROUP_BYTES:
+            decode_group()
+
+    def decode_group() -> None:
+        """The messages of the chunks read so far, each channel's decoded together: numpy's per-call cost
+        is paid once per group of chunks, not once per chunk."""
+        nonlocal n_read
+        if not group:
+            return
+        shifts = np.cumsum([0] + [len(b) for b, _ in group[:-1]])
+        buf = np.concatenate([b for b, _ in group]) if len(group) > 1 else group[0][0]
+        offsets = np.concatenate([o + shift for (_, o), shift in zip(group, shifts, strict=True)])
+        group.clear()
+        lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
+        channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
+        log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
+        starts = offsets + 31
+        for cid in np.unique(channel_ids):
+            ch = channels.get(int(cid))
+            if ch is not None:
+                sel = channel_ids == cid
+                collector.add_batch(ch.topic, log_times[sel], buf, starts[sel], lengths[sel])
+        n_read += len(offsets)
+        if progress:
+            progress(n_read, total)
+
+    chunk: Chunk | None = None
+    indexes: list[bytes] = []
     try:
         with path.open("rb") as f:
-            reader = StreamReader(f, emit_chunks=True, record_size_limit=_RECORD_SIZE_LIMIT)
-            for record in reader.records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    handle(record.channel_id, record.log_time, record.data)
-                elif isinstance(record, Chunk):
-                    try:
-                        msgs, other = _chunk_messages(_decompress(record))
-                    except (ValueError, zstandard.ZstdError, RuntimeError) as err:
-                        collector.skipped.append(
-                            Skipped(
-                                "<file>",
-                                f"chunk starting at log time "
-                                f"{record.message_start_time} unreadable ({err}); its "
-                                "messages were skipped",
-                                0,
-                                "lost",
-                            )
-                        )
-                        continue
-                    for rec in other:
-                        (schemas if isinstance(rec, Schema) else channels)[rec.id] = rec  # type: ignore[index]
-                    for channel_id, log_time, data in msgs:
-                        handle(channel_id, log_time, data)
-                elif isinstance(record, Footer):
-                    break
+            for op, body in _top_level_records(f):
+                if op == _OP_MESSAGE_INDEX:
+                    indexes.append(body)
+                    continue
+                if chunk is not None:
+                    chunk_messages(chunk, indexes)
+                    chunk, indexes = None, []
+                if op == _OP_SCHEMA:
+                    schema = Schema.read(ReadDataStream(io.BytesIO(body)))
+                    schemas[schema.id] = schema
+                elif op == _OP_CHANNEL:
+                    channel = Channel.read(ReadDataStream(io.BytesIO(body)))
+                    channels[channel.id] = channel
+                elif op == _OP_MESSAGE:
+                    channel_id, _, log_time, _ = _MSG_FIELDS.unpack_from(body)
+                    handle(channel_id, log_time, body[_MSG_FIELDS.size :])
+                elif op == _OP_CHUNK:
+                    chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
     except (McapError, ValueError, struct.error, EOFError, OSError, MemoryError) as err:
         problem = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+    if chunk is not None:  # the last chunk, complete even when what follows it is not
+        chunk_messages(chunk, indexes)
+    decode_group()
     if problem:
         if n_read == 0 and not channels:
             raise ReaderError(path, f"not a readable MCAP file ({problem})")

@@ -7,7 +7,9 @@ NavSatFix whatever file holds it and whichever way it goes. Each supported type 
 that take a message apart (`extract`), build one from a table row (`build`), and put spoofed fix
 values into one (`edit`). Reading: messages become raw rows either by the fast path (fixed-layout Imu
 and NavSatFix decoded straight from their bytes) or from a deserialised message, both giving identical
-rows; raw rows become schema columns in vectorised `*_columns` functions. Writing: Imu and NavSatFix
+rows, and the fixed layouts (`RosKind.layout`: Imu, NavSatFix, the twists, Odometry) of many messages at
+once with numpy (`batch_decoder`, `readers.ros_batch`); raw rows become schema columns in vectorised
+`*_columns` functions. Writing: Imu and NavSatFix
 are encoded straight to bytes (the mirror of the fast path), the other kinds built as typestore
 messages and serialised.
 """
@@ -23,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from readers.ros_batch import Field, Pick, decode_batch
 from spooflens.schema import FixType
 
 FloatArray = NDArray[np.float64]
@@ -457,6 +460,73 @@ def edit(kind: str, msg: Any, values: FixValues, velocity: bool) -> Any:
     return spec.edit(msg, values, velocity)
 
 
+# --- fixed layouts (after std_msgs/Header), for decoding many messages at once ------------------------
+
+_IMU_LAYOUT = (
+    Field("orientation", "f8", 4),
+    Field("orientation_covariance", "f8", 9),
+    Field("angular_velocity", "f8", 3),
+    Field("angular_velocity_covariance", "f8", 9),
+    Field("linear_acceleration", "f8", 3),
+    Field("linear_acceleration_covariance", "f8", 9),
+)
+_IMU_PICKS: tuple[Pick, ...] = (
+    *(("orientation", i) for i in range(4)),
+    ("orientation_covariance", 0),
+    *(("angular_velocity", i) for i in range(3)),
+    ("angular_velocity_covariance", 0),
+    *(("linear_acceleration", i) for i in range(3)),
+    ("linear_acceleration_covariance", 0),
+)
+_NAVSATFIX_LAYOUT = (
+    Field("status", "i1"),
+    Field("service", "u2"),
+    Field("position", "f8", 3),  # latitude, longitude, altitude
+    Field("position_covariance", "f8", 9),
+    Field("position_covariance_type", "u1"),
+)
+_NAVSATFIX_PICKS: tuple[Pick, ...] = (
+    ("status", 0),
+    *(("position", i) for i in range(3)),
+    *(("position_covariance", i) for i in (0, 4, 8)),
+    ("position_covariance_type", 0),
+)
+_TWIST = (Field("linear", "f8", 3), Field("angular", "f8", 3))
+_TWIST_COV_LAYOUT = (*_TWIST, Field("covariance", "f8", 36))
+_TWIST_PICKS: tuple[Pick, ...] = (*(("linear", i) for i in range(3)), None, None, None)
+_TWIST_COV_PICKS: tuple[Pick, ...] = (*(("linear", i) for i in range(3)), *(("covariance", i) for i in (0, 7, 14)))
+_ODOMETRY_LAYOUT = (
+    Field("child_frame_id", "string"),
+    Field("position", "f8", 3),
+    Field("orientation", "f8", 4),
+    Field("pose_covariance", "f8", 36),
+    Field("linear", "f8", 3),
+    Field("angular", "f8", 3),
+    Field("twist_covariance", "f8", 36),
+)
+_ODOMETRY_PICKS: tuple[Pick, ...] = (
+    *(("position", i) for i in range(3)),
+    *(("linear", i) for i in range(3)),
+    ("angular", 2),
+)
+
+BatchDecoder = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def batch_decoder(kind: str, encoding: str) -> BatchDecoder | None:
+    """(buf, starts, lengths) -> (stamps, raw rows, ok) for messages of `kind` ('cdr' or 'ros1' encoded),
+    or None when the kind has no fixed layout. Rows agree with `extract` of the deserialised message."""
+    spec = KINDS[kind]
+    if spec.layout is None or encoding not in ("cdr", "ros1"):
+        return None
+    layout, picks = spec.layout, spec.picks
+
+    def decode(buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return decode_batch(layout, picks, encoding, buf, starts, lengths)
+
+    return decode
+
+
 # --- the kinds --------------------------------------------------------------------------------------
 
 
@@ -468,6 +538,9 @@ class RosKind:
     `raw_columns`: the tuple `extract` returns per message (the fast path returns the same).
     `build`: (typestore types, header, row) -> message, for kinds written as typestore messages
     (Imu and NavSatFix are packed straight to bytes by `encode`). `edit`: spoofed values in.
+    `layout`: the fields after the header when the type has a fixed layout (strings may vary), and
+    `picks`: where each raw column lies in it ((field, index), None for a value the type lacks), for
+    decoding a whole chunk of messages at once; None for types with arrays (GPSFix), decoded one by one.
     """
 
     msgtypes: tuple[str, ...]
@@ -476,6 +549,8 @@ class RosKind:
     extract: Callable[[Any], tuple[float, ...]]
     build: Callable[[Any, Any, Row], Any] | None = None
     edit: Callable[[Any, FixValues, bool], Any] | None = None
+    layout: tuple[Field, ...] | None = None
+    picks: tuple[Pick, ...] = ()
 
 
 KINDS: dict[str, RosKind] = {
@@ -485,6 +560,8 @@ KINDS: dict[str, RosKind] = {
         ("status", "lat", "lon", "alt", "cov_e", "cov_n", "cov_u", "cov_type"),
         _navsatfix,
         edit=_edit_fix,
+        layout=_NAVSATFIX_LAYOUT,
+        picks=_NAVSATFIX_PICKS,
     ),
     "gpsfix": RosKind(
         ("gps_msgs/msg/GPSFix", "gps_common/msg/GPSFix"),
@@ -513,6 +590,8 @@ KINDS: dict[str, RosKind] = {
         "imu",
         ("qx", "qy", "qz", "qw", "ocov0", "wx", "wy", "wz", "wcov0", "ax", "ay", "az", "acov0"),
         _imu,
+        layout=_IMU_LAYOUT,
+        picks=_IMU_PICKS,
     ),
     "twist_cov": RosKind(
         ("geometry_msgs/msg/TwistWithCovarianceStamped",),
@@ -521,6 +600,8 @@ KINDS: dict[str, RosKind] = {
         _twist_cov,
         build=_build_twist_cov,
         edit=_edit_twist_cov,
+        layout=_TWIST_COV_LAYOUT,
+        picks=_TWIST_COV_PICKS,
     ),
     "twist": RosKind(
         ("geometry_msgs/msg/TwistStamped",),
@@ -528,6 +609,8 @@ KINDS: dict[str, RosKind] = {
         ("ve", "vn", "vu", "cov_ve", "cov_vn", "cov_vu"),
         _twist,
         edit=_edit_twist,
+        layout=_TWIST,
+        picks=_TWIST_PICKS,
     ),
     "odometry": RosKind(
         ("nav_msgs/msg/Odometry",),
@@ -535,6 +618,8 @@ KINDS: dict[str, RosKind] = {
         ("x", "y", "z", "vx", "vy", "vz", "wz"),
         _odometry,
         build=_build_odometry,
+        layout=_ODOMETRY_LAYOUT,
+        picks=_ODOMETRY_PICKS,
     ),
 }
 KIND_BY_TYPE = {t: kind for kind, spec in KINDS.items() for t in spec.msgtypes}

@@ -3,7 +3,10 @@
 Shared by every container (MCAP with ROS1/ROS2/JSON/protobuf channels, ROS1 and ROS2 bags): the
 container reader declares its topics with a decoder each and then only feeds (topic, log time, raw
 bytes); this module decides each topic's role, decodes (fast path where the layout is fixed), buffers
-rows and finally assembles the frames.
+rows and finally assembles the frames. Messages of a fixed-layout type are decoded many at a time
+(`add_batch` for a container that holds them in one buffer, as an MCAP chunk does; `add` queues them
+and decodes a batch at a time), the first message of each topic by the full decoder (its frame_id,
+and a cross-check of the fast path).
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from readers.buffers import RowBuffer
 from readers.ros_messages import (
     RAW_COLUMNS,
     ROLE_BY_KIND,
+    BatchDecoder,
+    batch_decoder,
     decode_cdr,
     decode_ros1,
     extract,
@@ -42,6 +47,9 @@ TRUTH_TOPIC_HINTS = ("truth", "ground_truth", "groundtruth")
 
 Deserialize = Callable[[bytes | memoryview, str], Any]
 Decoded = tuple[int, tuple[float, ...]]
+_QUEUE = 8192  # messages queued per topic before they are decoded as one batch
+# a topic's frame_id is the first non-empty one of its first messages (all decoded in full, one by one)
+_FRAME_ID_MESSAGES = 16
 
 
 @dataclass(frozen=True)
@@ -52,6 +60,7 @@ class TopicDecl:
     kind: str | None
     decode: Callable[[bytes | memoryview], tuple[Decoded, str]] | None = None  # -> ((stamp, values), frame_id)
     fast: Callable[[bytes | memoryview], Decoded | None] | None = None
+    batch: BatchDecoder | None = None  # (buf, starts, lengths) -> (stamps, rows, ok) for fixed layouts
 
 
 def ros_topic(msgtype: str, encoding: str, deserialize: Deserialize) -> TopicDecl:
@@ -65,7 +74,9 @@ def ros_topic(msgtype: str, encoding: str, deserialize: Deserialize) -> TopicDec
         return extract(kind, msg), str(msg.header.frame_id)
 
     fast_decoder = decode_cdr if encoding == "cdr" else decode_ros1
-    return TopicDecl(normalise_type(msgtype), kind, decode, lambda raw: fast_decoder(kind, raw))
+    return TopicDecl(
+        normalise_type(msgtype), kind, decode, lambda raw: fast_decoder(kind, raw), batch_decoder(kind, encoding)
+    )
 
 
 @dataclass
@@ -79,6 +90,7 @@ class TopicStream:
     bad: int = 0
     first_error: str = ""
     frame_id: str = ""
+    queue: list[tuple[int, bytes | memoryview]] = field(default_factory=list)  # (log time, raw) to batch-decode
 
     @property
     def kind(self) -> str | None:
@@ -145,24 +157,98 @@ class StreamCollector:
 
     def add(self, topic: str, log_time_ns: int, raw: bytes | memoryview) -> None:
         s = self.streams[topic]
-        s.seen += 1
         if s.buffer is None or s.decl.decode is None:
+            s.seen += 1
             return
-        try:
-            fast = s.decl.fast(raw) if s.decl.fast is not None and s.seen > 1 else None
-            if fast is None:  # the first message always takes the full decoder: frame_id, and a cross-check
-                (stamp, values), frame_id = s.decl.decode(raw)
-                s.frame_id = s.frame_id or frame_id
-            else:
-                stamp, values = fast
-        except Exception as err:  # noqa: BLE001 - any decoding failure of one message is counted, not fatal
-            s.bad += 1
-            s.first_error = s.first_error or f"{type(err).__name__}: {err}"
+        if s.decl.batch is None or self._wants_frame_id(s):
+            s.seen += 1
+            self._decode_one(s, log_time_ns, raw)
             return
+        s.queue.append((log_time_ns, raw))
+        if len(s.queue) >= _QUEUE:
+            self._flush(s)
+
+    def add_batch(
+        self, topic: str, log_times_ns: np.ndarray, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray
+    ) -> None:
+        """Messages of one topic, in log order, lying at buf[starts[i]:starts[i] + lengths[i]] (uint8 buf)."""
+        s = self.streams[topic]
+        if not len(starts):
+            return
+        if s.buffer is None or s.decl.decode is None:
+            s.seen += len(starts)
+            return
+        if s.queue:
+            self._flush(s)
+        first = 0
+        view = memoryview(buf.data)
+        while first < len(starts) and (s.decl.batch is None or self._wants_frame_id(s)):
+            s.seen += 1
+            self._decode_one(s, int(log_times_ns[first]), view[starts[first] : starts[first] + lengths[first]])
+            first += 1
+        if first < len(starts):
+            self._decode_many(s, log_times_ns[first:], buf, starts[first:], lengths[first:])
+
+    @staticmethod
+    def _wants_frame_id(s: TopicStream) -> bool:
+        """Whether the next message is decoded in full for its frame_id (the first always is: a cross-check)."""
+        return s.seen < _FRAME_ID_MESSAGES and not s.frame_id
+
+    def _flush(self, s: TopicStream) -> None:
+        raws = [bytes(r) for _, r in s.queue]
+        lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+        times = np.fromiter((t for t, _ in s.queue), dtype=np.int64, count=len(raws))
+        s.queue = []
+        self._decode_many(s, times, np.frombuffer(b"".join(raws), dtype=np.uint8), starts, lengths)
+
+    def _decode_one(self, s: TopicStream, log_time_ns: int, raw: bytes | memoryview) -> None:
+        assert s.buffer is not None and s.decl.decode is not None
+        row = self._decoded(s, raw)
+        if row is None:
+            return
+        stamp, values = row
         if stamp == 0:
             stamp = log_time_ns
             s.stamp_fallbacks += 1
         s.buffer.append(stamp, values)
+
+    def _decoded(self, s: TopicStream, raw: bytes | memoryview) -> Decoded | None:
+        """One message's (stamp, values); None (counted) when it cannot be decoded."""
+        assert s.decl.decode is not None
+        early = s.seen <= _FRAME_ID_MESSAGES and not s.frame_id  # s.seen counts this message
+        try:
+            fast = s.decl.fast(raw) if s.decl.fast is not None and not early else None
+            if fast is None:  # the first messages take the full decoder: frame_id, and a cross-check
+                (stamp, values), frame_id = s.decl.decode(raw)
+                if early:
+                    s.frame_id = frame_id
+                return stamp, values
+            return fast
+        except Exception as err:  # noqa: BLE001 - any decoding failure of one message is counted, not fatal
+            s.bad += 1
+            s.first_error = s.first_error or f"{type(err).__name__}: {err}"
+            return None
+
+    def _decode_many(
+        self, s: TopicStream, log_times_ns: np.ndarray, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray
+    ) -> None:
+        """Batch-decode; messages that do not fit the layout are decoded one by one, in place (order kept)."""
+        assert s.buffer is not None and s.decl.batch is not None
+        s.seen += len(starts)
+        stamps, values, ok = s.decl.batch(buf, starts, lengths)
+        keep = ok.copy()
+        if not ok.all():
+            view = memoryview(buf.data)
+            for i in np.flatnonzero(~ok):
+                row = self._decoded(s, view[starts[i] : starts[i] + lengths[i]])
+                if row is not None:
+                    stamps[i], values[i], keep[i] = row[0], row[1], True
+        zero = keep & (stamps == 0)
+        if zero.any():
+            stamps = np.where(zero, log_times_ns, stamps)
+            s.stamp_fallbacks += int(zero.sum())
+        s.buffer.extend(*((stamps, values) if keep.all() else (stamps[keep], values[keep])))
 
     def finish(self, time_reference: str = "unix") -> EpochTable:
         skipped = list(self.skipped)
@@ -170,6 +256,9 @@ class StreamCollector:
         infos: list[StreamInfo] = []
         velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
         spans: dict[tuple[str, str], tuple[int, int]] = {}  # streams merged into another frame
+        for s in self.streams.values():
+            if s.queue:
+                self._flush(s)
         for s in self.streams.values():
             if s.bad:
                 skipped.append(Skipped(s.topic, f"{s.bad} message(s) could not be decoded ({s.first_error})", s.bad))
@@ -222,6 +311,7 @@ class StreamCollector:
                     pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
                 )
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+            del values  # the raw rows are in the frame now: free them before the next stream and build_table
         fixes = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
         out = {
             "fixes": fixes,

@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "report": "spooflens.report.command:report",
     "view": "spooflens.viewer:view",
     "fleet": "spooflens.fleet.command:command",
+    "batch": "spooflens.batch:command",
 }
 
 
@@ -243,34 +244,42 @@ def analyze(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary and HTML report."""
+    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
+    output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
+    summaries = write_outputs(analyses, output, json_path, html_path)
+    n = len(analyses)
+    for k, (analysis, summary) in enumerate(zip(analyses, summaries, strict=True)):
+        if n > 1 and not quiet:
+            console().print(f"[bold]recording {k + 1} of {n}[/] (the log joins {n}; its clock starts again)")
+        if quiet:
+            click.echo((f"recording {k + 1} of {n}: " if n > 1 else "") + analysis.verdict.headline)
+        else:
+            html = segment_path(html_path, k, n) if html_path else None
+            _print_analysis(summary, segment_path(output, k, n), json_path, html)
+    return finish(log, analyses, fail_on_spoof)
+
+
+def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None, html_path: Path | None) -> list[dict]:
+    """Write the recording (always), the JSON summary and the operator report of a log's analyses (one per
+    recording it joins: `.segN` outputs, one JSON), as `analyze` does (`batch` writes through here too);
+    returns each recording's summary."""
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
-    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
-    output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     n = len(analyses)
     summaries = []
     for k, analysis in enumerate(analyses):
         table, verdict = analysis.table, analysis.verdict
-        rec = segment_path(output, k, n)
         lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-        write_recording(rec, table, analysis.results, lines, verdict)
-        summary = build_summary(table, analysis.results, verdict)
-        summaries.append(summary)
-        html = segment_path(html_path, k, n) if html_path else None
-        if html:
+        write_recording(segment_path(output, k, n), table, analysis.results, lines, verdict)
+        summaries.append(build_summary(table, analysis.results, verdict))
+        if html_path:
             from spooflens.report import write_report
 
-            write_report(html, analysis)
-        if n > 1 and not quiet:
-            console().print(f"[bold]recording {k + 1} of {n}[/] (the log joins {n}; its clock starts again)")
-        if quiet:
-            click.echo((f"recording {k + 1} of {n}: " if n > 1 else "") + verdict.headline)
-        else:
-            _print_analysis(summary, rec, json_path, html)
+            write_report(segment_path(html_path, k, n), analysis)
     if json_path:
         json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
-    return finish(log, analyses, fail_on_spoof)
+    return summaries
 
 
 def _stream_names(table: EpochTable) -> str:
@@ -428,6 +437,8 @@ def simulate(
         "seed004": "spooflens.bench.seed004_bench:command",
         "seed001": "spooflens.bench.seed001_bench:command",
         "seed002": "spooflens.bench.seed002_bench:command",
+        "e2e": "spooflens.bench.e2e_bench:command",
+        "batch": "spooflens.bench.batch_bench:command",
     },
 )
 def bench() -> None:

@@ -212,16 +212,16 @@ class EpochTable:
         return max(ends) if ends else 0.0
 
     def receivers(self) -> list[str]:
-        return list(dict.fromkeys(self.fixes["receiver_id"].astype(str)))
+        return _ids(self.fixes["receiver_id"])
 
     def imus(self) -> list[str]:
-        return list(dict.fromkeys(self.imu["imu_id"].astype(str)))
+        return _ids(self.imu["imu_id"])
 
     def fixes_of(self, receiver_id: str) -> pd.DataFrame:
-        return self.fixes[self.fixes["receiver_id"] == receiver_id].reset_index(drop=True)
+        return _rows_of(self.fixes, "receiver_id", receiver_id)
 
     def imu_of(self, imu_id: str) -> pd.DataFrame:
-        return self.imu[self.imu["imu_id"] == imu_id].reset_index(drop=True)
+        return _rows_of(self.imu, "imu_id", imu_id)
 
     def stream(self, role: str, stream_id: str) -> StreamInfo | None:
         return next((s for s in self.streams if s.role == role and s.stream_id == stream_id), None)
@@ -260,6 +260,26 @@ class EpochTable:
         if unix is not None:
             return pd.Timestamp(int(unix), unit="ns", tz="UTC").isoformat()
         return f"{int(self.absolute_ns(t_s)) / 1e9:.3f} s ({self.time_reference})"
+
+
+def _ids(column: pd.Series) -> list[str]:
+    """The distinct stream ids of a column, in order of appearance (hashing, not a string per row)."""
+    return [str(v) for v in column.unique()]
+
+
+def _rows_of(frame: pd.DataFrame, key: str, value: str) -> pd.DataFrame:
+    """The rows of one stream; the whole frame (no copy: pandas copies on write) when it is the only one."""
+    match = (frame[key] == value).to_numpy(dtype=bool, na_value=False)
+    return (frame if match.all() else frame[match]).reset_index(drop=True)
+
+
+def _streams_of(frame: pd.DataFrame, key: str) -> list[tuple[str, pd.DataFrame]]:
+    """(stream id, rows) of each stream of a frame; without a groupby when there is only one."""
+    ids = frame[key]
+    first = ids.iloc[0]
+    if not pd.isna(first) and (ids == first).to_numpy(dtype=bool, na_value=False).all():
+        return [(str(first), frame)]
+    return [(str(sid), g) for sid, g in frame.groupby(key, sort=False)]
 
 
 def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
@@ -425,9 +445,12 @@ def build_table(
         if df is None or not len(df):
             continue
         key = STREAM_KEY[name]
-        parts = [("truth", df)] if key is None else [(str(sid), g) for sid, g in df.groupby(key, sort=False)]
+        parts = [("truth", df)] if key is None else _streams_of(df, key)
         fixed = [_repair_stream(name, sid, g, skipped) for sid, g in parts]
-        repaired[name] = pd.concat(fixed, ignore_index=True) if fixed else df.iloc[:0]
+        if len(fixed) == 1:
+            repaired[name] = fixed[0].reset_index(drop=True)
+        else:
+            repaired[name] = pd.concat(fixed, ignore_index=True) if fixed else df.iloc[:0]
     if layout:
         t0_ns = layout[0][0]
     if t0_ns is None:
@@ -435,9 +458,10 @@ def build_table(
         t0_ns = min(firsts) if firsts else 0
     table_frames: dict[str, pd.DataFrame] = {}
     for name, df in repaired.items():
-        cols = {c: df[c].to_numpy() for c in df.columns if c != "t_ns"}
+        cols = {c: df[c].array if isinstance(df[c].dtype, pd.StringDtype) else df[c].to_numpy() for c in df.columns}
+        del cols["t_ns"]
         cols["t_s"] = (df["t_ns"].to_numpy(dtype=np.int64) - t0_ns) / 1e9
-        table_frames[name] = make_frame(name, cols, len(df))
+        table_frames[name] = make_frame(name, cols, len(df), copy=False)  # `repaired` is dropped after this
     final_streams: list[StreamInfo] = []
     for s in streams:
         frame = _ROLE_FRAME.get(s.role)

@@ -243,11 +243,32 @@ def empty_frame(frame: str) -> pd.DataFrame:
     return pd.DataFrame({c.name: pd.Series(dtype=c.dtype) for c in FRAMES[frame]})
 
 
-def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> pd.DataFrame:
+def string_array(values: object) -> pd.api.extensions.ExtensionArray:
+    """`values` as the schema's string column. Stream ids repeat down a whole frame (one per row of a
+    million-sample IMU), so an object array is dictionary-encoded first: far faster than converting
+    every string on its own."""
+    if isinstance(values, pd.Series | pd.Index):
+        values = values.array
+    if isinstance(values, pd.api.extensions.ExtensionArray) and isinstance(values.dtype, pd.StringDtype):
+        return values.astype("string")
+    arr = np.asarray(values, dtype=object)
+    if len(arr) < 1000:
+        return pd.array(arr, dtype="string")
+    codes, uniques = pd.factorize(arr, use_na_sentinel=True)
+    import pyarrow as pa
+
+    dictionary = pa.array([str(u) for u in uniques], type=pa.large_string())
+    indices = pa.array(np.maximum(codes, 0).astype(np.int32), mask=codes < 0)
+    strings = pa.DictionaryArray.from_arrays(indices, dictionary).cast(pa.large_string())
+    return pd.array(strings, dtype="string")
+
+
+def make_frame(frame: str, columns: dict[str, object], n: int | None = None, copy: bool = True) -> pd.DataFrame:
     """Build a frame from arrays: schema order and dtypes, absent optional columns filled.
 
     Absent optional floats become NaN, an absent spoofing flag UNKNOWN. Unknown names are an error,
-    so a reader's typo cannot silently produce a column nobody reads.
+    so a reader's typo cannot silently produce a column nobody reads. `copy=False` takes arrays of the
+    right dtype as they are (for a caller that owns them and will not change them).
     """
     spec = FRAMES[frame]
     known = {c.name for c in spec}
@@ -258,8 +279,10 @@ def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> 
         n = len(next(iter(columns.values()))) if columns else 0
     data: dict[str, pd.Series] = {}
     for col in spec:
-        if col.name in columns:
-            data[col.name] = pd.Series(columns[col.name]).astype(col.dtype)
+        if col.name in columns and col.dtype == "string":
+            data[col.name] = pd.Series(string_array(columns[col.name]))
+        elif col.name in columns:
+            data[col.name] = pd.Series(columns[col.name], copy=copy).astype(col.dtype)
         elif col.required:
             raise KeyError(f"{frame}: required column {col.name!r} missing")
         else:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 from typing import Any
@@ -19,10 +20,25 @@ print(json.dumps({"wall_s": wall, "peak_rss_mb": rss_mb, "result": extra}))
 """
 
 
-def measure_in_child(module: str, func: str, *args: Any) -> dict[str, Any]:
-    """Call module.func(*args) in a new Python process; its wall time, peak RSS and JSON-able result."""
+def measure_in_child(module: str, func: str, *args: Any, memory_limit_mb: float | None = None) -> dict[str, Any]:
+    """Call module.func(*args) in a new Python process; its wall time, peak RSS and JSON-able result.
+
+    `memory_limit_mb` caps the child's data segment (RLIMIT_DATA: heap and anonymous mappings), so a
+    run that would take more fails with a MemoryError (CalledProcessError here) instead of pressing on a
+    shared machine.
+    """
+
+    def limit() -> None:
+        if memory_limit_mb is not None:
+            cap = int(memory_limit_mb * 1024 * 1024)
+            resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
+
     out = subprocess.run(
-        [sys.executable, "-c", _CHILD, module, func, json.dumps(list(args))], check=True, capture_output=True, text=True
+        [sys.executable, "-c", _CHILD, module, func, json.dumps(list(args))],
+        check=True,
+        capture_output=True,
+        text=True,
+        preexec_fn=limit if memory_limit_mb is not None else None,
     )
     result: dict[str, Any] = json.loads(out.stdout.strip().splitlines()[-1])
     return result

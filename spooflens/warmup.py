@@ -1,0 +1,74 @@
+"""Compile every numba kernel into numba's on-disk cache before the first analysis needs it.
+
+    python -m spooflens.warmup [LOG ...]
+
+Numba compiles a kernel the first time it is called with a new combination of argument types, and
+caches the machine code beside the source (`__pycache__/*.nbi`, `*.nbc`), keyed by the source file's
+content, the CPU and the numba version. Compiling all of spooflens' kernels takes tens of seconds; a
+cached kernel loads in milliseconds. This module analyses logs that between them reach every kernel
+(by default two sample logs when they are there: the spoofed flight, whose analysis runs the filter,
+the smoother, every detector, the second pass and the coasts that confirm an incident, and the car;
+else a simulated spoofed flight) and
+writes their outputs to a temporary folder, so every kernel is compiled with the argument types a real
+analysis uses.
+
+`pip install` runs it (`spooflens/_build_backend.py`: the project's build backend, setuptools' with
+this step added), so the first `spooflens analyze` after installing finds every kernel compiled. Run it
+by hand after changing a kernel, or on a machine where the install could not (it says so).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+# the spoofed flight reaches every kernel (filter, smoother, detectors, the second pass, the coasts that
+# confirm an incident); the car adds the ground-vehicle paths (course-over-ground yaw)
+SAMPLE_LOGS = ("spoofed_flight.mcap", "ground_ros2.mcap")
+
+
+def default_logs() -> list[Path]:
+    return [SAMPLES / name for name in SAMPLE_LOGS if (SAMPLES / name).exists()]
+
+
+def _simulated_spoofed_flight(folder: Path) -> Path:
+    from spooflens.attacks import apply_attack, parse_attack
+    from spooflens.simulation.simulate import simulate
+    from spooflens.writers import write_log
+
+    table = simulate("aircraft", seed=7, duration_s=240.0).table
+    spoofed, _ = apply_attack(table, parse_attack("ramp:rate=2,axes=en,start=150"))
+    path = folder / "warmup.mcap"
+    write_log(spoofed, path, "mcap-ros2")
+    return path
+
+
+def warm(logs: list[Path] | None = None) -> list[tuple[str, float]]:
+    """Analyse `logs` (default: see the module) end to end; (log, seconds) of each."""
+    from spooflens.cli import analyse_log, write_outputs
+
+    done = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for log in logs or default_logs() or [_simulated_spoofed_flight(folder)]:
+            t0 = time.perf_counter()
+            analyses = analyse_log(log, (), None, quiet=True)
+            write_outputs(analyses, folder / "warmup.rrd", folder / "warmup.json", None)
+            done.append((log.name, time.perf_counter() - t0))
+    return done
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    t0 = time.perf_counter()
+    for name, seconds in warm([Path(a) for a in args] or None):
+        print(f"spooflens warm-up: {name} analysed in {seconds:.1f} s", flush=True)
+    print(f"spooflens warm-up: numba kernels compiled and cached in {time.perf_counter() - t0:.0f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
