@@ -120,12 +120,12 @@ def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
     results = run_analyses(circling_table(ramp_mps=3.0))
     keys = key_statistics(results)
     # one key statistic per evidence class that ran, from a detector that alarmed
-    assert [(k.evidence.value, k.detector) for k in keys] == [
-        ("gnss_only", "gnss_consistency"),
-        ("receiver", "receiver_evidence"),
-        ("inertial", "kf_innovation"),
-    ]
-    assert keys[2].paths == ("/detectors/kf_innovation/position_nis", "/detectors/kf_innovation/position_nis_threshold")
+    assert [k.evidence.value for k in keys] == ["gnss_only", "receiver", "inertial"]
+    assert keys[0].detector == "gnss_consistency" and keys[1].detector == "receiver_evidence"
+    by_name = {r.name: r for r in results}
+    inertial = by_name[keys[2].detector]
+    assert inertial.alarms and not inertial.advisory  # the inertial detector that alarmed, not the first that ran
+    assert keys[2].paths[0].startswith(f"/detectors/{inertial.name}/") and keys[2].paths[1].endswith("_threshold")
     panels = detector_panels(results)
     tabs = default_blueprint(panels, keys).root_container
     assert tabs.active_tab is not None and tabs.contents[0].name == "Overview"
