@@ -29,7 +29,7 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from readers import ReaderFormat, foxglove_messages
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
-from spooflens.errors import ReaderError
+from spooflens.errors import ReaderError, one_line
 
 Progress = Callable[[int, int], None]
 _RECORD_SIZE_LIMIT = 1 << 30  # a corrupt length field must not make us allocate more than this
@@ -47,6 +47,16 @@ class _Decoders:
         self.protobuf = ProtobufDecoderFactory()
 
     def declare(self, schema: Schema | None, channel: Channel) -> TopicDecl:
+        """The decoder of a channel, built from its schema; a schema the libraries cannot build a type
+        from (damaged text, a broken protobuf descriptor, a type clashing with another schema's) costs
+        that channel's messages, counted as lost, and nothing else."""
+        try:
+            return self._declare(schema, channel)
+        except Exception as err:  # noqa: BLE001 - rosbags, protobuf and UTF-8 errors alike: the schema is damaged
+            name = schema.name if schema else "<no schema>"
+            return TopicDecl(name, None, problem=f"schema unreadable ({one_line(err, 160)})")
+
+    def _declare(self, schema: Schema | None, channel: Channel) -> TopicDecl:
         name = schema.name if schema else "<no schema>"
         enc = channel.message_encoding
         if schema is not None and enc == "cdr" and schema.encoding in ("ros2msg", "ros2idl"):

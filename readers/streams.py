@@ -52,6 +52,7 @@ class TopicDecl:
     kind: str | None
     decode: Callable[[bytes | memoryview], tuple[Decoded, str]] | None = None  # -> ((stamp, values), frame_id)
     fast: Callable[[bytes | memoryview], Decoded | None] | None = None
+    problem: str = ""  # why a topic of a supported kind cannot be decoded (a damaged schema): its messages are lost
 
 
 def ros_topic(msgtype: str, encoding: str, deserialize: Deserialize) -> TopicDecl:
@@ -175,6 +176,9 @@ class StreamCollector:
                 skipped.append(Skipped(s.topic, f"{s.bad} message(s) could not be decoded ({s.first_error})", s.bad))
             if s.stamp_fallbacks:
                 skipped.append(Skipped(s.topic, "header stamp zero: used the log time", s.stamp_fallbacks, "repaired"))
+            if s.decl.problem:
+                skipped.append(Skipped(s.topic, f"{s.msgtype}: {s.decl.problem}", s.seen, "lost"))
+                continue
             if s.kind is None:
                 skipped.append(Skipped(s.topic, f"unsupported message type {s.msgtype}", s.seen))
                 continue

@@ -20,13 +20,28 @@ from rich.table import Table
 
 from spooflens.console import LazyGroup, console, progress, show_progress
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import NoGnssError, SpooflensError
+from spooflens.errors import NoGnssError, SpooflensError, one_line
 from spooflens.evidence import label
+from spooflens.navigation.imu_models import PRESETS
 
 if TYPE_CHECKING:
     from spooflens.pipeline import Analysis
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
+# `simulate --format` choices (spooflens.writers.WRITERS) and those written as directories
+SIMULATE_FORMATS = (
+    "mcap-ros2",
+    "mcap-ros1",
+    "mcap-json",
+    "mcap-protobuf",
+    "ros1bag",
+    "ros2bag-sqlite3",
+    "ros2bag-mcap",
+    "csv",
+    "ulog",
+    "rinex",
+)
+DIRECTORY_FORMATS = ("csv", "rinex", "ros2bag-sqlite3", "ros2bag-mcap")
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
 COMMANDS: dict[str, str] = {
@@ -157,7 +172,10 @@ fail_on_spoof_option = click.option(
     "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
 )
 imu_grade_option = click.option(
-    "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
+    "--imu-grade",
+    type=click.Choice(sorted(PRESETS)),
+    default=None,
+    help="IMU noise preset for the INS (default: from the log or consumer_mems).",
 )
 
 
@@ -302,9 +320,10 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
 @click.option(
     "--format",
     "fmt",
+    type=click.Choice(SIMULATE_FORMATS),
     default="mcap-ros2",
     show_default=True,
-    help="mcap-ros2, mcap-ros1, mcap-json, mcap-protobuf, ros1bag, ros2bag-sqlite3, ros2bag-mcap, csv, ulog.",
+    help="Output format. csv, rinex and the ROS2 bags are directories of files.",
 )
 @click.option("--seconds", type=float, default=None, help="Duration (default: the scenario's own).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed: same seed, same log.")
@@ -346,6 +365,12 @@ def simulate(
         observations=sc.observations or (ObservationNoise() if raw else None),
         constellation=constellation,
     )
+    if fmt in DIRECTORY_FORMATS and output.suffix:
+        raise click.BadParameter(
+            f"{output}: --format {fmt} writes a directory of files; give a name without an extension "
+            f"(e.g. {output.with_suffix('')})",
+            param_hint="-o",
+        )
     if raw and fmt not in ("csv", "rinex"):
         click.echo(f"note: {fmt} has no place for raw observations; the csv and rinex formats keep them", err=True)
     if fmt == "rinex":
@@ -370,6 +395,7 @@ def simulate(
         "report": "spooflens.bench.report_bench:command",
         "seed003": "spooflens.bench.seed003_bench:command",
         "seed004": "spooflens.bench.seed004_bench:command",
+        "fuzz": "spooflens.bench.fuzz:command",
     },
 )
 def bench() -> None:
@@ -399,12 +425,12 @@ def main(argv: list[str] | None = None) -> int:
     except SpooflensError as err:
         if debug:
             raise
-        click.echo(f"spooflens: error: {err}", err=True)
+        click.echo(f"spooflens: error: {one_line(str(err), 2000)}", err=True)
         return EXIT_INPUT
     except Exception as err:
         if debug:
             raise
-        click.echo(f"spooflens: internal error: {type(err).__name__}: {err} (rerun with --debug for details)", err=True)
+        click.echo(f"spooflens: internal error: {one_line(err)} (rerun with --debug for details)", err=True)
         return EXIT_BUG
     return int(code or 0)
 

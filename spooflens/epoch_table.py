@@ -205,6 +205,24 @@ class EpochTable:
         return f"{int(self.absolute_ns(t_s)) / 1e9:.3f} s ({self.time_reference})"
 
 
+def gap_losses(t_ns: np.ndarray, factor: float = 3.0, end_ns: int | None = None) -> int:
+    """How many samples a stream is missing in its gaps: each step longer than `factor` median periods
+    stands for step/period - 1 samples (a damaged stretch of a file is a stretch of time without rows);
+    with `end_ns`, the time the file's data really ends, the samples after the stream's last one too."""
+    t = np.sort(np.asarray(t_ns, dtype=np.int64))
+    if len(t) < 3:
+        return 0
+    steps = np.diff(t).astype(float)
+    period = float(np.median(steps))
+    if period <= 0:
+        return 0
+    gaps = steps[steps > factor * period]
+    missing = float(np.sum(gaps / period - 1.0))
+    if end_ns is not None and end_ns - t[-1] > factor * period:
+        missing += (end_ns - t[-1]) / period - 1.0
+    return int(np.round(missing))
+
+
 def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
     """Sort one stream by time, drop unusable rows, then duplicate stamps; record each repair."""
     t = df["t_ns"].to_numpy()
