@@ -160,7 +160,11 @@ def read_rows(
         raise ReaderError(path, "CSV has a header but no rows", stream)
     text = set(text_columns)
     wanted = [n for n in dict.fromkeys(layout.names) if keep(n)]
-    parts: dict[str, list[np.ndarray]] = {n: [] for n in wanted}
+    # numbers go straight into arrays of the final length (the scan counted the rows); text stays in
+    # pandas' Arrow-backed strings, a few bytes a value
+    numbers = {n: np.full(layout.rows, np.nan) for n in wanted if n not in text}
+    strings: dict[str, list[pd.Series]] = {n: [] for n in wanted if n in text}
+    filled = 0
     try:
         chunks = pd.read_csv(
             path,
@@ -168,7 +172,7 @@ def read_rows(
             header=0,
             usecols=lambda n: str(n).strip() in wanted,
             skipinitialspace=True,
-            dtype={n: str for n in wanted if n in text},
+            dtype={n: str for n in strings},
             chunksize=CHUNK_ROWS,
             encoding_errors="replace",
             on_bad_lines="skip",
@@ -178,16 +182,19 @@ def read_rows(
         for chunk in chunks:
             chunk.columns = [str(c).strip() for c in chunk.columns]
             chunk = chunk.loc[:, ~chunk.columns.duplicated()]
-            for name in wanted:
-                col = chunk[name] if name in chunk.columns else pd.Series(np.nan, index=chunk.index)
-                parts[name].append(_text(col) if name in text else _numbers(col))
+            m = min(len(chunk), layout.rows - filled)
+            for name, out in numbers.items():
+                if name in chunk.columns:
+                    out[filled : filled + m] = _numbers(chunk[name])[:m]
+            for name, parts in strings.items():
+                col = chunk[name] if name in chunk.columns else pd.Series("", index=chunk.index)
+                parts.append(col.astype("string").str.strip().fillna("").iloc[:m])
+            filled += m
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, OverflowError) as err:
         raise ReaderError(path, f"not a readable CSV: {err}", stream) from err
-    return pd.DataFrame({n: np.concatenate(v) if v else np.empty(0) for n, v in parts.items()}, copy=False)
-
-
-def _text(col: pd.Series) -> np.ndarray:
-    return col.astype("string").str.strip().fillna("").to_numpy(dtype=object)
+    columns: dict[str, object] = {n: v[:filled] for n, v in numbers.items()}
+    columns |= {n: pd.concat(v, ignore_index=True) if v else pd.Series([], dtype="string") for n, v in strings.items()}
+    return pd.DataFrame({n: columns[n] for n in wanted}, copy=False)
 
 
 def _numbers(col: pd.Series) -> np.ndarray:

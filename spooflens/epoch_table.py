@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from spooflens import plausibility
 from spooflens.errors import SchemaError
 from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
@@ -223,39 +224,134 @@ def gap_losses(t_ns: np.ndarray, factor: float = 3.0, end_ns: int | None = None)
     return int(np.round(missing))
 
 
-def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
-    """Sort one stream by time, drop unusable rows, then duplicate stamps; record each repair."""
-    t = df["t_ns"].to_numpy()
-    if len(t) > 1 and np.any(np.diff(t) < 0):
-        n_back = int(np.sum(np.diff(t) < 0))
+@dataclass
+class _Stream:
+    """One stream of a frame while it is repaired: its rows (positions in the reader's frame) and the
+    unit scales found for it."""
+
+    sid: str
+    rows: np.ndarray
+    scales: list[plausibility.Scale] = field(default_factory=list)
+
+
+def _stream_rows(frame: str, df: pd.DataFrame) -> list[_Stream]:
+    key = STREAM_KEY[frame]
+    if key is None:
+        return [_Stream("truth", np.arange(len(df)))]
+    codes, uniques = pd.factorize(df[key].astype(str), sort=False)
+    order = np.argsort(codes, kind="stable")
+    bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
+    return [_Stream(str(u), order[bounds[i] : bounds[i + 1]]) for i, u in enumerate(uniques)]
+
+
+def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[Skipped], source: Path) -> None:
+    """Sort one stream by time, find its units, drop rows no sensor produces, then duplicate stamps;
+    record each repair. Works on row positions only: the values are taken once, at the end."""
+    sid, rows = stream.sid, stream.rows
+    t = df["t_ns"].to_numpy()[rows]
+    steps = np.diff(t)
+    if len(t) > 1 and np.any(steps < 0):
+        n_back = int(np.sum(steps < 0))
         skipped.append(Skipped(sid, f"time went backwards {n_back} times; rows sorted by time", n_back, "repaired"))
-        df = df.sort_values("t_ns", kind="stable")
-    if frame in ("fixes", "truth"):
-        lat = df["lat_deg"].to_numpy(dtype=float)
-        lon = df["lon_deg"].to_numpy(dtype=float)
-        h = df["height_m"].to_numpy(dtype=float)
-        bad = ~np.isfinite(lat) | ~np.isfinite(lon) | ~np.isfinite(h) | ((lat == 0) & (lon == 0))
-        if bad.any():
-            skipped.append(Skipped(sid, "NaN or zero latitude/longitude/height (no fix)", int(bad.sum())))
-            df = df[~bad]
-        wrong = (np.abs(df["lat_deg"]) > 90) | (np.abs(df["lon_deg"]) > 180)
-        if wrong.any():
-            skipped.append(Skipped(sid, "latitude/longitude out of range", int(wrong.sum())))
-            df = df[~wrong]
+        order = np.argsort(t, kind="stable")
+        rows, t = rows[order], t[order]
+    cols = {c: df[c].to_numpy()[rows] for c in df.columns if c not in ("t_ns", STREAM_KEY[frame])}
     if frame == "imu":
-        vals = df[["ax_mps2", "ay_mps2", "az_mps2", "wx_radps", "wy_radps", "wz_radps"]].to_numpy(dtype=float)
-        bad = ~np.all(np.isfinite(vals), axis=1)
-        if bad.any():
-            skipped.append(Skipped(sid, "NaN specific force or angular rate", int(bad.sum())))
-            df = df[~bad]
+        stream.scales, refusal = plausibility.imu_unit(cols)
+        if refusal:
+            skipped.append(Skipped(sid, refusal, len(rows), "lost"))
+            stream.rows = rows[:0]
+            return
+    elif frame in ("fixes", "truth"):
+        stream.scales = plausibility.fix_units(cols, (t - t[0]) / 1e9 if len(t) else t.astype(float))
+    for scale in stream.scales:
+        for c in scale.columns:
+            cols[c] = cols[c] * scale.factor
+    keep = np.ones(len(rows), dtype=bool)
+    for mask, reason in plausibility.bad_rows(frame, cols):
+        hit = mask & keep
+        if hit.any():
+            skipped.append(Skipped(sid, reason, int(hit.sum())))
+            keep &= ~mask
+    rows, t = rows[keep], t[keep]
     # an observation epoch has one row per satellite: a duplicate is the same satellite twice
-    key = ["t_ns", "sv_id"] if frame == "observations" else ["t_ns"]
-    dup = df.duplicated(subset=key, keep="first").to_numpy()
+    if frame == "observations":
+        dup = pd.DataFrame({"t": t, "sv": df["sv_id"].to_numpy()[rows]}).duplicated(keep="first").to_numpy()
+    else:
+        dup = np.concatenate(([False], t[1:] == t[:-1])) if len(t) else np.zeros(0, dtype=bool)
     if dup.any():
         what = "duplicate (timestamp, satellite) rows" if frame == "observations" else "duplicate timestamps"
         skipped.append(Skipped(sid, f"{what}; kept the first", int(dup.sum())))
-        df = df[~dup]
-    return df
+        rows = rows[~dup]
+    stream.rows = rows
+
+
+def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skipped: list[Skipped]) -> pd.DataFrame:
+    """The repaired frame: each column taken once at the kept rows (the reader's column released as
+    soon as it is copied), unit scales applied, optional values out of range cleared, t_s set."""
+    idx = np.concatenate([s.rows for s in streams]) if streams else np.zeros(0, dtype=np.int64)
+    cols: dict[str, np.ndarray] = {}
+    for c in list(df.columns):
+        values = df[c].to_numpy()[idx] if c != "t_ns" else df[c].to_numpy(dtype=np.int64)[idx]
+        if c == "t_ns":
+            cols["t_s"] = (values - t0_ns) / 1e9
+        else:
+            cols[c] = values if values.dtype.kind != "f" else values.astype(np.float64, copy=False)
+        del df[c]
+    start = 0
+    for s in streams:
+        part = slice(start, start + len(s.rows))
+        start += len(s.rows)
+        for scale in s.scales:
+            skipped.append(Skipped(s.sid, scale.reason, len(s.rows), "repaired"))
+            for c in scale.columns:
+                cols[c][part] *= scale.factor
+        view = {c: v[part] for c, v in cols.items() if v.dtype.kind == "f" and c != "t_s"}
+        skipped += [Skipped(s.sid, f.reason, f.count, f.action) for f in plausibility.clean_optional(frame, view)]
+    return make_frame(frame, cols, len(idx))
+
+
+def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> None:
+    """An IMU whose yaw rate turns 57 times the GNSS course (deg/s logged as rad/s) is scaled; one whose
+    time span shares nothing with the fixes' (another clock) is left out."""
+    imu, fixes = frames.get("imu"), frames.get("fixes")
+    if imu is None or fixes is None or not len(imu) or not len(fixes):
+        return
+    receiver = fixes[fixes["receiver_id"] == fixes["receiver_id"].iloc[0]]
+    fix_cols = {c: receiver[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "vel_e_mps", "vel_n_mps")}
+    t_fix = receiver["t_s"].to_numpy(dtype=float)
+    drop = np.zeros(len(imu), dtype=bool)
+    for sid in pd.unique(imu["imu_id"]):
+        rows = np.flatnonzero(imu["imu_id"].to_numpy() == sid)
+        t = imu["t_s"].to_numpy()[rows]
+        gap = max(t[0] - t_fix[-1], t_fix[0] - t[-1])
+        if gap > 3600.0:
+            skipped.append(
+                Skipped(
+                    str(sid),
+                    f"IMU time span {t[0]:.0f}..{t[-1]:.0f} s lies {gap:.0f} s away from the fixes' "
+                    f"{t_fix[0]:.0f}..{t_fix[-1]:.0f} s (another clock): IMU left out",
+                    len(rows),
+                    "lost",
+                )
+            )
+            drop[rows] = True
+            continue
+        motion = {c: imu[c].to_numpy()[rows] for c in plausibility.IMU_MOTION}
+        ratio = plausibility.gyro_turn_ratio(t, motion, t_fix, fix_cols)
+        if ratio is not None and 40.0 < ratio < 80.0:
+            skipped.append(
+                Skipped(
+                    str(sid),
+                    f"angular rate in deg/s (the gyro turns {ratio:.1f} times the GNSS course): scaled to rad/s",
+                    len(rows),
+                    "repaired",
+                )
+            )
+            for c in plausibility.IMU_MOTION[3:]:
+                imu.iloc[rows, imu.columns.get_loc(c)] = imu[c].to_numpy()[rows] * (np.pi / 180.0)
+    if drop.any():
+        frames["imu"] = imu[~drop].reset_index(drop=True)
 
 
 def build_table(
@@ -272,29 +368,31 @@ def build_table(
     """Turn frames stamped in absolute nanoseconds (`t_ns` instead of `t_s`) into an EpochTable.
 
     The log start (t_s = 0) is the earliest stamp of any stream unless `t0_ns` is given. Each stream
-    is repaired independently; stream infos get their first/last time and final row count (for an
+    is repaired independently (`spooflens.plausibility`: units, impossible rows, optional values out of
+    range); stream infos get their first/last time and final row count (for an
     observation stream: its epochs, one per receiver time, whatever the satellites per epoch).
     `stream_spans_ns` gives the first and last stamp, in the same clock, of streams that fill no
     frame of their own ((role, stream_id) -> (first_ns, last_ns); e.g. a velocity topic merged into
-    the fixes), so their span and rate are on the table's time base too.
+    the fixes), so their span and rate are on the table's time base too. The reader's frames are
+    consumed (their columns released as they are copied), so a large log is held about once.
     """
     skipped = list(skipped)
-    repaired: dict[str, pd.DataFrame] = {}
-    for name, df in frames_ns.items():
+    kept: dict[str, tuple[pd.DataFrame, list[_Stream]]] = {}
+    for name in list(frames_ns):
+        df = frames_ns.pop(name)
         if df is None or not len(df):
             continue
-        key = STREAM_KEY[name]
-        parts = [("truth", df)] if key is None else [(str(sid), g) for sid, g in df.groupby(key, sort=False)]
-        fixed = [_repair_stream(name, sid, g, skipped) for sid, g in parts]
-        repaired[name] = pd.concat(fixed, ignore_index=True) if fixed else df.iloc[:0]
+        parts = _stream_rows(name, df)
+        for part in parts:
+            _repair_stream(name, df, part, skipped, source)
+        kept[name] = (df, parts)
     if t0_ns is None:
-        firsts = [int(df["t_ns"].min()) for df in repaired.values() if len(df)]
+        firsts = [int(df["t_ns"].to_numpy()[p.rows].min()) for df, parts in kept.values() for p in parts if len(p.rows)]
         t0_ns = min(firsts) if firsts else 0
     table_frames: dict[str, pd.DataFrame] = {}
-    for name, df in repaired.items():
-        cols = {c: df[c].to_numpy() for c in df.columns if c != "t_ns"}
-        cols["t_s"] = (df["t_ns"].to_numpy(dtype=np.int64) - t0_ns) / 1e9
-        table_frames[name] = make_frame(name, cols, len(df))
+    for name, (df, parts) in kept.items():
+        table_frames[name] = _take(name, df, parts, t0_ns, skipped)
+    _cross_check(table_frames, skipped)
     final_streams: list[StreamInfo] = []
     for s in streams:
         frame = {

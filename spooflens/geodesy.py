@@ -9,13 +9,15 @@ import numpy as np
 import pymap3d
 from numpy.typing import ArrayLike, NDArray
 
-A_M = 6378137.0  # WGS84 semi-major axis
-F = 1.0 / 298.257223563
-E2 = F * (2.0 - F)  # first eccentricity squared
-B_M = A_M * (1.0 - F)
-OMEGA_IE = 7.292115e-5  # Earth rotation rate, rad/s
-GM = 3.986004418e14  # m^3/s^2
-C_MPS = 299792458.0
+from spooflens.constants import SPEED_OF_LIGHT_MPS as C_MPS
+from spooflens.constants import WGS84_A_M as A_M
+from spooflens.constants import WGS84_B_M as B_M
+from spooflens.constants import WGS84_E2 as E2
+from spooflens.constants import WGS84_F as F
+from spooflens.constants import WGS84_GM as GM
+from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
+
+__all__ = ["A_M", "B_M", "C_MPS", "E2", "GM", "OMEGA_IE", "F"]
 
 # Somigliana normal gravity constants (WGS84)
 _GAMMA_E = 9.7803253359

@@ -252,13 +252,14 @@ def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> 
     data: dict[str, pd.Series] = {}
     for col in spec:
         if col.name in columns:
-            data[col.name] = pd.Series(columns[col.name]).astype(col.dtype)
+            values = columns[col.name]
+            data[col.name] = pd.Series(values).astype(col.dtype)
         elif col.required:
             raise KeyError(f"{frame}: required column {col.name!r} missing")
         else:
             fill = _MISSING[col.dtype]
             data[col.name] = pd.Series([fill] * n if col.dtype == "string" else np.full(n, fill)).astype(col.dtype)
-    return pd.DataFrame(data)
+    return pd.DataFrame(data, copy=False)
 
 
 def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:

@@ -99,7 +99,12 @@ def test_parse_errors_name_kinds_and_parameters() -> None:
 @given(st.floats(0.1, 20.0), st.floats(0.0, 200.0), st.sampled_from(["e", "n", "u", "en", "enu"]))
 def test_attack_truth_round_trips_and_nothing_changes_before_start(rate: float, start: float, axes: str) -> None:
     table = circling_table(seconds=60.0)
-    spoofed, truth = apply_attack(table, parse_attack(f"ramp:rate={rate},axes={axes},start={start}"))
+    spec = parse_attack(f"ramp:rate={rate},axes={axes},start={start}")
+    if start > table.fixes["t_s"].max():  # a window after the log's end is refused, never an empty attack
+        with pytest.raises(AttackError, match="after the end of the log's fixes"):
+            apply_attack(table, spec)
+        return
+    spoofed, truth = apply_attack(table, spec)
     assert AttackTruth.from_json(truth.to_json()) == truth
     before = table.fixes["t_s"].to_numpy() < start
     pd.testing.assert_frame_equal(spoofed.fixes[before], table.fixes[before])

@@ -31,9 +31,9 @@ def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Attac
     attacked = table.observations if on_observations else table.fixes
     if len(attacked):
         last = float(attacked["t_s"].max())
-        if spec.start_s >= last:
+        if spec.start_s > last:
             raise AttackError(
-                f"{table.source}: start={spec.start_s:g} s is at or after the end of the log's "
+                f"{table.source}: start={spec.start_s:g} s is after the end of the log's "
                 f"{'observations' if on_observations else 'fixes'} ({last:.1f} s); nothing to attack"
             )
     if on_observations:

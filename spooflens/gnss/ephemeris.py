@@ -16,11 +16,13 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.constants import SPEED_OF_LIGHT_MPS
+
 FloatArray = NDArray[np.float64]
 
 GM_GPS = 3.986005e14  # m^3/s^2, IS-GPS-200's value (not WGS84's 3.986004418e14)
 OMEGA_E_GPS = 7.2921151467e-5  # rad/s
-C_MPS = 299792458.0
+C_MPS = SPEED_OF_LIGHT_MPS
 F_REL = -4.442807633e-10  # s/m^0.5, relativistic clock correction constant
 SECONDS_PER_WEEK = 604800.0
 GPS_L1_HZ = 1575.42e6

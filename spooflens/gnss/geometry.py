@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.constants import WGS84_E2
 from spooflens.gnss.ephemeris import C_MPS, OMEGA_E_GPS, SECONDS_PER_WEEK, Klobuchar
 
 FloatArray = NDArray[np.float64]
@@ -40,7 +41,7 @@ def azimuth_elevation(sv_ecef: FloatArray, rx_ecef: FloatArray) -> tuple[FloatAr
     x, y, z = rx_ecef[..., 0], rx_ecef[..., 1], rx_ecef[..., 2]
     lon = np.arctan2(y, x)
     # geodetic latitude is what the horizon is referred to; spherical is within 0.2 deg, plenty here
-    lat = np.arctan2(z, np.hypot(x, y) * (1.0 - 6.69437999014e-3))
+    lat = np.arctan2(z, np.hypot(x, y) * (1.0 - WGS84_E2))
     u = line_of_sight(sv_ecef, rx_ecef)
     sl, cl, sp, cp = np.sin(lon), np.cos(lon), np.sin(lat), np.cos(lat)
     e = -sl * u[..., 0] + cl * u[..., 1]
