@@ -275,7 +275,10 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         raise ReaderError(path, f"files use different clocks {sorted(references)}; use one time column kind")
     reference = references.pop() if references else "relative"
     t0 = min(t0s) if t0s and reference != "relative" else None
-    merged = {k: pd.concat(v, ignore_index=True) for k, v in frames.items()}
+    merged = {k: v[0] if len(v) == 1 else pd.concat(v, ignore_index=True) for k, v in frames.items()}
+    frames.clear()
+    read.clear()  # build_table consumes the frames: nothing here may keep a second reference
+    df = r = None
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
     return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)

@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from readers import ReaderFormat
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
-from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, EpochTable, Skipped, StreamInfo, build_table, gps_utc_offset_ns
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns, gps_utc_offset_ns
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS
 from spooflens.navigation.rotations import matrix_to_quat
@@ -324,11 +324,6 @@ def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"t_ns": t_ns[keep], "agc_rec": db[keep]}).groupby("t_ns", as_index=False).mean()
 
 
-def _unix_to_gps_ns(unix_ns: IntArray) -> IntArray:
-    gps = unix_ns - GPS_EPOCH_UNIX_NS
-    return gps + gps_utc_offset_ns(gps + gps_utc_offset_ns(gps))
-
-
 def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
     n = len(fix)
     provider = _col(fix, "Provider")
@@ -421,7 +416,7 @@ def read_gnsslogger(
     reference = "gps" if have_raw else "unix"
 
     def from_unix_ns(unix_ns: IntArray) -> IntArray:
-        return _unix_to_gps_ns(unix_ns) if reference == "gps" else unix_ns
+        return gps_ns_of_unix_ns(unix_ns) if reference == "gps" else unix_ns
 
     fixes = _fixes(path, records["Fix"].frame(), skipped) if "Fix" in records else None
     # elapsedRealtimeNanos -> UTC: the GPS fixes carry both clocks

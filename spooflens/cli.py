@@ -11,7 +11,13 @@ written); 4 the verdict is spoofing and --fail-on-spoof was given.
 from __future__ import annotations
 
 import json
+import os
 import sys
+
+# pandas keeps text columns in Arrow; Arrow's default allocator (mimalloc) reserves address space in
+# large segments, a gigabyte beyond what a large log really uses, which an address-space limit (a
+# container's, or ulimit -v) counts. The system allocator reserves what it uses. Set before pandas loads.
+os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
 from pathlib import Path
 from typing import TYPE_CHECKING
 

@@ -7,7 +7,7 @@ drops unusable rows and records each repair. So every format gets the same treat
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -20,56 +20,73 @@ from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
-# GPS time (ns since the GPS epoch) at which each leap second took effect, and GPS-UTC after it.
-_LEAP_SECONDS = [
-    (ts, n)
-    for ts, n in zip(
-        np.array(
-            [
-                46828800,
-                78364801,
-                109900802,
-                173059203,
-                252028804,
-                315187205,
-                346723206,
-                393984007,
-                425520008,
-                457056009,
-                504489610,
-                551750411,
-                599184012,
-                820108813,
-                914803214,
-                1025136015,
-                1119744016,
-                1167264017,
-            ],
-            dtype=np.int64,
-        )
-        * 1_000_000_000,
-        range(1, 19),
-        strict=True,
+NS = 1_000_000_000
+# GPS time (ns since the GPS epoch) of each leap second (23:59:60 UTC); GPS - UTC is k s from the k-th
+# entry on, so the leap second itself reads as a second 23:59:59, as a UNIX clock shows it.
+_LEAP_GPS_NS = (
+    np.array(
+        [
+            46828800,
+            78364801,
+            109900802,
+            173059203,
+            252028804,
+            315187205,
+            346723206,
+            393984007,
+            425520008,
+            457056009,
+            504489610,
+            551750411,
+            599184012,
+            820108813,
+            914803214,
+            1025136015,
+            1119744016,
+            1167264017,
+        ],
+        dtype=np.int64,
     )
-]
+    * NS
+)
+# the midnights after them on the UTC scale (UTC ns since the GPS epoch, as a UNIX clock counts them)
+_LEAP_UTC_NS = _LEAP_GPS_NS - np.arange(len(_LEAP_GPS_NS), dtype=np.int64) * NS
 
 
-def gps_utc_offset_ns(gps_ns: np.ndarray) -> np.ndarray:
-    """GPS minus UTC (leap seconds) at the given GPS times, in ns."""
-    starts = np.array([ts for ts, _ in _LEAP_SECONDS], dtype=np.int64)
-    return np.searchsorted(starts, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * 1_000_000_000
+def gps_utc_offset_ns(gps_ns: np.ndarray | int) -> np.ndarray:
+    """GPS minus UTC (leap seconds) at the given GPS times (ns since the GPS epoch), in ns."""
+    return np.searchsorted(_LEAP_GPS_NS, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * NS
+
+
+def utc_gps_offset_ns(utc_ns: np.ndarray | int) -> np.ndarray:
+    """GPS minus UTC at the given UTC times (ns since the GPS epoch on the UTC scale), in ns.
+
+    Looked up by UTC, not by GPS time: during the 18 s after a leap second the two lookups differ by one.
+    """
+    return np.searchsorted(_LEAP_UTC_NS, np.asarray(utc_ns, dtype=np.int64), side="right").astype(np.int64) * NS
+
+
+def gps_ns_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
+    """UTC nanoseconds since 1970 -> GPS nanoseconds since 1980-01-06 (leap seconds added)."""
+    utc = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS
+    return utc + utc_gps_offset_ns(utc)
+
+
+def unix_ns_of_gps_ns(gps_ns: np.ndarray | int) -> np.ndarray:
+    """GPS nanoseconds since 1980-01-06 -> UTC nanoseconds since 1970 (a leap second reads as the
+    UTC second before it, as a UNIX clock shows it)."""
+    gps = np.asarray(gps_ns, dtype=np.int64)
+    return gps + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(gps)
 
 
 def gps_seconds_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
     """UTC nanoseconds since 1970 -> GPS seconds since 1980-01-06 (leap seconds added)."""
-    gps_ns = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS
-    return (gps_ns + gps_utc_offset_ns(gps_ns)) / 1e9
+    return gps_ns_of_unix_ns(unix_ns) / 1e9
 
 
 def unix_ns_of_gps_seconds(gps_s: np.ndarray | float) -> np.ndarray:
     """GPS seconds since 1980-01-06 -> UTC nanoseconds since 1970."""
-    gps_ns = np.round(np.asarray(gps_s, dtype=float) * 1e9).astype(np.int64)
-    return gps_ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(gps_ns)
+    return unix_ns_of_gps_ns(np.round(np.asarray(gps_s, dtype=float) * 1e9).astype(np.int64))
 
 
 TIME_REFERENCES = {
@@ -186,7 +203,7 @@ class EpochTable:
         if self.time_reference == "unix":
             return ns
         if self.time_reference == "gps":
-            return ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(ns)
+            return unix_ns_of_gps_ns(ns)
         return None
 
     def gps_seconds(self, t_s: float | np.ndarray) -> np.ndarray | None:
@@ -255,7 +272,7 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
         skipped.append(Skipped(sid, f"time went backwards {n_back} times; rows sorted by time", n_back, "repaired"))
         order = np.argsort(t, kind="stable")
         rows, t = rows[order], t[order]
-    cols = {c: df[c].to_numpy()[rows] for c in df.columns if c not in ("t_ns", STREAM_KEY[frame])}
+    cols = _Gathered(df, rows, exclude=("t_ns", STREAM_KEY[frame]))
     if frame == "imu":
         stream.scales, refusal = plausibility.imu_unit(cols)
         if refusal:
@@ -264,9 +281,7 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
             return
     elif frame in ("fixes", "truth"):
         stream.scales = plausibility.fix_units(cols, (t - t[0]) / 1e9 if len(t) else t.astype(float))
-    for scale in stream.scales:
-        for c in scale.columns:
-            cols[c] = cols[c] * scale.factor
+    cols.scales = {c: scale.factor for scale in stream.scales for c in scale.columns}
     keep = np.ones(len(rows), dtype=bool)
     for mask, reason in plausibility.bad_rows(frame, cols):
         hit = mask & keep
@@ -286,28 +301,74 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
     stream.rows = rows
 
 
+def _at(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """values[rows], as a view when the rows are one contiguous run (one sorted stream: the usual case)."""
+    if len(rows) and rows[-1] - rows[0] == len(rows) - 1 and (len(rows) < 2 or bool(np.all(np.diff(rows) == 1))):
+        return values[rows[0] : rows[-1] + 1]
+    return values[rows]
+
+
+class _Gathered(Mapping[str, np.ndarray]):
+    """The columns of a frame at some rows, gathered when asked for (a stream's checks touch a few
+    columns; copying all of them for every stream would double a large log's memory)."""
+
+    def __init__(self, df: pd.DataFrame, rows: np.ndarray, exclude: tuple[str | None, ...] = ()) -> None:
+        self.df, self.rows = df, rows
+        self.names = [c for c in df.columns if c not in exclude]
+        self.scales: dict[str, float] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.names:
+            raise KeyError(name)
+        values = _at(self.df[name].to_numpy(), self.rows)
+        return values * self.scales[name] if name in self.scales else values
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
 def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skipped: list[Skipped]) -> pd.DataFrame:
-    """The repaired frame: each column taken once at the kept rows (the reader's column released as
-    soon as it is copied), unit scales applied, optional values out of range cleared, t_s set."""
+    """The repaired frame: each column taken once at the kept rows (a view when nothing was dropped or
+    reordered; the reader's column released as soon as it is copied), unit scales applied, optional
+    values out of range cleared, t_s set."""
     idx = np.concatenate([s.rows for s in streams]) if streams else np.zeros(0, dtype=np.int64)
     cols: dict[str, np.ndarray] = {}
     for c in list(df.columns):
-        values = df[c].to_numpy()[idx] if c != "t_ns" else df[c].to_numpy(dtype=np.int64)[idx]
+        values = _at(df[c].to_numpy(), idx)
         if c == "t_ns":
-            cols["t_s"] = (values - t0_ns) / 1e9
+            cols["t_s"] = (values.astype(np.int64, copy=False) - t0_ns) / 1e9
         else:
-            cols[c] = values if values.dtype.kind != "f" else values.astype(np.float64, copy=False)
+            cols[c] = values
         del df[c]
     start = 0
     for s in streams:
         part = slice(start, start + len(s.rows))
         start += len(s.rows)
-        for scale in s.scales:
-            skipped.append(Skipped(s.sid, scale.reason, len(s.rows), "repaired"))
-            for c in scale.columns:
-                cols[c][part] *= scale.factor
+        changes = [
+            (scale.columns, None, scale.factor, Skipped(s.sid, scale.reason, len(s.rows), "repaired"))
+            for scale in s.scales
+        ]
         view = {c: v[part] for c, v in cols.items() if v.dtype.kind == "f" and c != "t_s"}
-        skipped += [Skipped(s.sid, f.reason, f.count, f.action) for f in plausibility.clean_optional(frame, view)]
+        for c, x in view.items():  # clean_optional judges the scaled values
+            factor = next((f for names, _, f, _ in changes if c in names), 1.0)
+            view[c] = x * factor if factor != 1.0 else x
+        changes += [
+            (names, bad, np.nan, Skipped(s.sid, f.reason, f.count, f.action))
+            for names, bad, f in plausibility.clean_optional(frame, view)
+        ]
+        for names, bad, value, note in changes:
+            skipped.append(note)
+            for c in names:
+                if not cols[c].flags.writeable or cols[c].base is not None:
+                    cols[c] = np.array(cols[c], dtype=np.float64)  # a view of the reader's array: copy once
+                target = cols[c][part]
+                if bad is None:
+                    target *= value
+                else:
+                    target[bad] = value
     return make_frame(frame, cols, len(idx))
 
 

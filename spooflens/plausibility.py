@@ -192,7 +192,9 @@ def fix_units(cols: Columns, t_s: FloatArray) -> list[Scale]:
 
 def _sentinel(x: FloatArray, tolerance: float) -> BoolArray:
     """Exact no-data values that stand far from the stream's own values."""
-    hit = np.isin(x, SENTINELS)
+    hit = np.zeros(len(x), dtype=bool)
+    for value in SENTINELS:  # one comparison each: np.isin would sort a copy of a long column
+        hit |= x == value
     if not hit.any() or hit.all():
         return hit
     rest = x[~hit & np.isfinite(x)]
@@ -292,44 +294,34 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
 }
 
 
-def clean_optional(frame: str, cols: dict[str, np.ndarray]) -> list[Finding]:
-    """Set optional values that are out of range to NaN, in place; what was cleared, per reason."""
-    out: list[Finding] = []
-    for names, low, high, what in _OPTIONAL_BOUNDS.get(frame, ()):
-        present = [n for n in names if n in cols]
-        if not present:
-            continue
-        bad = np.any([(cols[n] < low) | (cols[n] > high) | np.isinf(cols[n]) for n in present], axis=0)
+def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], BoolArray, Finding]]:
+    """Optional values out of range, to be set to NaN ("not known"): (columns, rows, finding) each."""
+    out: list[tuple[tuple[str, ...], BoolArray, Finding]] = []
+
+    def clear(names: tuple[str, ...], bad: BoolArray, what: str) -> None:
         if bad.any():
-            for n in present:
-                cols[n][bad] = np.nan
-            out.append(Finding(f"{what}: set to NaN (not known)", int(bad.sum()), "repaired"))
+            out.append((names, bad, Finding(f"{what}: set to NaN (not known)", int(bad.sum()), "repaired")))
+
+    for names, low, high, what in _OPTIONAL_BOUNDS.get(frame, ()):
+        present = tuple(n for n in names if n in cols)
+        if present:
+            clear(
+                present, np.any([(cols[n] < low) | (cols[n] > high) | np.isinf(cols[n]) for n in present], axis=0), what
+            )
     if frame == "imu" and all(q in cols for q in QUATERNION):
         q = np.stack([cols[n] for n in QUATERNION])
         norm = np.sqrt(np.sum(q**2, axis=0))
-        bad = np.isfinite(norm) & (np.abs(norm - 1.0) > 0.1)
-        bad |= np.any(np.isfinite(q), axis=0) & ~np.all(np.isfinite(q), axis=0)
-        if bad.any():
-            for n in QUATERNION:
-                cols[n][bad] = np.nan
-            out.append(Finding("orientation quaternion not of unit length: set to NaN", int(bad.sum()), "repaired"))
+        bad = (np.isfinite(norm) & (np.abs(norm - 1.0) > 0.1)) | (np.any(np.isfinite(q), axis=0) & ~np.isfinite(norm))
+        clear(QUATERNION, bad, "orientation quaternion not of unit length")
     if frame == "observations" and all(n in cols for n in SV_STATE[:3]):
         r = np.sqrt(sum(cols[n] ** 2 for n in SV_STATE[:3]))
-        bad = np.isfinite(r) & ((r < 6.4e6) | (r > 1e8))
-        bad |= np.any([np.isfinite(cols[n]) for n in SV_STATE[:3]], axis=0) & ~np.isfinite(r)
-        if bad.any():
-            for n in SV_STATE:
-                if n in cols:
-                    cols[n][bad] = np.nan
-            out.append(
-                Finding("satellite position not in an orbit: satellite state set to NaN", int(bad.sum()), "repaired")
-            )
-    generic = [n for n, x in cols.items() if x.dtype.kind == "f" and n not in _REQUIRED.get(frame, ()) and n != "t_s"]
-    for n in generic:
-        bad = np.isinf(cols[n]) | (np.abs(np.nan_to_num(cols[n])) > MAGNITUDE_LIMIT)
-        if bad.any():
-            cols[n][bad] = np.nan
-            out.append(Finding(f"{n} infinite or above 1e15: set to NaN", int(bad.sum()), "repaired"))
+        bad = (np.isfinite(r) & ((r < 6.4e6) | (r > 1e8))) | (
+            np.any([np.isfinite(cols[n]) for n in SV_STATE[:3]], axis=0) & ~np.isfinite(r)
+        )
+        clear(tuple(n for n in SV_STATE if n in cols), bad, "satellite position not in an orbit: satellite state")
+    for n, x in cols.items():
+        if x.dtype.kind == "f" and n not in _REQUIRED.get(frame, ()) and n != "t_s":
+            clear((n,), np.isinf(x) | (np.abs(np.nan_to_num(x)) > MAGNITUDE_LIMIT), f"{n} infinite or above 1e15")
     return out
 
 

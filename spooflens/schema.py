@@ -253,12 +253,13 @@ def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> 
     for col in spec:
         if col.name in columns:
             values = columns[col.name]
-            data[col.name] = pd.Series(values).astype(col.dtype)
+            data[col.name] = pd.Series(values, copy=False).astype(col.dtype)
         elif col.required:
             raise KeyError(f"{frame}: required column {col.name!r} missing")
         else:
             fill = _MISSING[col.dtype]
-            data[col.name] = pd.Series([fill] * n if col.dtype == "string" else np.full(n, fill)).astype(col.dtype)
+            filled = [fill] * n if col.dtype == "string" else np.full(n, fill)
+            data[col.name] = pd.Series(filled, copy=False).astype(col.dtype)
     return pd.DataFrame(data, copy=False)
 
 
