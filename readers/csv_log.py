@@ -278,7 +278,8 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     merged = {k: v[0] if len(v) == 1 else pd.concat(v, ignore_index=True) for k, v in frames.items()}
     frames.clear()
     read.clear()  # build_table consumes the frames: nothing here may keep a second reference
-    df = r = None
+    if files:
+        del df, r  # the loop's last file holds its frame too
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
     return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)

@@ -181,7 +181,10 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                         )
                         continue
                     for rec in other:
-                        (schemas if isinstance(rec, Schema) else channels)[rec.id] = rec  # type: ignore[index]
+                        if isinstance(rec, Schema):
+                            schemas[rec.id] = rec
+                        else:
+                            channels[rec.id] = rec
                     for channel_id, log_time, data in msgs:
                         handle(channel_id, log_time, data)
                 elif isinstance(record, Footer):
@@ -201,10 +204,10 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         )
     if not declared:
         collector.add_topics(_declarations(decoders, schemas, channels))
-        for channel_id, log_time, data in pending:
+        for channel_id, log_time, payload in pending:
             ch = channels.get(channel_id)
             if ch is not None:
-                collector.add(ch.topic, log_time, data)
+                collector.add(ch.topic, log_time, payload)
     if progress:
         progress(n_read, max(total, n_read))
     return collector.finish("unix")

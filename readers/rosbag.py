@@ -54,7 +54,11 @@ def _read_open_bag(
 ) -> EpochTable:
     encoding = "cdr" if reader.is2 else "ros1"
     collector = StreamCollector(path, fmt, topics)
-    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, reader.deserialize) for c in reader.connections})
+
+    def deserialize(raw: bytes | memoryview, msgtype: str) -> object:
+        return reader.deserialize(bytes(raw), msgtype)
+
+    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections})
     total = reader.message_count
     n = 0
     try:
@@ -225,9 +229,9 @@ def _read_ros1_sequential(path: Path, topics: dict[str, str] | None, progress: P
         }
     )
     per_topic: dict[str, int] = {}
-    for conn, t_ns, data in sorted(messages, key=lambda m: m[1]):
+    for conn, t_ns, payload in sorted(messages, key=lambda m: m[1]):
         if conn in conns:
-            collector.add(conns[conn][0], t_ns, data)
+            collector.add(conns[conn][0], t_ns, payload)
             per_topic[conns[conn][0]] = per_topic.get(conns[conn][0], 0) + 1
     if problem:
         collector.skipped += _cut_losses(per_topic, scanned, index_pos, problem, why)

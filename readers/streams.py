@@ -98,17 +98,17 @@ def assign_roles(
     unknown = sorted(set(overrides) - set(ROLES))
     if unknown:
         raise ReaderError(path, f"unknown topic role(s) {unknown}; roles are {list(ROLES)}")
-    for role, topic in overrides.items():
+    for wanted, topic in overrides.items():
         if topic not in topics:
-            raise ReaderError(path, f"--topic {role}={topic}: no such topic; topics are {sorted(topics)}")
-        if topics[topic] not in _ROLE_KINDS[role]:
+            raise ReaderError(path, f"--topic {wanted}={topic}: no such topic; topics are {sorted(topics)}")
+        if topics[topic] not in _ROLE_KINDS[wanted]:
             raise ReaderError(
-                path, f"--topic {role}={topic}: a {topics[topic] or 'unsupported'} topic cannot be a {role}", topic
+                path, f"--topic {wanted}={topic}: a {topics[topic] or 'unsupported'} topic cannot be a {wanted}", topic
             )
     roles: dict[str, str | None] = {}
     chosen_fix = {overrides[r] for r in ("fix", "fix2") if r in overrides}
     for topic, kind in topics.items():
-        role = ROLE_BY_KIND.get(kind) if kind else None
+        role: str | None = ROLE_BY_KIND.get(kind) if kind else None
         if role == "fix":
             if topic == overrides.get("truth") or (
                 "truth" not in overrides and any(h in topic.lower() for h in TRUTH_TOPIC_HINTS)

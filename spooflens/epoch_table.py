@@ -347,7 +347,8 @@ def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skip
     for s in streams:
         part = slice(start, start + len(s.rows))
         start += len(s.rows)
-        changes = [
+        # (columns, rows or None for all, factor or NaN to set, the note)
+        changes: list[tuple[tuple[str, ...], np.ndarray | None, float, Skipped]] = [
             (scale.columns, None, scale.factor, Skipped(s.sid, scale.reason, len(s.rows), "repaired"))
             for scale in s.scales
         ]

@@ -8,8 +8,10 @@ drift apart.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -236,7 +238,7 @@ def empty_frame(frame: str) -> pd.DataFrame:
     return pd.DataFrame({c.name: pd.Series(dtype=c.dtype) for c in FRAMES[frame]})
 
 
-def make_frame(frame: str, columns: dict[str, object], n: int | None = None) -> pd.DataFrame:
+def make_frame(frame: str, columns: Mapping[str, Any], n: int | None = None) -> pd.DataFrame:
     """Build a frame from arrays: schema order and dtypes, absent optional columns filled.
 
     Absent optional floats become NaN, an absent spoofing flag UNKNOWN. Unknown names are an error,

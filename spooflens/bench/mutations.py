@@ -198,6 +198,8 @@ def value(rng: random.Random, data: Data) -> str:
     for _ in range(k):
         i = rng.choice(rows)
         numbers = list(_NUMBER.finditer(lines[i]))
+        if not numbers:  # an earlier replacement took this line's last number
+            continue
         m = rng.choice(numbers)
         lines[i] = lines[i][: m.start()] + new.encode() + lines[i][m.end() :]
     _set_lines(data, lines)
@@ -348,7 +350,8 @@ TEXT_MUTATIONS: tuple[ByteMutation, ...] = (
 
 def ulog_messages(data: bytes) -> list[tuple[int, int, int]]:
     """(offset, size, type) of each ULog message after the 16-byte header, as far as they parse."""
-    out, pos = [], 16
+    out: list[tuple[int, int, int]] = []
+    pos = 16
     while pos + 3 <= len(data) and len(out) < 200_000:
         size, kind = struct.unpack_from("<HB", data, pos)
         out.append((pos, size, kind))
@@ -392,7 +395,8 @@ def ulog_structure(rng: random.Random, data: Data) -> str:
 def bag_structure(rng: random.Random, data: Data) -> str:
     """ROS1 bag v2.0: records are header_len(4) header data_len(4) data."""
     start = data.find(b"\n") + 1
-    records, pos = [], start
+    records: list[tuple[int, int]] = []
+    pos = start
     while pos + 8 <= len(data) and len(records) < 100_000:
         (hlen,) = struct.unpack_from("<I", data, pos)
         if pos + 4 + hlen + 4 > len(data):
@@ -480,7 +484,8 @@ def sqlite_bag(rng: random.Random, directory: Path) -> str:
     if what == "yaml format":
         meta = directory / "metadata.yaml"
         if meta.exists():
-            meta.write_text(re.sub(r"serialization_format: \w+", "serialization_format: ros1", meta.read_text()))
+            text = meta.read_text(encoding="utf-8", errors="replace")
+            meta.write_text(re.sub(r"serialization_format: \w+", "serialization_format: ros1", text))
     return f"sqlite3 bag: {what}"
 
 
@@ -524,17 +529,15 @@ def make_mutant(seed: SeedLog, index: int, base_seed: int, workdir: Path) -> Mut
     notes = []
     for _ in range(rng.choice([1, 1, 1, 2, 3])):
         targets = _target_files(log)
-        if log.is_dir() and any(log.glob("*.db3")) and rng.random() < 0.5:
-            notes.append(sqlite_bag(rng, log))
-            continue
         companions = [workdir / c.name for c in seed.companions]
-        if companions and rng.random() < 0.1:
-            victim = rng.choice(companions)
-        else:
-            victim = rng.choice(targets) if targets else None
-        if victim is None:
-            break
-        notes.append(f"{victim.name}: {_mutate_file(rng, victim)}")
+        try:
+            if log.is_dir() and any(log.glob("*.db3")) and rng.random() < 0.5:
+                notes.append(sqlite_bag(rng, log))
+                continue
+            victim = rng.choice(companions) if companions and rng.random() < 0.1 else rng.choice(targets)
+            notes.append(f"{victim.name}: {_mutate_file(rng, victim)}")
+        except (OSError, ValueError, IndexError, sqlite3.Error) as err:  # a second mutation may find nothing to hold
+            notes.append(f"(a mutation did not apply: {type(err).__name__})")
     if log.is_file() and rng.random() < 0.15:
         ext = rng.choice([e for e in EXTENSIONS if e != log.suffix])
         renamed = log.with_name(log.stem + ext if ext else log.stem + "_noext")

@@ -226,10 +226,10 @@ def _full_jump_wj(
         info += G.T @ SG
         e = e - K[k] @ G
     _, logdet = np.linalg.slogdet(info)
-    return d @ np.linalg.solve(info, d), logdet
+    return float(d @ np.linalg.solve(info, d)), float(logdet)
 
 
-def full_jump_wj(model: LinearGaussianModel, t: int, m: FloatArray) -> FloatArray:
+def full_jump_wj(model: LinearGaussianModel, t: int, m: NDArray[np.integer] | FloatArray) -> FloatArray:
     """2 log LR of a full-state jump after m, flat prior of density 1, from Willsky-Jones signatures."""
     fwd = forward_filter(model.window(0, t + 1))
     A = np.ascontiguousarray(model.A[: t + 1])

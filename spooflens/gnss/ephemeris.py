@@ -291,7 +291,8 @@ def states_at_transmission(
         codes, names = np.unique(sv, return_inverse=True)
         grid = np.round(t_tx / CLOCK_GRID_S).astype(np.int64)
         _, first, back = np.unique(grid * len(codes) + names.ravel(), return_index=True, return_inverse=True)
-        clock = satellite_states(eph, sv[first], grid[first] * CLOCK_GRID_S).clock_bias_m[back.ravel()]
+        at = np.asarray(grid[first] * CLOCK_GRID_S, dtype=np.float64)
+        clock = satellite_states(eph, sv[first], at).clock_bias_m[back.ravel()]
         edge = np.flatnonzero(~np.isfinite(clock))  # grid point outside the record's validity: ask at t_tx
         if len(edge):
             clock[edge] = satellite_states(eph, sv[edge], t_tx[edge]).clock_bias_m

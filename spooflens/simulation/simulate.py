@@ -116,7 +116,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
         imu_cols |= {"qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}
     step = max(1, round(sc.imu_hz / sc.gnss_hz))
     g_idx = np.arange(0, n, step)
-    receivers = [("/gps/fix", None)]
+    receivers: list[tuple[str, np.ndarray | None]] = [("/gps/fix", None)]
     if sc.second_receiver_lever_m is not None:
         receivers.append(("/gps2/fix", np.asarray(sc.second_receiver_lever_m)))
     fix_frames = []
