@@ -9,7 +9,7 @@ rows and finally assembles the frames.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -226,7 +226,8 @@ class StreamCollector:
                     pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
                 )
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
-        fixes = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
+        fixes, attached = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
+        infos = [replace(i, receiver=attached.get(i.topic, "")) if i.role == "vel" else i for i in infos]
         out = {
             "fixes": fixes,
             "imu": _concat(frames["imu"]),
@@ -249,52 +250,65 @@ def _common_prefix(a: str, b: str) -> int:
     return n
 
 
+def velocity_receiver(vel_topic: str, receivers: list[str], overrides: Mapping[str, str] | None) -> str:
+    """The receiver a velocity topic belongs to: the one named by `--topic fix=` when `--topic vel=`
+    chose the velocity, else the one whose topic shares the longest prefix with it."""
+    if overrides and "vel" in overrides and overrides.get("fix") in receivers:
+        return overrides["fix"]
+    return max(receivers, key=lambda r: _common_prefix(r, vel_topic))
+
+
+def match_velocities(fix_ns: np.ndarray, vel_ns: np.ndarray) -> np.ndarray:
+    """For each fix, the index of the velocity row nearest in time within half the median fix period,
+    or -1. The one matching the reader and `inject`'s rewrite both use."""
+    fix_ns = np.asarray(fix_ns, dtype=np.int64)
+    vel_ns = np.asarray(vel_ns, dtype=np.int64)
+    out = np.full(len(fix_ns), -1, dtype=np.int64)
+    if not len(fix_ns) or not len(vel_ns):
+        return out
+    order = np.argsort(vel_ns, kind="stable")
+    v = vel_ns[order]
+    period = float(np.median(np.diff(np.sort(fix_ns)))) if len(fix_ns) > 1 else 1e9
+    right = np.clip(np.searchsorted(v, fix_ns), 0, len(v) - 1)
+    left = np.maximum(right - 1, 0)
+    nearest = np.where(np.abs(fix_ns - v[left]) <= np.abs(v[right] - fix_ns), left, right)
+    ok = np.abs(v[nearest] - fix_ns) <= period / 2
+    out[ok] = order[nearest[ok]]
+    return out
+
+
 def merge_velocities(
     fixes: list[pd.DataFrame],
     velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]],
     overrides: Mapping[str, str] | None,
     skipped: list[Skipped],
-) -> pd.DataFrame | None:
-    """Attach each velocity topic to one receiver and its rows to the nearest fix in time.
-
-    The receiver is the one whose topic shares the longest prefix with the velocity topic, or the primary
-    receiver for `--topic vel=...`. A velocity row attaches to a fix within half the median fix period.
-    """
+) -> tuple[pd.DataFrame | None, dict[str, str]]:
+    """Attach each velocity topic to one receiver (`velocity_receiver`) and its rows to that receiver's
+    fixes (`match_velocities`); returns the fixes and velocity topic -> receiver."""
     if not fixes:
         if velocities:
             skipped += [Skipped(t, "GNSS velocity without any fix stream", len(v[0])) for t, v in velocities.items()]
-        return None
+        return None, {}
     by_topic = {str(f["receiver_id"].iloc[0]) if len(f) else "": f for f in fixes}
+    attached: dict[str, str] = {}
     for vtopic, (vt, vcols) in velocities.items():
-        if overrides and "vel" in overrides and "fix" in overrides:
-            target = overrides["fix"]
-        else:
-            target = max(by_topic, key=lambda r: _common_prefix(r, vtopic))
+        target = velocity_receiver(vtopic, list(by_topic), overrides)
+        attached[vtopic] = target
         f = by_topic[target]
         ft = f["t_ns"].to_numpy()
         if not len(ft) or not len(vt):
             continue
-        order = np.argsort(vt, kind="stable")
-        vt_sorted = vt[order]
-        period = np.median(np.diff(np.sort(ft))) if len(ft) > 1 else 1e9
-        idx = (
-            np.clip(np.searchsorted(vt_sorted, ft), 1, len(vt_sorted) - 1)
-            if len(vt_sorted) > 1
-            else np.zeros(len(ft), dtype=int)
-        )
-        left = vt_sorted[np.maximum(idx - 1, 0)]
-        right = vt_sorted[idx]
-        nearest = np.where(np.abs(ft - left) <= np.abs(right - ft), np.maximum(idx - 1, 0), idx)
-        ok = np.abs(vt_sorted[nearest] - ft) <= period / 2
+        match = match_velocities(ft, vt)
+        ok = match >= 0
         f = f.copy()
         for name, col in vcols.items():
             vals = np.full(len(ft), np.nan)
-            vals[ok] = col[order][nearest[ok]]
+            vals[ok] = col[match[ok]]
             f[name] = vals
-        unmatched = len(vt) - int(ok.sum())
+        unmatched = len(vt) - len(np.unique(match[ok]))
         if unmatched > 0:
             skipped.append(
                 Skipped(vtopic, f"velocity rows with no fix of {target} within half a fix period", unmatched)
             )
         by_topic[target] = f
-    return pd.concat(list(by_topic.values()), ignore_index=True)
+    return pd.concat(list(by_topic.values()), ignore_index=True), attached

@@ -110,6 +110,7 @@ class StreamInfo:
     last_s: float = float("nan")
     body_frame: str | None = None
     frame_id: str = ""
+    receiver: str = ""  # a velocity stream: the receiver whose fixes carry its rows
 
     @property
     def rate_hz(self) -> float:
