@@ -197,14 +197,19 @@ def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
     if s is None:
         return np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
     text = s.astype(str).str.strip()
-    whole = text.str.fullmatch(r"[-+]?\d+").to_numpy(dtype=bool)
+    # up to 18 digits always fits an int64; a 19-digit value is checked against its range one by one
+    whole = text.str.fullmatch(r"[-+]?\d{1,18}").to_numpy(dtype=bool, copy=True)
     out = np.zeros(n, dtype=np.int64)
     if whole.any():
         out[whole] = text[whole].astype(np.int64).to_numpy()
+    for i in np.flatnonzero(text.str.fullmatch(r"[-+]?\d{19,}").to_numpy(dtype=bool)):
+        value = int(text.iloc[i])
+        if -(2**63) <= value < 2**63:
+            out[i], whole[i] = value, True
     # a value written as a float ("1.2E18", "72076939000000.0") is taken as well as a float can hold it
-    other = ~whole & (text != "").to_numpy(dtype=bool)
+    other = ~whole & (text != "").to_numpy(dtype=bool) & ~text.str.fullmatch(r"[-+]?\d{19,}").to_numpy(dtype=bool)
     as_float = pd.to_numeric(text[other], errors="coerce").to_numpy(dtype=float)
-    ok_float = np.isfinite(as_float)
+    ok_float = np.isfinite(as_float) & (np.abs(as_float) < 9.2e18)
     idx = np.flatnonzero(other)
     out[idx[ok_float]] = np.round(as_float[ok_float]).astype(np.int64)
     present = whole.copy()

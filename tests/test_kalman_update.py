@@ -26,7 +26,7 @@ def _spd(rng: np.random.Generator, n: int) -> np.ndarray:
 @pytest.mark.parametrize("seed", range(20))
 def test_masked_update_matches_the_plain_update(seed: int) -> None:
     rng = np.random.default_rng(seed)
-    n, p = rng.integers(2, 16), rng.integers(1, 7)
+    n, p = int(rng.integers(2, 16)), int(rng.integers(1, 7))
     x, P, C, R = rng.normal(size=n), _spd(rng, n), rng.normal(size=(p, n)), _spd(rng, p)
     y = rng.normal(size=p) * 10
     y[rng.random(p) < 0.4] = np.nan

@@ -212,6 +212,7 @@ def run_fuzz(
         pending += [_Job(rng.choice(seeds), i, 0, work / "mutants" / str(i)) for i in range(n)]
         running: dict[int, _Job] = {}
         done, total = 0, len(pending)
+        log_every = max(1, (n + len(seeds)) // 20)
         with progress(show) as bar:
             while pending or running:
                 box = pool.free()
@@ -246,6 +247,8 @@ def run_fuzz(
                         shutil.rmtree(job.workdir, ignore_errors=True)
                     done += 1
                     bar(f"fuzzing ({report.failed} failed)", done, total)
+                    if not show and done % log_every == 0:  # no terminal: a line now and then instead of a bar
+                        err_console.print(f"fuzzing: {done}/{total} runs, {report.failed} failed")
         pool.close()
     report.counts = dict(sorted(counts.items()))
     report.per_seed = {k: dict(v) for k, v in sorted(per_seed.items())}
