@@ -216,7 +216,7 @@ def _seconds(path: Path, t: np.ndarray, time_col: str, frame: str, skipped: list
         skipped.append(
             Skipped(
                 path.name,
-                f"t_s steps by {step:g} (an {rate} rate of {1 / step:.3g} Hz): milliseconds, scaled to seconds",
+                f"t_s steps by {step:g} ({rate} at {1 / step:.3g} Hz): milliseconds, scaled to seconds",
                 len(t),
                 "repaired",
             )
@@ -241,7 +241,21 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         streams += part.streams
         metadata |= part.metadata
     body_frame = "FLU"
-    read = [_read_one(f, skipped) for f in files]
+    read: list[_File] = []
+    unread: list[ReaderError] = []
+    for f in files:
+        try:
+            read.append(_read_one(f, skipped))
+        except ReaderError as err:
+            if len(files) + len(px4_files) == 1:
+                raise
+            unread.append(err)
+    if unread and not read and not px4_files:
+        problems = "; ".join(f"{e.path.name}: {e.problem}" for e in unread)
+        raise ReaderError(path, f"no CSV file could be read: {problems}")
+    # one unusable file of a directory log costs that file: the others are still analysed
+    skipped += [Skipped(e.path.name, f"file not read: {e.problem}", 1, "lost") for e in unread]
+    files = [f for f in files if f not in {e.path for e in unread}]
     declared = {r.t0_ns for r in read if r.t0_ns is not None}
     for i, (f, r) in enumerate(zip(files, read, strict=True)):
         frame, df, reference, t0, meta = r.frame, r.df, r.reference, r.t0_ns, r.meta

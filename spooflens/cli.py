@@ -72,12 +72,13 @@ def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: b
     only raw pseudoranges get fixes from their single-point solution (listed as computed), and the truth
     file beside the log, if any, fills the truth frame (drawn, never analysed)."""
     from readers import read_log
+    from spooflens.epoch_table import checked
     from spooflens.navigation.single_point import with_solved_fixes
     from spooflens.truth import with_truth_beside
 
     with progress(show_progress) as report:
         table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
-    return with_truth_beside(with_solved_fixes(table), log) if solve_fixes else table
+    return checked(with_truth_beside(with_solved_fixes(table), log)) if solve_fixes else table
 
 
 def _damaged(table: EpochTable) -> list[str]:
@@ -152,7 +153,9 @@ def analyse_log(log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet
 
     table = _read(log, _parse_topics(topics), not quiet and show_progress())
     if not len(table.fixes):
-        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}); nothing written")
+        lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
+        why = f"; lost: {lost}" if lost else ""
+        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}{why}); nothing written")
     with progress(not quiet and show_progress()) as report:
         steps: list[str] = []
 

@@ -339,6 +339,11 @@ def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skip
     cols: dict[str, np.ndarray] = {}
     for c in list(df.columns):
         values = _at(df[c].to_numpy(), idx)
+        if not values.flags.writeable:  # pandas hands out read-only views; the table's frames are its own
+            try:
+                values.flags.writeable = True
+            except ValueError:
+                values = values.copy()
         if c == "t_ns":
             cols["t_s"] = (values.astype(np.int64, copy=False) - t0_ns) / 1e9
         else:
@@ -502,3 +507,32 @@ def build_table(
     )
     table.validate()
     return table
+
+
+def checked(table: EpochTable) -> EpochTable:
+    """`table` with the rows no sensor produces dropped from every frame, each drop listed.
+
+    `build_table` already does this for what a reader hands over; frames added later (fixes solved
+    from pseudoranges, a truth file beside the log) pass here before any analysis sees them.
+    """
+    out: EpochTable | None = None
+    for name in FRAMES:
+        df = table.frame(name)
+        if not len(df):
+            continue
+        key = STREAM_KEY[name]
+        drop = np.zeros(len(df), dtype=bool)
+        groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
+        notes = []
+        for sid, rows in groups:
+            cols = {c: df[c].to_numpy()[rows] for c in df.columns if c not in ("t_s", key)}
+            for mask, reason in plausibility.bad_rows(name, cols):
+                hit = mask & ~drop[rows]
+                if hit.any():
+                    notes.append(Skipped(str(sid), reason, int(hit.sum())))
+                    drop[rows[hit]] = True
+        if drop.any():
+            out = out or replace(table, skipped=list(table.skipped))
+            setattr(out, name, df[~drop].reset_index(drop=True))
+            out.skipped += notes
+    return out or table

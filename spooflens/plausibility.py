@@ -89,6 +89,7 @@ def _finite_rows(cols: Columns, names: tuple[str, ...]) -> BoolArray:
 def imu_unit(cols: Columns) -> tuple[list[Scale], str]:
     """Scales that put an IMU stream in m/s^2 and rad/s, or a reason it is in no unit we know ("")."""
     ok = _finite_rows(cols, IMU_MOTION)
+    ok &= np.all([np.abs(cols[n]) < 1e7 for n in IMU_MOTION], axis=0)  # beyond any unit: bad_rows' business
     if not ok.any():
         return [], ""
     f = np.sqrt(sum(np.square(cols[n][ok]) for n in IMU_MOTION[:3]))
@@ -140,6 +141,7 @@ def fix_units(cols: Columns, t_s: FloatArray) -> list[Scale]:
     """Scales that put a fix stream's latitude/longitude in degrees and height in metres."""
     lat, lon, h = cols["lat_deg"], cols["lon_deg"], cols["height_m"]
     ok = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h) & ~((lat == 0) & (lon == 0)) & np.isfinite(t_s)
+    ok &= (np.abs(lat) <= 90) & (np.abs(lon) <= 180) & (np.abs(h) < 1e9)  # garbage is bad_rows' business
     if ok.sum() < 10:
         return []
     lat, lon, h, t = lat[ok], lon[ok], h[ok], t_s[ok]
@@ -297,10 +299,14 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
 def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], BoolArray, Finding]]:
     """Optional values out of range, to be set to NaN ("not known"): (columns, rows, finding) each."""
     out: list[tuple[tuple[str, ...], BoolArray, Finding]] = []
+    cleared: dict[str, BoolArray] = {}  # a value counts under the first reason that clears it
 
     def clear(names: tuple[str, ...], bad: BoolArray, what: str) -> None:
-        if bad.any():
-            out.append((names, bad, Finding(f"{what}: set to NaN (not known)", int(bad.sum()), "repaired")))
+        new = bad & ~np.any([cleared[n] for n in names if n in cleared], axis=0) if cleared else bad
+        if np.any(new):
+            out.append((names, new, Finding(f"{what}: set to NaN (not known)", int(np.sum(new)), "repaired")))
+            for n in names:
+                cleared[n] = cleared[n] | new if n in cleared else new
 
     for names, low, high, what in _OPTIONAL_BOUNDS.get(frame, ()):
         present = tuple(n for n in names if n in cols)
@@ -314,7 +320,8 @@ def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], Boo
         bad = (np.isfinite(norm) & (np.abs(norm - 1.0) > 0.1)) | (np.any(np.isfinite(q), axis=0) & ~np.isfinite(norm))
         clear(QUATERNION, bad, "orientation quaternion not of unit length")
     if frame == "observations" and all(n in cols for n in SV_STATE[:3]):
-        r = np.sqrt(sum(cols[n] ** 2 for n in SV_STATE[:3]))
+        with np.errstate(over="ignore"):  # 1e300 squared is inf, which is out of orbit all the same
+            r = np.sqrt(sum(cols[n] ** 2 for n in SV_STATE[:3]))
         bad = (np.isfinite(r) & ((r < 6.4e6) | (r > 1e8))) | (
             np.any([np.isfinite(cols[n]) for n in SV_STATE[:3]], axis=0) & ~np.isfinite(r)
         )
@@ -400,7 +407,10 @@ def problems(frames: Mapping[str, pd.DataFrame]) -> list[str]:
         t = df["t_s"].to_numpy(dtype=float)
         if not np.all(np.isfinite(t)) or np.any(np.abs(t) > 1e10):
             out.append(f"{frame}: times not finite or beyond 300 years")
-        for mask, reason in bad_rows(frame, cols):
-            if mask.any():
-                out.append(f"{frame}: {int(mask.sum())} rows with {reason}")
+        hit = np.zeros(len(df), dtype=bool)
+        for mask, reason in bad_rows(frame, cols):  # a row counts under the first reason, as readers list it
+            new = mask & ~hit
+            if new.any():
+                out.append(f"{frame}: {int(new.sum())} rows with {reason}")
+                hit |= mask
     return out
