@@ -84,9 +84,19 @@ def _read_open_bag(
 def _missing_messages(reader: AnyReader, collector: StreamCollector) -> list[Skipped]:
     """Messages the bag's index or metadata counts per topic that its storage did not give."""
     listed: dict[str, int] = {}
-    for c in reader.connections:
-        listed[c.topic] = listed.get(c.topic, 0) + int(c.msgcount)
     out = []
+    for c in reader.connections:
+        try:
+            count = int(c.msgcount)
+        except (TypeError, ValueError, OverflowError):
+            count = -1
+        if count < 0:  # the metadata is damaged: nothing to compare with
+            out.append(
+                Skipped(c.topic, f"message count in the bag's metadata unreadable ({c.msgcount!r})", 0, "repaired")
+            )
+            listed[c.topic] = -(2**62)
+            continue
+        listed[c.topic] = listed.get(c.topic, 0) + count
     for topic, count in listed.items():
         seen = collector.streams[topic].seen if topic in collector.streams else 0
         if count > seen:

@@ -10,6 +10,8 @@ definition written in the log and recorded in the table's metadata with the firm
 
 from __future__ import annotations
 
+import contextlib
+import io
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -42,7 +44,7 @@ from readers.px4 import (
     utc_offset_us,
 )
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gap_losses
-from spooflens.errors import ReaderError
+from spooflens.errors import ReaderError, one_line
 from spooflens.schema import FixType
 
 Progress = Callable[[int, int], None]
@@ -63,12 +65,20 @@ def _topics_defined(ulog: ULog) -> set[str]:
 
 def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
+    said = io.StringIO()  # pyulog prints its warnings; they belong in the damage note, not on stdout
     try:
-        ulog = ULog(str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True)
+        with contextlib.redirect_stdout(said):
+            ulog = ULog(
+                str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True
+            )
     except Exception as err:
-        raise ReaderError(path, f"not a readable ULog: {type(err).__name__}: {err}") from err
+        raise ReaderError(path, f"not a readable ULog: {one_line(err)}") from err
     skipped: list[Skipped] = []
-    damage = _damage(path, ulog.file_corruption)
+    damage = _damage(path, ulog.file_corruption, one_line(said.getvalue()))
+    decoded = {(d.name, d.multi_id) for d in ulog.data_list if len(d.data.get("timestamp", ()))}
+    for (name, multi), count in damage.listed.items():
+        if name in (IMU_TOPIC, *GPS_TOPICS) and (name, multi) not in decoded:
+            skipped.append(Skipped(f"{name}/{multi}", "every message undecodable (its format damaged)", count, "lost"))
     data: dict[tuple[str, int], dict[str, np.ndarray]] = {}
     for d in ulog.data_list:
         if "timestamp" not in d.data:  # a damaged format message: the rows cannot be placed in time
@@ -153,6 +163,7 @@ _IMU_FIELDS = tuple(f"{name}[{i}]" for name in ("accelerometer_m_s2", "gyro_rad"
 class _Damage:
     what: str  # "" for an undamaged file
     end_us: int | None  # the last data message's timestamp found anywhere in the file (boot µs)
+    listed: dict[tuple[str, int], int]  # (topic, instance) -> data messages the walk found
 
 
 def _chain(data: bytes, pos: int, links: int = 6) -> bool:
@@ -164,7 +175,7 @@ def _chain(data: bytes, pos: int, links: int = 6) -> bool:
     return pos <= len(data)
 
 
-def _damage(path: Path, pyulog_corruption: bool) -> _Damage:
+def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Damage:
     """How the file is damaged, and the time its last data message carries.
 
     pyulog re-synchronises after corrupt bytes (and may stop at a corrupt size without saying so), so the
@@ -176,6 +187,8 @@ def _damage(path: Path, pyulog_corruption: bool) -> _Damage:
     pos, n = 16, len(data)
     what = ""
     end_us: int | None = None
+    subscribed: dict[int, tuple[str, int]] = {}  # msg_id -> (topic, instance), from the 'A' messages
+    counts: dict[int, int] = {}
     while pos + 3 <= n:
         size, kind = data[pos] | data[pos + 1] << 8, data[pos + 2]
         if kind not in _MESSAGE_TYPES or pos + 3 + size > n:
@@ -189,14 +202,23 @@ def _damage(path: Path, pyulog_corruption: bool) -> _Damage:
             pos = nxt - 2
             continue
         if kind == ord("D") and size >= 10:
-            (t,) = struct.unpack_from("<Q", data, pos + 5)
+            msg_id, t = struct.unpack_from("<HQ", data, pos + 3)
             end_us = t if end_us is None or t > end_us else end_us
+            counts[msg_id] = counts.get(msg_id, 0) + 1
+        elif kind == ord("A") and size > 3:
+            multi, msg_id = struct.unpack_from("<BH", data, pos + 3)
+            subscribed[msg_id] = (data[pos + 6 : pos + 3 + size].decode("ascii", "replace"), multi)
         pos += 3 + size
     if 0 < n - pos < 3 and not what:
         what = f"file cut short at byte {n} (a message header cut in half); what followed is lost"
     if pyulog_corruption:
         what = f"{what}; pyulog re-synchronised" if what else "pyulog found corrupt data and re-synchronised"
-    return _Damage(what, end_us)
+        what += f" ({pyulog_said})" if pyulog_said else ""
+    listed: dict[tuple[str, int], int] = {}
+    for msg_id, count in counts.items():
+        if msg_id in subscribed:
+            listed[subscribed[msg_id]] = listed.get(subscribed[msg_id], 0) + count
+    return _Damage(what, end_us, listed)
 
 
 def _damage_losses(damage: _Damage, frames: Mapping[str, pd.DataFrame], offset_us: int) -> list[Skipped]:
