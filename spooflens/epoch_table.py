@@ -405,6 +405,8 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> Non
             )
             drop[rows] = True
             continue
+        if any(n.stream == str(sid) and "angular rate in deg/s" in n.reason for n in skipped):
+            continue  # its range already said deg/s: scaled once
         motion = {c: imu[c].to_numpy()[rows] for c in plausibility.IMU_MOTION}
         ratio = plausibility.gyro_turn_ratio(t, motion, t_fix, fix_cols)
         if ratio is not None and 40.0 < ratio < 80.0:
