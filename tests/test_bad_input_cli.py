@@ -77,7 +77,8 @@ def test_a_fix_level_attack_on_a_raw_observation_log_moves_the_solved_fixes(tmp_
     assert np.mean(error < 0.05) > 0.97 and error.max() < 3.0
     truth = json.loads((tmp_path / "ramp.05o.attack.json").read_text())
     offsets = np.array(truth["offsets"]["0759"])
-    np.testing.assert_allclose(offsets[:, 1:], enu, atol=2e-3)  # the sidecar says what the solver will find
+    # the sidecar says what the solver will find (RINEX keeps pseudoranges to the millimetre)
+    np.testing.assert_allclose(offsets[:, 1:], enu, atol=1e-2)
     assert not clean_json.exists() and not ramp_json.exists()
 
 
