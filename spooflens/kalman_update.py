@@ -31,6 +31,24 @@ def observed_rows(y: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def observed_parts(
+    C: np.ndarray, R: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, C, R, y) of one epoch restricted to the observed entries of y."""
+    rows = observed_rows(y)
+    m = rows.shape[0]
+    Cm = np.empty((m, C.shape[1]))
+    Rm = np.empty((m, m))
+    ym = np.empty(m)
+    for a in range(m):
+        Cm[a] = C[rows[a]]
+        ym[a] = y[rows[a]]
+        for b in range(m):
+            Rm[a, b] = R[rows[a], rows[b]]
+    return rows, Cm, Rm, ym
+
+
+@njit(cache=True)
 def masked_update(
     x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
@@ -40,19 +58,9 @@ def masked_update(
     (K is n x m). With nothing observed, x and P come back unchanged, nis is NaN and logdet_S 0.
     S and the updated P are symmetrised against round-off.
     """
-    rows = observed_rows(y)
-    m = rows.shape[0]
-    n = x.shape[0]
-    if m == 0:
-        return x, P, rows, np.empty(0), np.empty((0, 0)), np.empty((0, 0)), np.empty((n, 0)), math.nan, 0.0
-    Ck = np.empty((m, n))
-    Rk = np.empty((m, m))
-    yk = np.empty(m)
-    for a in range(m):
-        Ck[a] = C[rows[a]]
-        yk[a] = y[rows[a]]
-        for b in range(m):
-            Rk[a, b] = R[rows[a], rows[b]]
+    rows, Ck, Rk, yk = observed_parts(C, R, y)
+    if rows.shape[0] == 0:
+        return x, P, rows, np.empty(0), np.empty((0, 0)), np.empty((0, 0)), np.empty((x.shape[0], 0)), math.nan, 0.0
     e = yk - Ck @ x
     PCt = P @ Ck.T
     S = Ck @ PCt + Rk

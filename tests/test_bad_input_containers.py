@@ -64,7 +64,10 @@ def test_an_overwritten_schema_costs_its_topic_counted_as_lost(
 ) -> None:
     src, bad = tmp_path / "src.mcap", tmp_path / "bad.mcap"
     write_log(circling_table(seconds=60.0), src, fmt)
-    name = next(s.name for s in make_reader(src.open("rb")).get_summary().schemas.values() if "Imu" in s.name)
+    with src.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    name = next(s.name for s in summary.schemas.values() if "Imu" in s.name)
     _with_schema(src, bad, name, edit)
     table = read_log(bad)
     lost = [s for s in table.skipped if s.action == "lost"]

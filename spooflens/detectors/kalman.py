@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from spooflens.kalman_update import masked_update, observed_rows
+from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -151,18 +151,9 @@ def information_update(
     Lam: np.ndarray, alpha: np.ndarray, Ck: np.ndarray, Rk: np.ndarray, yk: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Add one epoch's measurement (used rows only) to the information."""
-    rows = observed_rows(yk)
-    m = rows.shape[0]
-    if m == 0:
+    rows, Cm, Rm, ym = observed_parts(Ck, Rk, yk)
+    if rows.shape[0] == 0:
         return Lam, alpha
-    Cm = np.empty((m, Ck.shape[1]))
-    Rm = np.empty((m, m))
-    ym = np.empty(m)
-    for a in range(m):
-        Cm[a] = Ck[rows[a]]
-        ym[a] = yk[rows[a]]
-        for b in range(m):
-            Rm[a, b] = Rk[rows[a], rows[b]]
     Ri = np.linalg.inv(Rm)
     return Lam + Cm.T @ Ri @ Cm, alpha + Cm.T @ Ri @ ym
 

@@ -41,7 +41,7 @@ from spooflens.detectors.kalman import (
     information_predict_back,
     information_update,
 )
-from spooflens.kalman_update import masked_update, observed_rows
+from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -129,15 +129,9 @@ def _info_constant(
     c = 0.0
     for k in range(last, first, -1):
         yk = y[k]
-        rows = observed_rows(yk)
+        rows, _, Rm, ym = observed_parts(C[k], R[k], yk)
         m = rows.shape[0]
         if m > 0:
-            Rm = np.empty((m, m))
-            ym = np.empty(m)
-            for a in range(m):
-                ym[a] = yk[rows[a]]
-                for b in range(m):
-                    Rm[a, b] = R[k, rows[a], rows[b]]
             c += -0.5 * ym @ np.linalg.solve(Rm, ym) - 0.5 * (m * 1.8378770664093453 + np.linalg.slogdet(Rm)[1])
         Lam, alpha = information_update(Lam, alpha, C[k], R[k], yk)
         B, Qr = _noise_factor(Q[k], 1e-12)
