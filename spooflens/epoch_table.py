@@ -273,6 +273,12 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
         skipped.append(Skipped(sid, f"time went backwards {n_back} times; rows sorted by time", n_back, "repaired"))
         order = np.argsort(t, kind="stable")
         rows, t = rows[order], t[order]
+    stray = plausibility.stray_stamps(t)
+    if stray.any():
+        skipped.append(
+            Skipped(sid, "rows whose time lies an hour or more from the rest of the stream", int(stray.sum()))
+        )
+        rows, t = rows[~stray], t[~stray]
     cols = _Gathered(df, rows, exclude=("t_ns", STREAM_KEY[frame]))
     if frame == "imu":
         stream.scales, refusal = plausibility.imu_unit(cols)
@@ -379,12 +385,12 @@ def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skip
     return make_frame(frame, cols, len(idx))
 
 
-def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> None:
+def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> bool:
     """An IMU whose yaw rate turns 57 times the GNSS course (deg/s logged as rad/s) is scaled; one whose
     time span shares nothing with the fixes' (another clock) is left out."""
     imu, fixes = frames.get("imu"), frames.get("fixes")
     if imu is None or fixes is None or not len(imu) or not len(fixes):
-        return
+        return False
     receiver = fixes[fixes["receiver_id"] == fixes["receiver_id"].iloc[0]]
     fix_cols = {c: receiver[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "vel_e_mps", "vel_n_mps")}
     t_fix = receiver["t_s"].to_numpy(dtype=float)
@@ -422,6 +428,7 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> Non
                 imu.iloc[rows, imu.columns.get_loc(c)] = imu[c].to_numpy()[rows] * (np.pi / 180.0)
     if drop.any():
         frames["imu"] = imu[~drop].reset_index(drop=True)
+    return bool(drop.any())
 
 
 def build_table(
@@ -456,13 +463,21 @@ def build_table(
         for part in parts:
             _repair_stream(name, df, part, skipped, source)
         kept[name] = (df, parts)
+    auto_start = t0_ns is None
     if t0_ns is None:
         firsts = [int(df["t_ns"].to_numpy()[p.rows].min()) for df, parts in kept.values() for p in parts if len(p.rows)]
         t0_ns = min(firsts) if firsts else 0
     table_frames: dict[str, pd.DataFrame] = {}
     for name, (df, parts) in kept.items():
         table_frames[name] = _take(name, df, parts, t0_ns, skipped)
-    _cross_check(table_frames, skipped)
+    dropped = _cross_check(table_frames, skipped)
+    if auto_start or dropped:  # a stream left out by the cross-check may have held the earliest stamp
+        firsts_s = [float(df["t_s"].min()) for df in table_frames.values() if len(df)]
+        shift_ns = round(min(firsts_s) * 1e9) if firsts_s else 0
+        if shift_ns:
+            t0_ns += shift_ns
+            for df in table_frames.values():
+                df["t_s"] = df["t_s"].to_numpy() - shift_ns / 1e9
     final_streams: list[StreamInfo] = []
     for s in streams:
         frame = {

@@ -23,6 +23,7 @@ analyse such a table with one line rather than fail inside the filter).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -44,6 +45,7 @@ ACCEL_LIMIT_MPS2 = 2000.0  # 200 g: beyond any IMU's range
 GYRO_LIMIT_RADPS = 200.0
 GYRO_DEGREES_P99 = 35.0  # rad/s; vehicles stay far below (2000 deg/s is a consumer gyro's full scale)
 HEIGHT_RANGE_M = (-2000.0, 100_000.0)
+STRAY_GAP_NS = 3_600_000_000_000  # an hour without a sample of a stream
 TURN_SPACING_M = 50.0  # GNSS course taken over this much track, well above position noise
 PSEUDORANGE_RANGE_M = (1e6, 1e8)  # every GNSS orbit, with receiver clock offsets of milliseconds
 SV_ID_PATTERN = r"[GRECJSI]\d{1,3}"
@@ -187,6 +189,25 @@ def fix_units(cols: Columns, t_s: FloatArray) -> list[Scale]:
                 )
             )
     return scales
+
+
+def stray_stamps(t_ns: np.ndarray) -> BoolArray:
+    """Rows (of a stream sorted by time) in a small group that an hour or more of silence separates from
+    the rest: a corrupt stamp, not a recording. A log paused for hours keeps both of its parts, each far
+    larger than the 0.1% (at least 3 rows) a stray group may hold."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    out = np.zeros(len(t), dtype=bool)
+    if len(t) < 4:
+        return out
+    gaps = np.flatnonzero(np.diff(t) > STRAY_GAP_NS)
+    if not len(gaps):
+        return out
+    bounds = np.concatenate(([0], gaps + 1, [len(t)]))
+    small = max(3, len(t) // 1000)
+    for a, b in itertools.pairwise(bounds.tolist()):
+        if b - a <= small:
+            out[a:b] = True
+    return out
 
 
 # --- 2. rows no sensor produces ---------------------------------------------------------------------

@@ -194,3 +194,20 @@ def test_a_long_csv_is_read_in_a_bounded_memory_per_row(tmp_path: Path) -> None:
     assert result["rows"] == n
     per_row = result["extra_kib"] * 1024 / n
     assert per_row < 400, f"{per_row:.0f} bytes per row"  # the frame itself is 23 float columns: 184 B
+
+
+def test_a_row_with_a_corrupt_time_far_from_the_rest_is_dropped(clean_csv: Path, tmp_path: Path) -> None:
+    """One stamp of -5e8 s (or +5e8 s) would stretch the log to 16 years: it is a stray, not a recording."""
+    for value in ("-500000000", "500000000"):
+        log = _copy(clean_csv, tmp_path / value)
+        lines = _lines(log / "fixes.csv")
+        h = _header(lines)
+        cells = lines[h + 30].split(",")
+        cells[0] = value
+        lines[h + 30] = ",".join(cells)
+        (log / "fixes.csv").write_text("\n".join(lines) + "\n")
+        table = read_log(log)
+        assert table.duration_s == pytest.approx(119.98) and len(table.fixes) == 119
+        assert any(
+            s.reason == "rows whose time lies an hour or more from the rest of the stream" for s in table.skipped
+        )
