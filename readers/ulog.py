@@ -189,6 +189,7 @@ def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Dama
     end_us: int | None = None
     subscribed: dict[int, tuple[str, int]] = {}  # msg_id -> (topic, instance), from the 'A' messages
     counts: dict[int, int] = {}
+    stamps: list[int] = []
     while pos + 3 <= n:
         size, kind = data[pos] | data[pos + 1] << 8, data[pos + 2]
         if kind not in _MESSAGE_TYPES or pos + 3 + size > n:
@@ -203,7 +204,7 @@ def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Dama
             continue
         if kind == ord("D") and size >= 10:
             msg_id, t = struct.unpack_from("<HQ", data, pos + 3)
-            end_us = t if end_us is None or t > end_us else end_us
+            stamps.append(t)
             counts[msg_id] = counts.get(msg_id, 0) + 1
         elif kind == ord("A") and size > 3:
             multi, msg_id = struct.unpack_from("<BH", data, pos + 3)
@@ -214,6 +215,10 @@ def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Dama
     if pyulog_corruption:
         what = f"{what}; pyulog re-synchronised" if what else "pyulog found corrupt data and re-synchronised"
         what += f" ({pyulog_said})" if pyulog_said else ""
+    if stamps:  # the data's end: a corrupt stamp among a few resynchronised messages must not set it
+        t = np.sort(np.array(stamps, dtype=np.uint64))
+        top = int(t[int(0.999 * (len(t) - 1))])
+        end_us = int(t[t <= top + 60_000_000][-1]) if top < 2**53 else None
     listed: dict[tuple[str, int], int] = {}
     for msg_id, count in counts.items():
         if msg_id in subscribed:

@@ -237,8 +237,8 @@ def gap_losses(t_ns: np.ndarray, factor: float = 3.0, end_ns: int | None = None)
         return 0
     gaps = steps[steps > factor * period]
     missing = float(np.sum(gaps / period - 1.0))
-    if end_ns is not None and end_ns - t[-1] > factor * period:
-        missing += (end_ns - t[-1]) / period - 1.0
+    if end_ns is not None and abs(end_ns) < 2**62 and end_ns - int(t[-1]) > factor * period:
+        missing += (end_ns - int(t[-1])) / period - 1.0
     return int(np.round(missing))
 
 
