@@ -2,7 +2,7 @@
 
 `spooflens bench fuzz --n N [--seed S]` takes the seed logs (every sample log, the real logs in
 `../shared/real/`, and short simulated logs in the formats neither has: ULog, protobuf MCAP, ROS2 MCAP
-bag, RINEX 3, a single CSV file), makes N mutants (`spooflens.bench.mutations`), and runs `spooflens
+bag, RINEX 3, the PX4 CSV dialect; and the sample CSV's fixes file alone), makes N mutants (`spooflens.bench.mutations`), and runs `spooflens
 inspect` on each, then `spooflens analyze` when inspect read something (`--command` picks one), in a
 sandboxed child (`spooflens.bench.sandbox`: time limit, address-space cap, peak RSS measured).
 
@@ -15,8 +15,11 @@ be rerun by hand.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import random
+import re
 import selectors
 import shutil
 import tempfile
@@ -64,6 +67,11 @@ def sample_seeds(root: Path = SAMPLE_LOGS) -> list[SeedLog]:
     return seeds
 
 
+def _is_navigation(path: Path) -> bool:
+    """A RINEX navigation file (`.05n`, `.16n`): it goes beside the observation logs, not fuzzed alone."""
+    return re.fullmatch(r"\.\d\d[nNgG]", path.suffix) is not None
+
+
 def real_seeds(root: Path = REAL_LOGS) -> list[SeedLog]:
     """The real logs a reader reads (navigation files and licences go along as companions)."""
     from readers import sniff_format
@@ -74,19 +82,21 @@ def real_seeds(root: Path = REAL_LOGS) -> list[SeedLog]:
         files = sorted(p for p in folder.iterdir() if p.is_file())
         logs = []
         for p in files:
-            if p.suffix in _NOT_LOGS or p.name.startswith(("LICENSE", "COPYING", "RTKLIB")) or p.suffix[-1:] == "n":
+            if p.suffix in _NOT_LOGS or p.name.startswith(("LICENSE", "COPYING", "RTKLIB")) or _is_navigation(p):
                 continue
             try:
                 sniff_format(p)
             except SpooflensError:
                 continue
             logs.append(p)
-        navigation = tuple(p for p in files if p.suffix[-1:] == "n" and p not in logs)
+        navigation = tuple(p for p in files if _is_navigation(p))
         seeds += [SeedLog(p, navigation) for p in logs]
     return seeds
 
 
 def simulated_seeds(workdir: Path) -> list[SeedLog]:
+    from pyulog.ulog2csv import convert_ulog2csv
+
     from spooflens.simulation.simulate import SCENARIOS, simulate, write_with_truth
 
     seeds = []
@@ -95,6 +105,12 @@ def simulated_seeds(workdir: Path) -> list[SeedLog]:
         if not path.exists():
             write_with_truth(simulate(SCENARIOS[scenario], seed=0, duration_s=seconds).table, path, fmt)
         seeds.append(SeedLog(path, (Path(f"{path}.truth.csv"),)))
+    px4_csv = workdir / "sim_px4_csv"  # the PX4 CSV dialect: the ULog through PX4's own ulog2csv
+    if not px4_csv.exists():
+        px4_csv.mkdir()
+        with contextlib.redirect_stdout(io.StringIO()):  # it prints a line per file
+            convert_ulog2csv(str(workdir / "sim.ulg"), None, str(px4_csv), ",", None, None)
+    seeds.append(SeedLog(px4_csv))
     return seeds
 
 
