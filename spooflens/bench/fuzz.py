@@ -2,9 +2,10 @@
 
 `spooflens bench fuzz --n N [--seed S]` takes the seed logs (every sample log, the real logs in
 `../shared/real/`, and short simulated logs in the formats neither has: ULog, protobuf MCAP, ROS2 MCAP
-bag, RINEX 3, the PX4 CSV dialect; and the sample CSV's fixes file alone), makes N mutants (`spooflens.bench.mutations`), and runs `spooflens
-inspect` on each, then `spooflens analyze` when inspect read something (`--command` picks one), in a
-sandboxed child (`spooflens.bench.sandbox`: time limit, address-space cap, peak RSS measured).
+bag, RINEX 3, the PX4 CSV dialect; and the sample CSV's fixes file alone), makes N mutants
+(`spooflens.bench.mutations`), and runs `spooflens inspect` on each, then `spooflens analyze` when
+inspect read something (`--command` picks one), in a sandboxed child (`spooflens.bench.sandbox`: time
+limit, address-space cap, peak RSS measured).
 
 Outcomes: exit 0, 2, 3, 4 are what the README documents (done; bad input with one line; damaged and
 analysed; spoofed with --fail-on-spoof) and count as handled. Exit 1 or any other code is an internal
