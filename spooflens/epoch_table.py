@@ -262,7 +262,7 @@ def _stream_rows(frame: str, df: pd.DataFrame) -> list[_Stream]:
     return [_Stream(str(u), order[bounds[i] : bounds[i + 1]]) for i, u in enumerate(uniques)]
 
 
-def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[Skipped], source: Path) -> None:
+def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[Skipped]) -> None:
     """Sort one stream by time, find its units, drop rows no sensor produces, then duplicate stamps;
     record each repair. Works on row positions only: the values are taken once, at the end."""
     sid, rows = stream.sid, stream.rows
@@ -461,7 +461,7 @@ def build_table(
             continue
         parts = _stream_rows(name, df)
         for part in parts:
-            _repair_stream(name, df, part, skipped, source)
+            _repair_stream(name, df, part, skipped)
         kept[name] = (df, parts)
     auto_start = t0_ns is None
     if t0_ns is None:
