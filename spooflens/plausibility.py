@@ -18,8 +18,8 @@ left out: a few rows an hour or more from the rest):
    satellite inside the Earth, a non-unit quaternion) become NaN ("not known"), counted.
 
 `gyro_turn_ratio` compares streams (an IMU's yaw with the GNSS course; `build_table` also compares the
-IMU's time span with the fixes'). `problems` lists what is still implausible in a finished table (the pipeline refuses to
-analyse such a table with one line rather than fail inside the filter).
+IMU's time span with the fixes'). `problems` lists what is still implausible in a finished table (the
+pipeline refuses to analyse such a table with one line rather than fail inside the filter).
 """
 
 from __future__ import annotations
