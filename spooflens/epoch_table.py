@@ -542,7 +542,7 @@ def checked(table: EpochTable) -> EpochTable:
         groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
         notes = []
         for sid, rows in groups:
-            cols = {c: df[c].to_numpy()[rows] for c in df.columns if c not in ("t_s", key)}
+            cols = _Gathered(df, np.asarray(rows), exclude=("t_s", key))
             for mask, reason in plausibility.bad_rows(name, cols):
                 hit = mask & ~drop[rows]
                 if hit.any():
