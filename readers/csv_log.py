@@ -23,13 +23,15 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from readers import ReaderFormat, px4_csv
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from readers.csv_text import MAX_T0_NS, header_comments, parse_t0_ns, read_rows, scan
+from spooflens.epoch_table import TIME_REFERENCES, EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import BODY_FRAMES, FRAMES, FixType
 
@@ -91,18 +93,6 @@ def _canonical(name: str) -> str:
     return key
 
 
-def _header_comments(path: Path) -> dict[str, str]:
-    meta: dict[str, str] = {}
-    with path.open(encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.startswith("#"):
-                break
-            key, sep, value = line[1:].partition(":")
-            if sep:
-                meta[key.strip().lower()] = value.strip()
-    return meta
-
-
 def _frame_of(path: Path, columns: set[str]) -> str:
     if "sv_id" in columns:
         return "observations"
@@ -122,49 +112,71 @@ def _sv_ids(values: pd.Series) -> pd.Series:
     return s.where(~numeric, "G" + s.str.zfill(2))
 
 
-def _read_one(path: Path, skipped: list[Skipped]) -> tuple[str, pd.DataFrame, str, int | None, dict[str, str]]:
-    meta = _header_comments(path)
-    try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True, on_bad_lines="skip")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as err:
-        raise ReaderError(path, f"not a readable CSV: {err}") from err
-    if df.empty:
-        raise ReaderError(path, "CSV has a header but no rows")
-    df.columns = [_canonical(c) for c in df.columns]
-    df = df.loc[:, ~pd.Index(df.columns).duplicated()]
-    frame = _frame_of(path, set(df.columns))
-    time_col = next((c for c in _TIME_COLUMNS if c in df.columns), None)
+@dataclass
+class _File:
+    """One CSV file of a log, read: its frame, rows (`t_ns` in its own clock), clock and header comments."""
+
+    frame: str
+    df: pd.DataFrame
+    reference: str
+    t0_ns: int | None  # `# t0_ns:` of a t_s file, None when it has none
+    meta: dict[str, str]
+    time_col: str
+
+
+# the clocks a time column may carry, by its magnitude: seconds since 1970/1980 today are ~1.4e9-1.8e9
+_ABSOLUTE_SCALES = ((1e17, 1e-9, "nanoseconds"), (1e14, 1e-6, "microseconds"), (1e11, 1e-3, "milliseconds"))
+_MAX_ABSOLUTE_S = MAX_T0_NS / 1e9
+_MAX_RELATIVE_S = 1e9  # 31 years after the log start
+
+
+def _read_one(path: Path, skipped: list[Skipped]) -> _File:
+    meta = header_comments(path)
+    names = scan(path).names
+    canonical = {n: _canonical(n) for n in names}
+    firsts = {c: n for n, c in reversed(canonical.items())}  # each canonical name from its first column
+    frame = _frame_of(path, set(canonical.values()))
+    spec = {c.name: c for c in FRAMES[frame]}
+    time_col = next((c for c in _TIME_COLUMNS if c in firsts), None)
     if time_col is None:
         raise ReaderError(path, f"no time column; expected one of {list(_TIME_COLUMNS)} (or their aliases)", frame)
-    t = pd.to_numeric(df[time_col], errors="coerce").to_numpy(dtype=float)
-    bad_t = ~np.isfinite(t)
-    if bad_t.any():
-        skipped.append(Skipped(f"{path.name}", "rows with a missing or non-numeric time", int(bad_t.sum())))
-        df, t = df[~bad_t].reset_index(drop=True), t[~bad_t]
+    wanted = {n for c, n in firsts.items() if c in spec or c == time_col}
+    text = {firsts[c.name] for c in spec.values() if c.dtype == "string" and c.name in firsts}
+    raw = read_rows(path, skipped, keep=lambda n: n in wanted, text_columns=text, stream=path.name)
+    df = raw.rename(columns={n: canonical[n] for n in raw.columns})
+    ignored = [c for c in dict.fromkeys(canonical.values()) if c not in spec and c not in _TIME_COLUMNS]
+    if ignored:
+        skipped.append(Skipped(path.name, f"unknown columns ignored: {ignored}", len(ignored)))
     reference = _TIME_COLUMNS[time_col]
+    t = _seconds(path, df[time_col].to_numpy(dtype=float), time_col, frame, skipped)
     t0: int | None = None
     if reference == "relative":
         reference = meta.get("time_reference", "relative")
-        t0 = int(meta["t0_ns"]) if "t0_ns" in meta else 0
-        t_ns = t0 + np.round(t * 1e9).astype(np.int64)
-    else:
-        t_ns = np.round(t * 1e9).astype(np.int64)
-    spec = {c.name: c for c in FRAMES[frame]}
-    cols: dict[str, object] = {"t_ns": t_ns}
-    ignored = [c for c in df.columns if c not in spec and c not in _TIME_COLUMNS]
-    if ignored:
-        skipped.append(Skipped(path.name, f"unknown columns ignored: {ignored}", len(ignored)))
+        if reference not in TIME_REFERENCES:
+            raise ReaderError(path, f"# time_reference: {reference!r}; use one of {list(TIME_REFERENCES)}", frame)
+        t0 = parse_t0_ns(path, meta["t0_ns"], frame) if "t0_ns" in meta else None
+    limit = _MAX_RELATIVE_S if time_col == "t_s" else _MAX_ABSOLUTE_S
+    bad_t = ~np.isfinite(t) | (np.abs(t) > limit) | (t < 0 if time_col != "t_s" else False)
+    if bad_t.any():
+        skipped.append(
+            Skipped(path.name, f"rows with a missing, non-numeric or impossible time ({time_col})", int(bad_t.sum()))
+        )
+        df, t = df[~bad_t].reset_index(drop=True), t[~bad_t]
+    if not len(df):
+        raise ReaderError(path, f"no row has a usable time ({time_col})", frame)
+    cols: dict[str, object] = {"t_ns": (0 if t0 is None else t0) + np.round(t * 1e9).astype(np.int64)}
     for name, col in spec.items():
-        if name == "t_s":
+        if name == "t_s" or name not in df.columns:
             continue
-        if name in df.columns:
-            if col.dtype == "string":
-                cols[name] = _sv_ids(df[name]) if name == "sv_id" else df[name].astype(str).str.strip()
-            elif col.dtype == "int8":
-                default = FixType.FIX_3D if name == "fix_type" else 2
-                cols[name] = pd.to_numeric(df[name], errors="coerce").fillna(default).astype(np.int8)
-            else:
-                cols[name] = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
+        if col.dtype == "string":
+            cols[name] = _sv_ids(df[name]) if name == "sv_id" else df[name].astype(str).str.strip()
+        elif col.dtype == "int8":
+            default = FixType.FIX_3D if name == "fix_type" else 2
+            values = df[name].to_numpy(dtype=float)
+            ok = np.isfinite(values) & (np.abs(values) < 128)
+            cols[name] = np.where(ok, values, default).astype(np.int8)
+        else:
+            cols[name] = df[name].to_numpy(dtype=float)
     key = {"fixes": "receiver_id", "observations": "receiver_id", "imu": "imu_id"}.get(frame)
     if key and key not in cols:
         cols[key] = path.stem if frame == "imu" else "rx0"
@@ -173,7 +185,44 @@ def _read_one(path: Path, skipped: list[Skipped]) -> tuple[str, pd.DataFrame, st
     missing = [c.name for c in FRAMES[frame] if c.required and c.name != "t_s" and c.name not in cols]
     if missing:
         raise ReaderError(path, f"{frame} CSV lacks required columns {missing}", frame)
-    return frame, pd.DataFrame(cols), reference, t0, meta
+    return _File(frame, pd.DataFrame(cols, copy=False), reference, t0, meta, time_col)
+
+
+def _seconds(path: Path, t: np.ndarray, time_col: str, frame: str, skipped: list[Skipped]) -> np.ndarray:
+    """The time column in seconds: an absolute clock in ms, µs or ns (by its magnitude), or a `t_s` whose
+    steps say milliseconds (IMU samples a second or more apart, fixes 100 s or more), scaled, listed."""
+    finite = t[np.isfinite(t)]
+    if not len(finite):
+        return t
+    if time_col != "t_s":
+        level = float(np.median(np.abs(finite)))
+        for above, scale, unit in _ABSOLUTE_SCALES:
+            if level > above:
+                skipped.append(
+                    Skipped(
+                        path.name, f"{time_col} in {unit} (median {level:.4g}): scaled to seconds", len(t), "repaired"
+                    )
+                )
+                return t * scale
+        return t
+    steps = np.diff(np.sort(finite))
+    steps = steps[steps > 0]
+    if not len(steps):
+        return t
+    step = float(np.median(steps))
+    slow = 1.0 if frame == "imu" else 100.0 if frame in ("fixes", "observations") else None
+    if slow is not None and step >= slow and step / 1000 <= slow / 10:
+        rate = "IMU" if frame == "imu" else "GNSS"
+        skipped.append(
+            Skipped(
+                path.name,
+                f"t_s steps by {step:g} ({rate} at {1 / step:.3g} Hz): milliseconds, scaled to seconds",
+                len(t),
+                "repaired",
+            )
+        )
+        return t / 1000.0
+    return t
 
 
 def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
@@ -192,8 +241,31 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         streams += part.streams
         metadata |= part.metadata
     body_frame = "FLU"
-    for i, f in enumerate(files):
-        frame, df, reference, t0, meta = _read_one(f, skipped)
+    read: list[_File] = []
+    unread: list[ReaderError] = []
+    for f in files:
+        try:
+            read.append(_read_one(f, skipped))
+        except ReaderError as err:
+            if len(files) + len(px4_files) == 1:
+                raise
+            unread.append(err)
+    if unread and not read and not px4_files:
+        problems = "; ".join(f"{e.path.name}: {e.problem}" for e in unread)
+        raise ReaderError(path, f"no CSV file could be read: {problems}")
+    # one unusable file of a directory log costs that file: the others are still analysed
+    skipped += [Skipped(e.path.name, f"file not read: {e.problem}", 1, "lost") for e in unread]
+    files = [f for f in files if f not in {e.path for e in unread}]
+    declared = {r.t0_ns for r in read if r.t0_ns is not None}
+    for i, (f, r) in enumerate(zip(files, read, strict=True)):
+        frame, df, reference, t0, meta = r.frame, r.df, r.reference, r.t0_ns, r.meta
+        if t0 is None and declared and r.time_col == "t_s":
+            # one file of a log without the start the others declare: on the others' clock
+            if len(declared) > 1:
+                raise ReaderError(f, "no # t0_ns: comment while the other files declare different starts", frame)
+            t0 = next(iter(declared))
+            df["t_ns"] += t0
+            skipped.append(Skipped(f.name, f"no # t0_ns: comment: took the other files' start {t0}", 1, "repaired"))
         # provenance a writer kept: `# metadata <key>: <value>` (firmware, the meaning of enum codes)
         metadata |= {k.removeprefix(METADATA_PREFIX): v for k, v in meta.items() if k.startswith(METADATA_PREFIX)}
         if meta.get("body_frame", "FLU").upper() in BODY_FRAMES:
@@ -204,11 +276,12 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             t0s.add(t0)
         key = {"fixes": "receiver_id", "observations": "receiver_id", "imu": "imu_id"}.get(frame)
         role = {"fixes": "fix", "observations": "observations", "imu": "imu", "truth": "truth"}[frame]
-        ids = list(dict.fromkeys(df[key].astype(str))) if key else ["truth"]
-        for sid in ids:
-            n = int((df[key].astype(str) == sid).sum()) if key else len(df)
+        counts = df[key].astype(str).value_counts(sort=False) if key else pd.Series({"truth": len(df)})
+        for sid, n in counts.items():
             streams.append(
-                StreamInfo(role, sid, f.name, f"csv/{frame}", n, body_frame=body_frame if frame == "imu" else None)
+                StreamInfo(
+                    role, str(sid), f.name, f"csv/{frame}", int(n), body_frame=body_frame if frame == "imu" else None
+                )
             )
         if progress:
             progress(i + 1, len(files))
@@ -216,7 +289,11 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         raise ReaderError(path, f"files use different clocks {sorted(references)}; use one time column kind")
     reference = references.pop() if references else "relative"
     t0 = min(t0s) if t0s and reference != "relative" else None
-    merged = {k: pd.concat(v, ignore_index=True) for k, v in frames.items()}
+    merged = {k: v[0] if len(v) == 1 else pd.concat(v, ignore_index=True) for k, v in frames.items()}
+    frames.clear()
+    read.clear()  # build_table consumes the frames: nothing here may keep a second reference
+    if files:
+        del df, r  # the loop's last file holds its frame too
     if topics:
         skipped.append(Skipped("<csv>", f"--topic ignored for CSV logs ({dict(topics)})", len(topics)))
     return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)

@@ -143,7 +143,7 @@ JSON_SCHEMAS: dict[str, bytes] = {
 _D = descriptor_pb2.FieldDescriptorProto
 
 
-def _field(name: str, number: int, ftype: int, type_name: str = "", repeated: bool = False) -> _D:
+def _field(name: str, number: int, ftype: _D.Type.ValueType, type_name: str = "", repeated: bool = False) -> _D:
     field = _D(name=name, number=number, type=ftype, label=_D.LABEL_REPEATED if repeated else _D.LABEL_OPTIONAL)
     if type_name:  # an empty type_name still counts as set, and protobuf rejects it on scalar fields
         field.type_name = type_name

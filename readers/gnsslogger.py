@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from readers import ReaderFormat
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
-from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, EpochTable, Skipped, StreamInfo, build_table, gps_utc_offset_ns
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns, gps_utc_offset_ns
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS
 from spooflens.navigation.rotations import matrix_to_quat
@@ -66,6 +66,8 @@ IntArray = NDArray[np.int64]
 
 RECEIVER = "phone"
 WEEK_NS = 604_800 * 1_000_000_000
+MAX_UNIX_MS = 4_102_444_800_000  # 2100-01-01
+MAX_GPS_NS = (MAX_UNIX_MS * 1_000_000) - 315_964_800_000_000_000  # 2100-01-01 in GPS ns (without leap seconds)
 DAY_NS = 86_400 * 1_000_000_000
 BDS_GPS_NS = 14 * 1_000_000_000
 GLO_UTC_NS = 3 * 3600 * 1_000_000_000
@@ -197,14 +199,19 @@ def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
     if s is None:
         return np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
     text = s.astype(str).str.strip()
-    whole = text.str.fullmatch(r"[-+]?\d+").to_numpy(dtype=bool)
+    # up to 18 digits always fits an int64; a 19-digit value is checked against its range one by one
+    whole = text.str.fullmatch(r"[-+]?\d{1,18}").to_numpy(dtype=bool, copy=True)
     out = np.zeros(n, dtype=np.int64)
     if whole.any():
         out[whole] = text[whole].astype(np.int64).to_numpy()
+    for i in np.flatnonzero(text.str.fullmatch(r"[-+]?\d{19,}").to_numpy(dtype=bool)):
+        value = int(text.iloc[i])
+        if -(2**63) <= value < 2**63:
+            out[i], whole[i] = value, True
     # a value written as a float ("1.2E18", "72076939000000.0") is taken as well as a float can hold it
-    other = ~whole & (text != "").to_numpy(dtype=bool)
+    other = ~whole & (text != "").to_numpy(dtype=bool) & ~text.str.fullmatch(r"[-+]?\d{19,}").to_numpy(dtype=bool)
     as_float = pd.to_numeric(text[other], errors="coerce").to_numpy(dtype=float)
-    ok_float = np.isfinite(as_float)
+    ok_float = np.isfinite(as_float) & (np.abs(as_float) < 9.2e18)
     idx = np.flatnonzero(other)
     out[idx[ok_float]] = np.round(as_float[ok_float]).astype(np.int64)
     present = whole.copy()
@@ -256,9 +263,13 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
         f"ReceivedSvTimeUncertaintyNanos above {MAX_TIME_UNCERTAINTY_NS:.0f} ns",
         ~(uncertainty <= MAX_TIME_UNCERTAINTY_NS),
     )
+    reject("BiasNanos infinite or beyond a second", np.isinf(bias) | (np.abs(np.nan_to_num(bias)) >= 1e9))
+    bias = np.where(np.isfinite(bias) & (np.abs(bias) < 1e9), bias, 0.0)
     # GPS nanoseconds of the epoch tag; the sub-nanosecond rest stays a float
     bias_int = np.round(bias).astype(np.int64)
-    tag_ns = time_nanos - full_bias - bias_int
+    with np.errstate(over="ignore"):  # damaged fields wrap around int64: caught just below
+        tag_ns = time_nanos - full_bias - bias_int
+    reject("receiver time outside 1980 .. 2100", (tag_ns <= 0) | (tag_ns >= MAX_GPS_NS))
     rest_ns = (bias_int - bias) + offset
     leap_ns = np.where(np.isfinite(leap_logged), np.nan_to_num(leap_logged) * 1e9, gps_utc_offset_ns(tag_ns)).astype(
         np.int64
@@ -324,11 +335,6 @@ def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"t_ns": t_ns[keep], "agc_rec": db[keep]}).groupby("t_ns", as_index=False).mean()
 
 
-def _unix_to_gps_ns(unix_ns: IntArray) -> IntArray:
-    gps = unix_ns - GPS_EPOCH_UNIX_NS
-    return gps + gps_utc_offset_ns(gps + gps_utc_offset_ns(gps))
-
-
 def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
     n = len(fix)
     provider = _col(fix, "Provider")
@@ -370,9 +376,15 @@ def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFram
             ).astype(np.int8),
         }
     )
+    # a UNIX time in ms from 1970 to 2100: anything else is a damaged field, not a time (and would wrap
+    # around int64 once in nanoseconds)
+    bad_time = has_time & ((time_ms <= 0) | (time_ms >= MAX_UNIX_MS))
+    if (~others & bad_time).any():
+        skipped.append(Skipped("Fix/GPS", "UnixTimeMillis outside 1970 .. 2100", int((~others & bad_time).sum())))
+    has_time &= ~bad_time
     keep = ~others & has_time
-    if (~others & ~has_time).any():
-        skipped.append(Skipped("Fix/GPS", "fix without a time", int((~others & ~has_time).sum()), "lost"))
+    if (~others & ~has_time & ~bad_time).any():
+        skipped.append(Skipped("Fix/GPS", "fix without a time", int((~others & ~has_time & ~bad_time).sum()), "lost"))
     return out[keep].reset_index(drop=True)
 
 
@@ -383,6 +395,8 @@ def _sensor(rec: Records | None, value_cols: tuple[str, ...]) -> pd.DataFrame | 
     n = len(df)
     elapsed, has_elapsed = _int64(_col(df, "elapsedRealtimeNanos"), n)
     utc, has_utc = _int64(_col(df, "utcTimeMillis"), n)
+    has_utc &= (utc > 0) & (utc < MAX_UNIX_MS)  # else a damaged field, not a time
+    has_elapsed &= (elapsed >= 0) & (elapsed < 10**17)  # three years of uptime
     out = pd.DataFrame({"elapsed_ns": elapsed, "utc_ms": utc, "has_elapsed": has_elapsed, "has_utc": has_utc})
     for i, c in enumerate(value_cols):
         out[f"v{i}"] = _float(_col(df, c), n)
@@ -421,7 +435,7 @@ def read_gnsslogger(
     reference = "gps" if have_raw else "unix"
 
     def from_unix_ns(unix_ns: IntArray) -> IntArray:
-        return _unix_to_gps_ns(unix_ns) if reference == "gps" else unix_ns
+        return gps_ns_of_unix_ns(unix_ns) if reference == "gps" else unix_ns
 
     fixes = _fixes(path, records["Fix"].frame(), skipped) if "Fix" in records else None
     # elapsedRealtimeNanos -> UTC: the GPS fixes carry both clocks

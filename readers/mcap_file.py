@@ -34,7 +34,7 @@ from readers import ReaderFormat, foxglove_messages
 from readers.ros_batch import gather
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
-from spooflens.errors import ReaderError
+from spooflens.errors import ReaderError, one_line
 
 Progress = Callable[[int, int], None]
 _RECORD_SIZE_LIMIT = 1 << 30  # a corrupt length field must not make us allocate more than this
@@ -62,6 +62,16 @@ class _Decoders:
         self.protobuf = ProtobufDecoderFactory()
 
     def declare(self, schema: Schema | None, channel: Channel) -> TopicDecl:
+        """The decoder of a channel, built from its schema; a schema the libraries cannot build a type
+        from (damaged text, a broken protobuf descriptor, a type clashing with another schema's) costs
+        that channel's messages, counted as lost, and nothing else."""
+        try:
+            return self._declare(schema, channel)
+        except Exception as err:  # noqa: BLE001 - rosbags, protobuf and UTF-8 errors alike: the schema is damaged
+            name = schema.name if schema else "<no schema>"
+            return TopicDecl(name, None, problem=f"schema unreadable ({one_line(err, 160)})")
+
+    def _declare(self, schema: Schema | None, channel: Channel) -> TopicDecl:
         name = schema.name if schema else "<no schema>"
         enc = channel.message_encoding
         if schema is not None and enc == "cdr" and schema.encoding in ("ros2msg", "ros2idl"):
@@ -315,10 +325,10 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         )
     if not declared:
         collector.add_topics(_declarations(decoders, schemas, channels))
-        for channel_id, log_time, data in pending:
+        for channel_id, log_time, payload in pending:
             ch = channels.get(channel_id)
             if ch is not None:
-                collector.add(ch.topic, log_time, data)
+                collector.add(ch.topic, log_time, payload)
     if progress:
         progress(n_read, max(total, n_read))
     return collector.finish("unix")

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.csv_text import read_rows
 from readers.px4 import (
     ATTITUDE_TOPIC,
     BARO_TOPIC,
@@ -172,22 +173,14 @@ class Px4Part:
     metadata: dict[str, str] = field(default_factory=dict)
 
 
-def _record(path: Path) -> Record:
-    try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True, on_bad_lines="skip")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as err:
-        raise ReaderError(path, f"not a readable CSV: {err}") from err
-    df.columns = [str(c).strip() for c in df.columns]
-    rec: Record = {}
-    for c in df.columns:
-        col = df[c]
-        if col.dtype == object:
-            low = col.astype(str).str.strip().str.lower()
-            if low.isin(["true", "false"]).all():
-                col = low == "true"
-        rec[c] = pd.to_numeric(col, errors="coerce").to_numpy()
-    t = rec["timestamp"].astype(float)
-    keep = np.isfinite(t)
+def _record(path: Path, skipped: list[Skipped]) -> Record:
+    """Every column as numbers (true/false as 1/0); rows without a finite, non-negative timestamp dropped."""
+    df = read_rows(path, skipped)
+    rec: Record = {str(c): df[c].to_numpy() for c in df.columns}
+    t = rec["timestamp"]
+    keep = np.isfinite(t) & (t >= 0) & (t < 1e17)
+    if not keep.all():
+        skipped.append(Skipped(path.name, "rows without a usable timestamp", int((~keep).sum())))
     return {k: v[keep] for k, v in rec.items()}
 
 
@@ -212,7 +205,7 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
     if unused:
         skipped.append(Skipped("<csv>", f"PX4 topics not used: {unused}", len(unused)))
     notes: dict[Path, list[str]] = {f: [] for f in files}
-    records = {f: _record(f) for f, k in files.items() if k != "topic"}
+    records = {f: _record(f, skipped) for f, k in files.items() if k != "topic"}
     times = {f: _timestamp_us(f, rec, notes[f]) for f, rec in records.items()}
     gps_files = [f for f, k in files.items() if k == "gps"]
     named: dict[tuple[str, int], Record] = {}

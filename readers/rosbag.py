@@ -7,6 +7,7 @@ of its chunks instead, keeping every message before the damage.
 from __future__ import annotations
 
 import bz2
+import sqlite3
 import struct
 import tempfile
 from collections.abc import Callable, Iterator
@@ -17,9 +18,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from readers import ReaderFormat
-from readers.streams import StreamCollector, ros_topic
+from readers.ros_messages import normalise_type
+from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
-from spooflens.errors import ReaderError
+from spooflens.errors import ReaderError, one_line
 
 Progress = Callable[[int, int], None]
 _PROGRESS_EVERY = 20000
@@ -52,7 +54,11 @@ def _read_open_bag(
 ) -> EpochTable:
     encoding = "cdr" if reader.is2 else "ros1"
     collector = StreamCollector(path, fmt, topics)
-    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, reader.deserialize) for c in reader.connections})
+
+    def deserialize(raw: bytes | memoryview, msgtype: str) -> object:
+        return reader.deserialize(bytes(raw), msgtype)
+
+    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections})
     total = reader.message_count
     n = 0
     try:
@@ -63,18 +69,69 @@ def _read_open_bag(
                 progress(n, total)
     except Exception as err:  # noqa: BLE001 - keep what was read before the damage
         collector.skipped.append(
-            Skipped("<file>", f"reading stopped after {n} of {total} messages: {err}", total - n, "lost")
+            Skipped("<file>", f"reading stopped after {n} of {total} messages: {one_line(err)}", total - n, "lost")
         )
+    else:
+        collector.skipped += _missing_messages(reader, collector)
     if progress:
         progress(n, total)
     if n == 0 and total:
-        raise ReaderError(path, f"no message could be read ({collector.skipped[-1].reason})")
+        facts = _sqlite_facts(path) if reader.is2 else ""
+        raise ReaderError(path, f"no message could be read: the bag lists {total} messages, none is readable{facts}")
     return collector.finish("unix")
+
+
+def _missing_messages(reader: AnyReader, collector: StreamCollector) -> list[Skipped]:
+    """Messages the bag's index or metadata counts per topic that its storage did not give."""
+    listed: dict[str, int] = {}
+    out = []
+    for c in reader.connections:
+        try:
+            count = int(c.msgcount)
+        except (TypeError, ValueError, OverflowError):
+            count = -1
+        if count < 0:  # the metadata is damaged: nothing to compare with
+            out.append(
+                Skipped(c.topic, f"message count in the bag's metadata unreadable ({c.msgcount!r})", 0, "repaired")
+            )
+            listed[c.topic] = -(2**62)
+            continue
+        listed[c.topic] = listed.get(c.topic, 0) + count
+    for topic, count in listed.items():
+        seen = collector.streams[topic].seen if topic in collector.streams else 0
+        if count > seen:
+            out.append(
+                Skipped(
+                    topic,
+                    f"the bag lists {count} messages, its storage holds {seen} (deleted or damaged)",
+                    count - seen,
+                    "lost",
+                )
+            )
+    return out
+
+
+def _sqlite_facts(path: Path) -> str:
+    """What a ROS2 sqlite3 bag's database really holds, to say why nothing was read."""
+    facts = []
+    for db in sorted(path.glob("*.db3")):
+        try:
+            con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+            try:
+                (count,) = con.execute("SELECT count(*) FROM messages").fetchone()
+                formats = sorted({str(f) for (f,) in con.execute("SELECT serialization_format FROM topics")})
+            finally:
+                con.close()
+        except sqlite3.Error as err:
+            facts.append(f"{db.name}: {one_line(err)}")
+            continue
+        facts.append(f"{db.name} holds {count} messages, topics serialised as {formats} (readable: ['cdr'])")
+    return f" ({'; '.join(facts)})" if facts else ""
 
 
 # --- sequential ROS1 scan for bags without a usable index -------------------------------------------
 
-_OP_MSG, _OP_CHUNK, _OP_CONN = 0x02, 0x05, 0x07
+_OP_MSG, _OP_BAG_HEADER, _OP_CHUNK, _OP_CONN = 0x02, 0x03, 0x05, 0x07
 
 
 def _fields(header: bytes) -> dict[str, bytes]:
@@ -87,8 +144,9 @@ def _fields(header: bytes) -> dict[str, bytes]:
     return out
 
 
-def _records(data: bytes | memoryview) -> Iterator[tuple[dict[str, bytes], memoryview]]:
-    """Records of a ROS1 bag body; stops (raising ValueError) at a record cut short."""
+def _records(data: bytes | memoryview) -> Iterator[tuple[dict[str, bytes], memoryview, int]]:
+    """(header fields, data, end offset) of each record of a ROS1 bag body; stops (raising ValueError)
+    at a record cut short."""
     view, pos = memoryview(data), 0
     while pos < len(view):
         if pos + 4 > len(view):
@@ -101,8 +159,8 @@ def _records(data: bytes | memoryview) -> Iterator[tuple[dict[str, bytes], memor
         start = pos + 8 + hlen
         if start + dlen > len(view):
             raise ValueError("record data cut short")
-        yield header, view[start : start + dlen]
         pos = start + dlen
+        yield header, view[start:pos], pos
 
 
 def _decompress(kind: bytes, data: memoryview, size: int) -> bytes:
@@ -117,61 +175,100 @@ def _decompress(kind: bytes, data: memoryview, size: int) -> bytes:
 
 def _read_ros1_sequential(path: Path, topics: dict[str, str] | None, progress: Progress | None, why: str) -> EpochTable:
     raw = path.read_bytes()
-    if not raw.startswith(b"#ROSBAG V2.0\n"):
+    if not raw.startswith(ROS1_MAGIC):
         raise ReaderError(path, f"not a readable ROS1 bag ({why})")
+    body = memoryview(raw)[len(ROS1_MAGIC) :]
     conns: dict[int, tuple[str, str, str]] = {}  # id -> topic, type, definition
     messages: list[tuple[int, int, bytes]] = []
     problem = ""
+    index_pos = 0  # where the chunks end and the index begins, from the bag header record
+    scanned = 0  # bytes of the body read whole
 
     def take(header: dict[str, bytes], data: memoryview) -> None:
+        nonlocal index_pos
         op = header.get("op", b"\0")[0]
         if op == _OP_CONN:
             c = _fields(bytes(data))
             conns[struct.unpack("<I", header["conn"])[0]] = (
-                header["topic"].decode(),
-                c["type"].decode(),
-                c.get("message_definition", b"").decode(),
+                header["topic"].decode("utf-8", "replace"),
+                c["type"].decode("utf-8", "replace"),
+                c.get("message_definition", b"").decode("utf-8", "replace"),
             )
         elif op == _OP_MSG:
             sec, nsec = struct.unpack("<II", header["time"])
             messages.append((struct.unpack("<I", header["conn"])[0], sec * 1_000_000_000 + nsec, bytes(data)))
+        elif op == _OP_BAG_HEADER and "index_pos" in header:
+            (index_pos,) = struct.unpack("<Q", header["index_pos"])
 
     try:
-        for header, data in _records(memoryview(raw)[13:]):
+        for header, data, end in _records(body):
             if header.get("op", b"\0")[0] == _OP_CHUNK:
                 size = struct.unpack("<I", header["size"])[0]
-                for inner, inner_data in _records(_decompress(header["compression"], data, size)):
+                for inner, inner_data, _ in _records(_decompress(header["compression"], data, size)):
                     take(inner, inner_data)
             else:
                 take(header, data)
+            scanned = end
             if progress:
                 progress(len(messages), 0)
-    except (ValueError, KeyError, struct.error, OSError) as err:
-        problem = str(err)
+    except (ValueError, KeyError, struct.error, OSError, EOFError) as err:
+        problem = one_line(err)
     if not messages:
         raise ReaderError(path, f"no message could be read ({why}; scan: {problem or 'no messages'})")
     store = get_typestore(Stores.EMPTY)
+    unreadable: dict[str, str] = {}  # message type -> why its definition could not be registered
     for _, msgtype, definition in conns.values():
-        if definition:
-            store.register(get_types_from_msg(definition, msgtype))
+        if definition and msgtype not in unreadable:
+            try:
+                store.register(get_types_from_msg(definition, normalise_type(msgtype)))
+            except Exception as err:  # noqa: BLE001 - a damaged definition costs its topic
+                unreadable[msgtype] = one_line(err, 160)
 
     def deserialize(data: bytes | memoryview, msgtype: str) -> object:
-        return store.deserialize_ros1(bytes(data), msgtype)
+        return store.deserialize_ros1(bytes(data), normalise_type(msgtype))
 
     collector = StreamCollector(path, "ros1bag", topics)
-    collector.add_topics({topic: ros_topic(msgtype, "ros1", deserialize) for topic, msgtype, _ in conns.values()})
-    collector.skipped.append(
-        Skipped(
-            "<file>",
-            f"bag index unusable ({why}); read sequentially" + (f", stopped at damage: {problem}" if problem else ""),
-            1,
-            "lost" if problem else "repaired",
-        )
+    collector.add_topics(
+        {
+            topic: ros_topic(msgtype, "ros1", deserialize)
+            if msgtype not in unreadable
+            else TopicDecl(
+                normalise_type(msgtype), None, problem=f"message definition unreadable ({unreadable[msgtype]})"
+            )
+            for topic, msgtype, _ in conns.values()
+        }
     )
-    for conn, t_ns, data in sorted(messages, key=lambda m: m[1]):
+    per_topic: dict[str, int] = {}
+    for conn, t_ns, payload in sorted(messages, key=lambda m: m[1]):
         if conn in conns:
-            collector.add(conns[conn][0], t_ns, data)
+            collector.add(conns[conn][0], t_ns, payload)
+            per_topic[conns[conn][0]] = per_topic.get(conns[conn][0], 0) + 1
+    if problem:
+        collector.skipped += _cut_losses(per_topic, scanned, index_pos, problem, why)
+    else:
+        collector.skipped.append(Skipped("<file>", f"bag index unusable ({why}); read sequentially", 0, "repaired"))
     return collector.finish("unix")
+
+
+def _cut_losses(per_topic: dict[str, int], scanned: int, index_pos: int, problem: str, why: str) -> list[Skipped]:
+    """What a bag cut short lost, per topic: the messages its missing bytes held, estimated from each
+    topic's rate over the bytes read (the index that counted them is what was cut away)."""
+    body_end = index_pos - len(ROS1_MAGIC)  # the bag header's index_pos counts from the file start
+    missing = body_end - scanned if body_end > scanned else 0
+    note = f"bag index unusable ({why}); read sequentially up to byte {scanned + len(ROS1_MAGIC)}"
+    note += f", stopped at damage: {problem}"
+    if not missing or not scanned:
+        return [Skipped("<file>", note + "; how much followed is unknown", 0, "lost")]
+    out = [Skipped("<file>", note + f"; {missing} bytes of messages after it lost", 0, "lost")]
+    for topic, count in per_topic.items():
+        lost = round(count * missing / scanned)
+        if lost:
+            out.append(
+                Skipped(
+                    topic, f"about {lost} messages after the damage (estimated from the topic's rate)", lost, "lost"
+                )
+            )
+    return out
 
 
 ROS1_MAGIC = b"#ROSBAG V2.0\n"

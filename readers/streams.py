@@ -12,7 +12,7 @@ and a cross-check of the fast path).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +61,7 @@ class TopicDecl:
     decode: Callable[[bytes | memoryview], tuple[Decoded, str]] | None = None  # -> ((stamp, values), frame_id)
     fast: Callable[[bytes | memoryview], Decoded | None] | None = None
     batch: BatchDecoder | None = None  # (buf, starts, lengths) -> (stamps, rows, ok) for fixed layouts
+    problem: str = ""  # why a topic of a supported kind cannot be decoded (a damaged schema): its messages are lost
 
 
 def ros_topic(msgtype: str, encoding: str, deserialize: Deserialize) -> TopicDecl:
@@ -109,17 +110,17 @@ def assign_roles(
     unknown = sorted(set(overrides) - set(ROLES))
     if unknown:
         raise ReaderError(path, f"unknown topic role(s) {unknown}; roles are {list(ROLES)}")
-    for role, topic in overrides.items():
+    for wanted, topic in overrides.items():
         if topic not in topics:
-            raise ReaderError(path, f"--topic {role}={topic}: no such topic; topics are {sorted(topics)}")
-        if topics[topic] not in _ROLE_KINDS[role]:
+            raise ReaderError(path, f"--topic {wanted}={topic}: no such topic; topics are {sorted(topics)}")
+        if topics[topic] not in _ROLE_KINDS[wanted]:
             raise ReaderError(
-                path, f"--topic {role}={topic}: a {topics[topic] or 'unsupported'} topic cannot be a {role}", topic
+                path, f"--topic {wanted}={topic}: a {topics[topic] or 'unsupported'} topic cannot be a {wanted}", topic
             )
     roles: dict[str, str | None] = {}
     chosen_fix = {overrides[r] for r in ("fix", "fix2") if r in overrides}
     for topic, kind in topics.items():
-        role = ROLE_BY_KIND.get(kind) if kind else None
+        role: str | None = ROLE_BY_KIND.get(kind) if kind else None
         if role == "fix":
             if topic == overrides.get("truth") or (
                 "truth" not in overrides and any(h in topic.lower() for h in TRUTH_TOPIC_HINTS)
@@ -164,6 +165,7 @@ class StreamCollector:
             s.seen += 1
             self._decode_one(s, log_time_ns, raw)
             return
+        s.seen += 1  # counted when queued: a reader compares counts before the last queue is decoded
         s.queue.append((log_time_ns, raw))
         if len(s.queue) >= _QUEUE:
             self._flush(s)
@@ -200,7 +202,7 @@ class StreamCollector:
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
         times = np.fromiter((t for t, _ in s.queue), dtype=np.int64, count=len(raws))
         s.queue = []
-        self._decode_many(s, times, np.frombuffer(b"".join(raws), dtype=np.uint8), starts, lengths)
+        self._decode_many(s, times, np.frombuffer(b"".join(raws), dtype=np.uint8), starts, lengths, counted=True)
 
     def _decode_one(self, s: TopicStream, log_time_ns: int, raw: bytes | memoryview) -> None:
         assert s.buffer is not None and s.decl.decode is not None
@@ -231,11 +233,19 @@ class StreamCollector:
             return None
 
     def _decode_many(
-        self, s: TopicStream, log_times_ns: np.ndarray, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray
+        self,
+        s: TopicStream,
+        log_times_ns: np.ndarray,
+        buf: np.ndarray,
+        starts: np.ndarray,
+        lengths: np.ndarray,
+        counted: bool = False,
     ) -> None:
-        """Batch-decode; messages that do not fit the layout are decoded one by one, in place (order kept)."""
+        """Batch-decode; messages that do not fit the layout are decoded one by one, in place (order kept).
+        `counted`: the messages were already counted as seen when queued."""
         assert s.buffer is not None and s.decl.batch is not None
-        s.seen += len(starts)
+        if not counted:
+            s.seen += len(starts)
         stamps, values, ok = s.decl.batch(buf, starts, lengths)
         keep = ok.copy()
         if not ok.all():
@@ -264,6 +274,9 @@ class StreamCollector:
                 skipped.append(Skipped(s.topic, f"{s.bad} message(s) could not be decoded ({s.first_error})", s.bad))
             if s.stamp_fallbacks:
                 skipped.append(Skipped(s.topic, "header stamp zero: used the log time", s.stamp_fallbacks, "repaired"))
+            if s.decl.problem:
+                skipped.append(Skipped(s.topic, f"{s.msgtype}: {s.decl.problem}", s.seen, "lost"))
+                continue
             if s.kind is None:
                 skipped.append(Skipped(s.topic, f"unsupported message type {s.msgtype}", s.seen))
                 continue
@@ -312,7 +325,8 @@ class StreamCollector:
                 )
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
             del values  # the raw rows are in the frame now: free them before the next stream and build_table
-        fixes = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
+        fixes, attached = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
+        infos = [replace(i, receiver=attached.get(i.topic, "")) if i.role == "vel" else i for i in infos]
         out = {
             "fixes": fixes,
             "imu": _concat(frames["imu"]),
@@ -335,52 +349,65 @@ def _common_prefix(a: str, b: str) -> int:
     return n
 
 
+def velocity_receiver(vel_topic: str, receivers: list[str], overrides: Mapping[str, str] | None) -> str:
+    """The receiver a velocity topic belongs to: the one named by `--topic fix=` when `--topic vel=`
+    chose the velocity, else the one whose topic shares the longest prefix with it."""
+    if overrides and "vel" in overrides and overrides.get("fix") in receivers:
+        return overrides["fix"]
+    return max(receivers, key=lambda r: _common_prefix(r, vel_topic))
+
+
+def match_velocities(fix_ns: np.ndarray, vel_ns: np.ndarray) -> np.ndarray:
+    """For each fix, the index of the velocity row nearest in time within half the median fix period,
+    or -1. The one matching the reader and `inject`'s rewrite both use."""
+    fix_ns = np.asarray(fix_ns, dtype=np.int64)
+    vel_ns = np.asarray(vel_ns, dtype=np.int64)
+    out = np.full(len(fix_ns), -1, dtype=np.int64)
+    if not len(fix_ns) or not len(vel_ns):
+        return out
+    order = np.argsort(vel_ns, kind="stable")
+    v = vel_ns[order]
+    period = float(np.median(np.diff(np.sort(fix_ns)))) if len(fix_ns) > 1 else 1e9
+    right = np.clip(np.searchsorted(v, fix_ns), 0, len(v) - 1)
+    left = np.maximum(right - 1, 0)
+    nearest = np.where(np.abs(fix_ns - v[left]) <= np.abs(v[right] - fix_ns), left, right)
+    ok = np.abs(v[nearest] - fix_ns) <= period / 2
+    out[ok] = order[nearest[ok]]
+    return out
+
+
 def merge_velocities(
     fixes: list[pd.DataFrame],
     velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]],
     overrides: Mapping[str, str] | None,
     skipped: list[Skipped],
-) -> pd.DataFrame | None:
-    """Attach each velocity topic to one receiver and its rows to the nearest fix in time.
-
-    The receiver is the one whose topic shares the longest prefix with the velocity topic, or the primary
-    receiver for `--topic vel=...`. A velocity row attaches to a fix within half the median fix period.
-    """
+) -> tuple[pd.DataFrame | None, dict[str, str]]:
+    """Attach each velocity topic to one receiver (`velocity_receiver`) and its rows to that receiver's
+    fixes (`match_velocities`); returns the fixes and velocity topic -> receiver."""
     if not fixes:
         if velocities:
             skipped += [Skipped(t, "GNSS velocity without any fix stream", len(v[0])) for t, v in velocities.items()]
-        return None
+        return None, {}
     by_topic = {str(f["receiver_id"].iloc[0]) if len(f) else "": f for f in fixes}
+    attached: dict[str, str] = {}
     for vtopic, (vt, vcols) in velocities.items():
-        if overrides and "vel" in overrides and "fix" in overrides:
-            target = overrides["fix"]
-        else:
-            target = max(by_topic, key=lambda r: _common_prefix(r, vtopic))
+        target = velocity_receiver(vtopic, list(by_topic), overrides)
+        attached[vtopic] = target
         f = by_topic[target]
         ft = f["t_ns"].to_numpy()
         if not len(ft) or not len(vt):
             continue
-        order = np.argsort(vt, kind="stable")
-        vt_sorted = vt[order]
-        period = np.median(np.diff(np.sort(ft))) if len(ft) > 1 else 1e9
-        idx = (
-            np.clip(np.searchsorted(vt_sorted, ft), 1, len(vt_sorted) - 1)
-            if len(vt_sorted) > 1
-            else np.zeros(len(ft), dtype=int)
-        )
-        left = vt_sorted[np.maximum(idx - 1, 0)]
-        right = vt_sorted[idx]
-        nearest = np.where(np.abs(ft - left) <= np.abs(right - ft), np.maximum(idx - 1, 0), idx)
-        ok = np.abs(vt_sorted[nearest] - ft) <= period / 2
+        match = match_velocities(ft, vt)
+        ok = match >= 0
         f = f.copy()
         for name, col in vcols.items():
             vals = np.full(len(ft), np.nan)
-            vals[ok] = col[order][nearest[ok]]
+            vals[ok] = col[match[ok]]
             f[name] = vals
-        unmatched = len(vt) - int(ok.sum())
+        unmatched = len(vt) - len(np.unique(match[ok]))
         if unmatched > 0:
             skipped.append(
                 Skipped(vtopic, f"velocity rows with no fix of {target} within half a fix period", unmatched)
             )
         by_topic[target] = f
-    return pd.concat(list(by_topic.values()), ignore_index=True)
+    return pd.concat(list(by_topic.values()), ignore_index=True), attached

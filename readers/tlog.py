@@ -33,12 +33,13 @@ import pandas as pd
 
 from readers import ReaderFormat
 from readers.ardupilot import _attitude_at
+from spooflens.constants import STANDARD_GRAVITY
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
 Progress = Callable[[int, int], None]
-G0 = 9.80665
+G0 = STANDARD_GRAVITY
 UNIX_US_MIN = 946_684_800_000_000  # 2000-01-01: a time_usec above this is a UNIX time
 _FIX = {
     2: FixType.FIX_2D,

@@ -10,7 +10,11 @@ definition written in the log and recorded in the table's metadata with the firm
 
 from __future__ import annotations
 
+import contextlib
+import io
+import struct
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +43,8 @@ from readers.px4 import (
     select_receivers,
     utc_offset_us,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
-from spooflens.errors import ReaderError
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gap_losses
+from spooflens.errors import ReaderError, one_line
 from spooflens.schema import FixType
 
 Progress = Callable[[int, int], None]
@@ -61,16 +65,31 @@ def _topics_defined(ulog: ULog) -> set[str]:
 
 def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
+    said = io.StringIO()  # pyulog prints its warnings; they belong in the damage note, not on stdout
     try:
-        ulog = ULog(str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True)
+        with contextlib.redirect_stdout(said):
+            ulog = ULog(
+                str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True
+            )
     except Exception as err:
-        raise ReaderError(path, f"not a readable ULog: {type(err).__name__}: {err}") from err
+        raise ReaderError(path, f"not a readable ULog: {one_line(err)}") from err
     skipped: list[Skipped] = []
-    if ulog.file_corruption:
-        skipped.append(
-            Skipped("<file>", "pyulog found corrupt data and re-synchronised; some messages lost", 0, "lost")
-        )
-    data = {(d.name, d.multi_id): d.data for d in ulog.data_list}
+    damage = _damage(path, ulog.file_corruption, one_line(said.getvalue()))
+    decoded = {(d.name, d.multi_id) for d in ulog.data_list if len(d.data.get("timestamp", ()))}
+    for (name, multi), count in damage.listed.items():
+        if name in (IMU_TOPIC, *GPS_TOPICS) and (name, multi) not in decoded:
+            skipped.append(Skipped(f"{name}/{multi}", "every message undecodable (its format damaged)", count, "lost"))
+    data: dict[tuple[str, int], dict[str, np.ndarray]] = {}
+    for d in ulog.data_list:
+        if "timestamp" not in d.data:  # a damaged format message: the rows cannot be placed in time
+            skipped.append(Skipped(d.name, "format damaged (no timestamp field): messages lost", 1, "lost"))
+        elif d.name == IMU_TOPIC and not all(f in d.data for f in _IMU_FIELDS):
+            missing = [f for f in _IMU_FIELDS if f not in d.data]
+            skipped.append(
+                Skipped(d.name, f"format damaged (no {missing}): messages lost", len(d.data["timestamp"]), "lost")
+            )
+        else:
+            data[(d.name, d.multi_id)] = d.data
     info = ulog.msg_info_dict
     firmware = firmware_description(info)
     metadata: dict[str, str] = {"firmware": firmware}
@@ -128,8 +147,103 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     if progress:
         progress(1, 1)
     if not frames:
-        raise ReaderError(path, f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)}) in this ULog")
+        why = f" ({damage.what})" if damage.what else ""
+        raise ReaderError(path, f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)}) in this ULog{why}")
+    if damage.what:
+        skipped += _damage_losses(damage, frames, offset_us)
     return build_table(path, "ulog", reference, frames, streams, skipped, metadata=metadata)
+
+
+# ULog message types (the spec's): a header with another type means the walk lost the message boundaries
+_MESSAGE_TYPES = frozenset(b"BFIMPQARDLCSO")
+_IMU_FIELDS = tuple(f"{name}[{i}]" for name in ("accelerometer_m_s2", "gyro_rad") for i in range(3))
+
+
+@dataclass(frozen=True)
+class _Damage:
+    what: str  # "" for an undamaged file
+    end_us: int | None  # the last data message's timestamp found anywhere in the file (boot µs)
+    listed: dict[tuple[str, int], int]  # (topic, instance) -> data messages the walk found
+
+
+def _chain(data: bytes, pos: int, links: int = 6) -> bool:
+    """Do `links` message headers follow each other from `pos` (a place to re-synchronise)?"""
+    for _ in range(links):
+        if pos < 0 or pos + 3 > len(data) or data[pos + 2] not in _MESSAGE_TYPES:
+            return False
+        pos += 3 + (data[pos] | data[pos + 1] << 8)
+    return pos <= len(data)
+
+
+def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Damage:
+    """How the file is damaged, and the time its last data message carries.
+
+    pyulog re-synchronises after corrupt bytes (and may stop at a corrupt size without saying so), so the
+    message boundaries are walked here too: a header of no ULog type, or a size running past the end, is
+    damage; the walk then re-synchronises on the next run of headers that follow each other, so the time
+    the file really ends at is known and what the reader missed at the end can be counted.
+    """
+    data = path.read_bytes()
+    pos, n = 16, len(data)
+    what = ""
+    end_us: int | None = None
+    subscribed: dict[int, tuple[str, int]] = {}  # msg_id -> (topic, instance), from the 'A' messages
+    counts: dict[int, int] = {}
+    stamps: list[int] = []
+    while pos + 3 <= n:
+        size, kind = data[pos] | data[pos + 1] << 8, data[pos + 2]
+        if kind not in _MESSAGE_TYPES or pos + 3 + size > n:
+            nxt = data.find(b"D", pos + 3)
+            while nxt != -1 and not _chain(data, nxt - 2):
+                nxt = data.find(b"D", nxt + 1)
+            if nxt == -1:
+                what = what or f"file cut short in the middle of a message at byte {pos} of {n}; what followed is lost"
+                break
+            what = what or f"corrupt message header at byte {pos} of {n}"
+            pos = nxt - 2
+            continue
+        if kind == ord("D") and size >= 10:
+            msg_id, t = struct.unpack_from("<HQ", data, pos + 3)
+            stamps.append(t)
+            counts[msg_id] = counts.get(msg_id, 0) + 1
+        elif kind == ord("A") and size > 3:
+            multi, msg_id = struct.unpack_from("<BH", data, pos + 3)
+            subscribed[msg_id] = (data[pos + 6 : pos + 3 + size].decode("ascii", "replace"), multi)
+        pos += 3 + size
+    if 0 < n - pos < 3 and not what:
+        what = f"file cut short at byte {n} (a message header cut in half); what followed is lost"
+    if pyulog_corruption:
+        what = f"{what}; pyulog re-synchronised" if what else "pyulog found corrupt data and re-synchronised"
+        what += f" ({pyulog_said})" if pyulog_said else ""
+    if stamps:  # the data's end: a corrupt stamp among a few resynchronised messages must not set it
+        t = np.sort(np.array(stamps, dtype=np.uint64))
+        top = int(t[int(0.999 * (len(t) - 1))])
+        end_us = int(t[t <= top + 60_000_000][-1]) if top < 2**53 else None
+    listed: dict[tuple[str, int], int] = {}
+    for msg_id, count in counts.items():
+        if msg_id in subscribed:
+            listed[subscribed[msg_id]] = listed.get(subscribed[msg_id], 0) + count
+    return _Damage(what, end_us, listed)
+
+
+def _damage_losses(damage: _Damage, frames: Mapping[str, pd.DataFrame], offset_us: int) -> list[Skipped]:
+    """The damage, and per stream the samples missing in the gaps it left and after the last sample
+    the reader got, up to the last data message in the file (a damaged stretch of a file is a stretch
+    of time without rows: the stream's own rate says how many went with it)."""
+    out = [Skipped("<file>", damage.what, 0, "lost")]
+    for frame, key in (("fixes", "receiver_id"), ("imu", "imu_id")):
+        df = frames.get(frame)
+        if df is None or not len(df):
+            continue
+        for sid, rows in df.groupby(key, sort=False):
+            t = np.sort(rows["t_ns"].to_numpy(dtype=np.int64))
+            end = None if damage.end_us is None else (damage.end_us + offset_us) * 1000
+            missing = gap_losses(t, end_ns=end)
+            if missing:
+                out.append(
+                    Skipped(str(sid), f"about {missing} samples missing where the file is damaged", missing, "lost")
+                )
+    return out
 
 
 def _fixes(

@@ -11,7 +11,13 @@ written); 4 the verdict is spoofing and --fail-on-spoof was given.
 from __future__ import annotations
 
 import json
+import os
 import sys
+
+# pandas keeps text columns in Arrow; Arrow's default allocator (mimalloc) reserves address space in
+# large segments, a gigabyte beyond what a large log really uses, which an address-space limit (a
+# container's, or ulimit -v) counts. The system allocator reserves what it uses. Set before pandas loads.
+os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -20,13 +26,28 @@ from rich.table import Table
 
 from spooflens.console import LazyGroup, console, progress, show_progress
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import NoGnssError, SpooflensError
+from spooflens.errors import NoGnssError, SpooflensError, one_line
 from spooflens.evidence import label
+from spooflens.navigation.imu_models import PRESETS
 
 if TYPE_CHECKING:
     from spooflens.pipeline import Analysis
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
+# `simulate --format` choices (spooflens.writers.WRITERS) and those written as directories
+SIMULATE_FORMATS = (
+    "mcap-ros2",
+    "mcap-ros1",
+    "mcap-json",
+    "mcap-protobuf",
+    "ros1bag",
+    "ros2bag-sqlite3",
+    "ros2bag-mcap",
+    "csv",
+    "ulog",
+    "rinex",
+)
+DIRECTORY_FORMATS = ("csv", "rinex", "ros2bag-sqlite3", "ros2bag-mcap")
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
 COMMANDS: dict[str, str] = {
@@ -52,12 +73,13 @@ def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: b
     only raw pseudoranges get fixes from their single-point solution (listed as computed), and the truth
     file beside the log, if any, fills the truth frame (drawn, never analysed)."""
     from readers import read_log
+    from spooflens.epoch_table import checked
     from spooflens.navigation.single_point import with_solved_fixes
     from spooflens.truth import with_truth_beside
 
     with progress(show_progress) as report:
         table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
-    return with_truth_beside(with_solved_fixes(table), log) if solve_fixes else table
+    return checked(with_truth_beside(with_solved_fixes(table), log)) if solve_fixes else table
 
 
 def _damaged(table: EpochTable) -> list[str]:
@@ -140,7 +162,9 @@ def analyse_log(
         raise click.BadParameter(str(err), param_hint="--station") from None
     table = _read(log, _parse_topics(topics), not quiet and show_progress())
     if not len(table.fixes):
-        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}); nothing written")
+        lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
+        why = f"; lost: {lost}" if lost else ""
+        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}{why}); nothing written")
     with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
     for rid, *_ in given_stations:
         if rid is not None and rid not in with_obs:
@@ -200,7 +224,10 @@ fail_on_spoof_option = click.option(
     "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
 )
 imu_grade_option = click.option(
-    "--imu-grade", default=None, help="IMU noise preset for the INS (default: from the log or consumer_mems)."
+    "--imu-grade",
+    type=click.Choice(sorted(PRESETS)),
+    default=None,
+    help="IMU noise preset for the INS (default: from the log or consumer_mems).",
 )
 
 
@@ -366,9 +393,10 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
 @click.option(
     "--format",
     "fmt",
+    type=click.Choice(SIMULATE_FORMATS),
     default="mcap-ros2",
     show_default=True,
-    help="mcap-ros2, mcap-ros1, mcap-json, mcap-protobuf, ros1bag, ros2bag-sqlite3, ros2bag-mcap, csv, ulog.",
+    help="Output format. csv, rinex and the ROS2 bags are directories of files.",
 )
 @click.option("--seconds", type=float, default=None, help="Duration (default: the scenario's own).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed: same seed, same log.")
@@ -410,6 +438,12 @@ def simulate(
         observations=sc.observations or (ObservationNoise() if raw else None),
         constellation=constellation,
     )
+    if fmt in DIRECTORY_FORMATS and output.suffix:
+        raise click.BadParameter(
+            f"{output}: --format {fmt} writes a directory of files; give a name without an extension "
+            f"(e.g. {output.with_suffix('')})",
+            param_hint="-o",
+        )
     if raw and fmt not in ("csv", "rinex"):
         click.echo(f"note: {fmt} has no place for raw observations; the csv and rinex formats keep them", err=True)
     if fmt == "rinex":
@@ -439,6 +473,7 @@ def simulate(
         "seed002": "spooflens.bench.seed002_bench:command",
         "e2e": "spooflens.bench.e2e_bench:command",
         "batch": "spooflens.bench.batch_bench:command",
+        "fuzz": "spooflens.bench.fuzz:command",
     },
 )
 def bench() -> None:
@@ -468,12 +503,12 @@ def main(argv: list[str] | None = None) -> int:
     except SpooflensError as err:
         if debug:
             raise
-        click.echo(f"spooflens: error: {err}", err=True)
+        click.echo(f"spooflens: error: {one_line(str(err), 2000)}", err=True)
         return EXIT_INPUT
     except Exception as err:
         if debug:
             raise
-        click.echo(f"spooflens: internal error: {type(err).__name__}: {err} (rerun with --debug for details)", err=True)
+        click.echo(f"spooflens: internal error: {one_line(err)} (rerun with --debug for details)", err=True)
         return EXIT_BUG
     return int(code or 0)
 

@@ -7,68 +7,86 @@ drops unusable rows and records each repair. So every format gets the same treat
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from spooflens import plausibility
 from spooflens.errors import SchemaError
 from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
-# GPS time (ns since the GPS epoch) at which each leap second took effect, and GPS-UTC after it.
-_LEAP_SECONDS = [
-    (ts, n)
-    for ts, n in zip(
-        np.array(
-            [
-                46828800,
-                78364801,
-                109900802,
-                173059203,
-                252028804,
-                315187205,
-                346723206,
-                393984007,
-                425520008,
-                457056009,
-                504489610,
-                551750411,
-                599184012,
-                820108813,
-                914803214,
-                1025136015,
-                1119744016,
-                1167264017,
-            ],
-            dtype=np.int64,
-        )
-        * 1_000_000_000,
-        range(1, 19),
-        strict=True,
+NS = 1_000_000_000
+# GPS time (ns since the GPS epoch) of each leap second (23:59:60 UTC); GPS - UTC is k s from the k-th
+# entry on, so the leap second itself reads as a second 23:59:59, as a UNIX clock shows it.
+_LEAP_GPS_NS = (
+    np.array(
+        [
+            46828800,
+            78364801,
+            109900802,
+            173059203,
+            252028804,
+            315187205,
+            346723206,
+            393984007,
+            425520008,
+            457056009,
+            504489610,
+            551750411,
+            599184012,
+            820108813,
+            914803214,
+            1025136015,
+            1119744016,
+            1167264017,
+        ],
+        dtype=np.int64,
     )
-]
+    * NS
+)
+# the midnights after them on the UTC scale (UTC ns since the GPS epoch, as a UNIX clock counts them)
+_LEAP_UTC_NS = _LEAP_GPS_NS - np.arange(len(_LEAP_GPS_NS), dtype=np.int64) * NS
 
 
-def gps_utc_offset_ns(gps_ns: np.ndarray) -> np.ndarray:
-    """GPS minus UTC (leap seconds) at the given GPS times, in ns."""
-    starts = np.array([ts for ts, _ in _LEAP_SECONDS], dtype=np.int64)
-    return np.searchsorted(starts, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * 1_000_000_000
+def gps_utc_offset_ns(gps_ns: np.ndarray | int) -> np.ndarray:
+    """GPS minus UTC (leap seconds) at the given GPS times (ns since the GPS epoch), in ns."""
+    return np.searchsorted(_LEAP_GPS_NS, np.asarray(gps_ns, dtype=np.int64), side="right").astype(np.int64) * NS
+
+
+def utc_gps_offset_ns(utc_ns: np.ndarray | int) -> np.ndarray:
+    """GPS minus UTC at the given UTC times (ns since the GPS epoch on the UTC scale), in ns.
+
+    Looked up by UTC, not by GPS time: during the 18 s after a leap second the two lookups differ by one.
+    """
+    return np.searchsorted(_LEAP_UTC_NS, np.asarray(utc_ns, dtype=np.int64), side="right").astype(np.int64) * NS
+
+
+def gps_ns_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
+    """UTC nanoseconds since 1970 -> GPS nanoseconds since 1980-01-06 (leap seconds added)."""
+    utc = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS
+    return utc + utc_gps_offset_ns(utc)
+
+
+def unix_ns_of_gps_ns(gps_ns: np.ndarray | int) -> np.ndarray:
+    """GPS nanoseconds since 1980-01-06 -> UTC nanoseconds since 1970 (a leap second reads as the
+    UTC second before it, as a UNIX clock shows it)."""
+    gps = np.asarray(gps_ns, dtype=np.int64)
+    return gps + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(gps)
 
 
 def gps_seconds_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
     """UTC nanoseconds since 1970 -> GPS seconds since 1980-01-06 (leap seconds added)."""
-    gps_ns = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS
-    return (gps_ns + gps_utc_offset_ns(gps_ns)) / 1e9
+    return gps_ns_of_unix_ns(unix_ns) / 1e9
 
 
 def unix_ns_of_gps_seconds(gps_s: np.ndarray | float) -> np.ndarray:
     """GPS seconds since 1980-01-06 -> UTC nanoseconds since 1970."""
-    gps_ns = np.round(np.asarray(gps_s, dtype=float) * 1e9).astype(np.int64)
-    return gps_ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(gps_ns)
+    return unix_ns_of_gps_ns(np.round(np.asarray(gps_s, dtype=float) * 1e9).astype(np.int64))
 
 
 TIME_REFERENCES = {
@@ -92,6 +110,7 @@ class StreamInfo:
     last_s: float = float("nan")
     body_frame: str | None = None
     frame_id: str = ""
+    receiver: str = ""  # a velocity stream: the receiver whose fixes carry its rows
 
     @property
     def rate_hz(self) -> float:
@@ -242,7 +261,7 @@ class EpochTable:
         if self.time_reference == "unix":
             return ns
         if self.time_reference == "gps":
-            return ns + GPS_EPOCH_UNIX_NS - gps_utc_offset_ns(ns)
+            return unix_ns_of_gps_ns(ns)
         return None
 
     def gps_seconds(self, t_s: float | np.ndarray) -> np.ndarray | None:
@@ -273,48 +292,211 @@ def _rows_of(frame: pd.DataFrame, key: str, value: str) -> pd.DataFrame:
     return (frame if match.all() else frame[match]).reset_index(drop=True)
 
 
-def _streams_of(frame: pd.DataFrame, key: str) -> list[tuple[str, pd.DataFrame]]:
-    """(stream id, rows) of each stream of a frame; without a groupby when there is only one."""
-    ids = frame[key]
-    first = ids.iloc[0]
-    if not pd.isna(first) and (ids == first).to_numpy(dtype=bool, na_value=False).all():
-        return [(str(first), frame)]
-    return [(str(sid), g) for sid, g in frame.groupby(key, sort=False)]
+def gap_losses(t_ns: np.ndarray, factor: float = 3.0, end_ns: int | None = None) -> int:
+    """How many samples a stream is missing in its gaps: each step longer than `factor` median periods
+    stands for step/period - 1 samples (a damaged stretch of a file is a stretch of time without rows);
+    with `end_ns`, the time the file's data really ends, the samples after the stream's last one too."""
+    t = np.sort(np.asarray(t_ns, dtype=np.int64))
+    if len(t) < 3:
+        return 0
+    steps = np.diff(t).astype(float)
+    period = float(np.median(steps))
+    if period <= 0:
+        return 0
+    gaps = steps[steps > factor * period]
+    missing = float(np.sum(gaps / period - 1.0))
+    if end_ns is not None and abs(end_ns) < 2**62 and end_ns - int(t[-1]) > factor * period:
+        missing += (end_ns - int(t[-1])) / period - 1.0
+    return int(np.round(missing))
 
 
-def _repair_stream(frame: str, sid: str, df: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
-    """Sort one stream by time, drop unusable rows, then duplicate stamps; record each repair."""
-    t = df["t_ns"].to_numpy()
-    if len(t) > 1 and np.any(np.diff(t) < 0):
-        n_back = int(np.sum(np.diff(t) < 0))
+@dataclass
+class _Stream:
+    """One stream of a frame while it is repaired: its rows (positions in the reader's frame) and the
+    unit scales found for it."""
+
+    sid: str
+    rows: np.ndarray
+    scales: list[plausibility.Scale] = field(default_factory=list)
+
+
+def _stream_rows(frame: str, df: pd.DataFrame) -> list[_Stream]:
+    key = STREAM_KEY[frame]
+    if key is None:
+        return [_Stream("truth", np.arange(len(df)))]
+    codes, uniques = pd.factorize(df[key].astype(str), sort=False)
+    order = np.argsort(codes, kind="stable")
+    bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
+    return [_Stream(str(u), order[bounds[i] : bounds[i + 1]]) for i, u in enumerate(uniques)]
+
+
+def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[Skipped]) -> None:
+    """Sort one stream by time, find its units, drop rows no sensor produces, then duplicate stamps;
+    record each repair. Works on row positions only: the values are taken once, at the end."""
+    sid, rows = stream.sid, stream.rows
+    t = df["t_ns"].to_numpy()[rows]
+    steps = np.diff(t)
+    if len(t) > 1 and np.any(steps < 0):
+        n_back = int(np.sum(steps < 0))
         skipped.append(Skipped(sid, f"time went backwards {n_back} times; rows sorted by time", n_back, "repaired"))
-        df = df.sort_values("t_ns", kind="stable")
-    if frame in ("fixes", "truth"):
-        lat = df["lat_deg"].to_numpy(dtype=float)
-        lon = df["lon_deg"].to_numpy(dtype=float)
-        h = df["height_m"].to_numpy(dtype=float)
-        bad = ~np.isfinite(lat) | ~np.isfinite(lon) | ~np.isfinite(h) | ((lat == 0) & (lon == 0))
-        if bad.any():
-            skipped.append(Skipped(sid, "NaN or zero latitude/longitude/height (no fix)", int(bad.sum())))
-            df = df[~bad]
-        wrong = (np.abs(df["lat_deg"]) > 90) | (np.abs(df["lon_deg"]) > 180)
-        if wrong.any():
-            skipped.append(Skipped(sid, "latitude/longitude out of range", int(wrong.sum())))
-            df = df[~wrong]
+        order = np.argsort(t, kind="stable")
+        rows, t = rows[order], t[order]
+    stray = plausibility.stray_stamps(t)
+    if stray.any():
+        skipped.append(
+            Skipped(sid, "rows whose time lies an hour or more from the rest of the stream", int(stray.sum()))
+        )
+        rows, t = rows[~stray], t[~stray]
+    cols = _Gathered(df, rows, exclude=("t_ns", STREAM_KEY[frame]))
     if frame == "imu":
-        vals = df[["ax_mps2", "ay_mps2", "az_mps2", "wx_radps", "wy_radps", "wz_radps"]].to_numpy(dtype=float)
-        bad = ~np.all(np.isfinite(vals), axis=1)
-        if bad.any():
-            skipped.append(Skipped(sid, "NaN specific force or angular rate", int(bad.sum())))
-            df = df[~bad]
+        stream.scales, refusal = plausibility.imu_unit(cols)
+        if refusal:
+            skipped.append(Skipped(sid, refusal, len(rows), "lost"))
+            stream.rows = rows[:0]
+            return
+    elif frame in ("fixes", "truth"):
+        stream.scales = plausibility.fix_units(cols, (t - t[0]) / 1e9 if len(t) else t.astype(float))
+    cols.scales = {c: scale.factor for scale in stream.scales for c in scale.columns}
+    keep = np.ones(len(rows), dtype=bool)
+    for mask, reason in plausibility.bad_rows(frame, cols):
+        hit = mask & keep
+        if hit.any():
+            skipped.append(Skipped(sid, reason, int(hit.sum())))
+            keep &= ~mask
+    rows, t = rows[keep], t[keep]
     # an observation epoch has one row per satellite: a duplicate is the same satellite twice
-    key = ["t_ns", "sv_id"] if frame == "observations" else ["t_ns"]
-    dup = df.duplicated(subset=key, keep="first").to_numpy()
+    if frame == "observations":
+        dup = pd.DataFrame({"t": t, "sv": df["sv_id"].to_numpy()[rows]}).duplicated(keep="first").to_numpy()
+    else:
+        dup = np.concatenate(([False], t[1:] == t[:-1])) if len(t) else np.zeros(0, dtype=bool)
     if dup.any():
         what = "duplicate (timestamp, satellite) rows" if frame == "observations" else "duplicate timestamps"
         skipped.append(Skipped(sid, f"{what}; kept the first", int(dup.sum())))
-        df = df[~dup]
-    return df
+        rows = rows[~dup]
+    stream.rows = rows
+
+
+def _at(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """values[rows], as a view when the rows are one contiguous run (one sorted stream: the usual case)."""
+    if len(rows) and rows[-1] - rows[0] == len(rows) - 1 and (len(rows) < 2 or bool(np.all(np.diff(rows) == 1))):
+        return values[rows[0] : rows[-1] + 1]
+    return values[rows]
+
+
+class _Gathered(Mapping[str, np.ndarray]):
+    """The columns of a frame at some rows, gathered when asked for (a stream's checks touch a few
+    columns; copying all of them for every stream would double a large log's memory)."""
+
+    def __init__(self, df: pd.DataFrame, rows: np.ndarray, exclude: tuple[str | None, ...] = ()) -> None:
+        self.df, self.rows = df, rows
+        self.names = [c for c in df.columns if c not in exclude]
+        self.scales: dict[str, float] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.names:
+            raise KeyError(name)
+        values = _at(self.df[name].to_numpy(), self.rows)
+        return values * self.scales[name] if name in self.scales else values
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skipped: list[Skipped]) -> pd.DataFrame:
+    """The repaired frame: each column taken once at the kept rows (a view when nothing was dropped or
+    reordered; the reader's column released as soon as it is copied), unit scales applied, optional
+    values out of range cleared, t_s set."""
+    idx = np.concatenate([s.rows for s in streams]) if streams else np.zeros(0, dtype=np.int64)
+    cols: dict[str, np.ndarray] = {}
+    for c in list(df.columns):
+        values = _at(df[c].to_numpy(), idx)
+        if not values.flags.writeable:  # pandas hands out read-only views; the table's frames are its own
+            try:
+                values.flags.writeable = True
+            except ValueError:
+                values = values.copy()
+        if c == "t_ns":
+            cols["t_s"] = (values.astype(np.int64, copy=False) - t0_ns) / 1e9
+        else:
+            cols[c] = values
+        del df[c]
+    start = 0
+    for s in streams:
+        part = slice(start, start + len(s.rows))
+        start += len(s.rows)
+        # (columns, rows or None for all, factor or NaN to set, the note)
+        changes: list[tuple[tuple[str, ...], np.ndarray | None, float, Skipped]] = [
+            (scale.columns, None, scale.factor, Skipped(s.sid, scale.reason, len(s.rows), "repaired"))
+            for scale in s.scales
+        ]
+        view = {c: v[part] for c, v in cols.items() if v.dtype.kind == "f" and c != "t_s"}
+        for c, x in view.items():  # clean_optional judges the scaled values
+            factor = next((f for names, _, f, _ in changes if c in names), 1.0)
+            view[c] = x * factor if factor != 1.0 else x
+        changes += [
+            (names, bad, np.nan, Skipped(s.sid, f.reason, f.count, f.action))
+            for names, bad, f in plausibility.clean_optional(frame, view)
+        ]
+        for names, bad, value, note in changes:
+            skipped.append(note)
+            for c in names:
+                if not cols[c].flags.writeable or cols[c].base is not None:
+                    cols[c] = np.array(cols[c], dtype=np.float64)  # a view of the reader's array: copy once
+                target = cols[c][part]
+                if bad is None:
+                    target *= value
+                else:
+                    target[bad] = value
+    return make_frame(frame, cols, len(idx), copy=False)
+
+
+def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> bool:
+    """An IMU whose yaw rate turns 57 times the GNSS course (deg/s logged as rad/s) is scaled; one whose
+    time span shares nothing with the fixes' (another clock) is left out."""
+    imu, fixes = frames.get("imu"), frames.get("fixes")
+    if imu is None or fixes is None or not len(imu) or not len(fixes):
+        return False
+    receiver = fixes[fixes["receiver_id"] == fixes["receiver_id"].iloc[0]]
+    fix_cols = {c: receiver[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "vel_e_mps", "vel_n_mps")}
+    t_fix = receiver["t_s"].to_numpy(dtype=float)
+    drop = np.zeros(len(imu), dtype=bool)
+    for sid in pd.unique(imu["imu_id"]):
+        rows = np.flatnonzero(imu["imu_id"].to_numpy() == sid)
+        t = imu["t_s"].to_numpy()[rows]
+        gap = max(t[0] - t_fix[-1], t_fix[0] - t[-1])
+        if gap > 3600.0:
+            skipped.append(
+                Skipped(
+                    str(sid),
+                    f"IMU time span {t[0]:.0f}..{t[-1]:.0f} s lies {gap:.0f} s away from the fixes' "
+                    f"{t_fix[0]:.0f}..{t_fix[-1]:.0f} s (another clock): IMU left out",
+                    len(rows),
+                    "lost",
+                )
+            )
+            drop[rows] = True
+            continue
+        if any(n.stream == str(sid) and "angular rate in deg/s" in n.reason for n in skipped):
+            continue  # its range already said deg/s: scaled once
+        motion = {c: imu[c].to_numpy()[rows] for c in plausibility.IMU_MOTION}
+        ratio = plausibility.gyro_turn_ratio(t, motion, t_fix, fix_cols)
+        if ratio is not None and 40.0 < ratio < 80.0:
+            skipped.append(
+                Skipped(
+                    str(sid),
+                    f"angular rate in deg/s (the gyro turns {ratio:.1f} times the GNSS course): scaled to rad/s",
+                    len(rows),
+                    "repaired",
+                )
+            )
+            for c in plausibility.IMU_MOTION[3:]:
+                imu.iloc[rows, imu.columns.get_loc(c)] = imu[c].to_numpy()[rows] * (np.pi / 180.0)
+    if drop.any():
+        frames["imu"] = imu[~drop].reset_index(drop=True)
+    return bool(drop.any())
 
 
 _ROLE_FRAME = {
@@ -347,36 +529,38 @@ def _segment_frames(
     k moved after recording k-1 (gap SEGMENT_GAP_S), and (offset_ns, own t0_ns, end_ns) per recording.
     Streams are matched recording by recording in the order read; a stream with fewer recordings than
     the most-split one goes to those its time span overlaps."""
-    runs: dict[tuple[str, str], np.ndarray] = {}
+    # (frame, stream) -> (row positions, recording index of each); a stray stamp (a corrupt time far from
+    # the rest, dropped later by the stream's repair) makes no recording of its own
+    runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     for name, df in frames_ns.items():
         if df is None or not len(df):
             continue
         key = STREAM_KEY[name]
-        groups = [("truth", df.index)] if key is None else list(df.groupby(key, sort=False).groups.items())
-        for sid, idx in groups:
-            runs[(name, str(sid))] = _runs_of(df.loc[idx, "t_ns"].to_numpy())
-    n_seg = 1 + max((int(r.max()) for r in runs.values() if len(r)), default=0)
+        t_all = df["t_ns"].to_numpy()
+        groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
+        for sid, pos in groups:
+            order = np.argsort(t_all[pos], kind="stable")
+            stray = np.zeros(len(pos), dtype=bool)
+            stray[order] = plausibility.stray_stamps(t_all[pos][order])
+            pos = np.asarray(pos)[~stray]
+            runs[(name, str(sid))] = (pos, _runs_of(t_all[pos]))
+    n_seg = 1 + max((int(r.max()) for _, r in runs.values() if len(r)), default=0)
     if n_seg == 1:
         return frames_ns, []
-    ref_key = max((k for k, r in runs.items() if len(r) and r.max() == n_seg - 1), key=lambda k: len(runs[k]))
-    ref_df = frames_ns[ref_key[0]]
-    ref_t = (
-        ref_df["t_ns"]
-        if STREAM_KEY[ref_key[0]] is None
-        else ref_df.loc[ref_df[STREAM_KEY[ref_key[0]]].astype(str) == ref_key[1], "t_ns"]
-    ).to_numpy()
-    ref_ranges = [(ref_t[runs[ref_key] == k].min(), ref_t[runs[ref_key] == k].max()) for k in range(n_seg)]
+    ref_key = max((k for k, (_, r) in runs.items() if len(r) and r.max() == n_seg - 1), key=lambda k: len(runs[k][1]))
+    ref_pos, ref_runs = runs[ref_key]
+    ref_t = frames_ns[ref_key[0]]["t_ns"].to_numpy()[ref_pos]
+    ref_ranges = [(ref_t[ref_runs == k].min(), ref_t[ref_runs == k].max()) for k in range(n_seg)]
     seg_of: dict[str, np.ndarray] = {
-        name: np.zeros(len(df), dtype=np.int64) for name, df in frames_ns.items() if df is not None
-    }
-    for (name, sid), r in runs.items():
-        df = frames_ns[name]
-        key = STREAM_KEY[name]
-        pos = np.arange(len(df)) if key is None else np.flatnonzero(df[key].astype(str).to_numpy() == sid)
+        name: np.full(len(df), -1, dtype=np.int64) for name, df in frames_ns.items() if df is not None
+    }  # -1: a stray stamp, left where it is
+    for (name, _), (pos, r) in runs.items():
+        if not len(r):
+            continue
         if int(r.max()) == n_seg - 1:
             seg_of[name][pos] = r
             continue
-        t = df["t_ns"].to_numpy()[pos]
+        t = frames_ns[name]["t_ns"].to_numpy()[pos]
         for k in range(int(r.max()) + 1):
             a, b = t[r == k].min(), t[r == k].max()
             overlap = [min(b, hi) - max(a, lo) for lo, hi in ref_ranges]
@@ -404,8 +588,8 @@ def _segment_frames(
             continue
         df = df.copy()
         t = df["t_ns"].to_numpy().astype(np.int64)
-        shift = np.array([layout[k][0] - layout[k][1] for k in range(n_seg)], dtype=np.int64)
-        df["t_ns"] = t + shift[seg_of[name]]
+        shift = np.array([layout[k][0] - layout[k][1] for k in range(n_seg)] + [0], dtype=np.int64)
+        df["t_ns"] = t + shift[np.where(seg_of[name] < 0, n_seg, seg_of[name])]
         out[name] = df
     skipped.append(
         Skipped(
@@ -432,36 +616,42 @@ def build_table(
     """Turn frames stamped in absolute nanoseconds (`t_ns` instead of `t_s`) into an EpochTable.
 
     The log start (t_s = 0) is the earliest stamp of any stream unless `t0_ns` is given. Each stream
-    is repaired independently; stream infos get their first/last time and final row count (for an
+    is repaired independently (`spooflens.plausibility`: units, impossible rows, optional values out of
+    range); stream infos get their first/last time and final row count (for an
     observation stream: its epochs, one per receiver time, whatever the satellites per epoch).
     `stream_spans_ns` gives the first and last stamp, in the same clock, of streams that fill no
     frame of their own ((role, stream_id) -> (first_ns, last_ns); e.g. a velocity topic merged into
-    the fixes), so their span and rate are on the table's time base too.
+    the fixes), so their span and rate are on the table's time base too. The reader's frames are
+    consumed (their columns released as they are copied), so a large log is held about once.
     """
     skipped = list(skipped)
     frames_ns, layout = _segment_frames(frames_ns, skipped)
-    repaired: dict[str, pd.DataFrame] = {}
-    for name, df in frames_ns.items():
+    kept: dict[str, tuple[pd.DataFrame, list[_Stream]]] = {}
+    for name in list(frames_ns):
+        df = frames_ns.pop(name)
         if df is None or not len(df):
             continue
-        key = STREAM_KEY[name]
-        parts = [("truth", df)] if key is None else _streams_of(df, key)
-        fixed = [_repair_stream(name, sid, g, skipped) for sid, g in parts]
-        if len(fixed) == 1:
-            repaired[name] = fixed[0].reset_index(drop=True)
-        else:
-            repaired[name] = pd.concat(fixed, ignore_index=True) if fixed else df.iloc[:0]
+        parts = _stream_rows(name, df)
+        for part in parts:
+            _repair_stream(name, df, part, skipped)
+        kept[name] = (df, parts)
+    auto_start = t0_ns is None
     if layout:
         t0_ns = layout[0][0]
     if t0_ns is None:
-        firsts = [int(df["t_ns"].min()) for df in repaired.values() if len(df)]
+        firsts = [int(df["t_ns"].to_numpy()[p.rows].min()) for df, parts in kept.values() for p in parts if len(p.rows)]
         t0_ns = min(firsts) if firsts else 0
     table_frames: dict[str, pd.DataFrame] = {}
-    for name, df in repaired.items():
-        cols = {c: df[c].array if isinstance(df[c].dtype, pd.StringDtype) else df[c].to_numpy() for c in df.columns}
-        del cols["t_ns"]
-        cols["t_s"] = (df["t_ns"].to_numpy(dtype=np.int64) - t0_ns) / 1e9
-        table_frames[name] = make_frame(name, cols, len(df), copy=False)  # `repaired` is dropped after this
+    for name, (df, parts) in kept.items():
+        table_frames[name] = _take(name, df, parts, t0_ns, skipped)
+    dropped = _cross_check(table_frames, skipped)
+    if auto_start or dropped:  # a stream left out by the cross-check may have held the earliest stamp
+        firsts_s = [float(df["t_s"].min()) for df in table_frames.values() if len(df)]
+        shift_ns = round(min(firsts_s) * 1e9) if firsts_s else 0
+        if shift_ns:
+            t0_ns += shift_ns
+            for df in table_frames.values():
+                df["t_s"] = df["t_s"].to_numpy() - shift_ns / 1e9
     final_streams: list[StreamInfo] = []
     for s in streams:
         frame = _ROLE_FRAME.get(s.role)
@@ -504,3 +694,32 @@ def build_table(
     )
     table.validate()
     return table
+
+
+def checked(table: EpochTable) -> EpochTable:
+    """`table` with the rows no sensor produces dropped from every frame, each drop listed.
+
+    `build_table` already does this for what a reader hands over; frames added later (fixes solved
+    from pseudoranges, a truth file beside the log) pass here before any analysis sees them.
+    """
+    out: EpochTable | None = None
+    for name in FRAMES:
+        df = table.frame(name)
+        if not len(df):
+            continue
+        key = STREAM_KEY[name]
+        drop = np.zeros(len(df), dtype=bool)
+        groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
+        notes = []
+        for sid, rows in groups:
+            cols = _Gathered(df, np.asarray(rows), exclude=("t_s", key))
+            for mask, reason in plausibility.bad_rows(name, cols):
+                hit = mask & ~drop[rows]
+                if hit.any():
+                    notes.append(Skipped(str(sid), reason, int(hit.sum())))
+                    drop[rows[hit]] = True
+        if drop.any():
+            out = out or replace(table, skipped=list(table.skipped))
+            setattr(out, name, df[~drop].reset_index(drop=True))
+            out.skipped += notes
+    return out or table

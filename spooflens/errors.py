@@ -41,3 +41,14 @@ class AnalysisError(SpooflensError):
 
 class WriterError(SpooflensError):
     """A log could not be written in the requested format."""
+
+
+def one_line(err: BaseException | str, limit: int = 300) -> str:
+    """An error (type and message) or a text as one line of at most `limit` characters.
+
+    Library errors can carry a whole schema or a traceback-like message over many lines; the CLI
+    promises one line on stderr.
+    """
+    text = err if isinstance(err, str) else (f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 3] + "..."

@@ -9,13 +9,15 @@ import numpy as np
 import pymap3d
 from numpy.typing import ArrayLike, NDArray
 
-A_M = 6378137.0  # WGS84 semi-major axis
-F = 1.0 / 298.257223563
-E2 = F * (2.0 - F)  # first eccentricity squared
-B_M = A_M * (1.0 - F)
-OMEGA_IE = 7.292115e-5  # Earth rotation rate, rad/s
-GM = 3.986004418e14  # m^3/s^2
-C_MPS = 299792458.0
+from spooflens.constants import SPEED_OF_LIGHT_MPS as C_MPS
+from spooflens.constants import WGS84_A_M as A_M
+from spooflens.constants import WGS84_B_M as B_M
+from spooflens.constants import WGS84_E2 as E2
+from spooflens.constants import WGS84_F as F
+from spooflens.constants import WGS84_GM as GM
+from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
+
+__all__ = ["A_M", "B_M", "C_MPS", "E2", "GM", "OMEGA_IE", "F"]
 
 # Somigliana normal gravity constants (WGS84)
 _GAMMA_E = 9.7803253359
@@ -60,11 +62,17 @@ def transport_rate_enu(lat: ArrayLike, h: ArrayLike, v_enu: ArrayLike) -> FloatA
 
 
 def geodetic_to_enu(
-    lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike, lat0_deg: float, lon0_deg: float, h0: float
+    lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike, lat0_deg: ArrayLike, lon0_deg: ArrayLike, h0: ArrayLike
 ) -> FloatArray:
-    """Geodetic (deg, m) to local ENU metres about (lat0, lon0, h0); shape (..., 3)."""
+    """Geodetic (deg, m) to local ENU metres about (lat0, lon0, h0) (scalars, or arrays that broadcast);
+    shape (..., 3)."""
     e, n, u = pymap3d.geodetic2enu(
-        np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(h, float), lat0_deg, lon0_deg, h0
+        np.asarray(lat_deg, float),
+        np.asarray(lon_deg, float),
+        np.asarray(h, float),
+        np.asarray(lat0_deg, float),
+        np.asarray(lon0_deg, float),
+        np.asarray(h0, float),
     )
     return np.stack([np.asarray(e), np.asarray(n), np.asarray(u)], axis=-1)
 
@@ -106,8 +114,9 @@ def ecef_to_enu_vectors(lat_deg: ArrayLike, lon_deg: ArrayLike, d_ecef: ArrayLik
 def metres_per_radian(lat: ArrayLike, h: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Metres per radian of latitude and of longitude at (lat, h): (RM+h, (RN+h) cos lat)."""
     lat = np.asarray(lat, dtype=float)
+    height = np.asarray(h, dtype=float)
     rm, rn = radii(lat)
-    return rm + h, (rn + h) * np.cos(lat)
+    return rm + height, (rn + height) * np.cos(lat)
 
 
 def add_enu_offset(

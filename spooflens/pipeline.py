@@ -14,10 +14,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from spooflens import plausibility
 from spooflens.analysis import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import SpooflensError
+from spooflens.errors import AnalysisError, SpooflensError
+from spooflens.schema import FRAMES
 from spooflens.verdict import Verdict, decide
 
 SUSPECT_MARGIN_S = 10.0
@@ -64,6 +66,12 @@ def analyze_table(
     from spooflens.navigation.product import solve_navigation
 
     options = options or AnalyzeOptions()
+    problems = plausibility.problems({name: table.frame(name) for name in FRAMES})
+    if problems:  # a table built by hand: the readers drop and list such rows (spooflens.epoch_table.checked)
+        raise AnalysisError(
+            f"{table.source}: values no sensor produces ({'; '.join(problems[:4])}); nothing analysed "
+            "(pass the table through spooflens.epoch_table.checked to drop and list them)"
+        )
     ctx, verdict = _one_pass(table, options, on_step, {})
     spans = suspected_spans(verdict)
     if not spans or "navigation" not in ctx.cache:

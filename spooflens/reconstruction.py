@@ -33,7 +33,7 @@ from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
-from spooflens.navigation.loosely_coupled import NavSolution, run_prepared
+from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern, run_prepared
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
@@ -106,17 +106,7 @@ def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
 
 def coasting_nis(sol: NavSolution, rows: tuple[int, ...] = GNSS_ROWS) -> tuple[FloatArray, NDArray[np.int64]]:
     """NIS of the measured GNSS rows against the filter's prediction, whether the rows were used or not."""
-    idx = np.array(rows)
-    present = np.isfinite(sol.z[:, idx])
-    dof = present.sum(axis=1).astype(np.int64)
-    nis = np.full(len(sol.t), np.nan)
-    for pattern in np.unique(present[dof > 0], axis=0):
-        k = np.flatnonzero((present == pattern).all(axis=1))
-        r = idx[pattern]
-        nu = sol.nu[k][:, r]
-        S = sol.S_all[k][:, r][:, :, r]
-        nis[k] = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-    return nis, dof
+    return nis_by_pattern(sol.nu, sol.S_all, np.isfinite(sol.z[:, np.array(rows)]), rows)
 
 
 def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None) -> NavSolution:

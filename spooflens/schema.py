@@ -8,8 +8,10 @@ drift apart.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -263,7 +265,7 @@ def string_array(values: object) -> pd.api.extensions.ExtensionArray:
     return pd.array(strings, dtype="string")
 
 
-def make_frame(frame: str, columns: dict[str, object], n: int | None = None, copy: bool = True) -> pd.DataFrame:
+def make_frame(frame: str, columns: Mapping[str, Any], n: int | None = None, copy: bool = True) -> pd.DataFrame:
     """Build a frame from arrays: schema order and dtypes, absent optional columns filled.
 
     Absent optional floats become NaN, an absent spoofing flag UNKNOWN. Unknown names are an error,
@@ -287,8 +289,9 @@ def make_frame(frame: str, columns: dict[str, object], n: int | None = None, cop
             raise KeyError(f"{frame}: required column {col.name!r} missing")
         else:
             fill = _MISSING[col.dtype]
-            data[col.name] = pd.Series([fill] * n if col.dtype == "string" else np.full(n, fill)).astype(col.dtype)
-    return pd.DataFrame(data)
+            filled = [fill] * n if col.dtype == "string" else np.full(n, fill)
+            data[col.name] = pd.Series(filled, copy=False).astype(col.dtype)
+    return pd.DataFrame(data, copy=False)
 
 
 def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.csv_text import header_comments, parse_t0_ns, read_rows
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -36,24 +37,12 @@ def truth_path(log: Path) -> Path:
     return Path(str(log).rstrip("/") + SUFFIX)
 
 
-def _header(path: Path) -> dict[str, str]:
-    meta: dict[str, str] = {}
-    with path.open(encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.startswith("#"):
-                break
-            key, sep, value = line[1:].partition(":")
-            if sep:
-                meta[key.strip().lower()] = value.strip()
-    return meta
-
-
 def _table_seconds(table: EpochTable, df: pd.DataFrame, meta: dict[str, str], path: Path) -> np.ndarray:
     """The truth file's times on the table's time base (seconds since the log start)."""
     if "t_s" in df.columns:
         t = df["t_s"].to_numpy(dtype=float)
         if "t0_ns" in meta:
-            return t + (int(meta["t0_ns"]) - table.t0_ns) / 1e9
+            return t + (parse_t0_ns(path, meta["t0_ns"], "truth") - table.t0_ns) / 1e9
         return t
     for col, clock in (("unix_time_s", "unix"), ("gps_time_s", "gps")):
         if col not in df.columns:
@@ -74,12 +63,10 @@ def _table_seconds(table: EpochTable, df: pd.DataFrame, meta: dict[str, str], pa
 
 def read_truth(path: Path, table: EpochTable) -> pd.DataFrame:
     """A truth CSV as the table's `truth` frame (schema `truth`); raises ReaderError naming the problem."""
-    meta = _header(path)
-    try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as err:
-        raise ReaderError(path, f"not a readable CSV: {err}", "truth") from err
+    meta = header_comments(path)
+    df = read_rows(path, [], stream="truth")
     df.columns = [_ALIASES.get(str(c).strip().lower(), str(c).strip().lower()) for c in df.columns]
+    df = df.loc[:, ~df.columns.duplicated()]
     missing = [c for c in ("lat_deg", "lon_deg", "height_m") if c not in df.columns]
     if missing:
         raise ReaderError(path, f"truth CSV lacks columns {missing}", "truth")

@@ -110,18 +110,20 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     items = [a for a, _ in group]
     spans = tuple(sorted({(r.evidence, a.start_s, a.end_s) for a, r in group if r.evidence is not None}))
     # an onset with a credible interval beats point estimates
-    with_interval = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_interval_s is not None]
-    onsets = [(a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None]
-    if with_interval:
-        onset, interval = min(with_interval, key=lambda o: o[0])
-    elif onsets:
-        onset, interval = min(onsets, key=lambda o: o[0])
+    estimates: list[tuple[float, tuple[float, float] | None]] = [
+        (a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None
+    ]
+    with_interval = [e for e in estimates if e[1] is not None]
+    onset: float
+    interval: tuple[float, float] | None
+    if with_interval or estimates:
+        onset, interval = min(with_interval or estimates, key=lambda e: e[0])
     else:
         onset, interval = min(a.start_s for a in items), None
     return Incident(
         min(a.start_s for a in items),
         max(a.end_s for a in items),
-        float(onset),  # type: ignore[arg-type]
+        float(onset),
         interval,
         tuple(sorted({r.name for _, r in group})),
         "low",

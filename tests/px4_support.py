@@ -11,6 +11,7 @@ its own spoofing and jamming states raised).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -103,7 +104,7 @@ def flight(t_s: np.ndarray, attack_s: float | None = None) -> dict[str, np.ndarr
     }
 
 
-def fill_gps(rows: np.ndarray, f: dict[str, np.ndarray], device_id: int = 0, auth: float = 3.0) -> None:
+def fill_gps(rows: np.ndarray, f: dict[str, np.ndarray], device_id: int = 0, auth: float | np.ndarray = 3.0) -> None:
     """Set every field of a PX4 GPS message layout from `flight` values, in that layout's units."""
     names = set(rows.dtype.names or ())
     t_us = np.round(f["t_s"] * 1e6).astype(np.int64)
@@ -175,7 +176,7 @@ def v1_12_log(path: Path) -> dict[str, np.ndarray]:
     return f
 
 
-def v1_14_two_receivers(path: Path, attack_s: float | None = 20.0, attitude: bool = True) -> dict[str, object]:
+def v1_14_two_receivers(path: Path, attack_s: float | None = 20.0, attitude: bool = True) -> dict[str, Any]:
     """PX4 v1.14.0 with two receivers: sensor_gps 0 (M8N) and 1 (M9N) at the logger's default 1 Hz,
     vehicle_gps_position at 5 Hz from receiver 0 except three blended messages (device_id 0); the
     driver's 'GPS spoofing detected!' warning; vehicle_attitude at 10 Hz; satellite_info of receiver 0;

@@ -161,7 +161,7 @@ def test_windowed_ins_reference_is_close_to_the_truth(ground_raw, clean_context)
     assert ok.sum() > 150 and not ok[: int(np.searchsorted(grid.t_s, 20.0))].any()  # not before the filter settled
     err = np.linalg.norm(ref.vel[ok] - truth.vel[ok], axis=1)
     assert np.sqrt(np.mean(err**2)) < 0.3  # consumer MEMS, 5 s of free inertial
-    assert (ref.informed_s[ok] <= grid.t_s[ok] - 5.0 + 1e-6).all()
+    assert ref.informed_s is not None and (ref.informed_s[ok] <= grid.t_s[ok] - 5.0 + 1e-6).all()
 
 
 def test_clean_simulated_log_stays_clean_and_a_delayed_pair_is_named(ground_raw, clean_context) -> None:

@@ -62,7 +62,9 @@ def test_z_is_the_pseudorange_change_minus_the_range_change(station_log) -> None
     grid, ch = _changes(station_log)
     k, j = 300, int(np.flatnonzero(np.isfinite(ch.z[300]))[0])
     r = [
-        expected_pseudorange(grid.sv_pos[e, j], grid.sv_clock_bias_m[e, j], STATION, 0.0, grid.t_gps_s[e], None)
+        expected_pseudorange(
+            grid.sv_pos[e, j], grid.sv_clock_bias_m[e, j], STATION, np.zeros(()), grid.t_gps_s[e], None
+        )
         for e in (k - 1, k)
     ]
     hand = (grid.pseudorange_m[k, j] - grid.pseudorange_m[k - 1, j]) - (r[1] - r[0])

@@ -9,7 +9,14 @@ import pandas as pd
 import pytest
 
 from spooflens.geodesy import ecef_to_geodetic, geodetic_to_ecef, geodetic_to_enu
-from spooflens.gnss.ephemeris import GM_GPS, OMEGA_E_GPS, Klobuchar, satellite_states, synthetic_constellation
+from spooflens.gnss.ephemeris import (
+    GM_GPS,
+    OMEGA_E_GPS,
+    GpsEphemerides,
+    Klobuchar,
+    satellite_states,
+    synthetic_constellation,
+)
 from spooflens.gnss.geometry import azimuth_elevation, sagnac_range
 from spooflens.navigation.single_point import SinglePointOptions, solve, with_solved_fixes
 from spooflens.simulation.observations import ObservationNoise, simulate_observations
@@ -20,7 +27,9 @@ IONO = Klobuchar((1.118e-8, 1.49e-8, -5.96e-8, -5.96e-8), (8.806e4, 1.638e4, -1.
 BOSTON = geodetic_to_ecef(42.37, -71.1, 30.0)
 
 
-def _static_obs(n: int = 600, seed: int = 0, noise: ObservationNoise | None = None) -> tuple[pd.DataFrame, object]:
+def _static_obs(
+    n: int = 600, seed: int = 0, noise: ObservationNoise | None = None
+) -> tuple[pd.DataFrame, GpsEphemerides]:
     rng = np.random.default_rng(seed)
     eph = replace(synthetic_constellation(T0, rng=rng), iono=IONO)
     t = np.arange(n, dtype=float)

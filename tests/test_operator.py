@@ -18,7 +18,7 @@ from rerun.chunk import RrdReader
 
 from spooflens.cli import main
 from spooflens.detectors.base import Alarm
-from spooflens.epoch_table import StreamInfo
+from spooflens.epoch_table import EpochTable, StreamInfo
 from spooflens.schema import make_frame
 from spooflens.writers import write_log
 
@@ -62,7 +62,7 @@ def test_inspect_a_rinex_log_lists_solved_fixes_as_computed_and_the_nav_file_pla
     assert "single-point" not in skipped and "single-point" in out[out.index("Computed") :]
 
 
-def _circling_with_odometry(ramp_mps: float) -> object:
+def _circling_with_odometry(ramp_mps: float) -> EpochTable:
     """The circling vehicle with wheel odometry that follows the true circle (10 m/s, 1/60 rad/s)."""
     table = circling_table(ramp_mps=ramp_mps)
     t = np.arange(0.0, 300.0, 0.1)
@@ -128,8 +128,9 @@ def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
     assert keys[2].paths[0].startswith(f"/detectors/{inertial.name}/") and keys[2].paths[1].endswith("_threshold")
     panels = detector_panels(results)
     tabs = default_blueprint(panels, keys).root_container
-    assert tabs.active_tab is not None and tabs.contents[0].name == "Overview"
-    assert [c.name for c in tabs.contents[1 : 1 + len(panels)]] == [title for title, _ in panels]
+    contents = list(tabs.contents)
+    assert tabs.active_tab is not None and contents[0].name == "Overview"
+    assert [c.name for c in contents[1 : 1 + len(panels)]] == [title for title, _ in panels]
     lanes = {name: level for name, _, level in overview_lanes(results, decide(results), 300.0)}
     assert set(lanes) == {"GNSS-only consistency", "receiver self-report", "inertial reference", "spoofing incidents"}
     assert lanes["inertial reference"].max() == pytest.approx(2.8) and lanes["spoofing incidents"].max() == 0.8 - 1

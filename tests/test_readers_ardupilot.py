@@ -69,6 +69,7 @@ def test_plane_log_fixes_clock_and_ekf() -> None:
     assert abs(t.fixes["lat_deg"].iloc[0] - 51.6416) < 1e-3 and abs(t.fixes["lon_deg"].iloc[0] + 2.5257) < 1e-3
     # the GPS clock: a fix's absolute GPS time is its week and ms of week (up to the logging latency spread)
     gps_s = t.gps_seconds(t.fixes["t_s"].to_numpy())
+    assert gps_s is not None
     logged = np.array([m["GWk"] * 604800 + m["GMS"] / 1000 for m in ref])
     assert np.median(np.abs(gps_s[1:] - logged[1:])) < 0.05
     # no raw IMU in this log: the fixes are read all the same, the attitude is reported as unused
@@ -89,7 +90,8 @@ def test_copter_log_imu_attitude_and_receiver_indicators() -> None:
     assert t.metadata["firmware"].startswith("ArduCopter V4.6.2")
     assert t.imus() == ["IMU[0]", "IMU[1]"] and "IMU[0]" in t.metadata["imu.primary"]
     imu0 = t.imu_of("IMU[0]")
-    assert len(imu0) == 10 and t.stream("imu", "IMU[0]").body_frame == "FRD"
+    info = t.stream("imu", "IMU[0]")
+    assert len(imu0) == 10 and info is not None and info.body_frame == "FRD"
     g = np.linalg.norm(imu0[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(), axis=1)
     assert np.all(np.abs(g - 9.81) < 0.3) and np.all(imu0["az_mps2"] < -9.0)  # at rest, FRD: gravity reaction on -z
     # the ATT quaternion: the FRD body's x axis points along the logged yaw (99 deg: east-south-east)
@@ -261,7 +263,7 @@ def test_tlog_written_by_pymavlink_reads_back(tmp_path: Path) -> None:
     t = read_log(path)
     assert t.time_reference == "unix" and t.t0_ns == t0_unix_us * 1000  # SYSTEM_TIME, not the GCS latency
     fix, imu = t.stream("fix", "GPS_RAW_INT"), t.stream("imu", "SCALED_IMU")
-    assert fix.count == 150 and imu.count == 1500
+    assert fix is not None and imu is not None and fix.count == 150 and imu.count == 1500
     assert fix.rate_hz == pytest.approx(5.0, rel=0.01) and imu.rate_hz == pytest.approx(50.0, rel=0.01)
     np.testing.assert_allclose(t.fixes["vel_n_mps"], 2.0)
     np.testing.assert_allclose(t.fixes["height_m"], 145.0)

@@ -52,7 +52,7 @@ def _messages(store, ros: int, rng: np.random.Generator):
         if k == 7:
             stamp = 0  # a zero stamp: the log time is used (a repair), on both paths
         frame = "f" * (k % 9)  # every string length mod 8
-        w, a = rng.normal(size=3), rng.normal(size=3)
+        w, a = 0.1 * rng.normal(size=3), np.array([0.0, 0.0, 9.81]) + rng.normal(size=3)  # at rest, noisy
         ocov = np.zeros(9)
         ocov[0] = -1.0 if k % 5 == 0 else 0.01
         imu = T["sensor_msgs/msg/Imu"](

@@ -65,8 +65,8 @@ def test_v14_log_counts_clock_and_units() -> None:
     t = read_log(JUNE)
     assert sniff_format(JUNE) == "gnsslogger" and t.format == "gnsslogger"
     assert t.time_reference == "gps" and t.metadata["firmware"].startswith("1.4.0.0")
-    assert t.stream("fix", "phone").count == 216
-    obs = t.stream("observations", "phone")
+    fix, obs = t.stream("fix", "phone"), t.stream("observations", "phone")
+    assert fix is not None and obs is not None and fix.count == 216
     assert obs.count == 223 and obs.rate_hz == pytest.approx(1.0, abs=0.01)
     # 1379 Raw lines, 3 above the 500 ns time uncertainty
     assert len(t.observations) == 1379 - 3
@@ -84,7 +84,8 @@ def test_v14_log_counts_clock_and_units() -> None:
 def test_v3_log_providers_sensors_and_receiver_indicators() -> None:
     t = read_log(PIXEL)
     assert "Pixel 7" in t.metadata["firmware"]
-    assert t.stream("fix", "phone").count == 94
+    fix = t.stream("fix", "phone")
+    assert fix is not None and fix.count == 94
     skipped = {s.stream: s.count for s in t.skipped}
     assert skipped["Fix/FLP"] == 95 and skipped["Fix/NLP"] == 54
     # L5/E5a rows left out, one L1 signal per satellite; GPS, GLONASS and Galileo ids
@@ -94,7 +95,7 @@ def test_v3_log_providers_sensors_and_receiver_indicators() -> None:
     # C/N0 and AGC of the raw epochs land on the fixes (AgcDb in dB)
     assert t.fixes["cn0_mean_dbhz"].notna().sum() >= 25 and t.fixes["agc"].between(0, 80).any()
     imu = t.stream("imu", "phone_imu")
-    assert imu.body_frame == "ANDROID" and imu.count == 9
+    assert imu is not None and imu.body_frame == "ANDROID" and imu.count == 9
     g = np.linalg.norm(t.imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(), axis=1)
     assert abs(np.median(g) - 9.8) < 1.0  # a walking user: single samples swing by +-3 m/s^2
     assert t.imu[["qw", "qx", "qy", "qz"]].notna().all(axis=1).sum() >= 8
@@ -112,7 +113,9 @@ def test_v3_fixes_match_the_phones_nmea_and_pseudoranges_its_rinex() -> None:
             lon = -(int(f[5][:3]) + float(f[5][3:]) / 60)
             gga.append((int(f[-1]), lat, lon, float(f[10]) + float(f[12])))
     gga_df = pd.DataFrame(gga, columns=["unix_ms", "lat", "lon", "h"])
-    unix = t.unix_ns(t.fixes["t_s"].to_numpy()) // 1_000_000
+    unix_ns = t.unix_ns(t.fixes["t_s"].to_numpy())
+    assert unix_ns is not None
+    unix = unix_ns // 1_000_000
     lat = np.interp(gga_df["unix_ms"], unix, t.fixes["lat_deg"])
     lon = np.interp(gga_df["unix_ms"], unix, t.fixes["lon_deg"])
     d = geodetic_to_enu(

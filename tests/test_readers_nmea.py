@@ -84,7 +84,8 @@ def test_bundg_counts_rates_units(bundg: EpochTable) -> None:
     headings = bundg.headings
     assert len(headings) == 1457 and set(headings["heading_id"]) == {"SDHDG"}
     assert headings["heading_deg"].iloc[0] == pytest.approx(231.1)
-    assert 9.0 < bundg.stream("heading", "SDHDG").rate_hz < 10.5
+    sdhdg = bundg.stream("heading", "SDHDG")
+    assert sdhdg is not None and 9.0 < sdhdg.rate_hz < 10.5
     unused = {s.stream: s.count for s in bundg.skipped if "does not use" in s.reason}
     assert unused["WIMWV"] == 300 and unused["SDDPT"] == 149
 
@@ -93,6 +94,7 @@ def test_bundg_position_and_velocity_against_independent_values(bundg: EpochTabl
     rmc = _raw(BUNDG, "RMC")
     fixes = bundg.fixes
     utc = bundg.unix_ns(fixes["t_s"].to_numpy())
+    assert utc is not None
     tod = [f"{int(u // 1e9) % 86400 // 3600:02d}{int(u // 1e9) % 3600 // 60:02d}{int(u // 1e9) % 60:02d}" for u in utc]
     checked = 0
     for (_, row), t in zip(fixes.iterrows(), tod, strict=True):

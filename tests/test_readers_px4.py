@@ -104,9 +104,9 @@ def test_two_receivers_each_from_the_topic_that_logged_it_most(logs: Path) -> No
     rx0 = table.fixes_of("sensor_gps/0")
     keep = np.ones(150, bool)
     keep[[40, 41, 42]] = False
-    exp = {k: v[keep] for k, v in made["f5"].items()}  # type: ignore[union-attr]
+    exp = {k: v[keep] for k, v in made["f5"].items()}
     _expect(rx0, exp, INDICATORS)
-    _expect(table.fixes_of("sensor_gps/1"), made["f1b"], INDICATORS)  # type: ignore[arg-type]
+    _expect(table.fixes_of("sensor_gps/1"), made["f1b"], INDICATORS)
     assert "sensor_gps/0: u-blox 8 (M8) on serial bus 2" in table.metadata["receiver"]
     assert "sensor_gps/1: u-blox 9 (M9) on serial bus 4" in table.metadata["receiver"]
     assert table.metadata["firmware"].startswith("PX4 v1.14.0 (release)")
@@ -296,6 +296,7 @@ def test_attitude_slerped_onto_imu_times_and_read_by_the_alignment(logs: Path) -
     assert angle.max() < 1e-5  # rad; the log holds float32
     k = int(np.argmin(np.abs(t - 2.51)))
     c = _imu_orientation(imu, float(imu["t_s"].iloc[k]))
+    assert c is not None
     heading = np.degrees(np.arctan2(c[0, 0], c[1, 0]))  # of the nose, from north towards east
     assert heading == pytest.approx(30 + 10 * t[k], abs=1e-3)
     assert any(s.stream == "vehicle_attitude" and s.count == int((~inside).sum()) for s in table.skipped)

@@ -497,7 +497,7 @@ def _v2_obs(epochs: int, time_system: str = "GPS", event_after: int | None = Non
         hdr(f"{2005:6d}{4:6d}{2:6d}{3:6d}{0:6d}{0.0:13.7f}     {time_system}", "TIME OF FIRST OBS"),
         hdr("", "END OF HEADER"),
     ]
-    types = TYPES6
+    types: tuple[str, ...] = TYPES6
     for e in range(epochs):
         sec = 10.0 * e
         out.append(f" 05  4  2  3 {int(sec // 60):2d}{sec % 60:11.7f}  0{len(SATS14):3d}" + "".join(SATS14[:12]))

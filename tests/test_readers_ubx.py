@@ -204,7 +204,8 @@ def test_generated_capture_status_security_hw_version_and_imu(tmp_path: Path) ->
     assert table.metadata["receiver.sw_version"] == "EXT CORE 1.00 (test)"
     assert table.metadata["receiver.hw_version"] == "00190000"
     imu = table.imu
-    assert len(imu) == 60 and table.stream("imu", "ubx_esf").body_frame == "FRD"
+    esf = table.stream("imu", "ubx_esf")
+    assert len(imu) == 60 and esf is not None and esf.body_frame == "FRD"
     assert table.metadata["imu.time_tag_unit_s"] == "3.90625e-05"  # fitted from the stream
     assert np.allclose(np.diff(imu["t_s"]), 0.1)
     assert imu["wz_radps"].iloc[0] == pytest.approx(math.radians(5.0))

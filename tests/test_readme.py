@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from spooflens.attacks.spec import attacks_markdown
 from spooflens.cli import cli
 from spooflens.schema import schema_markdown
 
@@ -17,6 +18,12 @@ def test_schema_section_is_generated_from_the_schema_module() -> None:
     section = re.search(r"<!-- schema:start[^\n]*-->\n(.*)\n<!-- schema:end -->", README, re.S)
     assert section is not None
     assert section.group(1).strip() == schema_markdown().strip()
+
+
+def test_attacks_table_is_generated_from_the_kinds_table() -> None:
+    section = re.search(r"<!-- attacks:start[^\n]*-->\n(.*)\n<!-- attacks:end -->", README, re.S)
+    assert section is not None
+    assert section.group(1).strip() == attacks_markdown().strip()
 
 
 def test_every_cli_command_is_documented() -> None:

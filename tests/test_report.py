@@ -14,6 +14,7 @@ import io
 import json
 import os
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -80,7 +81,7 @@ def clean(tmp_path_factory: pytest.TempPathFactory) -> Run:
 
 
 @pytest.fixture(scope="module")
-def browser() -> Browser:
+def browser() -> Iterator[Browser]:
     if chromium_path() is None:
         pytest.fail("chromium is not installed: the README's test command installs it (apt-get install -y chromium)")
     with Browser(width=WIDTH) as b:

@@ -60,7 +60,9 @@ def test_long_logs_get_navigation_records_every_two_hours(tmp_path: Path) -> Non
     from spooflens.gnss.ephemeris import satellite_states
 
     table = _table()
-    start = float(table.gps_seconds(0.0))
+    start_gps = table.gps_seconds(0.0)
+    assert start_gps is not None and table.ephemerides is not None
+    start = float(start_gps)
     long = EpochTable(**{**table.__dict__})
     obs = table.observations.copy()
     obs.loc[obs.index[-1], "t_s"] = 5 * 3600.0  # one late row stretches the span to five hours
@@ -69,7 +71,7 @@ def test_long_logs_get_navigation_records_every_two_hours(tmp_path: Path) -> Non
     nav = read_rinex_nav(tmp_path / "rnx" / "BRDC_GN.rnx")
     g06 = nav.toe_s[nav.sv_id == "G06"]
     assert len(g06) >= 3 and np.all(np.diff(g06) == 7200.0)
-    t = start + np.linspace(0.0, 5 * 3600.0, 11)
+    t: np.ndarray = start + np.linspace(0.0, 5 * 3600.0, 11)
     sv = np.array(["G06"] * len(t))
     np.testing.assert_allclose(
         satellite_states(nav, sv, t).pos_m, satellite_states(table.ephemerides, sv, t).pos_m, atol=1e-3

@@ -31,7 +31,7 @@ from readers.rinex.text import (
     parse_int,
     sv_ids,
 )
-from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, Skipped, gps_utc_offset_ns
+from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, Skipped, utc_gps_offset_ns
 from spooflens.errors import ReaderError
 
 DEFAULT_TIME_SYSTEM = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS"}  # single-system files without one
@@ -223,7 +223,7 @@ def _time_shift(path: Path, tsys: str, epoch_ns: IntArray, skipped: list[Skipped
         return gps + 14 * NS
     if tsys in ("GLO", "UTC"):
         utc = gps - (3 * 3600 * NS if tsys == "GLO" else 0)
-        leap = gps_utc_offset_ns(utc + gps_utc_offset_ns(utc))
+        leap = utc_gps_offset_ns(utc)
         skipped.append(
             Skipped(path.name, f"{tsys} time converted to GPS time (leap seconds applied)", len(gps), "repaired")
         )

@@ -187,7 +187,7 @@ def sv_ids(tok: NDArray[np.uint8]) -> tuple[NDArray[np.str_], NDArray[np.uint8],
     ok &= prn > 0
     prn = np.where(ok, prn, 0)
     out = np.empty((len(tok), 3), dtype=np.uint8)
-    out[:, 0] = sys
+    out[:, 0] = np.where(ok, sys, ord("?"))  # any byte of a bad id (non-ASCII too) must still make a str
     out[:, 1] = 48 + prn // 10
     out[:, 2] = 48 + prn % 10
     return np.ascontiguousarray(out).view("S3").ravel().astype("U3"), sys, ok

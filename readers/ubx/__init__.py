@@ -40,13 +40,12 @@ from readers import ReaderFormat
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
 from spooflens.epoch_table import (
-    GPS_EPOCH_UNIX_NS,
     EpochTable,
     Skipped,
     StreamInfo,
     build_table,
+    gps_ns_of_unix_ns,
     gps_seconds_of_unix_ns,
-    gps_utc_offset_ns,
 )
 from spooflens.errors import ReaderError
 from spooflens.schema import SpoofingFlag
@@ -279,9 +278,7 @@ def _nmea_part(
         if df is None or not len(df):
             return None
         if reference == "gps" and out.time_reference == "unix":
-            utc = df["t_ns"].to_numpy(dtype=np.int64)
-            gps = utc - GPS_EPOCH_UNIX_NS
-            df = df.assign(t_ns=gps + gps_utc_offset_ns(gps))
+            df = df.assign(t_ns=gps_ns_of_unix_ns(df["t_ns"].to_numpy(dtype=np.int64)))
         return df
 
     streams = [s for s in out.streams if s.role == "heading" or use_fixes]

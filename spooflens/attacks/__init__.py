@@ -23,9 +23,33 @@ from spooflens.epoch_table import EpochTable
 
 
 def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
+    """The attack applied to the log's data; a window starting after the data ends is refused.
+
+    A fix-level kind on a log whose receivers logged only pseudoranges (RINEX, a CSV of observations)
+    acts on the pseudoranges: the fixes `analyze` solves from them then follow the attack.
+    """
+    on_observations = spec.kind in OBSERVATION_KINDS or (not len(table.fixes) and len(table.observations) > 0)
+    attacked = table.observations if on_observations else table.fixes
+    if len(attacked):
+        last = float(attacked["t_s"].max())
+        if spec.start_s > last:
+            raise AttackError(
+                f"{table.source}: start={spec.start_s:g} s is after the end of the log's "
+                f"{'observations' if on_observations else 'fixes'} ({last:.1f} s); nothing to attack"
+            )
+    if on_observations:
+        if spec.kind in (Kind.SINGLE_ANTENNA, Kind.CAPTURE):
+            raise AttackError(
+                f"{table.source}: {spec.kind.value} needs the receivers' fixes; this log has only pseudoranges"
+                + (
+                    " (spooflens.attacks.single_antenna_raw makes the raw-observation equivalent)"
+                    if spec.kind == Kind.SINGLE_ANTENNA
+                    else ""
+                )
+            )
+        return apply_observation_attack(table, spec)
     if spec.kind == Kind.CAPTURE:
         return apply_capture(table, spec)
-    if spec.kind in OBSERVATION_KINDS:
         return apply_observation_attack(table, spec)
     return apply_fix_attack(table, spec)
 

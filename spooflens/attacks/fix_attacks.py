@@ -25,7 +25,7 @@ def _axes(spec: AttackSpec) -> FloatArray:
     return np.array([1.0 if a in spec.axes else 0.0 for a in "enu"])
 
 
-def _offsets(
+def offsets_enu(
     spec: AttackSpec, t: FloatArray, end: float, p: FloatArray, v: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Position and velocity offsets (N, 3) for fixes at times t with positions p (ENU) and velocities v."""
@@ -68,7 +68,7 @@ def apply_fix_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, A
     unknown = [r for r in targets if r not in receivers]
     if unknown:
         raise AttackError(f"{table.source}: no receiver {unknown[0]!r}; receivers are {receivers}")
-    end = spec.end_s if spec.end_s is not None else table.duration_s
+    end = table.duration_s if spec.end_s is None else min(spec.end_s, table.duration_s)
     vel = bool(spec.params.get("vel", 0))
     fixes = table.fixes.copy()
     truth = AttackTruth(
@@ -89,7 +89,7 @@ def apply_fix_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, A
         lat, lon, h = (fx[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "height_m"))
         v = fx[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
         p = geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0])
-        dp, dv = _offsets(spec, t, end, p, v)
+        dp, dv = offsets_enu(spec, t, end, p, v)
         if lead is not None:  # every receiver reports the lead receiver's (spoofed) position
             lt = lead["t_s"].to_numpy(dtype=float)
             idx = np.clip(np.searchsorted(lt, t), 0, len(lt) - 1)

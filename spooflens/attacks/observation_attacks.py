@@ -16,9 +16,10 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, Kind
+from spooflens.attacks.fix_attacks import offsets_enu
+from spooflens.attacks.spec import KINDS, OBSERVATION_KINDS, AttackError, AttackSpec, AttackTruth, Kind
 from spooflens.epoch_table import EpochTable
-from spooflens.geodesy import add_enu_offset, ecef_to_enu_vectors, ecef_to_geodetic, geodetic_to_ecef
+from spooflens.geodesy import add_enu_offset, ecef_to_enu_vectors, ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ
 from spooflens.gnss.geometry import line_of_sight, sagnac_range
 from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointSolution, solve_logged
@@ -91,6 +92,32 @@ def _meaconing_delta(
     return d_range, d_rate
 
 
+def _fix_offset_delta(
+    spec: AttackSpec, obs: pd.DataFrame, clean: SinglePointSolution, end: float
+) -> tuple[FloatArray, FloatArray]:
+    """A fix-level attack (ramp, step, hover, pulls) on a receiver that logged only pseudoranges: each
+    row's range and range-rate change when the receiver's antenna is where the attack puts the fix.
+
+    The offsets are the fix-level kind's own, at each solved epoch in its local ENU frame; the ranges are
+    exact geometry (with the Earth's rotation) from the moved position, the clock untouched, so the
+    receiver's own solution of the attacked pseudoranges lands on the attacked fix.
+    """
+    ok = clean.ok
+    lat, lon, _ = clean.geodetic()
+    first = int(np.argmax(ok))
+    p = np.where(ok[:, None], ecef_to_enu_vectors(lat[first], lon[first], clean.ecef_m - clean.ecef_m[first]), 0.0)
+    dp_enu, dv_enu = offsets_enu(spec, clean.t_s, end, p, np.nan_to_num(clean.vel_enu_mps()))
+    rotation = np.swapaxes(enu_rotation(lat, lon), -1, -2)  # ENU -> ECEF per epoch
+    dp = np.where(ok[:, None], np.einsum("eij,ej->ei", rotation, dp_enu), 0.0)
+    dv = np.where(ok[:, None], np.einsum("eij,ej->ei", rotation, dv_enu), 0.0)
+    sv = obs[SV_COLUMNS].to_numpy(float)
+    R = clean.ecef_m[clean.row_epoch]
+    d_range = sagnac_range(sv, R + dp[clean.row_epoch]) - sagnac_range(sv, R)
+    d_rate = -np.sum(line_of_sight(sv, R) * dv[clean.row_epoch], axis=1)
+    usable = np.isfinite(d_range) & np.isfinite(d_rate)
+    return np.where(usable, d_range, 0.0), np.where(usable, d_rate, 0.0)
+
+
 def _smoothed_track(sol: SinglePointSolution, half_window_s: float = 5.0) -> tuple[FloatArray, FloatArray]:
     """Each epoch's position and velocity estimated from its neighbours within +-`half_window_s`.
 
@@ -147,7 +174,7 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
     if unknown:
         raise AttackError(f"{table.source}: no receiver {unknown[0]!r} with observations; receivers are {receivers}")
     start = spec.start_s
-    end = spec.end_s if spec.end_s is not None else table.duration_s
+    end = table.duration_s if spec.end_s is None else min(spec.end_s, table.duration_s)
     target_obs = obs_all[obs_all["receiver_id"].astype(str).isin(targets)]
     attacked_svs, authentic = _chosen_satellites(spec, target_obs, start)
     truth = AttackTruth(
@@ -177,6 +204,8 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
         else:
             if spec.kind == Kind.MEACONING:
                 d_range, d_rate = _meaconing_delta(spec, obs, clean, start)
+            elif spec.kind not in OBSERVATION_KINDS:
+                d_range, d_rate = _fix_offset_delta(spec, obs, clean, end)
             else:
                 d_range = spec.params["delay"] + spec.params["rate"] * (t - start)
                 d_rate = np.full(len(t), spec.params["rate"])

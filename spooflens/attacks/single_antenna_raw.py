@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from spooflens.attacks.spec import AttackError
+from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable
 from spooflens.navigation.single_point import with_solved_fixes
 
@@ -52,7 +53,7 @@ def single_antenna_observations(
     shift = distance_difference_m + rng.normal(0.0, noise_m, len(src))
     src["pseudorange_m"] = src["pseudorange_m"].to_numpy(float) + shift
     if "carrier_phase_cycles" in src:
-        lam = 299792458.0 / src["carrier_freq_hz"].to_numpy(float)
+        lam = SPEED_OF_LIGHT_MPS / src["carrier_freq_hz"].to_numpy(float)
         src["carrier_phase_cycles"] = src["carrier_phase_cycles"].to_numpy(float) + np.where(
             np.isfinite(lam), shift / lam, 0.0
         )

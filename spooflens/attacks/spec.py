@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from spooflens.errors import SpooflensError
 
@@ -33,122 +34,195 @@ class Kind(Enum):
 OBSERVATION_KINDS = frozenset({Kind.PR_DELAY, Kind.MEACONING, Kind.BLOCKING, Kind.SPOOFED_SUBSET})
 
 
+ParamType = Literal["float", "count", "axes", "flag", "text"]
+Value = float | int | str
+
+
 @dataclass(frozen=True)
-class KindInfo:
+class Param:
+    """One parameter of an attack kind: its type (how `name=value` is parsed and checked), its default
+    (None: not set unless given) and what it means, with its unit."""
+
+    name: str
+    type: ParamType
+    default: Value | None
+    meaning: str
+    unset: str = ""  # what an unset parameter without a default means (e.g. "all satellites")
+
+    def parse(self, kind: Kind, text: str) -> Value:
+        value = text.strip()
+        if self.type == "text":
+            if not value:
+                raise AttackError(f"{kind.value}: {self.name}= needs a value")
+            return value
+        if self.type == "axes":
+            if not value or set(value) - set("enu") or len(set(value)) != len(value):
+                raise AttackError(f"{kind.value}: axes={value!r}; use a subset of e, n, u such as en")
+            return value
+        try:
+            number = float(value)
+        except ValueError:
+            raise AttackError(f"{kind.value}: {self.name}={value!r} is not a number") from None
+        if not math.isfinite(number):
+            raise AttackError(f"{kind.value}: {self.name}={value!r} is not a finite number")
+        if self.type == "float":
+            return number
+        if number != int(number) or number < 0 or (self.type == "flag" and number > 1):
+            what = "0 or 1" if self.type == "flag" else "a whole number >= 0"
+            raise AttackError(f"{kind.value}: {self.name}={value} must be {what}")
+        return int(number)
+
+    @property
+    def shown(self) -> str:
+        """As the README's parameter column shows it: `name=default`, or the name and what unset means."""
+        if self.default is not None:
+            return (
+                f"`{self.name}={self.default:g}`"
+                if isinstance(self.default, float)
+                else f"`{self.name}={self.default}`"
+            )
+        return f"`{self.name}` ({self.unset})" if self.unset else f"`{self.name}`"
+
+
+@dataclass(frozen=True)
+class KindSpec:
+    """An attack kind: the seed paper it comes from, what it does, and its parameters."""
+
     seed: str
     summary: str
-    params: dict[str, str]  # name -> meaning (with unit and default)
+    params: tuple[Param, ...]
+
+    def param(self, name: str) -> Param | None:
+        return next((p for p in self.params if p.name == name), None)
+
+    @property
+    def defaults(self) -> dict[str, Value]:
+        return {p.name: p.default for p in self.params if p.default is not None}
 
 
-_SATELLITES = {
-    "svs": "satellites to attack, e.g. G05+G07 (default: `count` of them, or all)",
-    "count": "how many satellites, chosen at random among those tracked at `start` (default: all)",
-    "seed": "random seed of that choice (default 0)",
-}
-_WINDOW = {
-    "start": "attack start, s since the log start (default 0)",
-    "end": "attack end, s (default: end of log); the spoofer switches off there",
-    "receiver": "receiver id to attack (default: every receiver)",
-}
-KINDS: dict[Kind, KindInfo] = {
-    Kind.RAMP: KindInfo(
+# every kind has a window (and a receiver, but single_antenna, which moves every receiver together)
+_START = Param("start", "float", None, "attack start, s since the log start", "0")
+_END = Param("end", "float", None, "attack end, s; the spoofer switches off there", "end of the log")
+_RECEIVER = Param("receiver", "text", None, "receiver id to attack", "every receiver")
+_WINDOW = (_START, _END, _RECEIVER)
+WINDOW_PARAMS = frozenset(p.name for p in _WINDOW)
+
+
+def _axes(default: str) -> Param:
+    return Param("axes", "axes", default, "ENU axes the offset is on: a subset of e, n, u")
+
+
+def _vel(default: int, meaning: str) -> Param:
+    return Param("vel", "flag", default, meaning)
+
+
+_SVS = Param("svs", "text", None, "satellites to attack, e.g. G05+G07 (replaces `count`)")
+_SEED = Param("seed", "count", 0, "random seed of the choice of satellites")
+
+
+def _count(default: int | None) -> Param:
+    return Param("count", "count", default, "satellites chosen at random among those tracked at `start`", "all")
+
+
+KINDS: dict[Kind, KindSpec] = {
+    Kind.RAMP: KindSpec(
         "000",
-        "position drifts at `rate` m/s on each chosen axis; velocity untouched",
-        {
-            "rate": "m/s per axis (default 2)",
-            "axes": "subset of e, n, u (default en)",
-            "vel": "1 to move the reported velocity consistently (default 0)",
-            **_WINDOW,
-        },
+        "position drifts at `rate` m/s on each chosen axis",
+        (
+            Param("rate", "float", 2.0, "m/s per axis"),
+            _axes("en"),
+            _vel(0, "1 moves the reported velocity consistently"),
+            *_WINDOW,
+        ),
     ),
-    Kind.STEP: KindInfo(
+    Kind.STEP: KindSpec(
         "000",
-        "position jumps by `offset` m on each chosen axis",
-        {"offset": "m per axis (default 50)", "axes": "default en", "vel": "ignored", **_WINDOW},
+        "position jumps by `offset` m",
+        (
+            Param("offset", "float", 50.0, "m per axis"),
+            _axes("en"),
+            _vel(0, "no effect (a step has no velocity)"),
+            *_WINDOW,
+        ),
     ),
-    Kind.HOVER: KindInfo(
+    Kind.HOVER: KindSpec(
         "001",
-        "reported position frozen at its value at `start` (and velocity zero)",
-        {"vel": "1 (default) reports zero velocity, 0 leaves it", **_WINDOW},
+        "reported position frozen at its value at `start`",
+        (_vel(1, "1 reports zero velocity, 0 leaves it"), *_WINDOW),
     ),
-    Kind.VELOCITY_PULL: KindInfo(
+    Kind.VELOCITY_PULL: KindSpec(
         "001",
-        "velocity offset `dv` m/s on the chosen axes; position follows its integral",
-        {
-            "dv": "m/s per axis (default 0.1)",
-            "axes": "default n",
-            "vel": "1 (default) reports the pulled velocity",
-            **_WINDOW,
-        },
+        "velocity offset `dv`; position follows its integral",
+        (Param("dv", "float", 0.1, "m/s per axis"), _axes("n"), _vel(1, "1 reports the pulled velocity"), *_WINDOW),
     ),
-    Kind.POSITION_PULL: KindInfo(
+    Kind.POSITION_PULL: KindSpec(
         "001",
-        "position offset grows linearly to `offset` m over `ramp` s, then holds",
-        {
-            "offset": "m per axis (default 100)",
-            "axes": "default e",
-            "ramp": "s to reach the full offset (default 50)",
-            "vel": "default 0",
-            **_WINDOW,
-        },
+        "offset grows to `offset` m over `ramp` s, then holds",
+        (
+            Param("offset", "float", 100.0, "m per axis"),
+            _axes("e"),
+            Param("ramp", "float", 50.0, "s to reach the full offset"),
+            _vel(0, "1 moves the reported velocity consistently"),
+            *_WINDOW,
+        ),
     ),
-    Kind.SINGLE_ANTENNA: KindInfo(
+    Kind.SINGLE_ANTENNA: KindSpec(
         "003",
-        "one spoofer antenna: every receiver reports the same false position "
-        "(the first receiver's track plus a ramp of `rate` m/s), so the "
-        "baseline between receivers collapses",
-        {
-            "rate": "m/s per axis (default 1)",
-            "axes": "default en",
-            "vel": "default 0",
-            "start": _WINDOW["start"],
-            "end": _WINDOW["end"],
-        },
+        "every receiver reports the first receiver's track plus a ramp: the baseline collapses",
+        (
+            Param("rate", "float", 1.0, "m/s per axis"),
+            _axes("en"),
+            _vel(0, "1 moves the reported velocity consistently"),
+            _START,
+            _END,
+        ),
     ),
-    Kind.PR_DELAY: KindInfo(
+    Kind.PR_DELAY: KindSpec(
         "002, 004",
-        "every chosen satellite's signal arrives `delay` m late (growing at `rate` m/s): pseudorange, "
-        "carrier phase and Doppler move together, as for a replayed signal; the same delay on every "
-        "satellite moves only the receiver clock (seed 004's bias injection)",
-        {
-            "delay": "m (default 300, i.e. 1 us)",
-            "rate": "m/s growth of the delay (default 0)",
-            **_SATELLITES,
-            **_WINDOW,
-        },
+        "chosen satellites' signals arrive `delay` m late, growing at `rate` m/s (code, carrier and Doppler "
+        "alike); the same delay on every satellite moves only the clock",
+        (
+            Param("delay", "float", 300.0, "m (300 m is 1 us)"),
+            Param("rate", "float", 0.0, "m/s growth of the delay"),
+            _SVS,
+            _count(None),
+            _SEED,
+            *_WINDOW,
+        ),
     ),
-    Kind.MEACONING: KindInfo(
+    Kind.MEACONING: KindSpec(
         "002, 004",
-        "a meaconer antenna `east`/`north`/`up` m from where the receiver was at `start` re-broadcasts the "
-        "whole sky `delay` m late: every pseudorange becomes the meaconer's, so the fix moves there",
-        {
-            "east": "m (default 500)",
-            "north": "m (default 0)",
-            "up": "m (default 0)",
-            "delay": "m of extra replay delay (default 0)",
-            **_WINDOW,
-        },
+        "a meaconer `east`/`north`/`up` m from where the receiver was at `start` re-broadcasts the sky `delay` "
+        "m late: the fix goes to the meaconer and keeps the receiver's own noise",
+        (
+            Param("east", "float", 500.0, "m"),
+            Param("north", "float", 0.0, "m"),
+            Param("up", "float", 0.0, "m"),
+            Param("delay", "float", 0.0, "m of extra replay delay"),
+            *_WINDOW,
+        ),
     ),
-    Kind.BLOCKING: KindInfo(
+    Kind.BLOCKING: KindSpec(
         "004",
-        "the chosen satellites are not received at all (rows removed); the fix moves with the geometry",
-        {**_SATELLITES, **_WINDOW},
+        "chosen satellites are not received (their rows removed)",
+        (_SVS, _count(2), _SEED, *_WINDOW),
     ),
-    Kind.SPOOFED_SUBSET: KindInfo(
+    Kind.SPOOFED_SUBSET: KindSpec(
         "004",
-        "`keep` satellites stay authentic; every other satellite is replaced by a counterfeit delayed by "
-        "`delay` m (growing at `rate` m/s). On a log this is bias injection on the complement; the truth "
-        "sidecar names the authentic set, whose solution is seed 004's reference position",
-        {
-            "keep": "authentic satellites (default 7), chosen at random with `seed` unless `svs` names the spoofed",
-            "delay": "m (default 300)",
-            "rate": "m/s (default 0)",
-            "svs": _SATELLITES["svs"],
-            "seed": _SATELLITES["seed"],
-            **_WINDOW,
-        },
+        "`keep` satellites stay authentic, every other satellite is a counterfeit delayed by `delay` m; the "
+        "sidecar names the authentic set (seed 004's reference solution)",
+        (
+            Param(
+                "keep", "count", 7, "authentic satellites, chosen at random with `seed` unless `svs` names the spoofed"
+            ),
+            Param("delay", "float", 300.0, "m"),
+            Param("rate", "float", 0.0, "m/s growth of the delay"),
+            _SVS,
+            _SEED,
+            *_WINDOW,
+        ),
     ),
-    Kind.CAPTURE: KindInfo(
+    Kind.CAPTURE: KindSpec(
         "real captures",
         "a spoofer takeover as real receivers log it: satellites lost and re-acquired over `lost` s (the fix "
         "drops out for a moment), reported accuracies and DOP inflated, noise and jamming indicator up, C/N0 "
@@ -156,42 +230,19 @@ KINDS: dict[Kind, KindInfo] = {
         "position pulled at `rate` m/s (`drag=ramp`), moved by `offset` m (`step`) or pulled to `offset` m "
         "over 60 s (`pull`), the reported velocity consistent with it; when the spoofer switches off at "
         "`end`, the receiver loses and re-acquires the real sky again",
-        {
-            "drag": "ramp, step or pull (default ramp)",
-            "rate": "m/s per axis of the ramp (default 3)",
-            "offset": "m per axis of a step or pull (default 200)",
-            "axes": "default en",
-            "lost": "s of the takeover transient (default 4)",
-            "jump": "m/s of the velocity transient (default 3)",
-            "acc": "reported accuracy inflation at the worst of the takeover (default 4)",
-            "cn0": "dB the spoofed signals are stronger than the real ones (default 4)",
-            "seed": "random seed of the transient (default 0)",
-            **_WINDOW,
-        },
+        (
+            Param("drag", "text", "ramp", "how the position is dragged: ramp, step or pull"),
+            Param("rate", "float", 3.0, "m/s per axis of the ramp"),
+            Param("offset", "float", 200.0, "m per axis of a step or pull"),
+            _axes("en"),
+            Param("lost", "float", 4.0, "s of the takeover transient"),
+            Param("jump", "float", 3.0, "m/s of the velocity transient"),
+            Param("acc", "float", 4.0, "reported accuracy inflation at the worst of the takeover"),
+            Param("cn0", "float", 4.0, "dB the spoofed signals are stronger than the real ones"),
+            Param("seed", "count", 0, "random seed of the transient"),
+            *_WINDOW,
+        ),
     ),
-}
-_DEFAULTS: dict[Kind, dict[str, Any]] = {
-    Kind.RAMP: {"rate": 2.0, "axes": "en", "vel": 0},
-    Kind.STEP: {"offset": 50.0, "axes": "en", "vel": 0},
-    Kind.HOVER: {"vel": 1},
-    Kind.VELOCITY_PULL: {"dv": 0.1, "axes": "n", "vel": 1},
-    Kind.POSITION_PULL: {"offset": 100.0, "axes": "e", "ramp": 50.0, "vel": 0},
-    Kind.SINGLE_ANTENNA: {"rate": 1.0, "axes": "en", "vel": 0},
-    Kind.PR_DELAY: {"delay": 300.0, "rate": 0.0, "seed": 0},
-    Kind.MEACONING: {"east": 500.0, "north": 0.0, "up": 0.0, "delay": 0.0},
-    Kind.BLOCKING: {"count": 2, "seed": 0},
-    Kind.SPOOFED_SUBSET: {"keep": 7, "delay": 300.0, "rate": 0.0, "seed": 0},
-    Kind.CAPTURE: {
-        "drag": "ramp",
-        "rate": 3.0,
-        "offset": 200.0,
-        "axes": "en",
-        "lost": 4.0,
-        "jump": 3.0,
-        "acc": 4.0,
-        "cn0": 4.0,
-        "seed": 0,
-    },
 }
 
 
@@ -218,38 +269,40 @@ class AttackSpec:
 
 
 def parse_attack(text: str) -> AttackSpec:
-    """`ramp:rate=2,axes=en,start=10` -> AttackSpec, with errors listing kinds and parameters."""
+    """`ramp:rate=2,axes=en,start=10` -> AttackSpec; every value parsed and checked by its kind's table."""
     name, _, rest = text.strip().partition(":")
     try:
         kind = Kind(name.strip().lower())
     except ValueError:
         raise AttackError(f"unknown attack kind {name!r}; kinds are {[k.value for k in Kind]}") from None
-    params: dict[str, Any] = dict(_DEFAULTS[kind])
+    spec = KINDS[kind]
+    params: dict[str, Any] = dict(spec.defaults)
     for item in filter(None, (p.strip() for p in rest.split(","))):
         key, sep, value = item.partition("=")
-        key = key.strip().lower()
-        if not sep or key not in KINDS[kind].params:
-            raise AttackError(f"{kind.value}: bad parameter {item!r}; parameters are {sorted(KINDS[kind].params)}")
-        if key in ("axes", "receiver", "svs", "drag"):
-            params[key] = value.strip()
-        else:
-            try:
-                params[key] = float(value)
-            except ValueError:
-                raise AttackError(f"{kind.value}: {key}={value!r} is not a number") from None
+        param = spec.param(key.strip().lower())
+        if not sep or param is None:
+            raise AttackError(
+                f"{kind.value}: bad parameter {item!r}; parameters are {sorted(p.name for p in spec.params)}"
+            )
+        params[param.name] = param.parse(kind, value)
     if kind == Kind.CAPTURE and params["drag"] not in ("ramp", "step", "pull"):
         raise AttackError(f"capture: drag={params['drag']!r}; use ramp, step or pull")
-    axes = str(params.get("axes", ""))
-    if axes and (set(axes) - set("enu") or len(set(axes)) != len(axes)):
-        raise AttackError(f"{kind.value}: axes={axes!r}; use a subset of e, n, u such as en")
-    for key in ("count", "keep", "seed"):
-        if key in params and (params[key] != int(params[key]) or params[key] < 0):
-            raise AttackError(f"{kind.value}: {key}={params[key]:g} must be a whole number >= 0")
     if "svs" in params:
         params.pop("count", None)  # named satellites replace a random choice of them
+    if params.get("start", 0.0) < 0:
+        raise AttackError(f"{kind.value}: start={params['start']} is before the log start (0)")
     if "end" in params and params["end"] <= params.get("start", 0.0):
         raise AttackError(f"{kind.value}: end={params['end']} is not after start={params.get('start', 0.0)}")
     return AttackSpec(kind, params)
+
+
+def attacks_markdown() -> str:
+    """The README's table of attack kinds, from KINDS (`spooflens.attacks.spec`)."""
+    lines = ["| kind | seed | effect | parameters (defaults) |", "|---|---|---|---|"]
+    for kind, spec in KINDS.items():
+        shown = ", ".join(p.shown for p in spec.params if p.name not in WINDOW_PARAMS)
+        lines.append(f"| `{kind.value}` | {spec.seed} | {spec.summary} | {shown or '-'} |")
+    return "\n".join(lines)
 
 
 @dataclass

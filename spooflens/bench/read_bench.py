@@ -7,6 +7,8 @@ baseline a ROS user would write). Goal: ours at least as fast (ratio <= 1) and u
 
 from __future__ import annotations
 
+import contextlib
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -107,12 +109,20 @@ def run_read_bench(
 
 @click.command("read")
 @click.option("--duration", default=3600.0, show_default=True, help="Seconds of log to synthesise.")
-@click.option("--workdir", type=click.Path(path_type=Path), default=Path("bench_data"), show_default=True)
-def command(duration: float, workdir: Path) -> int:
+@click.option(
+    "--workdir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Keep the synthetic MCAP here (reused by the next run); default: a temporary directory, removed after.",
+)
+def command(duration: float, workdir: Path | None) -> int:
     """Reader speed and memory on a synthetic 200 Hz IMU + 10 Hz fix ROS2 MCAP, beside rosbags."""
-    workdir.mkdir(parents=True, exist_ok=True)
-    with err_console.status("writing the synthetic MCAP and reading it twice..."):
-        r = run_read_bench(workdir, duration_s=duration)
+    with contextlib.ExitStack() as stack:
+        if workdir is None:
+            workdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="spooflens-bench-read-")))
+        workdir.mkdir(parents=True, exist_ok=True)
+        with err_console.status("writing the synthetic MCAP and reading it twice..."):
+            r = run_read_bench(workdir, duration_s=duration)
     t = Table(
         "reader",
         "wall (s)",

@@ -40,7 +40,7 @@ from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
 METHODS = ("KF", "GLRT", "MLRT (paper two-filter, l>0)", "MLRT (ramp, flat, l>0)", "MLRT calibrated")
-PAPER_TABLE1 = {
+PAPER_TABLE1: dict[str, dict[int, float | None]] = {
     "KF": {2: None, 3: 3.4, 5: 1.9},
     "GLRT": {2: 2.63, 3: 1.59, 5: 1.03},
     "MLRT": {2: 2.57, 3: 1.57, 5: 0.56},
@@ -90,7 +90,7 @@ def method_statistics(
         "MLRT calibrated": odds / (1 + odds),
     }
     if paper:
-        prior = np.linalg.inv(model.P0 + 1e-30 * np.eye(model.n_states)) * 1e-6
+        prior = np.asarray(np.linalg.inv(model.P0 + 1e-30 * np.eye(model.n_states)) * 1e-6, dtype=np.float64)
         vals = np.full(model.n_epochs, np.nan)
         for t in range(opts.paper_L + 1, model.n_epochs):
             res = paper_two_filter(model, t, opts.paper_L, prior_information=prior)
@@ -143,7 +143,7 @@ def minimum_rate(
     opts: BenchOptions, rates: tuple[float, ...] = (0.5, 1.0, 1.5, 1.8, 2.0, 2.5, 3.0), runs: int = 40
 ) -> dict[str, Any]:
     thr = default_thresholds(opts)
-    detected = {m: [] for m in opts.methods}
+    detected: dict[str, list[float]] = {m: [] for m in opts.methods}
     for rate in rates:
         hits = {m: 0 for m in opts.methods}
         for i in range(runs):
@@ -349,7 +349,7 @@ def command(
     if quick:
         runs, hours = min(runs, 5), min(hours, 10)
     opts = BenchOptions(runs=runs, equal_fa_hours=hours)
-    out: dict[str, object] = {}
+    out: dict[str, Any] = {}
     with progress(show_progress()) as report:
         out["paper"] = paper_scenario(opts, lambda d, n: report("paper scenario (Monte Carlo)", d, n))
         out["minimum_rate"] = minimum_rate(opts, runs=8 if quick else 40)
@@ -366,7 +366,7 @@ def command(
     return 0
 
 
-def _print_seed000(out: dict, runs: int) -> None:
+def _print_seed000(out: dict[str, Any], runs: int) -> None:
     out_console = console()
     paper = out["paper"]
     t = Table(

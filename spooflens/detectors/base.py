@@ -135,11 +135,11 @@ def alarm_intervals(
     starts = np.flatnonzero(edges == 1)
     stops = np.flatnonzero(edges == -1) - 1
     runs: list[tuple[int, int]] = []
-    for s, e in zip(starts, stops, strict=True):
-        if runs and t[s] - t[runs[-1][1]] <= merge_gap_s:
-            runs[-1] = (runs[-1][0], int(e))
+    for first, last in zip(starts.tolist(), stops.tolist(), strict=True):
+        if runs and t[first] - t[runs[-1][1]] <= merge_gap_s:
+            runs[-1] = (runs[-1][0], last)
         else:
-            runs.append((int(s), int(e)))
+            runs.append((first, last))
     out = []
     for s, e in runs:
         seg = np.asarray(statistic[s : e + 1], dtype=float)

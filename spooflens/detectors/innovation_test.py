@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from spooflens.detectors.kalman import ForwardResult
+from spooflens.navigation.loosely_coupled import quadratic_forms
 
 FloatArray = NDArray[np.float64]
 
@@ -22,9 +23,4 @@ def threshold(p_false_alarm: float = 1e-5, dof: int = 3) -> float:
 def position_nis(fwd: ForwardResult, rows: tuple[int, ...] = (0, 1, 2)) -> FloatArray:
     """eps_p^T S_pp^-1 eps_p per epoch (NaN where the position was not measured)."""
     idx = np.array(rows)
-    e = fwd.eps[:, idx]
-    S = fwd.S[:, idx][:, :, idx]
-    ok = np.isfinite(e).all(axis=1)
-    out = np.full(len(e), np.nan)
-    out[ok] = np.einsum("ni,ni->n", e[ok], np.linalg.solve(S[ok], e[ok][..., None])[..., 0])
-    return out
+    return quadratic_forms(fwd.eps[:, idx], fwd.S[:, idx][:, :, idx])

@@ -24,7 +24,7 @@ from scipy import stats
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import DetectorResult, Series, alarm_intervals
 from spooflens.evidence import Evidence
-from spooflens.navigation.loosely_coupled import NavSolution
+from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern
 
 FloatArray = NDArray[np.float64]
 POSITION, VELOCITY = (0, 1, 2), (3, 4, 5)
@@ -39,18 +39,7 @@ class InnovationTestOptions:
 
 def rows_nis(sol: NavSolution, rows: tuple[int, ...]) -> tuple[FloatArray, NDArray[np.int64]]:
     """NIS of the given measurement rows at every epoch they were used, and its degrees of freedom."""
-    idx = np.array(rows)
-    used = sol.used[:, idx]
-    dof = used.sum(axis=1).astype(np.int64)
-    nis = np.full(len(sol.t), np.nan)
-    for d in np.unique(dof[dof > 0]):
-        for pattern in np.unique(used[dof == d], axis=0):
-            k = np.flatnonzero((used == pattern).all(axis=1))
-            r = idx[pattern]
-            nu = sol.nu[k][:, r]
-            S = sol.S[k][:, r][:, :, r]
-            nis[k] = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-    return nis, dof
+    return nis_by_pattern(sol.nu, sol.S, sol.used[:, np.array(rows)], rows)
 
 
 def nis_test(

@@ -7,13 +7,13 @@ spooflens.statespace: x_k = A[k] x_{k-1} + w_k (A[0] unused), y_k = C[k] x_k + e
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -69,39 +69,13 @@ def _forward(A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.n
             P = 0.5 * (P + P.T)
         xp[k] = x
         Pp[k] = P
-        m = 0
-        for i in range(p):
-            if not math.isnan(y[k, i]):
-                m += 1
         for i in range(p):
             S_out[k, i, i] = 1.0
+        x, P, rows, e, S, Sinv, K, nis_k, logdet_k = masked_update(x, P, C[k], R[k], y[k])
+        m = rows.shape[0]
         if m > 0:
-            rows = np.empty(m, dtype=np.int64)
-            j = 0
-            for i in range(p):
-                if not math.isnan(y[k, i]):
-                    rows[j] = i
-                    j += 1
-            Ck = np.empty((m, n))
-            Rk = np.empty((m, m))
-            yk = np.empty(m)
-            for a in range(m):
-                Ck[a] = C[k, rows[a]]
-                yk[a] = y[k, rows[a]]
-                for b in range(m):
-                    Rk[a, b] = R[k, rows[a], rows[b]]
-            e = yk - Ck @ x
-            PCt = P @ Ck.T
-            S = Ck @ PCt + Rk
-            S = 0.5 * (S + S.T)
-            Sinv = np.linalg.inv(S)
-            K = PCt @ Sinv
-            x = x + K @ e
-            P = P - K @ PCt.T
-            P = 0.5 * (P + P.T)
-            nis[k] = e @ Sinv @ e
-            _, ld = np.linalg.slogdet(S)
-            logdet[k] = ld
+            nis[k] = nis_k
+            logdet[k] = logdet_k
             dof[k] = m
             for a in range(m):
                 eps[k, rows[a]] = e[a]
@@ -177,26 +151,9 @@ def information_update(
     Lam: np.ndarray, alpha: np.ndarray, Ck: np.ndarray, Rk: np.ndarray, yk: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Add one epoch's measurement (used rows only) to the information."""
-    m = 0
-    for i in range(yk.shape[0]):
-        if not math.isnan(yk[i]):
-            m += 1
-    if m == 0:
+    rows, Cm, Rm, ym = observed_parts(Ck, Rk, yk)
+    if rows.shape[0] == 0:
         return Lam, alpha
-    rows = np.empty(m, dtype=np.int64)
-    j = 0
-    for i in range(yk.shape[0]):
-        if not math.isnan(yk[i]):
-            rows[j] = i
-            j += 1
-    Cm = np.empty((m, Ck.shape[1]))
-    Rm = np.empty((m, m))
-    ym = np.empty(m)
-    for a in range(m):
-        Cm[a] = Ck[rows[a]]
-        ym[a] = yk[rows[a]]
-        for b in range(m):
-            Rm[a, b] = Rk[rows[a], rows[b]]
     Ri = np.linalg.inv(Rm)
     return Lam + Cm.T @ Ri @ Cm, alpha + Cm.T @ Ri @ ym
 

@@ -41,6 +41,7 @@ from spooflens.detectors.kalman import (
     information_predict_back,
     information_update,
 )
+from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -67,38 +68,12 @@ def _backward_covariance(
     A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, start: int, x: np.ndarray, P: np.ndarray
 ):
     """Paper's backward covariance filter from epoch `start` (prior x, P from later data) down to 0."""
-    p = y.shape[1]
     VB = np.zeros(start + 2)
     DB = np.zeros(start + 2)
     for i in range(start, -1, -1):
-        v, dd = 0.0, 0.0
-        m = 0
-        for a in range(p):
-            if not math.isnan(y[i, a]):
-                m += 1
-        if m > 0:
-            rows = np.empty(m, dtype=np.int64)
-            j = 0
-            for a in range(p):
-                if not math.isnan(y[i, a]):
-                    rows[j] = a
-                    j += 1
-            Ci = np.empty((m, x.shape[0]))
-            Ri = np.empty((m, m))
-            yi = np.empty(m)
-            for a in range(m):
-                Ci[a] = C[i, rows[a]]
-                yi[a] = y[i, rows[a]]
-                for b in range(m):
-                    Ri[a, b] = R[i, rows[a], rows[b]]
-            e = yi - Ci @ x
-            PCt = P @ Ci.T
-            S = Ci @ PCt + Ri
-            Sinv = np.linalg.inv(S)
-            v = e @ Sinv @ e
-            dd = np.linalg.slogdet(S)[1]
-            x = x + PCt @ (Sinv @ e)
-            P = P - PCt @ Sinv @ PCt.T
+        x, P, rows, _, _, _, _, v, dd = masked_update(x, P, C[i], R[i], y[i])
+        if rows.shape[0] == 0:
+            v = 0.0
         VB[i] = VB[i + 1] + v
         DB[i] = DB[i + 1] + dd
         if i > 0:
@@ -154,23 +129,9 @@ def _info_constant(
     c = 0.0
     for k in range(last, first, -1):
         yk = y[k]
-        m = 0
-        for a in range(yk.shape[0]):
-            if not math.isnan(yk[a]):
-                m += 1
+        rows, _, Rm, ym = observed_parts(C[k], R[k], yk)
+        m = rows.shape[0]
         if m > 0:
-            rows = np.empty(m, dtype=np.int64)
-            j = 0
-            for a in range(yk.shape[0]):
-                if not math.isnan(yk[a]):
-                    rows[j] = a
-                    j += 1
-            Rm = np.empty((m, m))
-            ym = np.empty(m)
-            for a in range(m):
-                ym[a] = yk[rows[a]]
-                for b in range(m):
-                    Rm[a, b] = R[k, rows[a], rows[b]]
             c += -0.5 * ym @ np.linalg.solve(Rm, ym) - 0.5 * (m * 1.8378770664093453 + np.linalg.slogdet(Rm)[1])
         Lam, alpha = information_update(Lam, alpha, C[k], R[k], yk)
         B, Qr = _noise_factor(Q[k], 1e-12)
@@ -226,10 +187,10 @@ def _full_jump_wj(
         info += G.T @ SG
         e = e - K[k] @ G
     _, logdet = np.linalg.slogdet(info)
-    return d @ np.linalg.solve(info, d), logdet
+    return float(d @ np.linalg.solve(info, d)), float(logdet)
 
 
-def full_jump_wj(model: LinearGaussianModel, t: int, m: FloatArray) -> FloatArray:
+def full_jump_wj(model: LinearGaussianModel, t: int, m: NDArray[np.integer] | FloatArray) -> FloatArray:
     """2 log LR of a full-state jump after m, flat prior of density 1, from Willsky-Jones signatures."""
     fwd = forward_filter(model.window(0, t + 1))
     A = np.ascontiguousarray(model.A[: t + 1])

@@ -57,7 +57,12 @@ def check_receiver(
     ratio = res.statistic / res.threshold
     series = [
         Series(f"{rid}/residual_test", t, ratio, "ratio", 1.0),
-        Series(f"{rid}/excluded_satellites", t, np.bincount(epoch[res.flag == FAULT], minlength=len(t)), "count"),
+        Series(
+            f"{rid}/excluded_satellites",
+            t,
+            np.bincount(epoch[res.flag == FAULT], minlength=len(t)).astype(float),
+            "count",
+        ),
     ]
     solvable = np.isfinite(sol.ecef_m).all(axis=1) | (res.dof >= 1)
     for name in sorted(set(sv[res.flag == FAULT])):

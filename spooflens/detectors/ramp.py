@@ -160,5 +160,6 @@ def ramp_statistics(
         log_prior,
         int(min_after),
     )
+    glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds = out
     # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
-    return RampStatistics(*out, candidates=cands)
+    return RampStatistics(glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds, candidates=cands)

@@ -205,11 +205,11 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
             f"; MODEL MISMATCH: position innovations are not white on this log (lag-1 autocorrelation "
             f"{st.whiteness:.2f} > {opts.max_whiteness}), so this test's alarms are advisory"
         )
-        for r in results[1:]:
-            r.reason += note
-            r.advisory = True
-    for r in results:
-        r.extras["innovation_whiteness"] = round(st.whiteness, 3)
+        for result in results[1:]:
+            result.reason += note
+            result.advisory = True
+    for result in results:
+        result.extras["innovation_whiteness"] = round(st.whiteness, 3)
     return results
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -293,9 +294,13 @@ def _alarms(rule: RuleResult, receivers: tuple[str, ...]) -> list[Alarm]:
     return [replace(ep.alarm, receiver_id=rid) for ep in rule.episodes for rid in receivers]
 
 
-def _histogram_bars(
-    x: FloatArray, edges: FloatArray, label: str, fits: list[tuple[str, stats.rv_continuous]]
-) -> list[Bars]:
+class _Distribution(Protocol):
+    """A fitted distribution (a frozen scipy.stats one): what the histogram bars need of it."""
+
+    def cdf(self, x: FloatArray) -> FloatArray: ...
+
+
+def _histogram_bars(x: FloatArray, edges: FloatArray, label: str, fits: list[tuple[str, _Distribution]]) -> list[Bars]:
     x = x[np.isfinite(x)]
     counts = np.histogram(x, edges)[0].astype(float)
     bars = [Bars(label, counts)]
@@ -313,7 +318,7 @@ def rule_histograms(rule: RuleResult, name: str, x_label: str) -> list[Histogram
         span = max(hi - lo, 1e-6)
         lo = 0.0 if lo < 0.5 * span else lo - 0.1 * span
         edges = np.linspace(lo, hi + 0.1 * span, 41)
-        fits = [
+        fits: list[tuple[str, _Distribution]] = [
             (f"Rayleigh fit, sigma_GNSS {rule.cal.rayleigh_sigma:.3g}", stats.rayleigh(scale=rule.cal.rayleigh_sigma))
         ]
         if rule.cal.nu > 0:

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic
 from spooflens.gnss.ephemeris import Klobuchar
@@ -29,7 +30,7 @@ from spooflens.navigation.single_point import SV_COLUMNS, SinglePointOptions, so
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-NS_TO_M = 0.299792458
+NS_TO_M = SPEED_OF_LIGHT_MPS * 1e-9
 AUTHENTIC = 7  # the paper's spoofing keeps the first 7 satellites of the order authentic
 
 

@@ -22,7 +22,7 @@ from rich.table import Table
 
 from spooflens.console import console, progress, show_progress
 from spooflens.detectors.base import DetectorResult
-from spooflens.epoch_table import EpochTable
+from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import SpooflensError
 from spooflens.fleet.offsets import (
     FleetHomology,
@@ -73,7 +73,7 @@ def run_fleet(
     for i, path in enumerate(logs):
         report("analysing logs", i, len(logs))
         try:
-            table = with_solved_fixes(read_log(path))
+            table = checked(with_solved_fixes(read_log(path)))
         except SpooflensError as err:
             notes.append(f"{path}: not read ({err}); left out")
             continue

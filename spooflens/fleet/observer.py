@@ -216,31 +216,37 @@ def design_n(
 
     if not sizes:
         return tuple(unpack(np.zeros(0))), "none free"
-    opts = {"maxiter": 4000, "xatol": 1e-9, "fatol": 1e-12}
+
+    def two_norm(v: FloatArray) -> float:
+        return float(np.linalg.norm(matrix(v), 2))
+
+    def power_norm(v: FloatArray) -> float:  # a smooth stand-in for the spectral radius, to start from
+        return float(np.linalg.norm(np.linalg.matrix_power(matrix(v), 16), "fro") ** (1.0 / 16.0))
+
+    def radius(v: FloatArray) -> float:
+        return float(spectral_radius(matrix(v)))
+
     r = optimize.minimize(
-        lambda v: float(np.linalg.norm(matrix(v), 2)), np.zeros(sum(sizes)), method="Nelder-Mead", options=opts
+        two_norm, np.zeros(sum(sizes)), method="Nelder-Mead", options={"maxiter": 4000, "xatol": 1e-9, "fatol": 1e-12}
     )
     if r.fun < 1.0:
         return tuple(unpack(r.x)), "minimum 2-norm"
     rng = np.random.default_rng(seed)
-    best = (np.inf, r.x)
+    best: tuple[float, FloatArray] = (np.inf, np.asarray(r.x, dtype=np.float64))
     for _ in range(starts):
-        v = optimize.minimize(
-            lambda v: float(np.linalg.norm(np.linalg.matrix_power(matrix(v), 16), "fro") ** (1.0 / 16.0)),
-            rng.normal(0.0, 2.0, sum(sizes)),
-            method="Nelder-Mead",
-            options={"maxiter": 1500},
+        start = optimize.minimize(
+            power_norm, rng.normal(0.0, 2.0, sum(sizes)), method="Nelder-Mead", options={"maxiter": 1500}
         ).x
-        r = optimize.minimize(lambda v: spectral_radius(matrix(v)), v, method="Nelder-Mead", options={"maxiter": 1500})
+        r = optimize.minimize(radius, start, method="Nelder-Mead", options={"maxiter": 1500})
         if r.fun < best[0]:
-            best = (float(r.fun), np.asarray(r.x, float))
+            best = (float(r.fun), np.asarray(r.x, dtype=np.float64))
     return tuple(unpack(best[1])), "minimum spectral radius"
 
 
 def lyapunov_certificate(M: FloatArray) -> tuple[FloatArray, float]:
     """Psi solving M^T Psi M - Psi = -I, and the smallest eigenvalue of [[Psi, Psi M], [M^T Psi, Psi]]
     (positive: the corrected matrix inequality holds, so M is Schur stable)."""
-    Psi = linalg.solve_discrete_lyapunov(M.T, np.eye(len(M)))
+    Psi = np.asarray(linalg.solve_discrete_lyapunov(M.T, np.eye(len(M))), dtype=np.float64)
     Psi = 0.5 * (Psi + Psi.T)
     lmi = np.block([[Psi, Psi @ M], [M.T @ Psi, Psi]])
     return Psi, float(np.min(np.linalg.eigvalsh(0.5 * (lmi + lmi.T))))

@@ -16,11 +16,13 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.constants import SPEED_OF_LIGHT_MPS
+
 FloatArray = NDArray[np.float64]
 
 GM_GPS = 3.986005e14  # m^3/s^2, IS-GPS-200's value (not WGS84's 3.986004418e14)
 OMEGA_E_GPS = 7.2921151467e-5  # rad/s
-C_MPS = 299792458.0
+C_MPS = SPEED_OF_LIGHT_MPS
 F_REL = -4.442807633e-10  # s/m^0.5, relativistic clock correction constant
 SECONDS_PER_WEEK = 604800.0
 GPS_L1_HZ = 1575.42e6
@@ -289,7 +291,8 @@ def states_at_transmission(
         codes, names = np.unique(sv, return_inverse=True)
         grid = np.round(t_tx / CLOCK_GRID_S).astype(np.int64)
         _, first, back = np.unique(grid * len(codes) + names.ravel(), return_index=True, return_inverse=True)
-        clock = satellite_states(eph, sv[first], grid[first] * CLOCK_GRID_S).clock_bias_m[back.ravel()]
+        at = np.asarray(grid[first] * CLOCK_GRID_S, dtype=np.float64)
+        clock = satellite_states(eph, sv[first], at).clock_bias_m[back.ravel()]
         edge = np.flatnonzero(~np.isfinite(clock))  # grid point outside the record's validity: ask at t_tx
         if len(edge):
             clock[edge] = satellite_states(eph, sv[edge], t_tx[edge]).clock_bias_m

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.constants import WGS84_E2
 from spooflens.gnss.ephemeris import C_MPS, OMEGA_E_GPS, SECONDS_PER_WEEK, Klobuchar
 
 FloatArray = NDArray[np.float64]
@@ -40,7 +41,7 @@ def azimuth_elevation(sv_ecef: FloatArray, rx_ecef: FloatArray) -> tuple[FloatAr
     x, y, z = rx_ecef[..., 0], rx_ecef[..., 1], rx_ecef[..., 2]
     lon = np.arctan2(y, x)
     # geodetic latitude is what the horizon is referred to; spherical is within 0.2 deg, plenty here
-    lat = np.arctan2(z, np.hypot(x, y) * (1.0 - 6.69437999014e-3))
+    lat = np.arctan2(z, np.hypot(x, y) * (1.0 - WGS84_E2))
     u = line_of_sight(sv_ecef, rx_ecef)
     sl, cl, sp, cp = np.sin(lon), np.cos(lon), np.sin(lat), np.cos(lat)
     e = -sl * u[..., 0] + cl * u[..., 1]
@@ -86,16 +87,16 @@ def klobuchar_delay(
 
 
 def atmospheric_delay(
-    rx_ecef: FloatArray, sv_ecef: FloatArray, t_gps_s: FloatArray, iono: Klobuchar | None
+    rx_ecef: FloatArray, sv_ecef: FloatArray, t_gps_s: FloatArray | None, iono: Klobuchar | None
 ) -> FloatArray:
-    """Troposphere plus (when the broadcast coefficients are known) ionosphere on L1, metres."""
+    """Troposphere plus (when the broadcast coefficients and the GPS time are known) ionosphere on L1, metres."""
     from spooflens.geodesy import ecef_to_geodetic
 
     lat_deg, lon_deg, h = ecef_to_geodetic(rx_ecef)
     lat, lon = np.radians(lat_deg), np.radians(lon_deg)
     az, el = azimuth_elevation(sv_ecef, rx_ecef)
     delay = tropospheric_delay(lat, h, el)
-    if iono is not None:
+    if iono is not None and t_gps_s is not None:
         delay = delay + klobuchar_delay(iono, lat, lon, az, el, t_gps_s)
     return delay
 
@@ -105,7 +106,7 @@ def expected_pseudorange(
     sv_clock_bias_m: FloatArray,
     rx_ecef: FloatArray,
     rx_clock_bias_m: FloatArray,
-    t_gps_s: FloatArray,
+    t_gps_s: FloatArray | None,
     iono: Klobuchar | None,
 ) -> FloatArray:
     """The pseudorange a receiver at `rx_ecef` with clock bias `rx_clock_bias_m` measures, noise aside."""

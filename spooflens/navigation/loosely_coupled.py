@@ -93,6 +93,37 @@ class FilterOptions:
     t_start: float | None = None
 
 
+def quadratic_forms(nu: FloatArray, S: FloatArray) -> FloatArray:
+    """nu_k^T S_k^-1 nu_k for a stack of innovations and covariances; NaN where either is not finite.
+    A singular covariance (a degenerate epoch of a long log) is solved by least squares, not refused."""
+    out = np.full(len(nu), np.nan)
+    ok = np.isfinite(nu).all(axis=1) & np.isfinite(S).all(axis=(1, 2))
+    if not ok.any():
+        return out
+    e, C = nu[ok], S[ok]
+    try:
+        weighted = np.linalg.solve(C, e[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        weighted = (np.linalg.pinv(C, hermitian=True) @ e[..., None])[..., 0]
+    out[ok] = np.einsum("ni,ni->n", e, weighted)
+    return out
+
+
+def nis_by_pattern(
+    nu: FloatArray, S: FloatArray, present: NDArray[np.bool_], rows: tuple[int, ...]
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """NIS of the measurement `rows` present at each epoch (`present`: epochs x len(rows)), over the
+    rows present there, and its degrees of freedom; the epochs are grouped by which rows they have."""
+    idx = np.array(rows)
+    dof = present.sum(axis=1).astype(np.int64)
+    nis = np.full(len(nu), np.nan)
+    for pattern in np.unique(present[dof > 0], axis=0):
+        k = np.flatnonzero((present == pattern).all(axis=1))
+        r = idx[pattern]
+        nis[k] = quadratic_forms(nu[k][:, r], S[k][:, r][:, :, r])
+    return nis, dof
+
+
 @dataclass
 class NavSolution:
     """The filter's record. Arrays are per GNSS epoch (M) unless named as per block. Measurement rows

@@ -68,7 +68,7 @@ class SinglePointSolution:
 
     @property
     def ok(self) -> NDArray[np.bool_]:
-        return np.isfinite(self.ecef_m).all(axis=1)
+        return np.asarray(np.isfinite(self.ecef_m).all(axis=1), dtype=bool)
 
     def geodetic(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         return ecef_to_geodetic(self.ecef_m)

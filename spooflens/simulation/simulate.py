@@ -127,7 +127,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
         imu_cols |= {"qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}
     step = max(1, round(sc.imu_hz / sc.gnss_hz))
     g_idx = np.arange(0, n, step)
-    receivers = [("/gps/fix", None)]
+    receivers: list[tuple[str, np.ndarray | None]] = [("/gps/fix", None)]
     if sc.second_receiver_lever_m is not None:
         receivers.append(("/gps2/fix", np.asarray(sc.second_receiver_lever_m)))
     fix_frames = []
@@ -152,7 +152,7 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
                 "h_acc_m": np.full(len(g_idx), float(np.sqrt(0.5 * (sig[0] ** 2 + sig[1] ** 2)))),
                 "v_acc_m": np.full(len(g_idx), float(sig[2])),
                 "vel_acc_mps": np.full(len(g_idx), sc.gnss.sigma_vel_mps),
-                "sats_used": 9.0 + (np.arange(len(g_idx)) // 200) % 3,
+                "sats_used": (9.0 + (np.arange(len(g_idx)) // 200) % 3).astype(np.float64),
             }
         lat_g, lon_g, h_g = add_enu_offset(lat[g_idx], lon[g_idx], h[g_idx], dpos)
         v = truth.v_enu[g_idx] + dvel

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.constants import STANDARD_GRAVITY
 from spooflens.geodesy import geodetic_to_ecef, radii
 from spooflens.navigation.rotations import euler_to_matrix
 
 FloatArray = NDArray[np.float64]
-G0 = 9.80665
+G0 = STANDARD_GRAVITY
 
 
 @dataclass(frozen=True)

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from readers.gnsslogger import FIX_NAMES, _unix_to_gps_ns
-from spooflens.epoch_table import EpochTable
+from readers.gnsslogger import FIX_NAMES
+from spooflens.epoch_table import EpochTable, gps_ns_of_unix_ns
 from spooflens.errors import WriterError
 
 
@@ -66,7 +66,7 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
         except ValueError:
             out.append(line)
             continue
-        t_ns = int(_unix_to_gps_ns(np.array([unix_ns]))[0]) if table.time_reference == "gps" else unix_ns
+        t_ns = int(gps_ns_of_unix_ns(unix_ns)) if table.time_reference == "gps" else unix_ns
         v = values.get(t_ns)
         if v is None:
             out.append(line)

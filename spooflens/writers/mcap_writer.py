@@ -16,6 +16,7 @@ ENCODINGS = ("ros2", "ros1", "json", "protobuf")
 def write_mcap(table: EpochTable, path: Path, encoding: str = "ros2", compression: str = "zstd") -> list[str]:
     """Write `table`; returns the streams that this encoding cannot carry (written nowhere)."""
     streams = out_streams(table)
+    encoder: RosEncoder | JsonEncoder | ProtobufEncoder
     if encoding in ("ros2", "ros1"):
         ros = RosEncoder(2 if encoding == "ros2" else 1)
         schema_encoding = "ros2msg" if encoding == "ros2" else "ros1msg"

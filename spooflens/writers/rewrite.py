@@ -31,8 +31,9 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from readers import formats, foxglove_messages, ros_messages, sniff_format
+from readers.streams import match_velocities, velocity_receiver
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import WriterError
+from spooflens.errors import WriterError, one_line
 
 # stamp ns -> (lat, lon, h, ve, vn, vu) per receiver topic
 Replacement = dict[int, tuple[float, float, float, float, float, float]]
@@ -41,39 +42,30 @@ Replacement = dict[int, tuple[float, float, float, float, float, float]]
 @dataclasses.dataclass
 class _Plan:
     fixes: dict[str, Replacement]
-    velocity_of: dict[str, tuple[str, np.ndarray]]  # velocity topic -> (receiver topic, sorted fix stamps)
+    # velocity topic -> (receiver topic, velocity stamp -> the fix stamp whose values it carries)
+    velocity_of: dict[str, tuple[str, dict[int, int]]]
     changed: int = 0
 
 
-def _plan(table: EpochTable, spoofed: pd.DataFrame, velocities: bool) -> _Plan:
+def _plan(table: EpochTable, spoofed: pd.DataFrame, velocities: bool, velocity_stamps: dict[str, np.ndarray]) -> _Plan:
+    """What to write: each receiver's fix values by stamp, and each velocity message's fix, matched as
+    the reader matched them (`readers.streams.match_velocities`, to the receiver the reader chose)."""
     fixes: dict[str, Replacement] = {}
     for rid, rows in spoofed.groupby("receiver_id", sort=False):
         t_ns = table.absolute_ns(rows["t_s"].to_numpy())
         vals = rows[["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(float)
         fixes[str(rid)] = {int(t): tuple(v) for t, v in zip(t_ns, vals, strict=True)}
-    velocity_of: dict[str, tuple[str, np.ndarray]] = {}
+    velocity_of: dict[str, tuple[str, dict[int, int]]] = {}
     if velocities:
         for s in table.streams:
-            if s.role == "vel":
-                target = max(fixes, key=lambda r: len(_common_prefix(r, s.topic)))
-                velocity_of[s.topic] = (target, np.array(sorted(fixes[target])))
+            if s.role != "vel" or s.topic not in velocity_stamps or not fixes:
+                continue
+            target = s.receiver if s.receiver in fixes else velocity_receiver(s.topic, list(fixes), None)
+            fix_ns = np.array(sorted(fixes[target]), dtype=np.int64)
+            vel_ns = velocity_stamps[s.topic]
+            match = match_velocities(fix_ns, vel_ns)
+            velocity_of[s.topic] = (target, {int(vel_ns[j]): int(fix_ns[i]) for i, j in enumerate(match) if j >= 0})
     return _Plan(fixes, velocity_of)
-
-
-def _common_prefix(a: str, b: str) -> str:
-    n = 0
-    while n < min(len(a), len(b)) and a[n] == b[n]:
-        n += 1
-    return a[:n]
-
-
-def _nearest(stamps: np.ndarray, t: int) -> int | None:
-    if not len(stamps):
-        return None
-    i = int(np.clip(np.searchsorted(stamps, t), 1, len(stamps) - 1)) if len(stamps) > 1 else 0
-    best = i if len(stamps) == 1 or abs(stamps[i] - t) < abs(stamps[i - 1] - t) else i - 1
-    period = np.median(np.diff(stamps)) if len(stamps) > 1 else 1e9
-    return int(stamps[best]) if abs(stamps[best] - t) <= period / 2 else None
 
 
 def _ros_stamp(msg: Any) -> int:
@@ -98,8 +90,8 @@ class _RosEditor:
             return bytes(self.serialize(ros_messages.edit(kind, msg, values, bool(self.plan.velocity_of)), msgtype))
         if kind in ("twist", "twist_cov") and topic in self.plan.velocity_of:
             msg = self.deserialize(raw, msgtype)
-            target, stamps = self.plan.velocity_of[topic]
-            match = _nearest(stamps, _ros_stamp(msg) or log_time)
+            target, fix_of = self.plan.velocity_of[topic]
+            match = fix_of.get(_ros_stamp(msg) or log_time)
             if match is None:
                 return None
             self.plan.changed += 1
@@ -135,19 +127,62 @@ def _rewrite_bag(src: Path, dst: Path, plan: _Plan) -> None:
                 writer.write(conns[c.topic], t, new if new is not None else raw)
 
 
-def _rewrite_mcap(src: Path, dst: Path, plan: _Plan) -> None:
+def _mcap_typestores(src: Path, summary: Any) -> tuple[Any, Any]:
+    """ROS2 and ROS1 typestores with every ROS schema of an MCAP registered."""
     ros2, ros1 = get_typestore(Stores.EMPTY), get_typestore(Stores.EMPTY)
+    try:
+        for s in summary.schemas.values():
+            if s.encoding in ("ros2msg", "ros2idl"):
+                text = s.data.decode()
+                ros2.register(get_types_from_msg(text, s.name) if s.encoding == "ros2msg" else get_types_from_idl(text))
+            elif s.encoding == "ros1msg":
+                ros1.register(get_types_from_msg(s.data.decode(), s.name))
+    except Exception as err:
+        raise WriterError(f"{src}: a message schema cannot be read ({one_line(err)}); no spoofed copy made") from err
+    return ros2, ros1
+
+
+def _mcap_summary(src: Path, reader: Any) -> Any:
+    summary = reader.get_summary()
+    if summary is None:
+        raise WriterError(
+            f"{src}: MCAP without a summary section cannot be rewritten; "
+            "read it and write a fresh copy with `spooflens simulate`-style writers"
+        )
+    return summary
+
+
+def _velocity_stamps_mcap(src: Path, topics: list[str]) -> dict[str, np.ndarray]:
+    """The stamp the reader gave each message of the velocity topics (header stamp, else log time)."""
+    stamps: dict[str, list[int]] = {t: [] for t in topics}
+    with src.open("rb") as f:
+        reader = make_reader(f)
+        ros2, ros1 = _mcap_typestores(src, _mcap_summary(src, reader))
+        for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
+            if schema is None or channel.message_encoding not in ("cdr", "ros1"):
+                continue
+            store = ros2.deserialize_cdr if channel.message_encoding == "cdr" else ros1.deserialize_ros1
+            stamps[channel.topic].append(_ros_stamp(store(message.data, schema.name)) or message.log_time)
+    return {t: np.array(v, dtype=np.int64) for t, v in stamps.items()}
+
+
+def _velocity_stamps_bag(src: Path, topics: list[str]) -> dict[str, np.ndarray]:
+    stamps: dict[str, list[int]] = {t: [] for t in topics}
+    with AnyReader([src]) as reader:
+        conns = [c for c in reader.connections if c.topic in stamps]
+        for c, t, raw in reader.messages(connections=conns):
+            stamps[c.topic].append(_ros_stamp(reader.deserialize(raw, c.msgtype)) or t)
+    return {t: np.array(v, dtype=np.int64) for t, v in stamps.items()}
+
+
+def _rewrite_mcap(src: Path, dst: Path, plan: _Plan) -> None:
     protobuf = ProtobufDecoderFactory()
-    cdr_editor = _RosEditor(plan, lambda r, t: ros2.deserialize_cdr(r, t), ros2.serialize_cdr)
-    ros1_editor = _RosEditor(plan, lambda r, t: ros1.deserialize_ros1(r, t), ros1.serialize_ros1)
     with src.open("rb") as f, dst.open("wb") as out:
         reader = make_reader(f)
-        summary = reader.get_summary()
-        if summary is None:
-            raise WriterError(
-                f"{src}: MCAP without a summary section cannot be rewritten; "
-                "read it and write a fresh copy with `spooflens simulate`-style writers"
-            )
+        summary = _mcap_summary(src, reader)
+        ros2, ros1 = _mcap_typestores(src, summary)
+        cdr_editor = _RosEditor(plan, lambda r, t: ros2.deserialize_cdr(r, t), ros2.serialize_cdr)
+        ros1_editor = _RosEditor(plan, lambda r, t: ros1.deserialize_ros1(r, t), ros1.serialize_ros1)
         w = Writer(out, compression=CompressionType.ZSTD)
         header = reader.get_header()
         w.start(profile=header.profile, library="spooflens inject")
@@ -156,12 +191,6 @@ def _rewrite_mcap(src: Path, dst: Path, plan: _Plan) -> None:
             cid: w.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), dict(c.metadata))
             for cid, c in summary.channels.items()
         }
-        for s in summary.schemas.values():
-            if s.encoding in ("ros2msg", "ros2idl"):
-                text = s.data.decode()
-                ros2.register(get_types_from_msg(text, s.name) if s.encoding == "ros2msg" else get_types_from_idl(text))
-            elif s.encoding == "ros1msg":
-                ros1.register(get_types_from_msg(s.data.decode(), s.name))
         for schema, channel, message in reader.iter_messages(log_time_order=False):
             data = message.data
             if schema is not None:
@@ -240,8 +269,11 @@ def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochT
 
 def rewrite_container(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """MCAP files and ROS bags: every message copied, the fix messages edited in place."""
-    plan = _plan(table, spoofed.fixes, velocities)
-    if sniff_format(src) == "mcap":
+    is_mcap = sniff_format(src) == "mcap"
+    vel_topics = [s.topic for s in table.streams if s.role == "vel"] if velocities else []
+    stamps = (_velocity_stamps_mcap if is_mcap else _velocity_stamps_bag)(src, vel_topics) if vel_topics else {}
+    plan = _plan(table, spoofed.fixes, velocities, stamps)
+    if is_mcap:
         _rewrite_mcap(src, dst, plan)
     else:
         _rewrite_bag(src, dst, plan)

@@ -1,0 +1,146 @@
+"""Values no sensor produces, in any numeric column: repaired (rows dropped and listed) or refused with
+one line, never an internal error from the analysis; and no analysis of a table holding them."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from pipeline_support import circling_table
+
+from readers import read_log
+from spooflens.cli import main
+from spooflens.epoch_table import checked
+from spooflens.errors import AnalysisError
+from spooflens.pipeline import analyze_table
+from spooflens.writers import write_log
+
+EXTREMES = (1e300, -1e308, 1e308, np.nan, np.inf, -np.inf)
+
+
+@pytest.fixture(scope="module")
+def clean_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("clean") / "log"
+    write_log(circling_table(seconds=120.0), path, "csv")
+    return path
+
+
+def _with_values(src: Path, dst: Path, file: str, column: str, rows: list[int], value: float) -> Path:
+    """A copy of a CSV log with `value` written into `column` of `file` at data `rows`."""
+    import shutil
+
+    shutil.copytree(src, dst)
+    text = (dst / file).read_text().splitlines()
+    header = next(i for i, line in enumerate(text) if not line.startswith("#"))
+    col = text[header].split(",").index(column)
+    for r in rows:
+        cells = text[header + 1 + r].split(",")
+        cells[col] = repr(float(value))
+        text[header + 1 + r] = ",".join(cells)
+    (dst / file).write_text("\n".join(text) + "\n")
+    return dst
+
+
+def _analyse(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, list[str]]:
+    code = main(["analyze", str(log), "-o", str(tmp_path / "x.rrd"), "--json", str(tmp_path / "x.json"), "--quiet"])
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize(
+    ("file", "column"),
+    [
+        ("fixes.csv", "lat_deg"),
+        ("fixes.csv", "lon_deg"),
+        ("fixes.csv", "height_m"),
+        ("fixes.csv", "vel_e_mps"),
+        ("fixes.csv", "h_acc_m"),
+        ("fixes.csv", "sats_used"),
+        ("imu.csv", "ax_mps2"),
+        ("imu.csv", "wz_radps"),
+    ],
+)
+def test_extreme_values_in_any_column_are_dropped_or_cleared_and_listed(
+    clean_csv: Path, tmp_path: Path, file: str, column: str
+) -> None:
+    clean = read_log(clean_csv)
+    for k, value in enumerate(EXTREMES):
+        log = _with_values(clean_csv, tmp_path / f"v{k}", file, column, [10, 11, 40], value)
+        table = read_log(log)
+        frame = table.imu if file == "imu.csv" else table.fixes
+        numbers = frame.select_dtypes("number").to_numpy(dtype=float)
+        assert np.all(np.abs(numbers[np.isfinite(numbers)]) < 1e15), (column, value)
+        listed = sum(s.count for s in table.skipped if s.stream in ("/gps/fix", "/imu"))
+        if column in ("vel_e_mps", "h_acc_m", "sats_used"):  # optional: the value is cleared, the fix kept
+            # NaN is the schema's "not known": nothing to list; anything else impossible is cleared and listed
+            assert len(table.fixes) == len(clean.fixes) and listed == (0 if np.isnan(value) else 3), (column, value)
+            assert frame[column].isna().sum() == 3
+        else:  # required: the row goes
+            assert len(frame) == len(clean.imu if file == "imu.csv" else clean.fixes) - 3, (column, value)
+            assert listed == 3, (column, value, [str(s) for s in table.skipped])
+
+
+@pytest.mark.parametrize("value", [1e300, -1e308, np.inf])
+def test_analyze_on_extreme_imu_and_fix_values_never_fails_inside(
+    clean_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], value: float
+) -> None:
+    log = _with_values(clean_csv, tmp_path / "a", "imu.csv", "az_mps2", list(range(100, 400, 7)), value)
+    log = _with_values(log, tmp_path / "b", "fixes.csv", "height_m", [20, 21, 22], value)
+    code, err = _analyse(log, tmp_path, capsys)
+    assert code == 0 and not err  # dropped and listed: a repair, not damage
+
+
+def test_an_mcap_with_extreme_values_is_analysed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    table = circling_table(seconds=120.0)
+    table.imu.loc[500:520, "ax_mps2"] = 1e300
+    table.imu.loc[600:610, "wz_radps"] = -1e308
+    table.fixes.loc[30:32, "lat_deg"] = 1e300
+    write_log(table, tmp_path / "x.mcap", "mcap-ros2")
+    read = read_log(tmp_path / "x.mcap")
+    reasons = [str(s) for s in read.skipped]
+    assert any("/imu: skipped 32" in r and "above 200 g" in r for r in reasons), reasons
+    assert any("/gps/fix: skipped 3" in r and "out of range" in r for r in reasons), reasons
+    code, err = _analyse(tmp_path / "x.mcap", tmp_path, capsys)
+    assert code == 0 and not err
+
+
+def test_the_pipeline_refuses_a_table_with_impossible_values_in_one_line() -> None:
+    table = copy.copy(circling_table(seconds=60.0))
+    table.fixes = table.fixes.copy()
+    table.fixes.loc[5, "height_m"] = 1e300
+    table.imu = table.imu.copy()
+    table.imu.loc[7, "wx_radps"] = np.inf
+    with pytest.raises(AnalysisError, match=r"values no sensor produces \(.*fixes: 1 rows with height outside") as err:
+        analyze_table(table)
+    assert "\n" not in str(err.value) and "imu: 1 rows with NaN specific force" in str(err.value)
+    cleaned = checked(table)  # the way out the message names
+    assert len(cleaned.fixes) == len(table.fixes) - 1 and len(cleaned.imu) == len(table.imu) - 1
+    assert {(s.stream, s.reason, s.count) for s in cleaned.skipped} >= {
+        ("/imu", "NaN specific force or angular rate", 1),
+        ("/gps/fix", "height outside -2 km .. 100 km", 1),
+    }
+
+
+def test_nan_and_infinite_pseudoranges_are_counted(tmp_path: Path) -> None:
+    import shutil
+
+    from conftest import SAMPLE_LOGS
+
+    log = tmp_path / "raw"
+    shutil.copytree(SAMPLE_LOGS / "meaconed_raw", log)
+    obs = (log / "observations.csv").read_text().splitlines()
+    header = next(i for i, line in enumerate(obs) if not line.startswith("#"))
+    col = obs[header].split(",").index("pseudorange_m")
+    for k, bad in zip(range(header + 1, header + 31, 3), ["nan", "inf", "-inf", "1e300", "0"] * 2, strict=True):
+        cells = obs[k].split(",")
+        cells[col] = bad
+        obs[k] = ",".join(cells)
+    (log / "observations.csv").write_text("\n".join(obs) + "\n")
+    table = read_log(log)
+    counts = {s.reason: s.count for s in table.skipped}
+    assert counts["NaN or infinite pseudorange"] == 6
+    assert counts["pseudorange outside 1,000 .. 100,000 km"] == 4
+    assert len(table.observations) == len(read_log(SAMPLE_LOGS / "meaconed_raw").observations) - 10
+    assert isinstance(table.observations, pd.DataFrame)

@@ -1,0 +1,57 @@
+"""The one NaN-masked Kalman update against a plain numpy update written out from the textbook."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spooflens.kalman_update import masked_update, observed_rows
+
+
+def _plain(x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray):
+    """Textbook update on the observed rows, with numpy's own solve (no inverse kept)."""
+    keep = ~np.isnan(y)
+    Ck, Rk, yk = C[keep], R[np.ix_(keep, keep)], y[keep]
+    S = Ck @ P @ Ck.T + Rk
+    K = np.linalg.solve(S, Ck @ P).T  # P C^T S^-1, S symmetric
+    e = yk - Ck @ x
+    return x + K @ e, (np.eye(len(x)) - K @ Ck) @ P, e, S, float(e @ np.linalg.solve(S, e)), np.linalg.slogdet(S)[1]
+
+
+def _spd(rng: np.random.Generator, n: int) -> np.ndarray:
+    a = rng.normal(size=(n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_masked_update_matches_the_plain_update(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n, p = int(rng.integers(2, 16)), int(rng.integers(1, 7))
+    x, P, C, R = rng.normal(size=n), _spd(rng, n), rng.normal(size=(p, n)), _spd(rng, p)
+    y = rng.normal(size=p) * 10
+    y[rng.random(p) < 0.4] = np.nan
+    if np.isnan(y).all():
+        y[0] = 1.0
+    x1, P1, rows, e, S, Sinv, K, nis, logdet = masked_update(x, P, C, R, y)
+    x2, P2, e2, S2, nis2, logdet2 = _plain(x, P, C, R, y)
+    np.testing.assert_array_equal(rows, np.flatnonzero(~np.isnan(y)))
+    np.testing.assert_allclose(x1, x2, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(P1, P2, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(e, e2, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(S, S2, rtol=1e-12)
+    np.testing.assert_allclose(Sinv @ S, np.eye(len(rows)), atol=1e-9)
+    np.testing.assert_allclose(K, P @ C[rows].T @ np.linalg.inv(S2), rtol=1e-9, atol=1e-12)
+    assert nis == pytest.approx(nis2, rel=1e-9) and logdet == pytest.approx(logdet2, rel=1e-9)
+    np.testing.assert_allclose(P1, P1.T, atol=0)  # symmetrised
+
+
+def test_nothing_observed_leaves_the_state_alone() -> None:
+    rng = np.random.default_rng(0)
+    x, P = rng.normal(size=4), _spd(rng, 4)
+    x1, P1, rows, _e, _S, _Sinv, K, nis, logdet = masked_update(
+        x, P, rng.normal(size=(3, 4)), _spd(rng, 3), np.full(3, np.nan)
+    )
+    assert len(rows) == 0 and K.shape == (4, 0) and np.isnan(nis) and logdet == 0.0
+    np.testing.assert_array_equal(x1, x)
+    np.testing.assert_array_equal(P1, P)
+    np.testing.assert_array_equal(observed_rows(np.array([np.nan, 1.0, np.nan, 2.0])), [1, 3])
