@@ -189,7 +189,7 @@ def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None
     for spec in analyses():
         missing = spec.missing(ctx.table)
         if missing:
-            ctx.results.extend(_not_run(spec, "needs " + ", ".join(missing)))
+            ctx.results.extend(_not_run(spec, "needs " + ", ".join(dict.fromkeys(missing))))
             continue
         if on_step:
             on_step(spec.name)
