@@ -59,6 +59,17 @@ def test_receiver_evidence_is_quiet_on_a_clean_log_and_sees_a_capture(multirotor
     assert "reported horizontal accuracy" in text and "fix lost" in text
 
 
+def test_a_clean_multirotor_flight_is_clean_and_its_imu_needs_no_inflation(multirotor) -> None:
+    """Climb-out, hover and cruise: the INS follows the whole flight, so the learned IMU noise stays at
+    its preset and nothing is called spoofed (a multirotor tilts its thrust; it never pitches up 90
+    degrees to climb vertically, which an earlier truth did and which the filter could not follow)."""
+    assert np.degrees(np.abs(multirotor.truth.pitch)).max() < 15.0
+    analysis = analyze_table(multirotor.table)
+    assert not analysis.verdict.spoofed
+    nav = analysis.results[[r.name for r in analysis.results].index("navigation")]
+    assert "IMU noise 1 x preset" in nav.reason or "IMU noise 0." in nav.reason, nav.reason
+
+
 def test_the_noise_is_learned_from_the_fixes_not_from_what_the_receiver_reports(multirotor) -> None:
     from spooflens.analysis import AnalysisContext, AnalyzeOptions
 

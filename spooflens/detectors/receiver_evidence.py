@@ -87,13 +87,12 @@ def robust_z(x: FloatArray, direction: int, floor: float, relative_floor: float)
     return np.abs(z) if direction == 0 else direction * z
 
 
-def _windowed_max(t: FloatArray, z: FloatArray, half_s: float) -> FloatArray:
-    """max of z over [t - half_s, t + half_s] (NaN-aware), for indicators that change seconds apart."""
-    lo = np.searchsorted(t, t - half_s, side="left")
-    hi = np.searchsorted(t, t + half_s, side="right")
-    zz = np.nan_to_num(z, nan=-np.inf)
-    out = np.array([zz[a:b].max() if b > a else -np.inf for a, b in zip(lo, hi, strict=True)])
-    return np.where(np.isfinite(out), out, np.nan)
+def _windowed_max(t: FloatArray, z: FloatArray, window_s: float) -> FloatArray:
+    """max of z over the trailing [t - window_s, t] (NaN-aware), for indicators that change seconds apart.
+    Trailing, so a joint change is raised when its second indicator moves, never before the first did."""
+    index = pd.to_timedelta(t, unit="s")
+    rolled = pd.Series(z, index=index).rolling(pd.Timedelta(seconds=window_s), closed="both", min_periods=1)
+    return rolled.max().to_numpy(dtype=float)
 
 
 def _fix_gaps(t: FloatArray, factor: float) -> FloatArray:
@@ -141,7 +140,7 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         return None
     names = list(z_cols)
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
-    Zw = np.stack([_windowed_max(t, Z[:, i], opts.window_s / 2) for i in range(Z.shape[1])], axis=1) if names else Z
+    Zw = np.stack([_windowed_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
     beyond = np.nan_to_num(Zw, nan=0.0) > opts.z_alarm
     count = beyond.sum(axis=1).astype(float)
     joint = count >= opts.min_indicators

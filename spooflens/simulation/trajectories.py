@@ -3,7 +3,8 @@
 A trajectory is a list of manoeuvre segments (duration, longitudinal acceleration, turn rate, climb
 rate), blended smoothly so accelerations have no steps. Speed, course and vertical speed integrate
 from the segments; attitude follows the motion (yaw = course, pitch = flight-path angle, roll = the
-coordinated-turn bank angle for aircraft, zero for surface vehicles); position integrates the
+coordinated-turn bank angle for aircraft, zero for surface vehicles; a multirotor instead tilts its
+thrust axis along the acceleration it needs and stays level in a vertical climb); position integrates the
 velocity with the trapezoid rule on the ellipsoid, the same rule the mechanization uses, so the
 sampled truth is consistent with the IMU derived from it.
 """
@@ -41,6 +42,7 @@ class Profile:
     segments: tuple[Segment, ...]
     banked_turns: bool  # aircraft roll into turns; ships and cars do not
     blend_s: float = 2.0  # manoeuvre changes are smoothed over this long
+    thrust_tilt: bool = False  # a multirotor: body up along the thrust (no nose-up to the flight path)
 
     @property
     def duration_s(self) -> float:
@@ -109,8 +111,15 @@ def generate(profile: Profile, rate_hz: float) -> Truth:
     climb = _blended(t, profile, "climb_mps")
     horizontal = np.sqrt(np.maximum(speed**2 - climb**2, 0.0))
     v = np.stack([horizontal * np.cos(course), horizontal * np.sin(course), climb], axis=-1)
-    pitch = np.arctan2(climb, np.maximum(horizontal, 1e-9))
-    roll = np.arctan2(-speed * turn, G0) if profile.banked_turns else np.zeros_like(t)
+    if profile.thrust_tilt:
+        # the thrust carries gravity plus the manoeuvre's acceleration: forward acceleration pitches the
+        # nose down, a left turn's centripetal acceleration rolls left (negative roll for a FLU body)
+        lift = G0 + np.gradient(climb, t)
+        pitch = -np.arctan2(_blended(t, profile, "accel_mps2") * (speed > 0), lift)
+        roll = -np.arctan2(horizontal * turn, lift)
+    else:
+        pitch = np.arctan2(climb, np.maximum(horizontal, 1e-9))
+        roll = np.arctan2(-speed * turn, G0) if profile.banked_turns else np.zeros_like(t)
     # a left (positive) turn banks left wing down, which is negative roll for a FLU body
     yaw = course
     C = euler_to_matrix(roll, pitch, yaw)
@@ -213,6 +222,7 @@ PROFILES: dict[str, Profile] = {
         ),
         banked_turns=False,
         blend_s=2.0,
+        thrust_tilt=True,
     ),
     # Ground vehicle: accelerate, turn, brake, stop, go again (5 min).
     "ground": Profile(
