@@ -119,6 +119,23 @@ def test_code_jump_without_the_carrier_is_taken_for_multipath(station_log) -> No
     assert ch.confirmed()[300, j] and kalman_predictor(ch, 24.0).alarm[300, j]
 
 
+def test_without_carrier_a_one_epoch_code_spike_is_a_glitch_and_a_held_delay_is_not(station_log) -> None:
+    """A phone that logs no carrier (the real Android log of 2016-08-22: G12 44 m off for one epoch)."""
+    grid, _ = _changes(station_log)
+    grid = replace(grid, carrier_m=np.full_like(grid.carrier_m, np.nan))
+    j = int(np.flatnonzero(np.isfinite(grid.pseudorange_m[300]))[1])
+    ref = station_reference(grid, Station("stn", STATION, "test"))
+    spike = grid.pseudorange_m.copy()
+    spike[300, j] += 44.0
+    ch = pseudorange_changes(replace(grid, pseudorange_m=spike), ref, None)
+    assert ch.code_spikes()[300, j] and ch.code_spikes()[301, j] and not ch.confirmed()[300:302, j].any()
+    assert not kalman_predictor(ch, 24.0).alarm[:, j].any()
+    held = grid.pseudorange_m.copy()
+    held[300:, j] += 44.0  # the delay a spoofer imposes and keeps
+    ch = pseudorange_changes(replace(grid, pseudorange_m=held), ref, None)
+    assert not ch.code_spikes()[300, j] and ch.confirmed()[300, j] and kalman_predictor(ch, 24.0).alarm[300, j]
+
+
 def test_compensation_restarts_with_each_arc() -> None:
     v = np.array([[1.0], [2.0], [np.nan], [4.0], [8.0]])
     alarm = np.array([[True], [True], [False], [True], [False]])

@@ -35,7 +35,9 @@ whole signal, so the carrier moves with the code; code multipath moves the code 
 pair the one change beyond 5 sigma is a 3.5 m code jump of a satellite at 12 deg the carrier did not
 share). Where the carrier was tracked, an alarm needs it to have moved at least half as far the same
 way, unless code and carrier disagree by more than `CODE_ONLY_LIMIT_M` (30 m; more than C/A-code
-multipath reaches), which no real signal does.
+multipath reaches), which no real signal does. Where no carrier was tracked (phones often log none), a
+code change undone at the next epoch (a one-epoch spike: a tracking glitch, as the real Android log of
+2016-08-22 shows on G12 by 44 m) is not confirmed either: a spoofer holds the delay it imposes.
 An alarmed satellite's predictor coasts (the spoofed value is not learnt: the filter skips its update, the
 network is fed its own prediction) for at most `max_coast` epochs, then restarts at the new level.
 
@@ -81,9 +83,20 @@ class PseudorangeChanges:
         """Cells whose code change the carrier confirms (module notes): no carrier to ask, the carrier moved
         at least half as far the same way, or code and carrier disagree by more than multipath can."""
         zc, zp = self.z_median, self.carrier_z
-        return np.asarray(
-            ~np.isfinite(zp) | (zp * zc >= 0.5 * zc**2) | (np.abs(zc - zp) > code_only_limit_m), dtype=bool
-        )
+        carrier_agrees = ~np.isfinite(zp) | (zp * zc >= 0.5 * zc**2) | (np.abs(zc - zp) > code_only_limit_m)
+        return np.asarray(carrier_agrees & ~self.code_spikes(), dtype=bool)
+
+    def code_spikes(self) -> BoolArray:
+        """Cells without carrier whose code change the next epoch undoes (or that undo the previous one's):
+        a one-epoch jump and its return leave the pseudorange where it was."""
+        zc, zp = self.z_median, self.carrier_z
+        nxt = np.full_like(zc, np.nan)
+        nxt[:-1] = zc[1:]
+        with np.errstate(invalid="ignore"):
+            start = np.isfinite(nxt) & (np.abs(zc + nxt) < 0.5 * np.abs(zc))
+        spike = start.copy()
+        spike[1:] |= start[:-1]  # the return
+        return np.asarray(spike & ~np.isfinite(zp), dtype=bool)
 
 
 def elevation_factor(elevation_rad: FloatArray) -> FloatArray:
