@@ -67,6 +67,9 @@ class CoastingOptions:
     # GNSS must also have moved this far from the reference: real receivers wander and jump by metres
     # (an SBAS solution converging, a correction switching), which no spoofing verdict should rest on
     min_departure_m: float = 10.0
+    # or its velocity this far from the reference's: a velocity pull is metres off only after many seconds,
+    # while its velocity is off from the first pulled fix, when a young coast is still sharp
+    min_departure_mps: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -233,7 +236,9 @@ def coasting_check(
     ratio = _ratio(sol, opts.p_disagree)
     kappa = envelope.at(t - t_ex)
     offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
-    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & (np.nan_to_num(offset) > opts.min_departure_m)
+    velocity_off = np.hypot(sol.nu[:, 3], sol.nu[:, 4])
+    away = (np.nan_to_num(offset) > opts.min_departure_m) | (np.nan_to_num(velocity_off) > opts.min_departure_mps)
+    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
     departure = None
     deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
     for a, b in _runs(disagree):
