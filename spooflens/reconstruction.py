@@ -67,9 +67,11 @@ class CoastingOptions:
     # GNSS must also have moved this far from the reference: real receivers wander and jump by metres
     # (an SBAS solution converging, a correction switching), which no spoofing verdict should rest on
     min_departure_m: float = 10.0
-    # or its velocity this far from the reference's: a velocity pull is metres off only after many seconds,
-    # while its velocity is off from the first pulled fix, when a young coast is still sharp
+    # or its velocity this far from the reference's within `young_s` of the coast's start: a velocity pull
+    # is metres off only after many seconds, while its velocity is off from the first pulled fix, when the
+    # coast is still sharp; later, an unobservable heading (a hover) makes the coasted velocity drift
     min_departure_mps: float = 0.3
+    young_s: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -237,7 +239,10 @@ def coasting_check(
     kappa = envelope.at(t - t_ex)
     offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
     velocity_off = np.hypot(sol.nu[:, 3], sol.nu[:, 4])
-    away = (np.nan_to_num(offset) > opts.min_departure_m) | (np.nan_to_num(velocity_off) > opts.min_departure_mps)
+    young = t - t_ex <= opts.young_s
+    away = (np.nan_to_num(offset) > opts.min_departure_m) | (
+        young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
+    )
     disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
     departure = None
     deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
