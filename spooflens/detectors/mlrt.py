@@ -242,39 +242,28 @@ def _gaussian_log_integral2(mu: np.ndarray, P: np.ndarray, Lam: np.ndarray, alph
 
 
 @njit(cache=True)
-def _ramp_offline(
-    x_upd: np.ndarray,
-    P_upd: np.ndarray,
-    Lam: np.ndarray,
-    alpha: np.ndarray,
-    n: int,
-    q: int,
-    Sigma: np.ndarray,
-    first: int = -1,
-):
-    N = x_upd.shape[0]
-    bf = np.full(N, np.nan)
-    flat = np.full(N, np.nan)
-    na = x_upd.shape[1]
+def _offline_at(
+    mu: np.ndarray, P: np.ndarray, L: np.ndarray, a: np.ndarray, n: int, q: int, Sigma: np.ndarray, first: int
+) -> tuple[float, float]:
+    """(2 log BF, flat MLR) of a jump after one epoch from its forward estimate N(mu, P) and the backward
+    information (L, a) of the data after it; the jumping states are the q from `first` (-1: n + q)."""
+    na = mu.shape[0]
     Bsel = np.zeros((na, q))
     for j in range(q):
         Bsel[(n + q if first < 0 else first) + j, j] = 1.0
-    for m in range(N - 1):
-        mu, P, L, a = x_upd[m], P_upd[m], Lam[m], alpha[m]
-        base = _gaussian_log_integral2(mu, P, L, a)
-        P1 = P + Bsel @ Sigma @ Bsel.T
-        bf[m] = _gaussian_log_integral2(mu, P1, L, a) - base
-        X = np.eye(na) + P @ L
-        Xi = np.linalg.inv(X)
-        J = Bsel.T @ L @ Xi @ Bsel
-        sJ, ldJ = np.linalg.slogdet(J)
-        if sJ <= 0:
-            continue
-        Z = Xi - Xi @ Bsel @ np.linalg.solve(J, Bsel.T @ L @ Xi)
-        Minf = Z @ P + Xi @ Bsel @ np.linalg.solve(J, Bsel.T)
-        b = a - L @ mu
-        flat[m] = -ldJ + b @ (Minf - Xi @ P) @ b + q * 1.8378770664093453
-    return bf, flat
+    base = _gaussian_log_integral2(mu, P, L, a)
+    P1 = P + Bsel @ Sigma @ Bsel.T
+    bf = _gaussian_log_integral2(mu, P1, L, a) - base
+    X = np.eye(na) + P @ L
+    Xi = np.linalg.inv(X)
+    J = Bsel.T @ L @ Xi @ Bsel
+    sJ, ldJ = np.linalg.slogdet(J)
+    if sJ <= 0:
+        return bf, np.nan
+    Z = Xi - Xi @ Bsel @ np.linalg.solve(J, Bsel.T @ L @ Xi)
+    Minf = Z @ P + Xi @ Bsel @ np.linalg.solve(J, Bsel.T)
+    b = a - L @ mu
+    return bf, -ldJ + b @ (Minf - Xi @ P) @ b + q * 1.8378770664093453
 
 
 @dataclass(frozen=True)
@@ -284,17 +273,113 @@ class RampOffline:
     mlr_flat: FloatArray  # flat-prior MLR (density 1 per (m/s)^q): the paper's l_N(m)
 
 
+@njit(cache=True)
+def _augmented(
+    A: np.ndarray, Q: np.ndarray, C: np.ndarray, n: int, q: int, rows: np.ndarray, dt: float, ramp: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp): the same numbers, built when
+    needed rather than stored for every epoch (three (N, na, na) arrays: 0.6 GB per hour at 10 Hz)."""
+    na = n + (2 * q if ramp else q)
+    Aa = np.zeros((na, na))
+    Qa = np.zeros((na, na))
+    Ca = np.zeros((C.shape[0], na))
+    Aa[:n, :n] = A
+    Qa[:n, :n] = Q
+    Ca[:, :n] = C
+    for j in range(na - n):
+        Aa[n + j, n + j] = 1.0
+    if ramp:
+        for j in range(q):
+            Aa[n + j, n + q + j] = dt
+    for j in range(q):
+        Ca[rows[j], n + j] = 1.0
+    return Aa, Qa, Ca
+
+
+@njit(cache=True)
+def _two_filter_offline(
+    A: np.ndarray,
+    Q: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    x0: np.ndarray,
+    P0: np.ndarray,
+    rows: np.ndarray,
+    ramp: bool,
+    Sigma: np.ndarray,
+    last: int,
+):
+    """`_offline_at` for every epoch m < last of the augmented model over epochs 0..last: the backward
+    information filter (`backward_information`) and then the forward filter (`forward_filter`), each
+    epoch's update met with the backward information there as it is made. The augmented matrices are
+    made epoch by epoch and only the backward information is stored (the forward estimates, gains and
+    augmented matrices of every epoch were 1.5 GB per hour of 10 Hz GNSS)."""
+    n, q = x0.shape[0], rows.shape[0]
+    na = n + (2 * q if ramp else q)
+    first = -1 if ramp else n
+    # the backward information filter (backward_information over 0..last)
+    Lam = np.zeros((last + 1, na, na))
+    alpha = np.zeros((last + 1, na))
+    L = np.zeros((na, na))
+    a = np.zeros(na)
+    for k in range(last, -1, -1):
+        Lam[k] = L
+        alpha[k] = a
+        if k == 0:
+            break
+        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
+        L, a = information_update(L, a, Ca, R[k], y[k])
+        L, a = information_predict_back(L, a, Aa, Qa)
+    # the forward filter (forward_filter's _forward), each epoch's update met with its backward information
+    N = last + 1
+    bf = np.full(N, np.nan)
+    flat = np.full(N, np.nan)
+    x = np.zeros(na)
+    x[:n] = x0
+    P = np.zeros((na, na))
+    P[:n, :n] = P0
+    for k in range(N):
+        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
+        if k > 0:
+            x = Aa @ x
+            P = Aa @ P @ Aa.T + Qa
+            P = 0.5 * (P + P.T)
+        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k])
+        if k < N - 1:
+            bf[k], flat[k] = _offline_at(x, P, Lam[k], alpha[k], n, q, Sigma, first)
+    return bf, flat
+
+
 def ramp_two_filter_offline(
     model: LinearGaussianModel, rows: tuple[int, ...], sigma_rate: FloatArray, last: int | None = None
 ) -> RampOffline:
-    """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last`."""
+    """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last` (the
+    model `augment_ramp` makes, filtered forward and backward)."""
+    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True)
+
+
+def _offline(
+    model: LinearGaussianModel, rows: tuple[int, ...], sigma: FloatArray, last: int | None, ramp: bool
+) -> RampOffline:
     last = model.n_epochs - 1 if last is None else last
-    aug = augment_ramp(model.window(0, last + 1), rows)
-    fwd = forward_filter(aug)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
-    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
-    sigma = np.diag(np.asarray(sigma_rate, dtype=float) ** 2)
-    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma)
+    # views where the model's arrays are contiguous already (the navigation's are): no copies
+    A, Q, C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.A, model.Q, model.C, model.R, model.y))
+    bf, flat = _two_filter_offline(
+        A,
+        Q,
+        C,
+        R,
+        y,
+        np.ascontiguousarray(model.t[: last + 1], dtype=float),
+        model.x0.astype(float),
+        np.ascontiguousarray(model.P0, dtype=float),
+        np.array(rows, dtype=np.int64),
+        ramp,
+        np.diag(sigma**2),
+        last,
+    )
     return RampOffline(model.t[: last + 1], bf, flat)
 
 
@@ -323,15 +408,9 @@ def step_two_filter_offline(
     model: LinearGaussianModel, rows: tuple[int, ...], sigma_step: FloatArray, last: int | None = None
 ) -> RampOffline:
     """2 log BF of a step of the attacked rows after every epoch m (offset ~ N(0, sigma_step^2) per row),
-    from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp."""
-    last = model.n_epochs - 1 if last is None else last
-    aug = augment_step(model.window(0, last + 1), rows)
-    fwd = forward_filter(aug)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
-    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
-    sigma = np.diag(np.asarray(sigma_step, dtype=float) ** 2)
-    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma, model.n_states)
-    return RampOffline(model.t[: last + 1], bf, flat)
+    from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp (the model
+    `augment_step` makes)."""
+    return _offline(model, rows, np.asarray(sigma_step, dtype=float), last, ramp=False)
 
 
 def onset_posterior(

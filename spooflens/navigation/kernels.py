@@ -358,17 +358,21 @@ def filter_loop(
             x = propagate(x, dC, dv_b, dp_b, T)
             # Phi = blockdiag(Phi15, diag(a)): propagate the blocks, not 24 x 24 products
             P = _propagate_blocks(P, Phi15, decay)
-            Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
             for r in range(15):
                 for c in range(15):
                     P[r, c] += Qd15[r, c]
-                    Qd_acc[r, c] += Qd15[r, c]
             for i in range(NG):
                 P[15 + i, 15 + i] += qg[i]
-                Qd_acc[15 + i, 15 + i] += qg[i]
-            Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
-            for i in range(NG):
-                Phi_acc[15 + i, :] *= decay[i]
+            if record:  # the epoch-to-epoch Phi and Qd only a recorded run keeps (nothing else reads them)
+                Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
+                for r in range(15):
+                    for c in range(15):
+                        Qd_acc[r, c] += Qd15[r, c]
+                for i in range(NG):
+                    Qd_acc[15 + i, 15 + i] += qg[i]
+                Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
+                for i in range(NG):
+                    Phi_acc[15 + i, :] *= decay[i]
             k = j
             track[nt, 0] = x[21]
             track[nt, 1:4] = x[0:3]
@@ -490,14 +494,20 @@ def rts_closed_loop(P_pred: np.ndarray, P_upd: np.ndarray, Phi: np.ndarray, dx: 
     relative to the same propagated nominal, is dx[e+1]. So the smoothed error of the corrected state at e
     is delta_e = A_e (dx[e+1] + delta_{e+1}), A_e = P_upd[e] Phi[e+1]^T P_pred[e+1]^-1, and
     P_s[e] = P_upd[e] + A_e (P_s[e+1] - P_pred[e+1]) A_e^T.
+    Returns delta and the smoothed variances (the diagonal of every P_s[e]: all any consumer reads, and
+    a 24th of the memory of the full matrices).
     """
     M, n = dx.shape
     delta = np.zeros((M, n))
-    P_s = np.zeros((M, n, n))
-    P_s[M - 1] = P_upd[M - 1]
+    var = np.zeros((M, n))
+    P_next = P_upd[M - 1].copy()
+    for i in range(n):
+        var[M - 1, i] = P_next[i, i]
     for e in range(M - 2, -1, -1):
         A = np.linalg.solve(P_pred[e + 1].T, (P_upd[e] @ Phi[e + 1].T).T).T
         delta[e] = A @ (dx[e + 1] + delta[e + 1])
-        Ps = P_upd[e] + A @ (P_s[e + 1] - P_pred[e + 1]) @ A.T
-        P_s[e] = 0.5 * (Ps + Ps.T)
-    return delta, P_s
+        Ps = P_upd[e] + A @ (P_next - P_pred[e + 1]) @ A.T
+        P_next = 0.5 * (Ps + Ps.T)
+        for i in range(n):
+            var[e, i] = P_next[i, i]
+    return delta, var
