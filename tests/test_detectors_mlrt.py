@@ -208,12 +208,18 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
     del mean
 
 
-@pytest.mark.parametrize("ramp", [True, False])
-def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(ramp: bool) -> None:
-    """The fused kernel (augmented matrices made per epoch, forward estimates not stored) gives the
-    numbers of the explicit augmented model filtered forward and backward and combined per epoch."""
+@pytest.mark.parametrize(("ramp", "block"), [(True, 256), (False, 256), (True, 7), (False, 5)])
+def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
+    ramp: bool, block: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fused kernel (augmented matrices made per epoch, forward estimates kept only at block starts
+    and made again block by block) gives exactly the numbers of the explicit augmented model filtered
+    forward and backward and combined per epoch, whether the epochs fit one block or several."""
+    from spooflens.detectors import mlrt
     from spooflens.detectors.kalman import backward_information
     from spooflens.detectors.mlrt import _offline_at, augment_ramp, augment_step, step_two_filter_offline
+
+    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
 
     model = random_model(5, n=4, p=2, N=40, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])

@@ -296,6 +296,42 @@ def _augmented(
     return Aa, Qa, Ca
 
 
+OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held at a time
+
+
+@njit(cache=True)
+def _forward_block(
+    A: np.ndarray,
+    Q: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    rows: np.ndarray,
+    ramp: bool,
+    x: np.ndarray,
+    P: np.ndarray,
+    lo: int,
+    hi: int,
+    xs: np.ndarray,
+    Ps: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
+    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty)."""
+    n, q = A.shape[1], rows.shape[0]
+    for k in range(lo, hi + 1):
+        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
+        if k > 0:
+            x = Aa @ x
+            P = Aa @ P @ Aa.T + Qa
+            P = 0.5 * (P + P.T)
+        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k])
+        if xs.shape[0] > 0:
+            xs[k - lo] = x
+            Ps[k - lo] = P
+    return x, P
+
+
 @njit(cache=True)
 def _two_filter_offline(
     A: np.ndarray,
@@ -310,45 +346,55 @@ def _two_filter_offline(
     ramp: bool,
     Sigma: np.ndarray,
     last: int,
+    block: int,
 ):
-    """`_offline_at` for every epoch m < last of the augmented model over epochs 0..last: the backward
-    information filter (`backward_information`) and then the forward filter (`forward_filter`), each
-    epoch's update met with the backward information there as it is made. The augmented matrices are
-    made epoch by epoch and only the backward information is stored (the forward estimates, gains and
-    augmented matrices of every epoch were 1.5 GB per hour of 10 Hz GNSS)."""
+    """`_offline_at` for every epoch m < last of the augmented model over epochs 0..last, from the forward
+    filter (`forward_filter`) and the backward information filter (`backward_information`), with the
+    numbers those give, in bounded memory: the augmented matrices are made epoch by epoch; the forward
+    pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
+    block, the block's forward estimates made again from its checkpoint and combined with its backward
+    information (the whole forward record, gains and augmented matrices were 1.5 GB per hour of 10 Hz
+    GNSS; this holds two blocks)."""
     n, q = x0.shape[0], rows.shape[0]
     na = n + (2 * q if ramp else q)
     first = -1 if ramp else n
-    # the backward information filter (backward_information over 0..last)
-    Lam = np.zeros((last + 1, na, na))
-    alpha = np.zeros((last + 1, na))
-    L = np.zeros((na, na))
-    a = np.zeros(na)
-    for k in range(last, -1, -1):
-        Lam[k] = L
-        alpha[k] = a
-        if k == 0:
-            break
-        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
-        L, a = information_update(L, a, Ca, R[k], y[k])
-        L, a = information_predict_back(L, a, Aa, Qa)
-    # the forward filter (forward_filter's _forward), each epoch's update met with its backward information
     N = last + 1
-    bf = np.full(N, np.nan)
-    flat = np.full(N, np.nan)
+    nb = (N + block - 1) // block
+    # forward pass: the estimate after epoch b * block - 1 (the prior for block 0)
+    ck_x = np.zeros((nb, na))
+    ck_P = np.zeros((nb, na, na))
     x = np.zeros(na)
     x[:n] = x0
     P = np.zeros((na, na))
     P[:n, :n] = P0
-    for k in range(N):
-        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
-        if k > 0:
-            x = Aa @ x
-            P = Aa @ P @ Aa.T + Qa
-            P = 0.5 * (P + P.T)
-        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k])
-        if k < N - 1:
-            bf[k], flat[k] = _offline_at(x, P, Lam[k], alpha[k], n, q, Sigma, first)
+    no_x, no_P = np.zeros((0, na)), np.zeros((0, na, na))
+    for b in range(nb):
+        ck_x[b] = x
+        ck_P[b] = P
+        if b < nb - 1:
+            x, P = _forward_block(A, Q, C, R, y, t, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P)
+    bf = np.full(N, np.nan)
+    flat = np.full(N, np.nan)
+    xs = np.zeros((block, na))
+    Ps = np.zeros((block, na, na))
+    Ls = np.zeros((block, na, na))
+    als = np.zeros((block, na))
+    L = np.zeros((na, na))
+    a = np.zeros(na)
+    for b in range(nb - 1, -1, -1):
+        lo, hi = b * block, min((b + 1) * block, N) - 1
+        _forward_block(A, Q, C, R, y, t, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps)
+        for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
+            Ls[k - lo] = L
+            als[k - lo] = a
+            if k == 0:
+                break
+            Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
+            L, a = information_update(L, a, Ca, R[k], y[k])
+            L, a = information_predict_back(L, a, Aa, Qa)
+        top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
+        for k in range(lo, top + 1):
+            bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
     return bf, flat
 
 
@@ -379,6 +425,7 @@ def _offline(
         ramp,
         np.diag(sigma**2),
         last,
+        OFFLINE_BLOCK,
     )
     return RampOffline(model.t[: last + 1], bf, flat)
 
