@@ -115,11 +115,15 @@ def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavS
     (each still compared with it), up to `t_end`."""
     sol = base if base is not None else nav.solution
     k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
     if k < 0:
-        opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True)
+        opts = replace(
+            sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False
+        )
         return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
     opts = replace(
         sol.options,
+        record=False,
         initial=NavState.from_vector(sol.state[k]),
         initial_covariance=sol.P_upd[k],
         initial_gm=sol.gm[k],

@@ -295,6 +295,7 @@ def filter_loop(
     gm_sigma: np.ndarray,
     g0: np.ndarray,
     record: bool = True,
+    compare: bool = True,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
 
@@ -309,7 +310,8 @@ def filter_loop(
     # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need; a noise-
     # learning run keeps only what its likelihood reads (record=False), most of the memory traffic
     Mr = M if record else 1
-    out_S_all = np.zeros((Mr, NM, NM))  # H P H^T + R of every row, used or not (coasting comparisons)
+    # H P H^T + R of every row, used or not: what a coasting run is compared with (`compare`)
+    out_S_all = np.zeros((M if record or compare else 1, NM, NM))
     out_R = np.zeros((M, NM, NM))
     out_H = np.zeros((Mr, NM, NE))
     nis = np.full(M, np.nan)
@@ -407,7 +409,7 @@ def filter_loop(
             out_H[e] = Hm
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2
-        if record:
+        if record or compare:
             S_all = Hm @ P @ Hm.T
             for i in range(NM):
                 S_all[i, i] += sigma[e, i] ** 2

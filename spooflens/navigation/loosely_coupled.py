@@ -90,6 +90,7 @@ class FilterOptions:
     initial_covariance: FloatArray | None = None
     initial_gm: FloatArray | None = None
     record: bool = True  # keep the per-epoch matrices (off for noise-learning runs, which need only S)
+    compare: bool = True  # keep S_all (coasting comparisons) even when not recording the matrices
     t_start: float | None = None
 
 
@@ -140,13 +141,15 @@ class NavSolution:
     used: NDArray[np.bool_]  # (M, 9)
     S: FloatArray  # (M, 9, 9) innovation covariance of the used rows (zero elsewhere)
     S_all: FloatArray  # (M, 9, 9) the same for every measured row, used or not (GNSS left out: coasting)
+    # Without options.record, H, Phi, Qd, P_pred and P_upd hold one epoch only (not kept), and S_all too
+    # without options.compare.
     R: FloatArray  # (M, 9, 9)
     H: FloatArray  # (M, 9, 24)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
     Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
     Qd: FloatArray  # (M, 24, 24)
-    P_pred: FloatArray  # (M, 24, 24)
+    P_pred: FloatArray  # (M, 24, 24); the first only in a `product.Navigation` (smoothed already)
     P_upd: FloatArray  # (M, 24, 24)
     dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
     gm: FloatArray  # (M, 9) estimated sensor errors (receiver, odometry) after the update
@@ -384,6 +387,7 @@ def _run(
         gm_sigma,
         g0,
         opts.record,
+        opts.compare,
     )
     return NavSolution(
         imu_id,
