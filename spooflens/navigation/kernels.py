@@ -294,7 +294,7 @@ def filter_loop(
     gm_tau: np.ndarray,
     gm_sigma: np.ndarray,
     g0: np.ndarray,
-    record: bool = True,
+    keep: np.ndarray,
     compare: bool = True,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
@@ -307,19 +307,20 @@ def filter_loop(
     out_z = np.full((M, NM), np.nan)
     out_nu = np.full((M, NM), np.nan)
     out_S = np.zeros((M, NM, NM))
-    # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need; a noise-
-    # learning run keeps only what its likelihood reads (record=False), most of the memory traffic
-    Mr = M if record else 1
+    # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need, each kept
+    # only when asked (`keep`: Phi, Qd, H, P_pred, P_upd; one epoch otherwise): a noise-learning run keeps
+    # none, a coast only S_all, most of the memory traffic
+    keep_phi, keep_qd, keep_h, keep_pred, keep_upd = keep[0], keep[1], keep[2], keep[3], keep[4]
     # H P H^T + R of every row, used or not: what a coasting run is compared with (`compare`)
-    out_S_all = np.zeros((M if record or compare else 1, NM, NM))
+    out_S_all = np.zeros((M if compare else 1, NM, NM))
     out_R = np.zeros((M, NM, NM))
-    out_H = np.zeros((Mr, NM, NE))
+    out_H = np.zeros((M if keep_h else 1, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
-    out_Phi = np.zeros((Mr, NE, NE))
-    out_Qd = np.zeros((Mr, NE, NE))
-    P_pred = np.zeros((Mr, NE, NE))
-    P_upd = np.zeros((Mr, NE, NE))
+    out_Phi = np.zeros((M if keep_phi else 1, NE, NE))
+    out_Qd = np.zeros((M if keep_qd else 1, NE, NE))
+    P_pred = np.zeros((M if keep_pred else 1, NE, NE))
+    P_upd = np.zeros((M if keep_upd else 1, NE, NE))
     out_dx = np.zeros((M, NE))
     gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
@@ -365,13 +366,15 @@ def filter_loop(
                     P[r, c] += Qd15[r, c]
             for i in range(NG):
                 P[15 + i, 15 + i] += qg[i]
-            if record:  # the epoch-to-epoch Phi and Qd only a recorded run keeps (nothing else reads them)
+            # the epoch-to-epoch Qd and Phi, made only to be kept (nothing else reads them)
+            if keep_qd:
                 Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
                 for r in range(15):
                     for c in range(15):
                         Qd_acc[r, c] += Qd15[r, c]
                 for i in range(NG):
                     Qd_acc[15 + i, 15 + i] += qg[i]
+            if keep_phi:
                 Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
                 for i in range(NG):
                     Phi_acc[15 + i, :] *= decay[i]
@@ -382,9 +385,11 @@ def filter_loop(
             track_epoch[nt] = e - 1
             nt += 1
         P = 0.5 * (P + P.T)
-        if record:
+        if keep_phi:
             out_Phi[e] = Phi_acc
+        if keep_qd:
             out_Qd[e] = Qd_acc
+        if keep_pred:
             P_pred[e] = P
         lead = tf[e] - x[21]
         rm, rn = local_radii(x[0])
@@ -405,11 +410,11 @@ def filter_loop(
         nu = z - Hm @ xp
         out_z[e] = z
         out_nu[e] = nu
-        if record:
+        if keep_h:
             out_H[e] = Hm
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2
-        if record or compare:
+        if compare:
             S_all = Hm @ P @ Hm.T
             for i in range(NM):
                 S_all[i, i] += sigma[e, i] ** 2
@@ -447,7 +452,7 @@ def filter_loop(
             x = correct(x, dx[:15])
             g = g + dx[15:]
             out_dx[e] = dx
-        if record:
+        if keep_upd:
             P_upd[e] = P
         states[e] = x
         gm[e] = g
