@@ -33,7 +33,7 @@ from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
-from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern, run_prepared
+from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution, nis_by_pattern, run_prepared
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
@@ -120,11 +120,15 @@ def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavS
     (each still compared with it), up to `t_end`."""
     sol = base if base is not None else nav.solution
     k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
     if k < 0:
-        opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True)
+        opts = replace(
+            sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False
+        )
         return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
     opts = replace(
         sol.options,
+        record=False,
         initial=NavState.from_vector(sol.state[k]),
         initial_covariance=sol.P_upd[k],
         initial_gm=sol.gm[k],
@@ -282,7 +286,7 @@ def coasting_check(
 
 def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
     opts = nav.options(exclude_after_s=t_from, exclude_until_s=t_to, exclude_velocity_too=not velocity_honest)
-    sm = smooth(run_prepared(nav.inputs, opts, nav.start))
+    sm = smooth(run_prepared(nav.inputs, replace(opts, record=SMOOTHER_NEEDS), nav.start))
     name = (
         "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
         if velocity_honest
@@ -383,7 +387,8 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         windows = tuple(
             (_coast_start(i) - opts.margin_s, None if i.ongoing_at_end else i.end_s) for i in incidents if i.is_spoofing
         )
-        base = run_prepared(nav.inputs, nav.options(exclude_windows=windows), nav.start)
+        # what later coasts start from: the states and covariances after each update (no other matrices)
+        base = run_prepared(nav.inputs, nav.options(exclude_windows=windows, record=("P_upd",)), nav.start)
     incidents = _merge_overlapping(incidents)
     confirmed = [i for i in incidents if i.is_spoofing]
     for inc in confirmed:

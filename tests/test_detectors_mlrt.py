@@ -206,3 +206,36 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
     lr = 2 * (loglik(cov + s2 * Ej @ Ej.T) - loglik(cov)) + n * math.log(2 * math.pi * s2)
     assert full_jump_wj(model, t, np.array([m]))[0] == pytest.approx(lr, rel=1e-4, abs=1e-3)
     del mean
+
+
+@pytest.mark.parametrize(("ramp", "block"), [(True, 256), (False, 256), (True, 7), (False, 5)])
+def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
+    ramp: bool, block: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fused kernel (augmented matrices made per epoch, forward estimates kept only at block starts
+    and made again block by block) gives exactly the numbers of the explicit augmented model filtered
+    forward and backward and combined per epoch, whether the epochs fit one block or several."""
+    from spooflens.detectors import mlrt
+    from spooflens.detectors.kalman import backward_information
+    from spooflens.detectors.mlrt import _offline_at, augment_ramp, augment_step, step_two_filter_offline
+
+    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
+
+    model = random_model(5, n=4, p=2, N=40, missing=True)
+    rows, sigma = (0, 1), np.array([0.7, 1.3])
+    last = 33
+    aug = (augment_ramp if ramp else augment_step)(model.window(0, last + 1), rows)
+    fwd = forward_filter(aug)
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
+    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
+    first = -1 if ramp else model.n_states
+    expected = np.array(
+        [
+            _offline_at(fwd.x_upd[m], fwd.P_upd[m], Lam[m], alpha[m], model.n_states, 2, np.diag(sigma**2), first)
+            for m in range(last)
+        ]
+    )
+    off = (ramp_two_filter_offline if ramp else step_two_filter_offline)(model, rows, sigma, last=last)
+    np.testing.assert_array_equal(off.log_bf[:last], expected[:, 0])
+    np.testing.assert_array_equal(off.mlr_flat[:last], expected[:, 1])
+    assert np.isnan(off.log_bf[last]) and len(off.t) == last + 1

@@ -26,7 +26,7 @@ class ForwardResult:
     S: FloatArray  # (N, p, p) innovation covariance (used rows; identity elsewhere)
     Sinv: FloatArray  # (N, p, p) its inverse on the used rows, zero elsewhere
     K: FloatArray  # (N, n, p) gains (zero columns for unused rows)
-    x_pred: FloatArray  # (N, n)
+    x_pred: FloatArray  # (N, n); (0, n) when the filter ran without keep_states, as the three below
     P_pred: FloatArray  # (N, n, n)
     x_upd: FloatArray
     P_upd: FloatArray
@@ -46,17 +46,27 @@ class ForwardResult:
 
 
 @njit(cache=CACHE)
-def _forward(A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, x0: np.ndarray, P0: np.ndarray):
+def _forward(
+    A: np.ndarray,
+    Q: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    x0: np.ndarray,
+    P0: np.ndarray,
+    keep_states: bool = True,
+):
     N, p = y.shape
     n = x0.shape[0]
     eps = np.full((N, p), np.nan)
     S_out = np.zeros((N, p, p))
     Sinv_out = np.zeros((N, p, p))
     K_out = np.zeros((N, n, p))
-    xp = np.zeros((N, n))
-    Pp = np.zeros((N, n, n))
-    xu = np.zeros((N, n))
-    Pu = np.zeros((N, n, n))
+    Ns = N if keep_states else 0
+    xp = np.zeros((Ns, n))
+    Pp = np.zeros((Ns, n, n))
+    xu = np.zeros((Ns, n))
+    Pu = np.zeros((Ns, n, n))
     nis = np.full(N, np.nan)
     logdet = np.zeros(N)
     dof = np.zeros(N, dtype=np.int64)
@@ -67,8 +77,9 @@ def _forward(A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.n
             x = A[k] @ x
             P = A[k] @ P @ A[k].T + Q[k]
             P = 0.5 * (P + P.T)
-        xp[k] = x
-        Pp[k] = P
+        if keep_states:
+            xp[k] = x
+            Pp[k] = P
         for i in range(p):
             S_out[k, i, i] = 1.0
         x, P, rows, e, S, Sinv, K, nis_k, logdet_k = masked_update(x, P, C[k], R[k], y[k])
@@ -83,12 +94,16 @@ def _forward(A: np.ndarray, Q: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.n
                 for b in range(m):
                     S_out[k, rows[a], rows[b]] = S[a, b]
                     Sinv_out[k, rows[a], rows[b]] = Sinv[a, b]
-        xu[k] = x
-        Pu[k] = P
+        if keep_states:
+            xu[k] = x
+            Pu[k] = P
     return eps, S_out, Sinv_out, K_out, xp, Pp, xu, Pu, nis, logdet, dof
 
 
-def forward_filter(model: LinearGaussianModel) -> ForwardResult:
+def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> ForwardResult:
+    """The forward filter; without `keep_states` the state estimates and their covariances are not kept
+    (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
+    innovations, gains and S does without)."""
     out = _forward(
         np.ascontiguousarray(model.A),
         np.ascontiguousarray(model.Q),
@@ -97,6 +112,7 @@ def forward_filter(model: LinearGaussianModel) -> ForwardResult:
         np.ascontiguousarray(model.y),
         model.x0.astype(float),
         np.ascontiguousarray(model.P0),
+        keep_states,
     )
     return ForwardResult(*out)
 

@@ -242,39 +242,28 @@ def _gaussian_log_integral2(mu: np.ndarray, P: np.ndarray, Lam: np.ndarray, alph
 
 
 @njit(cache=True)
-def _ramp_offline(
-    x_upd: np.ndarray,
-    P_upd: np.ndarray,
-    Lam: np.ndarray,
-    alpha: np.ndarray,
-    n: int,
-    q: int,
-    Sigma: np.ndarray,
-    first: int = -1,
-):
-    N = x_upd.shape[0]
-    bf = np.full(N, np.nan)
-    flat = np.full(N, np.nan)
-    na = x_upd.shape[1]
+def _offline_at(
+    mu: np.ndarray, P: np.ndarray, L: np.ndarray, a: np.ndarray, n: int, q: int, Sigma: np.ndarray, first: int
+) -> tuple[float, float]:
+    """(2 log BF, flat MLR) of a jump after one epoch from its forward estimate N(mu, P) and the backward
+    information (L, a) of the data after it; the jumping states are the q from `first` (-1: n + q)."""
+    na = mu.shape[0]
     Bsel = np.zeros((na, q))
     for j in range(q):
         Bsel[(n + q if first < 0 else first) + j, j] = 1.0
-    for m in range(N - 1):
-        mu, P, L, a = x_upd[m], P_upd[m], Lam[m], alpha[m]
-        base = _gaussian_log_integral2(mu, P, L, a)
-        P1 = P + Bsel @ Sigma @ Bsel.T
-        bf[m] = _gaussian_log_integral2(mu, P1, L, a) - base
-        X = np.eye(na) + P @ L
-        Xi = np.linalg.inv(X)
-        J = Bsel.T @ L @ Xi @ Bsel
-        sJ, ldJ = np.linalg.slogdet(J)
-        if sJ <= 0:
-            continue
-        Z = Xi - Xi @ Bsel @ np.linalg.solve(J, Bsel.T @ L @ Xi)
-        Minf = Z @ P + Xi @ Bsel @ np.linalg.solve(J, Bsel.T)
-        b = a - L @ mu
-        flat[m] = -ldJ + b @ (Minf - Xi @ P) @ b + q * 1.8378770664093453
-    return bf, flat
+    base = _gaussian_log_integral2(mu, P, L, a)
+    P1 = P + Bsel @ Sigma @ Bsel.T
+    bf = _gaussian_log_integral2(mu, P1, L, a) - base
+    X = np.eye(na) + P @ L
+    Xi = np.linalg.inv(X)
+    J = Bsel.T @ L @ Xi @ Bsel
+    sJ, ldJ = np.linalg.slogdet(J)
+    if sJ <= 0:
+        return bf, np.nan
+    Z = Xi - Xi @ Bsel @ np.linalg.solve(J, Bsel.T @ L @ Xi)
+    Minf = Z @ P + Xi @ Bsel @ np.linalg.solve(J, Bsel.T)
+    b = a - L @ mu
+    return bf, -ldJ + b @ (Minf - Xi @ P) @ b + q * 1.8378770664093453
 
 
 @dataclass(frozen=True)
@@ -284,17 +273,160 @@ class RampOffline:
     mlr_flat: FloatArray  # flat-prior MLR (density 1 per (m/s)^q): the paper's l_N(m)
 
 
+@njit(cache=True)
+def _augmented(
+    A: np.ndarray, Q: np.ndarray, C: np.ndarray, n: int, q: int, rows: np.ndarray, dt: float, ramp: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp): the same numbers, built when
+    needed rather than stored for every epoch (three (N, na, na) arrays: 0.6 GB per hour at 10 Hz)."""
+    na = n + (2 * q if ramp else q)
+    Aa = np.zeros((na, na))
+    Qa = np.zeros((na, na))
+    Ca = np.zeros((C.shape[0], na))
+    Aa[:n, :n] = A
+    Qa[:n, :n] = Q
+    Ca[:, :n] = C
+    for j in range(na - n):
+        Aa[n + j, n + j] = 1.0
+    if ramp:
+        for j in range(q):
+            Aa[n + j, n + q + j] = dt
+    for j in range(q):
+        Ca[rows[j], n + j] = 1.0
+    return Aa, Qa, Ca
+
+
+OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held at a time
+
+
+@njit(cache=True)
+def _forward_block(
+    A: np.ndarray,
+    Q: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    rows: np.ndarray,
+    ramp: bool,
+    x: np.ndarray,
+    P: np.ndarray,
+    lo: int,
+    hi: int,
+    xs: np.ndarray,
+    Ps: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
+    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty)."""
+    n, q = A.shape[1], rows.shape[0]
+    for k in range(lo, hi + 1):
+        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
+        if k > 0:
+            x = Aa @ x
+            P = Aa @ P @ Aa.T + Qa
+            P = 0.5 * (P + P.T)
+        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k])
+        if xs.shape[0] > 0:
+            xs[k - lo] = x
+            Ps[k - lo] = P
+    return x, P
+
+
+@njit(cache=True)
+def _two_filter_offline(
+    A: np.ndarray,
+    Q: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    x0: np.ndarray,
+    P0: np.ndarray,
+    rows: np.ndarray,
+    ramp: bool,
+    Sigma: np.ndarray,
+    last: int,
+    block: int,
+):
+    """`_offline_at` for every epoch m < last of the augmented model over epochs 0..last, from the forward
+    filter (`forward_filter`) and the backward information filter (`backward_information`), with the
+    numbers those give, in bounded memory: the augmented matrices are made epoch by epoch; the forward
+    pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
+    block, the block's forward estimates made again from its checkpoint and combined with its backward
+    information (the whole forward record, gains and augmented matrices were 1.5 GB per hour of 10 Hz
+    GNSS; this holds two blocks)."""
+    n, q = x0.shape[0], rows.shape[0]
+    na = n + (2 * q if ramp else q)
+    first = -1 if ramp else n
+    N = last + 1
+    nb = (N + block - 1) // block
+    # forward pass: the estimate after epoch b * block - 1 (the prior for block 0)
+    ck_x = np.zeros((nb, na))
+    ck_P = np.zeros((nb, na, na))
+    x = np.zeros(na)
+    x[:n] = x0
+    P = np.zeros((na, na))
+    P[:n, :n] = P0
+    no_x, no_P = np.zeros((0, na)), np.zeros((0, na, na))
+    for b in range(nb):
+        ck_x[b] = x
+        ck_P[b] = P
+        if b < nb - 1:
+            x, P = _forward_block(A, Q, C, R, y, t, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P)
+    bf = np.full(N, np.nan)
+    flat = np.full(N, np.nan)
+    xs = np.zeros((block, na))
+    Ps = np.zeros((block, na, na))
+    Ls = np.zeros((block, na, na))
+    als = np.zeros((block, na))
+    L = np.zeros((na, na))
+    a = np.zeros(na)
+    for b in range(nb - 1, -1, -1):
+        lo, hi = b * block, min((b + 1) * block, N) - 1
+        _forward_block(A, Q, C, R, y, t, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps)
+        for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
+            Ls[k - lo] = L
+            als[k - lo] = a
+            if k == 0:
+                break
+            Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
+            L, a = information_update(L, a, Ca, R[k], y[k])
+            L, a = information_predict_back(L, a, Aa, Qa)
+        top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
+        for k in range(lo, top + 1):
+            bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
+    return bf, flat
+
+
 def ramp_two_filter_offline(
     model: LinearGaussianModel, rows: tuple[int, ...], sigma_rate: FloatArray, last: int | None = None
 ) -> RampOffline:
-    """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last`."""
+    """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last` (the
+    model `augment_ramp` makes, filtered forward and backward)."""
+    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True)
+
+
+def _offline(
+    model: LinearGaussianModel, rows: tuple[int, ...], sigma: FloatArray, last: int | None, ramp: bool
+) -> RampOffline:
     last = model.n_epochs - 1 if last is None else last
-    aug = augment_ramp(model.window(0, last + 1), rows)
-    fwd = forward_filter(aug)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
-    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
-    sigma = np.diag(np.asarray(sigma_rate, dtype=float) ** 2)
-    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma)
+    # views where the model's arrays are contiguous already (the navigation's are): no copies
+    A, Q, C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.A, model.Q, model.C, model.R, model.y))
+    bf, flat = _two_filter_offline(
+        A,
+        Q,
+        C,
+        R,
+        y,
+        np.ascontiguousarray(model.t[: last + 1], dtype=float),
+        model.x0.astype(float),
+        np.ascontiguousarray(model.P0, dtype=float),
+        np.array(rows, dtype=np.int64),
+        ramp,
+        np.diag(sigma**2),
+        last,
+        OFFLINE_BLOCK,
+    )
     return RampOffline(model.t[: last + 1], bf, flat)
 
 
@@ -323,15 +455,9 @@ def step_two_filter_offline(
     model: LinearGaussianModel, rows: tuple[int, ...], sigma_step: FloatArray, last: int | None = None
 ) -> RampOffline:
     """2 log BF of a step of the attacked rows after every epoch m (offset ~ N(0, sigma_step^2) per row),
-    from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp."""
-    last = model.n_epochs - 1 if last is None else last
-    aug = augment_step(model.window(0, last + 1), rows)
-    fwd = forward_filter(aug)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
-    Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
-    sigma = np.diag(np.asarray(sigma_step, dtype=float) ** 2)
-    bf, flat = _ramp_offline(fwd.x_upd, fwd.P_upd, Lam, alpha, model.n_states, len(rows), sigma, model.n_states)
-    return RampOffline(model.t[: last + 1], bf, flat)
+    from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp (the model
+    `augment_step` makes)."""
+    return _offline(model, rows, np.asarray(sigma_step, dtype=float), last, ramp=False)
 
 
 def onset_posterior(

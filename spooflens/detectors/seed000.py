@@ -100,7 +100,7 @@ class Seed000Statistics:
 
 
 def statistics(model: LinearGaussianModel, opts: Seed000Options) -> Seed000Statistics:
-    fwd = forward_filter(model)
+    fwd = forward_filter(model, keep_states=False)  # innovations, S and gains are all it reads
     ramp = ramp_statistics(
         model,
         fwd,

@@ -294,7 +294,8 @@ def filter_loop(
     gm_tau: np.ndarray,
     gm_sigma: np.ndarray,
     g0: np.ndarray,
-    record: bool = True,
+    keep: np.ndarray,
+    compare: bool = True,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
 
@@ -306,18 +307,20 @@ def filter_loop(
     out_z = np.full((M, NM), np.nan)
     out_nu = np.full((M, NM), np.nan)
     out_S = np.zeros((M, NM, NM))
-    # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need; a noise-
-    # learning run keeps only what its likelihood reads (record=False), most of the memory traffic
-    Mr = M if record else 1
-    out_S_all = np.zeros((Mr, NM, NM))  # H P H^T + R of every row, used or not (coasting comparisons)
+    # the per-epoch matrices the smoother, the detectors' model and coasting comparisons need, each kept
+    # only when asked (`keep`: Phi, Qd, H, P_pred, P_upd; one epoch otherwise): a noise-learning run keeps
+    # none, a coast only S_all, most of the memory traffic
+    keep_phi, keep_qd, keep_h, keep_pred, keep_upd = keep[0], keep[1], keep[2], keep[3], keep[4]
+    # H P H^T + R of every row, used or not: what a coasting run is compared with (`compare`)
+    out_S_all = np.zeros((M if compare else 1, NM, NM))
     out_R = np.zeros((M, NM, NM))
-    out_H = np.zeros((Mr, NM, NE))
+    out_H = np.zeros((M if keep_h else 1, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
-    out_Phi = np.zeros((Mr, NE, NE))
-    out_Qd = np.zeros((Mr, NE, NE))
-    P_pred = np.zeros((Mr, NE, NE))
-    P_upd = np.zeros((Mr, NE, NE))
+    out_Phi = np.zeros((M if keep_phi else 1, NE, NE))
+    out_Qd = np.zeros((M if keep_qd else 1, NE, NE))
+    P_pred = np.zeros((M if keep_pred else 1, NE, NE))
+    P_upd = np.zeros((M if keep_upd else 1, NE, NE))
     out_dx = np.zeros((M, NE))
     gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
@@ -358,17 +361,23 @@ def filter_loop(
             x = propagate(x, dC, dv_b, dp_b, T)
             # Phi = blockdiag(Phi15, diag(a)): propagate the blocks, not 24 x 24 products
             P = _propagate_blocks(P, Phi15, decay)
-            Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
             for r in range(15):
                 for c in range(15):
                     P[r, c] += Qd15[r, c]
-                    Qd_acc[r, c] += Qd15[r, c]
             for i in range(NG):
                 P[15 + i, 15 + i] += qg[i]
-                Qd_acc[15 + i, 15 + i] += qg[i]
-            Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
-            for i in range(NG):
-                Phi_acc[15 + i, :] *= decay[i]
+            # the epoch-to-epoch Qd and Phi, made only to be kept (nothing else reads them)
+            if keep_qd:
+                Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
+                for r in range(15):
+                    for c in range(15):
+                        Qd_acc[r, c] += Qd15[r, c]
+                for i in range(NG):
+                    Qd_acc[15 + i, 15 + i] += qg[i]
+            if keep_phi:
+                Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
+                for i in range(NG):
+                    Phi_acc[15 + i, :] *= decay[i]
             k = j
             track[nt, 0] = x[21]
             track[nt, 1:4] = x[0:3]
@@ -376,9 +385,11 @@ def filter_loop(
             track_epoch[nt] = e - 1
             nt += 1
         P = 0.5 * (P + P.T)
-        if record:
+        if keep_phi:
             out_Phi[e] = Phi_acc
+        if keep_qd:
             out_Qd[e] = Qd_acc
+        if keep_pred:
             P_pred[e] = P
         lead = tf[e] - x[21]
         rm, rn = local_radii(x[0])
@@ -399,11 +410,11 @@ def filter_loop(
         nu = z - Hm @ xp
         out_z[e] = z
         out_nu[e] = nu
-        if record:
+        if keep_h:
             out_H[e] = Hm
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2
-        if record:
+        if compare:
             S_all = Hm @ P @ Hm.T
             for i in range(NM):
                 S_all[i, i] += sigma[e, i] ** 2
@@ -441,7 +452,7 @@ def filter_loop(
             x = correct(x, dx[:15])
             g = g + dx[15:]
             out_dx[e] = dx
-        if record:
+        if keep_upd:
             P_upd[e] = P
         states[e] = x
         gm[e] = g
@@ -490,14 +501,20 @@ def rts_closed_loop(P_pred: np.ndarray, P_upd: np.ndarray, Phi: np.ndarray, dx: 
     relative to the same propagated nominal, is dx[e+1]. So the smoothed error of the corrected state at e
     is delta_e = A_e (dx[e+1] + delta_{e+1}), A_e = P_upd[e] Phi[e+1]^T P_pred[e+1]^-1, and
     P_s[e] = P_upd[e] + A_e (P_s[e+1] - P_pred[e+1]) A_e^T.
+    Returns delta and the smoothed variances (the diagonal of every P_s[e]: all any consumer reads, and
+    a 24th of the memory of the full matrices).
     """
     M, n = dx.shape
     delta = np.zeros((M, n))
-    P_s = np.zeros((M, n, n))
-    P_s[M - 1] = P_upd[M - 1]
+    var = np.zeros((M, n))
+    P_next = P_upd[M - 1].copy()
+    for i in range(n):
+        var[M - 1, i] = P_next[i, i]
     for e in range(M - 2, -1, -1):
         A = np.linalg.solve(P_pred[e + 1].T, (P_upd[e] @ Phi[e + 1].T).T).T
         delta[e] = A @ (dx[e + 1] + delta[e + 1])
-        Ps = P_upd[e] + A @ (P_s[e + 1] - P_pred[e + 1]) @ A.T
-        P_s[e] = 0.5 * (Ps + Ps.T)
-    return delta, P_s
+        Ps = P_upd[e] + A @ (P_next - P_pred[e + 1]) @ A.T
+        P_next = 0.5 * (Ps + Ps.T)
+        for i in range(n):
+            var[e, i] = P_next[i, i]
+    return delta, var

@@ -89,8 +89,23 @@ class FilterOptions:
     # continue from another run's epoch: its covariance (24 x 24) and sensor-error estimates (9)
     initial_covariance: FloatArray | None = None
     initial_gm: FloatArray | None = None
-    record: bool = True  # keep the per-epoch matrices (off for noise-learning runs, which need only S)
+    # the per-epoch matrices to keep: True all (RECORDED), False none (noise learning needs only S, a
+    # coast only S_all), or those named (a run only smoothed needs SMOOTHER_NEEDS)
+    record: bool | tuple[str, ...] = True
+    compare: bool = True  # keep S_all (what coasting compares GNSS with)
     t_start: float | None = None
+
+
+RECORDED = ("Phi", "Qd", "H", "P_pred", "P_upd")
+SMOOTHER_NEEDS = ("Phi", "P_pred", "P_upd")
+
+
+def _kept(record: bool | tuple[str, ...]) -> NDArray[np.bool_]:
+    names = RECORDED if record is True else () if record is False else record
+    unknown = set(names) - set(RECORDED)
+    if unknown:
+        raise ValueError(f"FilterOptions.record names {sorted(unknown)!r}; it can keep {RECORDED!r}")
+    return np.array([name in names for name in RECORDED], dtype=np.bool_)
 
 
 def quadratic_forms(nu: FloatArray, S: FloatArray) -> FloatArray:
@@ -140,13 +155,15 @@ class NavSolution:
     used: NDArray[np.bool_]  # (M, 9)
     S: FloatArray  # (M, 9, 9) innovation covariance of the used rows (zero elsewhere)
     S_all: FloatArray  # (M, 9, 9) the same for every measured row, used or not (GNSS left out: coasting)
+    # H, Phi, Qd, P_pred and P_upd not named in options.record hold one epoch only (not kept), and S_all
+    # too without options.compare.
     R: FloatArray  # (M, 9, 9)
     H: FloatArray  # (M, 9, 24)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
     Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
     Qd: FloatArray  # (M, 24, 24)
-    P_pred: FloatArray  # (M, 24, 24)
+    P_pred: FloatArray  # (M, 24, 24); the first only in a `product.Navigation` (smoothed already)
     P_upd: FloatArray  # (M, 24, 24)
     dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
     gm: FloatArray  # (M, 9) estimated sensor errors (receiver, odometry) after the update
@@ -383,7 +400,8 @@ def _run(
         gm_tau,
         gm_sigma,
         g0,
-        opts.record,
+        _kept(opts.record),
+        opts.compare,
     )
     return NavSolution(
         imu_id,

@@ -309,7 +309,7 @@ def learn_noise(
     sub = inputs.between(-np.inf, window[1])
     noise = initial_noise(sub, exclude)
     has_vel = noise.white_vel_mps != (0.0, 0.0)
-    base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False)
+    base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False, compare=False)
     objective = _Objective(sub, start, base)
     first = objective.run(base)
     objective.score_mask = _scored_epochs(first, window, exclude, opts)
@@ -367,7 +367,12 @@ def learn_noise(
                 tau_s=p["tau_o"],
             )
         return FilterOptions(
-            grade=scaled_grade(grade, p["imu"]), noise=n, odometry=odo, max_block_s=opts.max_block_s, record=False
+            grade=scaled_grade(grade, p["imu"]),
+            noise=n,
+            odometry=odo,
+            max_block_s=opts.max_block_s,
+            record=False,
+            compare=False,
         )
 
     # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid
@@ -380,7 +385,7 @@ def learn_noise(
             odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
             params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
             best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts)
-    final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True)
+    final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True, compare=True)
     assert final.noise is not None
     return LearnedNoise(
         replace(final.noise, source="learned from the log"),

@@ -31,7 +31,7 @@ ENU = ("east", "north", "up")
 
 @dataclass(frozen=True)
 class Navigation:
-    solution: NavSolution
+    solution: NavSolution  # P_pred holds the first epoch only (smoothed already: `smoothed`)
     smoothed: SmoothedSolution
     model: LinearGaussianModel  # the linearised error model the model-based detectors run on
     learned: LearnedNoise  # the sensor noise learned from this log, and how
@@ -62,7 +62,10 @@ def solve_navigation(
     learned = learn_noise(inputs, preset, start, odometry_id, exclude)
     opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry)
     sol = run_prepared(inputs, opts, start)
-    return Navigation(sol, smooth(sol), sol.error_model(), learned, inputs, start)
+    smoothed, model = smooth(sol), sol.error_model()
+    # the smoother and the model's prior were the last readers of the predicted covariances
+    sol = replace(sol, P_pred=sol.P_pred[:1].copy())
+    return Navigation(sol, smoothed, model, learned, inputs, start)
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:

@@ -24,16 +24,16 @@ class SmoothedSolution:
     t: FloatArray  # (M,) GNSS epochs
     state: FloatArray  # (M, 22) smoothed nominal state (layout of NavSolution.state)
     delta: FloatArray  # (M, 24) smoothed error of the filtered state
-    P: FloatArray  # (M, 24, 24) smoothed covariance
+    var: FloatArray  # (M, 24) smoothed variances (the diagonal of the smoothed covariance)
     track_t: FloatArray  # (K,) block-rate times
     track_llh: FloatArray  # (K, 3) smoothed lat, lon (rad), h
     gm: FloatArray  # (M, 9) smoothed sensor errors (Gauss-Markov states)
 
 
 def smooth(sol: NavSolution) -> SmoothedSolution:
-    delta, P_s = kernels.rts_closed_loop(sol.P_pred, sol.P_upd, sol.Phi, sol.dx)
+    delta, var = kernels.rts_closed_loop(sol.P_pred, sol.P_upd, sol.Phi, sol.dx)
     state = np.array([kernels.correct(x, d[:15]) for x, d in zip(sol.state, delta, strict=True)])
-    return SmoothedSolution(sol.t, state, delta, P_s, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
+    return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
 
 def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
