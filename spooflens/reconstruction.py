@@ -102,6 +102,7 @@ class CoastingCheck:
     end_s: float | None  # first fix of sustained agreement after it (None: never, to the end of the log)
     end_interval_s: tuple[float, float] | None
     inconclusive_from_s: float | None = None  # the reference became too uncertain to see an end from here
+    offset_en_m: FloatArray | None = None  # (M, 2) GNSS - reference, east and north
 
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -257,7 +258,7 @@ def coasting_check(
             departure = int(a)
             break
     if departure is None:
-        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None)
+        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2])
     end = end_interval = None
     # the reference can tell agreement only while its own uncertainty is well below the departure seen so
     # far beyond that uncertainty; a consumer INS coasting for minutes cannot
@@ -281,7 +282,9 @@ def coasting_check(
             end_interval = (float(t[last_bad[-1]]) if len(last_bad) else float(t[a]), end)
             break
     inconclusive_from = float(t[lost_at]) if end is None and lost_at is not None else None
-    return CoastingCheck(t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from)
+    return CoastingCheck(
+        t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from, sol.nu[:, :2]
+    )
 
 
 def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
@@ -314,6 +317,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
     placebo = placebo_coasts(nav, opts)
     envelopes = []
     base: NavSolution | None = None  # the filter with the incidents confirmed so far left out
+    current_check: CoastingCheck | None = None  # the coast that confirmed the last incident
     ordered = sorted(verdict.incidents, key=lambda i: i.start_s)
     for n, inc in enumerate(ordered):
         current = incidents[-1] if incidents and incidents[-1].is_spoofing else None
@@ -321,7 +325,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
             # start there; its alarms belong to the incident, and inside the stretch where the reference
             # could no longer tell, they are how the receiver's return to the real sky shows
-            incidents[-1] = _absorb(current, inc)
+            incidents[-1] = _absorb(current, inc, current_check)
             continue
         if Evidence.INERTIAL not in inc.evidence:
             incidents.append(inc)
@@ -351,6 +355,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
                 ).with_spans(tuple(sp for sp in inc.spans if sp[0] != Evidence.INERTIAL))
             )
             continue
+        current_check = check
         # the coasting comparison says when GNSS agreed again; alarms after that are the closed-loop
         # filter's recovery from the spoofed track, not more attack
         end = check.end_s if check.end_s is not None else t_last
@@ -414,10 +419,33 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
     return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
 
 
-def _absorb(current: Incident, inc: Incident) -> Incident:
+def _jumps_back(
+    check: CoastingCheck | None, inc: Incident, window_s: float = 10.0, settle_s: float = 3.0, share: float = 0.25
+) -> bool:
+    """Whether GNSS jumped across the transient `inc` by a good part of its distance from the coasted
+    reference: a receiver returning to the real sky drops the spoofer's offset within seconds, while the
+    reference's own drift is smooth (extrapolated linearly from the `window_s` before) and a glitch on a
+    continuing attack moves GNSS by metres. The jump must reach `share` of the distance before it and
+    `CoastingOptions.min_departure_m`."""
+    if check is None or check.offset_en_m is None:
+        return False
+    t, d = check.t, check.offset_en_m
+    pre = (t >= inc.start_s - window_s) & (t < inc.start_s) & np.isfinite(d).all(axis=1)
+    post = (t >= inc.start_s + settle_s) & (t <= inc.start_s + settle_s + window_s) & np.isfinite(d).all(axis=1)
+    if pre.sum() < 3 or not post.any():
+        return False
+    coef = np.polyfit(t[pre], d[pre], 1)  # (2, 2): slope, intercept per axis
+    drift = np.outer(t[post], coef[0]) + coef[1]
+    jump = float(np.hypot(*np.median(d[post] - drift, axis=0)))
+    distance = float(np.median(np.hypot(d[pre, 0], d[pre, 1])))
+    return jump >= max(share * distance, CoastingOptions().min_departure_m)
+
+
+def _absorb(current: Incident, inc: Incident, check: CoastingCheck | None = None) -> Incident:
     """`inc` (alarms inside a confirmed incident) merged into it; when it starts where the reference could
-    no longer tell whether GNSS agreed, it marks the end: a spoofer switching off makes the receiver lose
-    and re-acquire the real sky, which the detectors see as a new transient."""
+    no longer tell whether GNSS agreed, and GNSS comes back toward the reference across it, it marks the
+    end: a spoofer switching off makes the receiver lose and re-acquire the real sky, which the detectors
+    see as a new transient."""
     merged = replace(
         current,
         detectors=tuple(sorted({*current.detectors, *inc.detectors})),
@@ -433,6 +461,7 @@ def _absorb(current: Incident, inc: Incident) -> Incident:
         and window is not None
         and window[0] < window[1]
         and window[0] <= inc.start_s
+        and _jumps_back(check, inc)
     ):
         before = inc.onset_s if inc.onset_s < inc.start_s else inc.start_s - 2.0
         return replace(

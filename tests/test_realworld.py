@@ -156,3 +156,16 @@ def test_a_velocity_pull_is_confirmed_by_how_far_gnss_velocity_leaves_the_coaste
     hit = [i for i in verdict.incidents if i.is_spoofing]
     assert len(hit) == 1 and Evidence.INERTIAL in hit[0].evidence
     assert abs(hit[0].onset_s - first) <= 1.0 and hit[0].ongoing_at_end
+
+
+def test_a_capture_that_stops_ends_where_gnss_jumps_back_and_a_glitch_does_not_end_one_that_goes_on() -> None:
+    """A consumer car coasting for 150 s cannot tell agreement any more; the receiver's return to the real
+    sky at 250 s (the transient, and GNSS jumping hundreds of metres back) ends the incident there."""
+    sc = replace(SCENARIOS["ground"], receiver=ReceiverModel())
+    table = simulate(sc, seed=1, duration_s=300.0).table
+    stops, _ = apply_attack(table, parse_attack("capture:start=100,end=250"))
+    inc = next(i for i in analyze_table(stops).verdict.incidents if i.is_spoofing)
+    assert not inc.ongoing_at_end and 249.0 <= inc.end_s <= 252.0 and "returning" in inc.end_method
+    goes_on, _ = apply_attack(table, parse_attack("capture:start=100"))
+    inc = next(i for i in analyze_table(goes_on).verdict.incidents if i.is_spoofing)
+    assert inc.ongoing_at_end and inc.end_s == pytest.approx(float(table.duration_s), abs=0.5)
