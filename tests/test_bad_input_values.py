@@ -144,3 +144,20 @@ def test_nan_and_infinite_pseudoranges_are_counted(tmp_path: Path) -> None:
     assert counts["pseudorange outside 1,000 .. 100,000 km"] == 4
     assert len(table.observations) == len(read_log(SAMPLE_LOGS / "meaconed_raw").observations) - 10
     assert isinstance(table.observations, pd.DataFrame)
+
+
+def test_a_navigation_record_with_a_week_beyond_64_bits_is_dropped_not_an_overflow(tmp_path: Path) -> None:
+    """The fuzzer wrote 9223372036854775808 into a RINEX 2 nav file (an OverflowError before)."""
+    from readers.rinex.navigation import read_rinex_nav_file
+
+    real = Path(__file__).resolve().parents[1].parent / "shared/real/rinex_gsi_pair/07590920.05n"
+    lines = real.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    week = lines[first + 5]
+    lines[first + 5] = week[:41] + " 9.223372036855D+18" + week[60:]  # the 19-column field
+    damaged = tmp_path / "07590920.05n"
+    damaged.write_text("\n".join(lines) + "\n")
+    nav = read_rinex_nav_file(damaged)
+    whole = read_rinex_nav_file(real)
+    assert len(nav.ephemerides) == len(whole.ephemerides) - 1
+    assert any("out of range" in s.reason and s.count == 1 for s in nav.skipped)

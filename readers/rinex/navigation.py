@@ -87,6 +87,9 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
     fit = float(rec.pop("fit_hours"))
     if fit > 4.0:
         rec["max_age_s"] = fit * 3600.0 / 2
+    for key in ("week", "health", "iode"):  # integers a receiver writes: anything beyond 32 bits is damage
+        if not abs(float(rec[key])) < 2**31:
+            raise ValueError(f"{key} {rec[key]} out of range")
     week = int(rec["week"])
     toc_week = int(float(rec["toc_s"]) // SECONDS_PER_WEEK)
     while week + 512 < toc_week:  # a week written modulo 1024

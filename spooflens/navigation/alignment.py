@@ -141,6 +141,8 @@ def align(
     while True:
         sel = (tf >= tf[first]) & (tf <= tf[first] + window) & (tf <= pre.t[-1])
         idx = np.flatnonzero(sel)
+        if len(idx) < 4:
+            raise AnalysisError("too few GNSS fixes inside the IMU's time span to align the INS")
         k = np.clip(np.searchsorted(pre.t, tf[idx]), 0, len(pre.t) - 1)
         tau = pre.t[k] - pre.t[s]
         dH = quat_rotate(qs_inv, pre.H[k] - pre.H[s] - pre.G[s] * tau[:, None])
@@ -150,7 +152,12 @@ def align(
         # rotation is a single Kabsch problem on the projected vector pairs
         design = np.c_[np.ones_like(tau), tau]
         proj = np.eye(len(tau)) - design @ np.linalg.pinv(design)
-        C0 = _kabsch(proj @ dH, proj @ (P - grav))
+        if not (np.isfinite(dH).all() and np.isfinite(P - grav).all()):
+            raise AnalysisError("the IMU or GNSS values in the alignment window are not finite: cannot align")
+        try:
+            C0 = _kabsch(proj @ dH, proj @ (P - grav))
+        except np.linalg.LinAlgError as err:
+            raise AnalysisError(f"alignment failed on this log's IMU and GNSS ({err})") from None
         resid = P - grav - dH @ C0.T
         coef, *_ = np.linalg.lstsq(design, resid, rcond=None)
         v0 = coef[1]
@@ -278,7 +285,8 @@ def _earth_terms(lat: float, h: float, g: float, tau: FloatArray, P: FloatArray)
     -double integral of (2 omega_ie + omega_en) x v, with v from the GNSS positions. At aircraft speeds
     and 40 s windows each is tens of metres, the size of the heading signal itself.
     """
-    v = np.gradient(P, tau, axis=0) if len(tau) > 2 else np.zeros_like(P)
+    with np.errstate(divide="ignore", invalid="ignore"):  # repeated stamps (damaged logs): NaN, refused later
+        v = np.gradient(P, tau, axis=0) if len(tau) > 2 else np.zeros_like(P)
     w_ie, w_en, _, _ = rates(lat, h, np.mean(v, axis=0))
     rotation = -np.outer(tau**3 / 6.0, np.cross(w_ie + w_en, [0.0, 0.0, g]))
     cor = np.cross(2 * w_ie + w_en, v)
