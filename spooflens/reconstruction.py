@@ -325,7 +325,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
             # start there; its alarms belong to the incident, and inside the stretch where the reference
             # could no longer tell, they are how the receiver's return to the real sky shows
-            incidents[-1] = _absorb(current, inc, current_check)
+            incidents[-1] = _absorb(current, inc, current_check, opts.min_departure_m)
             continue
         if Evidence.INERTIAL not in inc.evidence:
             incidents.append(inc)
@@ -403,7 +403,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             r.name == "gnss_consistency" and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
             for r in ctx.results
         )
-        nav_result.tracks.append(_reconstructed_track(nav, onset - CoastingOptions().margin_s, t_to, velocity_honest))
+        nav_result.tracks.append(_reconstructed_track(nav, onset - opts.margin_s, t_to, velocity_honest))
     nav_result.extras["coasting_checks"] = [
         {
             "incident_onset_s": inc.onset_s,
@@ -420,13 +420,18 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
 
 
 def _jumps_back(
-    check: CoastingCheck | None, inc: Incident, window_s: float = 10.0, settle_s: float = 3.0, share: float = 0.25
+    check: CoastingCheck | None,
+    inc: Incident,
+    min_jump_m: float,
+    window_s: float = 10.0,
+    settle_s: float = 3.0,
+    share: float = 0.25,
 ) -> bool:
     """Whether GNSS jumped across the transient `inc` by a good part of its distance from the coasted
     reference: a receiver returning to the real sky drops the spoofer's offset within seconds, while the
     reference's own drift is smooth (extrapolated linearly from the `window_s` before) and a glitch on a
     continuing attack moves GNSS by metres. The jump must reach `share` of the distance before it and
-    `CoastingOptions.min_departure_m`."""
+    `min_jump_m` (the departure a confirmation needs)."""
     if check is None or check.offset_en_m is None:
         return False
     t, d = check.t, check.offset_en_m
@@ -438,10 +443,10 @@ def _jumps_back(
     drift = np.outer(t[post], coef[0]) + coef[1]
     jump = float(np.hypot(*np.median(d[post] - drift, axis=0)))
     distance = float(np.median(np.hypot(d[pre, 0], d[pre, 1])))
-    return jump >= max(share * distance, CoastingOptions().min_departure_m)
+    return jump >= max(share * distance, min_jump_m)
 
 
-def _absorb(current: Incident, inc: Incident, check: CoastingCheck | None = None) -> Incident:
+def _absorb(current: Incident, inc: Incident, check: CoastingCheck | None, min_jump_m: float) -> Incident:
     """`inc` (alarms inside a confirmed incident) merged into it; when it starts where the reference could
     no longer tell whether GNSS agreed, and GNSS comes back toward the reference across it, it marks the
     end: a spoofer switching off makes the receiver lose and re-acquire the real sky, which the detectors
@@ -461,7 +466,7 @@ def _absorb(current: Incident, inc: Incident, check: CoastingCheck | None = None
         and window is not None
         and window[0] < window[1]
         and window[0] <= inc.start_s
-        and _jumps_back(check, inc)
+        and _jumps_back(check, inc, min_jump_m)
     ):
         before = inc.onset_s if inc.onset_s < inc.start_s else inc.start_s - 2.0
         return replace(
