@@ -402,7 +402,7 @@ def _raw_observations(
     nav = None
     if len(rows) and reference == "gps":
         nav = navigation_for(log.path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
-        rows = add_satellite_states(rows, nav, "GPS[0]", skipped)
+        rows = add_satellite_states(rows, nav.ephemerides if nav else None, "GPS[0]", skipped)
     elif len(rows):
         skipped.append(Skipped("GPS[0]", "raw observations on the boot clock: no satellite states", len(rows)))
     epochs = int(rows["t_ns"].nunique())

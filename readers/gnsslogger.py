@@ -464,7 +464,7 @@ def read_gnsslogger(
     if have_raw and raw is not None:
         rows = raw.rows
         nav = navigation_for(path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
-        rows = add_satellite_states(rows, nav, RECEIVER, skipped)
+        rows = add_satellite_states(rows, nav.ephemerides if nav else None, RECEIVER, skipped)
         frames["observations"] = rows
         streams.append(StreamInfo("observations", RECEIVER, "Raw", "gnsslogger/Raw", int(rows["t_ns"].nunique())))
     if progress:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from readers.rinex import NavFile, is_gps_nav, read_rinex_nav_file
 from spooflens.epoch_table import Skipped, StreamInfo
 from spooflens.errors import ReaderError
-from spooflens.gnss.ephemeris import states_at_transmission
+from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
 
 COVER_S = 2 * 3600.0  # a broadcast record serves +-2 h around its toe
 
@@ -74,17 +74,25 @@ def nav_stream(nav: NavFile, t0_ns: int) -> StreamInfo:
     )
 
 
+NO_NAV_FILE = "no navigation file covers the log (give one with --topic nav=FILE); no satellite states"
+
+
 def add_satellite_states(
-    rows: pd.DataFrame, nav: NavFile | None, receiver_id: str, skipped: list[Skipped]
+    rows: pd.DataFrame,
+    ephemerides: GpsEphemerides | None,
+    receiver_id: str,
+    skipped: list[Skipped],
+    none_reason: str = NO_NAV_FILE,
 ) -> pd.DataFrame:
-    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of their GPS satellites."""
+    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of their GPS satellites;
+    `none_reason` says why there are no ephemerides when `ephemerides` is None."""
     sv = rows["sv_id"].to_numpy(str)
     gps = np.char.startswith(sv, "G") if len(sv) else np.zeros(0, dtype=bool)
     rows = rows.copy()
-    if nav is not None and gps.any():
+    if ephemerides is not None and gps.any():
         g = np.flatnonzero(gps)
         t = rows["t_ns"].to_numpy(np.int64)[g] / 1e9
-        states = states_at_transmission(nav.ephemerides, sv[g], t, rows["pseudorange_m"].to_numpy(float)[g])
+        states = states_at_transmission(ephemerides, sv[g], t, rows["pseudorange_m"].to_numpy(float)[g])
         for name, values in states.columns().items():
             col = np.full(len(rows), np.nan)
             col[g] = values
@@ -100,14 +108,7 @@ def add_satellite_states(
                 )
             )
     elif gps.any():
-        skipped.append(
-            Skipped(
-                receiver_id,
-                "no navigation file covers the log (give one with --topic nav=FILE); no satellite states",
-                int(gps.sum()),
-                "no ephemeris",
-            )
-        )
+        skipped.append(Skipped(receiver_id, none_reason, int(gps.sum()), "no ephemeris"))
     if (~gps).any():
         skipped.append(
             Skipped(

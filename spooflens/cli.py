@@ -100,8 +100,8 @@ topic_option = click.option(
     "topics",
     multiple=True,
     metavar="ROLE=/name",
-    help="Assign a topic to a role: fix, fix2, imu, vel, odom, truth; for RINEX logs nav=FILE names the "
-    "navigation file. Repeatable.",
+    help="Assign a topic to a role: fix, fix2, imu, vel, odom, truth; for logs of raw observations (RINEX, "
+    "UBX, GnssLogger, DataFlash) nav=FILE names the navigation file. Repeatable.",
 )
 
 

@@ -12,8 +12,9 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   same solution again and is counted, not used.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
-  RINEX-style. No satellite states: broadcast orbits would come from RXM-SFRBX subframes, which pyubx2
-  leaves as raw words and spooflens does not decode, so RAWX rows cannot be solved into positions.
+  RINEX-style. GPS satellite states from the broadcast ephemerides in the capture's own RXM-SFRBX
+  subframes (`subframes.py`), else from a RINEX navigation file (`--topic nav=FILE`, or one beside
+  the capture covering its time), so RAIM and the raw-measurement detectors run on the capture.
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
@@ -37,8 +38,10 @@ import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
 from readers import ReaderFormat
+from readers.raw_states import add_satellite_states, nav_stream, navigation_for
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
+from readers.ubx.subframes import LnavDecoder
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -48,6 +51,7 @@ from spooflens.epoch_table import (
     gps_seconds_of_unix_ns,
 )
 from spooflens.errors import ReaderError
+from spooflens.gnss.ephemeris import GpsEphemerides
 from spooflens.schema import SpoofingFlag
 
 Progress = Callable[[int, int], None]
@@ -71,6 +75,7 @@ class _State:
     pending: dict[str, float] = field(default_factory=dict)  # untimed values before the first epoch
     gps_refs: list[float] = field(default_factory=list)  # GPS seconds known from week-bearing messages
     rawx: list[m.RawxEpoch] = field(default_factory=list)
+    sfrbx: list[bytes] = field(default_factory=list)
     esf: list[tuple[str, int, int | None, dict[str, float]]] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)
     used: Counter[str] = field(default_factory=Counter)
@@ -109,6 +114,9 @@ def _handle(state: _State, frame: UbxFrame) -> None:
         raw = m.rawx(frame)
         state.rawx.append(raw)
         state.gps_refs.append(raw.gps_s)
+        return
+    if name == "RXM-SFRBX":
+        state.sfrbx.append(frame.payload)
         return
     if name in ("ESF-RAW", "ESF-MEAS"):
         for tag, sample in m.esf_samples(name, frame):
@@ -211,6 +219,60 @@ def _observations(state: _State) -> tuple[pd.DataFrame | None, int]:
     df = pd.concat(parts, ignore_index=True)
     df["receiver_id"] = RECEIVER
     return df, no_pr
+
+
+def _broadcast_ephemerides(state: _State, ref_s: float | None, skipped: list[Skipped]) -> GpsEphemerides | None:
+    """GPS ephemerides decoded from the capture's RXM-SFRBX subframes (None when none assemble)."""
+    if not state.sfrbx:
+        return None
+    decoder = LnavDecoder()
+    bad = 0
+    for payload in state.sfrbx:
+        try:
+            decoder.add(payload, ref_s)
+        except ValueError:
+            bad += 1
+    if bad:
+        skipped.append(Skipped("RXM-SFRBX", "subframe messages of impossible length", bad, "lost"))
+    for what in ("parity failed", "implausible orbit", "no GPS time to resolve the week"):
+        if decoder.counts[what]:
+            skipped.append(Skipped("RXM-SFRBX", f"GPS subframes dropped: {what}", decoder.counts[what], "lost"))
+    records = decoder.records()
+    if not records:
+        return None
+    return GpsEphemerides.from_records(records, decoder.iono)
+
+
+def _with_satellite_states(
+    state: _State,
+    obs: pd.DataFrame,
+    path: Path,
+    topics: Mapping[str, str] | None,
+    ref_s: float | None,
+    skipped: list[Skipped],
+) -> tuple[pd.DataFrame, StreamInfo | None]:
+    """RAWX rows with the sv_* columns: the capture's own subframes first, else a RINEX navigation file."""
+    eph = _broadcast_ephemerides(state, ref_s, skipped)
+    t0_ns = int(obs["t_ns"].min())
+    if eph is not None:
+        toe = eph.toe_s
+        stream = StreamInfo(
+            "nav",
+            RECEIVER,
+            "UBX",
+            "UBX RXM-SFRBX (GPS LNAV ephemerides)",
+            len(eph),
+            float(toe.min() - t0_ns / 1e9),
+            float(toe.max() - t0_ns / 1e9),
+        )
+        return add_satellite_states(obs, eph, RECEIVER, skipped), stream
+    reason = (
+        "no GPS ephemeris in the capture (RXM-SFRBX) and no navigation file covers it "
+        "(give one with --topic nav=FILE); no satellite states"
+    )
+    nav = navigation_for(path, topics, obs["t_ns"].to_numpy() / 1e9, skipped) if ref_s is not None else None
+    rows = add_satellite_states(obs, nav.ephemerides if nav else None, RECEIVER, skipped, reason)
+    return rows, nav_stream(nav, t0_ns) if nav is not None else None
 
 
 def _imu(state: _State, ref_s: float | None, skipped: list[Skipped]) -> pd.DataFrame | None:
@@ -336,8 +398,10 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         if progress and i % 2000 == 0:
             progress(i, len(frames.ubx))
     skipped: list[Skipped] = []
-    if topics:
-        skipped.append(Skipped("<ubx>", f"--topic is not used for UBX logs ({dict(topics)})", len(topics)))
+    unused_topics = {k: v for k, v in (topics or {}).items() if k != "nav"}
+    if unused_topics:
+        note = f"--topic other than nav= is not used for UBX logs ({unused_topics})"
+        skipped.append(Skipped("<ubx>", note, len(unused_topics)))
     for what, n in frames.bad.items():
         skipped.append(Skipped("UBX", what, n, "lost"))
     if frames.garbage_bytes:
@@ -359,6 +423,11 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     reference = "gps" if ref_s is not None else "relative"
     fixes = _fixes(state, ref_s)
     obs, no_pr = _observations(state)
+    nav_info = None
+    if obs is not None:
+        obs, nav_info = _with_satellite_states(state, obs, path, topics, ref_s, skipped)
+    elif state.sfrbx:
+        skipped.append(Skipped("RXM-SFRBX", "subframes without RXM-RAWX observations to use them", len(state.sfrbx)))
     imu = _imu(state, ref_s, skipped)
     nmea_fixes, headings, nmea_streams = _nmea_part(frames, path, reference, fixes is None, skipped)
     if fixes is None and nmea_fixes is not None:
@@ -376,8 +445,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         streams.append(StreamInfo("observations", RECEIVER, "UBX", "UBX RXM-RAWX", len(state.rawx)))
         if no_pr:
             skipped.append(Skipped(RECEIVER, "RAWX signals without a valid pseudorange (prValid 0)", no_pr))
-        reason = "RAWX rows: no satellite states (RXM-SFRBX subframes are not decoded); positions cannot be solved"
-        skipped.append(Skipped(RECEIVER, reason, len(obs), "no ephemeris"))
+        if nav_info is not None:
+            streams.append(nav_info)
     if imu is not None:
         streams.append(StreamInfo("imu", "ubx_esf", "UBX", "UBX ESF-RAW/ESF-MEAS", len(imu), body_frame="FRD"))
     if fixes is None and obs is None and imu is None:

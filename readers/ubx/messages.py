@@ -26,6 +26,7 @@ MSG = {  # (class, id) -> name, for the messages spooflens reads
     (0x01, 0x04): "NAV-DOP",
     (0x01, 0x20): "NAV-TIMEGPS",
     (0x02, 0x15): "RXM-RAWX",
+    (0x02, 0x13): "RXM-SFRBX",
     (0x0A, 0x38): "MON-RF",
     (0x0A, 0x09): "MON-HW",
     (0x0A, 0x04): "MON-VER",

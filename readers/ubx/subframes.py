@@ -1,0 +1,252 @@
+"""GPS broadcast ephemerides from u-blox RXM-SFRBX: the L1 C/A LNAV subframes a receiver passes on.
+
+A RAWX capture carries pseudoranges but no satellite positions; the receiver's SFRBX messages carry the
+navigation message it demodulated, so decoding subframes 1-3 (clock, orbit) and subframe 4 page 18
+(Klobuchar ionosphere) gives the same broadcast records a RINEX navigation file would, and RAIM and the
+raw-measurement detectors can run on the capture alone.
+
+Layout (IS-GPS-200 20.3.2-20.3.3; u-blox interface description, RXM-SFRBX): ten 30-bit words per
+subframe, each in the 30 least significant bits of a little-endian U4, 24 data bits then 6 parity
+bits. Receivers differ in whether the data bits are still complemented by the previous word's D30
+bit as transmitted; every subframe is parity-checked both ways and kept only when all ten words pass
+one of them, so a damaged or mis-assembled subframe never becomes an orbit.
+
+The 10-bit week of subframe 1 is resolved against the capture's GPS time (RAWX, NAV-TIMEGPS); the
+weeks of toe and toc are those within half a week of the subframe's transmission time. A record is
+assembled when subframes 1, 2 and 3 of one satellite come from one 30-s frame and agree on the issue
+of data (IODC low byte = IODE of subframes 2 and 3).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from spooflens.gnss.ephemeris import Klobuchar
+
+WEEK_S = 604_800
+HALF_WEEK_S = WEEK_S // 2
+SEMICIRCLE = math.pi  # LNAV angles are in semicircles
+TLM_PREAMBLE = 0x8B
+SFRBX_HEADER = 8
+GPS_GNSS_ID = 0
+
+# IS-GPS-200 Table 20-XIV: the data bits (1..24) each parity bit D25..D30 sums, and which of the
+# previous word's D29*/D30* enters it
+_PARITY_BITS: tuple[tuple[int, tuple[int, ...]], ...] = (
+    (29, (1, 2, 3, 5, 6, 10, 11, 12, 13, 14, 17, 18, 20, 23)),
+    (30, (2, 3, 4, 6, 7, 11, 12, 13, 14, 15, 18, 19, 21, 24)),
+    (29, (1, 3, 4, 5, 7, 8, 12, 13, 14, 15, 16, 19, 20, 22)),
+    (30, (2, 4, 5, 6, 8, 9, 13, 14, 15, 16, 17, 20, 21, 23)),
+    (30, (1, 3, 5, 6, 7, 9, 10, 14, 15, 16, 17, 18, 21, 22, 24)),
+    (29, (3, 5, 6, 8, 9, 10, 11, 13, 15, 19, 22, 23, 24)),
+)
+_PARITY_MASKS = tuple((star, sum(1 << (24 - b) for b in bits)) for star, bits in _PARITY_BITS)
+
+
+def parity(data24: int, d29_star: int, d30_star: int) -> int:
+    """The six parity bits (D25..D30, as a 6-bit int) of 24 source data bits."""
+    out = 0
+    for star, mask in _PARITY_MASKS:
+        bit = (d29_star if star == 29 else d30_star) ^ (bin(data24 & mask).count("1") & 1)
+        out = (out << 1) | bit
+    return out
+
+
+def _source_words(words30: list[int]) -> list[int] | None:
+    """The 24 source data bits of each word, or None when parity fails under both conventions: data as
+    transmitted (complemented when the previous word's D30 is 1) or already restored by the receiver."""
+    for transmitted in (True, False):
+        out = []
+        prev = 0  # word 10 of every subframe ends in D29 = D30 = 0, so TLM sees zeros
+        for w in words30:
+            d29s, d30s = (prev >> 1) & 1, prev & 1
+            data = (w >> 6) & 0xFFFFFF
+            if transmitted and d30s:
+                data ^= 0xFFFFFF
+            if parity(data, d29s, d30s) != w & 0x3F:
+                break
+            out.append(data)
+            prev = w
+        else:
+            return out
+    return None
+
+
+class _Bits:
+    """Big-endian bit reader over a subframe's 240 data bits (24 per word, parity removed)."""
+
+    def __init__(self, words24: list[int]) -> None:
+        self.value = 0
+        for w in words24:
+            self.value = (self.value << 24) | w
+
+    def u(self, pos: int, n: int) -> int:
+        return (self.value >> (240 - pos - n)) & ((1 << n) - 1)
+
+    def s(self, pos: int, n: int) -> int:
+        v = self.u(pos, n)
+        return v - (1 << n) if v >> (n - 1) else v
+
+
+@dataclass
+class _Subframes:
+    """The latest of subframes 1-3 of one satellite (decoded fields) and their transmission times."""
+
+    parts: dict[int, dict[str, float]] = field(default_factory=dict)
+
+
+def _subframe1(b: _Bits) -> dict[str, float]:
+    tgd = b.s(160, 8)
+    return {
+        "week10": b.u(48, 10),
+        "ura": b.u(60, 4),
+        "health": b.u(64, 6),
+        "iodc": (b.u(70, 2) << 8) | b.u(168, 8),
+        "tgd": 0.0 if tgd == -128 else tgd * 2.0**-31,
+        "toc_sow": b.u(176, 16) * 16.0,
+        "af2": b.s(192, 8) * 2.0**-55,
+        "af1": b.s(200, 16) * 2.0**-43,
+        "af0": b.s(216, 22) * 2.0**-31,
+    }
+
+
+def _subframe2(b: _Bits) -> dict[str, float]:
+    return {
+        "iode": b.u(48, 8),
+        "crs": b.s(56, 16) * 2.0**-5,
+        "delta_n": b.s(72, 16) * 2.0**-43 * SEMICIRCLE,
+        "m0": b.s(88, 32) * 2.0**-31 * SEMICIRCLE,
+        "cuc": b.s(120, 16) * 2.0**-29,
+        "e": b.u(136, 32) * 2.0**-33,
+        "cus": b.s(168, 16) * 2.0**-29,
+        "sqrt_a": b.u(184, 32) * 2.0**-19,
+        "toe_sow": b.u(216, 16) * 16.0,
+        "fit_flag": b.u(232, 1),
+    }
+
+
+def _subframe3(b: _Bits) -> dict[str, float]:
+    return {
+        "cic": b.s(48, 16) * 2.0**-29,
+        "omega0": b.s(64, 32) * 2.0**-31 * SEMICIRCLE,
+        "cis": b.s(96, 16) * 2.0**-29,
+        "i0": b.s(112, 32) * 2.0**-31 * SEMICIRCLE,
+        "crc": b.s(144, 16) * 2.0**-5,
+        "omega": b.s(160, 32) * 2.0**-31 * SEMICIRCLE,
+        "omega_dot": b.s(192, 24) * 2.0**-43 * SEMICIRCLE,
+        "iode": b.u(216, 8),
+        "idot": b.s(224, 14) * 2.0**-43 * SEMICIRCLE,
+    }
+
+
+def _klobuchar(b: _Bits) -> Klobuchar | None:
+    """Subframe 4 page 18 (SV ID 56): ionosphere alpha/beta; None for any other page."""
+    if b.u(50, 6) != 56:
+        return None
+    scale_a = (2.0**-30, 2.0**-27, 2.0**-24, 2.0**-24)
+    scale_b = (2.0**11, 2.0**14, 2.0**16, 2.0**16)
+    raw = [b.s(56 + 8 * k, 8) for k in range(8)]
+    alpha = tuple(raw[k] * scale_a[k] for k in range(4))
+    beta = tuple(raw[4 + k] * scale_b[k] for k in range(4))
+    return Klobuchar(alpha, beta)  # type: ignore[arg-type]
+
+
+def _near(sow: float, week: int, tow: float) -> float:
+    """GPS seconds of a seconds-of-week value in the week that puts it within half a week of (week, tow)."""
+    t = week * WEEK_S + sow
+    ref = week * WEEK_S + tow
+    return t + WEEK_S * round((ref - t) / WEEK_S)
+
+
+@dataclass
+class LnavDecoder:
+    """Collects RXM-SFRBX payloads; `records()` gives GpsEphemerides.from_records dicts."""
+
+    satellites: dict[str, _Subframes] = field(default_factory=dict)
+    assembled: dict[tuple[str, int, float], dict[str, float | int | str]] = field(default_factory=dict)
+    iono: Klobuchar | None = None
+    counts: Counter[str] = field(default_factory=Counter)  # "parity", "not gps lnav", "subframe k" ...
+    ref_week: int | None = None
+
+    def add(self, payload: bytes, ref_gps_s: float | None) -> None:
+        """One RXM-SFRBX payload. `ref_gps_s`: the capture's GPS time near it (resolves the 10-bit week)."""
+        if len(payload) < SFRBX_HEADER:
+            raise ValueError(f"RXM-SFRBX of {len(payload)} bytes")
+        gnss_id, sv, num_words = payload[0], payload[1], payload[4]
+        if len(payload) != SFRBX_HEADER + 4 * num_words:
+            raise ValueError(f"RXM-SFRBX with {num_words} words in {len(payload)} bytes")
+        if gnss_id != GPS_GNSS_ID or num_words != 10 or not 1 <= sv <= 32:
+            self.counts["not GPS L1 C/A LNAV"] += 1
+            return
+        words = np.frombuffer(payload[SFRBX_HEADER:], "<u4").astype(np.int64) & 0x3FFFFFFF
+        if (int(words[0]) >> 22) & 0xFF not in (TLM_PREAMBLE, TLM_PREAMBLE ^ 0xFF):
+            self.counts["CNAV or no TLM preamble"] += 1
+            return
+        data = _source_words([int(w) for w in words])
+        if data is None:
+            self.counts["parity failed"] += 1
+            return
+        bits = _Bits(data)
+        sf_id = bits.u(43, 3)
+        tow = bits.u(24, 17) * 6.0  # time of the next subframe's start; this one began 6 s earlier
+        self.counts[f"subframe {sf_id}"] += 1
+        if sf_id == 4:
+            self.iono = _klobuchar(bits) or self.iono
+            return
+        if sf_id not in (1, 2, 3):
+            return
+        decode = {1: _subframe1, 2: _subframe2, 3: _subframe3}[sf_id]
+        fields_ = decode(bits) | {"tow": tow - 6.0}
+        if ref_gps_s is not None:
+            fields_["ref_gps_s"] = ref_gps_s
+        sv_id = f"G{sv:02d}"
+        state = self.satellites.setdefault(sv_id, _Subframes())
+        state.parts[sf_id] = fields_
+        self._assemble(sv_id, state)
+
+    def _assemble(self, sv_id: str, state: _Subframes) -> None:
+        if not all(k in state.parts for k in (1, 2, 3)):
+            return
+        sf1, sf2, sf3 = state.parts[1], state.parts[2], state.parts[3]
+        tows = [float(sf["tow"]) for sf in (sf1, sf2, sf3)]
+        if max(tows) - min(tows) > 24.0 and max(tows) - min(tows) < WEEK_S - 24.0:
+            return  # not one 30-s frame: its parts may belong to different uploads
+        iode = int(sf2["iode"])
+        if not (int(sf1["iodc"]) & 0xFF == iode == int(sf3["iode"])):
+            return
+        ref = sf1.get("ref_gps_s")
+        if ref is None:
+            self.counts["no GPS time to resolve the week"] += 1
+            return
+        week = int(sf1["week10"])
+        ref_week = int(ref // WEEK_S)
+        week += 1024 * round((ref_week - week) / 1024)
+        tow = float(sf1["tow"])
+        toe_s = _near(float(sf2["toe_sow"]), week, tow)
+        toc_s = _near(float(sf1["toc_sow"]), week, tow)
+        toe_week = int(toe_s // WEEK_S)
+        record: dict[str, float | int | str] = {
+            "sv_id": sv_id,
+            "week": toe_week,
+            "toe_sow": toe_s - toe_week * WEEK_S,
+            "toc_s": toc_s,
+            "health": int(sf1["health"]),
+            "iode": iode,
+        }
+        for key in ("af0", "af1", "af2", "tgd"):
+            record[key] = float(sf1[key])
+        for key in ("crs", "delta_n", "m0", "cuc", "e", "cus", "sqrt_a"):
+            record[key] = float(sf2[key])
+        for key in ("cic", "omega0", "cis", "i0", "crc", "omega", "omega_dot", "idot"):
+            record[key] = float(sf3[key])
+        if not 2000.0 < float(record["sqrt_a"]) < 10000.0:
+            self.counts["implausible orbit"] += 1
+            return
+        self.assembled[(sv_id, iode, toe_s)] = record
+
+    def records(self) -> list[dict[str, float | int | str]]:
+        return list(self.assembled.values())
