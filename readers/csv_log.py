@@ -1,11 +1,12 @@
 """spooflens CSV logs: RINEX-like per-satellite observations, fixes, IMU samples and truth as text.
 
 A CSV log is one `.csv` file or a directory of them. Each file's columns say which frame it fills:
-a satellite column (`sv_id`, `sv`, `prn`, ...) makes it observations, else latitude makes it fixes
-(or truth, for a file named `truth*.csv`), else accelerometer columns make it IMU. One row per epoch
-(and receiver, and satellite for observations). Several receivers share a file through the receiver
-column. Column names are the epoch-table schema names (`spooflens schema`), and common spellings are
-accepted too (`ALIASES`).
+a satellite column (`sv_id`, `sv`, `prn`, ...) makes it observations (with a pseudorange) or the
+receiver's per-satellite reports (`satellites`: C/N0, elevation, used, ... without one), else latitude
+makes it fixes (or truth, for a file named `truth*.csv`), else accelerometer columns make it IMU. One
+row per epoch (and receiver, and satellite for observations and satellites). Several receivers share
+a file through the receiver column. Column names are the epoch-table schema names (`spooflens
+schema`), and common spellings are accepted too (`ALIASES`).
 
 Time, in seconds, from the first of these columns present:
 - `t_s` (aliases `t`, `time_s`, `time`): seconds since the log start; the absolute start may be given
@@ -93,9 +94,12 @@ def _canonical(name: str) -> str:
     return key
 
 
+_STREAM_KEY = {"fixes": "receiver_id", "observations": "receiver_id", "satellites": "receiver_id", "imu": "imu_id"}
+
+
 def _frame_of(path: Path, columns: set[str]) -> str:
     if "sv_id" in columns:
-        return "observations"
+        return "observations" if "pseudorange_m" in columns else "satellites"
     if "lat_deg" in columns:
         return "truth" if path.stem.lower().startswith("truth") else "fixes"
     if "ax_mps2" in columns:
@@ -177,7 +181,7 @@ def _read_one(path: Path, skipped: list[Skipped]) -> _File:
             cols[name] = np.where(ok, values, default).astype(np.int8)
         else:
             cols[name] = df[name].to_numpy(dtype=float)
-    key = {"fixes": "receiver_id", "observations": "receiver_id", "imu": "imu_id"}.get(frame)
+    key = _STREAM_KEY.get(frame)
     if key and key not in cols:
         cols[key] = path.stem if frame == "imu" else "rx0"
     if frame == "fixes" and "fix_type" not in cols:
@@ -274,8 +278,8 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         references.add(reference)
         if t0 is not None:
             t0s.add(t0)
-        key = {"fixes": "receiver_id", "observations": "receiver_id", "imu": "imu_id"}.get(frame)
-        role = {"fixes": "fix", "observations": "observations", "imu": "imu", "truth": "truth"}[frame]
+        key = _STREAM_KEY.get(frame)
+        role = {"fixes": "fix", "observations": "observations", "imu": "imu", "truth": "truth"}.get(frame, frame)
         counts = df[key].astype(str).value_counts(sort=False) if key else pd.Series({"truth": len(df)})
         for sid, n in counts.items():
             streams.append(

@@ -35,6 +35,8 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
     "spooflens.detectors.raim",
+    "spooflens.detectors.satellite_signals",
+    "spooflens.detectors.navigation_message",
     "spooflens.navigation.product",
     "spooflens.detectors.seed000",
     "spooflens.detectors.innovation_tests",
@@ -72,6 +74,22 @@ def _has_satellite_states(table: EpochTable) -> str | None:
     return None if ok.any() else "satellite positions (a navigation file or logged ephemerides)"
 
 
+def _has_satellite_view(table: EpochTable) -> str | None:
+    if len(table.satellites):
+        return None
+    obs = table.observations
+    if len(obs) and (np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any() or _has_satellite_states(table) is None):
+        return None
+    return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions"
+
+
+def _has_received_ephemerides(table: EpochTable) -> str | None:
+    eph = table.ephemerides
+    if eph is not None and np.isfinite(eph.received_s).any():
+        return None
+    return "navigation messages decoded from the signals (u-blox RXM-SFRBX)"
+
+
 def _has_two_receivers(table: EpochTable) -> str | None:
     n = len(table.receivers())
     return None if n >= 2 else f"two GNSS receivers ({n} found)"
@@ -88,6 +106,8 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "fix_velocity": _has_fix_velocity,
     "observations": _has_observations,
     "satellite_states": _has_satellite_states,
+    "satellite_view": _has_satellite_view,
+    "received_ephemerides": _has_received_ephemerides,
     "two_receivers": _has_two_receivers,
     "fleet": _has_fleet,
 }

@@ -163,6 +163,7 @@ class EpochTable:
     odometry: pd.DataFrame = field(default_factory=lambda: empty_frame("odometry"))
     headings: pd.DataFrame = field(default_factory=lambda: empty_frame("headings"))
     autopilot_ekf: pd.DataFrame = field(default_factory=lambda: empty_frame("autopilot_ekf"))
+    satellites: pd.DataFrame = field(default_factory=lambda: empty_frame("satellites"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
     # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
@@ -201,7 +202,7 @@ class EpochTable:
             key = STREAM_KEY[frame]
             rows = df if key is None else df[df[key] == st.stream_id]
             t = rows["t_s"].to_numpy()
-            count = len(np.unique(t)) if st.role == "observations" else len(rows)
+            count = len(np.unique(t)) if st.role in EPOCH_ROLES else len(rows)
             if count:
                 out.streams.append(replace(st, count=count, first_s=float(t[0]), last_s=float(t[-1])))
         return out
@@ -365,12 +366,12 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
             keep &= ~mask
     rows, t = rows[keep], t[keep]
     # an observation epoch has one row per satellite: a duplicate is the same satellite twice
-    if frame == "observations":
+    if frame in EPOCH_ROLES:
         dup = pd.DataFrame({"t": t, "sv": df["sv_id"].to_numpy()[rows]}).duplicated(keep="first").to_numpy()
     else:
         dup = np.concatenate(([False], t[1:] == t[:-1])) if len(t) else np.zeros(0, dtype=bool)
     if dup.any():
-        what = "duplicate (timestamp, satellite) rows" if frame == "observations" else "duplicate timestamps"
+        what = "duplicate (timestamp, satellite) rows" if frame in EPOCH_ROLES else "duplicate timestamps"
         skipped.append(Skipped(sid, f"{what}; kept the first", int(dup.sum())))
         rows = rows[~dup]
     stream.rows = rows
@@ -499,6 +500,8 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> boo
     return bool(drop.any())
 
 
+EPOCH_ROLES = ("observations", "satellites")  # streams of several rows per epoch: counted in epochs
+
 _ROLE_FRAME = {
     "imu": "imu",
     "fix": "fixes",
@@ -507,6 +510,7 @@ _ROLE_FRAME = {
     "observations": "observations",
     "heading": "headings",
     "autopilot_ekf": "autopilot_ekf",
+    "satellites": "satellites",
 }
 
 
@@ -671,7 +675,7 @@ def build_table(
                 s.stream_id,
                 s.topic,
                 s.msgtype,
-                len(np.unique(t)) if s.role == "observations" else len(rows),
+                len(np.unique(t)) if s.role in EPOCH_ROLES else len(rows),
                 float(t[0]) if len(t) else float("nan"),
                 float(t[-1]) if len(t) else float("nan"),
                 s.body_frame,

@@ -52,6 +52,10 @@ def _count(table: EpochTable, s: StreamInfo) -> str:
         obs = table.observations
         rows = int((obs["receiver_id"].astype(str) == s.stream_id).sum()) if len(obs) else 0
         return f"{s.count} epochs ({rows} observations)"
+    if s.role == "satellites":
+        sats = table.satellites
+        rows = sats[sats["receiver_id"].astype(str) == s.stream_id] if len(sats) else sats
+        return f"{s.count} epochs ({rows['sv_id'].nunique() if len(rows) else 0} satellites)"
     if s.role == "nav":
         return f"{s.count} records"
     return f"{s.count} messages" if s.frame_id != COMPUTED else f"{s.count} fixes"

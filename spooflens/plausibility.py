@@ -272,7 +272,10 @@ def bad_rows(frame: str, cols: Columns) -> list[tuple[BoolArray, str]]:
     elif frame == "headings":
         hd = cols["heading_deg"]
         out.append((~np.isfinite(hd) | (hd < 0) | (hd > 360), "heading outside 0 .. 360 deg"))
-    if frame in ("odometry", "autopilot_ekf", "truth", "fixes", "observations", "imu", "headings"):
+    elif frame == "satellites":
+        ids = pd.Series(cols["sv_id"], dtype="string")
+        out.append((~ids.str.fullmatch(SV_ID_PATTERN).fillna(False).to_numpy(dtype=bool), "unreadable satellite id"))
+    if frame in ("odometry", "autopilot_ekf", "truth", "fixes", "observations", "imu", "headings", "satellites"):
         big = np.zeros(len(next(iter(cols.values()))) if cols else 0, dtype=bool)
         for name, x in cols.items():
             if name in _REQUIRED.get(frame, ()) and x.dtype.kind == "f":

@@ -208,6 +208,21 @@ AUTOPILOT_EKF_COLUMNS: tuple[Column, ...] = (
     Column("primary_core", "float64", "-", "index of the core the autopilot used at the time (PI)", False),
 )
 
+# What the receiver says about each satellite it tracks (u-blox NAV-SAT, NMEA GSV/GSA): the sky as the
+# receiver sees it, with or without pseudoranges. Per-satellite evidence (a counterfeit satellite that
+# is stronger than its elevation allows, tracked below the horizon, or refused by the receiver).
+SATELLITE_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("receiver_id", "string", "-", "receiver id"),
+    Column("sv_id", "string", "-", "satellite id, RINEX style (G05, E11, C21, R07)"),
+    Column("cn0_dbhz", "float64", "dB-Hz", "carrier to noise density (strongest signal), NaN if not tracked", False),
+    Column("elevation_deg", "float64", "deg", "elevation the receiver computed, NaN if unknown", False),
+    Column("azimuth_deg", "float64", "deg", "azimuth the receiver computed, NaN if unknown", False),
+    Column("used", "float64", "-", "1 used in the receiver's solution, 0 not used, NaN unknown", False),
+    Column("residual_m", "float64", "m", "the receiver's pseudorange residual for it, NaN if not reported", False),
+    Column("healthy", "float64", "-", "1 healthy, 0 unhealthy, NaN unknown (as the receiver reports)", False),
+)
+
 FRAMES: dict[str, tuple[Column, ...]] = {
     "imu": IMU_COLUMNS,
     "fixes": FIX_COLUMNS,
@@ -216,6 +231,7 @@ FRAMES: dict[str, tuple[Column, ...]] = {
     "odometry": ODOMETRY_COLUMNS,
     "headings": HEADING_COLUMNS,
     "autopilot_ekf": AUTOPILOT_EKF_COLUMNS,
+    "satellites": SATELLITE_COLUMNS,
 }
 
 # Which column names the stream a row belongs to, per frame (truth has one stream).
@@ -227,6 +243,7 @@ STREAM_KEY: dict[str, str | None] = {
     "odometry": "odometry_id",
     "headings": "heading_id",
     "autopilot_ekf": "source",
+    "satellites": "receiver_id",
 }
 
 # Body-frame axis conventions an IMU stream may declare.

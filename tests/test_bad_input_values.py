@@ -13,7 +13,8 @@ from pipeline_support import circling_table
 
 from readers import read_log
 from spooflens.cli import main
-from spooflens.epoch_table import checked
+from spooflens.detectors.base import DetectorResult
+from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import AnalysisError
 from spooflens.pipeline import analyze_table
 from spooflens.writers import write_log
@@ -161,3 +162,30 @@ def test_a_navigation_record_with_a_week_beyond_64_bits_is_dropped_not_an_overfl
     whole = read_rinex_nav_file(real)
     assert len(nav.ephemerides) == len(whole.ephemerides) - 1
     assert any("out of range" in s.reason and s.count == 1 for s in nav.skipped)
+
+
+def _navigation_result(table: EpochTable) -> DetectorResult:
+    return next(r for r in analyze_table(table).results if r.name == "navigation")
+
+
+def test_an_imu_that_ends_before_the_alignment_window_leaves_the_navigation_not_run() -> None:
+    """The fuzzer cut an IMU stream to its first seconds (IndexError in the alignment before)."""
+    table = copy.copy(circling_table(seconds=60.0))
+    table.imu = table.imu[table.imu["t_s"] < 2.5].reset_index(drop=True)
+    nav = _navigation_result(table)
+    assert not nav.ran and "too few GNSS fixes inside the IMU's time span" in nav.reason
+
+
+def test_non_finite_values_in_the_alignment_window_are_refused_not_an_svd_error() -> None:
+    """Values each within range whose integrals overflow (1e300-scale damage) reached the SVD before."""
+    from spooflens.navigation.alignment import align
+    from spooflens.navigation.strapdown import preintegrate
+
+    table = circling_table(seconds=60.0)
+    imu, fixes = table.imu, table.fixes
+    f_b = imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(float)
+    w_b = imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy(float)
+    pre = preintegrate(imu["t_s"].to_numpy(float), f_b, w_b)
+    pre.H[200:220] = np.inf  # what an overflowed double integral leaves
+    with np.errstate(invalid="ignore"), pytest.raises(AnalysisError, match="not finite: cannot align"):
+        align(pre, imu, fixes, 0.0)

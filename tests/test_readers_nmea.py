@@ -267,3 +267,36 @@ def test_inject_round_trip_edits_positions_in_place(bundg: EpochTable, tmp_path:
     assert np.allclose(e[t >= 60], 200, atol=0.15) and np.allclose(n[t >= 60], 200, atol=0.15)
     assert np.array_equal(a["height_m"], b["height_m"])
     assert spoofed.headings.equals(bundg.headings)
+
+
+def test_bundg_satellites_from_gsv_and_gsa_agree_with_the_sentences(bundg: EpochTable) -> None:
+    sats = bundg.satellites
+    assert any(s.role == "satellites" and s.msgtype == "NMEA GSV/GSA" for s in bundg.streams)
+    assert set(sats["sv_id"].str[0]) == {"G", "R"}  # GPGSV and GLGSV (GLONASS numbered 65-96)
+    assert sats["elevation_deg"].between(0, 90).all() and sats["azimuth_deg"].between(0, 360).all()
+    assert sats.groupby("t_s")["sv_id"].apply(lambda s: s.is_unique).all()
+    # every satellite a GPGSV sentence lists is in the frame, with its elevation and C/N0
+    lines = (BOATS / "gpsd_bundg_zeus_9.log").read_text(errors="replace").splitlines()
+    first_gsv = next(ln.split("*")[0].split(",") for ln in lines if ln.startswith("$GPGSV,") and ln.split(",")[7])
+    sv, el, cn0 = int(first_gsv[4]), float(first_gsv[5]), float(first_gsv[7])
+    rows = sats[sats["sv_id"] == f"G{sv:02d}"]
+    assert ((rows["elevation_deg"] == el) & (rows["cn0_dbhz"] == cn0)).any()
+    # the epochs' mean C/N0 in the fixes is the mean of the satellites' C/N0
+    mean = sats.groupby("t_s")["cn0_dbhz"].mean()
+    fixes = bundg.fixes.set_index("t_s")["cn0_mean_dbhz"]
+    common = mean.index.intersection(fixes.index)
+    assert len(common) > 100
+    assert np.allclose(mean[common], fixes[common], equal_nan=True)
+
+
+@pytest.mark.parametrize(
+    ("talker", "svid", "expected"),
+    [
+        ("GP", 5, "G05"), ("GP", 46, "S33"), ("GN", 70, "R06"), ("GL", 70, "R06"), ("GA", 11, "E11"),
+        ("GB", 21, "C21"), ("BD", 221, "C21"), ("GP", 195, "J03"), ("GQ", 2, "J02"), ("GP", 120, None),
+    ],
+)  # fmt: skip
+def test_nmea_satellite_numbers(talker: str, svid: int, expected: str | None) -> None:
+    from readers.nmea.assembly import nmea_sv_id
+
+    assert nmea_sv_id(talker, svid) == expected

@@ -144,3 +144,47 @@ def test_raim_on_a_capture_alone_names_a_counterfeit_satellite(tmp_path: Path) -
     assert verdict["spoofed"] and verdict["incidents"][0]["satellites"] == ["G07"]
     assert verdict["incidents"][0]["onset_s"] == pytest.approx(1800.0, abs=1.0)
     assert any("G07 inconsistent by 3 km" in f["text"] for f in verdict["findings"])
+
+
+def _analyse(folder: Path, counterfeit: list[tuple[float, dict[str, float], float]]) -> dict[str, Any]:
+    folder.mkdir()
+    rinex = read_log(OBS)
+    nav = read_rinex_nav_file(NAV).ephemerides
+    records = _records(nav)
+    log = folder / "capture.ubx"
+    log.write_bytes(capture_from_rinex(rinex.observations, rinex.t0_ns / 1e9, records, None, counterfeit))
+    out = folder / "summary.json"
+    assert main(["analyze", str(log), "-o", str(folder / "a.rrd"), "--json", str(out), "--quiet"]) in (0, 3)
+    summary: dict[str, Any] = json.loads(out.read_text())
+    return summary
+
+
+def _message_detector(summary: dict[str, Any]) -> dict[str, Any]:
+    found: dict[str, Any] = next(d for d in summary["analyses"] if d["name"] == "navigation_message")
+    return found
+
+
+def test_navigation_messages_of_a_clean_capture_raise_nothing(tmp_path: Path) -> None:
+    _need()
+    summary = _analyse(tmp_path / "clean", [])
+    nav = _message_detector(summary)
+    assert nav["ran"] and not nav["alarms"], nav["reason"]
+    assert not summary["verdict"]["spoofed"]
+
+
+def test_a_counterfeit_navigation_message_is_named(tmp_path: Path) -> None:
+    """A spoofer's message for G07 from 1800 s: first an orbit 26 km off with the same issue of data,
+    then, for G08, a real orbit sent with its clock an hour off."""
+    _need()
+    records = _records(read_rinex_nav_file(NAV).ephemerides)
+    g07 = next(r for r in records if r["sv_id"] == "G07")
+    moved = g07 | {"m0": g07["m0"] + 1e-3}  # 1 mrad along track: 26 km
+    g08 = next(r for r in records if r["sv_id"] == "G08")
+    summary = _analyse(tmp_path / "fake", [(1800.0, moved, 0.0), (1800.0, g08, 3600.0)])
+    nav = _message_detector(summary)
+    by_sv = {tuple(a["satellites"]): a for a in nav["alarms"]}
+    assert set(by_sv) == {("G07",), ("G08",)}
+    assert by_sv[("G07",)]["start_s"] == pytest.approx(1800.0, abs=31.0)
+    texts = " ".join(f["text"] for f in summary["verdict"]["findings"])
+    assert "G07's broadcast orbit jumped" in texts and "G08: navigation message time off" in texts
+    assert summary["verdict"]["spoofed"]

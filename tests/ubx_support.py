@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -73,10 +73,13 @@ def _head(w: _Writer, tow_next: float, sf_id: int) -> None:
     w.put(43, 3, sf_id)
 
 
-def lnav_subframes(rec: Mapping[str, float], tx_gps_s: float, restored: bool = False) -> list[list[int]]:
+def lnav_subframes(
+    rec: Mapping[str, float], tx_gps_s: float, restored: bool = False, clock_error_s: float = 0.0
+) -> list[list[int]]:
     """Subframes 1, 2, 3 of one broadcast record (GpsEphemerides field names), the first sent at GPS
-    second `tx_gps_s` (a multiple of 30), as ten 30-bit words each."""
-    week, tow_s = divmod(tx_gps_s, WEEK_S)
+    second `tx_gps_s` (a multiple of 30), as ten 30-bit words each; `clock_error_s` shifts the time the
+    message says (a spoofer's clock), not when it is sent."""
+    week, tow_s = divmod(tx_gps_s + clock_error_s, WEEK_S)
     sc = math.pi
     w1, w2, w3 = _Writer(), _Writer(), _Writer()
     for k, w in enumerate((w1, w2, w3)):
@@ -147,10 +150,15 @@ def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
 
 
 def capture_from_rinex(
-    obs: pd.DataFrame, t0_gps_s: float, records: list[dict[str, float]], iono: tuple[tuple[float, ...], ...] | None
+    obs: pd.DataFrame,
+    t0_gps_s: float,
+    records: list[dict[str, float]],
+    iono: tuple[tuple[float, ...], ...] | None,
+    counterfeit: Sequence[tuple[float, dict[str, float], float]] = (),
 ) -> bytes:
     """A RAWX + SFRBX capture of a RINEX observation table (t_s from t0_gps_s): before each epoch, the
-    subframes 1-3 of every record whose toe is nearest, and the ionosphere page once."""
+    subframes 1-3 of every record whose toe is nearest, and the ionosphere page once. `counterfeit`:
+    (t_s from which, record, clock error s) messages sent instead for that satellite from then on."""
     out: list[bytes] = []
     sent: set[tuple[str, int]] = set()
     first = True
@@ -158,15 +166,20 @@ def capture_from_rinex(
         gps_s = t0_gps_s + float(t_s)
         frame_start = math.floor(gps_s / 30.0) * 30.0 - 30.0
         for sv in rows["sv_id"]:
-            cands = [r for r in records if r["sv_id"] == sv]
-            if not cands:
-                continue
-            rec = min(cands, key=lambda r: abs(r["week"] * WEEK_S + r["toe_sow"] - gps_s))
-            key = (sv, int(rec["iode"]))
+            fake = [(k, r, e) for k, (start, r, e) in enumerate(counterfeit) if r["sv_id"] == sv and t_s >= start]
+            if fake:
+                k, rec, error = fake[-1]
+                key = (sv, -1 - k)
+            else:
+                cands = [r for r in records if r["sv_id"] == sv]
+                if not cands:
+                    continue
+                rec = min(cands, key=lambda r: abs(r["week"] * WEEK_S + r["toe_sow"] - gps_s))
+                key, error = (sv, int(rec["iode"])), 0.0
             if key in sent:
                 continue
             sent.add(key)
-            for words in lnav_subframes(rec, frame_start):
+            for words in lnav_subframes(rec, frame_start, clock_error_s=error):
                 out.append(sfrbx(int(sv[1:]), words))
         if iono is not None and first:
             out.append(sfrbx(1, iono_subframe(iono[0], iono[1], frame_start)))

@@ -222,6 +222,53 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
     return values, pos.kind
 
 
+_TALKER_SYSTEM = {"GP": "G", "GL": "R", "GA": "E", "GB": "C", "BD": "C", "GQ": "J", "QZ": "J", "GI": "I"}
+
+
+def nmea_sv_id(talker: str, svid: int) -> str | None:
+    """RINEX-style id of an NMEA satellite number (NMEA 0183 numbering: GPS 1-32, SBAS 33-64, GLONASS
+    65-96, QZSS 193-202; Galileo, BeiDou and NavIC by their talker); None when it cannot be told."""
+    if 193 <= svid <= 202:
+        return f"J{svid - 192:02d}"
+    system = _TALKER_SYSTEM.get(talker)
+    if system in (None, "G"):
+        if 1 <= svid <= 32:
+            return f"G{svid:02d}"
+        if 33 <= svid <= 64:
+            return f"S{svid + 87 - 100:02d}"
+        if 65 <= svid <= 96:
+            return f"R{svid - 64:02d}"
+        return None
+    if system == "R":
+        return f"R{svid - 64:02d}" if 65 <= svid <= 96 else (f"R{svid:02d}" if 1 <= svid <= 24 else None)
+    if system == "C" and 201 <= svid <= 263:
+        svid -= 200
+    return f"{system}{svid:02d}" if 1 <= svid <= 99 else None
+
+
+def epoch_satellites(epoch: Epoch) -> list[tuple[str, float, float, float, float]]:
+    """The epoch's GSV satellites (sv id, elevation, azimuth, strongest C/N0, used per GSA: 1/0, NaN when
+    the epoch has no GSA), one per satellite."""
+    sky: dict[str, list[float]] = {}
+    used: set[str] = set()
+    has_gsa = False
+    for d in epoch.sentences:
+        if d.kind == "GSV":
+            for svid, el, az, c, _ in d.satellites:
+                sv = nmea_sv_id(d.talker, svid)
+                if sv is None:
+                    continue
+                row = sky.setdefault(sv, [math.nan, math.nan, math.nan])
+                row[0] = el if math.isfinite(el) else row[0]
+                row[1] = az if math.isfinite(az) else row[1]
+                if math.isfinite(c) and c > 0 and not (c <= row[2]):
+                    row[2] = c
+        elif d.kind == "GSA":
+            has_gsa = True
+            used.update(sv for v in d.used_svids if (sv := nmea_sv_id(d.talker, v)) is not None)
+    return [(sv, el, az, c, (1.0 if sv in used else 0.0) if has_gsa else math.nan) for sv, (el, az, c) in sky.items()]
+
+
 def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> np.ndarray:
     """Ellipsoidal heights: MSL altitude + geoid separation, with the repairs the docstring lists."""
     alt, sep = cols.pop("alt_msl_m"), cols.pop("geoid_sep_m")
@@ -292,6 +339,7 @@ class Assembled:
     metadata: dict[str, str]
     # (receiver id, fix time in ns on the log's clock) -> the epoch behind that fix row and its file (inject)
     fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = field(default_factory=dict)
+    satellites: pd.DataFrame | None = None
 
 
 def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
@@ -322,6 +370,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         metadata["log_header"] = " | ".join(comments)
 
     fix_parts: list[pd.DataFrame] = []
+    sat_rows: list[tuple[int, str, str, float, float, float, float]] = []
     fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = {}
     streams: list[StreamInfo] = []
     offsets: list[float] = []
@@ -359,6 +408,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
                 continue
             rows.append((int(t_ns), values))
             fix_epochs.setdefault((rx.receiver_id, int(t_ns)), (epoch, rx.file.scan.path))
+            sat_rows += [(int(t_ns), rx.receiver_id, *sat) for sat in epoch_satellites(epoch)]
         if invalid:
             skipped.append(
                 Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
@@ -380,6 +430,13 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         metadata["clock.gnss_minus_logger_s"] = f"{float(np.median(offsets)):.3f}"
 
     heading_parts, heading_streams = _headings(files, times_by_file, skipped)
+    satellites = None
+    if sat_rows:
+        satellites = pd.DataFrame(
+            sat_rows, columns=["t_ns", "receiver_id", "sv_id", "elevation_deg", "azimuth_deg", "cn0_dbhz", "used"]
+        )
+        for rid, n in satellites.groupby("receiver_id")["t_ns"].nunique().items():
+            streams.append(StreamInfo("satellites", str(rid), str(rid), "NMEA GSV/GSA", int(n)))
     return Assembled(
         pd.concat(fix_parts, ignore_index=True) if fix_parts else None,
         heading_parts,
@@ -387,6 +444,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         reference,
         metadata,
         fix_epochs,
+        satellites,
     )
 
 
@@ -428,7 +486,7 @@ def _headings(
 def build(path: Path, files: list[DecodedFile], skipped: list[Skipped]) -> EpochTable:
     """The EpochTable of a log's decoded files."""
     out = assemble(files, skipped)
-    frames = {"fixes": out.fixes, "headings": out.headings}
+    frames = {"fixes": out.fixes, "headings": out.headings, "satellites": out.satellites}
     return build_table(
         path,
         "nmea",

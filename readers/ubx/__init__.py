@@ -3,6 +3,8 @@
 One file is one receiver (`ubx`). The capture is framed (`frames.py`: every checksum verified, what is
 not UBX counted), and each message the reader uses is mapped in `messages.py`:
 
+- `satellites` from NAV-SAT: per satellite and epoch its C/N0, elevation, azimuth, pseudorange
+  residual, whether the receiver used it, and its health, as the receiver reports them.
 - `fixes` from NAV-PVT (position, NED velocity, hAcc/vAcc/sAcc, numSV, fixType), with, at the same
   iTOW, NAV-DOP (hdop, vdop), NAV-SAT (`cn0_mean_dbhz`) and NAV-STATUS (`spoofing_state` raw,
   `spoofing_flag` decoded); MON-RF (block 0) or MON-HW (`jamming_state`, `agc`, `noise_per_ms`,
@@ -75,7 +77,8 @@ class _State:
     pending: dict[str, float] = field(default_factory=dict)  # untimed values before the first epoch
     gps_refs: list[float] = field(default_factory=list)  # GPS seconds known from week-bearing messages
     rawx: list[m.RawxEpoch] = field(default_factory=list)
-    sfrbx: list[bytes] = field(default_factory=list)
+    sfrbx: list[tuple[bytes, float | None]] = field(default_factory=list)  # payload, receiver time then
+    navsat: list[m.NavSat] = field(default_factory=list)
     esf: list[tuple[str, int, int | None, dict[str, float]]] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)
     used: Counter[str] = field(default_factory=Counter)
@@ -116,11 +119,16 @@ def _handle(state: _State, frame: UbxFrame) -> None:
         state.gps_refs.append(raw.gps_s)
         return
     if name == "RXM-SFRBX":
-        state.sfrbx.append(frame.payload)
+        state.sfrbx.append((frame.payload, state.gps_refs[-1] if state.gps_refs else None))
         return
     if name in ("ESF-RAW", "ESF-MEAS"):
         for tag, sample in m.esf_samples(name, frame):
             state.esf.append((name, tag, state.current, sample))
+        return
+    if name == "NAV-SAT":
+        sat = m.nav_sat(frame)
+        state.epoch(sat.itow_ms).values["cn0_mean_dbhz"] = sat.cn0_mean
+        state.navsat.append(sat)
         return
     msg = m.parse(frame)
     if name == "NAV-PVT":
@@ -136,8 +144,6 @@ def _handle(state: _State, frame: UbxFrame) -> None:
             epoch.has_pvt = True
     elif name == "NAV-DOP":
         state.epoch(int(msg.iTOW)).values.update({"hdop": float(msg.hDOP), "vdop": float(msg.vDOP)})
-    elif name == "NAV-SAT":
-        state.epoch(int(msg.iTOW)).values["cn0_mean_dbhz"] = m.sat_cn0_mean(msg)
     elif name == "NAV-STATUS":
         state.epoch(int(msg.iTOW)).values.update(m.status_values(msg))
     elif name == "NAV-TIMEGPS":
@@ -221,15 +227,25 @@ def _observations(state: _State) -> tuple[pd.DataFrame | None, int]:
     return df, no_pr
 
 
+def _satellites(state: _State, ref_s: float | None) -> pd.DataFrame | None:
+    """NAV-SAT: what the receiver says about every satellite it tracks, one row per satellite and epoch."""
+    if not state.navsat:
+        return None
+    itow = np.concatenate([np.full(len(s.rows["sv_id"]), s.itow_ms, dtype=np.float64) for s in state.navsat])
+    t_s = _gps_of_itow(itow, ref_s) if ref_s is not None else itow / 1000.0
+    cols: dict[str, Any] = {k: np.concatenate([s.rows[k] for s in state.navsat]) for k in state.navsat[0].rows}
+    return pd.DataFrame({"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER, **cols})
+
+
 def _broadcast_ephemerides(state: _State, ref_s: float | None, skipped: list[Skipped]) -> GpsEphemerides | None:
     """GPS ephemerides decoded from the capture's RXM-SFRBX subframes (None when none assemble)."""
     if not state.sfrbx:
         return None
     decoder = LnavDecoder()
     bad = 0
-    for payload in state.sfrbx:
+    for payload, now in state.sfrbx:
         try:
-            decoder.add(payload, ref_s)
+            decoder.add(payload, ref_s, ref_s if now is None else now)  # before the first epoch: its time
         except ValueError:
             bad += 1
     if bad:
@@ -250,8 +266,9 @@ def _with_satellite_states(
     topics: Mapping[str, str] | None,
     ref_s: float | None,
     skipped: list[Skipped],
-) -> tuple[pd.DataFrame, StreamInfo | None]:
-    """RAWX rows with the sv_* columns: the capture's own subframes first, else a RINEX navigation file."""
+) -> tuple[pd.DataFrame, StreamInfo | None, GpsEphemerides | None]:
+    """RAWX rows with the sv_* columns: the capture's own subframes first, else a RINEX navigation file;
+    and the ephemerides used."""
     eph = _broadcast_ephemerides(state, ref_s, skipped)
     t0_ns = int(obs["t_ns"].min())
     if eph is not None:
@@ -265,14 +282,16 @@ def _with_satellite_states(
             float(toe.min() - t0_ns / 1e9),
             float(toe.max() - t0_ns / 1e9),
         )
-        return add_satellite_states(obs, eph, RECEIVER, skipped), stream
+        return add_satellite_states(obs, eph, RECEIVER, skipped), stream, eph
     reason = (
         "no GPS ephemeris in the capture (RXM-SFRBX) and no navigation file covers it "
         "(give one with --topic nav=FILE); no satellite states"
     )
     nav = navigation_for(path, topics, obs["t_ns"].to_numpy() / 1e9, skipped) if ref_s is not None else None
     rows = add_satellite_states(obs, nav.ephemerides if nav else None, RECEIVER, skipped, reason)
-    return rows, nav_stream(nav, t0_ns) if nav is not None else None
+    if nav is None:
+        return rows, None, None
+    return rows, nav_stream(nav, t0_ns), nav.ephemerides
 
 
 def _imu(state: _State, ref_s: float | None, skipped: list[Skipped]) -> pd.DataFrame | None:
@@ -423,12 +442,13 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     reference = "gps" if ref_s is not None else "relative"
     fixes = _fixes(state, ref_s)
     obs, no_pr = _observations(state)
-    nav_info = None
+    nav_info, ephemerides = None, None
     if obs is not None:
-        obs, nav_info = _with_satellite_states(state, obs, path, topics, ref_s, skipped)
+        obs, nav_info, ephemerides = _with_satellite_states(state, obs, path, topics, ref_s, skipped)
     elif state.sfrbx:
         skipped.append(Skipped("RXM-SFRBX", "subframes without RXM-RAWX observations to use them", len(state.sfrbx)))
     imu = _imu(state, ref_s, skipped)
+    satellites = _satellites(state, ref_s)
     nmea_fixes, headings, nmea_streams = _nmea_part(frames, path, reference, fixes is None, skipped)
     if fixes is None and nmea_fixes is not None:
         if reference == "relative":
@@ -449,6 +469,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             streams.append(nav_info)
     if imu is not None:
         streams.append(StreamInfo("imu", "ubx_esf", "UBX", "UBX ESF-RAW/ESF-MEAS", len(imu), body_frame="FRD"))
+    if satellites is not None:
+        streams.append(StreamInfo("satellites", RECEIVER, "UBX", "UBX NAV-SAT", len(state.navsat)))
     if fixes is None and obs is None and imu is None:
         reasons = "; ".join(str(s) for s in skipped[:6]) or "no UBX navigation message"
         raise ReaderError(path, f"no fix, raw observation or IMU sample in the capture: {reasons}", "ubx")
@@ -459,8 +481,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         "enum.fix_type": m.FIX_MEANING,
     }
     metadata["enum.spoofing_flag"] = f"{int(SpoofingFlag.INDICATED)} when spoofing_state >= 2"
-    frames_ns = {"fixes": fixes, "observations": obs, "imu": imu, "headings": headings}
-    return build_table(
+    frames_ns = {"fixes": fixes, "observations": obs, "imu": imu, "headings": headings, "satellites": satellites}
+    table = build_table(
         path,
         "ubx",
         reference,
@@ -469,6 +491,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         skipped,
         metadata=metadata,
     )
+    table.ephemerides = ephemerides
+    return table
 
 
 def looks_like_ubx(head: bytes) -> bool:

@@ -113,12 +113,55 @@ def pvt_utc_ns(msg: Any) -> int | None:
     return int(stamp.timestamp()) * 1_000_000_000 + int(_get(msg, "nano", 0))
 
 
-def sat_cn0_mean(msg: Any) -> float:
-    """Mean C/N0 of the satellites NAV-SAT reports as tracked (C/N0 > 0)."""
-    n = int(_get(msg, "numSvs", 0))
-    cn0 = [_get(msg, f"cno_{i:02d}", 0.0) for i in range(1, n + 1)]
-    tracked = [c for c in cn0 if c > 0]
-    return float(np.mean(tracked)) if tracked else math.nan
+NAV_SAT_SV = np.dtype(
+    [
+        ("gnssId", "u1"),
+        ("svId", "u1"),
+        ("cno", "u1"),
+        ("elev", "i1"),
+        ("azim", "<i2"),
+        ("prRes", "<i2"),
+        ("flags", "<u4"),
+    ]
+)
+
+
+@dataclass(frozen=True)
+class NavSat:
+    itow_ms: int
+    rows: dict[str, np.ndarray]  # satellites-frame columns (no t_ns, receiver_id)
+
+    @property
+    def cn0_mean(self) -> float:
+        """Mean C/N0 of the satellites reported as tracked (C/N0 > 0)."""
+        cn0 = self.rows["cn0_dbhz"]
+        tracked = cn0[np.isfinite(cn0)]
+        return float(tracked.mean()) if len(tracked) else math.nan
+
+
+def nav_sat(frame: UbxFrame) -> NavSat:
+    """NAV-SAT decoded at once: per satellite C/N0, elevation, azimuth, residual, used and health
+    (flags: qualityInd bits 0-2, svUsed bit 3, health bits 4-5 with 0 unknown, 1 healthy, 2 unhealthy)."""
+    p = frame.payload
+    if len(p) < 8 or len(p) != 8 + 12 * p[5]:
+        raise ValueError(f"NAV-SAT with {p[5] if len(p) > 5 else 0} satellites in {len(p)} bytes")
+    itow = int.from_bytes(p[:4], "little")
+    sv = np.frombuffer(p[8:], NAV_SAT_SV)
+    ids, ok = sv_ids(sv["gnssId"], sv["svId"])
+    sv = sv[ok]
+    flags = sv["flags"].astype(np.int64)
+    health = (flags >> 4) & 3
+    known_elev = (sv["elev"] >= -90) & ((flags >> 8) & 7 > 0)  # -91: unknown; orbitSource 0: no orbit
+    rows = {
+        "sv_id": ids[ok],
+        "cn0_dbhz": np.where(sv["cno"] > 0, sv["cno"].astype(float), np.nan),
+        "elevation_deg": np.where(known_elev, sv["elev"].astype(float), np.nan),
+        "azimuth_deg": np.where(known_elev, sv["azim"].astype(float), np.nan),
+        "used": ((flags >> 3) & 1).astype(float),
+        "residual_m": np.where((flags >> 3) & 1 == 1, sv["prRes"] * 0.1, np.nan),
+        "healthy": np.select([health == 1, health == 2], [1.0, 0.0], np.nan),
+    }
+    return NavSat(itow, rows)
 
 
 def status_values(msg: Any) -> dict[str, float]:
@@ -216,20 +259,27 @@ def rawx(frame: UbxFrame) -> RawxEpoch:
     return RawxEpoch(week * 604800 + rcv_tow, np.frombuffer(p[16:], RAWX_MEAS))
 
 
+def sv_ids(gnss_id: np.ndarray, sv_id: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """RINEX-style ids of u-blox (gnssId, svId) pairs, and which are real satellites (GLONASS 255:
+    unknown slot)."""
+    letter = np.array([SYSTEM_LETTER.get(int(g), "") for g in gnss_id], dtype="<U1")
+    prn = sv_id.astype(np.int64)
+    prn = np.where(gnss_id == 1, prn - 100, prn)  # SBAS PRN 120-158 -> S20-S58
+    prn = np.where((gnss_id == 5) & (prn > 192), prn - 192, prn)  # QZSS 193-202 -> J01-J10
+    ok = (letter != "") & (prn > 0) & (prn < 100) & ~((gnss_id == 6) & (sv_id == 255))
+    ids = np.char.add(letter, np.char.zfill(np.clip(prn, 0, 99).astype(str), 2))
+    return ids, ok
+
+
 def rawx_rows(epoch: RawxEpoch) -> dict[str, np.ndarray]:
     """One row per satellite: its L1-band signal's code, phase, Doppler and C/N0 (RINEX-style sv id)."""
     m = epoch.meas
-    letter = np.array([SYSTEM_LETTER.get(int(g), "") for g in m["gnssId"]])
-    prn = m["svId"].astype(np.int64)
-    prn = np.where(m["gnssId"] == 1, prn - 100, prn)  # SBAS PRN 120-158 -> S20-S58
-    prn = np.where((m["gnssId"] == 5) & (prn > 192), prn - 192, prn)  # QZSS 193-202 -> J01-J10
-    ok = (letter != "") & (prn > 0) & (prn < 100) & ~((m["gnssId"] == 6) & (m["svId"] == 255))
+    sv, ok = sv_ids(m["gnssId"], m["svId"])
     rank = np.full(len(m), 99)
     for system, sigs in L1_SIGNALS.items():
         for r, sig in enumerate(sigs):
             rank[(m["gnssId"] == system) & (m["sigId"] == sig)] = r
     ok &= rank < 99
-    sv = np.char.add(letter, np.char.zfill(prn.astype(str), 2))
     # one signal per satellite: the best-ranked
     order = np.lexsort((rank, sv))
     order = order[ok[order]]

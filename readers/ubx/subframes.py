@@ -167,13 +167,14 @@ class LnavDecoder:
     """Collects RXM-SFRBX payloads; `records()` gives GpsEphemerides.from_records dicts."""
 
     satellites: dict[str, _Subframes] = field(default_factory=dict)
-    assembled: dict[tuple[str, int, float], dict[str, float | int | str]] = field(default_factory=dict)
+    assembled: dict[tuple[object, ...], dict[str, float | int | str]] = field(default_factory=dict)
     iono: Klobuchar | None = None
     counts: Counter[str] = field(default_factory=Counter)  # "parity", "not gps lnav", "subframe k" ...
     ref_week: int | None = None
 
-    def add(self, payload: bytes, ref_gps_s: float | None) -> None:
-        """One RXM-SFRBX payload. `ref_gps_s`: the capture's GPS time near it (resolves the 10-bit week)."""
+    def add(self, payload: bytes, ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
+        """One RXM-SFRBX payload. `ref_gps_s`: the capture's GPS time near it (resolves the 10-bit week);
+        `now_gps_s`: the receiver's GPS time when the message came (its latest epoch), if known."""
         if len(payload) < SFRBX_HEADER:
             raise ValueError(f"RXM-SFRBX of {len(payload)} bytes")
         gnss_id, sv, num_words = payload[0], payload[1], payload[4]
@@ -203,6 +204,11 @@ class LnavDecoder:
         fields_ = decode(bits) | {"tow": tow - 6.0}
         if ref_gps_s is not None:
             fields_["ref_gps_s"] = ref_gps_s
+        if now_gps_s is not None:
+            # the subframe ended at `tow` (its HOW counts the next one's start) just before it was output
+            offset = tow - now_gps_s % WEEK_S
+            fields_["offset_s"] = offset - WEEK_S * round(offset / WEEK_S)
+            fields_["now_s"] = now_gps_s
         sv_id = f"G{sv:02d}"
         state = self.satellites.setdefault(sv_id, _Subframes())
         state.parts[sf_id] = fields_
@@ -246,7 +252,15 @@ class LnavDecoder:
         if not 2000.0 < float(record["sqrt_a"]) < 10000.0:
             self.counts["implausible orbit"] += 1
             return
-        self.assembled[(sv_id, iode, toe_s)] = record
+        offsets = [float(sf["offset_s"]) for sf in (sf1, sf2, sf3) if "offset_s" in sf]
+        offset = float(np.median(offsets)) if offsets else math.nan
+        # the same broadcast again (every 30 s) is one record; the same orbit on another clock is not
+        identity = (*sorted(record.items()), round(offset / 60.0) if offsets else None)
+        if identity in self.assembled:
+            return
+        record["message_offset_s"] = offset
+        record["received_s"] = max(float(sf.get("now_s", math.nan)) for sf in (sf1, sf2, sf3))
+        self.assembled[identity] = record
 
     def records(self) -> list[dict[str, float | int | str]]:
         return list(self.assembled.values())

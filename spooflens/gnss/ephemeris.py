@@ -74,16 +74,21 @@ class GpsEphemerides:
     health: NDArray[np.int64]
     iode: NDArray[np.int64]
     max_age_s: FloatArray
+    # when a receiver decoded the record from the signal (GPS seconds; NaN for a navigation file), and
+    # how far the message's own time (its subframes' HOW) was from the receiver's clock then (s)
+    received_s: FloatArray
+    message_offset_s: FloatArray
     iono: Klobuchar | None = field(default=None, compare=False)
 
     @classmethod
     def from_records(cls, records: list[dict[str, float | int | str]], iono: Klobuchar | None = None) -> GpsEphemerides:
-        """Build from one dict per record (keys: the field names; `max_age_s` defaults to the fit interval)."""
+        """Build from one dict per record (keys: the field names; `max_age_s` defaults to the fit interval,
+        `received_s` and `message_offset_s` to NaN)."""
         cols: dict[str, np.ndarray] = {}
         for f in fields(cls):
             if f.name == "iono":
                 continue
-            default = FIT_INTERVAL_S / 2 if f.name == "max_age_s" else None
+            default = {"max_age_s": FIT_INTERVAL_S / 2, "received_s": np.nan, "message_offset_s": np.nan}.get(f.name)
             values = [r.get(f.name, default) for r in records]
             if any(v is None for v in values):
                 raise ValueError(f"ephemeris record without {f.name!r}")
@@ -215,6 +220,15 @@ def satellite_states(eph: GpsEphemerides, sv_id: NDArray[np.str_] | list[str], t
         bias[ok] = C_MPS * _clock(sub, tt, ecc)
         drift[ok] = C_MPS * (_clock(sub, tt + h, ecc_plus) - _clock(sub, tt - h, ecc_minus)) / (2 * h)
     return SatelliteStates(pos, vel, bias, drift, rec)
+
+
+def record_positions(eph: GpsEphemerides, rec: NDArray[np.int64], t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """ECEF position (m) and clock bias times c (m) of record `rec[i]` at GPS time `t_s[i]`, whatever its
+    age or health: for comparing two broadcasts of one satellite."""
+    sub = eph.take(np.asarray(rec, dtype=np.int64))
+    t = np.asarray(t_s, dtype=float)
+    pos, ecc, _ = _kepler(sub, t)
+    return pos, C_MPS * _clock(sub, t, ecc)
 
 
 def synthetic_constellation(

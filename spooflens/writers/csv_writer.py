@@ -7,7 +7,13 @@ from pathlib import Path
 
 from spooflens.epoch_table import EpochTable
 
-FILES = {"fixes": "fixes.csv", "imu": "imu.csv", "observations": "observations.csv", "truth": "truth.csv"}
+FILES = {
+    "fixes": "fixes.csv",
+    "imu": "imu.csv",
+    "observations": "observations.csv",
+    "satellites": "satellites.csv",
+    "truth": "truth.csv",
+}
 
 
 def write_csv(table: EpochTable, path: Path) -> None:
