@@ -306,6 +306,20 @@ def _odometry(w: RecordingWriter, oid: str, od: pd.DataFrame) -> None:
         w.rec.log(entity("odometry", oid, "path"), rr.LineStrips3D([path], colors=[(40, 140, 60)]), static=True)
 
 
+def _satellite_series(w: RecordingWriter, table: EpochTable) -> None:
+    """Each satellite's C/N0 (and the receiver's elevation for it) over time: where a counterfeit
+    satellite shows, one line apart from the others."""
+    sats = table.satellites if len(table.satellites) else table.observations
+    if not len(sats) or not np.isfinite(sats["cn0_dbhz"].to_numpy(dtype=float)).any():
+        return
+    for (rid, sv), rows in sats.groupby([sats["receiver_id"].astype(str), sats["sv_id"].astype(str)], sort=True):
+        t = rows["t_s"].to_numpy(dtype=float)
+        w.scalars(entity("gnss", str(rid), "cn0_dbhz", str(sv)), t, rows["cn0_dbhz"].to_numpy(dtype=float), [str(sv)])
+        if "elevation_deg" in rows and np.isfinite(rows["elevation_deg"].to_numpy(dtype=float)).any():
+            el = rows["elevation_deg"].to_numpy(dtype=float)
+            w.scalars(entity("gnss", str(rid), "elevation_deg", str(sv)), t, el, [str(sv)])
+
+
 def _imu_series(w: RecordingWriter, iid: str, imu: pd.DataFrame) -> None:
     """Specific force and angular rate, taken from the table a block at a time (a day at 100 Hz is 8.6
     million rows: no whole-length stacked copy)."""
@@ -380,6 +394,7 @@ def write_recording(
                 tr["height_m"].to_numpy(),
                 COLOURS["truth"],
             )
+        _satellite_series(w, table)
         for iid in table.imus():
             _imu_series(w, iid, table.imu_of(iid))
         ev_t: list[float] = [0.0] * len(table.skipped)

@@ -169,3 +169,24 @@ def test_satellite_reports_survive_a_csv_round_trip(tmp_path: Path) -> None:
     num = cols[2:]
     assert np.allclose(left[num].to_numpy(float), right[num].to_numpy(float), equal_nan=True)
     assert any(s.role == "satellites" for s in back.streams)
+
+
+def test_the_recording_draws_every_satellites_cn0_and_elevation(tmp_path: Path) -> None:
+    from rerun.chunk import RrdReader
+
+    from spooflens.analysis import run_analyses
+    from spooflens.recording import write_recording
+
+    def ghost(s: int, sats: list[Sat]) -> list[Sat]:
+        return [*sats, (31, -25, 10, 46, 0, 1)] if s >= 40 else sats
+
+    table = read_log(_capture(tmp_path / "ghost.ubx", 60, ghost))
+    out = tmp_path / "ghost.rrd"
+    write_recording(out, table, run_analyses(table))
+    rows: dict[str, int] = {}
+    for chunk in RrdReader(str(out)).store().stream():
+        if not chunk.is_static:
+            rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows["/gnss/ubx/cn0_dbhz/G02"] == 60 and rows["/gnss/ubx/cn0_dbhz/G31"] == 20
+    assert rows["/gnss/ubx/elevation_deg/G31"] == 20
+    assert rows["/detectors/satellite_horizon/ubx/lowest_elevation"] == 60
