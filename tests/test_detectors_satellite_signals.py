@@ -190,3 +190,38 @@ def test_the_recording_draws_every_satellites_cn0_and_elevation(tmp_path: Path) 
     assert rows["/gnss/ubx/cn0_dbhz/G02"] == 60 and rows["/gnss/ubx/cn0_dbhz/G31"] == 20
     assert rows["/gnss/ubx/elevation_deg/G31"] == 20
     assert rows["/detectors/satellite_horizon/ubx/lowest_elevation"] == 60
+
+
+def test_a_counterfeit_satellite_in_a_real_phone_log_is_found_by_two_classes(tmp_path: Path) -> None:
+    """The real 2016-06-30 GnssLogger log (CSV copy, its navigation file beside it): G12 replaced from
+    100 s by a counterfeit 2 km late and 12 dB stronger. RAIM (raw measurements) and the C/N0 step
+    (receiver) agree in time and name G12; the clean copy stays clean."""
+    import json
+    import shutil
+
+    from spooflens.cli import main
+    from spooflens.writers import write_log
+
+    phone = REAL / "android_gnsslogger" / "gps-measurement-tools"
+    log = phone / "pseudoranges_log_2016_06_30_21_26_07.txt"
+    if not log.exists():
+        pytest.skip("the GnssLogger log is not present")
+    copy = tmp_path / "phone_csv"
+    write_log(read_log(log), copy, "csv")
+    shutil.copy(phone / "hour1820.16n", tmp_path / "hour1820.16n")
+    attacked = tmp_path / "attacked_csv"
+    spec = "pr_delay:svs=G12,delay=2000,cn0=12,start=100"
+    assert main(["inject", str(copy), "--attack", spec, "-o", str(attacked)]) == 0
+    verdicts = {}
+    for name in ("phone_csv", "attacked_csv"):
+        out = tmp_path / f"{name}.json"
+        main(["analyze", str(tmp_path / name), "-o", str(tmp_path / f"{name}.rrd"), "--json", str(out), "--quiet"])
+        verdicts[name] = json.loads(out.read_text())["verdict"]
+    assert not verdicts["phone_csv"]["spoofed"]
+    spoofed = verdicts["attacked_csv"]
+    assert spoofed["spoofed"]
+    incident = next(i for i in spoofed["incidents"] if i["spoofing"])
+    assert incident["confidence"] == "high" and incident["satellites"] == ["G12"]
+    assert {"raw_measurement", "receiver"} <= set(incident["evidence"])
+    assert {"raim", "satellite_signals"} <= set(incident["detectors"])
+    assert 98.0 <= incident["onset_s"] <= 101.0 and incident["end_s"] >= 220.0

@@ -220,6 +220,9 @@ def apply_observation_attack(table: EpochTable, spec: AttackSpec) -> tuple[Epoch
                 ("doppler_hz", -d_rate / lam),
             ):
                 new_obs.iloc[rows, cols.get_loc(col)] = obs[col].to_numpy(float) + delta
+            if float(spec.params.get("cn0", 0.0)):
+                cn0 = obs["cn0_dbhz"].to_numpy(float) + np.where(hit, float(spec.params["cn0"]), 0.0)
+                new_obs.iloc[rows, cols.get_loc("cn0_dbhz")] = cn0
         attacked = solve_logged(table, new_obs.iloc[rows][~drop[rows]])
         t_e, dp, dv = _solution_shift(clean, attacked)
         fix_rows = np.flatnonzero(fixes["receiver_id"].astype(str).to_numpy() == rid)

@@ -180,10 +180,11 @@ KINDS: dict[Kind, KindSpec] = {
     Kind.PR_DELAY: KindSpec(
         "002, 004",
         "chosen satellites' signals arrive `delay` m late, growing at `rate` m/s (code, carrier and Doppler "
-        "alike); the same delay on every satellite moves only the clock",
+        "alike), `cn0` dB stronger (a counterfeit satellite); the same delay on every satellite moves only the clock",
         (
             Param("delay", "float", 300.0, "m (300 m is 1 us)"),
             Param("rate", "float", 0.0, "m/s growth of the delay"),
+            Param("cn0", "float", 0.0, "dB added to their C/N0 (a counterfeit stronger than the real signal)"),
             _SVS,
             _count(None),
             _SEED,
