@@ -225,3 +225,18 @@ def test_a_counterfeit_satellite_in_a_real_phone_log_is_found_by_two_classes(tmp
     assert {"raw_measurement", "receiver"} <= set(incident["evidence"])
     assert {"raim", "satellite_signals"} <= set(incident["detectors"])
     assert 98.0 <= incident["onset_s"] <= 101.0 and incident["end_s"] >= 220.0
+
+
+def test_every_satellite_at_one_cn0_is_one_transmitter(tmp_path: Path) -> None:
+    rng = np.random.default_rng(9)
+
+    def one_transmitter(s: int, sats: list[Sat]) -> list[Sat]:
+        if s < 60:
+            return sats
+        return [(sv, el, az, 44 + int(rng.integers(-1, 2)), u, h) for sv, el, az, _, u, h in sats]
+
+    res = _run(read_log(_capture(tmp_path / "flat.ubx", 120, one_transmitter)))
+    alarms = res[SIGNALS].alarms
+    assert len(alarms) == 1 and alarms[0].satellites == ()
+    assert 60.0 <= alarms[0].start_s <= 64.0 and alarms[0].end_s == pytest.approx(119.0)
+    assert "8 satellites at one C/N0" in res[SIGNALS].findings[0].text

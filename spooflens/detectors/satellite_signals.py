@@ -18,6 +18,10 @@ the receiver's position). Three signatures, each for the satellite alone:
   above the median by `above_median_db`: a stronger signal took its tracking loop. A satellite
   climbing into view rises slowly (the short window refuses it); one coming out from behind an
   obstacle returns to its history (the long window refuses it).
+- **One C/N0 for all** (`satellite_signals`): `min_satellites` or more satellites whose C/N0 spread
+  (standard deviation, 5-s median) stays within `uniform_cn0_db` for `hold_s`: the channels of one
+  transmitter, not a sky of satellites at different elevations (the real logs at hand never go below
+  2.5 dB).
 - **Refused by the receiver** (`satellite_signals`): a healthy satellite with a known orbit, at least
   `refused_min_elevation_deg` high and at least as strong as the median satellite the receiver uses,
   that the receiver leaves out of its solution at `refused_fraction` of such epochs over at least
@@ -61,6 +65,8 @@ class SatelliteSignalOptions:
     refused_min_elevation_deg: float = 15.0
     min_used: int = 4
     residual_m: float = 100.0
+    uniform_cn0_db: float = 1.5
+    min_satellites: int = 6
     fix_gap_s: float = 2.0
 
 
@@ -332,6 +338,39 @@ def refused(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm], l
     return alarms, findings
 
 
+def uniform_cn0(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm], list[Finding], Series | None]:
+    """Epochs where `min_satellites` or more satellites all arrive at nearly one C/N0: real satellites
+    at different elevations and ranges spread over several dB (2.5 dB standard deviation at the least
+    in the real logs at hand), the channels of one transmitter do not."""
+    rows = view.rows[np.isfinite(view.rows["cn0_dbhz"].to_numpy(float))]
+    by_t = rows.groupby("t_s")["cn0_dbhz"]
+    n = by_t.count()
+    spread = by_t.std()[n >= opts.min_satellites]
+    if len(spread) < 3:
+        return [], [], None
+    t = spread.index.to_numpy(float)
+    smooth = pd.Series(spread.to_numpy(float), index=pd.to_datetime(t, unit="s")).rolling("5s").median().to_numpy()
+    flat = smooth <= opts.uniform_cn0_db
+    alarms, findings = [], []
+    for a, b in _runs(t, flat, 1):
+        if t[b] - t[a] < opts.hold_s:
+            continue
+        low = float(np.min(smooth[a : b + 1]))
+        alarms.append(Alarm(float(t[a]), float(t[b]), -low, float(t[a]), float(t[a]), receiver_id=view.receiver_id))
+        findings.append(
+            Finding(
+                f"{view.receiver_id}: {int(n.loc[t[a]])} satellites at one C/N0 (spread {low:.1f} dB) from "
+                f"{t[a]:.1f} s to {t[b]:.1f} s: one transmitter's signals, not the sky's",
+                float(t[a]),
+                float(t[b]),
+                (),
+                view.receiver_id,
+            )
+        )
+    series = Series(f"{view.receiver_id}/cn0_spread", t, smooth, "dB", opts.uniform_cn0_db)
+    return alarms, findings, series
+
+
 def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | None = None) -> list[DetectorResult]:
     opts = opts or SatelliteSignalOptions()
     views = sky_views(ctx.table, opts)
@@ -352,13 +391,13 @@ def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | N
                 f"{horizon_dip_deg(view.height_m):.1f} deg at {view.height_m:.0f} m"
             )
         c_alarms, c_findings, c_series = cn0_steps(view, opts)
+        u_alarms, u_findings, u_series = uniform_cn0(view, opts)
         r_alarms, r_findings = refused(view, opts)
         if c_series is not None or np.isfinite(view.rows["used"].to_numpy(float)).any():
             signals.ran = True
-            signals.alarms += c_alarms + r_alarms
-            signals.findings += c_findings + r_findings
-            if c_series is not None:
-                signals.series.append(c_series)
+            signals.alarms += c_alarms + u_alarms + r_alarms
+            signals.findings += c_findings + u_findings + r_findings
+            signals.series += [x for x in (c_series, u_series) if x is not None]
             s_notes.append(f"{view.receiver_id}: {view.rows['sv_id'].nunique()} satellites")
     horizon.reason = "; ".join(h_notes) or "no satellite elevations (no satellite reports, or orbits and fixes)"
     signals.reason = "; ".join(s_notes) or "no per-satellite C/N0 or use flags"
@@ -387,7 +426,8 @@ ANALYSIS = AnalysisSpec(
             Evidence.RECEIVER,
             "one satellite's C/N0 stepping above the others, or a strong healthy satellite the receiver refuses",
             "C/N0 relative to the epoch's median satellite rising 10 dB within 10 s against both the last 10 s "
-            "and the satellite's whole history, and ending 3 dB above the median; a healthy satellite at least "
+            "and the satellite's whole history, and ending 3 dB above the median; 6 or more satellites within "
+            "1.5 dB of one C/N0 (standard deviation, 5-s median) for 10 s; a healthy satellite at least "
             "15 deg high and as strong as the median used satellite left out of the receiver's solution at 80% "
             "of such epochs over 30 s; a used satellite with a 100 m pseudorange residual for 3 epochs.",
             "rule thresholds (not a calibrated rate)",
