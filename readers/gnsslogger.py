@@ -53,10 +53,11 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
-from readers.raw_states import add_satellite_states, nav_stream, navigation_for
+from readers.lnav import LnavDecoder
+from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns, gps_utc_offset_ns
 from spooflens.errors import ReaderError
-from spooflens.gnss.ephemeris import C_MPS
+from spooflens.gnss.ephemeris import C_MPS, GpsEphemerides
 from spooflens.navigation.rotations import matrix_to_quat
 from spooflens.schema import FixType, SpoofingFlag
 
@@ -125,7 +126,44 @@ class Records:
         return pd.DataFrame(self.rows, columns=self.columns, dtype=object)
 
 
-def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records], dict[str, str]]:
+GPS_L1CA_NAV = 0x0101  # GnssNavigationMessage TYPE_GPS_L1CA
+
+
+@dataclass(frozen=True)
+class NavRecord:
+    """One `Nav` line: a navigation-message subframe the phone demodulated, and the GPS time (s) of the
+    Raw measurement before it (Nav lines carry no time of their own)."""
+
+    svid: int
+    type: int
+    data: bytes
+    after_gps_s: float | None
+
+
+def _raw_gps_s(cols: list[str], values: list[str]) -> float | None:
+    """GPS time of one Raw line: TimeNanos - (FullBiasNanos + BiasNanos)."""
+    try:
+        get = dict(zip(cols, values, strict=True))
+        ns = int(get["TimeNanos"]) - int(get["FullBiasNanos"]) - float(get.get("BiasNanos") or 0.0)
+    except (KeyError, ValueError):
+        return None
+    return ns / 1e9 if ns > 0 else None
+
+
+def _nav_record(fields: list[str], last_raw_gps_s: float | None) -> NavRecord | None:
+    """`Nav,Svid,Type,Status,MessageId,Sub-messageId,Data(Bytes)`: the data are the bytes, comma-separated
+    (signed, as Java prints them)."""
+    try:
+        svid, kind = int(fields[1]), int(fields[2])
+        data = bytes(int(b) & 0xFF for b in fields[6:] if b.strip())
+    except (IndexError, ValueError):
+        return None
+    return NavRecord(svid, kind, data, last_raw_gps_s)
+
+
+def _split_file(
+    path: Path, skipped: list[Skipped], nav: list[NavRecord] | None = None
+) -> tuple[dict[str, Records], dict[str, str]]:
     try:
         text = path.read_bytes().decode("utf-8", errors="replace")
     except OSError as err:
@@ -138,6 +176,8 @@ def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records],
     unused: dict[str, int] = {}
     lines = text.splitlines()
     cut = bool(text) and not text.endswith(("\n", "\r"))
+    last_raw_gps_s: float | None = None
+    bad_nav = 0
     for i, line in enumerate(lines):
         if not line.strip():
             continue
@@ -151,6 +191,13 @@ def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records],
             continue
         fields = line.split(",")
         name = fields[0].strip()
+        if name == "Nav" and nav is not None and not (cut and i == len(lines) - 1):
+            record = _nav_record(fields, last_raw_gps_s)
+            if record is None:
+                bad_nav += 1
+            else:
+                nav.append(record)
+            continue
         if name not in RECORDS and name not in headers:
             unknown[name[:20]] = unknown.get(name[:20], 0) + 1
             continue
@@ -171,6 +218,10 @@ def _split_file(path: Path, skipped: list[Skipped]) -> tuple[dict[str, Records],
             bad[reason] = bad.get(reason, 0) + 1
             continue
         records.setdefault(name, Records(cols)).rows.append(values)
+        if name == "Raw" and nav is not None:
+            last_raw_gps_s = _raw_gps_s(cols, values) or last_raw_gps_s
+    if bad_nav:
+        skipped.append(Skipped("Nav", "navigation-message lines that cannot be read", bad_nav, "lost"))
     for reason, n in bad.items():
         name, _, why = reason.partition(": ")
         skipped.append(Skipped(name, why, n, "lost"))
@@ -425,7 +476,8 @@ def read_gnsslogger(
 ) -> EpochTable:
     path = Path(path)
     skipped: list[Skipped] = []
-    records, meta = _split_file(path, skipped)
+    nav_records: list[NavRecord] = []
+    records, meta = _split_file(path, skipped, nav_records)
     if progress:
         progress(1, 3)
     frames: dict[str, pd.DataFrame] = {}
@@ -460,11 +512,16 @@ def read_gnsslogger(
             meta["units.agc"] = "dB (Android AgcDb of the Raw or Agc records, mean over the L1 band)"
         frames["fixes"] = fx
         streams.append(StreamInfo("fix", RECEIVER, "Fix (GPS provider)", "gnsslogger/Fix", len(fx)))
-    nav = None
+    nav, ephemerides = None, None
     if have_raw and raw is not None:
         rows = raw.rows
         nav = navigation_for(path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
-        rows = add_satellite_states(rows, nav.ephemerides if nav else None, RECEIVER, skipped)
+        ephemerides = nav.ephemerides if nav is not None else _decoded_ephemerides(nav_records, rows, skipped)
+        reason = (
+            "no navigation file covers the log (give one with --topic nav=FILE) and no GPS navigation message "
+            "in its Nav records; no satellite states"
+        )
+        rows = add_satellite_states(rows, ephemerides, RECEIVER, skipped, reason)
         frames["observations"] = rows
         streams.append(StreamInfo("observations", RECEIVER, "Raw", "gnsslogger/Raw", int(rows["t_ns"].nunique())))
     if progress:
@@ -485,9 +542,37 @@ def read_gnsslogger(
     if nav is not None:
         table.ephemerides = nav.ephemerides
         table.streams.append(nav_stream(nav, table.t0_ns))
+    elif ephemerides is not None:
+        table.ephemerides = ephemerides
+        msgtype = "gnsslogger/Nav (GPS LNAV ephemerides)"
+        table.streams.append(ephemeris_stream(ephemerides, RECEIVER, "Nav", msgtype, len(ephemerides), table.t0_ns))
     if progress:
         progress(3, 3)
     return table
+
+
+def _decoded_ephemerides(
+    nav_records: list[NavRecord], rows: pd.DataFrame, skipped: list[Skipped]
+) -> GpsEphemerides | None:
+    """GPS ephemerides from the log's own Nav records (GPS L1 C/A subframes: ten 30-bit words, each in
+    the low 30 bits of a big-endian 4-byte word), with when each was received."""
+    if not nav_records:
+        return None
+    ref_s = float(rows["t_ns"].min()) / 1e9
+    decoder = LnavDecoder()
+    other = 0
+    for r in nav_records:
+        if r.type != GPS_L1CA_NAV or len(r.data) != 40:
+            other += 1
+            continue
+        words = [int.from_bytes(r.data[4 * k : 4 * k + 4], "big") for k in range(10)]
+        decoder.add_words(r.svid, words, ref_s, ref_s if r.after_gps_s is None else r.after_gps_s)
+    if other:
+        skipped.append(Skipped("Nav", "navigation messages of other signals (only GPS L1 C/A is decoded)", other))
+    if decoder.counts["parity failed"]:
+        skipped.append(Skipped("Nav", "GPS subframes that fail parity", decoder.counts["parity failed"], "lost"))
+    records = decoder.records()
+    return GpsEphemerides.from_records(records, decoder.iono) if records else None
 
 
 def _imu(

@@ -61,17 +61,19 @@ def navigation_for(
     return best[1]
 
 
-def nav_stream(nav: NavFile, t0_ns: int) -> StreamInfo:
-    toe = nav.ephemerides.toe_s
+def ephemeris_stream(
+    eph: GpsEphemerides, stream_id: str, topic: str, msgtype: str, count: int, t0_ns: int
+) -> StreamInfo:
+    """The `nav` stream of a log's broadcast ephemerides, spanning their toe on the table's time axis."""
+    toe = eph.toe_s
     return StreamInfo(
-        "nav",
-        nav.path.name,
-        nav.path.name,
-        f"RINEX {nav.version:.2f} nav (GPS)",
-        nav.records,
-        float(toe.min() - t0_ns / 1e9),
-        float(toe.max() - t0_ns / 1e9),
+        "nav", stream_id, topic, msgtype, count, float(toe.min() - t0_ns / 1e9), float(toe.max() - t0_ns / 1e9)
     )
+
+
+def nav_stream(nav: NavFile, t0_ns: int) -> StreamInfo:
+    name = nav.path.name
+    return ephemeris_stream(nav.ephemerides, name, name, f"RINEX {nav.version:.2f} nav (GPS)", nav.records, t0_ns)
 
 
 NO_NAV_FILE = "no navigation file covers the log (give one with --topic nav=FILE); no satellite states"

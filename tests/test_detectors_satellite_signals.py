@@ -240,3 +240,11 @@ def test_every_satellite_at_one_cn0_is_one_transmitter(tmp_path: Path) -> None:
     assert len(alarms) == 1 and alarms[0].satellites == ()
     assert 60.0 <= alarms[0].start_s <= 64.0 and alarms[0].end_s == pytest.approx(119.0)
     assert "8 satellites at one C/N0" in res[SIGNALS].findings[0].text
+
+
+def test_a_cn0_that_never_moves_is_a_placeholder_not_one_transmitter(tmp_path: Path) -> None:
+    def placeholder(s: int, sats: list[Sat]) -> list[Sat]:
+        return [(sv, el, az, 45, u, h) for sv, el, az, _, u, h in sats]
+
+    res = _run(read_log(_capture(tmp_path / "constant.ubx", 120, placeholder)))
+    assert res[SIGNALS].ran and not res[SIGNALS].alarms

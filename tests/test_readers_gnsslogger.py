@@ -219,3 +219,52 @@ def test_inject_rewrites_the_gps_fix_lines(tmp_path: Path) -> None:
     np.testing.assert_allclose(d[late, 0], 50.0, atol=0.01)
     np.testing.assert_allclose(d[~late], 0.0, atol=0.01)
     assert main(["inject", str(AUGUST), "--attack", "pr_delay:delay=300,svs=G05", "-o", str(tmp_path / "x.txt")]) == 2
+
+
+def test_nav_records_give_the_satellite_states_the_navigation_file_gives(tmp_path: Path) -> None:
+    """The real 2016-06-30 log without its navigation file, but with GnssLogger `Nav` lines carrying
+    that file's records as GPS L1 C/A subframes (encoded from IS-GPS-200): the same satellite states."""
+    from ubx_support import lnav_subframes
+
+    from readers.rinex import read_rinex_nav_file
+
+    folder = REAL / "gps-measurement-tools"
+    log, nav_file = folder / "pseudoranges_log_2016_06_30_21_26_07.txt", folder / "hour1820.16n"
+    if not (log.exists() and nav_file.exists()):
+        pytest.skip("the GnssLogger log or its navigation file is not present")
+    with_file = read_log(log)
+    eph = read_rinex_nav_file(nav_file).ephemerides
+    t_first = float(np.asarray(with_file.gps_seconds(0.0)))
+    lines = log.read_text().splitlines()
+    first_raw = next(i for i, ln in enumerate(lines) if ln.startswith("Raw,"))
+    nav_lines = ["# Nav,Svid,Type,Status,MessageId,Sub-messageId,Data(Bytes)"]
+    sent = 30.0 * (t_first // 30.0) - 30.0
+    for i in range(len(eph)):
+        toe = float(eph.toe_s[i])
+        if abs(toe - t_first) > 2 * 3600:
+            continue
+        rec = {k: getattr(eph, k)[i].item() for k in ("sv_id", "week", "toe_sow", "toc_s", "health", "iode")}
+        rec |= {k: getattr(eph, k)[i].item() for k in QUANTA}
+        for k, words in enumerate(lnav_subframes(rec, sent)):
+            data = b"".join(w.to_bytes(4, "big") for w in words)
+            signed = ",".join(str(b - 256 if b > 127 else b) for b in data)
+            nav_lines.append(f"Nav,{int(rec['sv_id'][1:])},257,1,1,{k + 1},{signed}")
+    out = tmp_path / "phone.txt"
+    out.write_text("\n".join(lines[: first_raw + 1] + nav_lines + lines[first_raw + 1 :]) + "\n")
+    table = read_log(out)  # no navigation file beside it
+    assert any(s.role == "nav" and s.msgtype.startswith("gnsslogger/Nav") for s in table.streams)
+    assert table.ephemerides is not None and np.isfinite(table.ephemerides.received_s).all()
+    key = ["t_s", "sv_id"]
+    cols = ["sv_x_m", "sv_y_m", "sv_z_m", "sv_clock_bias_m"]
+    a = table.observations[key + cols].assign(t_s=lambda d: d["t_s"].round(3))
+    b = with_file.observations[key + cols].assign(t_s=lambda d: d["t_s"].round(3))
+    both = a.merge(b, on=key, suffixes=("_nav", "_file")).dropna()
+    assert len(both) > 0.9 * len(with_file.observations)
+    for c in cols:
+        assert np.abs(both[f"{c}_nav"] - both[f"{c}_file"]).max() < 0.05, c
+
+
+QUANTA = (
+    "af0", "af1", "af2", "tgd", "crs", "crc", "cuc", "cus", "cic", "cis", "e", "sqrt_a", "m0", "omega0",
+    "i0", "omega", "delta_n", "omega_dot", "idot",
+)  # fmt: skip

@@ -14,8 +14,8 @@ import pytest
 from ubx_support import capture_from_rinex, lnav_subframes, sfrbx
 
 from readers import read_log
+from readers.lnav import LnavDecoder, parity
 from readers.rinex import read_rinex_nav_file
-from readers.ubx.subframes import LnavDecoder, parity
 from spooflens.cli import main
 from spooflens.gnss.ephemeris import GpsEphemerides
 

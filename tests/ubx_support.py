@@ -141,7 +141,7 @@ def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
     for r in rows.itertuples():
         cp = r.carrier_phase_cycles if np.isfinite(r.carrier_phase_cycles) else 0.0
         do = r.doppler_hz if np.isfinite(r.doppler_hz) else 0.0
-        cn0 = int(r.cn0_dbhz) if np.isfinite(r.cn0_dbhz) else 45
+        cn0 = int(r.cn0_dbhz) if np.isfinite(r.cn0_dbhz) else 32 + (7 * int(r.sv_id[1:])) % 17  # a spread sky
         trk = 1 | (2 if np.isfinite(r.carrier_phase_cycles) else 0)
         meas += struct.pack(
             "<ddfBBBBHBBBBBx", r.pseudorange_m, cp, do, 0, int(r.sv_id[1:]), 0, 0, 64000, cn0, 4, 2, 3, trk

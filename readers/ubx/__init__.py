@@ -15,7 +15,7 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
   RINEX-style. GPS satellite states from the broadcast ephemerides in the capture's own RXM-SFRBX
-  subframes (`subframes.py`), else from a RINEX navigation file (`--topic nav=FILE`, or one beside
+  subframes (`readers/lnav.py`), else from a RINEX navigation file (`--topic nav=FILE`, or one beside
   the capture covering its time), so RAIM and the raw-measurement detectors run on the capture.
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
@@ -40,10 +40,10 @@ import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
 from readers import ReaderFormat
-from readers.raw_states import add_satellite_states, nav_stream, navigation_for
+from readers.lnav import LnavDecoder
+from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
-from readers.ubx.subframes import LnavDecoder
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -272,16 +272,7 @@ def _with_satellite_states(
     eph = _broadcast_ephemerides(state, ref_s, skipped)
     t0_ns = int(obs["t_ns"].min())
     if eph is not None:
-        toe = eph.toe_s
-        stream = StreamInfo(
-            "nav",
-            RECEIVER,
-            "UBX",
-            "UBX RXM-SFRBX (GPS LNAV ephemerides)",
-            len(eph),
-            float(toe.min() - t0_ns / 1e9),
-            float(toe.max() - t0_ns / 1e9),
-        )
+        stream = ephemeris_stream(eph, RECEIVER, "UBX", "UBX RXM-SFRBX (GPS LNAV ephemerides)", len(eph), t0_ns)
         return add_satellite_states(obs, eph, RECEIVER, skipped), stream, eph
     reason = (
         "no GPS ephemeris in the capture (RXM-SFRBX) and no navigation file covers it "

@@ -343,6 +343,9 @@ def uniform_cn0(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm
     at different elevations and ranges spread over several dB (2.5 dB standard deviation at the least
     in the real logs at hand), the channels of one transmitter do not."""
     rows = view.rows[np.isfinite(view.rows["cn0_dbhz"].to_numpy(float))]
+    varies = rows.groupby("sv_id")["cn0_dbhz"].nunique() > 1
+    if not len(varies) or varies.mean() < 0.5:
+        return [], [], None  # C/N0 that never moves is a writer's placeholder, not a measurement
     by_t = rows.groupby("t_s")["cn0_dbhz"]
     n = by_t.count()
     spread = by_t.std()[n >= opts.min_satellites]

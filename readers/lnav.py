@@ -1,4 +1,5 @@
-"""GPS broadcast ephemerides from u-blox RXM-SFRBX: the L1 C/A LNAV subframes a receiver passes on.
+"""GPS broadcast ephemerides from the L1 C/A LNAV subframes a receiver passes on (u-blox RXM-SFRBX,
+Android GnssLogger `Nav` records).
 
 A RAWX capture carries pseudoranges but no satellite positions; the receiver's SFRBX messages carry the
 navigation message it demodulated, so decoding subframes 1-3 (clock, orbit) and subframe 4 page 18
@@ -184,10 +185,17 @@ class LnavDecoder:
             self.counts["not GPS L1 C/A LNAV"] += 1
             return
         words = np.frombuffer(payload[SFRBX_HEADER:], "<u4").astype(np.int64) & 0x3FFFFFFF
+        self.add_words(sv, [int(w) for w in words], ref_gps_s, now_gps_s)
+
+    def add_words(self, sv: int, words: list[int], ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
+        """One GPS L1 C/A subframe of satellite `sv` as ten 30-bit words (any receiver's)."""
+        if len(words) != 10 or not 1 <= sv <= 32:
+            self.counts["not GPS L1 C/A LNAV"] += 1
+            return
         if (int(words[0]) >> 22) & 0xFF not in (TLM_PREAMBLE, TLM_PREAMBLE ^ 0xFF):
             self.counts["CNAV or no TLM preamble"] += 1
             return
-        data = _source_words([int(w) for w in words])
+        data = _source_words([int(w) & 0x3FFFFFFF for w in words])
         if data is None:
             self.counts["parity failed"] += 1
             return
