@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
-from spooflens.evidence import ORDER, Evidence, Span, confidence, corroborated
+from spooflens.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
 
 
 @dataclass(frozen=True)
@@ -106,6 +106,24 @@ def _group(alarms: list[tuple[Alarm, DetectorResult]], merge_gap_s: float) -> li
     return groups
 
 
+def _joint_interval(items: list[Alarm], interval: tuple[float, float] | None) -> tuple[float, float] | None:
+    """The onset interval of an incident: the union of what the detectors that alarmed at its start (within
+    the corroboration window) say about the onset, their intervals and point estimates. Each method's
+    interval rests on its own model (white errors, a ramp or a step); on real receivers one is often
+    right where another is not (a capture is seen by the receiver at once and by the INS a little
+    later; a ramp's onset is pulled early by a slow receiver error), so the union is what the evidence
+    supports."""
+    first = min(a.start_s for a in items)
+    near = [a for a in items if a.start_s <= first + CORROBORATION_S]
+    points = [a.onset_s if a.onset_s is not None else a.start_s for a in near]
+    bounds = [a.onset_interval_s for a in near if a.onset_interval_s is not None]
+    if not bounds and len(set(points)) < 2:
+        return interval
+    lo = min([*points, *(b[0] for b in bounds)])
+    hi = max(b[1] for b in bounds) if bounds else max(points)
+    return (float(lo), float(max(hi, lo)))
+
+
 def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     items = [a for a, _ in group]
     spans = tuple(sorted({(r.evidence, a.start_s, a.end_s) for a, r in group if r.evidence is not None}))
@@ -120,6 +138,7 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
         onset, interval = min(with_interval or estimates, key=lambda e: e[0])
     else:
         onset, interval = min(a.start_s for a in items), None
+    interval = _joint_interval(items, interval)
     return Incident(
         min(a.start_s for a in items),
         max(a.end_s for a in items),
