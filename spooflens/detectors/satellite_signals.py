@@ -93,12 +93,8 @@ def _orbit_elevations(obs: pd.DataFrame, fixes: pd.DataFrame, gap_s: float) -> N
     ok = np.isfinite(sv).all(axis=1)
     if not ok.any() or not len(fixes):
         return out
-    tf = fixes["t_s"].to_numpy(float)
-    t = obs["t_s"].to_numpy(float)
-    k = np.clip(np.searchsorted(tf, t), 1, max(len(tf) - 1, 1)) if len(tf) > 1 else np.zeros(len(t), dtype=int)
-    near = np.where(np.abs(tf[k - 1] - t) <= np.abs(tf[np.minimum(k, len(tf) - 1)] - t), k - 1, k)
-    near = np.clip(near, 0, len(tf) - 1)
-    ok &= np.abs(tf[near] - t) <= gap_s
+    near, gap = _nearest(obs["t_s"].to_numpy(float), fixes["t_s"].to_numpy(float))
+    ok &= gap <= gap_s
     rx = geodetic_to_ecef(
         fixes["lat_deg"].to_numpy(float)[near],
         fixes["lon_deg"].to_numpy(float)[near],
@@ -142,12 +138,18 @@ def sky_views(table: EpochTable, opts: SatelliteSignalOptions) -> list[SkyView]:
     return views
 
 
+def _nearest(t: NDArray[np.float64], tf: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Index of the fix nearest each time (`tf` sorted, not empty) and how far it is (s)."""
+    k = np.clip(np.searchsorted(tf, t), 0, len(tf) - 1)
+    before = np.maximum(k - 1, 0)
+    near = np.where(np.abs(tf[before] - t) < np.abs(tf[k] - t), before, k)
+    return near, np.abs(tf[near] - t)
+
+
 def _near_fix(t: NDArray[np.float64], tf: NDArray[np.float64], gap_s: float) -> BoolArray:
     if not len(tf):
         return np.ones(len(t), dtype=bool)  # no fixes at all: the receiver's elevations are all we have
-    k = np.clip(np.searchsorted(tf, t), 0, len(tf) - 1)
-    d = np.minimum(np.abs(tf[k] - t), np.abs(tf[np.maximum(k - 1, 0)] - t))
-    return d <= gap_s
+    return _nearest(t, tf)[1] <= gap_s
 
 
 def _height(fixes: pd.DataFrame) -> float:
