@@ -188,3 +188,20 @@ def test_a_counterfeit_navigation_message_is_named(tmp_path: Path) -> None:
     texts = " ".join(f["text"] for f in summary["verdict"]["findings"])
     assert "G07's broadcast orbit jumped" in texts and "G08: navigation message time off" in texts
     assert summary["verdict"]["spoofed"]
+
+
+def test_an_orbit_jump_needs_two_records_within_their_fit_span() -> None:
+    """A satellite seen again six hours later has a new orbit that the old record cannot predict: no jump."""
+    import dataclasses
+
+    from spooflens.detectors.navigation_message import NavigationMessageOptions, _orbit_jumps
+
+    _need()
+    nav = read_rinex_nav_file(NAV).ephemerides
+    g07 = np.flatnonzero(nav.sv_id == "G07")
+    far = [int(i) for i in g07 if abs(float(nav.toe_s[i] - nav.toe_s[g07[0]])) > 4 * 3600]
+    if not far:
+        pytest.skip("the nav file has no G07 records 4 h apart")
+    pair = np.array([int(g07[0]), far[0]])
+    eph = dataclasses.replace(nav, received_s=nav.toe_s - 600.0)
+    assert not _orbit_jumps(eph, pair, 0.0, 1e12, NavigationMessageOptions()).alarms

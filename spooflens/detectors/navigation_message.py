@@ -68,6 +68,10 @@ def _orbit_jumps(
     worst = 0.0
     sv = str(eph.sv_id[trusted])
     for i in (int(k) for k in order[1:]):
+        if abs(float(eph.toe_s[i] - eph.toe_s[trusted])) > opts.max_age_s:
+            if suspect_from is None:
+                trusted = i  # the trusted orbit is out of its fit span there: nothing to compare with
+            continue
         t = np.array([eph.toe_s[i]])
         p_new, c_new = record_positions(eph, np.array([i]), t)
         p_old, c_old = record_positions(eph, np.array([trusted]), t)
