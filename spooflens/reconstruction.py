@@ -32,7 +32,7 @@ from scipy import stats
 from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
-from spooflens.evidence import Evidence
+from spooflens.evidence import CORROBORATION_S, Evidence
 from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution, nis_by_pattern, run_prepared
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
@@ -530,5 +530,11 @@ def _onset_before(
     pool = with_interval or found
     if not pool:
         return inc.onset_s, inc.onset_interval_s
-    onset, interval = max(pool, key=lambda f: f[0])
-    return float(onset), interval  # type: ignore[arg-type]
+    onset = float(max(pool, key=lambda f: f[0])[0])
+    # the interval: what every estimate within the corroboration window before it says (its own model's
+    # interval alone excludes the truth when the errors are not white or the attack is neither a ramp nor
+    # a step; the detectors that agree bracket it)
+    near = [f for f in found if f[0] >= onset - CORROBORATION_S]
+    lows = [f[1][0] if f[1] is not None else f[0] for f in near]
+    highs = [f[1][1] if f[1] is not None else f[0] for f in near]
+    return onset, (float(min(lows)), float(max(*highs, onset)))
