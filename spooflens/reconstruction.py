@@ -533,8 +533,9 @@ def _onset_before(
     onset = float(max(pool, key=lambda f: f[0])[0])
     # the interval: what every estimate within the corroboration window before it says (its own model's
     # interval alone excludes the truth when the errors are not white or the attack is neither a ramp nor
-    # a step; the detectors that agree bracket it)
+    # a step; the detectors that agree bracket it), and at the latest the confirmed departure, which the
+    # attack must precede (a slow receiver error drifting the same way can pull every estimate early)
     near = [f for f in found if f[0] >= onset - CORROBORATION_S]
     lows = [f[1][0] if f[1] is not None else f[0] for f in near]
     highs = [f[1][1] if f[1] is not None else f[0] for f in near]
-    return onset, (float(min(lows)), float(max(*highs, onset)))
+    return onset, (float(min(lows)), float(max(*highs, onset, departure_s)))
