@@ -104,6 +104,7 @@ def one_run(run: Run) -> dict[str, Any]:
         lo, hi = hit.onset_interval_s if hit.onset_interval_s else (hit.onset_s, hit.onset_s)
         period = float(np.median(np.diff(table.fixes["t_s"].to_numpy())))
         out["onset_covered"] = lo - period - 1e-6 <= first <= hi + period + 1e-6
+        out["onset_interval_width_s"] = hi - lo
         out["to_end"] = hit.ongoing_at_end or hit.end_s >= duration - 2.0
         out["confidence"] = hit.confidence
     return out
@@ -200,6 +201,9 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
             "delay_median_s": float(np.median(delays)) if delays else None,
             "delay_p90_s": float(np.percentile(delays, 90)) if delays else None,
             "onset_interval_coverage": float(np.mean([r["onset_covered"] for r in hit])) if hit else None,
+            "onset_interval_width_median_s": (
+                float(np.median([r["onset_interval_width_s"] for r in hit])) if hit else None
+            ),
             "to_end": float(np.mean([r["to_end"] for r in hit])) if hit else None,
         }
     hours = float(sum(r["hours"] for r in clean))
@@ -271,6 +275,7 @@ def command(
         "median delay (s)",
         "90% delay (s)",
         "onset interval covers truth",
+        "median interval width (s)",
         "incident runs to log end",
         title="Simulated vehicles (multirotor, car, ship, aircraft) with realistic receivers: the whole analysis",
     )
@@ -290,6 +295,7 @@ def command(
             sec(k["delay_median_s"]),
             sec(k["delay_p90_s"]),
             pct(k["onset_interval_coverage"]),
+            sec(k["onset_interval_width_median_s"]),
             pct(k["to_end"]),
         )
     console().print(t)
