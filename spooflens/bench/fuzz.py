@@ -140,7 +140,8 @@ class FuzzReport:
 
     @property
     def failed(self) -> int:
-        return sum(self.counts.get(k, 0) for k in FAILURES)
+        """Failing runs so far (counts are keyed "<command> <outcome>", so they are not summed here)."""
+        return len(self.failures)
 
 
 def _argv(command: str, log: Path, workdir: Path) -> list[str]:
