@@ -189,3 +189,20 @@ def test_non_finite_values_in_the_alignment_window_are_refused_not_an_svd_error(
     pre.H[200:220] = np.inf  # what an overflowed double integral leaves
     with np.errstate(invalid="ignore"), pytest.raises(AnalysisError, match="not finite: cannot align"):
         align(pre, imu, fixes, 0.0)
+
+
+def test_a_navigation_record_with_an_infinite_clock_time_is_dropped_not_an_overflow(tmp_path: Path) -> None:
+    """The 10^4 fuzz run wrote 'inf' into a RINEX 2 nav file's epoch seconds (an OverflowError before)."""
+    from readers.rinex.navigation import read_rinex_nav_file
+
+    real = Path(__file__).resolve().parents[1].parent / "shared/real/rinex_gsi_pair/07590920.05n"
+    if not real.exists():
+        pytest.skip("the GSI navigation file is not present")
+    lines = real.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    lines[first] = lines[first][:17] + "  inf" + lines[first][22:]  # the toc seconds field
+    damaged = tmp_path / "07590920.05n"
+    damaged.write_text("\n".join(lines) + "\n")
+    nav = read_rinex_nav_file(damaged)
+    assert len(nav.ephemerides) == len(read_rinex_nav_file(real).ephemerides) - 1
+    assert any(s.count == 1 and s.action == "lost" and "navigation records" in s.reason for s in nav.skipped)

@@ -158,7 +158,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
             if b == len(body) and not text.terminated and (len(rec_lines) < 8 or len(rec_lines[-1].rstrip()) < 22):
                 raise ValueError("record cut short (file ends inside it)")
             records.append(_nav_record(rec_lines, version))
-        except (ValueError, IndexError) as err:
+        except (ValueError, IndexError, OverflowError) as err:
             bad += 1
             first_bad = first_bad or (end + 2 + a, str(err))
     skipped = []
