@@ -212,11 +212,14 @@ def attitude_quaternion(roll_deg: FloatArray, pitch_deg: FloatArray, yaw_deg: Fl
     return quat_multiply(np.broadcast_to(Q_ENU_NED, q_ned_frd.shape), q_ned_frd)
 
 
+ATT_FIELDS = ("TimeUS", "Roll", "Pitch", "Yaw")
+
+
 def _attitude_at(att: Columns | None, t_us: NDArray[np.int64]) -> FloatArray:
     """ATT attitude at the IMU stamps (normalised linear interpolation), NaN far from any ATT row."""
     out = np.full((len(t_us), 4), np.nan)
-    if att is None or not len(att["TimeUS"]):
-        return out
+    if att is None or any(f not in att for f in ATT_FIELDS) or not len(att["TimeUS"]):
+        return out  # no ATT, or its FMT damaged so that a field is missing: no orientation
     ta = att["TimeUS"].astype(np.int64)
     order = np.argsort(ta, kind="stable")
     ta = ta[order]

@@ -290,3 +290,16 @@ def test_tlog_with_garbage_keeps_the_rest(tmp_path: Path) -> None:
     cut = tmp_path / "cut.tlog"
     cut.write_bytes(data[: len(data) // 3 + 5])
     assert 40 <= len(read_log(cut).fixes) <= 51
+
+
+def test_an_att_message_missing_a_field_gives_no_orientation_not_an_error() -> None:
+    """The 10^4 fuzz run overwrote characters of ATT's FMT column text, so a parsed ATT lacked `TimeUS`
+    or `Yaw` (KeyError before): such an ATT is no orientation."""
+    from readers.ardupilot import _attitude_at
+
+    t_us = np.arange(0, 2_000_000, 100_000, dtype=np.int64)
+    whole = {"TimeUS": t_us, "Roll": np.zeros(len(t_us)), "Pitch": np.zeros(len(t_us)), "Yaw": np.zeros(len(t_us))}
+    assert np.isfinite(_attitude_at(whole, t_us)).all()
+    for lost in ("TimeUS", "Yaw"):
+        damaged = {k: v for k, v in whole.items() if k != lost}
+        assert np.isnan(_attitude_at(damaged, t_us)).all()
