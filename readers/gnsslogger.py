@@ -43,6 +43,7 @@ put on UTC with the median offset to the GPS fixes' UnixTimeMillis (else the lin
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -131,26 +132,16 @@ GPS_L1CA_NAV = 0x0101  # GnssNavigationMessage TYPE_GPS_L1CA
 
 @dataclass(frozen=True)
 class NavRecord:
-    """One `Nav` line: a navigation-message subframe the phone demodulated, and the GPS time (s) of the
-    Raw measurement before it (Nav lines carry no time of their own)."""
+    """One `Nav` line: a navigation-message subframe the phone demodulated, and how many Raw lines came
+    before it (Nav lines carry no time of their own: the Raw measurement before one dates it)."""
 
     svid: int
     type: int
     data: bytes
-    after_gps_s: float | None
+    raw_lines_before: int
 
 
-def _raw_gps_s(cols: list[str], values: list[str]) -> float | None:
-    """GPS time of one Raw line: TimeNanos - (FullBiasNanos + BiasNanos)."""
-    try:
-        get = dict(zip(cols, values, strict=True))
-        ns = int(get["TimeNanos"]) - int(get["FullBiasNanos"]) - float(get.get("BiasNanos") or 0.0)
-    except (KeyError, ValueError):
-        return None
-    return ns / 1e9 if ns > 0 else None
-
-
-def _nav_record(fields: list[str], last_raw_gps_s: float | None) -> NavRecord | None:
+def _nav_record(fields: list[str], raw_lines_before: int) -> NavRecord | None:
     """`Nav,Svid,Type,Status,MessageId,Sub-messageId,Data(Bytes)`: the data are the bytes, comma-separated
     (signed, as Java prints them)."""
     try:
@@ -158,7 +149,7 @@ def _nav_record(fields: list[str], last_raw_gps_s: float | None) -> NavRecord | 
         data = bytes(int(b) & 0xFF for b in fields[6:] if b.strip())
     except (IndexError, ValueError):
         return None
-    return NavRecord(svid, kind, data, last_raw_gps_s)
+    return NavRecord(svid, kind, data, raw_lines_before)
 
 
 def _split_file(
@@ -176,7 +167,6 @@ def _split_file(
     unused: dict[str, int] = {}
     lines = text.splitlines()
     cut = bool(text) and not text.endswith(("\n", "\r"))
-    last_raw_gps_s: float | None = None
     bad_nav = 0
     for i, line in enumerate(lines):
         if not line.strip():
@@ -192,7 +182,7 @@ def _split_file(
         fields = line.split(",")
         name = fields[0].strip()
         if name == "Nav" and nav is not None and not (cut and i == len(lines) - 1):
-            record = _nav_record(fields, last_raw_gps_s)
+            record = _nav_record(fields, len(records["Raw"].rows) if "Raw" in records else 0)
             if record is None:
                 bad_nav += 1
             else:
@@ -218,8 +208,6 @@ def _split_file(
             bad[reason] = bad.get(reason, 0) + 1
             continue
         records.setdefault(name, Records(cols)).rows.append(values)
-        if name == "Raw" and nav is not None:
-            last_raw_gps_s = _raw_gps_s(cols, values) or last_raw_gps_s
     if bad_nav:
         skipped.append(Skipped("Nav", "navigation-message lines that cannot be read", bad_nav, "lost"))
     for reason, n in bad.items():
@@ -482,7 +470,8 @@ def read_gnsslogger(
         progress(1, 3)
     frames: dict[str, pd.DataFrame] = {}
     streams: list[StreamInfo] = []
-    raw = pseudoranges(records["Raw"].frame(), skipped) if "Raw" in records else None
+    raw_lines = records["Raw"].frame() if "Raw" in records else None
+    raw = pseudoranges(raw_lines, skipped) if raw_lines is not None else None
     have_raw = raw is not None and len(raw.rows) > 0
     reference = "gps" if have_raw else "unix"
 
@@ -516,7 +505,9 @@ def read_gnsslogger(
     if have_raw and raw is not None:
         rows = raw.rows
         nav = navigation_for(path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)
-        ephemerides = nav.ephemerides if nav is not None else _decoded_ephemerides(nav_records, rows, skipped)
+        ephemerides = (
+            nav.ephemerides if nav is not None else _decoded_ephemerides(nav_records, raw_lines, rows, skipped)
+        )
         reason = (
             "no navigation file covers the log (give one with --topic nav=FILE) and no GPS navigation message "
             "in its Nav records; no satellite states"
@@ -551,14 +542,26 @@ def read_gnsslogger(
     return table
 
 
+def _raw_line_gps_s(raw_lines: pd.DataFrame) -> FloatArray:
+    """GPS time (s) of the latest dated Raw line at or before each one: TimeNanos - (FullBiasNanos +
+    BiasNanos), carried forward over lines without it."""
+    n = len(raw_lines)
+    time_nanos, has_time = _int64(_col(raw_lines, "TimeNanos"), n)
+    full_bias, has_bias = _int64(_col(raw_lines, "FullBiasNanos"), n)
+    ns = (time_nanos - full_bias) - np.nan_to_num(_float(_col(raw_lines, "BiasNanos"), n))
+    gps_s = np.where(has_time & has_bias & (ns > 0), ns / 1e9, np.nan)
+    return pd.Series(gps_s).ffill().to_numpy(dtype=float)
+
+
 def _decoded_ephemerides(
-    nav_records: list[NavRecord], rows: pd.DataFrame, skipped: list[Skipped]
+    nav_records: list[NavRecord], raw_lines: pd.DataFrame, rows: pd.DataFrame, skipped: list[Skipped]
 ) -> GpsEphemerides | None:
     """GPS ephemerides from the log's own Nav records (GPS L1 C/A subframes: ten 30-bit words, each in
     the low 30 bits of a big-endian 4-byte word), with when each was received."""
     if not nav_records:
         return None
     ref_s = float(rows["t_ns"].min()) / 1e9
+    line_s = _raw_line_gps_s(raw_lines)
     decoder = LnavDecoder()
     other = 0
     for r in nav_records:
@@ -566,13 +569,12 @@ def _decoded_ephemerides(
             other += 1
             continue
         words = [int.from_bytes(r.data[4 * k : 4 * k + 4], "big") for k in range(10)]
-        decoder.add_words(r.svid, words, ref_s, ref_s if r.after_gps_s is None else r.after_gps_s)
+        before = line_s[r.raw_lines_before - 1] if r.raw_lines_before > 0 else math.nan
+        decoder.add_words(r.svid, words, ref_s, float(before) if math.isfinite(before) else ref_s)
     if other:
         skipped.append(Skipped("Nav", "navigation messages of other signals (only GPS L1 C/A is decoded)", other))
-    if decoder.counts["parity failed"]:
-        skipped.append(Skipped("Nav", "GPS subframes that fail parity", decoder.counts["parity failed"], "lost"))
-    records = decoder.records()
-    return GpsEphemerides.from_records(records, decoder.iono) if records else None
+    skipped.extend(decoder.losses("Nav"))
+    return decoder.ephemerides()
 
 
 def _imu(

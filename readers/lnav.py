@@ -26,10 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from spooflens.gnss.ephemeris import Klobuchar
+from spooflens.epoch_table import Skipped
+from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 
 WEEK_S = 604_800
-HALF_WEEK_S = WEEK_S // 2
 SEMICIRCLE = math.pi  # LNAV angles are in semicircles
 TLM_PREAMBLE = 0x8B
 SFRBX_HEADER = 8
@@ -91,13 +91,6 @@ class _Bits:
     def s(self, pos: int, n: int) -> int:
         v = self.u(pos, n)
         return v - (1 << n) if v >> (n - 1) else v
-
-
-@dataclass
-class _Subframes:
-    """The latest of subframes 1-3 of one satellite (decoded fields) and their transmission times."""
-
-    parts: dict[int, dict[str, float]] = field(default_factory=dict)
 
 
 def _subframe1(b: _Bits) -> dict[str, float]:
@@ -165,13 +158,14 @@ def _near(sow: float, week: int, tow: float) -> float:
 
 @dataclass
 class LnavDecoder:
-    """Collects RXM-SFRBX payloads; `records()` gives GpsEphemerides.from_records dicts."""
+    """Collects subframes (`add`: an RXM-SFRBX payload; `add_words`: any receiver's ten words);
+    `ephemerides()` gives the records assembled, `losses()` what was dropped."""
 
-    satellites: dict[str, _Subframes] = field(default_factory=dict)
+    # per satellite, the latest decoded subframe of each id 1-3 (with its transmission time)
+    satellites: dict[str, dict[int, dict[str, float]]] = field(default_factory=dict)
     assembled: dict[tuple[object, ...], dict[str, float | int | str]] = field(default_factory=dict)
     iono: Klobuchar | None = None
-    counts: Counter[str] = field(default_factory=Counter)  # "parity", "not gps lnav", "subframe k" ...
-    ref_week: int | None = None
+    counts: Counter[str] = field(default_factory=Counter)  # "parity failed", "subframe k" ...
 
     def add(self, payload: bytes, ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
         """One RXM-SFRBX payload. `ref_gps_s`: the capture's GPS time near it (resolves the 10-bit week);
@@ -184,7 +178,7 @@ class LnavDecoder:
         if gnss_id != GPS_GNSS_ID or num_words != 10 or not 1 <= sv <= 32:
             self.counts["not GPS L1 C/A LNAV"] += 1
             return
-        words = np.frombuffer(payload[SFRBX_HEADER:], "<u4").astype(np.int64) & 0x3FFFFFFF
+        words = np.frombuffer(payload[SFRBX_HEADER:], "<u4").astype(np.int64)
         self.add_words(sv, [int(w) for w in words], ref_gps_s, now_gps_s)
 
     def add_words(self, sv: int, words: list[int], ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
@@ -218,14 +212,14 @@ class LnavDecoder:
             fields_["offset_s"] = offset - WEEK_S * round(offset / WEEK_S)
             fields_["now_s"] = now_gps_s
         sv_id = f"G{sv:02d}"
-        state = self.satellites.setdefault(sv_id, _Subframes())
-        state.parts[sf_id] = fields_
-        self._assemble(sv_id, state)
+        parts = self.satellites.setdefault(sv_id, {})
+        parts[sf_id] = fields_
+        self._assemble(sv_id, parts)
 
-    def _assemble(self, sv_id: str, state: _Subframes) -> None:
-        if not all(k in state.parts for k in (1, 2, 3)):
+    def _assemble(self, sv_id: str, parts: dict[int, dict[str, float]]) -> None:
+        if not all(k in parts for k in (1, 2, 3)):
             return
-        sf1, sf2, sf3 = state.parts[1], state.parts[2], state.parts[3]
+        sf1, sf2, sf3 = parts[1], parts[2], parts[3]
         tows = [float(sf["tow"]) for sf in (sf1, sf2, sf3)]
         if max(tows) - min(tows) > 24.0 and max(tows) - min(tows) < WEEK_S - 24.0:
             return  # not one 30-s frame: its parts may belong to different uploads
@@ -272,3 +266,17 @@ class LnavDecoder:
 
     def records(self) -> list[dict[str, float | int | str]]:
         return list(self.assembled.values())
+
+    def ephemerides(self) -> GpsEphemerides | None:
+        """The records assembled (with the ionosphere page when one came), None when none did."""
+        records = self.records()
+        return GpsEphemerides.from_records(records, self.iono) if records else None
+
+    def losses(self, stream: str) -> list[Skipped]:
+        """What was dropped, for the reader's skipped list: subframes that failed parity, orbits out of
+        range, subframes without a GPS time to resolve their week."""
+        return [
+            Skipped(stream, f"GPS subframes dropped: {what}", self.counts[what], "lost")
+            for what in ("parity failed", "implausible orbit", "no GPS time to resolve the week")
+            if self.counts[what]
+        ]

@@ -250,13 +250,8 @@ def _broadcast_ephemerides(state: _State, ref_s: float | None, skipped: list[Ski
             bad += 1
     if bad:
         skipped.append(Skipped("RXM-SFRBX", "subframe messages of impossible length", bad, "lost"))
-    for what in ("parity failed", "implausible orbit", "no GPS time to resolve the week"):
-        if decoder.counts[what]:
-            skipped.append(Skipped("RXM-SFRBX", f"GPS subframes dropped: {what}", decoder.counts[what], "lost"))
-    records = decoder.records()
-    if not records:
-        return None
-    return GpsEphemerides.from_records(records, decoder.iono)
+    skipped.extend(decoder.losses("RXM-SFRBX"))
+    return decoder.ephemerides()
 
 
 def _with_satellite_states(
