@@ -171,8 +171,10 @@ def _runs(t: NDArray[np.float64], flag: BoolArray, min_len: int) -> list[tuple[i
     return [(int(s), int(e)) for s, e in zip(starts, stops, strict=True) if e - s + 1 >= min_len]
 
 
-def _alarm(start: float, end: float, peak: float, rid: str, sv: str) -> Alarm:
-    return Alarm(float(start), float(end), float(peak), float(start), float(start), receiver_id=rid, satellites=(sv,))
+def _alarm(start: float, end: float, peak: float, rid: str, sv: str | None) -> Alarm:
+    """An alarm whose onset is its start, about one satellite (or, with `sv` None, the whole sky)."""
+    sats = (sv,) if sv is not None else ()
+    return Alarm(float(start), float(end), float(peak), float(start), float(start), receiver_id=rid, satellites=sats)
 
 
 def _per_satellite(rows: pd.DataFrame) -> dict[str, pd.DataFrame]:
@@ -361,7 +363,7 @@ def uniform_cn0(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm
         if t[b] - t[a] < opts.hold_s:
             continue
         low = float(np.min(smooth[a : b + 1]))
-        alarms.append(Alarm(float(t[a]), float(t[b]), -low, float(t[a]), float(t[a]), receiver_id=view.receiver_id))
+        alarms.append(_alarm(t[a], t[b], -low, view.receiver_id, None))
         findings.append(
             Finding(
                 f"{view.receiver_id}: {int(n.loc[t[a]])} satellites at one C/N0 (spread {low:.1f} dB) from "
