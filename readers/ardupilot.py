@@ -63,6 +63,13 @@ UBX_MAX_AGE_S = 5.0
 ATT_MAX_GAP_S = 0.5
 Q_ENU_NED = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])
 # u-blox gnssId -> RINEX system letter
+# the fields each message must have to be read at all (a damaged FMT text can rename any of them)
+GPS_FIELDS = ("TimeUS", "Status", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ", "HDop", "NSats")
+IMU_FIELDS = ("TimeUS", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ")
+ATT_FIELDS = ("TimeUS", "Roll", "Pitch", "Yaw")
+UBX1_FIELDS = ("TimeUS", "noisePerMS", "jamInd", "agcCnt")
+GRXH_FIELDS = ("TimeUS", "week", "rcvTime")
+GRXS_FIELDS = ("TimeUS", "gnss", "sv", "freq", "prMes", "cpMes", "doMes", "cno", "trk")
 _UBX_SYSTEM = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
 _L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "E": 1575.42e6, "J": 1575.42e6, "C": 1561.098e6, "I": 1176.45e6}
 
@@ -82,7 +89,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     """Every GPS row with its instance (GPS2 messages as instance 1), GPA and UBX1 columns joined."""
     parts = []
     for name, inst in (("GPS", None), ("GPS2", 1)):
-        cols = log.columns(name)
+        cols = log.columns(name, GPS_FIELDS)
         if cols is None:
             continue
         df = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k != "_ofs"})
@@ -99,7 +106,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
         gps = gps[~blended]
     gpa_parts = []
     for name, inst in (("GPA", None), ("GPA2", 1)):
-        cols = log.columns(name)
+        cols = log.columns(name, ("TimeUS",))
         if cols is None:
             continue
         g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k not in ("I", "_ofs")})
@@ -108,7 +115,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     if gpa_parts:
         gpa = pd.concat(gpa_parts, ignore_index=True).drop_duplicates(["TimeUS", "inst"])
         gps = gps.merge(gpa, on=["TimeUS", "inst"], how="left")
-    ubx = log.columns("UBX1")
+    ubx = log.columns("UBX1", UBX1_FIELDS)
     if ubx is not None:
         u = pd.DataFrame(
             {
@@ -212,14 +219,11 @@ def attitude_quaternion(roll_deg: FloatArray, pitch_deg: FloatArray, yaw_deg: Fl
     return quat_multiply(np.broadcast_to(Q_ENU_NED, q_ned_frd.shape), q_ned_frd)
 
 
-ATT_FIELDS = ("TimeUS", "Roll", "Pitch", "Yaw")
-
-
 def _attitude_at(att: Columns | None, t_us: NDArray[np.int64]) -> FloatArray:
     """ATT attitude at the IMU stamps (normalised linear interpolation), NaN far from any ATT row."""
     out = np.full((len(t_us), 4), np.nan)
-    if att is None or any(f not in att for f in ATT_FIELDS) or not len(att["TimeUS"]):
-        return out  # no ATT, or its FMT damaged so that a field is missing: no orientation
+    if att is None or not len(att["TimeUS"]):
+        return out
     ta = att["TimeUS"].astype(np.int64)
     order = np.argsort(ta, kind="stable")
     ta = ta[order]
@@ -249,7 +253,7 @@ def _imu(
     """Every IMU instance (primary first) with the ATT attitude as its quaternion columns."""
     parts: dict[str, Columns] = {}
     for name in ("IMU", "IMU2", "IMU3"):
-        cols = log.columns(name)
+        cols = log.columns(name, IMU_FIELDS)
         if cols is None:
             continue
         if name == "IMU" and "I" in cols:
@@ -270,7 +274,7 @@ def _imu(
         if primary == first
         else f"{first} (ArduPilot's first IMU, primary while healthy)"
     )
-    att = log.columns("ATT")
+    att = log.columns("ATT", ATT_FIELDS)
     frames, streams = [], []
     for iid in ids:
         c = parts[iid]
@@ -329,7 +333,7 @@ def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[Stre
     for filt, innov, ratio in (("EKF3", "XKF3", "XKF4"), ("EKF2", "NKF3", "NKF4")):
         parts = []
         for name in (innov, ratio):
-            cols = log.columns(name)
+            cols = log.columns(name, ("TimeUS",))
             if cols is None:
                 continue
             df = pd.DataFrame({"TimeUS": cols["TimeUS"].astype(np.int64), "core": _instance(cols, "C")})
@@ -360,7 +364,7 @@ def _raw_observations(
     skipped: list[Skipped],
 ) -> tuple[pd.DataFrame | None, list[StreamInfo], NavFile | None]:
     """GRXH/GRXS (u-blox RXM-RAWX as logged) -> observation rows of receiver GPS[0]."""
-    hdr, sat = log.columns("GRXH"), log.columns("GRXS")
+    hdr, sat = log.columns("GRXH", GRXH_FIELDS), log.columns("GRXS", GRXS_FIELDS)
     if hdr is None or sat is None:
         return None, [], None
     h_ofs, s_ofs = hdr["_ofs"], sat["_ofs"]

@@ -39,6 +39,7 @@ class DataFlash:
     reader: DFReader_binary
     skipped: list[Skipped] = field(default_factory=list)
     _cache: dict[str, Columns | None] = field(default_factory=dict)
+    _incomplete: set[str] = field(default_factory=set)
 
     def names(self) -> set[str]:
         return {n for n, t in self.reader.name_to_id.items() if self.reader.counts[t] > 0}
@@ -62,12 +63,21 @@ class DataFlash:
             self.skipped.append(Skipped(name, "implausible TimeUS (corrupt message)", int((~ok).sum()), "lost"))
         return np.asarray(ok)
 
-    def columns(self, name: str) -> Columns | None:
+    def columns(self, name: str, required: tuple[str, ...] = ()) -> Columns | None:
         """Every row of message `name` as arrays (strings as bytes), or None if the log has none; `_ofs` is
-        each row's offset in the file."""
+        each row's offset in the file. A message whose FMT lacks a `required` field (a damaged FMT text
+        renames columns) is lost, counted once, rather than read without it."""
         if name not in self._cache:
             self._cache[name] = self._decode(name)
-        return self._cache[name]
+        cols = self._cache[name]
+        missing = [f for f in required if cols is not None and f not in cols]
+        if missing:
+            if name not in self._incomplete:
+                self._incomplete.add(name)
+                reason = f"message format lacks field(s) {', '.join(missing)} (damaged FMT)"
+                self.skipped.append(Skipped(name, reason, self.count(name), "lost"))
+            return None
+        return cols
 
     def dtype(self, name: str) -> tuple[np.dtype, dict[str, float]]:
         """The structured dtype of a message body and the multiplier of each scaled column."""

@@ -100,7 +100,12 @@ def _foxglove_decoder(kind: str, parse: Callable[[bytes | memoryview], Any]) -> 
     return decode
 
 
+MAX_CHUNK_BYTES = 1 << 30  # writers make chunks of a few MB; a larger declared size is a corrupt field
+
+
 def _decompress(chunk: Chunk) -> bytes:
+    if not 0 <= chunk.uncompressed_size <= MAX_CHUNK_BYTES:
+        raise ValueError(f"chunk declares {chunk.uncompressed_size} bytes uncompressed (corrupt length)")
     if chunk.compression == "zstd":
         data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
     elif chunk.compression == "lz4":
@@ -149,11 +154,14 @@ def _indexed_offsets(buf: np.ndarray, indexes: list[bytes]) -> np.ndarray | None
     if not parts:
         return None
     offsets = np.sort(np.concatenate(parts).astype(np.int64))
-    if not len(offsets) or offsets[-1] + 31 > len(buf):
+    if not len(offsets) or offsets[0] < 0 or offsets[-1] + 31 > len(buf):  # < 0: a u8 beyond int64
         return None
     if np.any(buf[offsets] != _OP_MESSAGE):
         return None
-    ends = offsets + 9 + gather(buf, offsets + 1, "u8").astype(np.int64)
+    lengths = gather(buf, offsets + 1, "u8").astype(np.uint64)
+    if np.any(lengths > len(buf)):
+        return None
+    ends = offsets + 9 + lengths.astype(np.int64)
     if np.any(ends[:-1] > offsets[1:]) or ends[-1] > len(buf):
         return None
     return offsets
@@ -237,7 +245,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                     else:
                         channels[rec.id] = rec
                 offsets = np.asarray(walked, dtype=np.int64)
-        except (ValueError, zstandard.ZstdError, RuntimeError, struct.error) as err:
+        except (ValueError, OverflowError, zstandard.ZstdError, RuntimeError, struct.error) as err:
             collector.skipped.append(
                 Skipped(
                     "<file>",
@@ -307,7 +315,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                     handle(channel_id, log_time, body[_MSG_FIELDS.size :])
                 elif op == _OP_CHUNK:
                     chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-    except (McapError, ValueError, struct.error, EOFError, OSError, MemoryError) as err:
+    except (McapError, ValueError, OverflowError, struct.error, EOFError, OSError, MemoryError) as err:
         problem = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
     if chunk is not None:  # the last chunk, complete even when what follows it is not
         chunk_messages(chunk, indexes)

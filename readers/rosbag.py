@@ -59,7 +59,7 @@ def _read_open_bag(
         return reader.deserialize(bytes(raw), msgtype)
 
     collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections})
-    total = reader.message_count
+    total = sum(max(_listed_count(c.msgcount), 0) for c in reader.connections)  # metadata may be damaged
     n = 0
     try:
         for conn, t_ns, raw in reader.messages():
@@ -81,15 +81,22 @@ def _read_open_bag(
     return collector.finish("unix")
 
 
+def _listed_count(msgcount: object) -> int:
+    """A topic's message count as the bag's index or metadata lists it; -1 where that is no count (a
+    damaged metadata.yaml can hold NaN, a string or a negative number there)."""
+    try:
+        count = int(msgcount)  # type: ignore[call-overload]
+    except (TypeError, ValueError, OverflowError):
+        return -1
+    return count if count >= 0 else -1
+
+
 def _missing_messages(reader: AnyReader, collector: StreamCollector) -> list[Skipped]:
     """Messages the bag's index or metadata counts per topic that its storage did not give."""
     listed: dict[str, int] = {}
     out = []
     for c in reader.connections:
-        try:
-            count = int(c.msgcount)
-        except (TypeError, ValueError, OverflowError):
-            count = -1
+        count = _listed_count(c.msgcount)
         if count < 0:  # the metadata is damaged: nothing to compare with
             out.append(
                 Skipped(c.topic, f"message count in the bag's metadata unreadable ({c.msgcount!r})", 0, "repaired")

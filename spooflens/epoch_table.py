@@ -526,6 +526,27 @@ def _runs_of(t_ns: np.ndarray, min_jump_ns: int = 2_000_000_000, periods: float 
     return np.r_[0, np.cumsum(back)].astype(np.int64)
 
 
+MAX_STAMP_NS = 1 << 62  # 146 years either side of any clock's zero: differences of stamps fit in int64
+
+
+def _drop_impossible_stamps(frames_ns: dict[str, pd.DataFrame], skipped: list[Skipped]) -> None:
+    """Rows whose stamp no clock can hold (a corrupt length or time field read as a 2^63-scale count, or
+    a non-finite float) are dropped per stream before anything subtracts stamps."""
+    for name, df in list(frames_ns.items()):
+        if df is None or not len(df):
+            continue
+        t = df["t_ns"].to_numpy()
+        with np.errstate(invalid="ignore"):
+            bad = ~((t > -MAX_STAMP_NS) & (t < MAX_STAMP_NS))  # comparisons, not abs(): abs(int64 min) < 0
+        if not bad.any():
+            continue
+        key = STREAM_KEY[name]
+        sids = ["truth"] * int(bad.sum()) if key is None else df[key].to_numpy()[bad].astype(str)
+        for sid, n in zip(*np.unique(sids, return_counts=True), strict=True):
+            skipped.append(Skipped(str(sid), "time stamp beyond any clock (corrupt time field)", int(n), "lost"))
+        frames_ns[name] = df[~bad].reset_index(drop=True)
+
+
 def _segment_frames(
     frames_ns: dict[str, pd.DataFrame], skipped: list[Skipped]
 ) -> tuple[dict[str, pd.DataFrame], list[tuple[int, int, int]]]:
@@ -629,6 +650,8 @@ def build_table(
     consumed (their columns released as they are copied), so a large log is held about once.
     """
     skipped = list(skipped)
+    frames_ns = dict(frames_ns)
+    _drop_impossible_stamps(frames_ns, skipped)
     frames_ns, layout = _segment_frames(frames_ns, skipped)
     kept: dict[str, tuple[pd.DataFrame, list[_Stream]]] = {}
     for name in list(frames_ns):

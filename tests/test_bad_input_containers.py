@@ -136,6 +136,62 @@ def test_a_cut_ros1_bag_counts_and_names_what_was_lost(husky_bag: Path, tmp_path
         assert read + lost[stream] == pytest.approx(whole, rel=0.02), stream
 
 
+def test_a_ros2_bag_metadata_with_nan_message_counts(tmp_path: Path) -> None:
+    """The 10^4 fuzz run wrote NaN into metadata.yaml's message counts (TypeError summing them before):
+    the bag is read, the unreadable counts are noted."""
+    src = tmp_path / "src"
+    write_log(circling_table(seconds=30.0), src, "ros2bag-mcap")
+    full = read_log(src)
+    meta = src / "metadata.yaml"
+    meta.write_text(re.sub(r"message_count: \d+", "message_count: NaN", meta.read_text()))
+    table = read_log(src)
+    assert len(table.imu) == len(full.imu) and len(table.fixes) == len(full.fixes)
+    assert any("message count in the bag's metadata unreadable" in s.reason for s in table.skipped)
+
+
+def _mcap_records(data: bytes, opcode: int) -> list[int]:
+    """Offsets of the top-level records of one opcode in an MCAP file."""
+    out, pos = [], 8
+    while pos + 9 <= len(data):
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == opcode:
+            out.append(pos)
+        if op == 0x02:  # footer
+            break
+        pos += 9 + length
+    return out
+
+
+@pytest.mark.parametrize(
+    ("opcode", "field_at", "value"),
+    [
+        (0x06, 9 + 16, 0x7FFF_FFFF_FFFF_FFFF),  # a chunk's uncompressed size
+        (0x07, 9 + 2 + 4 + 8, 0xFFFF_FFFF_FFFF_FFFF),  # a message index's first offset (-1 as int64)
+        (0x07, 9 + 2 + 4 + 8, 0x8000_0000_0000_0000),
+    ],
+)
+def test_an_mcap_length_or_offset_beyond_int64_is_damage_not_an_overflow(
+    tmp_path: Path, opcode: int, field_at: int, value: int
+) -> None:
+    """The fuzz run overwrote MCAP integers with 2^63-scale values: zstandard refused the declared size
+    (OverflowError) and a message index offset became a huge negative index (IndexError)."""
+    src = tmp_path / "src.mcap"
+    write_log(circling_table(seconds=30.0), src, "mcap-ros2")
+    data = bytearray(src.read_bytes())
+    at = _mcap_records(bytes(data), opcode)
+    assert at, "the writer made no such record"
+    struct.pack_into("<Q", data, at[0] + field_at, value)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    table = read_log(bad)  # the damaged chunk is lost and counted; an index is walked past
+    full = read_log(src)
+    if opcode == 0x06:
+        assert any("corrupt length" in s.reason and s.action == "lost" for s in table.skipped)
+    else:
+        assert len(table.imu) == len(full.imu) and len(table.fixes) == len(full.fixes)
+    assert main(["inspect", str(bad)]) in (0, 3)
+
+
 @pytest.fixture(scope="module")
 def ulog(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("ulog") / "sim.ulg"

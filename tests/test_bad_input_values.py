@@ -206,3 +206,36 @@ def test_a_navigation_record_with_an_infinite_clock_time_is_dropped_not_an_overf
     nav = read_rinex_nav_file(damaged)
     assert len(nav.ephemerides) == len(read_rinex_nav_file(real).ephemerides) - 1
     assert any(s.count == 1 and s.action == "lost" and "navigation records" in s.reason for s in nav.skipped)
+
+
+def test_a_velocity_missing_one_axis_is_not_used_not_a_singular_matrix(tmp_path: Path) -> None:
+    """The 10^4 fuzz run blanked one velocity column of a PX4 CSV export: no velocity noise could be
+    learned, yet the other axes reached the filter with zero variance (LinAlgError before)."""
+    table = copy.copy(circling_table(seconds=90.0))
+    table.fixes = table.fixes.assign(vel_n_mps=np.nan)
+    result = analyze_table(table)
+    nav = next(r for r in result.results if r.name == "navigation")
+    assert nav.ran
+    assert result.verdict.spoofed is False
+
+
+def test_time_stamps_beyond_any_clock_are_dropped_and_counted_not_an_overflow() -> None:
+    """The fuzz run overwrote ULog and MCAP time fields with 2^63-scale values; subtracting such stamps
+    overflowed int64 while the recordings of a joined log were laid out (OverflowError before)."""
+    from spooflens.epoch_table import build_table
+
+    table = circling_table(seconds=60.0)
+    t0 = 1_700_000_000_000_000_000
+    frames = {}
+    for name in ("imu", "fixes"):
+        df = getattr(table, name).copy()
+        df.insert(0, "t_ns", t0 + np.round(df.pop("t_s").to_numpy() * 1e9).astype(np.int64))
+        frames[name] = df
+    t = frames["fixes"]["t_ns"].to_numpy().copy()
+    t[[5, 20]] = [np.iinfo(np.int64).max, np.iinfo(np.int64).min]
+    t[40:] -= 3_600_000_000_000  # and a second recording an hour earlier: the layout subtracts stamps
+    frames["fixes"]["t_ns"] = t
+    out = build_table(Path("x.csv"), "csv", "unix", frames, list(table.streams), [])
+    lost = [s for s in out.skipped if "beyond any clock" in s.reason]
+    assert [(s.stream, s.count, s.action) for s in lost] == [(str(table.fixes["receiver_id"].iloc[0]), 2, "lost")]
+    assert len(out.fixes) == len(table.fixes) - 2 and len(out.segments) == 2

@@ -46,6 +46,11 @@ class GnssNoise:
     tau_vel_s: float = 10.0
     source: str = ""
 
+    @property
+    def has_velocity(self) -> bool:
+        """False when the log's velocity was found unusable (no white noise learned for it: (0, 0))."""
+        return self.white_vel_mps != (0.0, 0.0)
+
     def gm_arrays(self, odometry: OdometryAiding | None = None) -> tuple[FloatArray, FloatArray]:
         """(tau, sigma) of the nine Gauss-Markov states, in the kernel's order (pos ENU, vel ENU, odometry)."""
         odo_tau = odometry.tau_s if odometry is not None else 30.0
@@ -358,8 +363,8 @@ def _run(
         raise AnalysisError(f"fewer than two GNSS fixes of {receiver_id} inside the IMU's time span")
     sigma = _measurement_sigmas(fixes, opts)
     vel = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
-    if not opts.use_velocity:
-        vel = np.full_like(vel, np.nan)
+    if not opts.use_velocity or (opts.noise is not None and not opts.noise.has_velocity):
+        vel = np.full_like(vel, np.nan)  # a velocity with no noise learned (e.g. an axis missing) is not used
     llh = fixes[["lat_deg", "lon_deg", "height_m"]].to_numpy(dtype=float)
     odo = np.full((len(tf), 3), np.nan) if odometry is None else np.asarray(odometry, dtype=float)[keep]
     R_vb = opts.odometry.R_vb if opts.odometry is not None else np.eye(3)

@@ -86,7 +86,7 @@ class LearnedNoise:
             f"{self.window_s[1]:.0f} s): position white {n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m "
             f"(h/v) + Gauss-Markov {n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, tau {n.tau_pos_s:.0f} s"
         )
-        if n.white_vel_mps != (0.0, 0.0):
+        if n.has_velocity:
             text += (
                 f"; velocity white {n.white_vel_mps[0]:.2g}/{n.white_vel_mps[1]:.2g} m/s + Gauss-Markov "
                 f"{n.gm_vel_mps[0]:.2g}/{n.gm_vel_mps[1]:.2g} m/s, tau {n.tau_vel_s:.0f} s"
@@ -117,6 +117,11 @@ def _robust_std(x: FloatArray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
+def _mean_of_finite(values: Sequence[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
 def initial_noise(inputs: FilterInputs, exclude: Sequence[tuple[float, float]] = ()) -> GnssNoise:
     """A starting point from the fixes alone (away from suspected stretches): white noise from the scatter
     of second differences (the vehicle's motion is smooth over three epochs; exact repeats, a frozen
@@ -138,7 +143,7 @@ def initial_noise(inputs: FilterInputs, exclude: Sequence[tuple[float, float]] =
     )
     d2 = np.diff(p, 2, axis=0)
     d2 = np.where(np.abs(d2) > 1e-6, d2, np.nan)
-    wh = np.nanmean([_robust_std(d2[:, 0]), _robust_std(d2[:, 1])]) / np.sqrt(6.0)
+    wh = _mean_of_finite([_robust_std(d2[:, 0]), _robust_std(d2[:, 1])]) / np.sqrt(6.0)
     wv = _robust_std(d2[:, 2]) / np.sqrt(6.0)
     # the wander's size is found by the search; never started from the receiver's reported accuracy,
     # which is 5-10 times the real scatter in some receivers and a fifth of it in others
@@ -147,7 +152,7 @@ def initial_noise(inputs: FilterInputs, exclude: Sequence[tuple[float, float]] =
     has_vel = bool(np.isfinite(v[:, :2]).all(axis=1).any())
     dv = np.diff(v, 2, axis=0)
     dv = np.where(np.abs(dv) > 1e-9, dv, np.nan)
-    vh = np.nanmean([_robust_std(dv[:, 0]), _robust_std(dv[:, 1])]) / np.sqrt(6.0) if has_vel else 0.0
+    vh = _mean_of_finite([_robust_std(dv[:, 0]), _robust_std(dv[:, 1])]) / np.sqrt(6.0) if has_vel else 0.0
     vv = _robust_std(dv[:, 2]) / np.sqrt(6.0) if has_vel and np.isfinite(v[:, 2]).any() else vh
 
     def ok(x: float, floor: float) -> float:
@@ -308,7 +313,7 @@ def learn_noise(
     window = (t0, min(t_end, float(tf[-1])))
     sub = inputs.between(-np.inf, window[1])
     noise = initial_noise(sub, exclude)
-    has_vel = noise.white_vel_mps != (0.0, 0.0)
+    has_vel = noise.has_velocity
     base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False, compare=False)
     objective = _Objective(sub, start, base)
     first = objective.run(base)
