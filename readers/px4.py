@@ -27,9 +27,10 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.epoch_table import Skipped
+from spooflens.epoch_table import Skipped, StreamInfo
 from spooflens.navigation.rotations import quat_from_rotvec, quat_multiply, quat_to_rotvec
 from spooflens.schema import FixType, SpoofingFlag
 
@@ -557,7 +558,106 @@ def interpolate_attitude(t: np.ndarray, t_att: np.ndarray, q_att: FloatArray, ma
     return out
 
 
-# --- satellite_info: C/N0 per fix -------------------------------------------------------------------
+# --- satellite_info: C/N0 per fix, and every satellite ---------------------------------------------
+
+
+def _svinfo_sv_id(svid: int) -> str | None:
+    """RINEX-style id of a satellite_info `svid` in the u-blox NAV-SVINFO numbering that PX4's u-blox
+    driver writes (GPS 1-32, BeiDou 33-64 (C05-C37) and 159-163 (C01-C05), GLONASS 65-96, SBAS 120-158,
+    QZSS 193-202, Galileo 211-246); None for 255 (GLONASS slot unknown), 0 and unassigned numbers."""
+    if 1 <= svid <= 32:
+        return f"G{svid:02d}"
+    if 33 <= svid <= 64:
+        return f"C{svid - 28:02d}"
+    if 65 <= svid <= 96:
+        return f"R{svid - 64:02d}"
+    if 120 <= svid <= 158:
+        return f"S{svid - 100:02d}"
+    if 159 <= svid <= 163:
+        return f"C{svid - 158:02d}"
+    if 193 <= svid <= 202:
+        return f"J{svid - 192:02d}"
+    if 211 <= svid <= 246:
+        return f"E{svid - 210:02d}"
+    return None
+
+
+_SVINFO_IDS = np.array([_svinfo_sv_id(v) or "" for v in range(256)], dtype=object)
+
+
+def satellites_frame(
+    rec: Mapping[str, np.ndarray], rid: str, topic: str, offset_us: int, skipped: list[Skipped]
+) -> tuple[pd.DataFrame, StreamInfo] | None:
+    """satellite_info as receiver `rid`'s per-satellite report (`satellite_rows`), stamped in absolute
+    ns on the fixes' clock (boot µs + `offset_us`)."""
+    rows = satellite_rows(rec, skipped, topic)
+    if rows is None:
+        return None
+    t_us = rows.pop("timestamp").to_numpy()
+    df = pd.DataFrame({"t_ns": (t_us + offset_us) * 1000, "receiver_id": rid} | dict(rows.items()))
+    epochs = len(np.unique(t_us))
+    return df, StreamInfo("satellites", rid, topic, f"px4/{SATELLITE_TOPIC} (per satellite)", epochs)
+
+
+def satellite_rows(rec: Mapping[str, np.ndarray], skipped: list[Skipped], stream: str) -> pd.DataFrame | None:
+    """One row per satellite and satellite_info message: `timestamp` (µs, the message's), sv_id and the
+    satellites-frame columns. None when the record has no per-satellite arrays.
+
+    PX4 packs what the receiver reports into uint8 arrays: `svid` in u-blox's NAV-SVINFO numbering (older
+    drivers wrote the raw per-constellation svId, so two satellites can share a number in one message:
+    those are left out, counted, as their identity is unknown), `snr` = C/N0 in dB-Hz (0: not tracked),
+    `elevation` in degrees with negatives wrapped (the driver casts a signed value; -91 is u-blox's
+    "unknown"), `azimuth` scaled 0-255 for 0-360 deg, `used` 0/1. Health and residual are not carried.
+    """
+    n_max = sum(1 for k in rec if k.startswith("svid["))
+    if not n_max or any(f"{name}[{i}]" not in rec for name in ("svid", "snr") for i in range(n_max)):
+        return None
+
+    def matrix(name: str) -> NDArray[np.float64]:
+        """The (messages, n_max) array of one field; NaN where a layout does not carry it."""
+        if any(f"{name}[{i}]" not in rec for i in range(n_max)):
+            return np.full((len(rec["timestamp"]), n_max), np.nan)
+        return np.stack([np.asarray(rec[f"{name}[{i}]"]).astype(np.float64) for i in range(n_max)], axis=1)
+
+    svid, snr = matrix("svid"), matrix("snr")
+    count = np.asarray(rec["count"]).astype(np.int64) if "count" in rec else np.full(len(svid), n_max)
+    slot = np.arange(n_max)[None, :] < np.clip(count, 0, n_max)[:, None]
+    valid = slot & (svid > 0) & (svid < 256)
+    ids = np.where(valid, _SVINFO_IDS[np.clip(np.nan_to_num(svid), 0, 255).astype(np.int64)], "")
+    known = valid & (ids != "")
+    # a number twice in one message: a numbering that collides across constellations
+    key = np.where(known, svid, -1 - np.arange(n_max)[None, :])  # unknown slots never equal anything
+    order = np.argsort(key, axis=1, kind="stable")
+    ranked = np.take_along_axis(key, order, axis=1)
+    same = ranked[:, 1:] == ranked[:, :-1]
+    twin = np.zeros_like(known)
+    twin[:, 1:] |= same
+    twin[:, :-1] |= same
+    repeated = np.zeros_like(known)
+    np.put_along_axis(repeated, order, twin, axis=1)
+    if repeated.any():
+        reason = "satellites sharing an svid in one message (identity unknown)"
+        skipped.append(Skipped(stream, reason, int(repeated.sum())))
+    keep = known & ~repeated
+    if not keep.any():
+        return None
+    elev = matrix("elevation")
+    elev = np.where(elev > 127, elev - 256, elev)  # the driver's uint8 cast of a signed angle
+    elev = np.where((elev >= -90) & (elev <= 90), elev, np.nan)
+    row, col = np.nonzero(keep)
+    cn0, used = snr[row, col], matrix("used")[row, col]
+    return pd.DataFrame(
+        {
+            "timestamp": np.asarray(rec["timestamp"]).astype(np.int64)[row],
+            "sv_id": ids[row, col].astype(str),
+            "cn0_dbhz": np.where(cn0 > 0, cn0, np.nan),
+            "elevation_deg": elev[row, col],
+            "azimuth_deg": matrix("azimuth")[row, col] * (360.0 / 255.0),
+            "used": np.where(np.isfinite(used), used > 0, np.nan),
+            "residual_m": np.nan,
+            "healthy": np.nan,
+        }
+    )
 
 
 def cn0_mean(rec: Mapping[str, np.ndarray]) -> FloatArray | None:

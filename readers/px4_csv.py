@@ -47,6 +47,7 @@ from readers.px4 import (
     ned_frd_to_enu_flu,
     position_units,
     receiver_metadata,
+    satellites_frame,
     select_receivers,
 )
 from spooflens.epoch_table import Skipped, StreamInfo
@@ -111,7 +112,26 @@ def topic_of(path: Path) -> tuple[str | None, int]:
     return None, 0
 
 
+MAX_HEADER_BYTES = 1 << 16  # PX4's widest topic header is a few kB; a longer one is no PX4 table
+
+
+def _header_line(path: Path) -> bytes | None:
+    """The first line that is not a comment, if it ends within MAX_HEADER_BYTES of its start."""
+    try:
+        with path.open("rb") as f:
+            for line in iter(lambda: f.readline(MAX_HEADER_BYTES + 1), b""):
+                if len(line) > MAX_HEADER_BYTES:
+                    return None
+                if line.strip() and not line.startswith(b"#"):
+                    return line
+    except OSError:
+        return None
+    return None
+
+
 def _sample(path: Path) -> pd.DataFrame | None:
+    if _header_line(path) is None:  # pandas names a million-field header's columns in quadratic time
+        return None
     try:
         df = pd.read_csv(path, comment="#", skipinitialspace=True, nrows=SAMPLE_ROWS, on_bad_lines="skip")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError):
@@ -236,10 +256,14 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
         clock = "clock: seconds since boot (no time_utc_usec)"
     sats = [f for f, k in files.items() if k == "satellites"]
     fixes: list[pd.DataFrame] = []
+    skies: list[tuple[pd.DataFrame, StreamInfo]] = []
     for k, (src, rec, f) in enumerate(sources):
         df, info = _fixes(f, src, rec, offset_us, notes[f], skipped)
         sat = next((s for s in sats if topic_of(s)[1] == k), sats[0] if len(sats) == 1 and k == 0 else None)
         if sat is not None:
+            per_satellite = satellites_frame(records[sat], info.stream_id, sat.name, offset_us, skipped)
+            if per_satellite is not None:
+                skies.append(per_satellite)
             cn0 = cn0_mean(records[sat])
             if cn0 is not None:
                 t_fix = df["t_ns"].to_numpy() // 1000 - offset_us
@@ -256,6 +280,9 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
         part.metadata |= enum_metadata(columns, basis)
         part.metadata |= receiver_metadata([(s, rec) for s, rec, _ in sources])
         part.metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s, _, _ in sources)
+    if skies:
+        part.frames["satellites"] = pd.concat([frame for frame, _ in skies], ignore_index=True)
+        part.streams += [sky_info for _, sky_info in skies]
     imu_files = [f for f, k in files.items() if k == "imu"]
     att_files = [f for f, k in files.items() if k == "attitude"]
     if imu_files:

@@ -70,12 +70,21 @@ VEHICLE_GLOBAL_POSITION: Fields = [
     ("float", "eph"),
     ("float", "epv"),
 ]
-SATELLITE_INFO: Fields = [
+SATELLITE_INFO: Fields = [  # PX4's SatelliteInfo (v1.14 on: 40 satellites)
     ("uint64_t", "timestamp"),
     ("uint8_t", "count"),
     ("uint8_t[40]", "svid"),
+    ("uint8_t[40]", "used"),
+    ("uint8_t[40]", "elevation"),
+    ("uint8_t[40]", "azimuth"),
     ("uint8_t[40]", "snr"),
+    ("uint8_t[40]", "prn"),
 ]
+# 12 satellites in the u-blox NAV-SVINFO numbering PX4's driver writes: G02..G24, R03, R05 (65 + n - 1),
+# E11, E12 (211 + n - 1); the clean sky spreads over 12 dB around 38 dB-Hz (mean 38)
+SKY_SVID = np.array([2, 5, 7, 9, 13, 15, 20, 24, 67, 69, 221, 222])
+SKY_OFFSET_DB = np.array([-6, -5, -4, -3, -2, -1, 1, 2, 3, 4, 5, 6])
+SKY_ELEVATION = np.array([12, 25, 33, 41, 58, 77, 64, 47, 29, 18, 52, 250])  # 250: -6 deg, as the driver wraps it
 
 
 def flight(t_s: np.ndarray, attack_s: float | None = None) -> dict[str, np.ndarray]:
@@ -176,7 +185,9 @@ def v1_12_log(path: Path) -> dict[str, np.ndarray]:
     return f
 
 
-def v1_14_two_receivers(path: Path, attack_s: float | None = 20.0, attitude: bool = True) -> dict[str, Any]:
+def v1_14_two_receivers(
+    path: Path, attack_s: float | None = 20.0, attitude: bool = True, seconds: float = 30.0
+) -> dict[str, Any]:
     """PX4 v1.14.0 with two receivers: sensor_gps 0 (M8N) and 1 (M9N) at the logger's default 1 Hz,
     vehicle_gps_position at 5 Hz from receiver 0 except three blended messages (device_id 0); the
     driver's 'GPS spoofing detected!' warning; vehicle_attitude at 10 Hz; satellite_info of receiver 0;
@@ -185,18 +196,18 @@ def v1_14_two_receivers(path: Path, attack_s: float | None = 20.0, attitude: boo
     log.info("sys_name", "PX4")
     log.info("ver_sw_release", V1_14_0)
     log.info("ver_sw", "b1a4c0de00000000000000000000000000000000")
-    t_imu = np.round(np.arange(1.0, 31.0, 0.02), 6)
+    t_imu = np.round(np.arange(1.0, 1.0 + seconds, 0.02), 6)
     fill_imu(log.topic("sensor_combined", SENSOR_COMBINED, len(t_imu)), t_imu)
-    t_att = np.round(np.arange(1.0, 31.0, 0.1), 6)
+    t_att = np.round(np.arange(1.0, 1.0 + seconds, 0.1), 6)
     if attitude:
         att = log.topic("vehicle_attitude", VEHICLE_ATTITUDE, len(t_att))
         att["timestamp"] = att["timestamp_sample"] = np.round(t_att * 1e6).astype(np.int64)
         att["q"] = [np.cos(np.radians(15)), 0.0, 0.0, np.sin(np.radians(15))]  # level, heading 30 deg
-    t1 = np.round(np.arange(1.0, 31.0, 1.0), 6)
+    t1 = np.round(np.arange(1.0, 1.0 + seconds, 1.0), 6)
     fill_gps(log.topic("sensor_gps", SENSOR_GPS_V1_14, len(t1), 0), flight(t1, attack_s), M8N_SERIAL2)
     t1b = t1 + 0.05
     fill_gps(log.topic("sensor_gps", SENSOR_GPS_V1_14, len(t1b), 1), flight(t1b, attack_s), M9N_SERIAL4)
-    t5 = np.round(np.arange(1.0, 31.0, 0.2), 6)
+    t5 = np.round(np.arange(1.0, 1.0 + seconds, 0.2), 6)
     f5 = flight(t5, attack_s)
     sel = log.topic("vehicle_gps_position", SENSOR_GPS_V1_14, len(t5))
     fill_gps(sel, f5, M8N_SERIAL2)
@@ -204,16 +215,25 @@ def v1_14_two_receivers(path: Path, attack_s: float | None = 20.0, attitude: boo
     sats = log.topic("satellite_info", SATELLITE_INFO, len(t1))
     sats["timestamp"] = np.round(t1 * 1e6).astype(np.int64)
     sats["count"] = 12
-    cn0 = np.where(flight(t1, attack_s)["spoofing_state"] > 1, 47.0, 38.0)
-    sats["snr"][:, :12] = np.round(cn0)[:, None]
+    under = flight(t1, attack_s)["spoofing_state"] > 1
+    wobble = np.where(np.arange(len(t1))[:, None] % 2 == 0, 0, np.sign(SKY_OFFSET_DB))  # the sky is never still
+    # under attack every channel locks onto the one transmitter: 47 dB-Hz all
+    sats["snr"][:, :12] = np.where(
+        under[:, None], 47, 38 + SKY_OFFSET_DB[None, :] + wobble - wobble.mean(axis=1)[:, None]
+    )
     sats["snr"][:, 12:14] = 30  # beyond `count`: not satellites of this message
+    sats["svid"][:, :12] = SKY_SVID
+    sats["svid"][:, 12:14] = 3
+    sats["used"][:, :12] = 1
+    sats["elevation"][:, :12] = SKY_ELEVATION
+    sats["azimuth"][:, :12] = np.arange(12) * 20
     for name, fields in (
         ("vehicle_air_data", VEHICLE_AIR_DATA),
         ("battery_status", BATTERY_STATUS),
         ("vehicle_global_position", VEHICLE_GLOBAL_POSITION),
     ):
-        r = log.topic(name, fields, 30)
-        r["timestamp"] = np.round(np.arange(30), 6) * 1_000_000 + 1_000_000
+        r = log.topic(name, fields, int(seconds))
+        r["timestamp"] = np.round(np.arange(int(seconds)), 6) * 1_000_000 + 1_000_000
         if name == "vehicle_global_position":
             r["lat"], r["lon"], r["eph"] = LAT0, LON0, 1.0
     if attack_s is not None:

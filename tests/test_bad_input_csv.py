@@ -137,6 +137,18 @@ def test_garbage_lines_are_counted_not_taken_as_rows(clean_csv: Path, tmp_path: 
     np.testing.assert_array_equal(table.fixes["lat_deg"], full.fixes["lat_deg"])
 
 
+def test_a_header_of_a_million_fields_is_refused_for_its_file_quickly(clean_csv: Path, tmp_path: Path) -> None:
+    """The 10^4 fuzz run put a 1 MB line of commas where fixes.csv's header was: pandas named the
+    million empty columns in quadratic time (a hang before). The file is now no table, said so."""
+    log = _copy(clean_csv, tmp_path / "log")
+    lines = _lines(log / "fixes.csv")
+    lines[_header(lines)] = "," * 1_000_000
+    (log / "fixes.csv").write_text("\n".join(lines) + "\n")
+    table = read_log(log)
+    assert not len(table.fixes) and len(table.imu)
+    assert any(s.stream == "fixes.csv" and "cannot tell what this CSV holds" in s.reason for s in table.skipped)
+
+
 def test_t_s_in_milliseconds_is_recognised_by_its_rates(clean_csv: Path, tmp_path: Path) -> None:
     log = _copy(clean_csv, tmp_path / "log")
     for name in ("fixes.csv", "imu.csv"):

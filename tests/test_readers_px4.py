@@ -386,3 +386,54 @@ def test_px4_versions_devices_and_renamed_fields_decode() -> None:
     # the proposed vehicle_gnss nests the receiver's sample; its unit-free names map to SensorGps's
     rec = canonical_record({"timestamp": np.zeros(1), "receiver.latitude": np.ones(1), "receiver.noise": np.ones(1)})
     assert set(rec) == {"timestamp", "latitude_deg", "noise_per_ms"}
+
+
+def test_satellite_info_gives_every_satellite_by_its_svinfo_number(logs: Path) -> None:
+    """satellite_info per satellite: PX4's u-blox NAV-SVINFO numbering mapped to RINEX ids, the
+    driver's wrapped negative elevation unwrapped, azimuth unscaled, entries beyond `count` left out."""
+    path = logs / "v1_14_sky.ulg"
+    v1_14_two_receivers(path, attack_s=20.0)
+    table = read_log(path)
+    sky = table.satellites
+    assert set(sky["receiver_id"]) == {"sensor_gps/0"}  # satellite_info is receiver 0's
+    ids = ["G02", "G05", "G07", "G09", "G13", "G15", "G20", "G24", "R03", "R05", "E11", "E12"]
+    assert sorted(set(sky["sv_id"])) == sorted(ids) and len(sky) == 12 * 30
+    first = sky[sky["t_s"] == sky["t_s"].min()].set_index("sv_id")
+    assert first.loc["E12", "elevation_deg"] == -6.0 and first.loc["G02", "elevation_deg"] == 12.0
+    assert first.loc["R05", "azimuth_deg"] == pytest.approx(180 * 360 / 255)
+    assert (sky["used"] == 1.0).all() and sky["healthy"].isna().all()
+    stream = next(s for s in table.streams if s.role == "satellites")
+    assert stream.count == 30 and stream.topic == "satellite_info"
+
+
+def test_satellite_info_numbers_shared_in_one_message_are_left_out_and_counted() -> None:
+    """Older drivers wrote u-blox's per-constellation svId: G05 and E05 both 5 in one message."""
+    from readers.px4 import satellite_rows
+
+    rec = {"timestamp": np.array([1_000_000, 2_000_000]), "count": np.array([3, 3])}
+    for name, values in (("svid", (5, 5, 7)), ("snr", (40, 35, 0)), ("used", (1, 0, 0))):
+        for i in range(4):
+            rec[f"{name}[{i}]"] = np.full(2, values[i] if i < 3 else 9)
+    skipped: list = []
+    rows = satellite_rows(rec, skipped, "satellite_info")
+    assert rows is not None and list(rows["sv_id"]) == ["G07", "G07"]
+    assert np.isnan(rows["cn0_dbhz"]).all()  # snr 0: not tracked
+    assert rows["elevation_deg"].isna().all()  # a layout without elevation
+    assert [(s.count, "identity unknown" in s.reason) for s in skipped] == [(4, True)]
+
+
+def test_an_sdr_spoofer_locking_every_channel_shows_as_one_c_n0(logs: Path, tmp_path: Path) -> None:
+    """Under the attack every satellite_info channel reads 47 dB-Hz (one transmitter); the clean sky
+    spreads over 12 dB. The satellite-signal detector names the stretch; the clean log has no alarm."""
+    from spooflens.pipeline import analyze_table
+
+    for attack_s, expect in ((30.0, True), (None, False)):
+        path = tmp_path / f"sky_{attack_s}.ulg"
+        v1_14_two_receivers(path, attack_s=attack_s, seconds=60.0)
+        result = analyze_table(read_log(path))
+        signals = next(r for r in result.results if r.name == "satellite_signals")
+        assert signals.ran
+        uniform = [f for f in signals.findings if "at one C/N0" in f.text]
+        assert bool(uniform) is expect, signals.findings
+        if expect:
+            assert 30.0 - 2.0 <= uniform[0].start_s <= 35.0

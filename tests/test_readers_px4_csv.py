@@ -51,6 +51,7 @@ def test_ulog2csv_export_reads_like_the_ulog(exported: tuple[Path, Path]) -> Non
         b.fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]], a.fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]], rtol=1e-7
     )
     np.testing.assert_array_equal(b.fixes["spoofing_flag"], a.fixes["spoofing_flag"])
+    pd.testing.assert_frame_equal(b.satellites, a.satellites)  # satellite_info per satellite
     q = ["qw", "qx", "qy", "qz"]
     np.testing.assert_allclose(b.imu[q], a.imu[q], atol=1e-7)
     assert next(s for s in b.streams if s.role == "imu").body_frame == "FRD"
