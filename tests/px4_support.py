@@ -84,7 +84,7 @@ SATELLITE_INFO: Fields = [  # PX4's SatelliteInfo (v1.14 on: 40 satellites)
 # E11, E12 (211 + n - 1); the clean sky spreads over 12 dB around 38 dB-Hz (mean 38)
 SKY_SVID = np.array([2, 5, 7, 9, 13, 15, 20, 24, 67, 69, 221, 222])
 SKY_OFFSET_DB = np.array([-6, -5, -4, -3, -2, -1, 1, 2, 3, 4, 5, 6])
-SKY_ELEVATION = np.array([12, 25, 33, 41, 58, 77, 64, 47, 29, 18, 52, 250])  # 250: -6 deg, as the driver wraps it
+SKY_ELEVATION = np.array([12, 25, 33, 41, 58, 77, 64, 47, 29, 18, 52, 255])  # 255: -1 deg, as the driver wraps it
 
 
 def flight(t_s: np.ndarray, attack_s: float | None = None) -> dict[str, np.ndarray]:

@@ -399,7 +399,7 @@ def test_satellite_info_gives_every_satellite_by_its_svinfo_number(logs: Path) -
     ids = ["G02", "G05", "G07", "G09", "G13", "G15", "G20", "G24", "R03", "R05", "E11", "E12"]
     assert sorted(set(sky["sv_id"])) == sorted(ids) and len(sky) == 12 * 30
     first = sky[sky["t_s"] == sky["t_s"].min()].set_index("sv_id")
-    assert first.loc["E12", "elevation_deg"] == -6.0 and first.loc["G02", "elevation_deg"] == 12.0
+    assert first.loc["E12", "elevation_deg"] == -1.0 and first.loc["G02", "elevation_deg"] == 12.0
     assert first.loc["R05", "azimuth_deg"] == pytest.approx(180 * 360 / 255)
     assert (sky["used"] == 1.0).all() and sky["healthy"].isna().all()
     stream = next(s for s in table.streams if s.role == "satellites")
