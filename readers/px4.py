@@ -561,24 +561,25 @@ def interpolate_attitude(t: np.ndarray, t_att: np.ndarray, q_att: FloatArray, ma
 # --- satellite_info: C/N0 per fix, and every satellite ---------------------------------------------
 
 
+# u-blox NAV-SVINFO numbering, which PX4's u-blox driver writes into satellite_info.svid:
+# (first, last, RINEX system letter, number of the first)
+_SVINFO_RANGES = (
+    (1, 32, "G", 1),
+    (33, 64, "C", 5),
+    (65, 96, "R", 1),
+    (120, 158, "S", 20),
+    (159, 163, "C", 1),
+    (193, 202, "J", 1),
+    (211, 246, "E", 1),
+)
+
+
 def _svinfo_sv_id(svid: int) -> str | None:
-    """RINEX-style id of a satellite_info `svid` in the u-blox NAV-SVINFO numbering that PX4's u-blox
-    driver writes (GPS 1-32, BeiDou 33-64 (C05-C37) and 159-163 (C01-C05), GLONASS 65-96, SBAS 120-158,
-    QZSS 193-202, Galileo 211-246); None for 255 (GLONASS slot unknown), 0 and unassigned numbers."""
-    if 1 <= svid <= 32:
-        return f"G{svid:02d}"
-    if 33 <= svid <= 64:
-        return f"C{svid - 28:02d}"
-    if 65 <= svid <= 96:
-        return f"R{svid - 64:02d}"
-    if 120 <= svid <= 158:
-        return f"S{svid - 100:02d}"
-    if 159 <= svid <= 163:
-        return f"C{svid - 158:02d}"
-    if 193 <= svid <= 202:
-        return f"J{svid - 192:02d}"
-    if 211 <= svid <= 246:
-        return f"E{svid - 210:02d}"
+    """RINEX-style id of a satellite_info `svid`; None for 0, 255 (GLONASS slot unknown) and numbers
+    no range assigns."""
+    for first, last, system, number in _SVINFO_RANGES:
+        if first <= svid <= last:
+            return f"{system}{svid - first + number:02d}"
     return None
 
 

@@ -437,3 +437,12 @@ def test_an_sdr_spoofer_locking_every_channel_shows_as_one_c_n0(logs: Path, tmp_
         assert bool(uniform) is expect, signals.findings
         if expect:
             assert 30.0 - 2.0 <= uniform[0].start_s <= 35.0
+
+
+def test_svinfo_numbers_of_every_constellation() -> None:
+    """PX4's u-blox driver: BeiDou B1-B4 -> 159-162, B5-B37 -> 33-65, SBAS as its PRN, QZSS 193-202."""
+    from readers.px4 import _svinfo_sv_id
+
+    pairs = {1: "G01", 32: "G32", 33: "C05", 64: "C36", 96: "R32", 120: "S20", 159: "C01", 202: "J10", 246: "E36"}
+    assert {n: _svinfo_sv_id(n) for n in pairs} == pairs
+    assert [_svinfo_sv_id(n) for n in (0, 100, 255)] == [None, None, None]
