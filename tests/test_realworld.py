@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from readers import read_log
@@ -57,6 +58,46 @@ def test_receiver_evidence_is_quiet_on_a_clean_log_and_sees_a_capture(multirotor
     assert res.alarms[0].onset_s is not None and 145.0 <= res.alarms[0].onset_s <= 150.5
     text = res.findings[0].text
     assert "reported horizontal accuracy" in text and "fix lost" in text
+
+
+def _receiver_log(seconds: float, attack_s: float | None, seed: int = 3) -> pd.DataFrame:
+    """1 Hz fixes of one receiver whose indicators wander as real ones do, worse from `attack_s` on as
+    an M8N's under an SDR spoofer (accuracies x4, noise up, satellites down, DOP up)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0)
+    bad = np.zeros(len(t), bool) if attack_s is None else t >= attack_s
+    wander = lambda scale: scale * rng.standard_normal(len(t))  # noqa: E731
+    return pd.DataFrame(
+        {
+            "t_s": t,
+            "receiver_id": "gps",
+            "h_acc_m": np.where(bad, 6.0, 1.6) + wander(0.1),
+            "v_acc_m": np.where(bad, 9.5, 2.5) + wander(0.15),
+            "vel_acc_mps": np.where(bad, 4.0, 0.35) + wander(0.03),
+            "hdop": np.where(bad, 2.1, 0.9) + wander(0.03),
+            "vdop": np.where(bad, 3.0, 1.3) + wander(0.05),
+            "noise_per_ms": np.where(bad, 141.0, 95.0) + wander(2.0),
+            "sats_used": np.where(bad, 8.0, 14.0) + rng.integers(-1, 2, len(t)),
+            "jamming_indicator": np.nan,
+            "agc": np.nan,
+            "cn0_mean_dbhz": np.nan,
+            "jamming_state": np.nan,
+            "spoofing_flag": 0,
+        }
+    )
+
+
+@pytest.mark.parametrize("attack_s", [200.0, 100.0, 60.0])
+def test_receiver_evidence_learns_its_baseline_before_a_takeover_that_fills_most_of_the_log(attack_s: float) -> None:
+    """A takeover lasting to the log's end and filling 1/3 to 4/5 of it: the whole log's median would be
+    the attack's state (the attack normal, the clean part odd). The baseline is learned before the
+    change, which is found where the indicators worsen together."""
+    res = run_receiver_evidence(_receiver_log(300.0, attack_s))
+    assert [round(a.start_s) for a in res.alarms] == [round(attack_s)]
+    assert res.alarms[0].end_s == 299.0 and attack_s - 1.0 <= res.alarms[0].onset_s <= attack_s
+    assert f"learned before {attack_s:.1f} s" in res.reason
+    clean = run_receiver_evidence(_receiver_log(300.0, None))
+    assert not clean.alarms and "learned before" not in clean.reason
 
 
 def test_a_clean_multirotor_flight_is_clean_and_its_imu_needs_no_inflation(multirotor) -> None:

@@ -10,7 +10,9 @@ them too), so this class alone never makes a spoofing verdict; with the GNSS-onl
 class it does (`spooflens.evidence.confidence`).
 
 Per receiver and indicator the baseline is the log's own median and a robust scale (1.4826 MAD, with a
-floor per indicator so a constant indicator is not infinitely sensitive). Each epoch gets a directional
+floor per indicator so a constant indicator is not infinitely sensitive), learned from the whole log
+or, when the receiver's indicators worsen together at one time and stay so (`reference_epochs`: a
+takeover lasting to the end can fill half the log), from the part before that time. Each epoch gets a directional
 robust z-score per indicator (positive = the suspicious direction). The detector alarms on:
 
 - a joint change: at least `min_indicators` indicators beyond `z_alarm` within `window_s` of each other
@@ -74,17 +76,86 @@ class ReceiverEvidenceOptions:
     merge_gap_s: float = 10.0
     gap_factor: float = 4.0
     max_plausible_cn0_dbhz: float = 50.0
+    min_reference_s: float = 20.0  # the baseline is learned from at least this long a stretch ...
+    min_reference_fraction: float = 0.1  # ... and this fraction of the log
+    min_changed_s: float = 10.0  # a change of state to learn around lasts this long at least
 
 
-def robust_z(x: FloatArray, direction: int, floor: float, relative_floor: float) -> FloatArray:
-    """Directional robust z-score of a series against its own median (NaN where x is NaN)."""
-    ok = np.isfinite(x)
+def _center_scale(x: FloatArray, floor: float, relative_floor: float) -> tuple[float, float]:
+    """Median and robust scale (1.4826 MAD, floored) of the finite values of x."""
+    x = x[np.isfinite(x)]
+    med = float(np.median(x))
+    return med, max(1.4826 * float(np.median(np.abs(x - med))), floor, relative_floor * abs(med))
+
+
+def robust_z(
+    x: FloatArray, direction: int, floor: float, relative_floor: float, reference: NDArray[np.bool_] | None = None
+) -> FloatArray:
+    """Directional robust z-score of a series against its median over the `reference` epochs (all by
+    default; NaN where x is NaN)."""
+    ok = np.isfinite(x) & (True if reference is None else reference)
     if ok.sum() < 5:
-        return np.full(len(x), np.nan)
-    med = float(np.median(x[ok]))
-    scale = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor, relative_floor * abs(med))
+        ok = np.isfinite(x)
+        if ok.sum() < 5:
+            return np.full(len(x), np.nan)
+    med, scale = _center_scale(x[ok], floor, relative_floor)
     z = (x - med) / scale
     return np.abs(z) if direction == 0 else direction * z
+
+
+def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> tuple[NDArray[np.bool_], float]:
+    """The epochs the baseline is learned from, and where they end (NaN: the whole log).
+
+    The log's own median is the baseline while the receiver's state is the same most of the time. A
+    takeover that lasts to the end of a log can fill half of it or more, and then the whole-log median
+    is the attack's state: the attack looks normal and the clean part odd. So the log is split where the
+    receiver's directional indicators (accuracies, satellites used, DOP, noise, jamming indicator: each
+    with a direction in which it gets worse) worsen most, jointly. The split is located like a CUSUM's
+    change point (the second largest of the indicators' mean shifts in their bad directions, two must
+    agree, weighted by sqrt(n_before n_after / n)); it counts when the shift of the medians there,
+    against the median and robust scale before it, passes `z_alarm`. Then the part before it, when long
+    enough to learn from, is the baseline. A receiver improving after a cold start, or AGC and C/N0
+    changing at take-off (no bad direction), never moves the baseline.
+    """
+    everything = np.ones(len(t), dtype=bool)
+    n = len(t)
+    if n < 20:
+        return everything, float("nan")
+    first = t[0] + max(opts.min_reference_s, opts.min_reference_fraction * float(t[-1] - t[0]))
+    lo, hi = int(np.searchsorted(t, first)), int(np.searchsorted(t, t[-1] - opts.min_changed_s))
+    if hi <= lo:
+        return everything, float("nan")
+    columns = []
+    for ind in INDICATORS:
+        x = fx[ind.column].to_numpy(dtype=float)
+        if ind.direction != 0 and np.isfinite(x).sum() >= 10 and np.nanstd(x) > 0.0:
+            columns.append((ind, x))
+    if len(columns) < 2:
+        return everything, float("nan")
+    k = np.arange(lo, hi)
+    shifts = np.full((len(columns), len(k)), -np.inf)
+    for i, (ind, x) in enumerate(columns):
+        ok = np.isfinite(x)
+        _, scale = _center_scale(x, ind.floor, ind.relative_floor)
+        total, count = np.cumsum(np.where(ok, x, 0.0)), np.cumsum(ok)
+        nb, na = count[k - 1], count[-1] - count[k - 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean_b, mean_a = total[k - 1] / nb, (total[-1] - total[k - 1]) / na
+        shifts[i] = np.where((nb >= 5) & (na >= 5), ind.direction * (mean_a - mean_b) / scale, -np.inf)
+    joint = np.sort(shifts, axis=0)[-2]
+    located = joint * np.sqrt(k * (n - k) / n)
+    if not np.isfinite(located).any() or np.nanmax(located) <= 0.0:
+        return everything, float("nan")
+    split = int(k[np.nanargmax(located)])
+    robust = []
+    for ind, x in columns:
+        before, after = x[:split], x[split:]
+        if np.isfinite(before).sum() >= 5 and np.isfinite(after).sum() >= 5:
+            med, scale = _center_scale(before, ind.floor, ind.relative_floor)
+            robust.append(ind.direction * (float(np.nanmedian(after)) - med) / scale)
+    if len(robust) < 2 or sorted(robust)[-2] <= opts.z_alarm:
+        return everything, float("nan")
+    return np.arange(n) < split, float(t[split])
 
 
 def _windowed_max(t: FloatArray, z: FloatArray, window_s: float) -> FloatArray:
@@ -119,12 +190,13 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         return None
     z_cols: dict[str, FloatArray] = {}
     labels: dict[str, str] = {}
+    reference, reference_end = reference_epochs(t, fx, opts)
     for ind in INDICATORS:
         x = fx[ind.column].to_numpy(dtype=float)
         if np.isfinite(x).sum() < 10 or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
             continue
         z_cols[ind.column] = np.clip(
-            robust_z(x, ind.direction, ind.floor, ind.relative_floor), -opts.z_clip, opts.z_clip
+            robust_z(x, ind.direction, ind.floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
         )
         labels[ind.column] = ind.label
     gaps = _fix_gaps(t, opts.gap_factor)
@@ -158,6 +230,11 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         True,
         f"{rid}: {len(names)} indicator(s) against the log's own baseline"
         + (f" ({', '.join(labels[n] for n in names)})" if names else "")
+        + (
+            f", learned before {reference_end:.1f} s (where the receiver's indicators worsen together)"
+            if np.isfinite(reference_end)
+            else ""
+        )
         + "; receiver flags and documented ranges",
         _onsets(t, quiet, alarms, rid),
         [
