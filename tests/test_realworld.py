@@ -94,7 +94,8 @@ def test_receiver_evidence_learns_its_baseline_before_a_takeover_that_fills_most
     change, which is found where the indicators worsen together."""
     res = run_receiver_evidence(_receiver_log(300.0, attack_s))
     assert [round(a.start_s) for a in res.alarms] == [round(attack_s)]
-    assert res.alarms[0].end_s == 299.0 and attack_s - 1.0 <= res.alarms[0].onset_s <= attack_s
+    onset = res.alarms[0].onset_s
+    assert res.alarms[0].end_s == 299.0 and onset is not None and attack_s - 1.0 <= onset <= attack_s
     assert f"learned before {attack_s:.1f} s" in res.reason
     clean = run_receiver_evidence(_receiver_log(300.0, None))
     assert not clean.alarms and "learned before" not in clean.reason
