@@ -12,5 +12,9 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)  # semi-minor axis
 WGS84_OMEGA_IE = 7.292115e-5  # Earth rotation rate, rad/s
 WGS84_GM = 3.986004418e14  # m^3/s^2
+# Somigliana normal gravity (NIMA TR8350.2 eq. 4-1, 4-3)
+WGS84_GAMMA_E = 9.7803253359  # normal gravity at the equator, m/s^2
+WGS84_K_SOMIGLIANA = 0.00193185265241
+WGS84_M_GEO = WGS84_OMEGA_IE**2 * WGS84_A_M**2 * WGS84_B_M / WGS84_GM
 SPEED_OF_LIGHT_MPS = 299792458.0
 STANDARD_GRAVITY = 9.80665  # m/s^2, the g of "specific force in g"

@@ -14,15 +14,13 @@ from spooflens.constants import WGS84_A_M as A_M
 from spooflens.constants import WGS84_B_M as B_M
 from spooflens.constants import WGS84_E2 as E2
 from spooflens.constants import WGS84_F as F
+from spooflens.constants import WGS84_GAMMA_E as _GAMMA_E
 from spooflens.constants import WGS84_GM as GM
+from spooflens.constants import WGS84_K_SOMIGLIANA as _K_SOMIGLIANA
+from spooflens.constants import WGS84_M_GEO as _M_GEO
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
 
 __all__ = ["A_M", "B_M", "C_MPS", "E2", "GM", "OMEGA_IE", "F"]
-
-# Somigliana normal gravity constants (WGS84)
-_GAMMA_E = 9.7803253359
-_K_SOMIGLIANA = 0.00193185265241
-_M_GEO = OMEGA_IE**2 * A_M**2 * B_M / GM
 
 FloatArray = NDArray[np.float64]
 

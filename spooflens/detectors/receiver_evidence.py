@@ -302,7 +302,8 @@ ANALYSIS = AnalysisSpec(
             Evidence.RECEIVER,
             "the receiver's own indicators changing together, its spoofing/jamming state, implausible C/N0",
             "Each indicator the receiver logs (reported accuracies, satellites used, DOP, noise, jamming "
-            "indicator, AGC, mean C/N0, losses of fix) against its own median and robust scale in this log; "
+            "indicator, AGC, mean C/N0, losses of fix) against its own median and robust scale in this log "
+            "(learned before the indicators worsen together, when a takeover fills most of the log); "
             "an alarm needs two indicators beyond 6 robust sigma within 5 s of each other for 1 s, the "
             "receiver's own spoofing flag or jamming state, or a mean C/N0 above 50 dB-Hz. Evidence alone is "
             "never a spoofing verdict.",

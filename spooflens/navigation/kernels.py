@@ -17,11 +17,15 @@ import math
 import numpy as np
 from numba import njit
 
-OMEGA_IE = 7.292115e-5
-A_M = 6378137.0
-F_FLAT = 1.0 / 298.257223563
-E2 = F_FLAT * (2.0 - F_FLAT)
-_GE, _K, _M = 9.7803253359, 0.00193185265241, 0.00344978650684
+from spooflens.constants import WGS84_A_M as A_M
+from spooflens.constants import WGS84_E2 as E2
+from spooflens.constants import WGS84_F as F_FLAT
+from spooflens.constants import WGS84_GAMMA_E as _GE
+from spooflens.constants import WGS84_K_SOMIGLIANA as _K
+from spooflens.constants import WGS84_M_GEO as _M
+from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
+from spooflens.kalman_update import masked_update
+
 NX = 22
 CACHE = True
 
@@ -419,32 +423,15 @@ def filter_loop(
             for i in range(NM):
                 S_all[i, i] += sigma[e, i] ** 2
             out_S_all[e] = S_all
-        n_used = 0
+        # the rows left out (not used, or not measured) are NaN: the one masked update every filter makes
+        nu_used = np.full(NM, np.nan)
         for i in range(NM):
             if use[e, i] and not math.isnan(z[i]):
-                n_used += 1
+                nu_used[i] = nu[i]
+        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(np.zeros(NE), P, Hm, out_R[e], nu_used)
+        n_used = rows.shape[0]
         if n_used > 0:
-            rows = np.empty(n_used, dtype=np.int64)
-            m = 0
-            for i in range(NM):
-                if use[e, i] and not math.isnan(z[i]):
-                    rows[m] = i
-                    m += 1
-            Hu = np.empty((n_used, NE))
-            nuu = np.empty(n_used)
-            for a in range(n_used):
-                Hu[a] = Hm[rows[a]]
-                nuu[a] = nu[rows[a]]
-            PHt = P @ Hu.T
-            S = Hu @ PHt
-            for a in range(n_used):
-                S[a, a] += sigma[e, rows[a]] ** 2
-            Sinv = np.linalg.inv(S)
-            K = PHt @ Sinv
-            dx = K @ nuu
-            P = P - K @ PHt.T  # = P - K S K^T
-            P = 0.5 * (P + P.T)
-            nis[e] = nuu @ Sinv @ nuu
+            nis[e] = nis_e
             dof[e] = n_used
             for a in range(n_used):
                 for b in range(n_used):
