@@ -33,6 +33,11 @@ SpeedAccuracyMps -> vel_acc_mps; velocity from speed and bearing (horizontal onl
 spoofing_flag INDICATED (the OS says an app supplied the location). Each fix gets the mean C/N0 of the
 raw measurements and the mean AgcDb of the L1 band at the nearest raw epoch within 1 s.
 
+**Status -> satellites.** GnssStatus as logged (`UnixTimeMillis`, `ConstellationType`, `Svid`,
+`CarrierFrequencyHz`, `Cn0DbHz`, `AzimuthDegrees`, `ElevationDegrees`, `UsedInFix`): what the phone
+says of every satellite it sees, one row per satellite and time (its L1-band signal), for the
+per-satellite detectors; time UTC -> the table's clock.
+
 **IMU.** Accel + Gyro (calibrated) when logged, else UncalAccel + UncalGyro as measured (the navigation
 filter estimates biases); the gyro is interpolated to the accelerometer's stamps. Body frame ANDROID
 (x right, y toward the top of the screen, z out of the screen). OrientationDeg (yaw = azimuth, pitch,
@@ -90,7 +95,7 @@ RECORDS = (
     "Mag",
     "UncalMag",
 )
-USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDeg", "Agc"}
+USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDeg", "Agc", "Status"}
 
 # GnssMeasurement.State bits
 TOW_DECODED, MSEC_AMBIGUOUS, GLO_TOD_DECODED, TOW_KNOWN, GLO_TOD_KNOWN = 8, 16, 128, 16384, 32768
@@ -258,6 +263,66 @@ def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
     return out, present
 
 
+def android_sv_ids(system: NDArray[np.str_], svid: FloatArray) -> NDArray[np.str_]:
+    """RINEX-style ids of Android (constellation, svid) pairs: SBAS 120-158 -> S20-S58, QZSS 193-200 ->
+    J01-J08; "" where there is none (no constellation; a GLONASS satellite known only by its frequency
+    channel, svid 93-106)."""
+    prn = np.where(system == "S", svid - 100, np.where(system == "J", svid - 192, svid))
+    ok = (system != "") & np.isfinite(prn) & (prn >= 1) & (prn <= 99) & ~((system == "R") & (prn > 24))
+    return np.array([f"{s}{int(p):02d}" if good else "" for s, p, good in zip(system, prn, ok, strict=True)])
+
+
+L1_BAND_HZ = (1559e6, 1611e6)  # GPS/Galileo/QZSS/SBAS L1, BeiDou B1I, GLONASS L1OF
+
+
+def status_satellites(status: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame | None:
+    """`Status` records (GnssStatus: what the phone says of each satellite it sees) -> satellites-frame
+    rows with `unix_ns`: C/N0, elevation, azimuth, used in the fix. One row per satellite and time, its
+    L1-band signal (a dual-frequency phone reports L5/E5a as another signal of the same satellite); a
+    record without a time, or of a satellite without an id, is left out and counted."""
+    n = len(status)
+    unix_ms = _float(_col(status, "UnixTimeMillis"), n)
+    constellation = _float(_col(status, "ConstellationType"), n)
+    system = np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
+    sv_id = android_sv_ids(system, _float(_col(status, "Svid"), n))
+    freq = _float(_col(status, "CarrierFrequencyHz"), n)
+    l1 = ~np.isfinite(freq) | ((freq >= L1_BAND_HZ[0]) & (freq <= L1_BAND_HZ[1]))
+    timed = np.isfinite(unix_ms) & (unix_ms > 0)
+    for reason, bad in (
+        ("no UnixTimeMillis", ~timed),
+        ("no satellite id (constellation, svid)", timed & (sv_id == "")),
+    ):
+        if bad.any():
+            skipped.append(Skipped("Status", reason, int(bad.sum())))
+    keep = timed & (sv_id != "") & l1
+    if not keep.any():
+        return None
+    used_text = _col(status, "UsedInFix")
+    used = (
+        np.full(n, np.nan)
+        if used_text is None
+        else used_text.astype(str).str.strip().str.lower().map({"1": 1.0, "true": 1.0, "0": 0.0, "false": 0.0})
+    )
+    cn0 = _float(_col(status, "Cn0DbHz"), n)
+    rows = pd.DataFrame(
+        {
+            "unix_ns": unix_ms * 1e6,  # whole ns once the rows without a time are gone
+            "sv_id": sv_id,
+            "cn0_dbhz": np.where(cn0 > 0, cn0, np.nan),
+            "elevation_deg": _float(_col(status, "ElevationDegrees"), n),
+            "azimuth_deg": _float(_col(status, "AzimuthDegrees"), n),
+            "used": np.asarray(used, dtype=float),
+            "residual_m": np.nan,
+            "healthy": np.nan,
+        }
+    )[keep]
+    rows["unix_ns"] = np.round(rows["unix_ns"].to_numpy()).astype(np.int64)
+    # the strongest signal of a satellite at a time (two L1-band signals: GLONASS FDMA, or duplicates)
+    rows = rows.sort_values("cn0_dbhz", ascending=False, na_position="last", kind="stable")
+    rows = rows.drop_duplicates(["unix_ns", "sv_id"]).sort_values(["unix_ns", "sv_id"], kind="stable")
+    return rows.reset_index(drop=True)
+
+
 @dataclass
 class RawResult:
     rows: pd.DataFrame  # observation rows with t_ns (GPS clock)
@@ -323,8 +388,7 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
         f"pseudorange outside {PR_RANGE_M[0]:.0e}-{PR_RANGE_M[1]:.0e} m",
         ~((pr_m >= PR_RANGE_M[0]) & (pr_m <= PR_RANGE_M[1])),
     )
-    prn = np.where(system == "S", svid - 100, np.where(system == "J", svid - 192, svid))
-    sv_id = np.array([f"{s}{int(p):02d}" if s and np.isfinite(p) else "" for s, p in zip(system, prn, strict=True)])
+    sv_id = android_sv_ids(system, svid)
     rate = _float(_col(raw, "PseudorangeRateMetersPerSecond"), n)
     adr = _float(_col(raw, "AccumulatedDeltaRangeMeters"), n)
     adr_state = np.nan_to_num(_float(_col(raw, "AccumulatedDeltaRangeState"), n)).astype(np.int64)
@@ -515,6 +579,11 @@ def read_gnsslogger(
         rows = add_satellite_states(rows, ephemerides, RECEIVER, skipped, reason)
         frames["observations"] = rows
         streams.append(StreamInfo("observations", RECEIVER, "Raw", "gnsslogger/Raw", int(rows["t_ns"].nunique())))
+    sky = status_satellites(records["Status"].frame(), skipped) if "Status" in records else None
+    if sky is not None:
+        frames["satellites"] = sky.assign(t_ns=from_unix_ns(sky.pop("unix_ns").to_numpy()), receiver_id=RECEIVER)
+        n_epochs = int(frames["satellites"]["t_ns"].nunique())
+        streams.append(StreamInfo("satellites", RECEIVER, "Status", "gnsslogger/Status (GnssStatus)", n_epochs))
     if progress:
         progress(2, 3)
     imu = _imu(records, clock_offset, from_unix_ns, skipped, meta)

@@ -268,3 +268,40 @@ QUANTA = (
     "af0", "af1", "af2", "tgd", "crs", "crc", "cuc", "cus", "cic", "cis", "e", "sqrt_a", "m0", "omega0",
     "i0", "omega", "delta_n", "omega_dot", "idot",
 )  # fmt: skip
+
+
+@pytest.mark.skipif(not PIXEL.exists(), reason="real GnssLogger logs not present")
+def test_status_records_give_the_satellites_frame(tmp_path: Path) -> None:
+    """GnssStatus lines (GnssLogger v3) -> one row per satellite and time: its L1-band signal (the L5 of
+    a dual-frequency phone left out), GLONASS known only by its frequency channel counted and left out,
+    UsedInFix as 1/0 or true/false, the UTC time on the table's clock like the fixes'."""
+    header = (
+        "# Status,UnixTimeMillis,SignalCount,SignalIndex,ConstellationType,Svid,CarrierFrequencyHz,Cn0DbHz,"
+        "AzimuthDegrees,ElevationDegrees,UsedInFix,HasAlmanacData,HasEphemerisData,BasebandCn0DbHz\n"
+    )
+    lines = PIXEL.read_text().splitlines(keepends=True)
+    fixes = [line.split(",") for line in lines if line.startswith("Fix,GPS,")]
+    times = [f[8] for f in fixes[:20]]
+    status = []
+    for ms in times:
+        status += [
+            f"Status,{ms},5,0,1,5,1575420030,41.5,120.0,35.0,1,1,1,38.0\n",
+            f"Status,{ms},5,1,1,5,1176450050,33.0,120.0,35.0,1,1,1,30.0\n",  # G05's L5
+            f"Status,{ms},5,2,6,11,1575420030,29.0,300.0,12.5,false,1,1,26.0\n",
+            f"Status,{ms},5,3,4,194,1575420030,36.0,10.0,70.0,true,1,1,33.0\n",  # QZSS J02
+            f"Status,{ms},5,4,3,93,1602000000,30.0,200.0,20.0,0,1,1,27.0\n",  # GLONASS by channel
+        ]
+    status.append("Status,,5,0,1,7,1575420030,40.0,10.0,10.0,1,1,1,37.0\n")
+    log = tmp_path / "with_status.txt"
+    log.write_text("".join(lines[:5]) + header + "".join(lines[5:]) + "".join(status))
+    table = read_log(log)
+    sky = table.satellites
+    assert sorted(set(sky["sv_id"])) == ["E11", "G05", "J02"] and len(sky) == 3 * 20
+    g05 = sky[sky["sv_id"] == "G05"]
+    assert (g05["cn0_dbhz"] == 41.5).all() and (g05["elevation_deg"] == 35.0).all()
+    assert list(sky.groupby("sv_id")["used"].first()) == [0.0, 1.0, 1.0]
+    gps_fix_t = table.fixes["t_s"].to_numpy()[:20]
+    np.testing.assert_allclose(np.unique(sky["t_s"]), gps_fix_t, atol=1e-6)  # the same clock as the fixes
+    counted = {s.reason: s.count for s in table.skipped if s.stream == "Status"}
+    assert counted == {"no UnixTimeMillis": 1, "no satellite id (constellation, svid)": 20}
+    assert next(s for s in table.streams if s.role == "satellites").count == 20
