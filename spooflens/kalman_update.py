@@ -50,13 +50,14 @@ def observed_parts(
 
 @njit(cache=True)
 def masked_update(
-    x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray
+    x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray, with_logdet: bool = True
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Update (x, P) with the observed entries of y = C x + e, e ~ N(0, R).
 
     Returns (x, P, rows, e, S, Sinv, K, nis, logdet_S) with e, S, Sinv, K over the observed rows only
     (K is n x m). With nothing observed, x and P come back unchanged, nis is NaN and logdet_S 0.
-    S and the updated P are symmetrised against round-off.
+    S and the updated P are symmetrised against round-off. `with_logdet` False skips the determinant
+    (logdet_S NaN) for the filters that never use it (the navigation filter runs some 90 times per log).
     """
     rows, Ck, Rk, yk = observed_parts(C, R, y)
     if rows.shape[0] == 0:
@@ -71,5 +72,5 @@ def masked_update(
     P_new = P - K @ PCt.T
     P_new = 0.5 * (P_new + P_new.T)
     nis = e @ Sinv @ e
-    logdet = np.linalg.slogdet(S)[1]
+    logdet = np.linalg.slogdet(S)[1] if with_logdet else math.nan
     return x_new, P_new, rows, e, S, Sinv, K, nis, logdet

@@ -325,7 +325,7 @@ def _forward_block(
             x = Aa @ x
             P = Aa @ P @ Aa.T + Qa
             P = 0.5 * (P + P.T)
-        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k])
+        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k], False)
         if xs.shape[0] > 0:
             xs[k - lo] = x
             Ps[k - lo] = P

@@ -428,7 +428,7 @@ def filter_loop(
         for i in range(NM):
             if use[e, i] and not math.isnan(z[i]):
                 nu_used[i] = nu[i]
-        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(np.zeros(NE), P, Hm, out_R[e], nu_used)
+        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(np.zeros(NE), P, Hm, out_R[e], nu_used, False)
         n_used = rows.shape[0]
         if n_used > 0:
             nis[e] = nis_e
