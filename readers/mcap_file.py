@@ -107,6 +107,9 @@ def _decompress(chunk: Chunk) -> bytes:
     if not 0 <= chunk.uncompressed_size <= MAX_CHUNK_BYTES:
         raise ValueError(f"chunk declares {chunk.uncompressed_size} bytes uncompressed (corrupt length)")
     if chunk.compression == "zstd":
+        declared = zstandard.frame_content_size(chunk.data)  # -1: the frame does not say
+        if declared > chunk.uncompressed_size:  # zstandard would allocate what the frame header says
+            raise ValueError(f"zstd frame declares {declared} bytes in a chunk of {chunk.uncompressed_size}")
         data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
     elif chunk.compression == "lz4":
         data = lz4.frame.decompress(chunk.data)

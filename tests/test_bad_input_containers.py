@@ -25,7 +25,8 @@ from spooflens.errors import ReaderError
 from spooflens.simulation.simulate import SCENARIOS, simulate
 from spooflens.writers import write_log
 
-GSI = Path(__file__).resolve().parents[1].parent / "shared" / "real" / "rinex_gsi_pair"
+ROOT = Path(__file__).resolve().parents[1]
+GSI = ROOT.parent / "shared" / "real" / "rinex_gsi_pair"
 
 
 def _with_schema(src: Path, dst: Path, name: str, edit) -> None:
@@ -190,6 +191,27 @@ def test_an_mcap_length_or_offset_beyond_int64_is_damage_not_an_overflow(
     else:
         assert len(table.imu) == len(full.imu) and len(table.fixes) == len(full.fixes)
     assert main(["inspect", str(bad)]) in (0, 3)
+
+
+def test_an_mcap_zstd_frame_declaring_gigabytes_is_damage_not_a_memory_error(tmp_path: Path) -> None:
+    """The second 10^4 fuzz run set a chunk's zstd frame content size to 4 GB: zstandard allocated what
+    the frame said and ran out of memory (MemoryError under the 4 GB cap). A frame declaring more than
+    the chunk holds is damage: the chunk's messages are lost and counted, the rest is read."""
+    src = ROOT / "sample_logs" / "dual_receiver.mcap"
+    data = bytearray(src.read_bytes())
+    chunk = _mcap_records(bytes(data), 0x06)[0]
+    frame = data.index(b"\x28\xb5\x2f\xfd", chunk)  # the zstd magic of the chunk's records
+    descriptor = data[frame + 4]
+    single = (descriptor >> 5) & 1
+    start = frame + 5 + (0 if single else 1) + (0, 1, 2, 4)[descriptor & 3]
+    size = {0: 1 if single else 0, 1: 2, 2: 4, 3: 8}[descriptor >> 6]
+    assert size >= 4, "the writer's frame has no content size to overwrite"
+    data[start : start + size] = b"\xff" * size
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    table = read_log(bad)
+    assert any("zstd frame declares" in s.reason and s.action == "lost" for s in table.skipped)
+    assert main(["inspect", str(bad)]) == 3
 
 
 @pytest.fixture(scope="module")
