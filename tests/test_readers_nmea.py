@@ -39,6 +39,11 @@ def plaka() -> EpochTable:
     return read_log(_need(PLAKA))
 
 
+def _write(path: Path, bodies: list[str]) -> Path:
+    path.write_text("\n".join(_sentence(b) for b in bodies) + "\n")
+    return path
+
+
 def _sentence(body: str) -> str:
     check = 0
     for c in body.encode():
@@ -227,6 +232,16 @@ def test_bad_checksum_garbage_and_cut_last_line(tmp_path: Path) -> None:
     assert lost["binary garbage (not text)"] == 1
     assert lost["file cut inside its last sentence"] == 1
     assert list(table.fixes["t_s"]) == [0.0, 2.0]  # the 23:59:59 GGA was the corrupt one
+
+
+def test_a_zda_year_beyond_64_bits_is_no_date_not_an_overflow(tmp_path: Path) -> None:
+    """The second 10^4 fuzz run wrote -9223372036854775809 into NMEA fields: a ZDA "year" that large
+    overflowed the date arithmetic (OverflowError before). It is no date; the fixes stay."""
+    bodies = [*BASE_BODIES[:2], "GPZDA,235958.00,31,12,-9223372036854775809,00,00", *BASE_BODIES[2:]]
+    path = tmp_path / "zda.log"
+    path.write_text("\n".join(_sentence(b) for b in bodies) + "\n")
+    table = read_log(path)
+    assert len(table.fixes) == len(read_log(_write(tmp_path / "base.log", BASE_BODIES)).fixes)
 
 
 def test_bad_input_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

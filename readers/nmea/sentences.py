@@ -60,7 +60,16 @@ FIX_MEANING = (
     "M manual, S simulator, N invalid. Estimated, manual and simulator positions are kept with fix_type UNKNOWN"
 )
 
-ParseErrors = (NMEAMessageError, NMEAParseError, NMEATypeError, ValueError, TypeError, IndexError, KeyError)
+ParseErrors = (
+    NMEAMessageError,
+    NMEAParseError,
+    NMEATypeError,
+    ValueError,
+    TypeError,
+    IndexError,
+    KeyError,
+    OverflowError,
+)
 
 
 @dataclass
@@ -118,7 +127,7 @@ def _tod(msg: Any) -> float:
 def _day(year: int, month: int, day: int) -> int | None:
     try:
         return (dt.date(year, month, day) - dt.date(1970, 1, 1)).days
-    except ValueError:
+    except (ValueError, OverflowError):  # a damaged field can hold a 19-digit "year"
         return None
 
 
