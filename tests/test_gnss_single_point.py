@@ -125,6 +125,21 @@ def test_epochs_with_too_few_satellites_are_left_unsolved() -> None:
     assert np.isnan(sol.ecef_m[0]).all()
 
 
+def test_an_epoch_of_degenerate_geometry_is_left_unsolved_not_a_singular_matrix() -> None:
+    """The second 10^4 fuzz run zeroed the satellites' x positions of an observations CSV: some epochs'
+    normal equations were singular and failed the whole batch (LinAlgError before)."""
+    obs, _ = _static_obs(10)
+    first = (obs["t_s"] == 0.0).to_numpy()
+    degenerate = obs.copy()
+    # every satellite of the first epoch at one point: no geometry to solve from
+    degenerate.loc[first, ["sv_x_m", "sv_y_m", "sv_z_m"]] = (
+        degenerate.loc[first, ["sv_x_m", "sv_y_m", "sv_z_m"]].iloc[0].to_numpy()
+    )
+    sol = solve(degenerate)
+    assert not sol.ok[0] and sol.ok[1:].all()
+    np.testing.assert_allclose(sol.ecef_m[1:], solve(obs).ecef_m[1:], atol=1e-6)
+
+
 def test_simulated_receiver_fixes_are_its_own_solution_near_the_truth() -> None:
     sim = simulate("ground_raw", seed=3, duration_s=120.0)
     table = sim.table

@@ -118,6 +118,27 @@ def _padded(epoch: NDArray[np.int64], n_epochs: int) -> tuple[NDArray[np.int64],
     return slot, int(counts.max()) if len(counts) else 0
 
 
+def _solve_normal(N: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, NDArray[np.bool_]]:
+    """Solve the normal equations of each epoch at once; (steps, which epochs could be solved). An
+    epoch whose matrix is singular (its satellites' geometry degenerate) is not, rather than failing
+    the batch."""
+    ok = np.ones(len(N), dtype=bool)
+    try:
+        return np.linalg.solve(N, b[..., None])[..., 0], ok
+    except np.linalg.LinAlgError:
+        pass
+    with np.errstate(all="ignore"):
+        cond = np.linalg.cond(N)
+    ok = np.isfinite(cond) & (cond < 1e14)
+    step = np.zeros_like(b)
+    for k in np.flatnonzero(ok):  # only reached for a batch holding a singular epoch
+        try:
+            step[k] = np.linalg.solve(N[k], b[k])
+        except np.linalg.LinAlgError:
+            ok[k] = False
+    return step, ok
+
+
 def solve(
     obs: pd.DataFrame,
     t_gps_s: FloatArray | None = None,
@@ -155,6 +176,7 @@ def solve(
     use = pad(usable.astype(float), 0.0) > 0
     x = np.zeros((n_e, n_x))
     weight = use.astype(float)
+    singular = np.zeros(n_e, dtype=bool)
     for it in range(opts.max_iterations):
         rx = x[:, None, :3]
         near_earth = np.linalg.norm(x[:, :3], axis=1) > 6.0e6
@@ -177,9 +199,12 @@ def solve(
         # a system with no satellite in an epoch leaves its clock column empty: pin it weakly
         N[:, np.arange(3, n_x), np.arange(3, n_x)] += 1e-9
         b = np.einsum("eki,ek,ek->ei", H, weight, res)
-        solvable = _redundancy(weight > 0, SYS) >= 0
+        solvable = (_redundancy(weight > 0, SYS) >= 0) & ~singular
         dx = np.zeros_like(x)
-        dx[solvable] = np.linalg.solve(N[solvable], b[solvable][..., None])[..., 0]
+        idx = np.flatnonzero(solvable)
+        step, ok = _solve_normal(N[idx], b[idx])
+        singular[idx[~ok]] = True  # satellites in a degenerate geometry (e.g. damaged positions): unsolved
+        dx[idx[ok]] = step[ok]
         x += dx
         if it >= 3 and np.max(np.abs(dx[solvable]), initial=0.0) < 1e-4:
             break
@@ -191,7 +216,7 @@ def solve(
     res_pad = np.where(used, PR - pred, np.nan)
     res_all = np.where(np.isfinite(PR), PR - pred, np.nan)
     n_used = used.sum(axis=1)
-    solved = (_redundancy(used, SYS) >= 0) & np.isfinite(x).all(axis=1)
+    solved = (_redundancy(used, SYS) >= 0) & np.isfinite(x).all(axis=1) & ~singular
     rms = np.sqrt(np.sum(np.where(used, res_pad, 0.0) ** 2, axis=1) / np.maximum(n_used, 1))
     pdop, hdop, vdop = _dops(P_sv, np.where(solved[:, None], x[:, :3], np.nan), used, SYS)
     ecef = np.where(solved[:, None], x[:, :3], np.nan)
