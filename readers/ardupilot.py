@@ -62,7 +62,6 @@ BLENDED_INSTANCE = 2  # GPS_MAX_RECEIVERS: the blended solution is logged as thi
 UBX_MAX_AGE_S = 5.0
 ATT_MAX_GAP_S = 0.5
 Q_ENU_NED = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])
-# u-blox gnssId -> RINEX system letter
 # the fields each message must have to be read at all (a damaged FMT text can rename any of them)
 GPS_FIELDS = ("TimeUS", "Status", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ", "HDop", "NSats")
 IMU_FIELDS = ("TimeUS", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ")
@@ -70,6 +69,7 @@ ATT_FIELDS = ("TimeUS", "Roll", "Pitch", "Yaw")
 UBX1_FIELDS = ("TimeUS", "noisePerMS", "jamInd", "agcCnt")
 GRXH_FIELDS = ("TimeUS", "week", "rcvTime")
 GRXS_FIELDS = ("TimeUS", "gnss", "sv", "freq", "prMes", "cpMes", "doMes", "cno", "trk")
+# u-blox gnssId -> RINEX system letter
 _UBX_SYSTEM = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
 _L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "E": 1575.42e6, "J": 1575.42e6, "C": 1561.098e6, "I": 1176.45e6}
 

@@ -263,6 +263,11 @@ def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
     return out, present
 
 
+def android_systems(constellation: FloatArray) -> NDArray[np.str_]:
+    """RINEX system letter of each Android ConstellationType ("" for unknown or missing)."""
+    return np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
+
+
 def android_sv_ids(system: NDArray[np.str_], svid: FloatArray) -> NDArray[np.str_]:
     """RINEX-style ids of Android (constellation, svid) pairs: SBAS 120-158 -> S20-S58, QZSS 193-200 ->
     J01-J08; "" where there is none (no constellation; a GLONASS satellite known only by its frequency
@@ -282,8 +287,7 @@ def status_satellites(status: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFr
     record without a time, or of a satellite without an id, is left out and counted."""
     n = len(status)
     unix_ms = _float(_col(status, "UnixTimeMillis"), n)
-    constellation = _float(_col(status, "ConstellationType"), n)
-    system = np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
+    system = android_systems(_float(_col(status, "ConstellationType"), n))
     sv_id = android_sv_ids(system, _float(_col(status, "Svid"), n))
     freq = _float(_col(status, "CarrierFrequencyHz"), n)
     l1 = ~np.isfinite(freq) | ((freq >= L1_BAND_HZ[0]) & (freq <= L1_BAND_HZ[1]))
@@ -343,7 +347,7 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
     state = np.nan_to_num(_float(_col(raw, "State"), n)).astype(np.int64)
     uncertainty = _float(_col(raw, "ReceivedSvTimeUncertaintyNanos"), n)
     freq = _float(_col(raw, "CarrierFrequencyHz"), n)
-    system = np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
+    system = android_systems(constellation)
     reasons: dict[str, NDArray[np.bool_]] = {}
 
     def reject(reason: str, mask: NDArray[np.bool_]) -> None:

@@ -627,15 +627,10 @@ def satellite_rows(rec: Mapping[str, np.ndarray], skipped: list[Skipped], stream
     ids = np.where(valid, _SVINFO_IDS[np.clip(np.nan_to_num(svid), 0, 255).astype(np.int64)], "")
     known = valid & (ids != "")
     # a number twice in one message: a numbering that collides across constellations
-    key = np.where(known, svid, -1 - np.arange(n_max)[None, :])  # unknown slots never equal anything
-    order = np.argsort(key, axis=1, kind="stable")
-    ranked = np.take_along_axis(key, order, axis=1)
-    same = ranked[:, 1:] == ranked[:, :-1]
-    twin = np.zeros_like(known)
-    twin[:, 1:] |= same
-    twin[:, :-1] |= same
+    msg, slot_of = np.nonzero(known)
+    twins = pd.DataFrame({"msg": msg, "svid": svid[msg, slot_of]}).duplicated(keep=False).to_numpy()
     repeated = np.zeros_like(known)
-    np.put_along_axis(repeated, order, twin, axis=1)
+    repeated[msg[twins], slot_of[twins]] = True
     if repeated.any():
         reason = "satellites sharing an svid in one message (identity unknown)"
         skipped.append(Skipped(stream, reason, int(repeated.sum())))

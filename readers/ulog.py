@@ -125,14 +125,15 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         )
         metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s in sources)
         metadata |= receiver_metadata([(s, gps_records[(s.topic, s.multi_id)]) for s in sources])
-    satellites = [
-        satellites_frame(data[(SATELLITE_TOPIC, k)], s.receiver_id, SATELLITE_TOPIC, offset_us, skipped)
+    skies = [
+        sky
         for k, s in enumerate(sources)
         if (SATELLITE_TOPIC, k) in data
+        and (sky := satellites_frame(data[(SATELLITE_TOPIC, k)], s.receiver_id, SATELLITE_TOPIC, offset_us, skipped))
     ]
-    if any(sat is not None for sat in satellites):
-        frames["satellites"] = pd.concat([sat for sat, _ in filter(None, satellites)], ignore_index=True)
-        streams += [info_ for _, info_ in filter(None, satellites)]
+    if skies:
+        frames["satellites"] = pd.concat([frame for frame, _ in skies], ignore_index=True)
+        streams += [sky_info for _, sky_info in skies]
     if (IMU_TOPIC, 0) in data:
         imu, info_ = _imu(data[(IMU_TOPIC, 0)], data.get((ATTITUDE_TOPIC, 0)), offset_us, skipped)
         frames["imu"] = imu
