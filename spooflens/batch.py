@@ -116,6 +116,7 @@ def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> d
     from spooflens.cli import _damaged, _read, segments_summary, write_outputs
     from spooflens.errors import NoGnssError, SpooflensError
     from spooflens.pipeline import analyze_segments
+    from spooflens.threads import limited
 
     path, out = Path(log), Path(out_dir)
     record: dict[str, Any] = {"log": str(path), "sha256": digest, "outputs": str(out)}
@@ -124,7 +125,8 @@ def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> d
         table = _read(path, {}, False)
         if not len(table.fixes):
             raise NoGnssError(path, "no GNSS fixes found; nothing analysed")
-        analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
+        with limited(1):  # one task per core already: a second thread per task would only contend
+            analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
         out.mkdir(parents=True, exist_ok=True)
         stem = path.name.rstrip("/")
         files = {"rrd": out / f"{stem}.rrd", "json": out / f"{stem}.json", "html": out / f"{stem}.html"}

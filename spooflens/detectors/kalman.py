@@ -45,7 +45,7 @@ class ForwardResult:
         return np.cumsum(self.logdet_S)
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def _forward(
     A: np.ndarray,
     Q: np.ndarray,

@@ -332,7 +332,7 @@ def _forward_block(
     return x, P
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _two_filter_offline(
     A: np.ndarray,
     Q: np.ndarray,

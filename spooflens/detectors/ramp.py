@@ -43,7 +43,7 @@ class RampStatistics:
     candidates: NDArray[np.int64]  # the candidate onset epochs
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ramp_pass(
     A: np.ndarray,
     C: np.ndarray,

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +32,7 @@ from spooflens.detectors.mlrt import onset_posterior, ramp_two_filter_offline, s
 from spooflens.detectors.ramp import RampStatistics, ramp_statistics
 from spooflens.evidence import Evidence
 from spooflens.statespace import LinearGaussianModel
+from spooflens.threads import both
 
 FloatArray = NDArray[np.float64]
 POSITION_ROWS = (0, 1, 2)
@@ -141,7 +143,12 @@ def _alarms(
 def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> list[DetectorResult]:
     """The four detectors' results (statistics, thresholds, alarms, onsets, curves)."""
     opts = opts or Seed000Options()
-    st = statistics(model, opts)
+    offline = opts.offline and model.n_epochs > 3
+    # the offline pass over the whole log needs nothing of the windowed one: both at once
+    st, off = both(
+        partial(statistics, model, opts),
+        partial(ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps)) if offline else _none,
+    )
     t, r = st.t, st.ramp
     kf_thr = opts.kf_threshold if opts.kf_threshold is not None else threshold(opts.kf_p_false_alarm, 3)
     glrt_thr = opts.glrt_threshold if opts.glrt_threshold is not None else threshold(opts.glrt_p_false_alarm, 3)
@@ -185,9 +192,8 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
         ],
         evidence=Evidence.INERTIAL,
     )
-    if opts.offline and model.n_epochs > 3:
+    if off is not None:
         cal.alarms = [_with_onset_posterior(model, a, opts) for a in cal.alarms]
-        off = ramp_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_rate_mps))
         results[2].curves.append(Curve("l_N_over_onset", off.t, off.mlr_flat, "candidate onset (s)"))
         cal.curves.append(Curve("two_log_bf_N_over_onset", off.t, off.log_bf, "candidate onset (s)"))
     results.append(cal)
@@ -213,16 +219,22 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
     return results
 
 
+def _none() -> None:
+    return None
+
+
 def _with_onset_posterior(model: LinearGaussianModel, a: Alarm, opts: Seed000Options) -> Alarm:
     """MAP onset and credible interval from the data up to `onset_horizon_s` after the alarm starts."""
     last = int(np.searchsorted(model.t, min(a.end_s, a.start_s + opts.onset_horizon_s)))
     last = min(last, model.n_epochs - 1)
-    ramp = ramp_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last)
-    step = step_two_filter_offline(model, POSITION_ROWS, np.array(opts.sigma_step_m), last=last)
+    ramp, step = both(
+        partial(ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last),
+        partial(step_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_step_m), last=last),
+    )
     # a ramp or a step, equally likely a priori: the onset's evidence is the mixture of both
-    both = np.logaddexp(0.5 * np.nan_to_num(ramp.log_bf, nan=-np.inf), 0.5 * np.nan_to_num(step.log_bf, nan=-np.inf))
-    both = both + np.log(0.5)
-    log_bf = np.where(np.isfinite(ramp.log_bf) | np.isfinite(step.log_bf), 2.0 * both, np.nan)
+    mixture = np.logaddexp(0.5 * np.nan_to_num(ramp.log_bf, nan=-np.inf), 0.5 * np.nan_to_num(step.log_bf, nan=-np.inf))
+    mixture = mixture + np.log(0.5)
+    log_bf = np.where(np.isfinite(ramp.log_bf) | np.isfinite(step.log_bf), 2.0 * mixture, np.nan)
     lo = a.start_s - opts.window_s
     sel = (ramp.t >= lo) & (ramp.t <= model.t[last]) & np.isfinite(log_bf)
     if sel.sum() < 2:

@@ -277,7 +277,7 @@ def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.nda
     return out
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def filter_loop(
     t: np.ndarray,
     Qb: np.ndarray,

@@ -27,6 +27,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +43,7 @@ from spooflens.navigation.loosely_coupled import (
     run_prepared,
 )
 from spooflens.navigation.strapdown import NavState
+from spooflens.threads import in_parallel
 
 FloatArray = NDArray[np.float64]
 
@@ -227,6 +229,14 @@ class _Objective:
         sol = self.run(opts)
         return score(sol, self.score_mask)
 
+    def many(self, candidates: Sequence[FilterOptions]) -> list[float]:
+        """The score of each candidate, the runs side by side."""
+        self.evaluations += len(candidates)
+        return in_parallel([partial(self._score, o) for o in candidates])
+
+    def _score(self, opts: FilterOptions) -> float:
+        return score(run_prepared(self.inputs, opts, self.start), self.score_mask)
+
 
 def score(sol: NavSolution, mask: NDArray[np.bool_] | None = None) -> float:
     """Twice the negative log-likelihood of the innovations of the scored epochs (constants dropped)."""
@@ -269,19 +279,25 @@ def _search(
     names: Sequence[str],
     opts: LearnOptions,
 ) -> tuple[float, dict[str, float]]:
-    """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps)."""
+    """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps).
+
+    Each step's two candidates (up and down) are run side by side (`threads.in_parallel`) and judged in
+    that order, the first that improves taken: the path and the answer are those of trying them one
+    after the other; only the second run is wasted when the first already improved."""
     best = objective(make(params))
     for _ in range(opts.sweeps):
         before = best
         for name in names:
             lo, hi = BOUNDS.get(name, (1e-4, 1e4))
             for step in opts.steps:
+                trials = []
                 for factor in (step, 1.0 / step):
                     trial = dict(params)
                     trial[name] = float(np.clip(params[name] * factor, lo, hi))
-                    if trial[name] == params[name]:
-                        continue
-                    value = objective(make(trial))
+                    if trial[name] != params[name]:
+                        trials.append(trial)
+                values = objective.many([make(trial) for trial in trials])
+                for trial, value in zip(trials, values, strict=True):
                     if value < best:
                         best, params = value, trial
                         break
@@ -382,7 +398,8 @@ def learn_noise(
 
     # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid
     grid = [{**params, "b_h": b, "b_v": 2.0 * b} for b in opts.wander_grid_m]
-    params = min(grid, key=lambda g: objective(options(g)))
+    values = objective.many([options(g) for g in grid])
+    params = grid[int(np.argmin(values))]
     best, params = _search(objective, options, params, list(params), opts)
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)

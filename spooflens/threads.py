@@ -1,0 +1,95 @@
+"""Independent pieces of one analysis on the machine's cores.
+
+The heavy work of an analysis is compiled numba loops that release the GIL (`nogil=True`): the noise
+learning's candidate filter runs, seed 000's windowed ramp pass and its offline two-filter pass. Where
+two of them do not depend on each other they run side by side in threads, with results identical to
+running them one after the other (the callers keep the sequential order of decisions).
+
+`SPOOFLENS_THREADS` sets how many threads (default: the cores, at most 2, since the independent pieces
+come in pairs). `spooflens batch` sets one per task: its workers already fill the cores.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from typing import TypeVar
+
+T = TypeVar("T")
+
+ENV = "SPOOFLENS_THREADS"
+_MAX_DEFAULT = 2
+
+_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
+_pool_size = 0
+_inside = threading.local()  # set in the pool's threads: a piece never waits on the pool it runs in
+_limit: int | None = None  # set by `limited`
+
+
+def thread_count() -> int:
+    """Threads an analysis may use: `SPOOFLENS_THREADS` when it is a positive integer, else the cores (<= 2)."""
+    if _limit is not None:
+        return _limit
+    value = os.environ.get(ENV, "").strip()
+    if value.isdigit() and int(value) >= 1:
+        return int(value)
+    return max(1, min(_MAX_DEFAULT, os.cpu_count() or 1))
+
+
+@contextmanager
+def limited(threads: int) -> Iterator[None]:
+    """Within the block, analyses use at most `threads` threads (a batch worker: the cores are full)."""
+    global _limit
+    before = _limit
+    _limit = max(1, threads)
+    try:
+        yield
+    finally:
+        _limit = before
+
+
+def _executor(size: int) -> ThreadPoolExecutor:
+    global _pool, _pool_size
+    with _lock:
+        if _pool is None or _pool_size != size:
+            if _pool is not None:
+                _pool.shutdown(wait=False)
+            _pool = ThreadPoolExecutor(max_workers=size, thread_name_prefix="spooflens", initializer=_mark)
+            _pool_size = size
+        return _pool
+
+
+def _mark() -> None:
+    _inside.active = True
+
+
+def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
+    """Every call's result, in order; side by side when more than one thread is allowed (an exception is
+    raised as the sequential run would have raised it, after the others finish)."""
+    size = thread_count()
+    if size < 2 or len(calls) < 2 or getattr(_inside, "active", False):
+        return [call() for call in calls]
+    pool = _executor(size)
+    futures = [pool.submit(call) for call in calls[1:]]
+    try:
+        first = calls[0]()
+    finally:
+        rest = [f.exception() for f in futures]  # wait for all before anything is raised
+    for error in rest:
+        if error is not None:
+            raise error
+    return [first, *(f.result() for f in futures)]
+
+
+A = TypeVar("A")
+B = TypeVar("B")
+
+
+def both(first: Callable[[], A], second: Callable[[], B]) -> tuple[A, B]:
+    """`in_parallel` of two calls of different result types."""
+    a, b = in_parallel([first, second])  # type: ignore[list-item]
+    return a, b  # type: ignore[return-value]

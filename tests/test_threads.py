@@ -1,0 +1,98 @@
+"""Independent pieces of an analysis side by side: same answers as one after the other."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from spooflens import threads
+from spooflens.analysis import AnalyzeOptions
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.detectors import seed000
+from spooflens.navigation.product import solve_navigation
+from spooflens.simulation.simulate import simulate
+
+
+def test_two_pieces_really_run_at_once_and_come_back_in_order() -> None:
+    meet = threading.Barrier(2, timeout=10)  # only passes when both calls are running together
+
+    def piece(value: int) -> int:
+        meet.wait()
+        return value
+
+    with threads.limited(2):
+        assert threads.in_parallel([lambda: piece(1), lambda: piece(2)]) == [1, 2]
+
+
+def test_one_thread_runs_the_pieces_in_the_caller_one_after_the_other() -> None:
+    seen: list[str] = []
+
+    def piece(value: int) -> int:
+        seen.append(threading.current_thread().name)
+        return value
+
+    with threads.limited(1):
+        assert threads.in_parallel([lambda: piece(1), lambda: piece(2), lambda: piece(3)]) == [1, 2, 3]
+    assert seen == [threading.current_thread().name] * 3
+
+
+def test_the_environment_sets_the_threads_and_nonsense_is_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(threads.ENV, "1")
+    assert threads.thread_count() == 1
+    monkeypatch.setenv(threads.ENV, "zero")
+    assert 1 <= threads.thread_count() <= 2
+    with threads.limited(1):
+        monkeypatch.setenv(threads.ENV, "2")
+        assert threads.thread_count() == 1  # a batch worker's limit wins
+
+
+def test_an_error_in_either_piece_is_raised_after_both_finish() -> None:
+    finished = threading.Event()
+
+    def slow() -> int:
+        finished.wait(0.2)
+        finished.set()
+        return 1
+
+    def bad() -> int:
+        raise ValueError("piece failed")
+
+    with threads.limited(2), pytest.raises(ValueError, match="piece failed"):
+        threads.in_parallel([bad, slow])
+    assert finished.is_set()
+    with threads.limited(2), pytest.raises(ValueError, match="piece failed"):
+        threads.in_parallel([slow, bad])
+
+
+def test_a_piece_that_splits_again_runs_its_parts_in_its_own_thread() -> None:
+    def inner() -> list[int]:
+        return threads.in_parallel([lambda: 1, lambda: 2])
+
+    with threads.limited(2):
+        assert threads.in_parallel([inner, inner, inner]) == [[1, 2]] * 3
+
+
+def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() -> None:
+    """Noise learning's candidate runs and seed 000's two passes side by side change nothing but the
+    count of filter runs (a candidate run after one that already improved is wasted)."""
+    table = simulate("aircraft", seed=3, duration_s=120.0).table
+    spoofed, _ = apply_attack(table, parse_attack("ramp:rate=3,axes=en,start=70"))
+    runs = []
+    for n in (1, 2):
+        with threads.limited(n):
+            nav = solve_navigation(spoofed, AnalyzeOptions())
+            runs.append((nav, seed000.detect(nav.model)))
+    (nav1, det1), (nav2, det2) = runs
+    assert nav1.learned.noise == nav2.learned.noise and nav1.learned.imu_scale == nav2.learned.imu_scale
+    np.testing.assert_array_equal(nav1.solution.nis, nav2.solution.nis)
+    assert any(r.alarms for r in det1)  # the onset posteriors (ramp and step side by side) ran
+    for a, b in zip(det1, det2, strict=True):
+        assert [(x.start_s, x.end_s, x.onset_s, x.onset_interval_s) for x in a.alarms] == [
+            (x.start_s, x.end_s, x.onset_s, x.onset_interval_s) for x in b.alarms
+        ]
+        for sa, sb in zip(a.series, b.series, strict=True):
+            np.testing.assert_array_equal(sa.values, sb.values, err_msg=f"{a.name}/{sa.name}")
+        for ca, cb in zip(a.curves, b.curves, strict=True):
+            np.testing.assert_array_equal(ca.y, cb.y, err_msg=f"{a.name}/{ca.name}")
