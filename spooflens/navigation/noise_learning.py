@@ -43,7 +43,7 @@ from spooflens.navigation.loosely_coupled import (
     run_prepared,
 )
 from spooflens.navigation.strapdown import NavState
-from spooflens.threads import in_parallel
+from spooflens.threads import in_parallel, thread_count
 
 FloatArray = NDArray[np.float64]
 
@@ -234,6 +234,12 @@ class _Objective:
         self.evaluations += len(candidates)
         return in_parallel([partial(self._score, o) for o in candidates])
 
+    def first_better(self, candidates: Sequence[FilterOptions], best: float) -> tuple[int, float] | None:
+        """(index, score) of the first candidate, in order, that scores below `best`; None if none does.
+        With two threads the candidates run side by side; with one, the runs stop at the first better."""
+        values = self.many(candidates) if thread_count() >= 2 else (self(o) for o in candidates)
+        return next(((i, value) for i, value in enumerate(values) if value < best), None)
+
     def _score(self, opts: FilterOptions) -> float:
         return score(run_prepared(self.inputs, opts, self.start), self.score_mask)
 
@@ -296,11 +302,9 @@ def _search(
                     trial[name] = float(np.clip(params[name] * factor, lo, hi))
                     if trial[name] != params[name]:
                         trials.append(trial)
-                values = objective.many([make(trial) for trial in trials])
-                for trial, value in zip(trials, values, strict=True):
-                    if value < best:
-                        best, params = value, trial
-                        break
+                better = objective.first_better([make(trial) for trial in trials], best)
+                if better is not None:
+                    best, params = better[1], trials[better[0]]
         if before - best < opts.min_gain:  # a sweep that bought almost nothing: converged
             break
     return best, params
