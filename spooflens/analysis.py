@@ -29,11 +29,13 @@ if TYPE_CHECKING:
 
 MIN_FIXES = 3
 MIN_IMU_SAMPLES = 50
+MIN_AUTOPILOT_ROWS = 20
 
 # Every analysis, in the order it runs. One line per module; the module declares the rest.
 ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
+    "spooflens.detectors.autopilot_ekf",
     "spooflens.detectors.raim",
     "spooflens.detectors.satellite_signals",
     "spooflens.detectors.navigation_message",
@@ -95,6 +97,13 @@ def _has_two_receivers(table: EpochTable) -> str | None:
     return None if n >= 2 else f"two GNSS receivers ({n} found)"
 
 
+def _has_autopilot_ekf(table: EpochTable) -> str | None:
+    n = len(table.frame("autopilot_ekf"))
+    return (
+        None if n >= MIN_AUTOPILOT_ROWS else f"the autopilot's GNSS innovations ({n} rows, {MIN_AUTOPILOT_ROWS} needed)"
+    )
+
+
 def _has_fleet(table: EpochTable) -> str | None:
     """One log is never a fleet: `spooflens fleet` runs the fleet analysis with the other vehicles' logs."""
     return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
@@ -110,6 +119,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "received_ephemerides": _has_received_ephemerides,
     "two_receivers": _has_two_receivers,
     "fleet": _has_fleet,
+    "autopilot_ekf": _has_autopilot_ekf,
 }
 
 

@@ -1,0 +1,90 @@
+"""The autopilot's own EKF innovations and test ratios as an inertial reference (real ArduPilot flight)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from readers import read_log
+from spooflens.detectors.autopilot_ekf import run_autopilot_ekf
+from spooflens.evidence import Evidence
+from spooflens.pipeline import analyze_table
+
+FLIGHT = Path(__file__).resolve().parents[2] / "shared" / "real" / "ardupilot_dataflash" / "flightdata_center_0003.bin"
+
+
+@pytest.fixture(scope="module")
+def flight():
+    if not FLIGHT.exists():
+        pytest.fail(f"real log missing: {FLIGHT}")
+    return read_log(FLIGHT)
+
+
+def _dragged(ekf: pd.DataFrame, start_s: float, rate_mps: float = 2.0, tau_s: float = 5.0) -> pd.DataFrame:
+    """What an EKF shows when its GNSS is dragged north at `rate_mps` from `start_s` (a consistent
+    spoofer: position and velocity move together): the velocity innovation (prediction minus
+    measurement) steps by -rate and decays as the filter follows GNSS (time constant `tau_s`); the
+    position innovation grows by the part of the drag not followed yet."""
+    out = ekf.copy()
+    dt = np.clip(out["t_s"].to_numpy(dtype=float) - start_s, 0.0, None)
+    on = out["t_s"].to_numpy(dtype=float) >= start_s
+    out.loc[on, "vel_innov_n_mps"] -= rate_mps * np.exp(-dt[on] / tau_s)
+    out.loc[on, "pos_innov_n_m"] -= rate_mps * tau_s * (1.0 - np.exp(-dt[on] / tau_s))
+    return out
+
+
+def test_the_clean_real_flight_raises_nothing_with_a_wide_margin(flight) -> None:
+    result = run_autopilot_ekf(flight.frame("autopilot_ekf"))
+    assert result.ran and result.evidence == Evidence.INERTIAL
+    assert not result.alarms
+    strength = next(s for s in result.series if s.name == "strength").values
+    assert np.nanmax(strength) < 0.5  # at most half the alarm level anywhere in the real flight
+
+
+def test_a_drag_the_autopilot_filter_followed_is_found_from_its_onset(flight) -> None:
+    ekf = _dragged(flight.frame("autopilot_ekf"), start_s=25.0)
+    result = run_autopilot_ekf(ekf)
+    assert len(result.alarms) == 1
+    alarm = result.alarms[0]
+    # the filter follows the drag, so the position innovation needs 2.6 s to pass 8 x 0.5 m; the onset
+    # is where its rise began
+    assert 25.0 <= alarm.start_s <= 28.0 and alarm.end_s - alarm.start_s >= 2.0
+    assert 24.9 <= (alarm.onset_s or 0.0) <= 25.3
+    assert "EKF3 core 0 position innovation up to" in result.findings[0].text
+
+
+def test_gnss_rejected_by_the_autopilot_for_seconds_alarms_a_one_fix_glitch_does_not(flight) -> None:
+    ekf = flight.frame("autopilot_ekf").copy()
+    t = ekf["t_s"].to_numpy(dtype=float)
+    ekf.loc[(t >= 30.0) & (t <= 33.0), "vel_test_ratio"] = 2.5
+    rejected = run_autopilot_ekf(ekf)
+    assert [round(a.start_s) for a in rejected.alarms] == [30]
+    assert "velocity test ratio up to 2.5" in rejected.findings[0].text
+    glitch = flight.frame("autopilot_ekf").copy()
+    glitch.loc[(t >= 30.0) & (t <= 30.3), ["vel_test_ratio", "vel_innov_n_mps"]] = (4.0, 6.0)
+    assert not run_autopilot_ekf(glitch).alarms
+
+
+def test_one_core_of_two_out_of_line_is_no_alarm_both_are(flight) -> None:
+    core0 = flight.frame("autopilot_ekf")
+    core1 = core0.assign(source="EKF3 core 1")
+    odd = pd.concat([_dragged(core0, 25.0), core1], ignore_index=True)
+    assert not run_autopilot_ekf(odd).alarms
+    both = pd.concat([_dragged(core0, 25.0), _dragged(core1, 25.0)], ignore_index=True)
+    assert len(run_autopilot_ekf(both).alarms) == 1
+
+
+def test_the_autopilot_filter_counts_as_the_inertial_class_in_the_verdict(flight) -> None:
+    """The real flight logs no IMU, so spooflens' own filter cannot run; the autopilot's can speak."""
+    assert not len(flight.imu)
+    clean = analyze_table(flight)
+    assert not clean.verdict.spoofed
+    attacked = analyze_table(replace(flight, autopilot_ekf=_dragged(flight.frame("autopilot_ekf"), 25.0)))
+    assert attacked.verdict.spoofed
+    incident = attacked.verdict.incidents[0]
+    assert Evidence.INERTIAL in incident.evidence and "autopilot_ekf" in incident.detectors
+    assert 24.9 <= incident.onset_s <= 25.3
