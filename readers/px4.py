@@ -44,6 +44,26 @@ IMU_TOPIC = "sensor_combined"
 ATTITUDE_TOPIC = "vehicle_attitude"
 BARO_TOPIC = "vehicle_air_data"
 SATELLITE_TOPIC = "satellite_info"  # per-satellite C/N0, logged when GPS_SAT_INFO is set
+# EKF2's GNSS innovations (state minus measurement) and their test ratios, one instance per estimator
+INNOVATIONS_TOPIC = "estimator_innovations"
+TEST_RATIOS_TOPIC = "estimator_innovation_test_ratios"
+EKF_TOPICS = (INNOVATIONS_TOPIC, TEST_RATIOS_TOPIC)
+# estimator_innovations field -> autopilot_ekf column (innovations), and the test-ratio columns as the
+# largest ratio of the fields they summarise (horizontal velocity, horizontal position, height)
+_INNOVATION_FIELDS = {
+    "gps_hvel[0]": "vel_innov_n_mps",
+    "gps_hvel[1]": "vel_innov_e_mps",
+    "gps_vvel": "vel_innov_d_mps",
+    "gps_hpos[0]": "pos_innov_n_m",
+    "gps_hpos[1]": "pos_innov_e_m",
+    "gps_vpos": "pos_innov_d_m",
+}
+_RATIO_FIELDS = {
+    "vel_test_ratio": ("gps_hvel[0]", "gps_hvel[1]"),
+    "pos_test_ratio": ("gps_hpos[0]", "gps_hpos[1]"),
+    "hgt_test_ratio": ("gps_vpos",),
+}
+EKF_MAX_DT_US = 200_000  # a test-ratio message belongs to the innovation message this close to it
 
 # newer (SensorGnss rename) field names -> the SensorGps names this module reads
 RENAMED_FIELDS = {
@@ -686,3 +706,36 @@ def nearest_values(t: np.ndarray, t_src: np.ndarray, values: FloatArray, max_dt:
     ok = np.abs(ts[j] - t) <= max_dt
     out[ok] = vs[j[ok]]
     return out
+
+
+def autopilot_ekf_frame(
+    records: Mapping[tuple[str, int], Mapping[str, np.ndarray]], offset_us: int
+) -> tuple[pd.DataFrame, list[StreamInfo]] | None:
+    """EKF2's GNSS innovations and test ratios, per estimator instance, as the `autopilot_ekf` frame
+    (source 'EKF2 instance k'), stamped in absolute ns on the fixes' clock (boot µs + `offset_us`)."""
+    frames, streams = [], []
+    for (topic, k), innov in sorted(records.items()):
+        if topic != INNOVATIONS_TOPIC or "timestamp" not in innov or not len(innov["timestamp"]):
+            continue
+        ts = np.asarray(innov["timestamp"]).astype(np.int64)
+        order = np.argsort(ts, kind="stable")
+        ts = ts[order]
+        cols: dict[str, object] = {"t_ns": (ts + offset_us) * 1000, "source": f"EKF2 instance {k}"}
+        for field_name, column in _INNOVATION_FIELDS.items():
+            if field_name in innov:
+                cols[column] = np.asarray(innov[field_name], dtype=float)[order]
+        ratios = records.get((TEST_RATIOS_TOPIC, k))
+        described = f"px4/{INNOVATIONS_TOPIC}"
+        if ratios is not None and "timestamp" in ratios and len(ratios["timestamp"]):
+            t_ratio = np.asarray(ratios["timestamp"]).astype(np.int64)
+            for column, names in _RATIO_FIELDS.items():
+                present = [np.asarray(ratios[n], dtype=float) for n in names if n in ratios]
+                if present:
+                    cols[column] = nearest_values(ts, t_ratio, np.max(np.stack(present), axis=0), EKF_MAX_DT_US)
+            described += f" + {TEST_RATIOS_TOPIC}"
+        if len(cols) > 2:
+            frames.append(pd.DataFrame(cols))
+            streams.append(StreamInfo("autopilot_ekf", f"EKF2 instance {k}", INNOVATIONS_TOPIC, described, len(ts)))
+    if not frames:
+        return None
+    return pd.concat(frames, ignore_index=True), streams

@@ -25,11 +25,13 @@ from readers import ReaderFormat
 from readers.px4 import (
     ATTITUDE_TOPIC,
     BARO_TOPIC,
+    EKF_TOPICS,
     GPS_TOPICS,
     IMU_TOPIC,
     SATELLITE_TOPIC,
     GpsSource,
     Record,
+    autopilot_ekf_frame,
     canonical_record,
     cn0_mean,
     enum_metadata,
@@ -70,7 +72,9 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     try:
         with contextlib.redirect_stdout(said):
             ulog = ULog(
-                str(path), [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS], disable_str_exceptions=True
+                str(path),
+                [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS, *EKF_TOPICS],
+                disable_str_exceptions=True,
             )
     except Exception as err:
         raise ReaderError(path, f"not a readable ULog: {one_line(err)}") from err
@@ -142,10 +146,14 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         skipped.append(
             Skipped(ATTITUDE_TOPIC, "no sensor_combined to attach the orientation to", len(data[(ATTITUDE_TOPIC, 0)]))
         )
+    ekf = autopilot_ekf_frame(data, offset_us)
+    if ekf is not None:
+        frames["autopilot_ekf"] = ekf[0]
+        streams += ekf[1]
     defined = _topics_defined(ulog)
     if BARO_TOPIC in defined:
         skipped.append(Skipped(BARO_TOPIC, "barometric altitude not used (no schema column for it yet)", 1))
-    used = {IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS, BARO_TOPIC}
+    used = {IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS, BARO_TOPIC, *EKF_TOPICS}
     others = sorted(defined - used)
     if others:
         skipped.append(Skipped("<ulog>", f"topics not used: {others}", len(others)))

@@ -7,12 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import px4_support
 import pytest
 
 from readers import read_log
 from spooflens.detectors.autopilot_ekf import run_autopilot_ekf
 from spooflens.evidence import Evidence
 from spooflens.pipeline import analyze_table
+from spooflens.writers.ulog_writer import SENSOR_GPS, Fields, ULogFile
 
 FLIGHT = Path(__file__).resolve().parents[2] / "shared" / "real" / "ardupilot_dataflash" / "flightdata_center_0003.bin"
 
@@ -88,3 +90,70 @@ def test_the_autopilot_filter_counts_as_the_inertial_class_in_the_verdict(flight
     incident = attacked.verdict.incidents[0]
     assert Evidence.INERTIAL in incident.evidence and "autopilot_ekf" in incident.detectors
     assert 24.9 <= incident.onset_s <= 25.3
+
+
+# PX4's EstimatorInnovations / EstimatorInnovationTestRatios layouts (the GNSS part and what follows it)
+ESTIMATOR_FIELDS: Fields = [
+    ("uint64_t", "timestamp"),
+    ("uint64_t", "timestamp_sample"),
+    ("float[2]", "gps_hvel"),
+    ("float", "gps_vvel"),
+    ("float[2]", "gps_hpos"),
+    ("float", "gps_vpos"),
+    ("float[2]", "ev_hvel"),
+    ("float", "heading"),
+]
+
+
+def _px4_log(path: Path, drag_from_s: float | None) -> None:
+    """30 s of PX4 at 5 Hz GNSS with two EKF2 instances logging their GNSS innovations at 10 Hz (noise
+    0.15 m/s, 0.3 m), and from `drag_from_s` the drag `_dragged` models on both."""
+    rng = np.random.default_rng(5)
+    log = ULogFile()
+    log.info("sys_name", "PX4")
+    t = np.round(np.arange(1.0, 31.0, 0.2), 6)
+    px4_support.fill_gps(log.topic("sensor_gps", SENSOR_GPS, len(t)), px4_support.flight(t), px4_support.M8N_SERIAL2)
+    te = np.round(np.arange(1.0, 31.0, 0.1), 6)
+    for k in (0, 1):
+        frame = pd.DataFrame(
+            {
+                "t_s": te,
+                "vel_innov_n_mps": rng.normal(0, 0.15, len(te)),
+                "pos_innov_n_m": rng.normal(0, 0.3, len(te)),
+            }
+        )
+        if drag_from_s is not None:
+            frame = _dragged(frame, drag_from_s)
+        innov = log.topic("estimator_innovations", ESTIMATOR_FIELDS, len(te), multi_id=k)
+        ratios = log.topic("estimator_innovation_test_ratios", ESTIMATOR_FIELDS, len(te), multi_id=k)
+        for rows in (innov, ratios):
+            rows["timestamp"] = rows["timestamp_sample"] = np.round(te * 1e6).astype(np.int64)
+        innov["gps_hvel"][:, 0] = frame["vel_innov_n_mps"]
+        innov["gps_hvel"][:, 1] = rng.normal(0, 0.15, len(te))
+        innov["gps_hpos"][:, 0] = frame["pos_innov_n_m"]
+        innov["gps_hpos"][:, 1] = rng.normal(0, 0.3, len(te))
+        # PX4's ratio: innovation^2 / (gate^2 variance), gate 5, its variance from the reported accuracy
+        ratios["gps_hvel"][:, 0] = frame["vel_innov_n_mps"] ** 2 / (25 * 0.5**2)
+        ratios["gps_hpos"][:, 0] = frame["pos_innov_n_m"] ** 2 / (25 * 1.6**2)
+    log.write(path)
+
+
+def test_px4_ekf2_innovations_and_test_ratios_are_read_per_instance_and_judged(tmp_path: Path) -> None:
+    clean_path, dragged_path = tmp_path / "clean.ulg", tmp_path / "dragged.ulg"
+    _px4_log(clean_path, None)
+    _px4_log(dragged_path, 20.0)
+    clean = read_log(clean_path)
+    ekf = clean.frame("autopilot_ekf")
+    assert sorted(ekf["source"].unique()) == ["EKF2 instance 0", "EKF2 instance 1"]
+    assert len(ekf) == 2 * 300
+    assert np.isfinite(ekf[["vel_innov_n_mps", "vel_innov_e_mps", "pos_innov_n_m", "vel_test_ratio"]]).all().all()
+    first = ekf[ekf["source"] == "EKF2 instance 0"]["t_s"].to_numpy()
+    np.testing.assert_allclose(first[:2] - clean.fixes["t_s"].to_numpy()[0], [0.0, 0.1], atol=1e-6)  # one clock
+    assert any(s.role == "autopilot_ekf" for s in clean.streams)
+    assert not run_autopilot_ekf(ekf).alarms
+    attacked = run_autopilot_ekf(read_log(dragged_path).frame("autopilot_ekf"))
+    drag_s = 20.0 - 1.0  # boot 20 s on the log's clock (it starts at the first message, boot 1 s)
+    assert len(attacked.alarms) == 1
+    alarm = attacked.alarms[0]
+    assert drag_s - 0.5 <= (alarm.onset_s or 0.0) <= drag_s + 0.3 and alarm.start_s <= drag_s + 5.0
+    assert "EKF2 instance 0" in attacked.findings[0].text and "EKF2 instance 1" in attacked.findings[0].text
