@@ -32,12 +32,14 @@ from readers.csv_text import read_rows
 from readers.px4 import (
     ATTITUDE_TOPIC,
     BARO_TOPIC,
+    EKF_TOPICS,
     GPS_TOPICS,
     IMU_TOPIC,
     RAW_GPS_TOPICS,
     SATELLITE_TOPIC,
     GpsSource,
     Record,
+    autopilot_ekf_frame,
     canonical_record,
     cn0_mean,
     enum_metadata,
@@ -97,7 +99,7 @@ PX4_ONLY = {
 }
 IMU_COLUMNS = {f"{n}[{i}]" for n in ("gyro_rad", "accelerometer_m_s2") for i in range(3)}
 Q_COLUMNS = [f"q[{i}]" for i in range(4)]
-KNOWN_TOPICS = (*GPS_TOPICS, IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, BARO_TOPIC)
+KNOWN_TOPICS = (*GPS_TOPICS, IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, BARO_TOPIC, *EKF_TOPICS)
 SAMPLE_ROWS = 200
 ATTITUDE_MAX_GAP_US = 500_000
 SATELLITE_MAX_DT_US = 1_000_000
@@ -166,6 +168,8 @@ def kind_of(path: Path, df: pd.DataFrame) -> str | None:
         return "attitude"
     if {"count", "snr[0]"} <= cols and topic in (SATELLITE_TOPIC, None):
         return "satellites"
+    if topic in EKF_TOPICS and {"gps_hvel[0]", "gps_hpos[0]"} <= cols:  # the two share one layout: by name
+        return "ekf"
     return "topic"
 
 
@@ -294,7 +298,14 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
             skipped.append(Skipped("<csv>", f"more than one sensor_combined table; read {f.name}", len(imu_files) - 1))
     elif att_files:
         skipped.append(Skipped(att_files[0].name, "no sensor_combined table to attach the orientation to", 1))
+    ekf_files = [f for f, k in files.items() if k == "ekf"]
+    ekf_records = {(str(topic_of(f)[0]), topic_of(f)[1]): records[f] | {"timestamp": times[f]} for f in ekf_files}
+    ekf = autopilot_ekf_frame(ekf_records, offset_us)
+    if ekf is not None:
+        part.frames["autopilot_ekf"] = ekf[0]
+        part.streams += ekf[1]
     read = {f for _, _, f in sources} | set(imu_files[:1]) | set(att_files[:1] if imu_files else []) | set(sats)
+    read |= set(ekf_files)
     for f, what in notes.items():
         if f in read:
             unit = [] if any(w.startswith("timestamp") for w in what) else ["timestamp µs since boot"]

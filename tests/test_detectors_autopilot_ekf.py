@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import replace
 from pathlib import Path
 
@@ -9,6 +11,7 @@ import numpy as np
 import pandas as pd
 import px4_support
 import pytest
+from pyulog.ulog2csv import convert_ulog2csv
 
 from readers import read_log
 from spooflens.detectors.autopilot_ekf import run_autopilot_ekf
@@ -157,3 +160,17 @@ def test_px4_ekf2_innovations_and_test_ratios_are_read_per_instance_and_judged(t
     alarm = attacked.alarms[0]
     assert drag_s - 0.5 <= (alarm.onset_s or 0.0) <= drag_s + 0.3 and alarm.start_s <= drag_s + 5.0
     assert "EKF2 instance 0" in attacked.findings[0].text and "EKF2 instance 1" in attacked.findings[0].text
+
+
+def test_a_ulog2csv_export_of_the_px4_innovations_reads_like_the_ulog(tmp_path: Path) -> None:
+    ulg, out = tmp_path / "log_7_2024-5-17-10-22-41.ulg", tmp_path / "csv"
+    _px4_log(ulg, 20.0)
+    out.mkdir()
+    with contextlib.redirect_stdout(io.StringIO()):
+        convert_ulog2csv(str(ulg), None, str(out), ",", None, None)
+    assert (out / "log_7_2024-5-17-10-22-41_estimator_innovation_test_ratios_1.csv").exists()
+    a, b = read_log(ulg).frame("autopilot_ekf"), read_log(out).frame("autopilot_ekf")
+    columns = ["t_s", "vel_innov_n_mps", "pos_innov_e_m", "vel_test_ratio", "pos_test_ratio"]
+    pd.testing.assert_frame_equal(a[columns], b[columns], check_exact=False, rtol=1e-6)
+    assert list(a["source"]) == list(b["source"])
+    assert len(run_autopilot_ekf(b).alarms) == 1
