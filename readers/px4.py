@@ -44,25 +44,35 @@ IMU_TOPIC = "sensor_combined"
 ATTITUDE_TOPIC = "vehicle_attitude"
 BARO_TOPIC = "vehicle_air_data"
 SATELLITE_TOPIC = "satellite_info"  # per-satellite C/N0, logged when GPS_SAT_INFO is set
-# EKF2's GNSS innovations (state minus measurement) and their test ratios, one instance per estimator
-INNOVATIONS_TOPIC = "estimator_innovations"
-TEST_RATIOS_TOPIC = "estimator_innovation_test_ratios"
-EKF_TOPICS = (INNOVATIONS_TOPIC, TEST_RATIOS_TOPIC)
-# estimator_innovations field -> autopilot_ekf column (innovations), and the test-ratio columns as the
-# largest ratio of the fields they summarise (horizontal velocity, horizontal position, height)
-_INNOVATION_FIELDS = {
-    "gps_hvel[0]": "vel_innov_n_mps",
-    "gps_hvel[1]": "vel_innov_e_mps",
-    "gps_vvel": "vel_innov_d_mps",
-    "gps_hpos[0]": "pos_innov_n_m",
-    "gps_hpos[1]": "pos_innov_e_m",
-    "gps_vpos": "pos_innov_d_m",
+# EKF2's GNSS innovations (state minus measurement) and their test ratios, one instance per estimator:
+# topic -> {field: autopilot_ekf column}; for the ratios, column -> the fields whose largest it is
+INNOVATION_TOPICS: dict[str, dict[str, str]] = {
+    "estimator_innovations": {  # PX4 >= 1.11
+        "gps_hvel[0]": "vel_innov_n_mps",
+        "gps_hvel[1]": "vel_innov_e_mps",
+        "gps_vvel": "vel_innov_d_mps",
+        "gps_hpos[0]": "pos_innov_n_m",
+        "gps_hpos[1]": "pos_innov_e_m",
+        "gps_vpos": "pos_innov_d_m",
+    },
+    "ekf2_innovations": {  # PX4 <= 1.10: velocity then position, NED
+        **{f"vel_pos_innov[{i}]": f"vel_innov_{a}_mps" for i, a in enumerate("ned")},
+        **{f"vel_pos_innov[{i + 3}]": f"pos_innov_{a}_m" for i, a in enumerate("ned")},
+    },
 }
-_RATIO_FIELDS = {
-    "vel_test_ratio": ("gps_hvel[0]", "gps_hvel[1]"),
-    "pos_test_ratio": ("gps_hpos[0]", "gps_hpos[1]"),
-    "hgt_test_ratio": ("gps_vpos",),
+RATIO_TOPICS: dict[str, dict[str, tuple[str, ...]]] = {
+    "estimator_innovation_test_ratios": {  # PX4 >= 1.11, per axis
+        "vel_test_ratio": ("gps_hvel[0]", "gps_hvel[1]"),
+        "pos_test_ratio": ("gps_hpos[0]", "gps_hpos[1]"),
+        "hgt_test_ratio": ("gps_vpos",),
+    },
+    "estimator_status": {  # every release (the only ratios before 1.11)
+        "vel_test_ratio": ("vel_test_ratio",),
+        "pos_test_ratio": ("pos_test_ratio",),
+        "hgt_test_ratio": ("hgt_test_ratio",),
+    },
 }
+EKF_TOPICS = (*INNOVATION_TOPICS, *RATIO_TOPICS)
 EKF_MAX_DT_US = 200_000  # a test-ratio message belongs to the innovation message this close to it
 
 # newer (SensorGnss rename) field names -> the SensorGps names this module reads
@@ -712,30 +722,35 @@ def autopilot_ekf_frame(
     records: Mapping[tuple[str, int], Mapping[str, np.ndarray]], offset_us: int
 ) -> tuple[pd.DataFrame, list[StreamInfo]] | None:
     """EKF2's GNSS innovations and test ratios, per estimator instance, as the `autopilot_ekf` frame
-    (source 'EKF2 instance k'), stamped in absolute ns on the fixes' clock (boot µs + `offset_us`)."""
+    (source 'EKF2 instance k'), stamped in absolute ns on the fixes' clock (boot µs + `offset_us`). The
+    ratios come from the first of `RATIO_TOPICS` the instance logged, nearest each innovation message."""
     frames, streams = [], []
     for (topic, k), innov in sorted(records.items()):
-        if topic != INNOVATIONS_TOPIC or "timestamp" not in innov or not len(innov["timestamp"]):
+        fields = INNOVATION_TOPICS.get(topic)
+        if fields is None or "timestamp" not in innov or not len(innov["timestamp"]):
             continue
         ts = np.asarray(innov["timestamp"]).astype(np.int64)
         order = np.argsort(ts, kind="stable")
         ts = ts[order]
         cols: dict[str, object] = {"t_ns": (ts + offset_us) * 1000, "source": f"EKF2 instance {k}"}
-        for field_name, column in _INNOVATION_FIELDS.items():
+        for field_name, column in fields.items():
             if field_name in innov:
                 cols[column] = np.asarray(innov[field_name], dtype=float)[order]
-        ratios = records.get((TEST_RATIOS_TOPIC, k))
-        described = f"px4/{INNOVATIONS_TOPIC}"
-        if ratios is not None and "timestamp" in ratios and len(ratios["timestamp"]):
+        described = f"px4/{topic}"
+        for ratio_topic, ratio_fields in RATIO_TOPICS.items():
+            ratios = records.get((ratio_topic, k))
+            if ratios is None or "timestamp" not in ratios or not len(ratios["timestamp"]):
+                continue
             t_ratio = np.asarray(ratios["timestamp"]).astype(np.int64)
-            for column, names in _RATIO_FIELDS.items():
+            for column, names in ratio_fields.items():
                 present = [np.asarray(ratios[n], dtype=float) for n in names if n in ratios]
                 if present:
                     cols[column] = nearest_values(ts, t_ratio, np.max(np.stack(present), axis=0), EKF_MAX_DT_US)
-            described += f" + {TEST_RATIOS_TOPIC}"
+            described += f" + {ratio_topic}"
+            break
         if len(cols) > 2:
             frames.append(pd.DataFrame(cols))
-            streams.append(StreamInfo("autopilot_ekf", f"EKF2 instance {k}", INNOVATIONS_TOPIC, described, len(ts)))
+            streams.append(StreamInfo("autopilot_ekf", f"EKF2 instance {k}", topic, described, len(ts)))
     if not frames:
         return None
     return pd.concat(frames, ignore_index=True), streams

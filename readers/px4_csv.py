@@ -35,6 +35,8 @@ from readers.px4 import (
     EKF_TOPICS,
     GPS_TOPICS,
     IMU_TOPIC,
+    INNOVATION_TOPICS,
+    RATIO_TOPICS,
     RAW_GPS_TOPICS,
     SATELLITE_TOPIC,
     GpsSource,
@@ -142,6 +144,11 @@ def _sample(path: Path) -> pd.DataFrame | None:
     return df
 
 
+def _ekf_fields(topic: str) -> set[str]:
+    ratios = RATIO_TOPICS.get(topic, {}).values()
+    return set(INNOVATION_TOPICS.get(topic, {})) | {name for names in ratios for name in names}
+
+
 def kind_of(path: Path, df: pd.DataFrame) -> str | None:
     """'gps', 'imu', 'attitude', 'satellites' for a PX4 table, 'topic' for another PX4-like table with a
     `timestamp` column (unused unless beside a PX4 file), None when it is no PX4 table."""
@@ -168,7 +175,7 @@ def kind_of(path: Path, df: pd.DataFrame) -> str | None:
         return "attitude"
     if {"count", "snr[0]"} <= cols and topic in (SATELLITE_TOPIC, None):
         return "satellites"
-    if topic in EKF_TOPICS and {"gps_hvel[0]", "gps_hpos[0]"} <= cols:  # the two share one layout: by name
+    if topic in EKF_TOPICS and cols & _ekf_fields(topic):  # innovations and ratios share layouts: by name
         return "ekf"
     return "topic"
 

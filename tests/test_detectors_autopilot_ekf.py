@@ -174,3 +174,35 @@ def test_a_ulog2csv_export_of_the_px4_innovations_reads_like_the_ulog(tmp_path: 
     pd.testing.assert_frame_equal(a[columns], b[columns], check_exact=False, rtol=1e-6)
     assert list(a["source"]) == list(b["source"])
     assert len(run_autopilot_ekf(b).alarms) == 1
+
+
+def test_px4_1_10_ekf2_innovations_with_estimator_status_ratios_are_read(tmp_path: Path) -> None:
+    """PX4 <= 1.10 logged `ekf2_innovations.vel_pos_innov[6]` (velocity then position, NED) and the
+    ratios only in `estimator_status`."""
+    rng = np.random.default_rng(8)
+    log = ULogFile()
+    log.info("sys_name", "PX4")
+    t = np.round(np.arange(1.0, 31.0, 0.2), 6)
+    px4_support.fill_gps(
+        log.topic("vehicle_gps_position", px4_support.V1_12_VEHICLE_GPS_POSITION, len(t)), px4_support.flight(t)
+    )
+    te = np.round(np.arange(1.0, 31.0, 0.1), 6)
+    frame = _dragged(
+        pd.DataFrame({"t_s": te, "vel_innov_n_mps": rng.normal(0, 0.15, len(te)), "pos_innov_n_m": 0.0}), 20.0
+    )
+    innov = log.topic("ekf2_innovations", [("uint64_t", "timestamp"), ("float[6]", "vel_pos_innov")], len(te))
+    status_fields: Fields = [("uint64_t", "timestamp")] + [
+        ("float", f"{n}_test_ratio") for n in ("vel", "pos", "hgt", "mag")
+    ]
+    status = log.topic("estimator_status", status_fields, len(te))
+    innov["timestamp"] = status["timestamp"] = np.round(te * 1e6).astype(np.int64)
+    innov["vel_pos_innov"][:, 0] = frame["vel_innov_n_mps"]
+    innov["vel_pos_innov"][:, 3] = frame["pos_innov_n_m"]
+    status["pos_test_ratio"] = np.abs(frame["pos_innov_n_m"]) / (5 * 1.6)
+    path = tmp_path / "v1_10.ulg"
+    log.write(path)
+    ekf = read_log(path).frame("autopilot_ekf")
+    assert set(ekf["source"]) == {"EKF2 instance 0"} and len(ekf) == len(te)
+    np.testing.assert_allclose(ekf["pos_innov_n_m"], frame["pos_innov_n_m"], atol=1e-5)
+    np.testing.assert_allclose(ekf["pos_test_ratio"], status["pos_test_ratio"], atol=1e-6)
+    assert [round(a.onset_s or 0.0) for a in run_autopilot_ekf(ekf).alarms] == [19]
