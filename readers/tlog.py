@@ -12,6 +12,10 @@ like a program). Only the vehicle that sent most GPS_RAW_INT messages is read.
 - `SCALED_IMU`, `SCALED_IMU2`, `SCALED_IMU3` (mG, mrad/s; ArduPilot's `RAW_IMU` carries the same
   scaled values and is used when no SCALED_IMU is there) -> IMU, body FRD; `ATTITUDE` (NED Euler
   angles) -> the quaternion columns, as for DataFlash ATT.
+- `EKF_STATUS_REPORT` (ArduPilot: velocity, horizontal position and height "variances", which are the
+  square roots of its EKF's test ratios) and `ESTIMATOR_STATUS` (PX4: `vel_ratio`, `pos_horiz_ratio`,
+  `pos_vert_ratio`) -> the `autopilot_ekf` frame's test ratios (no innovations: telemetry has none),
+  stamped with the ground station's receive time when the message has no time of its own.
 - `GLOBAL_POSITION_INT` is the autopilot's fused estimate, not a receiver: counted as not used.
 
 Time: the messages' own boot-time stamps (`time_boot_ms`, or `time_usec` when it is not a UNIX time),
@@ -61,8 +65,24 @@ WANTED = [
     "SYSTEM_TIME",
     "HEARTBEAT",
     "GLOBAL_POSITION_INT",
+    "EKF_STATUS_REPORT",
+    "ESTIMATOR_STATUS",
     "BAD_DATA",
 ]
+# the autopilot's GNSS test ratios (above 1: GNSS rejected) -> autopilot_ekf columns. ArduPilot's
+# EKF_STATUS_REPORT calls them variances; they are the square roots of its EKF's test ratios
+EKF_RATIOS = {
+    "EKF_STATUS_REPORT": {
+        "vel_test_ratio": "velocity_variance",
+        "pos_test_ratio": "pos_horiz_variance",
+        "hgt_test_ratio": "pos_vert_variance",
+    },
+    "ESTIMATOR_STATUS": {
+        "vel_test_ratio": "vel_ratio",
+        "pos_test_ratio": "pos_horiz_ratio",
+        "hgt_test_ratio": "pos_vert_ratio",
+    },
+}
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_TYPE_GCS = 6
 
@@ -235,6 +255,16 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         streams.append(StreamInfo("imu", kind, kind, f"mavlink/{kind}", len(df), body_frame="FRD"))
     if imu_parts:
         frames["imu"] = pd.concat(imu_parts, ignore_index=True)
+    ekf_parts = []
+    for kind, columns in EKF_RATIOS.items():
+        rows = msgs.get(kind, [])
+        if rows:
+            ratios = {col: [float(f.get(name, np.nan)) for _, _, f in rows] for col, name in columns.items()}
+            stamps = [stamp_ns(t, f) for t, _, f in rows]
+            ekf_parts.append(pd.DataFrame({"t_ns": stamps, "source": f"autopilot ({kind})"} | ratios))
+            streams.append(StreamInfo("autopilot_ekf", kind, kind, f"mavlink/{kind} (test ratios)", len(rows)))
+    if ekf_parts:
+        frames["autopilot_ekf"] = pd.concat(ekf_parts, ignore_index=True)
     if msgs.get("GLOBAL_POSITION_INT"):
         skipped.append(
             Skipped(

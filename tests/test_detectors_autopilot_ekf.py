@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import struct
 from dataclasses import replace
 from pathlib import Path
 
@@ -206,3 +207,27 @@ def test_px4_1_10_ekf2_innovations_with_estimator_status_ratios_are_read(tmp_pat
     np.testing.assert_allclose(ekf["pos_innov_n_m"], frame["pos_innov_n_m"], atol=1e-5)
     np.testing.assert_allclose(ekf["pos_test_ratio"], status["pos_test_ratio"], atol=1e-6)
     assert [round(a.onset_s or 0.0) for a in run_autopilot_ekf(ekf).alarms] == [19]
+
+
+def test_a_tlog_carries_the_autopilot_test_ratios_and_seconds_of_rejected_gnss_alarm(tmp_path: Path) -> None:
+    """Telemetry has no innovations, only ArduPilot's EKF_STATUS_REPORT (square roots of the test ratios)."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+    from test_readers_ardupilot import write_tlog
+
+    path = tmp_path / "flight.tlog"
+    t0_unix_us, _ = write_tlog(path)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    times = np.arange(0.0, 30.0, 0.5)
+    with path.open("ab") as f:
+        for t in times:
+            velocity = 2.0 if 15.0 <= t < 20.0 else 0.1  # the EKF rejecting GNSS velocity for 5 s
+            f.write(struct.pack(">Q", t0_unix_us + round(t * 1e6) + 150_000))
+            f.write(mav.ekf_status_report_encode(0x1FF, velocity, 0.2, 0.1, 0.05, 0.0).pack(mav))
+    table = read_log(path)
+    ekf = table.frame("autopilot_ekf")
+    assert len(ekf) == len(times) and set(ekf["source"]) == {"autopilot (EKF_STATUS_REPORT)"}
+    assert ekf["vel_innov_n_mps"].isna().all()
+    result = run_autopilot_ekf(ekf)
+    assert len(result.alarms) == 1
+    assert 14.5 <= result.alarms[0].start_s - table.fixes["t_s"].iloc[0] <= 15.5
+    assert "velocity test ratio up to 2.0" in result.findings[0].text
