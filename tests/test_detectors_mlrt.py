@@ -155,6 +155,15 @@ def test_ramp_two_filter_offline_equals_willsky_jones_for_every_onset(missing: b
         assert off.mlr_flat[m] == pytest.approx(flat, rel=1e-6, abs=1e-6)
 
 
+def test_every_nth_onset_of_the_offline_pass_is_the_full_pass_there() -> None:
+    model = random_model(7, n=4, p=2, N=30, missing=True)
+    full = ramp_two_filter_offline(model, (0, 1), np.array([0.7, 1.3]))
+    third = ramp_two_filter_offline(model, (0, 1), np.array([0.7, 1.3]), stride=3)
+    np.testing.assert_array_equal(third.t, full.t[::3])
+    np.testing.assert_array_equal(third.log_bf, full.log_bf[::3])
+    np.testing.assert_array_equal(third.mlr_flat, full.mlr_flat[::3])
+
+
 def test_two_filter_smoother_equals_rts() -> None:
     model = random_model(11)
     xs, Ps = two_filter_smoother(model)

@@ -347,8 +347,10 @@ def _two_filter_offline(
     Sigma: np.ndarray,
     last: int,
     block: int,
+    stride: int,
 ):
-    """`_offline_at` for every epoch m < last of the augmented model over epochs 0..last, from the forward
+    """`_offline_at` for every `stride`-th epoch m < last (NaN between) of the augmented model over epochs
+    0..last, from the forward
     filter (`forward_filter`) and the backward information filter (`backward_information`), with the
     numbers those give, in bounded memory: the augmented matrices are made epoch by epoch; the forward
     pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
@@ -394,20 +396,32 @@ def _two_filter_offline(
             L, a = information_predict_back(L, a, Aa, Qa)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
         for k in range(lo, top + 1):
-            bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
+            if k % stride == 0:
+                bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
     return bf, flat
 
 
 def ramp_two_filter_offline(
-    model: LinearGaussianModel, rows: tuple[int, ...], sigma_rate: FloatArray, last: int | None = None
+    model: LinearGaussianModel,
+    rows: tuple[int, ...],
+    sigma_rate: FloatArray,
+    last: int | None = None,
+    stride: int = 1,
 ) -> RampOffline:
     """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last` (the
-    model `augment_ramp` makes, filtered forward and backward)."""
-    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True)
+    model `augment_ramp` makes, filtered forward and backward); with `stride` > 1 only every stride-th
+    candidate is evaluated (the others are left out of the result): the same numbers there, for a
+    fraction of the cost (the two filters still run over every epoch)."""
+    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True, stride=stride)
 
 
 def _offline(
-    model: LinearGaussianModel, rows: tuple[int, ...], sigma: FloatArray, last: int | None, ramp: bool
+    model: LinearGaussianModel,
+    rows: tuple[int, ...],
+    sigma: FloatArray,
+    last: int | None,
+    ramp: bool,
+    stride: int = 1,
 ) -> RampOffline:
     last = model.n_epochs - 1 if last is None else last
     # views where the model's arrays are contiguous already (the navigation's are): no copies
@@ -426,8 +440,10 @@ def _offline(
         np.diag(sigma**2),
         last,
         OFFLINE_BLOCK,
+        max(1, int(stride)),
     )
-    return RampOffline(model.t[: last + 1], bf, flat)
+    kept = np.arange(last + 1) % max(1, int(stride)) == 0
+    return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])
 
 
 def augment_step(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGaussianModel:
