@@ -79,11 +79,13 @@ def analyze_table(
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
-    del ctx
+    first_nav = ctx.cache["navigation"]
+    aligned = (first_nav.inputs, first_nav.start)  # the IMU integrated and the alignment: reused as they are
+    del ctx, first_nav
     if on_step:
         on_step("learning the noise again without the suspected stretches")
     try:
-        nav = solve_navigation(table, options, exclude=spans)
+        nav = solve_navigation(table, options, exclude=spans, aligned=aligned)
     except SpooflensError:
         return Analysis(table, options, first_results, verdict)
     del first_results

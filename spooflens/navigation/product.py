@@ -12,7 +12,7 @@ from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, De
 from spooflens.detectors.base import DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.navigation.alignment import Alignment, heading_from_course
-from spooflens.navigation.imu_models import grade
+from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.loosely_coupled import (
     FilterInputs,
     FilterOptions,
@@ -44,10 +44,29 @@ class Navigation:
 
 
 def solve_navigation(
-    table: EpochTable, options: AnalyzeOptions, exclude: tuple[tuple[float, float], ...] = ()
+    table: EpochTable,
+    options: AnalyzeOptions,
+    exclude: tuple[tuple[float, float], ...] = (),
+    aligned: tuple[FilterInputs, tuple[NavState, Alignment | None]] | None = None,
 ) -> Navigation:
-    """Align, learn the sensors' noise from the log (leaving `exclude` out), filter and smooth."""
+    """Align, learn the sensors' noise from the log (leaving `exclude` out), filter and smooth.
+    `aligned`: the prepared inputs and the alignment of an earlier solution of the same table and
+    options (a second pass), which depend on neither the noise nor `exclude`."""
     preset = grade(options.imu_grade or "consumer_mems")
+    inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
+    odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
+    learned = learn_noise(inputs, preset, start, odometry_id, exclude)
+    opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry)
+    sol = run_prepared(inputs, opts, start)
+    smoothed, model = smooth(sol), sol.error_model()
+    # the smoother and the model's prior were the last readers of the predicted covariances
+    sol = replace(sol, P_pred=sol.P_pred[:1].copy())
+    return Navigation(sol, smoothed, model, learned, inputs, start)
+
+
+def _aligned(
+    table: EpochTable, options: AnalyzeOptions, preset: ImuGrade
+) -> tuple[FilterInputs, tuple[NavState, Alignment | None]]:
     inputs = prepare(table, options.imu_id, options.receiver_id)
     start = initial_state(inputs, FilterOptions(grade=preset))
     odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
@@ -59,13 +78,7 @@ def solve_navigation(
         if by_course is not None:
             a = by_course
             start = (NavState(a.t0, a.lat0, a.lon0, a.h0, a.v0.copy(), a.C0.copy()), a)
-    learned = learn_noise(inputs, preset, start, odometry_id, exclude)
-    opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry)
-    sol = run_prepared(inputs, opts, start)
-    smoothed, model = smooth(sol), sol.error_model()
-    # the smoother and the model's prior were the last readers of the predicted covariances
-    sol = replace(sol, P_pred=sol.P_pred[:1].copy())
-    return Navigation(sol, smoothed, model, learned, inputs, start)
+    return inputs, start
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
