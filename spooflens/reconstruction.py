@@ -27,7 +27,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
@@ -37,6 +36,7 @@ from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution, ni
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
+from spooflens.quantiles import chi2_isf
 from spooflens.verdict import Incident, Verdict
 
 FloatArray = NDArray[np.float64]
@@ -144,7 +144,7 @@ def _ratio(sol: NavSolution, p: float, window_s: float = 1.0) -> FloatArray:
     """NIS over its chi-square threshold, as a centred running median over `window_s`: a single fix's
     NIS is mostly receiver noise, so a slow pull (ratio near the margin) would break into short runs."""
     nis, dof = coasting_nis(sol, HORIZONTAL_ROWS)
-    threshold = np.where(dof > 0, stats.chi2.isf(p, np.maximum(dof, 1)), np.nan)
+    threshold = np.where(dof > 0, chi2_isf(p, np.maximum(dof, 1)), np.nan)
     ratio = pd.Series(nis / threshold)
     dt = np.diff(sol.t)
     n = round(window_s / float(np.median(dt))) if len(dt) and np.median(dt) > 0 else 1

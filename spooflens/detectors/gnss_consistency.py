@@ -19,12 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
 from spooflens.evidence import Evidence
 from spooflens.geodesy import geodetic_to_enu
+from spooflens.quantiles import chi2_isf, halfnorm_ppf
 
 FloatArray = NDArray[np.float64]
 NAME = "gnss_consistency"
@@ -40,7 +40,7 @@ class ConsistencyOptions:
 
 # 25th percentile of |N(0, 1)|: the scale is read off the quietest quarter of the residuals, which
 # stays right while up to three quarters of the log is attacked (a MAD breaks down at one half).
-_Q25_ABS_NORMAL = float(stats.halfnorm.ppf(0.25))
+_Q25_ABS_NORMAL = halfnorm_ppf(0.25)
 
 
 def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
@@ -119,7 +119,7 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
 def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = None) -> DetectorResult:
     """The check for every receiver in a fixes frame (schema `fixes`)."""
     opts = opts or ConsistencyOptions()
-    threshold = float(stats.chi2.isf(opts.p_false_alarm, 3))
+    threshold = float(chi2_isf(opts.p_false_alarm, 3))
     result = DetectorResult(name=NAME, ran=True, evidence=Evidence.GNSS_ONLY)
     modes = []
     for rid, rx in fixes.groupby("receiver_id", sort=False):
@@ -129,7 +129,7 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
         modes.append(f"{rid}: {mode}")
         dof = np.isfinite(z).sum(axis=1)
         alarm = np.nan_to_num(stat, nan=0.0) > np.where(
-            dof > 0, stats.chi2.isf(opts.p_false_alarm, np.maximum(dof, 1)), np.inf
+            dof > 0, chi2_isf(opts.p_false_alarm, np.maximum(dof, 1)), np.inf
         )
         alarms = alarm_intervals(t, np.nan_to_num(stat), alarm, merge_gap_s=opts.window_s)
         result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0)

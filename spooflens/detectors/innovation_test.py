@@ -8,16 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.detectors.kalman import ForwardResult
 from spooflens.navigation.loosely_coupled import quadratic_forms
+from spooflens.quantiles import chi2_isf
 
 FloatArray = NDArray[np.float64]
 
 
 def threshold(p_false_alarm: float = 1e-5, dof: int = 3) -> float:
-    return float(stats.chi2.isf(p_false_alarm, dof))
+    return float(chi2_isf(p_false_alarm, dof))
 
 
 def position_nis(fwd: ForwardResult, rows: tuple[int, ...] = (0, 1, 2)) -> FloatArray:

@@ -19,12 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import DetectorResult, Series, alarm_intervals
 from spooflens.evidence import Evidence
 from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern
+from spooflens.quantiles import chi2_isf
 
 FloatArray = NDArray[np.float64]
 POSITION, VELOCITY = (0, 1, 2), (3, 4, 5)
@@ -48,12 +48,12 @@ def nis_test(
     nis, dof = rows_nis(sol, rows)
     if not (dof > 0).any():
         return DetectorResult.skipped(name, f"no epoch has {unit_label} measurements", Evidence.INERTIAL)
-    threshold = np.where(dof > 0, stats.chi2.isf(opts.p_false_alarm, np.maximum(dof, 1)), np.nan)
+    threshold = np.where(dof > 0, chi2_isf(opts.p_false_alarm, np.maximum(dof, 1)), np.nan)
     ratio = nis / threshold  # one axis for every dof
     alarm = np.nan_to_num(ratio) > 1.0
     alarm &= sol.t >= sol.t[0] + opts.settle_s
     main_dof = int(np.bincount(dof[dof > 0]).argmax())
-    thr_main = float(stats.chi2.isf(opts.p_false_alarm, main_dof))
+    thr_main = float(chi2_isf(opts.p_false_alarm, main_dof))
     return DetectorResult(
         name,
         True,

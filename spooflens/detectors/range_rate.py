@@ -41,12 +41,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize, stats
 
 from spooflens.detectors.references import Reference
 from spooflens.detectors.scales import robust_scale
 from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.grid import ObservationGrid, epoch_change, predicted, predicted_rate
+from spooflens.quantiles import chi2_isf, norm_isf, t_isf
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -252,7 +252,7 @@ def fit_velocity_error(
 
     def failing(fit: EpochFit) -> BoolArray:
         c = np.nan_to_num(fit.weighted_sq) / sigma**2
-        return (fit.dof >= 1) & (c > stats.chi2.isf(p_exclude, np.maximum(fit.dof, 1)))
+        return (fit.dof >= 1) & (c > chi2_isf(p_exclude, np.maximum(fit.dof, 1)))
 
     excluded = res.delay_step & full.used
     use = full.used & ~excluded
@@ -300,6 +300,8 @@ def normalised_components(
             var = variance(params)
             return float(np.sum(np.log(var) + np.minimum(x**2 / var, cap**2)))
 
+        from scipy import optimize  # only for logs with raw observations and an IMU
+
         p0 = np.r_[np.log(start), np.log(1e-3)]
         best = optimize.minimize(
             cost, p0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-3, "maxiter": 2000}
@@ -321,7 +323,7 @@ def paper_threshold(x: FloatArray, p_false_alarm: float = 0.01) -> tuple[float, 
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
     mu, sd = float(np.mean(x)), float(np.std(x, ddof=1))
-    return mu, float(stats.norm.isf(p_false_alarm / 2.0)) * sd
+    return mu, norm_isf(p_false_alarm / 2.0) * sd
 
 
 def t_statistic(x: FloatArray, K: int) -> FloatArray:
@@ -350,12 +352,14 @@ def t_statistic(x: FloatArray, K: int) -> FloatArray:
 
 def t_threshold(p_false_alarm: float, K: int) -> float:
     """gamma_1 = t_{1-alpha/2}(K-1) (eq. 25)."""
-    return float(stats.t.isf(p_false_alarm / 2.0, K - 1))
+    return t_isf(p_false_alarm / 2.0, K - 1)
 
 
 def detection_probability(bias: float, sigma: float, K: int, p_false_alarm: float) -> float:
     """P'_D of the two-sided t-test over K samples for a bias `bias` in noise `sigma` (noncentral t,
     delta = bias sqrt(K) / sigma)."""
+    from scipy import stats  # the noncentral t: only here
+
     g = t_threshold(p_false_alarm, K)
     nc = bias * np.sqrt(K) / sigma
     return float(stats.nct.sf(g, K - 1, nc) + stats.nct.cdf(-g, K - 1, nc))

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -133,6 +132,8 @@ def effective_window(x: FloatArray, clean: BoolArray, k: int) -> float:
 
 def _ncx2(p: float, dof: float, nc: float, upper: bool) -> float:
     """Quantile (lower tail p, or upper tail p) of noncentral chi-square(dof, nc)."""
+    from scipy import stats  # imported where used: seconds of start-up for analyses that never get here
+
     if nc < 1e-12:
         return float(stats.chi2.isf(p, dof) if upper else stats.chi2.ppf(p, dof))
     if nc > _GAUSSIAN_NC:
@@ -151,6 +152,8 @@ def scale_threshold(p: float, sigma: float, nu: float, k_eff: float, upper: bool
 def scale_probability_below(th: float, sigma: float, nu: float, k: float) -> float:
     """P(sigma_hat <= th) for a window of k independent Rice(nu, sigma) samples: the false-alarm rate of
     the collapse rule at threshold th (the miss rate when sigma, nu describe spoofing, as 1 minus it)."""
+    from scipy import stats
+
     x = 2.0 * k * th * th / (sigma * sigma)
     nc = k * nu * nu / (sigma * sigma)
     return float(stats.chi2.cdf(x, 2.0 * k) if nc < 1e-12 else stats.ncx2.cdf(x, 2.0 * k, nc))

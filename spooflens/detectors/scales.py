@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+
+from spooflens.quantiles import f_isf, halfnorm_ppf, norm_cdf, norm_pdf
 
 FloatArray = NDArray[np.float64]
 
 _CLIP = 3.0
-_CLIPPED_VARIANCE = 1.0 - 2.0 * _CLIP * stats.norm.pdf(_CLIP) / (2.0 * stats.norm.cdf(_CLIP) - 1.0)
+_CLIPPED_VARIANCE = 1.0 - 2.0 * _CLIP * norm_pdf(_CLIP) / (2.0 * norm_cdf(_CLIP) - 1.0)
 
 
 def robust_scale(x: FloatArray, floor: float = 0.0) -> float:
@@ -28,7 +29,7 @@ def robust_scale(x: FloatArray, floor: float = 0.0) -> float:
     a = a[np.isfinite(a) & (a > 1e-12)]
     if not len(a):
         return floor
-    s = float(np.percentile(a, 25) / stats.halfnorm.ppf(0.25))
+    s = float(np.percentile(a, 25) / halfnorm_ppf(0.25))
     for _ in range(100):
         inside = a[a < _CLIP * s]
         if len(inside) < 3:
@@ -62,4 +63,4 @@ def threshold(p_false_alarm: float, n_samples: int, rho: float, dof: int = 3) ->
     scale read off a short or smooth series. Returns (threshold, n_eff)."""
     r = float(np.clip(np.nan_to_num(rho), 0.0, 0.99))
     n_eff = max(n_samples * (1.0 - r) / (1.0 + r), 5.0)
-    return float(dof * stats.f.isf(p_false_alarm, dof, n_eff)), n_eff
+    return float(dof * f_isf(p_false_alarm, dof, n_eff)), n_eff

@@ -36,7 +36,6 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
@@ -54,6 +53,7 @@ from spooflens.detectors.scales import lag1_autocorrelation, threshold
 from spooflens.errors import SpooflensError
 from spooflens.evidence import Evidence
 from spooflens.gnss.grid import ObservationGrid, observation_grid
+from spooflens.quantiles import t_isf
 
 FloatArray = NDArray[np.float64]
 ENU = ("east", "north", "up")
@@ -169,7 +169,7 @@ def component_threshold(p_false_alarm: float, n_samples: int, rho: float, tail_d
     number of samples the scales were read from. Returns (threshold, nu)."""
     _, n_eff = threshold(p_false_alarm, n_samples, rho)
     nu = float(np.clip(n_eff - 1.0, 2.0, tail_dof))
-    return float(stats.t.isf(p_false_alarm / 6.0, nu)), nu
+    return t_isf(p_false_alarm / 6.0, nu), nu
 
 
 def detect(stats_list: list[ReceiverStatistics], opts: Seed001Options) -> list[DetectorResult]:

@@ -32,7 +32,6 @@ from typing import Protocol
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
@@ -311,6 +310,8 @@ def _histogram_bars(x: FloatArray, edges: FloatArray, label: str, fits: list[tup
 
 def rule_histograms(rule: RuleResult, name: str, x_label: str) -> list[Histogram]:
     """The statistic's distribution in clean and in flagged windows, each with its fitted densities."""
+    from scipy import stats  # the fitted densities: imported where drawn
+
     out = []
     clean = rule.x[~rule.flagged & np.isfinite(rule.x)]
     if len(clean) >= 5:

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy import stats
 
 from spooflens.gnss.geometry import azimuth_elevation, line_of_sight
 from spooflens.navigation.single_point import (
@@ -30,6 +29,7 @@ from spooflens.navigation.single_point import (
     _padded,
     solve,
 )
+from spooflens.quantiles import chi2_isf
 
 FloatArray = NDArray[np.float64]
 CLEAR, FAULT, UNKNOWN = 0, 1, 2
@@ -162,7 +162,7 @@ def _fde(
         best = np.min(T_loo, axis=1) / np.maximum(dof - 1, 1)
         testable = (dof >= 2) & np.isfinite(best)
         scale2 = max(float(np.median(best[testable])) if testable.any() else 1.0, 1.0)
-    threshold = np.where(dof >= 1, stats.chi2.isf(ropts.p_false_alarm, np.maximum(dof, 1)), np.nan)
+    threshold = np.where(dof >= 1, chi2_isf(ropts.p_false_alarm, np.maximum(dof, 1)), np.nan)
     statistic = np.where(dof >= 1, T_all / scale2, np.nan)
     first_threshold = threshold
     row_of = np.full(H.shape[:2], -1, dtype=np.int64)
@@ -174,7 +174,7 @@ def _fde(
         j = np.argmin(np.where(W > 0, T_loo, np.inf), axis=1)
         fe = np.flatnonzero(faulty)
         T_one = T_loo[fe, j[fe]]
-        one_clears = T_one / scale2 <= stats.chi2.isf(ropts.p_false_alarm, np.maximum(dof[fe] - 1, 1))
+        one_clears = T_one / scale2 <= chi2_isf(ropts.p_false_alarm, np.maximum(dof[fe] - 1, 1))
         rows = row_of[fe[one_clears], j[fe[one_clears]]]
         excluded[rows[rows >= 0]] = True
         # where leaving out one satellite does not clear the test, two faults are likelier than one:
@@ -182,7 +182,7 @@ def _fde(
         two = fe[~one_clears & (dof[fe] >= 3)]
         if len(two):
             T_two, pair = _leave_two_out(H, W, r, two)
-            clears = T_two / scale2 <= stats.chi2.isf(ropts.p_false_alarm, np.maximum(dof[two] - 2, 1))
+            clears = T_two / scale2 <= chi2_isf(ropts.p_false_alarm, np.maximum(dof[two] - 2, 1))
             for k in range(2):
                 rows = row_of[two[clears], pair[clears, k]]
                 excluded[rows[rows >= 0]] = True
@@ -196,7 +196,7 @@ def _fde(
         epoch, slot, H, W, r = _design(obs, sol, opts, np.isfinite(sol.residual_m))
         dof = (W > 0).sum(axis=1) - m
         T_loo, _res_loo, T_all = _leave_one_out(H, W, r)
-        threshold = np.where(dof >= 1, stats.chi2.isf(ropts.p_false_alarm, np.maximum(dof, 1)), np.nan)
+        threshold = np.where(dof >= 1, chi2_isf(ropts.p_false_alarm, np.maximum(dof, 1)), np.nan)
     final_ratio = np.where(dof >= 1, T_all / np.maximum(dof, 1), np.nan)
     return sol, excluded, statistic, first_threshold, scale2, final_ratio, dof
 
