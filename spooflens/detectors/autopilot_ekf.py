@@ -18,8 +18,9 @@ below 1 through a takeover. Per core the detector therefore judges:
 - the test ratios against their documented meaning: above 1, the autopilot rejected GNSS.
 
 An alarm needs, on a majority of the cores logged at the time, the horizontal velocity or position
-innovation beyond `z_alarm` robust sigma, or a test ratio above 1, for `min_duration_s` (a real GNSS
-glitch moves an innovation for a fix or two; a spoofer's drag lasts). The onset is where the statistic
+innovation beyond `z_alarm` robust sigma, or a test ratio above 1, for `min_duration_s` (5 s: a real
+GNSS glitch moves an innovation for a fix or a few seconds of multipath; a spoofer's drag lasts, and
+with the inertial class alone an alarm is a spoofing verdict). The onset is where the statistic
 began the rise that crossed half its alarm level before the alarm (the last row below half, then back
 down the rise).
 """
@@ -52,7 +53,7 @@ RATIOS: dict[str, str] = {"velocity": "vel_test_ratio", "position": "pos_test_ra
 @dataclass(frozen=True)
 class AutopilotEkfOptions:
     z_alarm: float = 8.0
-    min_duration_s: float = 2.0
+    min_duration_s: float = 5.0  # real multipath glitches last seconds; an attack lasts
     merge_gap_s: float = 5.0
     rejected_ratio: float = 1.0  # the documented meaning: above 1 the filter rejects the measurement
     min_rows: int = 20  # a core with fewer rows is not judged
@@ -186,9 +187,9 @@ ANALYSIS = AnalysisSpec(
             "Per EKF core the autopilot logged, the horizontal GNSS velocity and position innovations (its "
             "inertial prediction minus the receiver's measurement) as robust z-scores against their median and "
             "1.4826 MAD over the log, and its velocity and position test ratios (above 1 the autopilot rejects "
-            "GNSS). An alarm needs a majority of cores beyond 8 robust sigma or a ratio above 1 for 2 s. The "
+            "GNSS). An alarm needs a majority of cores beyond 8 robust sigma or a ratio above 1 for 5 s. The "
             "reported accuracy that scales the autopilot's own ratios is not the yardstick: a capture inflates it.",
-            "8 robust sigma, or a test ratio above 1, for 2 s",
+            "8 robust sigma, or a test ratio above 1, for 5 s",
         ),
     ),
 )
