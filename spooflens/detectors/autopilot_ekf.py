@@ -23,6 +23,11 @@ GNSS glitch moves an innovation for a fix or a few seconds of multipath; a spoof
 with the inertial class alone an alarm is a spoofing verdict). The onset is where the statistic
 began the rise that crossed half its alarm level before the alarm (the last row below half, then back
 down the rise).
+
+Being the inertial class, an incident it raises in a log that also carries the IMU is held to what
+every inertial incident is held to: spooflens' own INS, coasted from before it, must confirm that GNSS
+left it (`spooflens.reconstruction`). Without an IMU in the log (an ArduPilot log with IMU logging
+off, a telemetry log, a GPS-only export) the autopilot's filter is the only inertial reference there is.
 """
 
 from __future__ import annotations
