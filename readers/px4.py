@@ -718,6 +718,10 @@ def nearest_values(t: np.ndarray, t_src: np.ndarray, values: FloatArray, max_dt:
     return out
 
 
+def _has_rows(rec: Mapping[str, np.ndarray]) -> bool:
+    return "timestamp" in rec and len(rec["timestamp"]) > 0
+
+
 def autopilot_ekf_frame(
     records: Mapping[tuple[str, int], Mapping[str, np.ndarray]], offset_us: int
 ) -> tuple[pd.DataFrame, list[StreamInfo]] | None:
@@ -727,7 +731,7 @@ def autopilot_ekf_frame(
     frames, streams = [], []
     for (topic, k), innov in sorted(records.items()):
         fields = INNOVATION_TOPICS.get(topic)
-        if fields is None or "timestamp" not in innov or not len(innov["timestamp"]):
+        if fields is None or not _has_rows(innov):
             continue
         ts = np.asarray(innov["timestamp"]).astype(np.int64)
         order = np.argsort(ts, kind="stable")
@@ -739,7 +743,7 @@ def autopilot_ekf_frame(
         described = f"px4/{topic}"
         for ratio_topic, ratio_fields in RATIO_TOPICS.items():
             ratios = records.get((ratio_topic, k))
-            if ratios is None or "timestamp" not in ratios or not len(ratios["timestamp"]):
+            if ratios is None or not _has_rows(ratios):
                 continue
             t_ratio = np.asarray(ratios["timestamp"]).astype(np.int64)
             for column, names in ratio_fields.items():

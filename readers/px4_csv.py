@@ -306,7 +306,10 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
     elif att_files:
         skipped.append(Skipped(att_files[0].name, "no sensor_combined table to attach the orientation to", 1))
     ekf_files = [f for f, k in files.items() if k == "ekf"]
-    ekf_records = {(str(topic_of(f)[0]), topic_of(f)[1]): records[f] | {"timestamp": times[f]} for f in ekf_files}
+    ekf_records = {}
+    for f in ekf_files:
+        topic, instance = topic_of(f)
+        ekf_records[(str(topic), instance)] = records[f] | {"timestamp": times[f]}
     ekf = autopilot_ekf_frame(ekf_records, offset_us)
     if ekf is not None:
         part.frames["autopilot_ekf"] = ekf[0]

@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.analysis import MIN_AUTOPILOT_ROWS, AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
 from spooflens.evidence import Evidence
 
@@ -61,8 +61,8 @@ class AutopilotEkfOptions:
     min_duration_s: float = 5.0  # real multipath glitches last seconds; an attack lasts
     merge_gap_s: float = 5.0
     rejected_ratio: float = 1.0  # the documented meaning: above 1 the filter rejects the measurement
-    min_rows: int = 20  # a core with fewer rows is not judged
-    quiet_level: float = 0.5  # of the alarm level: below it a row is quiet (the onset is the last quiet row)
+    min_rows: int = MIN_AUTOPILOT_ROWS  # a core with fewer rows is not judged
+    quiet_level: float = 0.5  # of the alarm level: below it a row is quiet (the onset search starts there)
 
 
 def _axis_z(x: FloatArray, floor: float) -> FloatArray:
@@ -117,7 +117,7 @@ def run_autopilot_ekf(ekf: pd.DataFrame, opts: AutopilotEkfOptions | None = None
     if not cores:
         return DetectorResult.skipped(
             NAME,
-            "the log has no autopilot GNSS innovations or test ratios (ArduPilot XKF3/XKF4, NKF3/NKF4)",
+            f"no autopilot filter core logged {opts.min_rows} rows of GNSS innovations or test ratios",
             Evidence.INERTIAL,
         )
     # every core's rows on one time line: a core votes with its latest row (within a second)

@@ -424,6 +424,7 @@ def _offline(
     stride: int = 1,
 ) -> RampOffline:
     last = model.n_epochs - 1 if last is None else last
+    stride = max(1, int(stride))
     # views where the model's arrays are contiguous already (the navigation's are): no copies
     A, Q, C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.A, model.Q, model.C, model.R, model.y))
     bf, flat = _two_filter_offline(
@@ -440,9 +441,9 @@ def _offline(
         np.diag(sigma**2),
         last,
         OFFLINE_BLOCK,
-        max(1, int(stride)),
+        stride,
     )
-    kept = np.arange(last + 1) % max(1, int(stride)) == 0
+    kept = np.arange(last + 1) % stride == 0
     return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])
 
 

@@ -226,8 +226,8 @@ class _Objective:
         return run_prepared(self.inputs, opts, self.start)
 
     def __call__(self, opts: FilterOptions) -> float:
-        sol = self.run(opts)
-        return score(sol, self.score_mask)
+        self.evaluations += 1
+        return self._score(opts)
 
     def many(self, candidates: Sequence[FilterOptions]) -> list[float]:
         """The score of each candidate, the runs side by side."""
