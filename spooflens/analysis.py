@@ -36,6 +36,7 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
     "spooflens.detectors.autopilot_ekf",
+    "spooflens.detectors.heading_reference",
     "spooflens.detectors.raim",
     "spooflens.detectors.satellite_signals",
     "spooflens.detectors.navigation_message",
@@ -104,6 +105,10 @@ def _has_autopilot_ekf(table: EpochTable) -> str | None:
     )
 
 
+def _has_headings(table: EpochTable) -> str | None:
+    return None if len(table.frame("headings")) else "a compass heading (NMEA HDT, HDG, THS or VHW)"
+
+
 def _has_fleet(table: EpochTable) -> str | None:
     """One log is never a fleet: `spooflens fleet` runs the fleet analysis with the other vehicles' logs."""
     return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
@@ -120,6 +125,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "two_receivers": _has_two_receivers,
     "fleet": _has_fleet,
     "autopilot_ekf": _has_autopilot_ekf,
+    "headings": _has_headings,
 }
 
 

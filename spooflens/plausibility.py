@@ -307,6 +307,7 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
         (("vdop",), 0.0, 1e4, "VDOP outside 0 .. 10,000"),
         (("cn0_mean_dbhz",), 0.0, 100.0, "mean C/N0 outside 0 .. 100 dB-Hz"),
     ),
+    "headings": ((("water_speed_mps",), 0.0, 50.0, "speed through the water outside 0 .. 50 m/s"),),
     "truth": ((("vel_e_mps", "vel_n_mps", "vel_u_mps"), -1e4, 1e4, "velocity above 10 km/s"),),
     "observations": (
         (("pseudorange_rate_mps",), -1e5, 1e5, "pseudorange rate above 100 km/s"),

@@ -175,6 +175,13 @@ HEADING_COLUMNS: tuple[Column, ...] = (
         "NMEA talker of the source (HE gyro, HC/SD magnetic compass made true, II integrated instruments; GP/GN "
         "a GNSS dual-antenna heading, which a spoofer can move)",
     ),
+    Column(
+        "water_speed_mps",
+        "float64",
+        "m/s",
+        "speed through the water from the vessel's log (NMEA VHW), NaN when the row carries none",
+        False,
+    ),
 )
 
 # The autopilot's own navigation filter, as it logged it (ArduPilot XKF3/XKF4, EKF2 NKF3/NKF4): evidence

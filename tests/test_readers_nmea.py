@@ -87,8 +87,14 @@ def test_bundg_counts_rates_units(bundg: EpochTable) -> None:
     assert first["cn0_mean_dbhz"] == pytest.approx(424 / 12)
     # SDHDG at ~10 Hz: magnetic 229.8 + 1.3 E variation = true 231.1
     headings = bundg.headings
-    assert len(headings) == 1457 and set(headings["heading_id"]) == {"SDHDG"}
-    assert headings["heading_deg"].iloc[0] == pytest.approx(231.1)
+    hdg = headings[headings["heading_id"] == "SDHDG"]
+    assert len(hdg) == 1457 and hdg["heading_deg"].iloc[0] == pytest.approx(231.1)
+    assert hdg["water_speed_mps"].isna().all()
+    # SDVHW: the speed log's sentence, true heading 231.3 and 6.6 kn through the water
+    vhw = headings[headings["heading_id"] == "SDVHW"]
+    assert len(vhw) == 150 and set(headings["heading_id"]) == {"SDHDG", "SDVHW"}
+    assert vhw["heading_deg"].iloc[0] == pytest.approx(231.3)
+    assert vhw["water_speed_mps"].iloc[0] == pytest.approx(6.6 * 1852 / 3600)
     sdhdg = bundg.stream("heading", "SDHDG")
     assert sdhdg is not None and 9.0 < sdhdg.rate_hz < 10.5
     unused = {s.stream: s.count for s in bundg.skipped if "does not use" in s.reason}

@@ -5,8 +5,9 @@ split off their logger's wrapping and checked (`lines.py`), decoded with pynmeag
 (`sentences.py`), and assembled into receivers, epochs and headings on one clock (`assembly.py`):
 
 - `fixes`: one row per receiver epoch, from GGA/GNS/RMC/GLL with VTG, GSA, GSV and GST;
-- `headings`: true headings from HDT, THS and HDG (a gyrocompass is a reference a spoofer cannot move;
-  a GNSS dual-antenna THS can be moved, its talker says which it is).
+- `headings`: true headings from HDT, THS, HDG and VHW (a gyrocompass is a reference a spoofer cannot
+  move; a GNSS dual-antenna THS can be moved, its talker says which it is), with VHW's speed through the
+  water from the vessel's log.
 
 Time reference `unix` when the log has dates (RMC, ZDA) or logger times, else `relative`. Every
 sentence that is not used is counted by type; bad checksums, cut lines and garbage are counted and

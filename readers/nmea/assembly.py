@@ -451,7 +451,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
 def _headings(
     files: list[DecodedFile], times_by_file: dict[int, dict[int, int]], skipped: list[Skipped]
 ) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
-    rows: list[tuple[int, str, float, str]] = []
+    rows: list[tuple[int, str, float, str, float]] = []
     no_value: Counter[str] = Counter()
     untimed: Counter[str] = Counter()
     for f in files:
@@ -467,15 +467,15 @@ def _headings(
             if t is None:
                 untimed[hid] += 1
                 continue
-            rows.append((t, hid, d.heading_deg % 360.0, d.talker))
+            rows.append((t, hid, d.heading_deg % 360.0, d.talker, d.water_speed_mps))
     for hid, n in no_value.items():
-        reason = "headings without a value (invalid, or magnetic without variation)"
+        reason = "headings without a value (invalid, magnetic without variation, or a speed log without heading)"
         skipped.append(Skipped(hid, reason, n))
     for hid, n in untimed.items():
         skipped.append(Skipped(hid, "headings in a file with no time at all (no epoch, no logger time)", n))
     if not rows:
         return None, []
-    frame = pd.DataFrame(rows, columns=["t_ns", "heading_id", "heading_deg", "talker"])
+    frame = pd.DataFrame(rows, columns=["t_ns", "heading_id", "heading_deg", "talker", "water_speed_mps"])
     streams = [
         StreamInfo("heading", str(hid), str(hid), f"NMEA {str(hid)[-3:]}", int(n))
         for hid, n in frame["heading_id"].value_counts(sort=False).items()

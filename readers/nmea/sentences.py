@@ -24,7 +24,7 @@ from spooflens.schema import FixType
 KNOT_MPS = 1852.0 / 3600.0
 POSITION_KINDS = ("GGA", "GNS", "RMC", "GLL")
 TIMED_KINDS = ("GGA", "GNS", "RMC", "GLL", "GST", "ZDA")
-HEADING_KINDS = ("HDT", "THS", "HDG")
+HEADING_KINDS = ("HDT", "THS", "HDG", "VHW")
 EPOCH_KINDS = ("VTG", "GSA", "GSV")  # no time of their own: they belong to their receiver's current epoch
 WANTED = frozenset(POSITION_KINDS + TIMED_KINDS + HEADING_KINDS + EPOCH_KINDS)
 
@@ -96,6 +96,7 @@ class Decoded:
     std_lon_m: float = math.nan
     std_alt_m: float = math.nan
     heading_deg: float = math.nan
+    water_speed_mps: float = math.nan  # VHW: the vessel's log, speed through the water
     satellites: list[tuple[int, float, float, float, int]] = field(default_factory=list)  # svid, el, az, C/N0, sig
 
     @property
@@ -236,6 +237,13 @@ def _hdg(d: Decoded, msg: Any) -> None:
     d.heading_deg = heading + dev + variation * sign[_str(msg, "variationEW")]
 
 
+def _vhw(d: Decoded, msg: Any) -> None:
+    """The speed log's sentence: true heading (when the compass feeds it) and speed through the water."""
+    d.heading_deg = _num(msg, "hdgT")
+    knots, kmh = _num(msg, "spdN"), _num(msg, "spdK")
+    d.water_speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
+
+
 _DECODERS = {
     "GGA": _gga,
     "GNS": _gns,
@@ -249,6 +257,7 @@ _DECODERS = {
     "HDT": _hdt,
     "THS": _ths,
     "HDG": _hdg,
+    "VHW": _vhw,
 }
 
 

@@ -1,0 +1,375 @@
+"""GNSS against the vessel's compass and speed log: a reference a spoofer of the receiver cannot move.
+
+A ship moves along its heading at its speed through the water, plus the water's current and a little
+leeway. Its gyrocompass or magnetic compass (NMEA HDT/HDG/THS) and its speed log (VHW) measure the
+first two without GNSS; so GNSS velocity minus that is the current, constant over minutes to hours, and
+a spoofer's drag or jump shows as a current that changes at once. With no speed log only the part of
+GNSS motion across the bow is tested: a vessel does not crab sideways beyond its leeway and the
+current.
+
+Per receiver, two GNSS velocities are compared with the reference:
+
+- `track`: the displacement between consecutive fixes, each interval's motion split along and across the
+  heading at its middle, averaged over a trailing `window_s` (a jump moves it for a whole window, a
+  single bad fix only where the window's ends pass it);
+- `velocity`: the receiver's own velocity (Doppler), when it reports one.
+
+Residual r = v_GNSS - STW * u_heading - c - l * u_starboard, with the current c (east, north) and the
+leeway l fitted to this log by a robust (Huber) least squares, refitted once without the alarmed part so
+an attack filling less than half the log cannot move it. Each component is judged as a robust z against
+its 1.4826 MAD over the rest of the log, floored at 0.2 m/s and at 2 degrees of heading error at the
+log's median speed (a compass and a receiver this good do not show less). Choices where nothing
+published fixes a number: the current is one vector for the whole log (tidal changes over hours widen
+the scale rather than raise alarms); the alarm level and duration are those of the autopilot's filter
+(8 robust sigma for 5 s), which a single bad fix or a few seconds of multipath cannot reach.
+
+Headings from a GNSS talker (GP/GN/GA/GB/GL/GQ/GI: a dual-antenna receiver) are not a reference: the
+spoofer moves them with the position.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.evidence import Evidence
+from spooflens.geodesy import metres_per_radian
+
+FloatArray = NDArray[np.float64]
+NAME = "heading_reference"
+GNSS_TALKERS = frozenset({"GP", "GN", "GA", "GB", "GL", "GQ", "GI", "BD"})
+MIN_REFERENCED_FIXES = 20
+
+
+@dataclass(frozen=True)
+class HeadingReferenceOptions:
+    window_s: float = 10.0  # the track statistic's trailing window
+    z_alarm: float = 8.0
+    min_duration_s: float = 5.0
+    merge_gap_s: float = 5.0
+    floor_mps: float = 0.2
+    heading_floor_deg: float = 2.0
+    max_age_s: float = 5.0  # a heading or water speed further than this from a fix is not used
+    quiet_level: float = 0.5  # of the alarm level: below it an epoch is quiet (the onset search starts there)
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The compass heading and the log's speed through the water, interpolated at given times."""
+
+    heading_id: str
+    t: FloatArray
+    sin: FloatArray
+    cos: FloatArray
+    water_t: FloatArray
+    water: FloatArray
+
+    def at(self, t: FloatArray, max_age_s: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(sin, cos of the heading, speed through the water) at t; NaN where no sample is near enough."""
+        s = np.interp(t, self.t, self.sin)
+        c = np.interp(t, self.t, self.cos)
+        norm = np.hypot(s, c)  # interpolating across a turn shortens the vector: back to unit length
+        far = _age(self.t, t) > max_age_s
+        s = np.where(far | (norm < 1e-6), np.nan, s / np.maximum(norm, 1e-6))
+        c = np.where(far | (norm < 1e-6), np.nan, c / np.maximum(norm, 1e-6))
+        if len(self.water_t):
+            w = np.where(_age(self.water_t, t) > max_age_s, np.nan, np.interp(t, self.water_t, self.water))
+        else:
+            w = np.full(len(t), np.nan)
+        return s, c, w
+
+
+def _age(samples: FloatArray, t: FloatArray) -> FloatArray:
+    """Distance from each t to the nearest sample time (samples sorted, at least one)."""
+    k = np.searchsorted(samples, t)
+    after = np.abs(samples[np.clip(k, 0, len(samples) - 1)] - t)
+    before = np.abs(t - samples[np.clip(k - 1, 0, len(samples) - 1)])
+    return np.minimum(before, after)
+
+
+def reference(headings: pd.DataFrame) -> Reference | None:
+    """The compass stream with the most rows (never a GNSS talker's), and every speed-log sample."""
+    own = headings[~headings["talker"].astype(str).isin(GNSS_TALKERS)]
+    if own.empty:
+        return None
+    best = own["heading_id"].value_counts().index[0]
+    h = own[own["heading_id"] == best].sort_values("t_s")
+    rad = np.radians(h["heading_deg"].to_numpy(dtype=float))
+    water = own[np.isfinite(own["water_speed_mps"].to_numpy(dtype=float))].sort_values("t_s")
+    return Reference(
+        str(best),
+        h["t_s"].to_numpy(dtype=float),
+        np.sin(rad),
+        np.cos(rad),
+        water["t_s"].to_numpy(dtype=float),
+        water["water_speed_mps"].to_numpy(dtype=float),
+    )
+
+
+def _design(sin_h: FloatArray, cos_h: FloatArray, water: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rows of the linear model of GNSS velocity given the reference: the along-heading row only where
+    the log gives the speed through the water, the across row always. Returns (A (n, 2, 3), offset
+    (n, 2)) with v_along - STW = c . u and v_across = c . p + leeway (u the heading's unit vector, p
+    starboard, c the current east/north)."""
+    n = len(sin_h)
+    A = np.zeros((n, 2, 3))
+    A[:, 0, 0], A[:, 0, 1] = sin_h, cos_h
+    A[:, 1, 0], A[:, 1, 1], A[:, 1, 2] = cos_h, -sin_h, 1.0
+    offset = np.stack([water, np.zeros(n)], axis=1)
+    return A, offset
+
+
+def _project(v: FloatArray, sin_h: FloatArray, cos_h: FloatArray) -> FloatArray:
+    """GNSS velocity (east, north) along and across (to starboard) the heading."""
+    return np.stack([v[:, 0] * sin_h + v[:, 1] * cos_h, v[:, 0] * cos_h - v[:, 1] * sin_h], axis=1)
+
+
+def _fit(y: FloatArray, A: FloatArray, use: NDArray[np.bool_]) -> FloatArray:
+    """Current (east, north) and leeway, robust to an attack filling a good part of the log: least absolute
+    deviations first (iteratively reweighted), then Tukey's biweight at 4.685 of their MAD, which gives
+    rows far off (the attacked ones) no weight at all. Huber alone was pulled a third of the way to a 2 m/s
+    drag covering a third of a log."""
+    rows = use[:, None] & np.isfinite(y) & np.isfinite(A).all(axis=2)
+    a = A[rows]
+    b = y[rows]
+    theta = np.zeros(3)
+    if len(b) < 3:
+        return theta
+    # a small ridge: with a steady heading and no speed log, the current across the bow and the leeway
+    # are one number; the smallest theta that explains it is as good as any
+    ridge = 1e-6 * np.eye(3)
+
+    def solve(w: FloatArray) -> FloatArray:
+        aw = a * w[:, None]
+        return np.asarray(np.linalg.solve(aw.T @ a + ridge, aw.T @ b), dtype=float)
+
+    w = np.ones(len(b))
+    for _ in range(20):  # L1 by IRLS
+        theta = solve(w)
+        w = 1.0 / np.maximum(np.abs(b - a @ theta), 1e-3)
+    r = b - a @ theta
+    scale = max(1.4826 * float(np.median(np.abs(r))), 1e-3)
+    for _ in range(10):
+        u = r / (4.685 * scale)
+        w = np.where(np.abs(u) < 1.0, (1.0 - u**2) ** 2, 0.0)
+        if w.sum() < 3:
+            break
+        theta = solve(w)
+        r = b - a @ theta
+    return theta
+
+
+def _residual(v: FloatArray, sin_h: FloatArray, cos_h: FloatArray, water: FloatArray, use: NDArray[np.bool_]):
+    """(residual (n, 2) along/across, fitted theta): GNSS velocity minus what the reference and the fitted
+    current and leeway explain; NaN along where the log gives no speed through the water."""
+    A, offset = _design(sin_h, cos_h, water)
+    y = _project(v, sin_h, cos_h) - offset
+    theta = _fit(y, A, use)
+    return y - A @ theta, theta
+
+
+def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> FloatArray:
+    """Per component |r| / max(1.4826 MAD over the quiet epochs, floor), combined over both components."""
+    out = np.zeros(len(r))
+    for j in range(r.shape[1]):
+        x = r[:, j]
+        ok = quiet & np.isfinite(x)
+        if ok.sum() < 5:
+            continue
+        med = float(np.median(x[ok]))
+        scale = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor)
+        out = np.hypot(out, np.nan_to_num(np.abs(x - med) / scale))
+    return out
+
+
+@dataclass(frozen=True)
+class ReceiverTest:
+    receiver_id: str
+    t: FloatArray
+    z: dict[str, FloatArray]  # channel -> combined robust z
+    residual: dict[str, FloatArray]  # channel -> (n, 2) along/across, m/s
+    current: FloatArray  # (east, north) m/s, fitted
+    leeway: float
+
+
+def _velocities(fixes: pd.DataFrame, opts: HeadingReferenceOptions) -> tuple[FloatArray, dict[str, FloatArray]]:
+    """Fix times and each channel's GNSS velocity (east, north) at them: the track over the trailing
+    window (per interval, weighted by its length) and the receiver's own velocity."""
+    t = fixes["t_s"].to_numpy(dtype=float)
+    lat = np.radians(fixes["lat_deg"].to_numpy(dtype=float))
+    lon = np.radians(fixes["lon_deg"].to_numpy(dtype=float))
+    mlat, mlon = metres_per_radian(lat, np.zeros(len(lat)))
+    dt = np.diff(t)
+    dlon = (np.diff(lon) + np.pi) % (2 * np.pi) - np.pi
+    d = np.stack([dlon * 0.5 * (mlon[1:] + mlon[:-1]), np.diff(lat) * 0.5 * (mlat[1:] + mlat[:-1])], axis=1)
+    ok = (dt > 0) & (dt <= opts.max_age_s) & np.isfinite(d).all(axis=1)
+    channels = {"track": np.where(ok[:, None], d / np.where(dt > 0, dt, 1.0)[:, None], np.nan)}
+    v = fixes[["vel_e_mps", "vel_n_mps"]].to_numpy(dtype=float)
+    if np.isfinite(v).all(axis=1).sum() >= MIN_REFERENCED_FIXES:
+        channels["velocity"] = v
+    return t, channels
+
+
+def _windowed(t_mid: FloatArray, dt: FloatArray, r: FloatArray, t: FloatArray, window_s: float) -> FloatArray:
+    """Each interval's residual averaged over the intervals that end in (t - window, t], per component
+    (with no speed log the along component is NaN throughout and the across one still counts)."""
+    t_end = t_mid + dt / 2
+    hi = np.searchsorted(t_end, t, side="right")
+    lo = np.searchsorted(t_end, t - window_s, side="right")
+    out = np.full((len(t), r.shape[1]), np.nan)
+    for j in range(r.shape[1]):
+        ok = np.isfinite(r[:, j])
+        w = np.where(ok, dt, 0.0)
+        cr = np.concatenate([[0.0], np.cumsum(np.where(ok, r[:, j], 0.0) * w)])
+        cw = np.concatenate([[0.0], np.cumsum(w)])
+        span = cw[hi] - cw[lo]
+        out[:, j] = np.where(span >= window_s / 2, (cr[hi] - cr[lo]) / np.maximum(span, 1e-9), np.nan)
+    return out
+
+
+def test_receiver(
+    fixes: pd.DataFrame, ref: Reference, opts: HeadingReferenceOptions, exclude: NDArray[np.bool_] | None = None
+) -> ReceiverTest | None:
+    """Both channels of one receiver's fixes (sorted by time) against the reference; `exclude` marks
+    fixes left out of the fit and the scale (a first pass's alarms)."""
+    t, channels = _velocities(fixes, opts)
+    if len(t) < MIN_REFERENCED_FIXES:
+        return None
+    sin_f, cos_f, water_f = ref.at(t, opts.max_age_s)
+    if np.isfinite(sin_f).sum() < MIN_REFERENCED_FIXES:
+        return None
+    quiet_fix = ~exclude if exclude is not None else np.ones(len(t), dtype=bool)
+    speed = np.nanmedian(np.where(np.isfinite(water_f), water_f, np.nan)) if np.isfinite(water_f).any() else None
+    z: dict[str, FloatArray] = {}
+    residual: dict[str, FloatArray] = {}
+    theta = np.zeros(3)
+    for name, v in channels.items():
+        if name == "track":
+            t_mid, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
+            s, c, w = ref.at(t_mid, opts.max_age_s)
+            use = quiet_fix[1:] & quiet_fix[:-1]
+            r_int, theta_c = _residual(v, s, c, w, use)
+            r = _windowed(t_mid, dt, r_int, t, opts.window_s)
+        else:
+            r, theta_c = _residual(v, sin_f, cos_f, water_f, quiet_fix)
+        if name == "velocity" or "velocity" not in channels:
+            theta = theta_c  # the Doppler velocity's fit is the finer one to report
+        gnss_speed = float(np.nanmedian(np.hypot(v[:, 0], v[:, 1]))) if np.isfinite(v).any() else 0.0
+        typical = speed if speed is not None and np.isfinite(speed) else gnss_speed
+        floor = float(np.hypot(opts.floor_mps, typical * np.sin(np.radians(opts.heading_floor_deg))))
+        residual[name] = r
+        z[name] = _z(r, quiet_fix, floor)
+    return ReceiverTest(str(fixes["receiver_id"].iloc[0]), t, z, residual, theta[:2], float(theta[2]))
+
+
+def _alarms(t: FloatArray, score: FloatArray, opts: HeadingReferenceOptions) -> list[Alarm]:
+    raised = score >= 1.0
+    alarms = [
+        a for a in alarm_intervals(t, score, raised, opts.merge_gap_s) if a.end_s - a.start_s >= opts.min_duration_s
+    ]
+    quiet = score < opts.quiet_level
+    out = []
+    for a in alarms:
+        before = np.flatnonzero((t < a.start_s) & quiet)
+        k = int(before[-1]) if len(before) else 0
+        while k > 0 and score[k - 1] <= score[k]:  # back down the rise to where it began
+            k -= 1
+        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=float(t[k])))
+    return out
+
+
+def _score(test: ReceiverTest, opts: HeadingReferenceOptions) -> FloatArray:
+    return np.max(np.stack(list(test.z.values())), axis=0) / opts.z_alarm
+
+
+def run_heading_reference(
+    fixes: pd.DataFrame, headings: pd.DataFrame, opts: HeadingReferenceOptions | None = None
+) -> DetectorResult:
+    opts = opts or HeadingReferenceOptions()
+    ref = reference(headings)
+    if ref is None:
+        return DetectorResult.skipped(
+            NAME, "no compass heading in the log (a GNSS receiver's heading is no reference)", Evidence.HEADING
+        )
+    tests: list[tuple[ReceiverTest, list[Alarm]]] = []
+    for _, rows in fixes.groupby("receiver_id", sort=True):
+        rows = rows.sort_values("t_s").reset_index(drop=True)
+        first = test_receiver(rows, ref, opts)
+        if first is None:
+            continue
+        alarmed = np.zeros(len(first.t), dtype=bool)
+        for a in _alarms(first.t, _score(first, opts), opts):
+            alarmed |= (first.t >= (a.onset_s or a.start_s)) & (first.t <= a.end_s)
+        # the current, the leeway and the scale refitted without what the first pass alarmed on
+        final = test_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
+        if final is not None:
+            tests.append((final, _alarms(final.t, _score(final, opts), opts)))
+    if not tests:
+        return DetectorResult.skipped(
+            NAME,
+            f"fewer than {MIN_REFERENCED_FIXES} fixes within {opts.max_age_s:g} s of a compass heading",
+            Evidence.HEADING,
+        )
+    water = "and speed log" if len(ref.water) else "(no speed log: across the bow only)"
+    result = DetectorResult(
+        NAME,
+        True,
+        f"{', '.join(t.receiver_id for t, _ in tests)} against {ref.heading_id} {water}: GNSS track and "
+        f"velocity beyond {opts.z_alarm:g} robust sigma for {opts.min_duration_s:g} s",
+        sorted((a for _, alarms in tests for a in alarms), key=lambda a: a.start_s),
+        evidence=Evidence.HEADING,
+    )
+    for test, alarms in tests:
+        rid = test.receiver_id
+        result.series.append(Series(f"{rid}/strength", test.t, _score(test, opts), "x alarm level", 1.0))
+        for name, r in test.residual.items():
+            result.series.append(Series(f"{rid}/{name}_residual", test.t, r, "m/s", None, ("along", "across")))
+        for a in alarms:
+            inside = (test.t >= a.start_s) & (test.t <= a.end_s)
+            peaks = []
+            for name, r in test.residual.items():
+                seg = np.where(np.isfinite(r[inside]), np.abs(r[inside]), -1.0)
+                if seg.size and seg.max() >= 0:
+                    j = int(np.argmax(seg.max(axis=0)))
+                    peaks.append(f"{name} {('along', 'across')[j]} {float(seg.max()):.1f} m/s")
+            result.findings.append(
+                Finding(
+                    f"{rid} against the vessel's heading {water}: {', '.join(peaks)} off what the compass"
+                    f" and the fitted current ({test.current[0]:+.1f} E, {test.current[1]:+.1f} N m/s) explain "
+                    f"({a.start_s:.1f}-{a.end_s:.1f} s)",
+                    a.start_s,
+                    a.end_s,
+                    receiver_id=rid,
+                )
+            )
+    return result
+
+
+def _run(ctx: AnalysisContext) -> list[DetectorResult]:
+    return [run_heading_reference(ctx.table.fixes, ctx.table.frame("headings"))]
+
+
+ANALYSIS = AnalysisSpec(
+    NAME,
+    "GNSS track and velocity against the vessel's compass heading and speed log",
+    ("fixes", "headings"),
+    _run,
+    (
+        DetectorInfo(
+            NAME,
+            Evidence.HEADING,
+            "GNSS motion the vessel's compass and speed log cannot explain",
+            "GNSS velocity (the track over a 10 s window, and the receiver's own velocity) split along and across "
+            "the compass heading, minus the speed through the water along it, minus a current and leeway fitted "
+            "robustly to the log; each component as a robust z-score against its scatter in the log (floored "
+            "at 0.2 m/s and 2 degrees of heading). A jump or a drag of the GNSS position moves the vessel where "
+            "its heading and log say it did not go.",
+            "8 robust sigma for 5 s",
+        ),
+    ),
+)
