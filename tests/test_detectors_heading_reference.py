@@ -188,3 +188,19 @@ def test_the_track_alone_finds_a_jump_across_the_bow_without_log_or_receiver_vel
     assert len(result.alarms) == 1
     # the jump is in the 10 s window's displacement until the window has passed it
     assert 450.0 <= result.alarms[0].start_s <= 451.0 and 455.0 <= result.alarms[0].end_s <= 460.0
+
+
+def test_a_jump_is_held_while_its_offset_lasts_and_ends_when_gnss_comes_back(bundg) -> None:
+    # the track sees a jump only while its 10 s window holds it; the offset from where the compass and
+    # log put the vessel lasts, and holds the incident until GNSS comes back or the dead reckoning's own
+    # growing error covers the offset
+    last = float(bundg.fixes["t_s"].max())
+    for attack, end in [("step:offset=3000,start=70", last), ("step:offset=3000,start=70,end=110", 110.0)]:
+        spoofed, _ = apply_attack(bundg, parse_attack(attack))
+        result = run_heading_reference(spoofed.fixes, spoofed.headings)
+        assert len(result.alarms) == 1, attack  # the jump back at 110 s is the end, not a second attack
+        assert result.alarms[0].end_s == pytest.approx(end, abs=1.0), attack
+    # 30 m: held for as long as 5 sigma of the dead reckoning stays below it, about half a minute here
+    spoofed, _ = apply_attack(bundg, parse_attack("step:offset=30,start=70"))
+    (alarm,) = run_heading_reference(spoofed.fixes, spoofed.headings).alarms
+    assert 95.0 <= alarm.end_s <= 120.0

@@ -23,13 +23,17 @@ published fixes a number: the current is one vector for the whole log (tidal cha
 the scale rather than raise alarms); the alarm level and duration are those of the autopilot's filter
 (8 robust sigma for 5 s), which a single bad fix or a few seconds of multipath cannot reach.
 
+An incident lasts while GNSS stays away from the dead reckoning from its last quiet fix (with the speed
+log): a jump is seen by the track only while its window holds it, but the offset it left lasts, until
+GNSS comes back or the dead reckoning's growing error covers it (`_held`).
+
 Headings from a GNSS talker (GP/GN/GA/GB/GL/GQ/GI: a dual-antenna receiver) are not a reference: the
 spoofer moves them with the position.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -56,6 +60,7 @@ class HeadingReferenceOptions:
     heading_floor_deg: float = 2.0
     max_age_s: float = 5.0  # a heading or water speed further than this from a fix is not used
     quiet_level: float = 0.5  # of the alarm level: below it an epoch is quiet (the onset search starts there)
+    hold_sigma: float = 5.0  # an incident lasts while GNSS is this far from the dead reckoning
 
 
 @dataclass(frozen=True)
@@ -173,9 +178,11 @@ def _residual(v: FloatArray, sin_h: FloatArray, cos_h: FloatArray, water: FloatA
     return y - A @ theta, theta
 
 
-def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> FloatArray:
-    """Per component |r| / max(1.4826 MAD over the quiet epochs, floor), combined over both components."""
+def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> tuple[FloatArray, float]:
+    """Per component |r| / max(1.4826 MAD over the quiet epochs, floor), combined over both components;
+    and the larger component scale."""
     out = np.zeros(len(r))
+    largest = floor
     for j in range(r.shape[1]):
         x = r[:, j]
         ok = quiet & np.isfinite(x)
@@ -183,8 +190,9 @@ def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> FloatArray:
             continue
         med = float(np.median(x[ok]))
         scale = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor)
+        largest = max(largest, scale)
         out = np.hypot(out, np.nan_to_num(np.abs(x - med) / scale))
-    return out
+    return out, largest
 
 
 @dataclass(frozen=True)
@@ -195,6 +203,10 @@ class ReceiverTest:
     residual: dict[str, FloatArray]  # channel -> (n, 2) along/across, m/s
     current: FloatArray  # (east, north) m/s, fitted
     leeway: float
+    # per fix interval, GNSS displacement minus the compass and log's (east, north, m): NaN without a
+    # speed log. Summed from before an incident, it is how far GNSS is from where the vessel went.
+    offset_step: FloatArray
+    track_scale: float  # m/s, the track residual's scale
 
 
 def _velocities(fixes: pd.DataFrame, opts: HeadingReferenceOptions) -> tuple[FloatArray, dict[str, FloatArray]]:
@@ -248,6 +260,7 @@ def test_receiver(
     z: dict[str, FloatArray] = {}
     residual: dict[str, FloatArray] = {}
     theta = np.zeros(3)
+    offset_step = np.full((len(t) - 1, 2), np.nan)
     for name, v in channels.items():
         if name == "track":
             t_mid, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
@@ -255,6 +268,9 @@ def test_receiver(
             use = quiet_fix[1:] & quiet_fix[:-1]
             r_int, theta_c = _residual(v, s, c, w, use)
             r = _windowed(t_mid, dt, r_int, t, opts.window_s)
+            # back to east/north: along the heading (sin, cos) and to starboard (cos, -sin)
+            offset_step = np.stack([r_int[:, 0] * s + r_int[:, 1] * c, r_int[:, 0] * c - r_int[:, 1] * s], axis=1)
+            offset_step *= dt[:, None]
         else:
             r, theta_c = _residual(v, sin_f, cos_f, water_f, quiet_fix)
         if name == "velocity" or "velocity" not in channels:
@@ -263,8 +279,12 @@ def test_receiver(
         typical = speed if speed is not None and np.isfinite(speed) else gnss_speed
         floor = float(np.hypot(opts.floor_mps, typical * np.sin(np.radians(opts.heading_floor_deg))))
         residual[name] = r
-        z[name] = _z(r, quiet_fix, floor)
-    return ReceiverTest(str(fixes["receiver_id"].iloc[0]), t, z, residual, theta[:2], float(theta[2]))
+        z[name], scale = _z(r, quiet_fix, floor)
+        if name == "track":
+            track_scale = scale
+    return ReceiverTest(
+        str(fixes["receiver_id"].iloc[0]), t, z, residual, theta[:2], float(theta[2]), offset_step, track_scale
+    )
 
 
 def _alarms(t: FloatArray, score: FloatArray, opts: HeadingReferenceOptions) -> list[Alarm]:
@@ -280,6 +300,42 @@ def _alarms(t: FloatArray, score: FloatArray, opts: HeadingReferenceOptions) -> 
         while k > 0 and score[k - 1] <= score[k]:  # back down the rise to where it began
             k -= 1
         out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=float(t[k])))
+    return out
+
+
+def _held(test: ReceiverTest, alarm: Alarm, opts: HeadingReferenceOptions) -> Alarm:
+    """The alarm, lasting while GNSS stays away from where the compass and log put the vessel since the
+    last quiet fix before the onset: a jump is seen by the track only while its window holds it, but the
+    offset it left lasts. The dead reckoning's own error grows with time (the track's scale per second,
+    e.g. a current that is not quite the fitted one), so an offset is held while it is beyond
+    `hold_sigma` of sqrt(window^2 + elapsed^2) x scale. Needs the speed log (along the heading too)."""
+    a = int(np.searchsorted(test.t, alarm.onset_s if alarm.onset_s is not None else alarm.start_s))
+    e = int(np.searchsorted(test.t, alarm.end_s))
+    steps = test.offset_step[a:]
+    if e >= len(test.t) - 1 or not np.isfinite(steps).all(axis=1).any():
+        return alarm
+    offset = np.hypot(*np.cumsum(np.nan_to_num(steps), axis=0).T)  # at fixes a+1, a+2, ...
+    elapsed = test.t[a + 1 :] - test.t[a]
+    held = offset > opts.hold_sigma * test.track_scale * np.hypot(opts.window_s, elapsed)
+    after = np.arange(a + 1, len(test.t)) > e
+    released = np.flatnonzero(after & ~held)
+    last = int(released[0]) + a if len(released) else len(test.t) - 1  # the last fix still held
+    if last <= e:
+        return alarm
+    return replace(alarm, end_s=float(test.t[last]))
+
+
+def _incidents(test: ReceiverTest, alarms: list[Alarm], opts: HeadingReferenceOptions) -> list[Alarm]:
+    """Each alarm held while its offset lasts. An alarm that starts where a held one was released is the
+    jump back (GNSS returned to where the vessel is, which is why the hold ended), not a new attack."""
+    out: list[Alarm] = []
+    released_at: float | None = None
+    for a in alarms:
+        if released_at is not None and (a.onset_s or a.start_s) <= released_at + opts.merge_gap_s:
+            continue
+        h = _held(test, a, opts)
+        released_at = h.end_s if h.end_s > a.end_s and h.end_s < test.t[-1] else None
+        out.append(h)
     return out
 
 
@@ -308,7 +364,7 @@ def run_heading_reference(
         # the current, the leeway and the scale refitted without what the first pass alarmed on
         final = test_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
         if final is not None:
-            tests.append((final, _alarms(final.t, _score(final, opts), opts)))
+            tests.append((final, _incidents(final, _alarms(final.t, _score(final, opts), opts), opts)))
     if not tests:
         return DetectorResult.skipped(
             NAME,
