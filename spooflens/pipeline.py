@@ -14,6 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from spooflens import plausibility
 from spooflens.analysis import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.detectors.base import DetectorResult
@@ -35,6 +37,12 @@ class Analysis:
     suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
 
 
+def last_fix_s(table: EpochTable) -> float | None:
+    """The time of the log's last GNSS fix: an incident lasting to it lasted to the end of the log."""
+    t = table.fixes["t_s"].to_numpy(dtype=float)
+    return float(np.nanmax(t)) if len(t) and np.isfinite(t).any() else None
+
+
 def _one_pass(
     table: EpochTable, options: AnalyzeOptions, on_step: Callable[[str], None] | None, cache: dict[str, object]
 ) -> tuple[AnalysisContext, Verdict]:
@@ -42,7 +50,7 @@ def _one_pass(
 
     ctx = AnalysisContext(table, options, cache=dict(cache))
     results = run_with_context(ctx, on_step)
-    verdict = decide(results)
+    verdict = decide(results, log_end_s=last_fix_s(table))
     if on_step and verdict.incidents:
         on_step("confirmation and reconstruction")
     return ctx, reconstruct(ctx, verdict)

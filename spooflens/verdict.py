@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, replace
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
 from spooflens.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
 
+ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
+
 
 @dataclass(frozen=True)
 class Incident:
@@ -151,7 +153,10 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     ).with_spans(spans)
 
 
-def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
+def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: float | None = None) -> Verdict:
+    """Incidents from every counted detector's alarms. An incident whose last alarm is within a second of
+    `log_end_s` (the last GNSS fix) was still going on when the log ended: its end is the log's, not the
+    attack's (the reconstruction stage says the same for the incidents it confirms)."""
     detectors = [r for r in results if r.is_detector]
     ran = tuple(r.name for r in detectors if r.ran and not r.advisory)
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
@@ -159,5 +164,12 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0) -> Verdict:
     counted = [r for r in detectors if r.ran and not r.advisory]
     alarms = [(a, r) for r in counted for a in r.alarms]
     incidents = [_incident(g) for g in _group(alarms, merge_gap_s)]
+    if log_end_s is not None:
+        incidents = [
+            replace(i, ongoing_at_end=True, end_method="last alarm, at the end of the log")
+            if i.end_s >= log_end_s - ONGOING_WITHIN_S
+            else i
+            for i in incidents
+        ]
     findings = [f for r in counted for f in r.findings]
     return Verdict(any(i.is_spoofing for i in incidents), incidents, ran, not_run, advisory, findings)

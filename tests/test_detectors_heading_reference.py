@@ -53,6 +53,8 @@ def test_a_jump_of_the_real_log_is_spoofing_with_the_heading_class(bundg, offset
     assert verdict.spoofed
     first = verdict.deciding_incident
     assert first is not None and Evidence.HEADING in first.corroborating
+    # 3 km is held to the last fix: the incident lasted to the end of the log, not to its last alarm
+    assert first.ongoing_at_end == (offset_m == 3000.0)
 
 
 def test_a_drag_of_a_third_of_the_real_log_is_found_to_its_end(bundg) -> None:

@@ -27,3 +27,14 @@ def test_one_detector_keeps_its_own_interval_and_a_later_alarm_does_not_stretch_
     later = _result("gnss_consistency", Evidence.GNSS_ONLY, Alarm(75.0, 80.0, 30.0, 76.0, 74.0))
     incident = decide([inertial, later]).incidents[0]
     assert incident.onset_interval_s == pytest.approx((50.0, 50.4))
+
+
+def test_an_incident_that_lasts_to_the_last_fix_is_ongoing_at_the_end_of_the_log() -> None:
+    heading = _result(
+        "heading_reference", Evidence.HEADING, Alarm(70.0, 147.6, 50.0, 71.0, 69.0), Alarm(20.0, 30.0, 9.0, 21.0, 19.0)
+    )
+    incidents = decide([heading], log_end_s=148.4).incidents
+    assert [i.ongoing_at_end for i in incidents] == [False, True]
+    assert incidents[1].end_method == "last alarm, at the end of the log"
+    # without the log's end the verdict cannot tell
+    assert not any(i.ongoing_at_end for i in decide([heading]).incidents)

@@ -32,6 +32,7 @@ from spooflens.fleet.offsets import (
     overlap_groups,
     vehicle_offsets,
 )
+from spooflens.pipeline import last_fix_s
 from spooflens.recording import APP_ID, COLOURS, entity
 from spooflens.verdict import Verdict, decide
 
@@ -97,7 +98,7 @@ def run_fleet(
             v.table, v.offsets if v.name in members else None, why, fh if v.name in members else None, opts
         )
         v.results = [res if r.name == NAME else r for r in v.results]
-        v.verdict = decide(v.results)
+        v.verdict = decide(v.results, log_end_s=last_fix_s(v.table))
     return vehicles, fh, notes
 
 
