@@ -103,7 +103,10 @@ class FilterOptions:
 
 
 RECORDED = ("Phi", "Qd", "H", "P_pred", "P_upd")
-SMOOTHER_NEEDS = ("Phi", "P_pred", "P_upd")
+SMOOTHER_NEEDS = ("Phi", "Qd", "P_upd")
+# an analysis's solution: the smoother, the detectors' model (Phi, Qd, H) and coasts (P_upd); the
+# predicted covariances only at the first epoch, the model's prior (the smoother makes the rest)
+ANALYSIS_NEEDS = ("Phi", "Qd", "H", "P_upd")
 
 
 def _kept(record: bool | tuple[str, ...]) -> NDArray[np.bool_]:
@@ -169,7 +172,7 @@ class NavSolution:
     dof: NDArray[np.int64]  # (M,)
     Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
     Qd: FloatArray  # (M, 24, 24)
-    P_pred: FloatArray  # (M, 24, 24); the first only in a `product.Navigation` (smoothed already)
+    P_pred: FloatArray  # (M, 24, 24) when recorded; else the first epoch only
     P_upd: FloatArray  # (M, 24, 24)
     dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
     gm: FloatArray  # (M, 9) estimated sensor errors (receiver, odometry) after the update

@@ -14,6 +14,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.navigation.alignment import Alignment, heading_from_course
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.loosely_coupled import (
+    ANALYSIS_NEEDS,
     FilterInputs,
     FilterOptions,
     NavSolution,
@@ -31,7 +32,7 @@ ENU = ("east", "north", "up")
 
 @dataclass(frozen=True)
 class Navigation:
-    solution: NavSolution  # P_pred holds the first epoch only (smoothed already: `smoothed`)
+    solution: NavSolution  # P_pred holds the first epoch only (ANALYSIS_NEEDS)
     smoothed: SmoothedSolution
     model: LinearGaussianModel  # the linearised error model the model-based detectors run on
     learned: LearnedNoise  # the sensor noise learned from this log, and how
@@ -56,11 +57,9 @@ def solve_navigation(
     inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
     odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
     learned = learn_noise(inputs, preset, start, odometry_id, exclude)
-    opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry)
+    opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry, record=ANALYSIS_NEEDS)
     sol = run_prepared(inputs, opts, start)
     smoothed, model = smooth(sol), sol.error_model()
-    # the smoother and the model's prior were the last readers of the predicted covariances
-    sol = replace(sol, P_pred=sol.P_pred[:1].copy())
     return Navigation(sol, smoothed, model, learned, inputs, start)
 
 

@@ -31,7 +31,7 @@ class SmoothedSolution:
 
 
 def smooth(sol: NavSolution) -> SmoothedSolution:
-    delta, var = kernels.rts_closed_loop(sol.P_pred, sol.P_upd, sol.Phi, sol.dx)
+    delta, var = kernels.rts_closed_loop(sol.P_upd, sol.Phi, sol.Qd, sol.dx)
     state = np.array([kernels.correct(x, d[:15]) for x, d in zip(sol.state, delta, strict=True)])
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
