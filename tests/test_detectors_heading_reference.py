@@ -4,6 +4,7 @@ headings)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,14 @@ from spooflens.detectors.heading_reference import run_heading_reference
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic
 from spooflens.pipeline import analyze_table
+from spooflens.simulation.sensors import (
+    TIDE_PERIOD_S,
+    CompassModel,
+    compass_readings,
+    realistic_compass,
+    realistic_receiver,
+)
+from spooflens.simulation.simulate import SCENARIOS, simulate
 
 BUNDG = Path(__file__).resolve().parents[2] / "shared" / "real" / "nmea_boats" / "gpsd_bundg_zeus_9.log"
 
@@ -206,3 +215,30 @@ def test_a_jump_is_held_while_its_offset_lasts_and_ends_when_gnss_comes_back(bun
     spoofed, _ = apply_attack(bundg, parse_attack("step:offset=30,start=70"))
     (alarm,) = run_heading_reference(spoofed.fixes, spoofed.headings).alarms
     assert 95.0 <= alarm.end_s <= 120.0
+
+
+def test_the_simulated_compass_and_log_explain_the_ground_track() -> None:
+    # a perfect compass and log: heading and speed through the water plus the current are the ground
+    # velocity (the tide at its phase, no leeway)
+    t = np.arange(0.0, 600.0, 1.0)
+    v = np.c_[3.0 * np.sin(t / 100.0), 3.0 * np.cos(t / 100.0) + 1.0]
+    model = CompassModel(noise_deg=0.0, log_noise_mps=0.0, current_mps=(0.3, -0.2), tide_mps=(0.2, 0.1))
+    heading, log = compass_readings(t, v, model, np.random.default_rng(0))
+    h = np.radians(heading)
+    tide = np.sin(2 * np.pi * t / TIDE_PERIOD_S)[:, None] * np.array([0.2, 0.1])
+    rebuilt = log[:, None] * np.c_[np.sin(h), np.cos(h)] + np.array([0.3, -0.2]) + tide
+    assert np.abs(rebuilt - v).max() < 1e-9
+
+
+def test_simulated_voyages_with_realistic_compasses_are_quiet_and_a_capture_is_found() -> None:
+    # voyage records as `bench realworld --vehicle ship_nmea` draws them: gyro or magnetic compass with
+    # deviation, a speed log off by up to 8 %, currents and tides, leeway; GNSS with correlated errors
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        sc = replace(SCENARIOS["ship"], receiver=realistic_receiver(rng), compass=realistic_compass(rng))
+        table = simulate(sc, seed=seed, duration_s=1200.0).table
+        clean = run_heading_reference(table.fixes, table.headings)
+        assert clean.ran and not clean.alarms and np.nanmax(_strength(clean)) < 0.5, seed
+        spoofed, _ = apply_attack(table, parse_attack("ramp:rate=5,vel=1,start=600"))
+        (alarm,) = run_heading_reference(spoofed.fixes, spoofed.headings).alarms
+        assert 600.0 <= alarm.start_s <= 602.0 and alarm.end_s == pytest.approx(1199.0, abs=1.0), seed

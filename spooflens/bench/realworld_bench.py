@@ -27,13 +27,17 @@ from rich.table import Table
 
 from spooflens.console import console, progress, show_progress
 
-# vehicle -> (scenario, seconds of log, IMU grade override or None)
+# vehicle -> (scenario, seconds of log)
 VEHICLES: dict[str, tuple[str, float]] = {
     "multirotor": ("multirotor", 600.0),
     "car": ("ground", 300.0),
     "ship": ("ship", 1200.0),
     "aircraft": ("aircraft", 600.0),
+    "ship_nmea": ("ship", 1200.0),
 }
+# a ship's voyage record: GNSS fixes, its compass and its speed log (`realistic_compass`), no IMU; the
+# heading reference is the only independent evidence there
+VOYAGE_RECORDS = frozenset({"ship_nmea"})
 ATTACKS: dict[str, str] = {
     "capture": "capture",
     "ramp 1 m/s": "ramp:rate=1,vel=1",
@@ -57,13 +61,18 @@ class Run:
 def _table(run: Run) -> tuple[Any, float | None]:
     """The simulated (and attacked) log of a run, and the attack's first spoofed fix time."""
     from spooflens.attacks import apply_attack, parse_attack
-    from spooflens.simulation.sensors import realistic_receiver
+    from spooflens.schema import empty_frame
+    from spooflens.simulation.sensors import realistic_compass, realistic_receiver
     from spooflens.simulation.simulate import SCENARIOS, simulate
 
     scenario, seconds = VEHICLES[run.vehicle]
     rng = np.random.default_rng(run.seed)
     sc = replace(SCENARIOS[scenario], receiver=realistic_receiver(rng))
+    if run.vehicle in VOYAGE_RECORDS:
+        sc = replace(sc, compass=realistic_compass(rng))
     table = simulate(sc, seed=run.seed, duration_s=seconds).table
+    if run.vehicle in VOYAGE_RECORDS:
+        table = replace(table, imu=empty_frame("imu"), streams=[s for s in table.streams if s.role != "imu"])
     if run.attack is None:
         return table, None
     start = float(rng.uniform(seconds / 3, 2 * seconds / 3))
@@ -224,6 +233,13 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
 @click.option("--clean-hours", default=10.0, show_default=True, help="Hours of clean logs (false incidents).")
 @click.option("--workers", default=2, show_default=True, help="Processes.")
 @click.option("--seed", default=1000, show_default=True)
+@click.option(
+    "--vehicle",
+    "vehicles",
+    multiple=True,
+    type=click.Choice(list(VEHICLES)),
+    help="Only these vehicles (repeatable; default all). ship_nmea: a voyage record, compass and log, no IMU.",
+)
 @click.option("--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write all figures here.")
 @click.option("--quick", is_flag=True, help="One run per case and 1 h clean (a smoke test, not the figures).")
 @click.option(
@@ -235,7 +251,14 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     help="The real clean husky bag, attacked by injection (skipped if missing).",
 )
 def command(
-    runs: int, clean_hours: float, workers: int, seed: int, json_path: Path | None, quick: bool, husky_path: Path
+    runs: int,
+    clean_hours: float,
+    workers: int,
+    seed: int,
+    vehicles: tuple[str, ...],
+    json_path: Path | None,
+    quick: bool,
+    husky_path: Path,
 ) -> int:
     """Real-world-like Monte Carlo: detection and delay per attack kind, false incidents per 100 h; the
     real husky bag with injected ramps and captures."""
@@ -265,7 +288,7 @@ def command(
                 ", ".join(r.get("evidence", [])),
             )
         console().print(t)
-    out = run_bench(runs, clean_hours, workers, seed)
+    out = run_bench(runs, clean_hours, workers, seed, vehicles)
     out["husky"] = husky_rows
     t = Table(
         "attack",
@@ -277,7 +300,7 @@ def command(
         "onset interval covers truth",
         "median interval width (s)",
         "incident runs to log end",
-        title="Simulated vehicles (multirotor, car, ship, aircraft) with realistic receivers: the whole analysis",
+        title=f"Simulated vehicles ({', '.join(vehicles or VEHICLES)}) with realistic receivers: the whole analysis",
     )
     for kind, k in out["per_attack"].items():
 

@@ -244,7 +244,7 @@ def _windowed(t_mid: FloatArray, dt: FloatArray, r: FloatArray, t: FloatArray, w
     return out
 
 
-def test_receiver(
+def judge_receiver(
     fixes: pd.DataFrame, ref: Reference, opts: HeadingReferenceOptions, exclude: NDArray[np.bool_] | None = None
 ) -> ReceiverTest | None:
     """Both channels of one receiver's fixes (sorted by time) against the reference; `exclude` marks
@@ -355,14 +355,14 @@ def run_heading_reference(
     tests: list[tuple[ReceiverTest, list[Alarm]]] = []
     for _, rows in fixes.groupby("receiver_id", sort=True):
         rows = rows.sort_values("t_s").reset_index(drop=True)
-        first = test_receiver(rows, ref, opts)
+        first = judge_receiver(rows, ref, opts)
         if first is None:
             continue
         alarmed = np.zeros(len(first.t), dtype=bool)
         for a in _alarms(first.t, _score(first, opts), opts):
             alarmed |= (first.t >= (a.onset_s or a.start_s)) & (first.t <= a.end_s)
         # the current, the leeway and the scale refitted without what the first pass alarmed on
-        final = test_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
+        final = judge_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
         if final is not None:
             tests.append((final, _incidents(final, _alarms(final.t, _score(final, opts), opts), opts)))
     if not tests:

@@ -186,3 +186,65 @@ def receiver_fix_errors(
         "cn0_mean_dbhz": model.cn0_dbhz + 0.5 * slow[:, 0] + rng.normal(0.0, 0.3, n),
     }
     return pos, vel, reported
+
+
+@dataclass(frozen=True)
+class CompassModel:
+    """A vessel's own heading and speed sensors as real ones are: a gyrocompass (a few tenths of a degree)
+    or a magnetic compass with its residual deviation (a one-cycle curve over the heading, degrees), a
+    speed log with a calibration error of some per cent, and the water the vessel moves through: a
+    current with a tidal part (12.42 h) and a leeway angle. The vessel's ground track is the truth; its
+    heading and speed through the water follow from it and the water's motion. `realistic_compass`
+    draws one."""
+
+    noise_deg: float = 0.3
+    deviation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # A + B sin(h) + C cos(h)
+    talker: str = "HE"  # HE gyro, HC magnetic compass made true
+    log_scale: float = 1.0  # speed log reading / true speed through the water
+    log_noise_mps: float = 0.05
+    current_mps: tuple[float, float] = (0.0, 0.0)  # mean east, north
+    tide_mps: tuple[float, float] = (0.0, 0.0)  # tidal amplitude east, north
+    tide_phase: float = 0.0
+    leeway_deg: float = 0.0  # heading minus the water track's direction
+
+
+TIDE_PERIOD_S = 12.42 * 3600.0
+
+
+def realistic_compass(rng: np.random.Generator) -> CompassModel:
+    """One draw: half gyrocompasses, half magnetic compasses with up to 3 degrees of residual deviation;
+    a speed log within 8 % of the truth; currents up to 1 m/s with tides up to 1 m/s; leeway up to
+    3 degrees."""
+    magnetic = bool(rng.random() < 0.5)
+    dev = tuple(float(x) for x in rng.uniform(-3.0, 3.0, 3)) if magnetic else (0.0, 0.0, 0.0)
+    current = rng.normal(0.0, 0.5, 2)
+    tide_dir = rng.uniform(0.0, 2 * np.pi)
+    tide = float(rng.uniform(0.0, 1.0))
+    return CompassModel(
+        noise_deg=float(rng.uniform(0.5, 1.5) if magnetic else rng.uniform(0.1, 0.5)),
+        deviation_deg=(dev[0], dev[1], dev[2]),
+        talker="HC" if magnetic else "HE",
+        log_scale=float(rng.uniform(0.92, 1.08)),
+        log_noise_mps=float(rng.uniform(0.02, 0.15)),
+        current_mps=(float(current[0]), float(current[1])),
+        tide_mps=(tide * float(np.sin(tide_dir)), tide * float(np.cos(tide_dir))),
+        tide_phase=float(rng.uniform(0.0, 2 * np.pi)),
+        leeway_deg=float(rng.uniform(-3.0, 3.0)),
+    )
+
+
+def compass_readings(
+    t: FloatArray, v_ground_en: FloatArray, model: CompassModel, rng: np.random.Generator
+) -> tuple[FloatArray, FloatArray]:
+    """(true heading in degrees [0, 360), speed-log reading in m/s) at times t of a vessel whose ground
+    velocity (east, north) is v_ground_en: through the water it moves at v_ground - current, its bow
+    `leeway_deg` off that track."""
+    tide = np.sin(2 * np.pi * t / TIDE_PERIOD_S + model.tide_phase)[:, None] * np.asarray(model.tide_mps)
+    water = v_ground_en - np.asarray(model.current_mps) - tide
+    h = np.degrees(np.arctan2(water[:, 0], water[:, 1])) + model.leeway_deg
+    a, b, c = model.deviation_deg
+    hr = np.radians(h)
+    shown = h + a + b * np.sin(hr) + c * np.cos(hr) + rng.normal(0.0, model.noise_deg, len(t))
+    stw = np.hypot(water[:, 0], water[:, 1]) * np.cos(np.radians(model.leeway_deg))
+    log = np.clip(model.log_scale * stw + rng.normal(0.0, model.log_noise_mps, len(t)), 0.0, None)
+    return shown % 360.0, log

@@ -20,7 +20,15 @@ from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.rotations import matrix_to_quat, rotvec_to_matrix
 from spooflens.schema import FixType
 from spooflens.simulation.observations import ObservationNoise
-from spooflens.simulation.sensors import GnssNoise, ReceiverModel, gnss_errors, noisy_imu, receiver_fix_errors
+from spooflens.simulation.sensors import (
+    CompassModel,
+    GnssNoise,
+    ReceiverModel,
+    compass_readings,
+    gnss_errors,
+    noisy_imu,
+    receiver_fix_errors,
+)
 from spooflens.simulation.trajectories import PROFILES, Profile, Truth, generate
 
 # 2026-03-01T12:00:00Z: a fixed start so simulated logs are byte-for-byte reproducible
@@ -45,6 +53,8 @@ class Scenario:
     # A receiver as real ones behave (correlated errors, misstated accuracies, indicators); None: the
     # plain `gnss` noise model with honest accuracies
     receiver: ReceiverModel | None = None
+    # a vessel's compass and speed log (and the water it moves through): the `headings` frame
+    compass: CompassModel | None = None
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -204,6 +214,19 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     frames = {"imu": pd.DataFrame(imu_cols), "fixes": pd.concat(fix_frames, ignore_index=True), "truth": truth_frame}
     if obs_frames:
         frames["observations"] = pd.concat(obs_frames, ignore_index=True)
+    if sc.compass is not None:
+        heading, log = compass_readings(truth.t[g_idx], truth.v_enu[g_idx, :2], sc.compass, rng)
+        hid = f"{sc.compass.talker}{'HDT' if sc.compass.talker == 'HE' else 'HDG'}"
+        frames["headings"] = pd.DataFrame(
+            {
+                "t_ns": t_ns[g_idx],
+                "heading_id": hid,
+                "heading_deg": heading,
+                "talker": sc.compass.talker,
+                "water_speed_mps": log,
+            }
+        )
+        streams.append(StreamInfo("heading", hid, hid, f"NMEA {hid[-3:]} with VHW", len(g_idx)))
     table = build_table(
         Path(f"simulated_{sc.name}_seed{seed}"), "simulation", "unix", frames, streams, [], t0_ns=t0_unix_ns
     )
