@@ -195,7 +195,7 @@ def test_the_track_alone_finds_a_jump_across_the_bow_without_log_or_receiver_vel
     fixes[["vel_e_mps", "vel_n_mps"]] = np.nan  # GGA only: no Doppler velocity
     across = np.array([np.cos(np.radians(70.0)), -np.sin(np.radians(70.0))])
     result = run_heading_reference(_shift(fixes, (t >= 450.0)[:, None] * 60.0 * across), headings)
-    assert [s.name for s in result.series] == ["GP/strength", "GP/track_residual"]
+    assert [s.name for s in result.series] == ["GP/strength", "GP/level", "GP/track_residual"]
     assert len(result.alarms) == 1
     # the jump is in the 10 s window's displacement until the window has passed it
     assert 450.0 <= result.alarms[0].start_s <= 451.0 and 455.0 <= result.alarms[0].end_s <= 460.0

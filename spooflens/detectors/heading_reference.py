@@ -15,13 +15,20 @@ Per receiver, two GNSS velocities are compared with the reference:
 - `velocity`: the receiver's own velocity (Doppler), when it reports one.
 
 Residual r = v_GNSS - STW * u_heading - c - l * u_starboard, with the current c (east, north) and the
-leeway l fitted to this log by a robust (Huber) least squares, refitted once without the alarmed part so
-an attack filling less than half the log cannot move it. Each component is judged as a robust z against
-its 1.4826 MAD over the rest of the log, floored at 0.2 m/s and at 2 degrees of heading error at the
-log's median speed (a compass and a receiver this good do not show less). Choices where nothing
-published fixes a number: the current is one vector for the whole log (tidal changes over hours widen
-the scale rather than raise alarms); the alarm level and duration are those of the autopilot's filter
-(8 robust sigma for 5 s), which a single bad fix or a few seconds of multipath cannot reach.
+leeway l fitted to this log (least absolute deviations, then Tukey's biweight), refitted once without
+the alarmed part. What opens an alarm is how r changes: against its own median over the two minutes
+ending a window before (`baseline_s`), in east/north where both components are known (so a turn does
+not rotate a current misfit into a change). The current is allowed to change over minutes (tides, a
+river mouth); a spoofer's jump or drag changes r within a window. Each component is a robust z against
+its 1.4826 MAD over the log, floored at 0.2 m/s and at 2 degrees of heading at the log's median speed
+(a compass and a receiver this good do not show less). An open alarm lasts while r stays beyond the
+alarm level against the baseline frozen at the onset (the attack cannot enter it), and the onset
+interval runs from where the change's rise began to the first fix it left its quiet level at. The
+residual against the whole log's fit (`level`) is drawn but opens nothing: when an attack fills most of
+a log, the fitted current is the attacked one and the clean stretch looks off. Choices where nothing
+published fixes a number: the alarm level and duration are those of the autopilot's filter (8 robust
+sigma for 5 s), which a single bad fix or a few seconds of multipath cannot reach; a drift of the
+velocity slower than the two-minute baseline (a pull of tenths of a m/s per minute) is not seen.
 
 An incident lasts while GNSS stays away from the dead reckoning from its last quiet fix (with the speed
 log): a jump is seen by the track only while its window holds it, but the offset it left lasts, until
@@ -61,6 +68,8 @@ class HeadingReferenceOptions:
     max_age_s: float = 5.0  # a heading or water speed further than this from a fix is not used
     quiet_level: float = 0.5  # of the alarm level: below it an epoch is quiet (the onset search starts there)
     hold_sigma: float = 5.0  # an incident lasts while GNSS is this far from the dead reckoning
+    # the change statistic's baseline: the median of the residual over this long, ending `window_s` before
+    baseline_s: float = 120.0
 
 
 @dataclass(frozen=True)
@@ -178,28 +187,53 @@ def _residual(v: FloatArray, sin_h: FloatArray, cos_h: FloatArray, water: FloatA
     return y - A @ theta, theta
 
 
-def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> tuple[FloatArray, float]:
-    """Per component |r| / max(1.4826 MAD over the quiet epochs, floor), combined over both components;
-    and the larger component scale."""
+def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> tuple[FloatArray, FloatArray]:
+    """Per component |r - median| / max(1.4826 MAD over the quiet epochs, floor), combined over both
+    components (hypot); and each component's scale (NaN for a component with too few values)."""
     out = np.zeros(len(r))
-    largest = floor
+    scales = np.full(r.shape[1], np.nan)
     for j in range(r.shape[1]):
         x = r[:, j]
         ok = quiet & np.isfinite(x)
         if ok.sum() < 5:
             continue
         med = float(np.median(x[ok]))
-        scale = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor)
-        largest = max(largest, scale)
-        out = np.hypot(out, np.nan_to_num(np.abs(x - med) / scale))
-    return out, largest
+        scales[j] = max(1.4826 * float(np.median(np.abs(x[ok] - med))), floor)
+        out = np.hypot(out, np.nan_to_num(np.abs(x - med) / scales[j]))
+    return out, scales
+
+
+def _trailing_median(t: FloatArray, x: FloatArray, span_s: float, gap_s: float) -> FloatArray:
+    """Per component, the median of x over the fixes in [t - gap - span, t - gap] (NaN before any)."""
+    idx = pd.to_timedelta(t, unit="s")
+    out = np.full(x.shape, np.nan)
+    for j in range(x.shape[1]):
+        med = pd.Series(x[:, j], index=idx).rolling(pd.Timedelta(seconds=span_s), min_periods=3).median()
+        m = med.to_numpy(dtype=float)
+        ok = np.isfinite(m)
+        if ok.sum() >= 2:
+            out[:, j] = np.interp(t - gap_s, t[ok], m[ok], left=np.nan)
+    return out
+
+
+def _earth(r: FloatArray, sin_h: FloatArray, cos_h: FloatArray) -> FloatArray:
+    """Along/across residuals back to east/north where both are known (a turn does not rotate a current
+    misfit there); across alone stays as it is."""
+    both = np.asarray(np.isfinite(r).all(axis=1), dtype=bool)
+    e = r[:, 0] * sin_h + r[:, 1] * cos_h
+    n = r[:, 0] * cos_h - r[:, 1] * sin_h
+    return np.where(both[:, None], np.stack([e, n], axis=1), r)
 
 
 @dataclass(frozen=True)
 class ReceiverTest:
     receiver_id: str
     t: FloatArray
-    z: dict[str, FloatArray]  # channel -> combined robust z
+    z: dict[str, FloatArray]  # channel -> combined robust z of the residual (its level)
+    z_change: dict[str, FloatArray]  # channel -> the same of its change against the trailing baseline
+    # channel -> (residual in east/north where both are known (n, 2), its trailing baseline (n, 2), the
+    # change's scale per component (2,)): what an open alarm is judged against, frozen at its onset
+    change_parts: dict[str, tuple[FloatArray, FloatArray, FloatArray]]
     residual: dict[str, FloatArray]  # channel -> (n, 2) along/across, m/s
     current: FloatArray  # (east, north) m/s, fitted
     leeway: float
@@ -258,6 +292,8 @@ def judge_receiver(
     quiet_fix = ~exclude if exclude is not None else np.ones(len(t), dtype=bool)
     speed = np.nanmedian(np.where(np.isfinite(water_f), water_f, np.nan)) if np.isfinite(water_f).any() else None
     z: dict[str, FloatArray] = {}
+    z_change: dict[str, FloatArray] = {}
+    change_parts: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = {}
     residual: dict[str, FloatArray] = {}
     theta = np.zeros(3)
     offset_step = np.full((len(t) - 1, 2), np.nan)
@@ -279,27 +315,83 @@ def judge_receiver(
         typical = speed if speed is not None and np.isfinite(speed) else gnss_speed
         floor = float(np.hypot(opts.floor_mps, typical * np.sin(np.radians(opts.heading_floor_deg))))
         residual[name] = r
-        z[name], scale = _z(r, quiet_fix, floor)
+        z[name], scales = _z(r, quiet_fix, floor)
+        # the change: against the residual's own median over the two minutes before the window, in
+        # east/north where both components are known; it needs no baseline from the whole log, so an
+        # attack filling most of the log still shows where it began
+        flat = _earth(r, sin_f, cos_f)
+        baseline = _trailing_median(t, flat, opts.baseline_s, opts.window_s)
+        z_change[name], change_scales = _z(flat - baseline, quiet_fix, floor)
+        change_parts[name] = (flat, baseline, change_scales)
         if name == "track":
-            track_scale = scale
+            track_scale = float(np.nanmax(scales))
     return ReceiverTest(
-        str(fixes["receiver_id"].iloc[0]), t, z, residual, theta[:2], float(theta[2]), offset_step, track_scale
+        str(fixes["receiver_id"].iloc[0]),
+        t,
+        z,
+        z_change,
+        change_parts,
+        residual,
+        theta[:2],
+        float(theta[2]),
+        offset_step,
+        track_scale,
     )
 
 
-def _alarms(t: FloatArray, score: FloatArray, opts: HeadingReferenceOptions) -> list[Alarm]:
-    raised = score >= 1.0
-    alarms = [
-        a for a in alarm_intervals(t, score, raised, opts.merge_gap_s) if a.end_s - a.start_s >= opts.min_duration_s
+def _from_onset(test: ReceiverTest, k: int) -> FloatArray:
+    """Every fix's residual against the baseline as it was at fix k (frozen there, before the attack
+    could enter it), as a combined robust z over the alarm level, the largest channel."""
+    out = np.zeros(len(test.t))
+    for flat, baseline, scales in test.change_parts.values():
+        frozen = baseline[k]
+        z = np.zeros(len(test.t))
+        for j in range(flat.shape[1]):
+            if np.isfinite(frozen[j]) and np.isfinite(scales[j]):
+                z = np.hypot(z, np.nan_to_num(np.abs(flat[:, j] - frozen[j]) / scales[j]))
+        out = np.maximum(out, z)
+    return out
+
+
+def _alarms(test: ReceiverTest, opts: HeadingReferenceOptions) -> list[Alarm]:
+    """Alarms opened by the change statistic (beyond the alarm level for `min_duration_s`) and lasting
+    while the residual stays beyond it against the baseline frozen at the onset. The level against the
+    whole log's fit opens none: when an attack fills most of the log the fitted current is the attacked
+    one and the clean stretch looks off. The onset is where the change's rise began; its interval runs
+    from there to the first fix the change left its quiet level at."""
+    t = test.t
+    change = _score(test.z_change, opts)
+    opened = [
+        a
+        for a in alarm_intervals(t, change, change >= 1.0, opts.merge_gap_s)
+        if a.end_s - a.start_s >= opts.min_duration_s
     ]
-    quiet = score < opts.quiet_level
-    out = []
-    for a in alarms:
+    quiet = change < opts.quiet_level
+    out: list[Alarm] = []
+    for a in opened:
+        if out and a.start_s <= out[-1].end_s:
+            continue
         before = np.flatnonzero((t < a.start_s) & quiet)
         k = int(before[-1]) if len(before) else 0
-        while k > 0 and score[k - 1] <= score[k]:  # back down the rise to where it began
+        rise = min(k + 1, len(t) - 1)
+        while k > 0 and change[k - 1] <= change[k]:  # back down the rise to where it began
             k -= 1
-        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=float(t[k])))
+        against_onset = _from_onset(test, k) / opts.z_alarm
+        k_end = int(np.searchsorted(t, a.end_s))
+        stop = np.flatnonzero(against_onset[k_end:] < 1.0)
+        end = float(t[max(k_end + int(stop[0]) - 1, k_end)] if len(stop) else t[-1])
+        inside = (t >= a.start_s) & (t <= end)
+        peak = int(np.argmax(np.where(inside, np.maximum(change, against_onset), -np.inf)))
+        out.append(
+            Alarm(
+                a.start_s,
+                max(end, a.end_s),
+                float(max(change[peak], against_onset[peak])),
+                float(t[peak]),
+                onset_s=float(t[k]),
+                onset_interval_s=(float(t[k]), float(t[rise])),
+            )
+        )
     return out
 
 
@@ -339,8 +431,9 @@ def _incidents(test: ReceiverTest, alarms: list[Alarm], opts: HeadingReferenceOp
     return out
 
 
-def _score(test: ReceiverTest, opts: HeadingReferenceOptions) -> FloatArray:
-    return np.max(np.stack(list(test.z.values())), axis=0) / opts.z_alarm
+def _score(z: dict[str, FloatArray], opts: HeadingReferenceOptions) -> FloatArray:
+    """The largest channel's z over the alarm level."""
+    return np.max(np.stack(list(z.values())), axis=0) / opts.z_alarm
 
 
 def run_heading_reference(
@@ -359,12 +452,12 @@ def run_heading_reference(
         if first is None:
             continue
         alarmed = np.zeros(len(first.t), dtype=bool)
-        for a in _alarms(first.t, _score(first, opts), opts):
+        for a in _alarms(first, opts):
             alarmed |= (first.t >= (a.onset_s or a.start_s)) & (first.t <= a.end_s)
         # the current, the leeway and the scale refitted without what the first pass alarmed on
         final = judge_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
         if final is not None:
-            tests.append((final, _incidents(final, _alarms(final.t, _score(final, opts), opts), opts)))
+            tests.append((final, _incidents(final, _alarms(final, opts), opts)))
     if not tests:
         return DetectorResult.skipped(
             NAME,
@@ -382,7 +475,11 @@ def run_heading_reference(
     )
     for test, alarms in tests:
         rid = test.receiver_id
-        result.series.append(Series(f"{rid}/strength", test.t, _score(test, opts), "x alarm level", 1.0))
+        level, change = _score(test.z, opts), _score(test.z_change, opts)
+        # strength: the change, what opens an alarm; level: the residual against the whole log's fit
+        # (drawn, it opens none: an attack filling most of a log makes its clean stretch look off)
+        result.series.append(Series(f"{rid}/strength", test.t, change, "x alarm level", 1.0))
+        result.series.append(Series(f"{rid}/level", test.t, level, "x alarm level", None))
         for name, r in test.residual.items():
             result.series.append(Series(f"{rid}/{name}_residual", test.t, r, "m/s", None, ("along", "across")))
         for a in alarms:
@@ -422,10 +519,11 @@ ANALYSIS = AnalysisSpec(
             "GNSS motion the vessel's compass and speed log cannot explain",
             "GNSS velocity (the track over a 10 s window, and the receiver's own velocity) split along and across "
             "the compass heading, minus the speed through the water along it, minus a current and leeway fitted "
-            "robustly to the log; each component as a robust z-score against its scatter in the log (floored "
-            "at 0.2 m/s and 2 degrees of heading). A jump or a drag of the GNSS position moves the vessel where "
-            "its heading and log say it did not go.",
-            "8 robust sigma for 5 s",
+            "robustly to the log; its change against its own two-minute median (robust z against its scatter "
+            "in the log, floored at 0.2 m/s and 2 degrees of heading) opens an alarm, which lasts while the "
+            "residual stays off the baseline frozen at the onset, or GNSS off the dead reckoning. A jump or a "
+            "drag of the GNSS position moves the vessel where its heading and log say it did not go.",
+            "8 robust sigma of change for 5 s",
         ),
     ),
 )
