@@ -242,3 +242,15 @@ def test_simulated_voyages_with_realistic_compasses_are_quiet_and_a_capture_is_f
         spoofed, _ = apply_attack(table, parse_attack("ramp:rate=5,vel=1,start=600"))
         (alarm,) = run_heading_reference(spoofed.fixes, spoofed.headings).alarms
         assert 600.0 <= alarm.start_s <= 602.0 and alarm.end_s == pytest.approx(1199.0, abs=1.0), seed
+
+
+def test_a_stuck_speed_log_is_not_used_rather_than_turning_every_turn_into_an_alarm(monkeypatch) -> None:
+    # a fouled paddle wheel reading 0 while the ship makes 5 m/s: taken at its word, the 5 m/s the log
+    # misses would look like a current along the bow that swings with every turn of the zig-zag
+    fixes, headings, _, _ = _vessel()
+    headings["water_speed_mps"] = 0.0
+    result = run_heading_reference(fixes, headings)
+    assert result.ran and not result.alarms
+    assert "speed log not used: it reads 0.00 x the GNSS speed along the heading" in result.reason
+    monkeypatch.setattr("spooflens.detectors.heading_reference.LOG_SCALE", (0.0, np.inf))
+    assert run_heading_reference(fixes, headings).alarms  # believed, the stuck log raises alarms at the turns

@@ -55,6 +55,10 @@ FloatArray = NDArray[np.float64]
 NAME = "heading_reference"
 GNSS_TALKERS = frozenset({"GP", "GN", "GA", "GB", "GL", "GQ", "GI", "BD"})
 MIN_REFERENCED_FIXES = 20
+# a speed log reading outside these times the GNSS speed along the heading (over the fixes not alarmed
+# on) is stuck, fouled or garbage, not off by a calibration error (some per cent) or a current (a good
+# part of a slow boat's speed); wide, so that a drag filling much of the log cannot switch it off
+LOG_SCALE = (0.2, 5.0)
 
 
 @dataclass(frozen=True)
@@ -129,7 +133,8 @@ def _design(sin_h: FloatArray, cos_h: FloatArray, water: FloatArray) -> tuple[Fl
     """Rows of the linear model of GNSS velocity given the reference: the along-heading row only where
     the log gives the speed through the water, the across row always. Returns (A (n, 2, 3), offset
     (n, 2)) with v_along - STW = c . u and v_across = c . p + leeway (u the heading's unit vector, p
-    starboard, c the current east/north)."""
+    starboard, c the current east/north). The log's scale is not a parameter: a vessel that holds two
+    headings leaves no redundancy to fit it, and then an attack on a third of the log moved the fit."""
     n = len(sin_h)
     A = np.zeros((n, 2, 3))
     A[:, 0, 0], A[:, 0, 1] = sin_h, cos_h
@@ -151,12 +156,12 @@ def _fit(y: FloatArray, A: FloatArray, use: NDArray[np.bool_]) -> FloatArray:
     rows = use[:, None] & np.isfinite(y) & np.isfinite(A).all(axis=2)
     a = A[rows]
     b = y[rows]
-    theta = np.zeros(3)
-    if len(b) < 3:
+    theta = np.zeros(A.shape[2])
+    if len(b) < A.shape[2]:
         return theta
     # a small ridge: with a steady heading and no speed log, the current across the bow and the leeway
     # are one number; the smallest theta that explains it is as good as any
-    ridge = 1e-6 * np.eye(3)
+    ridge = 1e-6 * np.eye(A.shape[2])
 
     def solve(w: FloatArray) -> FloatArray:
         aw = a * w[:, None]
@@ -171,11 +176,23 @@ def _fit(y: FloatArray, A: FloatArray, use: NDArray[np.bool_]) -> FloatArray:
     for _ in range(10):
         u = r / (4.685 * scale)
         w = np.where(np.abs(u) < 1.0, (1.0 - u**2) ** 2, 0.0)
-        if w.sum() < 3:
+        if w.sum() < A.shape[2]:
             break
         theta = solve(w)
         r = b - a @ theta
     return theta
+
+
+def _log_scale(
+    v: FloatArray, sin_h: FloatArray, cos_h: FloatArray, water: FloatArray, use: NDArray[np.bool_]
+) -> float | None:
+    """The speed log's reading over the GNSS speed along the heading (medians over the moving fixes in
+    `use`), or None without a log: near 1 for a log and a current that are what they seem."""
+    along = _project(v, sin_h, cos_h)[:, 0]
+    moving = use & np.isfinite(water) & np.isfinite(along) & (np.abs(along) > 0.5)
+    if moving.sum() < MIN_REFERENCED_FIXES:
+        return None
+    return float(np.median(water[moving]) / max(float(np.median(along[moving])), 1e-3))
 
 
 def _residual(v: FloatArray, sin_h: FloatArray, cos_h: FloatArray, water: FloatArray, use: NDArray[np.bool_]):
@@ -241,6 +258,8 @@ class ReceiverTest:
     # speed log. Summed from before an incident, it is how far GNSS is from where the vessel went.
     offset_step: FloatArray
     track_scale: float  # m/s, the track residual's scale
+    log_scale: float | None = None  # the speed log's reading / GNSS speed along the heading, None: not used
+    log_dropped: float | None = None  # the implausible scale of a speed log left out
 
 
 def _velocities(fixes: pd.DataFrame, opts: HeadingReferenceOptions) -> tuple[FloatArray, dict[str, FloatArray]]:
@@ -279,14 +298,21 @@ def _windowed(t_mid: FloatArray, dt: FloatArray, r: FloatArray, t: FloatArray, w
 
 
 def judge_receiver(
-    fixes: pd.DataFrame, ref: Reference, opts: HeadingReferenceOptions, exclude: NDArray[np.bool_] | None = None
+    fixes: pd.DataFrame,
+    ref: Reference,
+    opts: HeadingReferenceOptions,
+    exclude: NDArray[np.bool_] | None = None,
+    use_log: bool = True,
 ) -> ReceiverTest | None:
     """Both channels of one receiver's fixes (sorted by time) against the reference; `exclude` marks
-    fixes left out of the fit and the scale (a first pass's alarms)."""
+    fixes left out of the fit and the scale (a first pass's alarms). A speed log whose fitted scale is
+    outside `LOG_SCALE` (a stuck or fouled log) is not used: the test falls back to across the bow."""
     t, channels = _velocities(fixes, opts)
     if len(t) < MIN_REFERENCED_FIXES:
         return None
     sin_f, cos_f, water_f = ref.at(t, opts.max_age_s)
+    if not use_log:
+        water_f = np.full(len(t), np.nan)
     if np.isfinite(sin_f).sum() < MIN_REFERENCED_FIXES:
         return None
     quiet_fix = ~exclude if exclude is not None else np.ones(len(t), dtype=bool)
@@ -301,16 +327,21 @@ def judge_receiver(
         if name == "track":
             t_mid, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
             s, c, w = ref.at(t_mid, opts.max_age_s)
+            if not use_log:
+                w = np.full(len(t_mid), np.nan)
             use = quiet_fix[1:] & quiet_fix[:-1]
             r_int, theta_c = _residual(v, s, c, w, use)
+            along_of = (s, c, w, use)
             r = _windowed(t_mid, dt, r_int, t, opts.window_s)
             # back to east/north: along the heading (sin, cos) and to starboard (cos, -sin)
             offset_step = np.stack([r_int[:, 0] * s + r_int[:, 1] * c, r_int[:, 0] * c - r_int[:, 1] * s], axis=1)
             offset_step *= dt[:, None]
         else:
             r, theta_c = _residual(v, sin_f, cos_f, water_f, quiet_fix)
+            along_of = (sin_f, cos_f, water_f, quiet_fix)
         if name == "velocity" or "velocity" not in channels:
             theta = theta_c  # the Doppler velocity's fit is the finer one to report
+            log_scale = _log_scale(v, *along_of)
         gnss_speed = float(np.nanmedian(np.hypot(v[:, 0], v[:, 1]))) if np.isfinite(v).any() else 0.0
         typical = speed if speed is not None and np.isfinite(speed) else gnss_speed
         floor = float(np.hypot(opts.floor_mps, typical * np.sin(np.radians(opts.heading_floor_deg))))
@@ -325,6 +356,10 @@ def judge_receiver(
         change_parts[name] = (flat, baseline, change_scales)
         if name == "track":
             track_scale = float(np.nanmax(scales))
+    if log_scale is not None and not LOG_SCALE[0] <= log_scale <= LOG_SCALE[1]:
+        fallback = judge_receiver(fixes, ref, opts, exclude, use_log=False)
+        if fallback is not None:
+            return replace(fallback, log_dropped=log_scale)
     return ReceiverTest(
         str(fixes["receiver_id"].iloc[0]),
         t,
@@ -336,6 +371,7 @@ def judge_receiver(
         float(theta[2]),
         offset_step,
         track_scale,
+        log_scale,
     )
 
 
@@ -431,6 +467,17 @@ def _incidents(test: ReceiverTest, alarms: list[Alarm], opts: HeadingReferenceOp
     return out
 
 
+def _log_words(test: ReceiverTest) -> str:
+    if test.log_scale is not None:
+        return f"and speed log (reading {test.log_scale:.2f} x the GNSS speed along the heading)"
+    if test.log_dropped is not None:
+        return (
+            f"(speed log not used: it reads {test.log_dropped:.2f} x the GNSS speed along the heading, stuck or "
+            "fouled; across the bow only)"
+        )
+    return "(no speed log: across the bow only)"
+
+
 def _score(z: dict[str, FloatArray], opts: HeadingReferenceOptions) -> FloatArray:
     """The largest channel's z over the alarm level."""
     return np.max(np.stack(list(z.values())), axis=0) / opts.z_alarm
@@ -464,12 +511,11 @@ def run_heading_reference(
             f"fewer than {MIN_REFERENCED_FIXES} fixes within {opts.max_age_s:g} s of a compass heading",
             Evidence.HEADING,
         )
-    water = "and speed log" if len(ref.water) else "(no speed log: across the bow only)"
     result = DetectorResult(
         NAME,
         True,
-        f"{', '.join(t.receiver_id for t, _ in tests)} against {ref.heading_id} {water}: GNSS track and "
-        f"velocity beyond {opts.z_alarm:g} robust sigma for {opts.min_duration_s:g} s",
+        f"{'; '.join(f'{t.receiver_id} against {ref.heading_id} {_log_words(t)}' for t, _ in tests)}: GNSS "
+        f"track and velocity changing by {opts.z_alarm:g} robust sigma for {opts.min_duration_s:g} s",
         sorted((a for _, alarms in tests for a in alarms), key=lambda a: a.start_s),
         evidence=Evidence.HEADING,
     )
@@ -492,7 +538,7 @@ def run_heading_reference(
                     peaks.append(f"{name} {('along', 'across')[j]} {float(seg.max()):.1f} m/s")
             result.findings.append(
                 Finding(
-                    f"{rid} against the vessel's heading {water}: {', '.join(peaks)} off what the compass"
+                    f"{rid} against the vessel's heading {_log_words(test)}: {', '.join(peaks)} off what the compass"
                     f" and the fitted current ({test.current[0]:+.1f} E, {test.current[1]:+.1f} N m/s) explain "
                     f"({a.start_s:.1f}-{a.end_s:.1f} s)",
                     a.start_s,
