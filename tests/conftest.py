@@ -12,8 +12,14 @@ HUSKY_BAG = REAL / "ros1_husky_navsat" / "test1.bag"
 SAMPLE_LOGS = ROOT / "sample_logs"
 
 
+def real_log(relative: str) -> Path:
+    """A real log under ../shared/real; a test that needs one fails (never skips) when it is missing."""
+    path = REAL / relative
+    if not path.exists():
+        pytest.fail(f"real log missing: {path} (tests expect ../shared/real beside the checkout)")
+    return path
+
+
 @pytest.fixture(scope="session")
 def husky_bag() -> Path:
-    if not HUSKY_BAG.exists():
-        pytest.fail(f"real log missing: {HUSKY_BAG} (tests expect ../shared/real beside the checkout)")
-    return HUSKY_BAG
+    return real_log("ros1_husky_navsat/test1.bag")

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import px4_support
 import pytest
+from conftest import real_log
 from pyulog.ulog2csv import convert_ulog2csv
 
 from readers import read_log
@@ -20,14 +21,10 @@ from spooflens.evidence import Evidence
 from spooflens.pipeline import analyze_table
 from spooflens.writers.ulog_writer import SENSOR_GPS, Fields, ULogFile
 
-FLIGHT = Path(__file__).resolve().parents[2] / "shared" / "real" / "ardupilot_dataflash" / "flightdata_center_0003.bin"
-
 
 @pytest.fixture(scope="module")
 def flight():
-    if not FLIGHT.exists():
-        pytest.fail(f"real log missing: {FLIGHT}")
-    return read_log(FLIGHT)
+    return read_log(real_log("ardupilot_dataflash/flightdata_center_0003.bin"))
 
 
 def _dragged(ekf: pd.DataFrame, start_s: float, rate_mps: float = 2.0, tau_s: float = 5.0) -> pd.DataFrame:

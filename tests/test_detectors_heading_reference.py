@@ -5,11 +5,11 @@ headings)."""
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import real_log
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
@@ -26,14 +26,10 @@ from spooflens.simulation.sensors import (
 )
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
-BUNDG = Path(__file__).resolve().parents[2] / "shared" / "real" / "nmea_boats" / "gpsd_bundg_zeus_9.log"
-
 
 @pytest.fixture(scope="module")
 def bundg():
-    if not BUNDG.exists():
-        pytest.fail(f"real log missing: {BUNDG}")
-    return read_log(BUNDG)
+    return read_log(real_log("nmea_boats/gpsd_bundg_zeus_9.log"))
 
 
 def _strength(result) -> np.ndarray:
