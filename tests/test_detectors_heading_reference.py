@@ -13,6 +13,7 @@ from conftest import real_log
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
+from spooflens.departure import gnss_departure
 from spooflens.detectors.heading_reference import run_heading_reference
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic
@@ -54,12 +55,19 @@ def test_a_jump_of_the_real_log_is_spoofing_with_the_heading_class(bundg, offset
     assert len(result.alarms) == 1
     alarm = result.alarms[0]
     assert 70.0 <= alarm.start_s <= 71.5 and alarm.onset_s is not None and 67.0 <= alarm.onset_s <= 70.5
-    verdict = analyze_table(spoofed).verdict
+    analysis = analyze_table(spoofed)
+    verdict = analysis.verdict
     assert verdict.spoofed
     first = verdict.deciding_incident
     assert first is not None and Evidence.HEADING in first.corroborating
     # 3 km is held to the last fix: the incident lasted to the end of the log, not to its last alarm
     assert first.ongoing_at_end == (offset_m == 3000.0)
+    # where the vessel was: dead reckoned by its compass and log from the last quiet fix; GNSS went the
+    # jump's sqrt(2) x offset (east and north) away from it, give or take the dead reckoning's own
+    # error over the half minute it is held and the fixes' scatter
+    (departure,) = gnss_departure(spoofed, analysis.results, first)
+    assert departure.track.startswith("reconstructed (compass")
+    assert departure.peak_m == pytest.approx(np.sqrt(2) * offset_m, rel=0.05, abs=5.0)
 
 
 def test_a_drag_of_a_third_of_the_real_log_is_found_to_its_end(bundg) -> None:

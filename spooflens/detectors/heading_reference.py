@@ -47,9 +47,9 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, Track, alarm_intervals
 from spooflens.evidence import Evidence
-from spooflens.geodesy import metres_per_radian
+from spooflens.geodesy import enu_to_geodetic, metres_per_radian
 
 FloatArray = NDArray[np.float64]
 NAME = "heading_reference"
@@ -257,6 +257,9 @@ class ReceiverTest:
     # per fix interval, GNSS displacement minus the compass and log's (east, north, m): NaN without a
     # speed log. Summed from before an incident, it is how far GNSS is from where the vessel went.
     offset_step: FloatArray
+    # per fix interval, where the compass, the log and the fitted current and leeway moved the vessel
+    # (east, north, m): the dead reckoning, NaN without a speed log
+    reckoned_step: FloatArray
     track_scale: float  # m/s, the track residual's scale
     log_scale: float | None = None  # the speed log's reading / GNSS speed along the heading, None: not used
     log_dropped: float | None = None  # the implausible scale of a speed log left out
@@ -323,6 +326,7 @@ def judge_receiver(
     residual: dict[str, FloatArray] = {}
     theta = np.zeros(3)
     offset_step = np.full((len(t) - 1, 2), np.nan)
+    reckoned_step = np.full((len(t) - 1, 2), np.nan)
     for name, v in channels.items():
         if name == "track":
             t_mid, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
@@ -336,6 +340,8 @@ def judge_receiver(
             # back to east/north: along the heading (sin, cos) and to starboard (cos, -sin)
             offset_step = np.stack([r_int[:, 0] * s + r_int[:, 1] * c, r_int[:, 0] * c - r_int[:, 1] * s], axis=1)
             offset_step *= dt[:, None]
+            ce, cn, leeway = theta_c
+            reckoned_step = np.stack([w * s + ce + leeway * c, w * c + cn - leeway * s], axis=1) * dt[:, None]
         else:
             r, theta_c = _residual(v, sin_f, cos_f, water_f, quiet_fix)
             along_of = (sin_f, cos_f, water_f, quiet_fix)
@@ -370,6 +376,7 @@ def judge_receiver(
         theta[:2],
         float(theta[2]),
         offset_step,
+        reckoned_step,
         track_scale,
         log_scale,
     )
@@ -453,6 +460,27 @@ def _held(test: ReceiverTest, alarm: Alarm, opts: HeadingReferenceOptions) -> Al
     return replace(alarm, end_s=float(test.t[last]))
 
 
+RECKONED = "reconstructed (compass, speed log and the fitted current; GNSS left out)"
+
+
+def _dead_reckoned(test: ReceiverTest, fixes: pd.DataFrame, alarm: Alarm) -> Track | None:
+    """Where the vessel went over an alarm by its compass and speed log alone, from the last quiet fix
+    before the onset: the reconstructed track (how far GNSS went from it is what the verdict reports)."""
+    a = int(np.searchsorted(test.t, alarm.onset_s if alarm.onset_s is not None else alarm.start_s))
+    e = min(int(np.searchsorted(test.t, alarm.end_s)), len(test.t) - 1)
+    steps = test.reckoned_step[a:e]
+    if e <= a or not np.isfinite(steps).all(axis=1).all():
+        return None
+    enu = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    lat, lon, h = enu_to_geodetic(
+        np.c_[enu, np.zeros(len(enu))],
+        float(fixes["lat_deg"].iloc[a]),
+        float(fixes["lon_deg"].iloc[a]),
+        float(fixes["height_m"].iloc[a]) if "height_m" in fixes else 0.0,
+    )
+    return Track(RECKONED, test.t[a : e + 1], lat, lon, h)
+
+
 def _incidents(test: ReceiverTest, alarms: list[Alarm], opts: HeadingReferenceOptions) -> list[Alarm]:
     """Each alarm held while its offset lasts. An alarm that starts where a held one was released is the
     jump back (GNSS returned to where the vessel is, which is why the hold ended), not a new attack."""
@@ -493,6 +521,7 @@ def run_heading_reference(
             NAME, "no compass heading in the log (a GNSS receiver's heading is no reference)", Evidence.HEADING
         )
     tests: list[tuple[ReceiverTest, list[Alarm]]] = []
+    fixes_of: dict[str, pd.DataFrame] = {}
     for _, rows in fixes.groupby("receiver_id", sort=True):
         rows = rows.sort_values("t_s").reset_index(drop=True)
         first = judge_receiver(rows, ref, opts)
@@ -505,6 +534,7 @@ def run_heading_reference(
         final = judge_receiver(rows, ref, opts, alarmed) if alarmed.any() else first
         if final is not None:
             tests.append((final, _incidents(final, _alarms(final, opts), opts)))
+            fixes_of[final.receiver_id] = rows
     if not tests:
         return DetectorResult.skipped(
             NAME,
@@ -521,6 +551,10 @@ def run_heading_reference(
     )
     for test, alarms in tests:
         rid = test.receiver_id
+        for a in alarms:
+            track = _dead_reckoned(test, fixes_of[rid], a)
+            if track is not None:
+                result.tracks.append(track)
         level, change = _score(test.z, opts), _score(test.z_change, opts)
         # strength: the change, what opens an alarm; level: the residual against the whole log's fit
         # (drawn, it opens none: an attack filling most of a log makes its clean stretch look off)
