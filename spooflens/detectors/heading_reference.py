@@ -261,7 +261,8 @@ class ReceiverTest:
     # (east, north, m): the dead reckoning, NaN without a speed log
     reckoned_step: FloatArray
     track_scale: float  # m/s, the track residual's scale
-    log_scale: float | None = None  # the speed log's reading / GNSS speed along the heading, None: not used
+    has_log: bool = False  # a speed log was used
+    log_scale: float | None = None  # its reading / GNSS speed along the heading (None: GNSS hardly moved)
     log_dropped: float | None = None  # the implausible scale of a speed log left out
 
 
@@ -378,6 +379,7 @@ def judge_receiver(
         offset_step,
         reckoned_step,
         track_scale,
+        bool(np.isfinite(water_f).any()),
         log_scale,
     )
 
@@ -498,6 +500,8 @@ def _incidents(test: ReceiverTest, alarms: list[Alarm], opts: HeadingReferenceOp
 def _log_words(test: ReceiverTest) -> str:
     if test.log_scale is not None:
         return f"and speed log (reading {test.log_scale:.2f} x the GNSS speed along the heading)"
+    if test.has_log:
+        return "and speed log"
     if test.log_dropped is not None:
         return (
             f"(speed log not used: it reads {test.log_dropped:.2f} x the GNSS speed along the heading, stuck or "
