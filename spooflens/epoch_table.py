@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -411,8 +412,12 @@ def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skip
     reordered; the reader's column released as soon as it is copied), unit scales applied, optional
     values out of range cleared, t_s set."""
     idx = np.concatenate([s.rows for s in streams]) if streams else np.zeros(0, dtype=np.int64)
-    cols: dict[str, np.ndarray] = {}
+    cols: dict[str, Any] = {}
     for c in list(df.columns):
+        if isinstance(df[c].dtype, pd.StringDtype):  # stream ids: kept as strings, not made Python objects
+            cols[c] = _at(df[c].array, idx)
+            del df[c]
+            continue
         values = _at(df[c].to_numpy(), idx)
         if not values.flags.writeable:  # pandas hands out read-only views; the table's frames are its own
             try:
@@ -465,7 +470,7 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> boo
     t_fix = receiver["t_s"].to_numpy(dtype=float)
     drop = np.zeros(len(imu), dtype=bool)
     for sid in pd.unique(imu["imu_id"]):
-        rows = np.flatnonzero(imu["imu_id"].to_numpy() == sid)
+        rows = np.flatnonzero((imu["imu_id"] == sid).to_numpy(dtype=bool))
         t = imu["t_s"].to_numpy()[rows]
         gap = max(t[0] - t_fix[-1], t_fix[0] - t[-1])
         if gap > 3600.0:

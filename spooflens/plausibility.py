@@ -374,13 +374,13 @@ def gyro_turn_ratio(imu_t_s: FloatArray, imu: Columns, fix_t_s: FloatArray, fixe
     ok = _finite_rows(imu, IMU_MOTION)
     if ok.sum() < 100 or len(fix_t_s) < 10:
         return None
-    f = np.stack([imu[n][ok] for n in IMU_MOTION[:3]], axis=1)
-    w = np.stack([imu[n][ok] for n in IMU_MOTION[3:]], axis=1)
-    t = imu_t_s[ok]
-    up = f.mean(axis=0)
+    every = bool(ok.all())  # the usual case: no copy of the six columns
+    t = imu_t_s if every else imu_t_s[ok]
+    up = np.array([(imu[n] if every else imu[n][ok]).mean() for n in IMU_MOTION[:3]])
     if np.linalg.norm(up) == 0:
         return None
-    yaw_rate = w @ (up / np.linalg.norm(up))
+    up /= np.linalg.norm(up)
+    yaw_rate = sum(u * (imu[n] if every else imu[n][ok]) for u, n in zip(up, IMU_MOTION[3:], strict=True))
     turned = np.concatenate(([0.0], np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * np.diff(t))))
     course_t = _gnss_course(fix_t_s, fixes, t[0], t[-1])
     if course_t is None:
