@@ -302,21 +302,16 @@ def _windowed(t_mid: FloatArray, dt: FloatArray, r: FloatArray, t: FloatArray, w
 
 
 def judge_receiver(
-    fixes: pd.DataFrame,
-    ref: Reference,
-    opts: HeadingReferenceOptions,
-    exclude: NDArray[np.bool_] | None = None,
-    use_log: bool = True,
+    fixes: pd.DataFrame, ref: Reference, opts: HeadingReferenceOptions, exclude: NDArray[np.bool_] | None = None
 ) -> ReceiverTest | None:
     """Both channels of one receiver's fixes (sorted by time) against the reference; `exclude` marks
-    fixes left out of the fit and the scale (a first pass's alarms). A speed log whose fitted scale is
-    outside `LOG_SCALE` (a stuck or fouled log) is not used: the test falls back to across the bow."""
+    fixes left out of the fit and the scale (a first pass's alarms). A speed log reading outside
+    `LOG_SCALE` times the GNSS speed along the heading (stuck, fouled) is not used: the test falls back
+    to across the bow."""
     t, channels = _velocities(fixes, opts)
     if len(t) < MIN_REFERENCED_FIXES:
         return None
     sin_f, cos_f, water_f = ref.at(t, opts.max_age_s)
-    if not use_log:
-        water_f = np.full(len(t), np.nan)
     if np.isfinite(sin_f).sum() < MIN_REFERENCED_FIXES:
         return None
     quiet_fix = ~exclude if exclude is not None else np.ones(len(t), dtype=bool)
@@ -332,8 +327,6 @@ def judge_receiver(
         if name == "track":
             t_mid, dt = 0.5 * (t[1:] + t[:-1]), np.diff(t)
             s, c, w = ref.at(t_mid, opts.max_age_s)
-            if not use_log:
-                w = np.full(len(t_mid), np.nan)
             use = quiet_fix[1:] & quiet_fix[:-1]
             r_int, theta_c = _residual(v, s, c, w, use)
             along_of = (s, c, w, use)
@@ -364,7 +357,7 @@ def judge_receiver(
         if name == "track":
             track_scale = float(np.nanmax(scales))
     if log_scale is not None and not LOG_SCALE[0] <= log_scale <= LOG_SCALE[1]:
-        fallback = judge_receiver(fixes, ref, opts, exclude, use_log=False)
+        fallback = judge_receiver(fixes, replace(ref, water_t=np.zeros(0), water=np.zeros(0)), opts, exclude)
         if fallback is not None:
             return replace(fallback, log_dropped=log_scale)
     return ReceiverTest(

@@ -146,9 +146,9 @@ def fix_against_own_solution(
         findings.append(
             Finding(
                 f"{rid}: its reported fixes lay up to {_describe(a.peak_statistic)} from the position its own "
-                f"pseudoranges give (a quarter of its epochs within {usual:.0f} m), {a.start_s:.1f}-{a.end_s:.1f} s: those fixes did not "
-                "come from these measurements (its position output was moved, or it followed satellites RAIM "
-                "excluded)",
+                f"pseudoranges give (a quarter of its epochs within {usual:.0f} m), {a.start_s:.1f}-{a.end_s:.1f} s: "
+                "those fixes did not come from these measurements (its position output was moved, or it followed "
+                "satellites RAIM excluded)",
                 a.start_s,
                 a.end_s,
                 (),
