@@ -33,7 +33,10 @@ class Departure:
 
 
 def reconstructed_tracks(results: Sequence[DetectorResult]) -> list[Track]:
-    return [tr for r in results if r.ran for tr in r.tracks if tr.name.startswith(RECONSTRUCTED)]
+    """Every reconstructed track, the INS's first (`navigation`: the IMU with the log's own noise, where a
+    vessel's dead reckoning from its compass and log, `heading_reference`, carries an unknown current)."""
+    ordered = sorted(results, key=lambda r: r.name != "navigation")
+    return [tr for r in ordered if r.ran for tr in r.tracks if tr.name.startswith(RECONSTRUCTED)]
 
 
 def _horizontal_gap(table: EpochTable, rid: str, track: Track, start_s: float, end_s: float) -> Departure | None:

@@ -13,7 +13,8 @@ from conftest import real_log
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
-from spooflens.departure import gnss_departure
+from spooflens.departure import gnss_departure, reconstructed_tracks
+from spooflens.detectors.base import DetectorResult, Track
 from spooflens.detectors.heading_reference import run_heading_reference
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic
@@ -258,3 +259,14 @@ def test_a_stuck_speed_log_is_not_used_rather_than_turning_every_turn_into_an_al
     assert "speed log not used: it reads 0.00 x the GNSS speed along the heading" in result.reason
     monkeypatch.setattr("spooflens.detectors.heading_reference.LOG_SCALE", (0.0, np.inf))
     assert run_heading_reference(fixes, headings).alarms  # believed, the stuck log raises alarms at the turns
+
+
+def test_where_a_log_has_an_imu_its_ins_reconstruction_comes_before_the_dead_reckoning() -> None:
+    # the verdict measures how far GNSS went against the first reconstructed track; a vessel with an IMU
+    # and a compass has both, and the INS (noise learned from the log) beats a current-fitted reckoning
+    def result(name: str, track: str) -> DetectorResult:
+        z = np.zeros(2)
+        return DetectorResult(name, True, tracks=[Track(f"reconstructed ({track})", z, z, z, z)])
+
+    heading, nav = result("heading_reference", "compass"), result("navigation", "INS")
+    assert [t.name for t in reconstructed_tracks([heading, nav])] == ["reconstructed (INS)", "reconstructed (compass)"]
