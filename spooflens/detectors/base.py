@@ -146,3 +146,12 @@ def alarm_intervals(
         k = s + int(np.nanargmax(seg)) if np.isfinite(seg).any() else s
         out.append(Alarm(float(t[s]), float(t[e]), float(statistic[k]), float(t[k])))
     return out
+
+
+def nearest(t: NDArray[np.float64], samples: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Index of the sample nearest each time (`samples` sorted, not empty; the earlier one on a tie) and
+    how far it is (s)."""
+    k = np.clip(np.searchsorted(samples, t), 0, len(samples) - 1)
+    before = np.maximum(k - 1, 0)
+    near = np.where(np.abs(samples[before] - t) < np.abs(samples[k] - t), before, k)
+    return near, np.abs(samples[near] - t)

@@ -47,7 +47,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, Track, alarm_intervals
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, Track, alarm_intervals, nearest
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic, metres_per_radian
 
@@ -92,22 +92,14 @@ class Reference:
         s = np.interp(t, self.t, self.sin)
         c = np.interp(t, self.t, self.cos)
         norm = np.hypot(s, c)  # interpolating across a turn shortens the vector: back to unit length
-        far = _age(self.t, t) > max_age_s
+        far = nearest(t, self.t)[1] > max_age_s
         s = np.where(far | (norm < 1e-6), np.nan, s / np.maximum(norm, 1e-6))
         c = np.where(far | (norm < 1e-6), np.nan, c / np.maximum(norm, 1e-6))
         if len(self.water_t):
-            w = np.where(_age(self.water_t, t) > max_age_s, np.nan, np.interp(t, self.water_t, self.water))
+            w = np.where(nearest(t, self.water_t)[1] > max_age_s, np.nan, np.interp(t, self.water_t, self.water))
         else:
             w = np.full(len(t), np.nan)
         return s, c, w
-
-
-def _age(samples: FloatArray, t: FloatArray) -> FloatArray:
-    """Distance from each t to the nearest sample time (samples sorted, at least one)."""
-    k = np.searchsorted(samples, t)
-    after = np.abs(samples[np.clip(k, 0, len(samples) - 1)] - t)
-    before = np.abs(t - samples[np.clip(k - 1, 0, len(samples) - 1)])
-    return np.minimum(before, after)
 
 
 def reference(headings: pd.DataFrame) -> Reference | None:

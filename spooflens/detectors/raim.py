@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals, nearest
 from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
 from spooflens.navigation.raim import FAULT, RaimOptions, RaimResult, solve_with_fde
@@ -127,12 +127,11 @@ def fix_against_own_solution(
     t_fix = fixes["t_s"].to_numpy(dtype=float)
     if len(t_fix) < opts.fix_departure_epochs or not len(sol.t_s):
         return [], []
-    k = np.clip(np.searchsorted(t_fix, sol.t_s), 1, len(t_fix) - 1)  # the nearest fix (there are several)
-    k = np.where(np.abs(t_fix[k - 1] - sol.t_s) < np.abs(t_fix[k] - sol.t_s), k - 1, k)
+    k, gap = nearest(sol.t_s, t_fix)
     lat, lon, h = (fixes[c].to_numpy(dtype=float)[k] for c in ("lat_deg", "lon_deg", "height_m"))
     enu = ecef_to_enu_vectors(lat, lon, sol.ecef_m - geodetic_to_ecef(lat, lon, h))
     distance = np.hypot(enu[:, 0], enu[:, 1])
-    distance[np.abs(t_fix[k] - sol.t_s) > 0.5] = np.nan
+    distance[gap > 0.5] = np.nan
     if np.isfinite(distance).sum() < opts.fix_departure_epochs:
         return [], []
     usual = float(np.nanpercentile(distance, 25))  # an output moved over most of the log cannot move it

@@ -40,7 +40,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, nearest
 from spooflens.epoch_table import EpochTable
 from spooflens.evidence import Evidence
 from spooflens.geodesy import geodetic_to_ecef
@@ -93,7 +93,7 @@ def _orbit_elevations(obs: pd.DataFrame, fixes: pd.DataFrame, gap_s: float) -> N
     ok = np.isfinite(sv).all(axis=1)
     if not ok.any() or not len(fixes):
         return out
-    near, gap = _nearest(obs["t_s"].to_numpy(float), fixes["t_s"].to_numpy(float))
+    near, gap = nearest(obs["t_s"].to_numpy(float), fixes["t_s"].to_numpy(float))
     ok &= gap <= gap_s
     rx = geodetic_to_ecef(
         fixes["lat_deg"].to_numpy(float)[near],
@@ -138,18 +138,10 @@ def sky_views(table: EpochTable, opts: SatelliteSignalOptions) -> list[SkyView]:
     return views
 
 
-def _nearest(t: NDArray[np.float64], tf: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Index of the fix nearest each time (`tf` sorted, not empty) and how far it is (s)."""
-    k = np.clip(np.searchsorted(tf, t), 0, len(tf) - 1)
-    before = np.maximum(k - 1, 0)
-    near = np.where(np.abs(tf[before] - t) < np.abs(tf[k] - t), before, k)
-    return near, np.abs(tf[near] - t)
-
-
 def _near_fix(t: NDArray[np.float64], tf: NDArray[np.float64], gap_s: float) -> BoolArray:
     if not len(tf):
         return np.ones(len(t), dtype=bool)  # no fixes at all: the receiver's elevations are all we have
-    return _nearest(t, tf)[1] <= gap_s
+    return nearest(t, tf)[1] <= gap_s
 
 
 def _height(fixes: pd.DataFrame) -> float:
