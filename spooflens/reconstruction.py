@@ -32,7 +32,13 @@ from spooflens.analysis import AnalysisContext
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
 from spooflens.evidence import CORROBORATION_S, Evidence
-from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution, nis_by_pattern, run_prepared
+from spooflens.navigation.loosely_coupled import (
+    SMOOTHER_NEEDS,
+    FilterOptions,
+    NavSolution,
+    nis_by_pattern,
+    run_prepared,
+)
 from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
@@ -115,29 +121,30 @@ def coasting_nis(sol: NavSolution, rows: tuple[int, ...] = GNSS_ROWS) -> tuple[F
     return nis_by_pattern(sol.nu, sol.S_all, np.isfinite(sol.z[:, np.array(rows)]), rows)
 
 
+def continued(
+    nav: Navigation, sol: NavSolution, t_from: float, opts: FilterOptions, t_end: float | None = None
+) -> NavSolution:
+    """`opts` run from `sol`'s last epoch at or before `t_from` (its state, covariance and sensor errors
+    after that update: the fixes up to it are in them) to `t_end`, or from the log's start when `t_from`
+    comes before `sol`'s first epoch. A smoothed or compared estimate after that epoch is the one a run
+    over the whole log with the same options gives."""
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    if k < 0:
+        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
+    opts = replace(
+        opts, initial=NavState.from_vector(sol.state[k]), initial_covariance=sol.P_upd[k], initial_gm=sol.gm[k]
+    )
+    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+
+
 def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None) -> NavSolution:
     """The INS (and odometry) continued from a solution's last epoch at or before `t_from` (the main one,
     or `base`: one that left the incidents already confirmed out) with every later GNSS fix left out
     (each still compared with it), up to `t_end`."""
     sol = base if base is not None else nav.solution
-    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
     # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
-    if k < 0:
-        opts = replace(
-            sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False
-        )
-        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
-    opts = replace(
-        sol.options,
-        record=False,
-        initial=NavState.from_vector(sol.state[k]),
-        initial_covariance=sol.P_upd[k],
-        initial_gm=sol.gm[k],
-        exclude_after_s=float(sol.t[k]),
-        exclude_until_s=None,
-        exclude_velocity_too=True,
-    )
-    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+    opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False)
+    return continued(nav, sol, t_from, opts, t_end)
 
 
 def _ratio(sol: NavSolution, p: float, window_s: float = 1.0) -> FloatArray:
@@ -289,25 +296,14 @@ def coasting_check(
 
 def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
     """The smoothed trajectory with GNSS (positions, and velocity unless it stayed honest) left out over
-    the incident, from the main solution's last epoch before it on: the filter continued from there is the
-    whole-log run's, and a smoothed estimate depends only on its filtered state and the data after it, so
-    the track over the incident is the same as a whole-log run's at a fraction of the memory (the
-    per-epoch matrices the smoother keeps are 0.5 GB per hour of 10 Hz GNSS)."""
-    opts = nav.options(exclude_after_s=t_from, exclude_until_s=t_to, exclude_velocity_too=not velocity_honest)
-    sol = nav.solution
-    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
-    if k < 0:
-        run = run_prepared(nav.inputs, replace(opts, record=SMOOTHER_NEEDS), nav.start)
-    else:
-        opts = replace(
-            opts,
-            record=SMOOTHER_NEEDS,
-            initial=NavState.from_vector(sol.state[k]),
-            initial_covariance=sol.P_upd[k],
-            initial_gm=sol.gm[k],
-        )
-        run = run_prepared(nav.inputs.between(float(sol.t[k])), opts)
-    sm = smooth(run)
+    the incident, `continued` from the main solution's last epoch before it: a smoothed estimate depends
+    only on its filtered state and the data after it, so the track over the incident is a whole-log run's
+    at a fraction of the memory (the per-epoch matrices the smoother keeps are 0.5 GB per hour of 10 Hz
+    GNSS)."""
+    opts = nav.options(
+        exclude_after_s=t_from, exclude_until_s=t_to, exclude_velocity_too=not velocity_honest, record=SMOOTHER_NEEDS
+    )
+    sm = smooth(continued(nav, nav.solution, t_from, opts))
     name = (
         "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
         if velocity_honest
