@@ -39,7 +39,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import MIN_AUTOPILOT_ROWS, AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals, rise_start
 from spooflens.evidence import Evidence
 
 FloatArray = NDArray[np.float64]
@@ -137,13 +137,9 @@ def run_autopilot_ekf(ekf: pd.DataFrame, opts: AutopilotEkfOptions | None = None
     alarms = [
         a for a in alarm_intervals(t_all, score, raised, opts.merge_gap_s) if a.end_s - a.start_s >= opts.min_duration_s
     ]
-    quiet = score < opts.quiet_level  # the onset: where the statistic left its quiet level, not the alarm
     out = []
     for a in alarms:
-        before = np.flatnonzero((t_all < a.start_s) & quiet)
-        k = int(before[-1]) if len(before) else 0
-        while k > 0 and score[k - 1] <= score[k]:  # back down the rise to where it began
-            k -= 1
+        k, _ = rise_start(t_all, score, a.start_s, opts.quiet_level)
         out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=float(t_all[k])))
     result = DetectorResult(
         NAME,

@@ -155,3 +155,15 @@ def nearest(t: NDArray[np.float64], samples: NDArray[np.float64]) -> tuple[NDArr
     before = np.maximum(k - 1, 0)
     near = np.where(np.abs(samples[before] - t) < np.abs(samples[k] - t), before, k)
     return near, np.abs(samples[near] - t)
+
+
+def rise_start(t: FloatArray, score: FloatArray, start_s: float, quiet_level: float) -> tuple[int, int]:
+    """Where the rise of `score` that led to an alarm at `start_s` began, and the last quiet epoch before
+    the alarm (below `quiet_level`; 0 if none): from that epoch back down the rise while the statistic
+    keeps falling, so an onset is where the statistic left its floor, not where it crossed a level."""
+    before = np.flatnonzero((t < start_s) & (score < quiet_level))
+    last_quiet = int(before[-1]) if len(before) else 0
+    k = last_quiet
+    while k > 0 and score[k - 1] <= score[k]:
+        k -= 1
+    return k, last_quiet

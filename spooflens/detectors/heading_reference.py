@@ -47,7 +47,16 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, Track, alarm_intervals, nearest
+from spooflens.detectors.base import (
+    Alarm,
+    DetectorResult,
+    Finding,
+    Series,
+    Track,
+    alarm_intervals,
+    nearest,
+    rise_start,
+)
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic, metres_per_radian
 
@@ -396,16 +405,12 @@ def _alarms(test: ReceiverTest, opts: HeadingReferenceOptions) -> list[Alarm]:
         for a in alarm_intervals(t, change, change >= 1.0, opts.merge_gap_s)
         if a.end_s - a.start_s >= opts.min_duration_s
     ]
-    quiet = change < opts.quiet_level
     out: list[Alarm] = []
     for a in opened:
         if out and a.start_s <= out[-1].end_s:
             continue
-        before = np.flatnonzero((t < a.start_s) & quiet)
-        k = int(before[-1]) if len(before) else 0
-        rise = min(k + 1, len(t) - 1)
-        while k > 0 and change[k - 1] <= change[k]:  # back down the rise to where it began
-            k -= 1
+        k, last_quiet = rise_start(t, change, a.start_s, opts.quiet_level)
+        rise = min(last_quiet + 1, len(t) - 1)
         against_onset = _from_onset(test, k) / opts.z_alarm
         k_end = int(np.searchsorted(t, a.end_s))
         stop = np.flatnonzero(against_onset[k_end:] < 1.0)
