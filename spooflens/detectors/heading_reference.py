@@ -316,7 +316,7 @@ def judge_receiver(
     if np.isfinite(sin_f).sum() < MIN_REFERENCED_FIXES:
         return None
     quiet_fix = ~exclude if exclude is not None else np.ones(len(t), dtype=bool)
-    speed = np.nanmedian(np.where(np.isfinite(water_f), water_f, np.nan)) if np.isfinite(water_f).any() else None
+    speed = float(np.nanmedian(water_f)) if np.isfinite(water_f).any() else None
     z: dict[str, FloatArray] = {}
     z_change: dict[str, FloatArray] = {}
     change_parts: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = {}
@@ -332,11 +332,11 @@ def judge_receiver(
             r_int, theta_c = _residual(v, s, c, w, use)
             along_of = (s, c, w, use)
             r = _windowed(t_mid, dt, r_int, t, opts.window_s)
-            # back to east/north: along the heading (sin, cos) and to starboard (cos, -sin)
-            offset_step = np.stack([r_int[:, 0] * s + r_int[:, 1] * c, r_int[:, 0] * c - r_int[:, 1] * s], axis=1)
-            offset_step *= dt[:, None]
+            # the dead reckoning: the log along the heading (sin, cos), the fitted current, the leeway to
+            # starboard (cos, -sin); what GNSS moved beyond it is the offset
             ce, cn, leeway = theta_c
             reckoned_step = np.stack([w * s + ce + leeway * c, w * c + cn - leeway * s], axis=1) * dt[:, None]
+            offset_step = v * dt[:, None] - reckoned_step
         else:
             r, theta_c = _residual(v, sin_f, cos_f, water_f, quiet_fix)
             along_of = (sin_f, cos_f, water_f, quiet_fix)
@@ -344,7 +344,7 @@ def judge_receiver(
             theta = theta_c  # the Doppler velocity's fit is the finer one to report
             log_scale = _log_scale(v, *along_of)
         gnss_speed = float(np.nanmedian(np.hypot(v[:, 0], v[:, 1]))) if np.isfinite(v).any() else 0.0
-        typical = speed if speed is not None and np.isfinite(speed) else gnss_speed
+        typical = speed if speed is not None else gnss_speed
         floor = float(np.hypot(opts.floor_mps, typical * np.sin(np.radians(opts.heading_floor_deg))))
         residual[name] = r
         z[name], scales = _z(r, quiet_fix, floor)
