@@ -59,6 +59,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
+from readers.inav import InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns, gps_utc_offset_ns
@@ -133,6 +134,7 @@ class Records:
 
 
 GPS_L1CA_NAV = 0x0101  # GnssNavigationMessage TYPE_GPS_L1CA
+GALILEO_INAV = 0x0601  # TYPE_GAL_I
 
 
 @dataclass(frozen=True)
@@ -629,25 +631,33 @@ def _raw_line_gps_s(raw_lines: pd.DataFrame) -> FloatArray:
 def _decoded_ephemerides(
     nav_records: list[NavRecord], raw_lines: pd.DataFrame, rows: pd.DataFrame, skipped: list[Skipped]
 ) -> GpsEphemerides | None:
-    """GPS ephemerides from the log's own Nav records (GPS L1 C/A subframes: ten 30-bit words, each in
-    the low 30 bits of a big-endian 4-byte word), with when each was received."""
+    """GPS and Galileo ephemerides from the log's own Nav records (GPS L1 C/A subframes: ten 30-bit
+    words, each in the low 30 bits of a big-endian 4-byte word; Galileo I/NAV pages, `InavDecoder`),
+    with when each was received."""
     if not nav_records:
         return None
     ref_s = float(rows["t_ns"].min()) / 1e9
     line_s = _raw_line_gps_s(raw_lines)
-    decoder = LnavDecoder()
+    lnav, inav = LnavDecoder(), InavDecoder()
     other = 0
     for r in nav_records:
+        before = line_s[r.raw_lines_before - 1] if r.raw_lines_before > 0 else math.nan
+        now = float(before) if math.isfinite(before) else ref_s
+        if r.type == GALILEO_INAV:
+            inav.add_android(r.svid, r.data, now)
+            continue
         if r.type != GPS_L1CA_NAV or len(r.data) != 40:
             other += 1
             continue
         words = [int.from_bytes(r.data[4 * k : 4 * k + 4], "big") for k in range(10)]
-        before = line_s[r.raw_lines_before - 1] if r.raw_lines_before > 0 else math.nan
-        decoder.add_words(r.svid, words, ref_s, float(before) if math.isfinite(before) else ref_s)
+        lnav.add_words(r.svid, words, ref_s, now)
     if other:
-        skipped.append(Skipped("Nav", "navigation messages of other signals (only GPS L1 C/A is decoded)", other))
-    skipped.extend(decoder.losses("Nav"))
-    return decoder.ephemerides()
+        skipped.append(
+            Skipped("Nav", "navigation messages of other signals (GPS L1 C/A and Galileo I/NAV are decoded)", other)
+        )
+    skipped.extend(lnav.losses("Nav") + inav.losses("Nav"))
+    records = lnav.records() + inav.records()
+    return GpsEphemerides.from_records(records, lnav.iono) if records else None
 
 
 def _imu(

@@ -1,7 +1,7 @@
 """Satellite states for logs of raw observations that carry no ephemerides (GnssLogger, DataFlash GRXS).
 
 The navigation file is the one named with `--topic nav=FILE`, else a GPS RINEX navigation file in the
-log's directory whose records cover the log's time (the one covering most of it when several do;
+log's directory whose GPS or Galileo records cover the log's time (the one covering most of it when several do;
 `hour1820.16n` beside a log of 2016-06-30). Satellite positions, velocities and clocks then come from
 `spooflens.gnss.ephemeris.states_at_transmission`, as for RINEX observation files.
 """
@@ -15,10 +15,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from readers.orbits import state_columns
 from readers.rinex import NavFile, is_gps_nav, read_rinex_nav_file
 from spooflens.epoch_table import Skipped, StreamInfo
 from spooflens.errors import ReaderError
-from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
+from spooflens.gnss.ephemeris import GpsEphemerides
 
 COVER_S = 2 * 3600.0  # a broadcast record serves +-2 h around its toe
 
@@ -86,38 +87,15 @@ def add_satellite_states(
     skipped: list[Skipped],
     none_reason: str = NO_NAV_FILE,
 ) -> pd.DataFrame:
-    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of their GPS satellites;
-    `none_reason` says why there are no ephemerides when `ephemerides` is None."""
-    sv = rows["sv_id"].to_numpy(str)
-    gps = np.char.startswith(sv, "G") if len(sv) else np.zeros(0, dtype=bool)
-    rows = rows.copy()
-    if ephemerides is not None and gps.any():
-        g = np.flatnonzero(gps)
-        t = rows["t_ns"].to_numpy(np.int64)[g] / 1e9
-        states = states_at_transmission(ephemerides, sv[g], t, rows["pseudorange_m"].to_numpy(float)[g])
-        for name, values in states.columns().items():
-            col = np.full(len(rows), np.nan)
-            col[g] = values
-            rows[name] = col
-        missing = int((~states.valid).sum())
-        if missing:
-            skipped.append(
-                Skipped(
-                    receiver_id,
-                    "GPS rows without a valid broadcast ephemeris; satellite states NaN",
-                    missing,
-                    "no ephemeris",
-                )
-            )
-    elif gps.any():
-        skipped.append(Skipped(receiver_id, none_reason, int(gps.sum()), "no ephemeris"))
-    if (~gps).any():
-        skipped.append(
-            Skipped(
-                receiver_id,
-                "non-GPS rows: no satellite states (only GPS orbits are modelled)",
-                int((~gps).sum()),
-                "no ephemeris",
-            )
-        )
-    return rows
+    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of their GPS and Galileo
+    satellites; `none_reason` says why there are no ephemerides when `ephemerides` is None."""
+    columns = state_columns(
+        ephemerides,
+        rows["sv_id"].to_numpy(str),
+        rows["t_ns"].to_numpy(np.int64) / 1e9,
+        rows["pseudorange_m"].to_numpy(float),
+        receiver_id,
+        skipped,
+        none_reason,
+    )
+    return rows.assign(**columns) if columns else rows.copy()

@@ -407,7 +407,8 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
     "--constellation",
     default="synthetic",
     show_default=True,
-    help="'synthetic' (GPS-like Walker 24/6/1) or a RINEX navigation file whose satellites to use.",
+    help="'synthetic' (GPS-like Walker 24/6/1), 'synthetic_gps_galileo' (and Galileo's 24/3/1), or a RINEX "
+    "navigation file whose satellites to use.",
 )
 def simulate(
     scenario: str,

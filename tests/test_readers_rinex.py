@@ -270,7 +270,13 @@ def test_rinex3_mixed_nav_gives_the_same_gps_records(tmp_path: Path) -> None:
     for name in ("sv_id", "week", "toe_sow", "toc_s", "af0", "sqrt_a", "m0", "omega_dot", "tgd", "health", "iode"):
         assert np.array_equal(getattr(v3.ephemerides, name), getattr(v2.ephemerides, name)), name
     assert v3.ephemerides.iono == v2.ephemerides.iono
-    assert [(s.reason, s.count) for s in v3.skipped] == [("non-GPS navigation records (only GPS orbits are used)", 2)]
+    # the GLONASS record is another system's; the Galileo one (every field 1.0) is read and refused
+    (galileo, glonass) = v3.skipped
+    assert (glonass.reason, glonass.count) == (
+        "navigation records of GLONASS, BeiDou, ... (GPS and Galileo orbits are used)",
+        1,
+    )
+    assert galileo.reason.endswith("implausible orbit (sqrt(A) or e out of range))") and galileo.count == 1
 
 
 def test_bad_and_cut_nav_records_are_counted(tmp_path: Path) -> None:
@@ -288,7 +294,7 @@ def test_bad_and_cut_nav_records_are_counted(tmp_path: Path) -> None:
     assert read_rinex_nav_file(cut).records == 1
     header_only = tmp_path / "empty.05n"
     header_only.write_text("\n".join(lines[:12]) + "\n")
-    with pytest.raises(ReaderError, match=r"empty.05n: no usable GPS navigation record"):
+    with pytest.raises(ReaderError, match=r"empty.05n: no usable GPS or Galileo navigation record"):
         read_rinex_nav(header_only)
 
 
@@ -313,7 +319,8 @@ def test_android_rinex3_mixed_constellations(pixel: EpochTable) -> None:
     assert np.allclose(first["pseudorange_rate_mps"], rate)
     assert obs["sv_x_m"].isna().all()
     reasons = {s.reason.split(" (")[0]: s for s in pixel.skipped}
-    assert reasons["no navigation file found for pixel6.23o"].count == int((obs["sv_id"].str[0] == "G").sum())
+    assert reasons["no navigation file found for pixel6.23o"].count == int(obs["sv_id"].str[0].isin(["G", "E"]).sum())
+    assert reasons["rows of systems R: no satellite states"].count == int((obs["sv_id"].str[0] == "R").sum())
 
 
 def test_nav_topic_overrides_the_search(tmp_path: Path) -> None:

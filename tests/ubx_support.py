@@ -1,6 +1,6 @@
-"""Building u-blox captures for tests: GPS LNAV subframes encoded from broadcast records (IS-GPS-200,
-independently of the reader's decoder: field by field from the ICD's tables) in RXM-SFRBX, and RXM-RAWX
-epochs from an observation table."""
+"""Building u-blox captures for tests: GPS LNAV subframes and Galileo I/NAV pages encoded from broadcast
+records (IS-GPS-200, Galileo OS SIS ICD; independently of the reader's decoders: field by field from the
+ICDs' tables) in RXM-SFRBX, and RXM-RAWX epochs from an observation table."""
 
 from __future__ import annotations
 
@@ -128,13 +128,85 @@ def iono_subframe(alpha: tuple[float, ...], beta: tuple[float, ...], tx_gps_s: f
     return _transmit(w.words())
 
 
+class _Bits:
+    """A sequential bit writer: fields appended in the ICD's order, most significant bit first."""
+
+    def __init__(self) -> None:
+        self.bits: list[int] = []
+
+    def add(self, n: int, value: float) -> _Bits:
+        v = round(value) & ((1 << n) - 1)
+        self.bits += [(v >> (n - 1 - k)) & 1 for k in range(n)]
+        return self
+
+    def value(self, width: int) -> int:
+        assert len(self.bits) <= width, len(self.bits)
+        return int("".join(map(str, self.bits + [0] * (width - len(self.bits)))), 2)
+
+
+def _crc24q_of_bits(bits: list[int]) -> int:
+    """CRC-24Q of a bit sequence, one bit at a time (the ICD's polynomial, no table)."""
+    poly = [int(c) for c in f"{0x1864CFB:025b}"][1:]
+    reg = [0] * 24
+    for b in bits:
+        feedback = reg[0] ^ b
+        reg = [*reg[1:], 0]
+        if feedback:
+            reg = [r ^ p for r, p in zip(reg, poly, strict=True)]
+    return int("".join(map(str, reg)), 2)
+
+
+def inav_words(rec: Mapping[str, float], tx_gps_s: float, health: int = 0) -> list[int]:
+    """Galileo I/NAV word types 1-5 (128 bits each, Galileo OS SIS ICD Tables 40-42) of one record
+    (GpsEphemerides field names; `tgd` is BGD(E1, E5b)); word 5's time is `tx_gps_s`."""
+    sc = math.pi
+    iod = int(rec["iode"])
+    toe, toc = rec["toe_sow"], rec["toc_s"] % WEEK_S
+    week, tow = divmod(tx_gps_s, WEEK_S)
+    w1 = _Bits().add(6, 1).add(10, iod).add(14, toe / 60).add(32, rec["m0"] / sc / 2.0**-31)
+    w1.add(32, rec["e"] / 2.0**-33).add(32, rec["sqrt_a"] / 2.0**-19)
+    w2 = _Bits().add(6, 2).add(10, iod).add(32, rec["omega0"] / sc / 2.0**-31).add(32, rec["i0"] / sc / 2.0**-31)
+    w2.add(32, rec["omega"] / sc / 2.0**-31).add(14, rec["idot"] / sc / 2.0**-43)
+    w3 = (
+        _Bits().add(6, 3).add(10, iod).add(24, rec["omega_dot"] / sc / 2.0**-43).add(16, rec["delta_n"] / sc / 2.0**-43)
+    )
+    for key in ("cuc", "cus"):
+        w3.add(16, rec[key] / 2.0**-29)
+    w3.add(16, rec["crc"] / 2.0**-5).add(16, rec["crs"] / 2.0**-5).add(8, 107)  # SISA index
+    w4 = _Bits().add(6, 4).add(10, iod).add(6, int(str(rec["sv_id"])[1:]))
+    w4.add(16, rec["cic"] / 2.0**-29).add(16, rec["cis"] / 2.0**-29).add(14, toc / 60)
+    w4.add(31, rec["af0"] / 2.0**-34).add(21, rec["af1"] / 2.0**-46).add(6, rec["af2"] / 2.0**-59)
+    w5 = _Bits().add(6, 5).add(11, 0).add(11, 0).add(14, 0).add(5, 0)  # NeQuick coefficients, region flags
+    w5.add(10, 0).add(10, rec["tgd"] / 2.0**-32)  # BGD(E1, E5a), BGD(E1, E5b)
+    w5.add(2, 0).add(2, health >> 1).add(1, 0).add(1, health & 1)  # E5b HS, E1-B HS, E5b DVS, E1-B DVS
+    w5.add(12, week - 1024).add(20, tow)
+    return [w.value(128) for w in (w1, w2, w3, w4, w5)]
+
+
+def inav_page(word: int, alert: bool = False) -> list[int]:
+    """A nominal page carrying one 128-bit word as u-blox sends it: even then odd part, 120 bits each in
+    four U4 words (8 bits of padding), the CRC-24Q over both parts' data."""
+    data = [(word >> (127 - k)) & 1 for k in range(128)]
+    even = [0, int(alert), *data[:112]]
+    odd = [1, int(alert), *data[112:], *([0] * 64)]
+    crc = _crc24q_of_bits([0] * 4 + even + odd)
+    odd += [(crc >> (23 - k)) & 1 for k in range(24)] + [0] * 8
+    parts = [even + [0] * (128 - len(even)), odd + [0] * (128 - len(odd))]
+    bits = parts[0] + parts[1]
+    return [int("".join(map(str, bits[32 * i : 32 * i + 32])), 2) for i in range(8)]
+
+
 def sfrbx(sv: int, words30: list[int], gnss_id: int = 0) -> bytes:
     payload = bytes((gnss_id, sv, 0, 0, len(words30), 0, 2, 0)) + struct.pack(f"<{len(words30)}I", *words30)
     return UBXMessage("RXM", "RXM-SFRBX", GET, payload=payload).serialize()
 
 
+GNSS_ID = {"G": 0, "E": 2}  # u-blox gnssId; signal 0 is GPS L1 C/A and Galileo E1C
+
+
 def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
-    """One RXM-RAWX epoch of GPS L1 C/A rows (sv_id, pseudorange_m, carrier_phase_cycles, doppler_hz, cn0_dbhz)."""
+    """One RXM-RAWX epoch of GPS L1 C/A and Galileo E1C rows (sv_id, pseudorange_m, carrier_phase_cycles,
+    doppler_hz, cn0_dbhz)."""
     week, tow = divmod(gps_s, WEEK_S)
     head = struct.pack("<dHbBBB2x", tow, int(week), 18, len(rows), 1, 1)
     meas = b""
@@ -143,9 +215,8 @@ def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
         do = r.doppler_hz if np.isfinite(r.doppler_hz) else 0.0
         cn0 = int(r.cn0_dbhz) if np.isfinite(r.cn0_dbhz) else 32 + (7 * int(r.sv_id[1:])) % 17  # a spread sky
         trk = 1 | (2 if np.isfinite(r.carrier_phase_cycles) else 0)
-        meas += struct.pack(
-            "<ddfBBBBHBBBBBx", r.pseudorange_m, cp, do, 0, int(r.sv_id[1:]), 0, 0, 64000, cn0, 4, 2, 3, trk
-        )
+        ids = (GNSS_ID[r.sv_id[0]], int(r.sv_id[1:]))
+        meas += struct.pack("<ddfBBBBHBBBBBx", r.pseudorange_m, cp, do, *ids, 0, 0, 64000, cn0, 4, 2, 3, trk)
     return UBXMessage("RXM", "RXM-RAWX", GET, payload=head + meas).serialize()
 
 
@@ -157,8 +228,9 @@ def capture_from_rinex(
     counterfeit: Sequence[tuple[float, dict[str, float], float]] = (),
 ) -> bytes:
     """A RAWX + SFRBX capture of a RINEX observation table (t_s from t0_gps_s): before each epoch, the
-    subframes 1-3 of every record whose toe is nearest, and the ionosphere page once. `counterfeit`:
-    (t_s from which, record, clock error s) messages sent instead for that satellite from then on."""
+    subframes 1-3 (a Galileo satellite's I/NAV word types 1-5, just sent) of every record whose toe is
+    nearest, and the ionosphere page once. `counterfeit`: (t_s from which, record, clock error s)
+    messages sent instead for that satellite from then on."""
     out: list[bytes] = []
     sent: set[tuple[str, int]] = set()
     first = True
@@ -179,6 +251,10 @@ def capture_from_rinex(
             if key in sent:
                 continue
             sent.add(key)
+            if sv.startswith("E"):
+                for word in inav_words(rec, gps_s - 3.0 + error):
+                    out.append(sfrbx(int(sv[1:]), inav_page(word), GNSS_ID["E"]))
+                continue
             for words in lnav_subframes(rec, frame_start, clock_error_s=error):
                 out.append(sfrbx(int(sv[1:]), words))
         if iono is not None and first:

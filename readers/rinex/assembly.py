@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.orbits import state_columns
 from readers.rinex.navigation import NavFile, find_nav_files, read_rinex_nav_file
 from readers.rinex.observation import ObsScan, extract_l1, is_rinex_obs, scan_obs
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
-from spooflens.gnss.ephemeris import C_MPS, GpsEphemerides, states_at_transmission
+from spooflens.gnss.ephemeris import C_MPS, GpsEphemerides
 
 Progress = Callable[[int, int], None]
 
@@ -83,38 +84,10 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
 def _add_satellite_states(
     rows: dict[str, np.ndarray], navs: list[NavFile], obs_name: str, receiver_id: str, skipped: list[Skipped]
 ) -> None:
-    """Fill the sv_* columns of GPS rows from the broadcast orbits; count every row left without."""
-    sv = rows["sv_id"]
-    gps = np.char.startswith(sv, "G") if len(sv) else np.zeros(0, dtype=bool)
-    if navs and gps.any():
-        eph = navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)
-        g = np.flatnonzero(gps)
-        states = states_at_transmission(eph, sv[g], rows["t_ns"][g] / 1e9, rows["pseudorange_m"][g]).columns()
-        for name, values in states.items():
-            rows[name] = np.full(len(sv), np.nan)
-            rows[name][g] = values
-        missing = int((~np.isfinite(states["sv_x_m"])).sum())
-        if missing:
-            skipped.append(
-                Skipped(
-                    receiver_id,
-                    "GPS rows without a valid broadcast ephemeris; satellite states NaN",
-                    missing,
-                    "no ephemeris",
-                )
-            )
-    elif gps.any():
-        reason = f"no navigation file found for {obs_name} (give one with --topic nav=FILE); no satellite states"
-        skipped.append(Skipped(receiver_id, reason, int(gps.sum()), "no ephemeris"))
-    if (~gps).any():
-        skipped.append(
-            Skipped(
-                receiver_id,
-                "non-GPS rows: no satellite states (only GPS orbits are modelled)",
-                int((~gps).sum()),
-                "no ephemeris",
-            )
-        )
+    """Fill the sv_* columns of GPS and Galileo rows from the broadcast orbits; count every row left without."""
+    eph = (navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)) if navs else None
+    reason = f"no navigation file found for {obs_name} (give one with --topic nav=FILE); no satellite states"
+    rows |= state_columns(eph, rows["sv_id"], rows["t_ns"] / 1e9, rows["pseudorange_m"], receiver_id, skipped, reason)
 
 
 def _navigation(
@@ -157,10 +130,7 @@ def _read_obs_file(
 
 def merge_navs(navs: list[NavFile]) -> GpsEphemerides:
     """Several navigation files as one set of records (duplicates are harmless: the nearest toe wins)."""
-    eph = [n.ephemerides for n in navs]
-    names = [f for f in GpsEphemerides.__dataclass_fields__ if f != "iono"]
-    recs = [{k: getattr(e, k)[i].item() for k in names} for e in eph for i in range(len(e))]
-    return GpsEphemerides.from_records(recs, iono=next((e.iono for e in eph if e.iono), None))
+    return GpsEphemerides.combined([n.ephemerides for n in navs])
 
 
 def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> EpochTable:

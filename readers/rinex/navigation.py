@@ -1,4 +1,13 @@
-"""RINEX navigation files: GPS broadcast orbits (and the Klobuchar ionosphere), and where to find them."""
+"""RINEX navigation files: GPS and Galileo broadcast orbits (and the Klobuchar ionosphere), and where to
+find them.
+
+A Galileo record has the GPS layout with other meanings in three fields (RINEX 3.04 A8): line 5's
+second field is the data sources (bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2 I/NAV E5b-I; bit 8 clock
+for E5a/E1, bit 9 for E5b/E1), line 6 holds SISA, the health bits and the two group delays
+BGD(E1, E5a), BGD(E1, E5b), and the week is GPS's continuous week. An E1 pseudorange is corrected with
+the BGD of the clock the record carries; only the E1-B health bits (0-2) speak for E1, and only an
+I/NAV record sends them, so F/NAV records (the same orbit, re-broadcast on E5a) are counted and left out.
+"""
 
 from __future__ import annotations
 
@@ -10,23 +19,31 @@ from pathlib import Path
 
 import numpy as np
 
+from readers.orbits import ORBIT_SYSTEMS as MODELLED
 from readers.rinex.text import GPS_EPOCH, TextLines, checked_version, end_of_header, first_line
 from spooflens.epoch_table import Skipped
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import SECONDS_PER_WEEK, GpsEphemerides, Klobuchar
 
+ORBIT_SYSTEMS = tuple(MODELLED)  # RINEX 3 systems whose records are read
+_RINEX3_SYSTEMS = (*ORBIT_SYSTEMS, "M", " ", "")
+GALILEO_INAV = 0b101  # data sources: I/NAV E1-B or E5b-I
+GALILEO_E5A_CLOCK = 1 << 8
+E1B_HEALTH = 0b111  # E1-B data validity and signal health
+
 
 def is_gps_nav(path: Path) -> bool:
-    """True for a RINEX navigation file that can hold GPS orbits (RINEX 2 'N', RINEX 3 GPS or mixed)."""
+    """True for a RINEX navigation file that can hold GPS or Galileo orbits (RINEX 2 'N', RINEX 3 GPS,
+    Galileo or mixed)."""
     line = first_line(path)
     if "RINEX VERSION / TYPE" not in line or line[20:21].upper() != "N":
         return False
-    return line[:9].strip().startswith("2") or line[40:41].upper() in ("G", "M", " ", "")
+    return line[:9].strip().startswith("2") or line[40:41].upper() in _RINEX3_SYSTEMS
 
 
 @dataclass(frozen=True)
 class NavFile:
-    """A navigation file's GPS records, with what was skipped and why."""
+    """A navigation file's GPS and Galileo records, with what was skipped and why."""
 
     path: Path
     version: float
@@ -45,6 +62,12 @@ _NAV_KEYS = (  # RINEX GPS broadcast orbit lines 1-7, four fields each (None: no
     (None, "fit_hours", None, None),
 )
 _OPTIONAL = {"fit_hours"}
+# Galileo (RINEX 3.04 Table A8): lines 5-7 carry data sources, SISA, health, BGDs and the transmission time
+_GALILEO_KEYS = (
+    *_NAV_KEYS[:4],
+    ("idot", "data_sources", "week", None),
+    (None, "health", "bgd_e5a", "bgd_e5b"),
+)
 
 
 def _nav_number(text: str) -> float | None:
@@ -55,8 +78,10 @@ def _nav_number(text: str) -> float | None:
 
 
 def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str]:
-    """One GPS broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records keys."""
+    """One GPS or Galileo broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records
+    keys."""
     first = lines[0]
+    system = "G" if version < 3 else first[:1].upper()
     if version < 3:
         sv = f"G{int(first[:2]):02d}"
         yy, mo, d, h, mi = (int(v) for v in first[2:17].split())
@@ -64,7 +89,7 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
         year = yy + (2000 if yy < 80 else 1900) if yy < 100 else yy
         head, col0 = first[22:79], 3
     else:
-        sv = f"G{int(first[1:3]):02d}"
+        sv = f"{system}{int(first[1:3]):02d}"
         year, mo, d, h, mi, isec = (int(v) for v in first[4:23].split())
         sec = float(isec)
         head, col0 = first[23:80], 4
@@ -75,7 +100,7 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
         if v is None:
             raise ValueError(f"{key} is blank")
         rec[key] = v
-    for row, keys in enumerate(_NAV_KEYS):
+    for row, keys in enumerate(_GALILEO_KEYS if system == "E" else _NAV_KEYS):
         line = lines[row + 1] if row + 1 < len(lines) else ""
         for k, name in enumerate(keys):
             if name is None:
@@ -84,7 +109,14 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
             if v is None and name not in _OPTIONAL:
                 raise ValueError(f"{name} is blank")
             rec[name] = 0.0 if v is None else v
-    fit = float(rec.pop("fit_hours"))
+    if system == "E":
+        sources = int(float(rec.pop("data_sources")))
+        if not sources & GALILEO_INAV:
+            raise _FNavRecord
+        bgd_e5a, bgd_e5b = float(rec.pop("bgd_e5a")), float(rec.pop("bgd_e5b"))
+        rec["tgd"] = bgd_e5a if sources & GALILEO_E5A_CLOCK else bgd_e5b
+        rec["health"] = int(float(rec["health"])) & E1B_HEALTH
+    fit = float(rec.pop("fit_hours", 0.0))
     if fit > 4.0:
         rec["max_age_s"] = fit * 3600.0 / 2
     for key in ("week", "health", "iode"):  # integers a receiver writes: anything beyond 32 bits is damage
@@ -99,6 +131,10 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
     if not np.all(np.isfinite(values)) or not 2000.0 < float(rec["sqrt_a"]) < 10000.0 or not 0 <= float(rec["e"]) < 1:
         raise ValueError("implausible orbit (sqrt(A) or e out of range)")
     return rec
+
+
+class _FNavRecord(Exception):
+    """A Galileo F/NAV record: its orbit is the I/NAV one's, without the E1 health."""
 
 
 def _klobuchar(lines: list[str]) -> Klobuchar | None:
@@ -125,10 +161,11 @@ def _klobuchar(lines: list[str]) -> Klobuchar | None:
 
 
 def read_rinex_nav_file(path: Path | str) -> NavFile:
-    """Read a RINEX 2 GPS or RINEX 3 (GPS or mixed) navigation file, keeping the GPS records.
+    """Read a RINEX 2 GPS or RINEX 3 (GPS, Galileo or mixed) navigation file, keeping the GPS and
+    Galileo I/NAV records.
 
     Records that are cut short or hold a field that is not a number are skipped and counted; other
-    systems' records are counted as skipped. ReaderError if no GPS record is usable.
+    systems' records are counted as skipped. ReaderError if no record is usable.
     """
     path = Path(path)
     text = TextLines.load(path)
@@ -139,17 +176,17 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
     ftype, fsys = first[20:21].upper(), first[40:41].upper()
     if version < 3 and ftype != "N":
         raise ReaderError(path, f"RINEX 2 navigation type {ftype!r}: only GPS navigation ('N') files carry GPS orbits")
-    if version >= 3 and fsys not in ("G", "M", " ", ""):
-        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS records")
+    if version >= 3 and fsys not in _RINEX3_SYSTEMS:
+        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS or Galileo records")
     body = lines[end + 1 :]
     is_start = [(ln[:2].strip() != "") if version < 3 else (ln[:1].strip() != "") for ln in body]
     starts = [i for i, s in enumerate(is_start) if s]
     records: list[dict[str, float | int | str]] = []
-    bad, other = 0, 0
+    bad, other, fnav = 0, 0, 0
     first_bad: tuple[int, str] | None = None
     for a, b in zip(starts, [*starts[1:], len(body)][: len(starts)], strict=True):
         rec_lines = body[a:b]
-        if version >= 3 and rec_lines[0][:1].upper() != "G":
+        if version >= 3 and rec_lines[0][:1].upper() not in ORBIT_SYSTEMS:
             other += 1
             continue
         try:
@@ -158,6 +195,8 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
             if b == len(body) and not text.terminated and (len(rec_lines) < 8 or len(rec_lines[-1].rstrip()) < 22):
                 raise ValueError("record cut short (file ends inside it)")
             records.append(_nav_record(rec_lines, version))
+        except _FNavRecord:
+            fnav += 1
         except (ValueError, IndexError, OverflowError) as err:
             bad += 1
             first_bad = first_bad or (end + 2 + a, str(err))
@@ -172,10 +211,14 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
             )
         )
     if other:
-        skipped.append(Skipped(path.name, "non-GPS navigation records (only GPS orbits are used)", other))
+        skipped.append(
+            Skipped(path.name, "navigation records of GLONASS, BeiDou, ... (GPS and Galileo orbits are used)", other)
+        )
+    if fnav:
+        skipped.append(Skipped(path.name, "Galileo F/NAV records (the I/NAV records carry the same orbits)", fnav))
     if not records:
         where = f"; first problem at line {first_bad[0]}: {first_bad[1]}" if first_bad else ""
-        raise ReaderError(path, f"no usable GPS navigation record{where}")
+        raise ReaderError(path, f"no usable GPS or Galileo navigation record{where}")
     unique = {(r["sv_id"], r["week"], r["toe_sow"], r["iode"]): r for r in reversed(records)}
     if len(unique) < len(records):
         skipped.append(Skipped(path.name, "duplicate navigation records", len(records) - len(unique)))
@@ -184,7 +227,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
 
 
 def read_rinex_nav(path: Path | str) -> GpsEphemerides:
-    """GPS broadcast ephemerides of a RINEX navigation file (`read_rinex_nav_file` for what was skipped)."""
+    """GPS and Galileo broadcast ephemerides of a RINEX navigation file (`read_rinex_nav_file` for what was skipped)."""
     return read_rinex_nav_file(path).ephemerides
 
 

@@ -14,9 +14,10 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   same solution again and is counted, not used.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
-  RINEX-style. GPS satellite states from the broadcast ephemerides in the capture's own RXM-SFRBX
-  subframes (`readers/lnav.py`), else from a RINEX navigation file (`--topic nav=FILE`, or one beside
-  the capture covering its time), so RAIM and the raw-measurement detectors run on the capture.
+  RINEX-style. GPS and Galileo satellite states from the broadcast ephemerides in the capture's own
+  RXM-SFRBX messages (`readers/lnav.py`, `readers/inav.py`), else from a RINEX navigation file
+  (`--topic nav=FILE`, or one beside the capture covering its time), so RAIM and the raw-measurement
+  detectors run on the capture.
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
@@ -40,8 +41,10 @@ import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
 from readers import ReaderFormat
+from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
+from readers.rtcm_ephemeris import RTCM_EPHEMERIS, rtcm_ephemerides
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
 from spooflens.epoch_table import (
@@ -238,20 +241,25 @@ def _satellites(state: _State, ref_s: float | None) -> pd.DataFrame | None:
 
 
 def _broadcast_ephemerides(state: _State, ref_s: float | None, skipped: list[Skipped]) -> GpsEphemerides | None:
-    """GPS ephemerides decoded from the capture's RXM-SFRBX subframes (None when none assemble)."""
+    """GPS and Galileo ephemerides decoded from the capture's RXM-SFRBX messages (None when none assemble)."""
     if not state.sfrbx:
         return None
-    decoder = LnavDecoder()
+    lnav, inav = LnavDecoder(), InavDecoder()
     bad = 0
     for payload, now in state.sfrbx:
+        when = ref_s if now is None else now  # before the first epoch: its time
         try:
-            decoder.add(payload, ref_s, ref_s if now is None else now)  # before the first epoch: its time
+            if payload[:1] == bytes([GALILEO_GNSS_ID]):
+                inav.add(payload, when)
+            else:
+                lnav.add(payload, ref_s, when)
         except ValueError:
             bad += 1
     if bad:
         skipped.append(Skipped("RXM-SFRBX", "subframe messages of impossible length", bad, "lost"))
-    skipped.extend(decoder.losses("RXM-SFRBX"))
-    return decoder.ephemerides()
+    skipped.extend(lnav.losses("RXM-SFRBX") + inav.losses("RXM-SFRBX"))
+    records = lnav.records() + inav.records()
+    return GpsEphemerides.from_records(records, lnav.iono) if records else None
 
 
 def _with_satellite_states(
@@ -260,18 +268,24 @@ def _with_satellite_states(
     path: Path,
     topics: Mapping[str, str] | None,
     ref_s: float | None,
+    rtcm_frames: list[bytes],
     skipped: list[Skipped],
 ) -> tuple[pd.DataFrame, StreamInfo | None, GpsEphemerides | None]:
-    """RAWX rows with the sv_* columns: the capture's own subframes first, else a RINEX navigation file;
-    and the ephemerides used."""
-    eph = _broadcast_ephemerides(state, ref_s, skipped)
+    """RAWX rows with the sv_* columns and the ephemerides used: the capture's own subframes and the
+    orbits of the RTCM3 stream fed to it, else a RINEX navigation file."""
     t0_ns = int(obs["t_ns"].min())
-    if eph is not None:
-        stream = ephemeris_stream(eph, RECEIVER, "UBX", "UBX RXM-SFRBX (GPS LNAV ephemerides)", len(eph), t0_ns)
+    own = _broadcast_ephemerides(state, ref_s, skipped)
+    fed, rtcm_skipped = rtcm_ephemerides(rtcm_frames, ref_s)
+    skipped.extend(rtcm_skipped)
+    parts = [e for e in (own, GpsEphemerides.from_records(fed) if fed else None) if e is not None]
+    if parts:
+        eph = parts[0] if len(parts) == 1 else GpsEphemerides.combined(parts)
+        sources = [s for s, e in (("RXM-SFRBX", own), ("RTCM3 1019/1046", fed)) if e]
+        stream = ephemeris_stream(eph, RECEIVER, "UBX", f"{' + '.join(sources)} (GPS, Galileo)", len(eph), t0_ns)
         return add_satellite_states(obs, eph, RECEIVER, skipped), stream, eph
     reason = (
-        "no GPS ephemeris in the capture (RXM-SFRBX) and no navigation file covers it "
-        "(give one with --topic nav=FILE); no satellite states"
+        "no GPS or Galileo ephemeris in the capture (RXM-SFRBX, RTCM3 1019/1046) and no navigation file "
+        "covers it (give one with --topic nav=FILE); no satellite states"
     )
     nav = navigation_for(path, topics, obs["t_ns"].to_numpy() / 1e9, skipped) if ref_s is not None else None
     rows = add_satellite_states(obs, nav.ephemerides if nav else None, RECEIVER, skipped, reason)
@@ -414,7 +428,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             Skipped("bytes", "bytes that are no UBX, NMEA or RTCM3 frame (cut frames, garbage)", frames.garbage_bytes)
         )
     for num, n in sorted(frames.rtcm.items()):
-        skipped.append(Skipped(f"RTCM3 {num}", "RTCM3 corrections fed to the receiver (not used)", n))
+        if num not in RTCM_EPHEMERIS:
+            skipped.append(Skipped(f"RTCM3 {num}", "RTCM3 corrections fed to the receiver (not used)", n))
     for name, n in sorted(state.unused.items()):
         skipped.append(Skipped(name, "UBX message type spooflens does not use", n))
     for name, n in state.bad.items():
@@ -430,9 +445,17 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     obs, no_pr = _observations(state)
     nav_info, ephemerides = None, None
     if obs is not None:
-        obs, nav_info, ephemerides = _with_satellite_states(state, obs, path, topics, ref_s, skipped)
-    elif state.sfrbx:
-        skipped.append(Skipped("RXM-SFRBX", "subframes without RXM-RAWX observations to use them", len(state.sfrbx)))
+        obs, nav_info, ephemerides = _with_satellite_states(
+            state, obs, path, topics, ref_s, frames.rtcm_ephemerides, skipped
+        )
+    else:
+        if state.sfrbx:
+            skipped.append(
+                Skipped("RXM-SFRBX", "subframes without RXM-RAWX observations to use them", len(state.sfrbx))
+            )
+        for num in sorted(RTCM_EPHEMERIS & set(frames.rtcm)):
+            why = "RTCM3 ephemerides fed to the receiver, without RXM-RAWX observations to use them"
+            skipped.append(Skipped(f"RTCM3 {num}", why, frames.rtcm[num]))
     imu = _imu(state, ref_s, skipped)
     satellites = _satellites(state, ref_s)
     nmea_fixes, headings, nmea_streams = _nmea_part(frames, path, reference, fixes is None, skipped)

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyrtcm.rtcmhelpers import calc_crc24q
 
+from readers.rtcm_ephemeris import RTCM_EPHEMERIS
+
 UBX_SYNC = b"\xb5\x62"
 MAX_NMEA = 120  # longest NMEA sentence accepted (the standard's limit is 82 characters)
 _CANDIDATE = re.compile(rb"[\xb5$!\xd3#]")
@@ -45,6 +47,7 @@ class Frames:
     nmea: list[NmeaLine] = field(default_factory=list)
     comments: list[str] = field(default_factory=list)
     rtcm: Counter[int] = field(default_factory=Counter)  # message number -> count
+    rtcm_ephemerides: list[bytes] = field(default_factory=list)  # whole frames of RTCM_EPHEMERIS messages
     garbage_bytes: int = 0
     bad: Counter[str] = field(default_factory=Counter)  # damaged or cut frames, by kind
     order: list[tuple[str, int]] = field(default_factory=list)  # ("ubx" | "nmea", index) in file order
@@ -118,7 +121,10 @@ def split_frames(data: bytes) -> Frames:
             length = ((data[pos + 1] & 0x03) << 8) | data[pos + 2]
             end = pos + 6 + length
             if end <= n and calc_crc24q(data[pos:end]) == 0:
-                out.rtcm[(data[pos + 3] << 4) | (data[pos + 4] >> 4) if length >= 2 else 0] += 1
+                number = (data[pos + 3] << 4) | (data[pos + 4] >> 4) if length >= 2 else 0
+                out.rtcm[number] += 1
+                if number in RTCM_EPHEMERIS:
+                    out.rtcm_ephemerides.append(data[pos:end])
                 pos = end
                 continue
         elif b == 0x23 and (pos == 0 or data[pos - 1] == 0x0A):  # '#' at a line start: a text comment

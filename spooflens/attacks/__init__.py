@@ -27,8 +27,16 @@ def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Attac
 
     A fix-level kind on a log whose receivers logged only pseudoranges (RINEX, a CSV of observations)
     acts on the pseudoranges: the fixes `analyze` solves from them then follow the attack.
+    A ramp or step given `systems` acts on those systems' pseudoranges alone (a GPS-only spoofer before
+    a multi-constellation receiver).
     """
-    on_observations = spec.kind in OBSERVATION_KINDS or (not len(table.fixes) and len(table.observations) > 0)
+    if "systems" in spec.params and not len(table.observations):
+        raise AttackError(f"{table.source}: systems= acts on raw pseudoranges and this log has none")
+    on_observations = (
+        spec.kind in OBSERVATION_KINDS
+        or "systems" in spec.params
+        or (not len(table.fixes) and len(table.observations) > 0)
+    )
     attacked = table.observations if on_observations else table.fixes
     if len(attacked):
         last = float(attacked["t_s"].max())
@@ -50,7 +58,6 @@ def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Attac
         return apply_observation_attack(table, spec)
     if spec.kind == Kind.CAPTURE:
         return apply_capture(table, spec)
-        return apply_observation_attack(table, spec)
     return apply_fix_attack(table, spec)
 
 

@@ -34,6 +34,12 @@ def _chosen_satellites(spec: AttackSpec, obs: pd.DataFrame, start: float) -> tup
     first = at_start["t_s"].min() if len(at_start) else np.nan
     tracked = sorted(set(at_start.loc[at_start["t_s"] == first, "sv_id"].astype(str)))
     rng = np.random.default_rng(int(spec.params.get("seed", 0)))
+    if "systems" in spec.params:
+        systems = str(spec.params["systems"]).upper().replace("+", "")
+        chosen = [s for s in tracked_all if s[:1] in systems]
+        if not chosen:
+            raise AttackError(f"{spec.kind.value}: no satellite of systems {systems!r}; the log has {tracked_all}")
+        return chosen, [s for s in tracked_all if s not in chosen]
     if "svs" in spec.params:
         named = [s.strip().upper() for s in str(spec.params["svs"]).replace(",", "+").split("+") if s.strip()]
         unknown = [s for s in named if s not in tracked_all]

@@ -118,6 +118,14 @@ def _vel(default: int, meaning: str) -> Param:
 
 _SVS = Param("svs", "text", None, "satellites to attack, e.g. G05+G07 (replaces `count`)")
 _SEED = Param("seed", "count", 0, "random seed of the choice of satellites")
+_SYSTEMS = Param(
+    "systems",
+    "text",
+    None,
+    "act on the pseudoranges of these systems' satellites alone, e.g. G: a GPS-only spoofer (the open SDR "
+    "spoofers) before a multi-constellation receiver; the fixes follow the receiver's solution of them",
+    "on the fixes",
+)
 
 
 def _count(default: int | None) -> Param:
@@ -132,6 +140,7 @@ KINDS: dict[Kind, KindSpec] = {
             Param("rate", "float", 2.0, "m/s per axis"),
             _axes("en"),
             _vel(0, "1 moves the reported velocity consistently"),
+            _SYSTEMS,
             *_WINDOW,
         ),
     ),
@@ -142,6 +151,7 @@ KINDS: dict[Kind, KindSpec] = {
             Param("offset", "float", 50.0, "m per axis"),
             _axes("en"),
             _vel(0, "no effect (a step has no velocity)"),
+            _SYSTEMS,
             *_WINDOW,
         ),
     ),

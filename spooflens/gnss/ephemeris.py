@@ -1,12 +1,15 @@
-"""GPS broadcast ephemerides and where each satellite is: IS-GPS-200 (Table 20-IV) orbit and clock.
+"""GPS and Galileo broadcast ephemerides and where each satellite is: IS-GPS-200 (Table 20-IV) orbit
+and clock, which the Galileo OS SIS ICD (5.1.1) repeats with its own gravitational constant.
 
 One code path serves real navigation files (`readers.rinex.read_rinex_nav`) and the simulator's
 synthetic constellation (`synthetic_constellation`: the same Keplerian elements with the harmonic
 corrections set to zero), so a simulated log and a real one meet the same satellite model.
 
-Times are GPS seconds since 1980-01-06 (continuous, no week rollover). Positions come out in the
-ECEF frame of the instant asked for; the rotation of the Earth while the signal travels is the
-receiver side's business (`spooflens.gnss.geometry`).
+Times are GPS seconds since 1980-01-06 (continuous, no week rollover). A Galileo record's times are
+taken on the same scale: GST is steered to GPS time within tens of nanoseconds, and the broadcast
+offset between them (GGTO) is left to the receiver's clock unknown per system, which absorbs it.
+Positions come out in the ECEF frame of the instant asked for; the rotation of the Earth while the
+signal travels is the receiver side's business (`spooflens.gnss.geometry`).
 """
 
 from __future__ import annotations
@@ -21,9 +24,12 @@ from spooflens.constants import SPEED_OF_LIGHT_MPS
 FloatArray = NDArray[np.float64]
 
 GM_GPS = 3.986005e14  # m^3/s^2, IS-GPS-200's value (not WGS84's 3.986004418e14)
+GM_GALILEO = 3.986004418e14  # m^3/s^2, the Galileo ICD's
 OMEGA_E_GPS = 7.2921151467e-5  # rad/s
 C_MPS = SPEED_OF_LIGHT_MPS
-F_REL = -4.442807633e-10  # s/m^0.5, relativistic clock correction constant
+# s/m^0.5, relativistic clock correction constant; Galileo's (from its GM) differs by 1e-7 of a term of
+# tens of nanoseconds, so one constant serves both
+F_REL = -4.442807633e-10
 SECONDS_PER_WEEK = 604800.0
 GPS_L1_HZ = 1575.42e6
 GPS_L2_HZ = 1227.60e6
@@ -41,7 +47,8 @@ class Klobuchar:
 
 @dataclass(frozen=True)
 class GpsEphemerides:
-    """Broadcast ephemeris records, one entry per record (several per satellite), as parallel arrays.
+    """Broadcast ephemeris records, one entry per record (several per satellite), as parallel arrays:
+    GPS LNAV (`sv_id` G..) and Galileo I/NAV (E..; `tgd` holds BGD(E1, E5b), `health` the E1-B bits).
 
     Names follow IS-GPS-200; angles in radians, rates in rad/s, `sqrt_a` in m^0.5. `toe_sow` is the
     time of ephemeris in seconds of GPS week `week`; `toc_s` the clock reference time (GPS seconds).
@@ -96,6 +103,14 @@ class GpsEphemerides:
             cols[f.name] = np.asarray(values, dtype=dtype)
         order = np.lexsort((cols["week"] * SECONDS_PER_WEEK + cols["toe_sow"], cols["sv_id"]))
         return cls(**{k: v[order] for k, v in cols.items()}, iono=iono)
+
+    @classmethod
+    def combined(cls, parts: list[GpsEphemerides]) -> GpsEphemerides:
+        """Several sets of records as one (the first ionosphere model given wins; duplicates are harmless:
+        the nearest toe wins)."""
+        names = [f.name for f in fields(cls) if f.name != "iono"]
+        recs = [{k: getattr(e, k)[i].item() for k in names} for e in parts for i in range(len(e))]
+        return cls.from_records(recs, iono=next((e.iono for e in parts if e.iono), None))
 
     def __len__(self) -> int:
         return len(self.sv_id)
@@ -163,7 +178,8 @@ def _kepler(eph: GpsEphemerides, t_s: FloatArray) -> tuple[FloatArray, FloatArra
     """Orbit position in ECEF at `t_s` for each record, plus the eccentric anomaly (for the clock)."""
     a = eph.sqrt_a**2
     tk = t_s - eph.toe_s
-    n = np.sqrt(GM_GPS / a**3) + eph.delta_n
+    gm = np.where(np.char.startswith(eph.sv_id.astype(str), "E"), GM_GALILEO, GM_GPS)
+    n = np.sqrt(gm / a**3) + eph.delta_n
     m = eph.m0 + n * tk
     ecc_anomaly = m.copy()
     for _ in range(12):  # Newton on E - e sin E = M; e < 0.03 for GPS, converges in a few steps
@@ -239,8 +255,10 @@ def synthetic_constellation(
     semi_major_axis_m: float = 26_559_700.0,
     phasing: int = 1,
     rng: np.random.Generator | None = None,
+    system: str = "G",
 ) -> GpsEphemerides:
-    """A Walker constellation (GPS-like 24/6/1 by default) as broadcast records valid at any time.
+    """A Walker constellation (GPS-like 24/6/1 by default; `galileo_constellation` for Galileo's) as
+    broadcast records valid at any time, satellites named `system` + number.
 
     Circular orbits, no perturbations; with `rng`, each satellite gets a small clock offset and drift
     (a few microseconds, 1e-12 s/s) as real ones have, so the receiver must apply the clock model.
@@ -254,7 +272,7 @@ def synthetic_constellation(
             k = p * per_plane + s
             recs.append(
                 {
-                    "sv_id": f"G{k + 1:02d}",
+                    "sv_id": f"{system}{k + 1:02d}",
                     "week": week,
                     "toe_sow": toe_sow,
                     "toc_s": t_ref_s,
@@ -285,6 +303,11 @@ def synthetic_constellation(
                 }
             )
     return GpsEphemerides.from_records(recs)
+
+
+def galileo_constellation(t_ref_s: float, rng: np.random.Generator | None = None) -> GpsEphemerides:
+    """Galileo's nominal Walker 24/3/1 at 56 degrees and 29,600 km, satellites E01-E24."""
+    return synthetic_constellation(t_ref_s, 3, 8, 56.0, 29_600_318.0, 1, rng, "E")
 
 
 def states_at_transmission(

@@ -15,7 +15,12 @@ import pandas as pd
 
 from spooflens.epoch_table import EpochTable, StreamInfo, build_table, gps_seconds_of_unix_ns, unix_ns_of_gps_seconds
 from spooflens.geodesy import add_enu_offset, geodetic_to_ecef
-from spooflens.gnss.ephemeris import GpsEphemerides, satellite_states, synthetic_constellation
+from spooflens.gnss.ephemeris import (
+    GpsEphemerides,
+    galileo_constellation,
+    satellite_states,
+    synthetic_constellation,
+)
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.rotations import matrix_to_quat, rotvec_to_matrix
 from spooflens.schema import FixType
@@ -33,6 +38,7 @@ from spooflens.simulation.trajectories import PROFILES, Profile, Truth, generate
 
 # 2026-03-01T12:00:00Z: a fixed start so simulated logs are byte-for-byte reproducible
 T0_UNIX_NS = 1_772_366_400_000_000_000
+SYNTHETIC_CONSTELLATIONS = ("synthetic", "synthetic_gps_galileo")
 
 
 @dataclass(frozen=True)
@@ -49,7 +55,9 @@ class Scenario:
     # Raw observations: with noise settings, each receiver logs pseudoranges, rates, carrier phase and
     # C/N0, and its fixes are its own single-point solution of them (as a real receiver's are).
     observations: ObservationNoise | None = None
-    constellation: str = "synthetic"  # or the path of a RINEX navigation file (the log then starts in its span)
+    # "synthetic" (GPS-like), "synthetic_gps_galileo" (and Galileo's), or the path of a RINEX navigation file
+    # (the log then starts in its span)
+    constellation: str = "synthetic"
     # A receiver as real ones behave (correlated errors, misstated accuracies, indicators); None: the
     # plain `gnss` noise model with honest accuracies
     receiver: ReceiverModel | None = None
@@ -253,9 +261,12 @@ def write_with_truth(table: EpochTable, path: Path, fmt: str) -> Path:
 def _constellation(sc: Scenario, rng: np.random.Generator) -> tuple[GpsEphemerides, int]:
     """The satellites and the log's start (UNIX ns): a synthetic constellation at the fixed start, or a
     navigation file's satellites with the log starting when the vehicle can see enough of them."""
-    if sc.constellation == "synthetic":
+    if sc.constellation in SYNTHETIC_CONSTELLATIONS:
         start_gps = float(gps_seconds_of_unix_ns(T0_UNIX_NS))
-        return synthetic_constellation(start_gps, rng=rng), T0_UNIX_NS
+        gps = synthetic_constellation(start_gps, rng=rng)
+        if sc.constellation == "synthetic":
+            return gps, T0_UNIX_NS
+        return GpsEphemerides.combined([gps, galileo_constellation(start_gps, rng=rng)]), T0_UNIX_NS
     from readers.rinex import read_rinex_nav
 
     eph = read_rinex_nav(Path(sc.constellation))

@@ -1,0 +1,70 @@
+"""Which rows of raw observations get satellite states, and what is said of the rest: one rule for every
+reader of pseudoranges (RINEX, u-blox, GnssLogger, DataFlash).
+
+GPS and Galileo orbits are modelled (`spooflens.gnss.ephemeris`); a GLONASS, BeiDou, QZSS or SBAS row
+keeps its measurements without a satellite position, and the reader's skipped list says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spooflens.epoch_table import Skipped
+from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
+
+ORBIT_SYSTEMS = {"G": "GPS", "E": "Galileo"}
+FloatArray = NDArray[np.float64]
+
+
+def _system_names(systems: set[str]) -> str:
+    return " and ".join(ORBIT_SYSTEMS[s] for s in ORBIT_SYSTEMS if s in systems)
+
+
+def state_columns(
+    ephemerides: GpsEphemerides | None,
+    sv_id: NDArray[np.str_],
+    t_gps_s: FloatArray,
+    pseudorange_m: FloatArray,
+    receiver_id: str,
+    skipped: list[Skipped],
+    none_reason: str,
+) -> dict[str, FloatArray]:
+    """The `sv_*` columns (NaN where there is no state) for rows of satellites `sv_id` received at GPS
+    time `t_gps_s`; empty when no row could have one. `none_reason` says why when `ephemerides` is None."""
+    sv = np.asarray(sv_id).astype(str)
+    system = np.char.ljust(sv, 1).astype("U1") if len(sv) else np.zeros(0, dtype="U1")
+    modelled = np.isin(system, list(ORBIT_SYSTEMS))
+    out: dict[str, FloatArray] = {}
+    if ephemerides is not None and modelled.any():
+        g = np.flatnonzero(modelled)
+        states = states_at_transmission(ephemerides, sv[g], t_gps_s[g], pseudorange_m[g])
+        for name, values in states.columns().items():
+            out[name] = np.full(len(sv), np.nan)
+            out[name][g] = values
+        have = {s[:1] for s in ephemerides.satellites()}
+        for s, name in ORBIT_SYSTEMS.items():
+            rows = system[g] == s
+            missing = int((rows & ~states.valid).sum())
+            if not missing:
+                continue
+            why = (
+                "without a valid broadcast ephemeris; satellite states NaN"
+                if s in have
+                else "without satellite states: the navigation data holds no orbit of this system"
+            )
+            skipped.append(Skipped(receiver_id, f"{name} rows {why}", missing, "no ephemeris"))
+    elif modelled.any():
+        skipped.append(Skipped(receiver_id, none_reason, int(modelled.sum()), "no ephemeris"))
+    if (~modelled).any():
+        others = sorted(set(system[~modelled].tolist()))
+        skipped.append(
+            Skipped(
+                receiver_id,
+                f"rows of systems {', '.join(others)}: no satellite states (only {_system_names(set(ORBIT_SYSTEMS))} "
+                "orbits are modelled)",
+                int((~modelled).sum()),
+                "no ephemeris",
+            )
+        )
+    return out
