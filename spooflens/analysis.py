@@ -38,6 +38,7 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.autopilot_ekf",
     "spooflens.detectors.heading_reference",
     "spooflens.detectors.raim",
+    "spooflens.detectors.system_agreement",
     "spooflens.detectors.satellite_signals",
     "spooflens.detectors.navigation_message",
     "spooflens.navigation.product",
