@@ -74,7 +74,7 @@ def ephemeris_stream(
 
 def nav_stream(nav: NavFile, t0_ns: int) -> StreamInfo:
     name = nav.path.name
-    return ephemeris_stream(nav.ephemerides, name, name, f"RINEX {nav.version:.2f} nav (GPS)", nav.records, t0_ns)
+    return ephemeris_stream(nav.ephemerides, name, name, nav.label, nav.records, t0_ns)
 
 
 NO_NAV_FILE = "no navigation file covers the log (give one with --topic nav=FILE); no satellite states"

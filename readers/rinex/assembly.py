@@ -153,11 +153,7 @@ def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> E
             seen.add(nav.path)
             toe_ns = np.round(nav.ephemerides.toe_s * 1e9).astype(np.int64)
             span = (float((toe_ns.min() - t0) / 1e9), float((toe_ns.max() - t0) / 1e9))
-            streams.append(
-                StreamInfo(
-                    "nav", nav.path.name, nav.path.name, f"RINEX {nav.version:.2f} nav (GPS)", nav.records, *span
-                )
-            )
+            streams.append(StreamInfo("nav", nav.path.name, nav.path.name, nav.label, nav.records, *span))
             skipped.extend(nav.skipped)
     # The header's APPROX POSITION: a static station's surveyed site (the known-station detectors decide
     # whether the receiver really stayed there; a moving receiver's header is only where it started).

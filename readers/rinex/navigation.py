@@ -51,6 +51,12 @@ class NavFile:
     records: int
     skipped: list[Skipped]
 
+    @property
+    def label(self) -> str:
+        """What the file is, for its stream: 'RINEX 3.04 nav (GPS, Galileo)'."""
+        present = {s[:1] for s in self.ephemerides.satellites()}
+        return f"RINEX {self.version:.2f} nav ({', '.join(n for k, n in MODELLED.items() if k in present)})"
+
 
 _NAV_KEYS = (  # RINEX GPS broadcast orbit lines 1-7, four fields each (None: not used)
     ("iode", "crs", "delta_n", "m0"),
