@@ -23,7 +23,7 @@ from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, ala
 from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
 from spooflens.navigation.raim import FAULT, RaimOptions, RaimResult, solve_with_fde
-from spooflens.navigation.single_point import SV_COLUMNS, SinglePointOptions, SinglePointSolution
+from spooflens.navigation.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
 
 NAME = "raim"
 
@@ -160,15 +160,12 @@ def fix_against_own_solution(
 def run_raim(ctx: AnalysisContext, opts: RaimDetectorOptions | None = None) -> DetectorResult:
     opts = opts or RaimDetectorOptions()
     table = ctx.table
-    obs = table.observations
-    obs = obs[np.isfinite(obs[SV_COLUMNS].to_numpy(float)).all(axis=1) & np.isfinite(obs["pseudorange_m"])]
     result = DetectorResult(NAME, True, evidence=Evidence.RAW_MEASUREMENT)
     notes = []
-    for rid, rows in obs.groupby("receiver_id", sort=False):
-        rows = rows.reset_index(drop=True)
-        res = raim_of(rows, table.gps_seconds(rows["t_s"].to_numpy(float)), table.ionosphere, opts)
-        alarms, findings, series = check_receiver(str(rid), rows, res, opts)
-        own_series, own_findings = fix_against_own_solution(str(rid), res.solution, table.fixes_of(str(rid)), opts)
+    for rid, rows, t_gps in ranged_by_receiver(table):
+        res = raim_of(rows, t_gps, table.ionosphere, opts)
+        alarms, findings, series = check_receiver(rid, rows, res, opts)
+        own_series, own_findings = fix_against_own_solution(rid, res.solution, table.fixes_of(rid), opts)
         series += own_series
         findings += own_findings
         result.alarms += alarms

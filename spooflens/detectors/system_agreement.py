@@ -29,7 +29,7 @@ from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, ala
 from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic
 from spooflens.navigation.raim import RaimOptions, solve_with_fde
-from spooflens.navigation.single_point import SV_COLUMNS, SinglePointOptions, SinglePointSolution
+from spooflens.navigation.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
 from spooflens.quantiles import chi2_isf, halfnorm_ppf
 
 NAME = "system_agreement"
@@ -131,13 +131,9 @@ def check_pair(
 def run_system_agreement(ctx: AnalysisContext, opts: SystemAgreementOptions | None = None) -> DetectorResult:
     opts = opts or SystemAgreementOptions()
     table = ctx.table
-    obs = table.observations
-    obs = obs[np.isfinite(obs[SV_COLUMNS].to_numpy(float)).all(axis=1) & np.isfinite(obs["pseudorange_m"])]
     result = DetectorResult(NAME, True, evidence=Evidence.RAW_MEASUREMENT)
     notes = []
-    for rid, rows in obs.groupby("receiver_id", sort=False):
-        rows = rows.reset_index(drop=True)
-        t_gps = table.gps_seconds(rows["t_s"].to_numpy(float))
+    for rid, rows, t_gps in ranged_by_receiver(table):
         sols = _solutions(rows, t_gps, SinglePointOptions(iono=table.ionosphere), opts)
         if len(sols) < 2:
             continue
@@ -147,7 +143,7 @@ def run_system_agreement(ctx: AnalysisContext, opts: SystemAgreementOptions | No
             t, d = separation(sols[ref], sols[other])
             if len(t) < opts.min_epochs:
                 continue
-            alarms, findings, series = check_pair(str(rid), (ref, other), t, d, opts)
+            alarms, findings, series = check_pair(rid, (ref, other), t, d, opts)
             result.alarms += alarms
             result.findings += findings
             result.series += series

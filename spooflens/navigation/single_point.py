@@ -14,6 +14,7 @@ raw-observation attacks, which must move a fix the way a receiver's own solution
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -310,6 +311,16 @@ def _velocity(
     vel[good] = sol[:, :3]
     drift[good] = sol[:, 3]
     return vel, drift
+
+
+def ranged_by_receiver(table: EpochTable) -> Iterator[tuple[str, pd.DataFrame, FloatArray | None]]:
+    """Each receiver's observation rows a solution can use (a satellite position and a pseudorange), with
+    their GPS times (None on a log without a GPS clock)."""
+    obs = table.observations
+    obs = obs[np.isfinite(obs[SV_COLUMNS].to_numpy(float)).all(axis=1) & np.isfinite(obs["pseudorange_m"])]
+    for rid, rows in obs.groupby("receiver_id", sort=False):
+        rows = rows.reset_index(drop=True)
+        yield str(rid), rows, table.gps_seconds(rows["t_s"].to_numpy(float))
 
 
 def solve_logged(table: EpochTable, rows: pd.DataFrame) -> SinglePointSolution:
