@@ -276,7 +276,10 @@ def coasting_check(
     # judged against the departure reached up to `agree_s` later: a growing one keeps ahead of the drift
     ahead = peak[np.minimum(np.searchsorted(t, t + opts.agree_s), len(t) - 1)]
     conclusive = sigma_ref < ahead / opts.resolution
-    agree = ~disagree & np.isfinite(ratio) & conclusive
+    # GNSS agrees again when it is back where the reference is (within its uncertainty, or the metres a
+    # receiver wanders), not merely under a clean envelope that a consumer INS's coasts made wide
+    back = np.nan_to_num(offset, nan=np.inf) <= np.maximum(opts.min_departure_m, 3.0 * sigma_ref)
+    agree = ~disagree & np.isfinite(ratio) & conclusive & back
     lost_at = next((i for i in range(departure, len(t)) if not conclusive[i]), None)
     for a, b in _runs(agree):
         if a <= departure:
