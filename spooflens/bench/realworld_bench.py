@@ -6,7 +6,8 @@ Each run draws a receiver (`spooflens.simulation.sensors.realistic_receiver`: Ga
 of the vehicles (multirotor hovering and cruising, car, ship, aircraft), simulates the log, injects one
 attack kind from a random time in the log's middle third to its end (`capture` takes the receiver over
 before dragging it; the ramps, the step and the velocity pull are the plain fix-level kinds; a car
-whose receiver logs raw GPS and Galileo observations meets a GPS-only spoofer instead), and analyses it.
+whose receiver logs raw GPS and Galileo observations, or GPS alone, meets a GPS-only spoofer instead), and
+analyses it.
 Measured: the detection rate, the delay from the first spoofed fix to the first alarm of the incident
 that made the verdict, whether the onset interval covers the true onset, whether the incident runs to
 the end of the log; and on clean logs the false spoofing incidents per 100 hours.
@@ -36,13 +37,14 @@ VEHICLES: dict[str, tuple[str, float]] = {
     "aircraft": ("aircraft", 600.0),
     "ship_nmea": ("ship", 1200.0),
     "car_raw": ("ground_raw", 300.0),
+    "car_raw_gps": ("ground_raw", 300.0),
 }
 # a ship's voyage record: GNSS fixes, its compass and its speed log (`realistic_compass`), no IMU; the
 # heading reference is the only independent evidence there
 VOYAGE_RECORDS = frozenset({"ship_nmea"})
-# a car whose receiver logs raw GPS and Galileo observations (white code noise) and solves its own fixes;
-# it meets the GPS-only spoofer, the others the fix-level attacks
-RAW_MULTI_SYSTEM = frozenset({"car_raw"})
+# a car whose receiver logs raw observations (white code noise) of GPS and Galileo, or of GPS alone, and
+# solves its own fixes; it meets the GPS-only spoofer, the others the fix-level attacks
+RAW_CONSTELLATIONS = {"car_raw": "synthetic_gps_galileo", "car_raw_gps": "synthetic"}
 ATTACKS: dict[str, str] = {
     "capture": "capture",
     "ramp 1 m/s": "ramp:rate=1,vel=1",
@@ -52,7 +54,7 @@ ATTACKS: dict[str, str] = {
     "velocity pull 0.5 m/s": "velocity_pull:dv=0.5,axes=en",
     "GPS-only ramp 2 m/s": "ramp:rate=2,vel=1,systems=G",
 }
-RAW_ATTACKS = frozenset({"GPS-only ramp 2 m/s"})  # act on pseudoranges: only for RAW_MULTI_SYSTEM vehicles
+RAW_ATTACKS = frozenset({"GPS-only ramp 2 m/s"})  # act on pseudoranges: only for RAW_CONSTELLATIONS vehicles
 GOAL_CAPTURE_DETECTED = 0.99
 GOAL_CAPTURE_DELAY_S = 2.0
 GOAL_FALSE_PER_100H = 1.0
@@ -77,8 +79,8 @@ def _table(run: Run) -> tuple[Any, float | None]:
     sc = replace(SCENARIOS[scenario], receiver=realistic_receiver(rng))
     if run.vehicle in VOYAGE_RECORDS:
         sc = replace(sc, compass=realistic_compass(rng))
-    if run.vehicle in RAW_MULTI_SYSTEM:
-        sc = replace(sc, constellation="synthetic_gps_galileo")
+    if run.vehicle in RAW_CONSTELLATIONS:
+        sc = replace(sc, constellation=RAW_CONSTELLATIONS[run.vehicle])
     table = simulate(sc, seed=run.seed, duration_s=seconds).table
     if run.vehicle in VOYAGE_RECORDS:
         table = replace(table, imu=empty_frame("imu"), streams=[s for s in table.streams if s.role != "imu"])
@@ -180,7 +182,7 @@ def plan(
     k = seed
     for v in vehicles:
         for a in attacks or tuple(ATTACKS):
-            if (a in RAW_ATTACKS) != (v in RAW_MULTI_SYSTEM):
+            if (a in RAW_ATTACKS) != (v in RAW_CONSTELLATIONS):
                 continue
             for _ in range(runs):
                 out.append(Run(v, a, k))
@@ -257,7 +259,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     "vehicles",
     multiple=True,
     type=click.Choice(list(VEHICLES)),
-    help="Only these vehicles (repeatable; default all). ship_nmea: a voyage record, compass and log, no IMU.",
+    help="Only these vehicles (repeatable; default all). ship_nmea: a voyage record, compass and log, no IMU; "
+    "car_raw, car_raw_gps: raw GPS + Galileo, or GPS, observations before a GPS-only spoofer.",
 )
 @click.option(
     "--attack",
