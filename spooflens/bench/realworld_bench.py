@@ -38,13 +38,21 @@ VEHICLES: dict[str, tuple[str, float]] = {
     "ship_nmea": ("ship", 1200.0),
     "car_raw": ("ground_raw", 300.0),
     "car_raw_gps": ("ground_raw", 300.0),
+    "car_raw_gps_orbits": ("ground_raw", 300.0),
 }
 # a ship's voyage record: GNSS fixes, its compass and its speed log (`realistic_compass`), no IMU; the
 # heading reference is the only independent evidence there
 VOYAGE_RECORDS = frozenset({"ship_nmea"})
 # a car whose receiver logs raw observations (white code noise) of GPS and Galileo, or of GPS alone, and
 # solves its own fixes; it meets the GPS-only spoofer, the others the fix-level attacks
-RAW_CONSTELLATIONS = {"car_raw": "synthetic_gps_galileo", "car_raw_gps": "synthetic"}
+RAW_CONSTELLATIONS = {
+    "car_raw": "synthetic_gps_galileo",
+    "car_raw_gps": "synthetic",
+    "car_raw_gps_orbits": "synthetic_gps_galileo",
+}
+# car_raw's very logs (same seed, same log), analysed as a tool that models GPS orbits alone would: its
+# Galileo rows keep their measurements without satellite states
+GPS_ORBITS_ONLY = frozenset({"car_raw_gps_orbits"})
 ATTACKS: dict[str, str] = {
     "capture": "capture",
     "ramp 1 m/s": "ramp:rate=1,vel=1",
@@ -85,13 +93,26 @@ def _table(run: Run) -> tuple[Any, float | None]:
     if run.vehicle in VOYAGE_RECORDS:
         table = replace(table, imu=empty_frame("imu"), streams=[s for s in table.streams if s.role != "imu"])
     if run.attack is None:
-        return table, None
+        return _orbits_seen(run, table), None
     start = float(rng.uniform(seconds / 3, 2 * seconds / 3))
     text = ATTACKS[run.attack]
     spoofed, _ = apply_attack(table, parse_attack(f"{text}{',' if ':' in text else ':'}start={start:.1f}"))
     t = spoofed.fixes["t_s"].to_numpy()
     first = float(t[t >= start][0]) if (t >= start).any() else start
-    return spoofed, first
+    return _orbits_seen(run, spoofed), first
+
+
+def _orbits_seen(run: Run, table: Any) -> Any:
+    """The table as the run's analysis sees it: without Galileo satellite states for GPS_ORBITS_ONLY."""
+    if run.vehicle not in GPS_ORBITS_ONLY:
+        return table
+    from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS
+
+    obs = table.observations.copy()
+    galileo = obs["sv_id"].astype(str).str.startswith("E").to_numpy()
+    for col in (*SV_COLUMNS, *SV_VEL_COLUMNS, "sv_clock_bias_m", "sv_clock_drift_mps"):
+        obs.loc[galileo, col] = np.nan
+    return replace(table, observations=obs)
 
 
 def one_run(run: Run) -> dict[str, Any]:
@@ -260,7 +281,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     multiple=True,
     type=click.Choice(list(VEHICLES)),
     help="Only these vehicles (repeatable; default all). ship_nmea: a voyage record, compass and log, no IMU; "
-    "car_raw, car_raw_gps: raw GPS + Galileo, or GPS, observations before a GPS-only spoofer.",
+    "car_raw, car_raw_gps: raw GPS + Galileo, or GPS, observations before a GPS-only spoofer; "
+    "car_raw_gps_orbits: car_raw's logs analysed with GPS orbits alone.",
 )
 @click.option(
     "--attack",
