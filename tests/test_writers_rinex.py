@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.geodesy import geodetic_to_enu
 from spooflens.navigation.single_point import with_solved_fixes
-from spooflens.simulation.simulate import simulate
+from spooflens.simulation.simulate import SCENARIOS, simulate
 from spooflens.writers import write_log
 
 
@@ -41,6 +42,20 @@ def test_round_trip_keeps_observations_to_rinex_precision(tmp_path: Path) -> Non
     cols = ["sv_x_m", "sv_y_m", "sv_z_m"]
     np.testing.assert_allclose(b[cols].to_numpy(), a[cols].to_numpy(), atol=1e-3)
     np.testing.assert_allclose(b["sv_clock_bias_m"], a["sv_clock_bias_m"], atol=1e-6)
+
+
+def test_a_gps_and_galileo_log_round_trips_with_both_systems_orbits(tmp_path: Path) -> None:
+    """Galileo records are written with Galileo's fields (I/NAV data sources, BGD) in a mixed navigation
+    file and read back as the same orbits."""
+    table = simulate(replace(SCENARIOS["ground_raw"], constellation="synthetic_gps_galileo"), 5, 600.0).table
+    write_log(table, tmp_path / "rnx", "rinex")
+    assert (tmp_path / "rnx" / "BRDC_MN.rnx").read_text().startswith("     3.04           N: GNSS NAV DATA    M")
+    back = read_log(tmp_path / "rnx")
+    a, b = _sorted(table.observations), _sorted(back.observations)
+    assert set(b["sv_id"].str[0]) == {"G", "E"} and list(a["sv_id"]) == list(b["sv_id"])
+    for col in ("sv_x_m", "sv_y_m", "sv_z_m", "sv_clock_bias_m"):
+        np.testing.assert_allclose(b[col], a[col], atol=1e-3)
+    assert not [s for s in back.skipped if "Galileo" in s.reason]
 
 
 def test_the_rinex_copy_solves_to_the_truth(tmp_path: Path) -> None:

@@ -1,5 +1,6 @@
-"""An EpochTable's raw observations as RINEX 3.04: one observation file per receiver and one GPS
-navigation file with the broadcast records behind its satellite states, in one directory.
+"""An EpochTable's raw observations as RINEX 3.04: one observation file per receiver and one navigation
+file (GPS, or mixed with Galileo) with the broadcast records behind its satellite states, in one
+directory.
 
 This is how a simulated raw log reaches tools that speak RINEX (RTKLIB, gnss_lib_py, teqc) and how
 the RINEX reader is checked against a log whose truth is known. RINEX holds observations only:
@@ -24,12 +25,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.orbits import ORBIT_SYSTEMS
 from readers.rinex import GPS_EPOCH
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.geodesy import geodetic_to_ecef
-from spooflens.gnss.ephemeris import GM_GPS, OMEGA_E_GPS, SECONDS_PER_WEEK, GpsEphemerides
+from spooflens.gnss.ephemeris import GM_GALILEO, GM_GPS, OMEGA_E_GPS, SECONDS_PER_WEEK, GpsEphemerides
 
+GALILEO_INAV_E5B_CLOCK = 0b1000000101  # RINEX data sources: I/NAV E1-B and E5b, af0-af2 for E5b/E1
 OBS_TYPES = (("C1C", "pseudorange_m"), ("L1C", "carrier_phase_cycles"), ("D1C", "doppler_hz"), ("S1C", "cn0_dbhz"))
 REISSUE_S = 7200.0
 
@@ -110,14 +113,17 @@ def _nav_record(eph: GpsEphemerides, i: int) -> str:
     r = {f.name: getattr(eph, f.name)[i] for f in fields(eph) if f.name != "iono"}
     t = _calendar(float(r["toc_s"]))
     fit = 4.0 if np.isinf(r["max_age_s"]) else 2 * float(r["max_age_s"]) / 3600.0
+    galileo = str(r["sv_id"]).startswith("E")
     rows = [
         (r["iode"], r["crs"], r["delta_n"], r["m0"]),
         (r["cuc"], r["e"], r["cus"], r["sqrt_a"]),
         (r["toe_sow"], r["cic"], r["omega0"], r["cis"]),
         (r["i0"], r["crc"], r["omega"], r["omega_dot"]),
-        (r["idot"], 0.0, r["week"], 0.0),
-        (2.0, r["health"], r["tgd"], r["iode"]),
-        (r["toe_sow"], fit),
+        # Galileo (RINEX 3.04 A8): data sources I/NAV E1-B + E5b, clock for E5b/E1; SISA, health, the
+        # BGDs (E1/E5a not kept: written as E1/E5b's); GPS: codes on L2, URA, health, TGD, IODC
+        (r["idot"], float(GALILEO_INAV_E5B_CLOCK) if galileo else 0.0, r["week"], 0.0),
+        (3.12, r["health"], r["tgd"], r["tgd"]) if galileo else (2.0, r["health"], r["tgd"], r["iode"]),
+        (r["toe_sow"],) if galileo else (r["toe_sow"], fit),
     ]
     head = (
         f"{r['sv_id']:<3} {t.year:4d} {t.month:02d} {t.day:02d} {t.hour:02d} {t.minute:02d} {t.second:02d}"
@@ -140,7 +146,8 @@ def _reissued(eph: GpsEphemerides, first_s: float, last_s: float, svs: set[str])
             if toe[i] + r["max_age_s"] >= first_s and toe[i] - r["max_age_s"] <= last_s:
                 recs.append(r)
             continue
-        n = np.sqrt(GM_GPS / r["sqrt_a"] ** 6) + r["delta_n"]
+        gm = GM_GALILEO if str(r["sv_id"]).startswith("E") else GM_GPS
+        n = np.sqrt(gm / r["sqrt_a"] ** 6) + r["delta_n"]
         for new_toe in np.arange(np.floor(first_s / REISSUE_S) * REISSUE_S, last_s + REISSUE_S, REISSUE_S):
             dt = float(new_toe - toe[i])
             week = int(new_toe // SECONDS_PER_WEEK)
@@ -168,8 +175,10 @@ def _reissued(eph: GpsEphemerides, first_s: float, last_s: float, svs: set[str])
 
 
 def _nav_file(eph: GpsEphemerides) -> str:
+    systems = {s[:1] for s in eph.satellites()}
+    kind = "G" if systems == {"G"} else "E" if systems == {"E"} else "M"
     head = [
-        _label(f"{3.04:9.2f}{'':11}{'N: GNSS NAV DATA':<20}{'G':<20}", "RINEX VERSION / TYPE"),
+        _label(f"{3.04:9.2f}{'':11}{'N: GNSS NAV DATA':<20}{kind:<20}", "RINEX VERSION / TYPE"),
         _program_line(),
     ]
     if eph.iono is not None:
@@ -214,6 +223,7 @@ def write_rinex(table: EpochTable, path: Path) -> None:
         text = _header(str(rid), systems, float(t[0]), np.asarray(xyz)) + _body(rows, t)
         (path / f"{_safe(str(rid))}_MO.rnx").write_text(text, encoding="ascii")
     if table.ephemerides is not None:
-        gps_svs = {s for s in obs["sv_id"].astype(str) if s.startswith("G")}
-        eph = _reissued(table.ephemerides, first, last, gps_svs)
-        (path / "BRDC_GN.rnx").write_text(_nav_file(eph), encoding="ascii")
+        svs = {s for s in obs["sv_id"].astype(str) if s[:1] in ORBIT_SYSTEMS}
+        eph = _reissued(table.ephemerides, first, last, svs)
+        only_gps = {s[:1] for s in eph.satellites()} == {"G"}
+        (path / ("BRDC_GN.rnx" if only_gps else "BRDC_MN.rnx")).write_text(_nav_file(eph), encoding="ascii")
