@@ -1,7 +1,7 @@
 """Which rows of raw observations get satellite states, and what is said of the rest: one rule for every
 reader of pseudoranges (RINEX, u-blox, GnssLogger, DataFlash).
 
-GPS and Galileo orbits are modelled (`spooflens.gnss.ephemeris`); a GLONASS, BeiDou, QZSS or SBAS row
+GPS, Galileo and BeiDou orbits are modelled (`spooflens.gnss.ephemeris`); a GLONASS, QZSS or SBAS row
 keeps its measurements without a satellite position, and the reader's skipped list says so.
 """
 
@@ -13,12 +13,13 @@ from numpy.typing import NDArray
 from spooflens.epoch_table import Skipped
 from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
 
-ORBIT_SYSTEMS = {"G": "GPS", "E": "Galileo"}
+ORBIT_SYSTEMS = {"G": "GPS", "E": "Galileo", "C": "BeiDou"}
 FloatArray = NDArray[np.float64]
 
 
 def _system_names(systems: set[str]) -> str:
-    return " and ".join(ORBIT_SYSTEMS[s] for s in ORBIT_SYSTEMS if s in systems)
+    names = [ORBIT_SYSTEMS[s] for s in ORBIT_SYSTEMS if s in systems]
+    return ", ".join(names[:-1]) + " and " + names[-1] if len(names) > 1 else "".join(names)
 
 
 def state_columns(

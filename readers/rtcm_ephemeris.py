@@ -1,5 +1,5 @@
-"""Broadcast ephemerides from the RTCM3 correction stream a receiver was fed (messages 1019, GPS, and
-1046, Galileo I/NAV), decoded with pyrtcm.
+"""Broadcast ephemerides from the RTCM3 correction stream a receiver was fed (messages 1019, GPS, 1042,
+BeiDou, and 1046, Galileo I/NAV), decoded with pyrtcm.
 
 A capture of an RTK rover often carries its base station's corrections, and the base sends the
 broadcast orbits with them. They are the base's copy of the satellites' messages, received at another
@@ -9,20 +9,24 @@ own, and never evidence about the rover's signals (they get no reception time, s
 1046 again with the E5a clock and no E1 health, and is counted, not used.
 
 pyrtcm scales every field to its unit (angles in semicircles); the GPS week is sent modulo 1024 and
-resolved against the capture's GPS time; the Galileo week counts from GPS week 1024.
+resolved against the capture's GPS time; the Galileo week counts from GPS week 1024, BeiDou's (BDT, 14 s
+behind GPS time) from GPS week 1356; BeiDou's group delay is sent in nanoseconds.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 from pyrtcm import RTCMReader
 
 from spooflens.epoch_table import Skipped
+from spooflens.gnss.ephemeris import BDT_OFFSET_S, BDT_WEEK_OFFSET
 
-RTCM_EPHEMERIS = frozenset({1019, 1045, 1046})
+RTCM_EPHEMERIS = frozenset({1019, 1042, 1045, 1046})
 WEEK_S = 604_800
 GST_WEEK_OFFSET = 1024
 PI = math.pi
@@ -64,10 +68,31 @@ def _galileo(msg: Any) -> Record:
     }  # fmt: skip
 
 
+def _beidou(msg: Any) -> Record:
+    week = int(msg.DF489) + BDT_WEEK_OFFSET
+    toc_s = week * WEEK_S + float(msg.DF493) + BDT_OFFSET_S
+    toe_sow = float(msg.DF505) + BDT_OFFSET_S  # on the GPS scale, past the week's end if need be
+    toc_s += WEEK_S * round((week * WEEK_S + toe_sow - toc_s) / WEEK_S)
+    return {
+        "sv_id": f"C{int(msg.DF488):02d}", "week": week, "toe_sow": toe_sow, "toc_s": toc_s,
+        "af0": msg.DF496, "af1": msg.DF495, "af2": msg.DF494, "tgd": msg.DF513 * 1e-9,
+        "sqrt_a": msg.DF504, "e": msg.DF502, "m0": msg.DF500 * PI, "delta_n": msg.DF499 * PI,
+        "omega": msg.DF511 * PI, "i0": msg.DF509 * PI, "idot": msg.DF491 * PI,
+        "omega0": msg.DF507 * PI, "omega_dot": msg.DF512 * PI,
+        "cuc": msg.DF501, "cus": msg.DF503, "crc": msg.DF510, "crs": msg.DF498, "cic": msg.DF506, "cis": msg.DF508,
+        "health": int(msg.DF515), "iode": int(msg.DF492),
+    }  # fmt: skip
+
+
 def rtcm_ephemerides(frames: list[bytes], ref_gps_s: float | None) -> tuple[list[Record], list[Skipped]]:
     """The distinct GPS and Galileo records of whole RTCM3 frames, and what was not used."""
     records: dict[tuple[object, ...], Record] = {}
     counts: Counter[str] = Counter()
+    decoders: dict[int, Callable[[Any], Record]] = {
+        1019: partial(_gps, ref_gps_s=ref_gps_s or math.nan),
+        1042: _beidou,
+        1046: _galileo,
+    }
     for frame in frames:
         try:
             msg = RTCMReader.parse(frame)
@@ -78,7 +103,7 @@ def rtcm_ephemerides(frames: list[bytes], ref_gps_s: float | None) -> tuple[list
             if number == 1019 and ref_gps_s is None:
                 counts["1019: GPS ephemerides without a GPS time in the capture to resolve their week"] += 1
                 continue
-            rec = _gps(msg, ref_gps_s) if number == 1019 else _galileo(msg)  # type: ignore[arg-type]
+            rec = decoders[number](msg)
         except Exception as err:  # noqa: BLE001 - pyrtcm raises its own and plain errors on damaged payloads
             counts[f"ephemeris messages pyrtcm cannot decode ({type(err).__name__})"] += 1
             continue

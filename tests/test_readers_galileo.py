@@ -1,6 +1,7 @@
-"""Galileo broadcast orbits: RINEX 3 records, I/NAV pages in a u-blox capture, the orbit with Galileo's
-own GM; and what they are for: a GPS-only spoofer before a GPS + Galileo receiver, which RAIM sees only
-when the Galileo satellites have orbits."""
+"""Galileo (and BeiDou) broadcast orbits: RINEX 3 records, I/NAV pages in a u-blox capture, RTCM3
+orbits, the orbit with each system's own constants, checked on a real capture; and what they are for:
+a GPS-only spoofer before a GPS + Galileo receiver, which RAIM sees only when the Galileo satellites
+have orbits."""
 
 from __future__ import annotations
 
@@ -278,10 +279,11 @@ def test_systems_needs_pseudoranges_of_that_system(tmp_path: Path) -> None:
 
 
 def test_real_rtcm_orbits_put_the_satellites_where_the_receiver_saw_them() -> None:
-    """The base station's GPS (1019) and Galileo I/NAV (1046) orbits in a real capture, through our orbit
-    model, against the elevation and azimuth the receiver reported for each satellite (NAV-SAT, whole
-    degrees) from its own decoding: within a degree and a half. A week off, a wrong constant or the GPS
-    scale on Galileo's angles would put them tens of degrees away."""
+    """The base station's GPS (1019), BeiDou (1042) and Galileo I/NAV (1046) orbits in a real capture,
+    through our orbit model, against the elevation and azimuth the receiver reported for each satellite
+    (NAV-SAT, whole degrees) from its own decoding: within a degree and a half. A week off, a wrong
+    constant, the GPS scale on Galileo's angles, BeiDou's 14 s or its geostationary frame (C02, C05)
+    wrong would put them degrees to tens of degrees away."""
     path = real_log("ubx_receivers/gpsd_ublox-zed-f9r.log")
     table = read_log(path)
     origin = float(np.asarray(table.gps_seconds(0.0)).reshape(-1)[0])
@@ -289,24 +291,61 @@ def test_real_rtcm_orbits_put_the_satellites_where_the_receiver_saw_them() -> No
     records, skipped = rtcm_ephemerides(frames.rtcm_ephemerides, origin)
     assert [(s.reason.split(":")[0], s.count) for s in skipped] == [("1045", 15)]
     eph = GpsEphemerides.from_records(records)
-    assert {s[0] for s in eph.satellites()} == {"G", "E"} and len(eph.satellites()) == 34
-    sat = table.satellites[table.satellites["sv_id"].str[0].isin(["G", "E"])]
-    assert set(sat["sv_id"].str[0]) == {"G", "E"} and len(sat) > 600
+    assert {s[0] for s in eph.satellites()} == {"G", "E", "C"} and len(eph.satellites()) == 53
+    sat = table.satellites[table.satellites["sv_id"].str[0].isin(["G", "E", "C"])]
     fix = table.fixes.iloc[0]
     rx = geodetic_to_ecef(float(fix["lat_deg"]), float(fix["lon_deg"]), float(fix["height_m"]))
     st = satellite_states(eph, sat["sv_id"].to_numpy(str), origin + sat["t_s"].to_numpy(float))
-    assert st.valid.all()
-    az, el = azimuth_elevation(st.pos_m, np.broadcast_to(rx, st.pos_m.shape))
-    reported_el = sat["elevation_deg"].to_numpy(float)
+    # every GPS and Galileo satellite it saw has an orbit in the stream, every BeiDou one but C60
+    assert set(sat["sv_id"][~st.valid]) == {"C60"}
+    seen = sat[st.valid]
+    assert {"C02", "C05"} <= set(seen["sv_id"]) and len(set(seen["sv_id"])) == 36
+    az, el = azimuth_elevation(st.pos_m[st.valid], np.broadcast_to(rx, (int(st.valid.sum()), 3)))
+    reported_el = seen["elevation_deg"].to_numpy(float)
     d_el = np.degrees(el) - reported_el
-    d_az = (np.degrees(az) - sat["azimuth_deg"].to_numpy(float) + 180.0) % 360.0 - 180.0
+    d_az = (np.degrees(az) - seen["azimuth_deg"].to_numpy(float) + 180.0) % 360.0 - 180.0
     assert np.abs(d_el).max() < 1.5
     assert np.abs(d_az[reported_el < 70.0]).max() < 1.5  # near the zenith a degree of azimuth is nothing
 
 
+def test_a_rinex_beidou_record_and_the_rtcm_one_give_the_same_orbit(tmp_path: Path) -> None:
+    """A real BeiDou record (the geostationary C02, from the capture's RTCM3 1042) written as RINEX 3
+    (BDT calendar and week, as RINEX holds them) reads back as the same orbit on the GPS time scale."""
+    path = real_log("ubx_receivers/gpsd_ublox-zed-f9r.log")
+    origin = float(np.asarray(read_log(path).gps_seconds(0.0)).reshape(-1)[0])
+    records, _ = rtcm_ephemerides(split_frames(path.read_bytes()).rtcm_ephemerides, origin)
+    rec = next(r for r in records if r["sv_id"] == "C02")
+    bdt = dict(rec)  # back to BeiDou time, as RINEX writes it
+    bdt["toc_s"] = float(rec["toc_s"]) - 14.0
+    bdt["toe_sow"] = float(rec["toe_sow"]) - 14.0
+    bdt["week"] = int(rec["week"]) - 1356
+    t = GPS_EPOCH + timedelta(seconds=float(bdt["toc_s"]))
+    f = {k: float(v) for k, v in bdt.items() if k != "sv_id"}
+    rows = [
+        (f["iode"], f["crs"], f["delta_n"], f["m0"]),
+        (f["cuc"], f["e"], f["cus"], f["sqrt_a"]),
+        (f["toe_sow"], f["cic"], f["omega0"], f["cis"]),
+        (f["i0"], f["crc"], f["omega"], f["omega_dot"]),
+        (f["idot"], 0.0, f["week"], 0.0),
+        (2.0, f["health"], f["tgd"], -1.38e-8),
+        (f["toe_sow"] - 60.0, 1.0),
+    ]
+    text = f"C02 {t:%Y %m %d %H %M %S}" + "".join(_d19(f[k]) for k in ("af0", "af1", "af2")) + "\n"
+    text += "".join("    " + "".join(_d19(v) for v in row) + "\n" for row in rows)
+    header = f"{'     3.04':<20}{'N: GNSS NAV DATA':<20}{'C: BDS':<20}RINEX VERSION / TYPE\n{'':60}END OF HEADER\n"
+    (tmp_path / "BRDC_CN.rnx").write_text(header + text)
+    nav = read_rinex_nav_file(tmp_path / "BRDC_CN.rnx").ephemerides
+    assert (nav.week[0], nav.toe_sow[0], nav.toc_s[0]) == (rec["week"], rec["toe_sow"], rec["toc_s"])
+    rtcm = GpsEphemerides.from_records([rec])
+    when = np.full(1, origin + 20.0)
+    a, b = satellite_states(nav, ["C02"], when), satellite_states(rtcm, ["C02"], when)
+    assert np.linalg.norm(a.pos_m - b.pos_m) < 1e-3 and abs(a.clock_bias_m[0] - b.clock_bias_m[0]) < 1e-3
+    assert 42_000e3 < np.linalg.norm(a.pos_m) < 42_300e3  # geostationary
+
+
 def test_a_capture_with_rtcm_orbits_gives_its_raw_observations_satellite_states(tmp_path: Path) -> None:
-    """RAWX and the RTCM3 1019/1046 messages a rover was fed, no subframes: its GPS and Galileo rows
-    get satellite states from the correction stream's orbits."""
+    """RAWX and the RTCM3 1019/1042/1046 messages a rover was fed, no subframes: its GPS, Galileo and
+    BeiDou rows get satellite states from the correction stream's orbits."""
     real = real_log("ubx_receivers/gpsd_ublox-zed-f9r.log")
     rtcm = b"".join(split_frames(real.read_bytes()).rtcm_ephemerides)
     origin = float(np.asarray(read_log(real).gps_seconds(0.0)).reshape(-1)[0])
@@ -321,8 +360,8 @@ def test_a_capture_with_rtcm_orbits_gives_its_raw_observations_satellite_states(
     path.write_bytes(rtcm + capture_from_rinex(obs, origin, [], None))
     table = read_log(path)
     got = table.observations
-    assert {"G", "E"} <= set(got["sv_id"].str[0])
+    assert {"G", "E", "C"} <= set(got["sv_id"].str[0])
     assert np.isfinite(got["sv_x_m"].to_numpy(float)).all()
     (nav,) = [s for s in table.streams if s.role == "nav"]
-    assert nav.msgtype == "RTCM3 1019/1046 (GPS, Galileo)"
+    assert nav.msgtype == "RTCM3 1019/1042/1046 (GPS, Galileo, BeiDou)"
     assert table.ephemerides is not None and np.isnan(table.ephemerides.received_s).all()

@@ -273,7 +273,7 @@ def test_rinex3_mixed_nav_gives_the_same_gps_records(tmp_path: Path) -> None:
     # the GLONASS record is another system's; the Galileo one (every field 1.0) is read and refused
     (galileo, glonass) = v3.skipped
     assert (glonass.reason, glonass.count) == (
-        "navigation records of GLONASS, BeiDou, ... (GPS and Galileo orbits are used)",
+        "navigation records of GLONASS, QZSS, ... (GPS, Galileo, BeiDou orbits are used)",
         1,
     )
     assert galileo.reason.endswith("implausible orbit (sqrt(A) or e out of range))") and galileo.count == 1
@@ -294,7 +294,7 @@ def test_bad_and_cut_nav_records_are_counted(tmp_path: Path) -> None:
     assert read_rinex_nav_file(cut).records == 1
     header_only = tmp_path / "empty.05n"
     header_only.write_text("\n".join(lines[:12]) + "\n")
-    with pytest.raises(ReaderError, match=r"empty.05n: no usable GPS or Galileo navigation record"):
+    with pytest.raises(ReaderError, match=r"empty.05n: no usable GPS, Galileo or BeiDou navigation record"):
         read_rinex_nav(header_only)
 
 

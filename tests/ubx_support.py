@@ -201,7 +201,7 @@ def sfrbx(sv: int, words30: list[int], gnss_id: int = 0) -> bytes:
     return UBXMessage("RXM", "RXM-SFRBX", GET, payload=payload).serialize()
 
 
-GNSS_ID = {"G": 0, "E": 2}  # u-blox gnssId; signal 0 is GPS L1 C/A and Galileo E1C
+GNSS_ID = {"G": 0, "E": 2, "C": 3}  # u-blox gnssId; signal 0 is GPS L1 C/A, Galileo E1C, BeiDou B1I D1
 
 
 def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:

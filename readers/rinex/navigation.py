@@ -1,5 +1,6 @@
-"""RINEX navigation files: GPS and Galileo broadcast orbits (and the Klobuchar ionosphere), and where to
-find them.
+"""RINEX navigation files: GPS, Galileo and BeiDou broadcast orbits (and the Klobuchar ionosphere), and
+where to find them. A BeiDou record's times are BDT (toc's calendar, toe's week and time of week): they
+are put on the GPS scale (+14 s, week + 1356) as `spooflens.gnss.ephemeris` keeps them.
 
 A Galileo record has the GPS layout with other meanings in three fields (RINEX 3.04 A8): line 5's
 second field is the data sources (bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2 I/NAV E5b-I; bit 8 clock
@@ -23,7 +24,7 @@ from readers.orbits import ORBIT_SYSTEMS as MODELLED
 from readers.rinex.text import GPS_EPOCH, TextLines, checked_version, end_of_header, first_line
 from spooflens.epoch_table import Skipped
 from spooflens.errors import ReaderError
-from spooflens.gnss.ephemeris import SECONDS_PER_WEEK, GpsEphemerides, Klobuchar
+from spooflens.gnss.ephemeris import BDT_OFFSET_S, BDT_WEEK_OFFSET, SECONDS_PER_WEEK, GpsEphemerides, Klobuchar
 
 ORBIT_SYSTEMS = tuple(MODELLED)  # RINEX 3 systems whose records are read
 _RINEX3_SYSTEMS = (*ORBIT_SYSTEMS, "M", " ", "")
@@ -68,6 +69,8 @@ _NAV_KEYS = (  # RINEX GPS broadcast orbit lines 1-7, four fields each (None: no
     (None, "fit_hours", None, None),
 )
 _OPTIONAL = {"fit_hours"}
+# BeiDou (Table A14): line 6 holds SatH1 and TGD1 (B1/B3) where GPS has health and TGD; line 7 no fit
+_BEIDOU_KEYS = _NAV_KEYS[:6]
 # Galileo (RINEX 3.04 Table A8): lines 5-7 carry data sources, SISA, health, BGDs and the transmission time
 _GALILEO_KEYS = (
     *_NAV_KEYS[:4],
@@ -106,7 +109,7 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
         if v is None:
             raise ValueError(f"{key} is blank")
         rec[key] = v
-    for row, keys in enumerate(_GALILEO_KEYS if system == "E" else _NAV_KEYS):
+    for row, keys in enumerate({"E": _GALILEO_KEYS, "C": _BEIDOU_KEYS}.get(system, _NAV_KEYS)):
         line = lines[row + 1] if row + 1 < len(lines) else ""
         for k, name in enumerate(keys):
             if name is None:
@@ -115,6 +118,10 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
             if v is None and name not in _OPTIONAL:
                 raise ValueError(f"{name} is blank")
             rec[name] = 0.0 if v is None else v
+    if system == "C":  # BeiDou time is 14 s behind GPS time; its week 0 is GPS week 1356
+        rec["toc_s"] = float(rec["toc_s"]) + BDT_OFFSET_S
+        rec["toe_sow"] = float(rec["toe_sow"]) + BDT_OFFSET_S
+        rec["week"] = float(rec["week"]) + BDT_WEEK_OFFSET
     if system == "E":
         sources = int(float(rec.pop("data_sources")))
         if not sources & GALILEO_INAV:
@@ -183,7 +190,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
     if version < 3 and ftype != "N":
         raise ReaderError(path, f"RINEX 2 navigation type {ftype!r}: only GPS navigation ('N') files carry GPS orbits")
     if version >= 3 and fsys not in _RINEX3_SYSTEMS:
-        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS or Galileo records")
+        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS, Galileo or BeiDou records")
     body = lines[end + 1 :]
     is_start = [(ln[:2].strip() != "") if version < 3 else (ln[:1].strip() != "") for ln in body]
     starts = [i for i, s in enumerate(is_start) if s]
@@ -218,13 +225,13 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
         )
     if other:
         skipped.append(
-            Skipped(path.name, "navigation records of GLONASS, BeiDou, ... (GPS and Galileo orbits are used)", other)
+            Skipped(path.name, "navigation records of GLONASS, QZSS, ... (GPS, Galileo, BeiDou orbits are used)", other)
         )
     if fnav:
         skipped.append(Skipped(path.name, "Galileo F/NAV records (the I/NAV records carry the same orbits)", fnav))
     if not records:
         where = f"; first problem at line {first_bad[0]}: {first_bad[1]}" if first_bad else ""
-        raise ReaderError(path, f"no usable GPS or Galileo navigation record{where}")
+        raise ReaderError(path, f"no usable GPS, Galileo or BeiDou navigation record{where}")
     unique = {(r["sv_id"], r["week"], r["toe_sow"], r["iode"]): r for r in reversed(records)}
     if len(unique) < len(records):
         skipped.append(Skipped(path.name, "duplicate navigation records", len(records) - len(unique)))

@@ -43,6 +43,7 @@ from pyubx2.ubxtypes_core import UBX_MSGIDS
 from readers import ReaderFormat
 from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
+from readers.orbits import ORBIT_SYSTEMS
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
 from readers.rtcm_ephemeris import RTCM_EPHEMERIS, rtcm_ephemerides
 from readers.ubx import messages as m
@@ -280,11 +281,14 @@ def _with_satellite_states(
     parts = [e for e in (own, GpsEphemerides.from_records(fed) if fed else None) if e is not None]
     if parts:
         eph = parts[0] if len(parts) == 1 else GpsEphemerides.combined(parts)
-        sources = [s for s, e in (("RXM-SFRBX", own), ("RTCM3 1019/1046", fed)) if e]
-        stream = ephemeris_stream(eph, RECEIVER, "UBX", f"{' + '.join(sources)} (GPS, Galileo)", len(eph), t0_ns)
+        sources = [s for s, e in (("RXM-SFRBX", own), ("RTCM3 1019/1042/1046", fed)) if e]
+        present = {sv[:1] for sv in eph.satellites()}
+        systems = ", ".join(name for k, name in ORBIT_SYSTEMS.items() if k in present)
+        stream = ephemeris_stream(eph, RECEIVER, "UBX", f"{' + '.join(sources)} ({systems})", len(eph), t0_ns)
         return add_satellite_states(obs, eph, RECEIVER, skipped), stream, eph
     reason = (
-        "no GPS or Galileo ephemeris in the capture (RXM-SFRBX, RTCM3 1019/1046) and no navigation file "
+        "no GPS, Galileo or BeiDou ephemeris in the capture (RXM-SFRBX, RTCM3 1019/1042/1046) and no navigation "
+        "file "
         "covers it (give one with --topic nav=FILE); no satellite states"
     )
     nav = navigation_for(path, topics, obs["t_ns"].to_numpy() / 1e9, skipped) if ref_s is not None else None
@@ -516,8 +520,18 @@ def looks_like_ubx(head: bytes) -> bool:
     return False
 
 
+RTCM_LEAD_BYTES = 1 << 18  # an RTK rover's capture can open with a burst of corrections before any UBX
+
+
 def _is_ubx(path: Path, head: bytes) -> bool:
-    return path.is_file() and looks_like_ubx(head)
+    if not path.is_file():
+        return False
+    if looks_like_ubx(head):
+        return True
+    if not split_frames(head).rtcm:  # a capture that opens with RTCM3: look further for its UBX
+        return False
+    with path.open("rb") as f:
+        return looks_like_ubx(f.read(RTCM_LEAD_BYTES))
 
 
 FORMATS = (

@@ -25,6 +25,12 @@ FloatArray = NDArray[np.float64]
 
 GM_GPS = 3.986005e14  # m^3/s^2, IS-GPS-200's value (not WGS84's 3.986004418e14)
 GM_GALILEO = 3.986004418e14  # m^3/s^2, the Galileo ICD's
+GM_BEIDOU = 3.986004418e14  # m^3/s^2, BDS-SIS-ICD (CGCS2000)
+OMEGA_E_BEIDOU = 7.2921150e-5  # rad/s: CGCS2000's; over a week's toe it moves a node by tens of metres
+BDT_OFFSET_S = 14.0  # GPS time - BeiDou time; BDT week 0 began at GPS week 1356
+BDT_WEEK_OFFSET = 1356
+# BeiDou geostationary satellites: their orbit is given in a frame tilted by 5 degrees (BDS-SIS-ICD 5.2.4.12)
+BEIDOU_GEO = frozenset({"C01", "C02", "C03", "C04", "C05", "C59", "C60", "C61", "C62", "C63"})
 OMEGA_E_GPS = 7.2921151467e-5  # rad/s
 C_MPS = SPEED_OF_LIGHT_MPS
 # s/m^0.5, relativistic clock correction constant; Galileo's (from its GM) differs by 1e-7 of a term of
@@ -48,7 +54,9 @@ class Klobuchar:
 @dataclass(frozen=True)
 class GpsEphemerides:
     """Broadcast ephemeris records, one entry per record (several per satellite), as parallel arrays:
-    GPS LNAV (`sv_id` G..) and Galileo I/NAV (E..; `tgd` holds BGD(E1, E5b), `health` the E1-B bits).
+    GPS LNAV (`sv_id` G..), Galileo I/NAV (E..; `tgd` holds BGD(E1, E5b), `health` the E1-B bits) and
+    BeiDou D1/D2 (C..; `tgd` holds TGD1 for B1I; its times on the GPS scale: `week` is the BDT week +
+    1356 and `toe_sow` the BDT time of week + 14 s, which may pass the week's end).
 
     Names follow IS-GPS-200; angles in radians, rates in rad/s, `sqrt_a` in m^0.5. `toe_sow` is the
     time of ephemeris in seconds of GPS week `week`; `toc_s` the clock reference time (GPS seconds).
@@ -176,9 +184,14 @@ class SatelliteStates:
 
 def _kepler(eph: GpsEphemerides, t_s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Orbit position in ECEF at `t_s` for each record, plus the eccentric anomaly (for the clock)."""
+    system = eph.sv_id.astype("U1")
+    beidou = system == "C"
+    geo = np.isin(eph.sv_id.astype(str), list(BEIDOU_GEO))
+    gm = np.where(system == "G", GM_GPS, np.where(beidou, GM_BEIDOU, GM_GALILEO))
+    omega_e = np.where(beidou, OMEGA_E_BEIDOU, OMEGA_E_GPS)
+    toe_own = eph.toe_sow - np.where(beidou, BDT_OFFSET_S, 0.0)  # the time of week Omega0 is referred to
     a = eph.sqrt_a**2
     tk = t_s - eph.toe_s
-    gm = np.where(np.char.startswith(eph.sv_id.astype(str), "E"), GM_GALILEO, GM_GPS)
     n = np.sqrt(gm / a**3) + eph.delta_n
     m = eph.m0 + n * tk
     ecc_anomaly = m.copy()
@@ -190,7 +203,8 @@ def _kepler(eph: GpsEphemerides, t_s: FloatArray) -> tuple[FloatArray, FloatArra
     u = phi + eph.cus * s2 + eph.cuc * c2
     r = a * (1.0 - eph.e * np.cos(ecc_anomaly)) + eph.crs * s2 + eph.crc * c2
     inc = eph.i0 + eph.cis * s2 + eph.cic * c2 + eph.idot * tk
-    node = eph.omega0 + (eph.omega_dot - OMEGA_E_GPS) * tk - OMEGA_E_GPS * eph.toe_sow
+    # a geostationary BeiDou node does not turn with the Earth here: the frame is rotated below
+    node = eph.omega0 + (eph.omega_dot - np.where(geo, 0.0, omega_e)) * tk - omega_e * toe_own
     xp, yp = r * np.cos(u), r * np.sin(u)
     pos = np.stack(
         [
@@ -200,7 +214,17 @@ def _kepler(eph: GpsEphemerides, t_s: FloatArray) -> tuple[FloatArray, FloatArra
         ],
         axis=-1,
     )
+    if geo.any():
+        pos[geo] = _geo_to_ecef(pos[geo], (omega_e * tk)[geo])
     return pos, ecc_anomaly, n
+
+
+def _geo_to_ecef(p: FloatArray, earth_angle: FloatArray) -> FloatArray:
+    """BDS-SIS-ICD 5.2.4.12: R_Z(Omega_e t_k) R_X(-5 deg) applied to a GEO's position."""
+    c, s = np.cos(np.radians(-5.0)), np.sin(np.radians(-5.0))
+    x, y, z = p[:, 0], c * p[:, 1] + s * p[:, 2], -s * p[:, 1] + c * p[:, 2]
+    ca, sa = np.cos(earth_angle), np.sin(earth_angle)
+    return np.stack([ca * x + sa * y, -sa * x + ca * y, z], axis=-1)
 
 
 def _clock(eph: GpsEphemerides, t_s: FloatArray, ecc_anomaly: FloatArray) -> FloatArray:

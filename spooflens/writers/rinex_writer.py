@@ -25,13 +25,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from readers.orbits import ORBIT_SYSTEMS
 from readers.rinex import GPS_EPOCH
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.geodesy import geodetic_to_ecef
 from spooflens.gnss.ephemeris import GM_GALILEO, GM_GPS, OMEGA_E_GPS, SECONDS_PER_WEEK, GpsEphemerides
 
+WRITTEN_SYSTEMS = ("G", "E")  # the navigation records this writer lays out (BeiDou's are not written)
 GALILEO_INAV_E5B_CLOCK = 0b1000000101  # RINEX data sources: I/NAV E1-B and E5b, af0-af2 for E5b/E1
 OBS_TYPES = (("C1C", "pseudorange_m"), ("L1C", "carrier_phase_cycles"), ("D1C", "doppler_hz"), ("S1C", "cn0_dbhz"))
 REISSUE_S = 7200.0
@@ -223,7 +223,7 @@ def write_rinex(table: EpochTable, path: Path) -> None:
         text = _header(str(rid), systems, float(t[0]), np.asarray(xyz)) + _body(rows, t)
         (path / f"{_safe(str(rid))}_MO.rnx").write_text(text, encoding="ascii")
     if table.ephemerides is not None:
-        svs = {s for s in obs["sv_id"].astype(str) if s[:1] in ORBIT_SYSTEMS}
+        svs = {s for s in obs["sv_id"].astype(str) if s[:1] in WRITTEN_SYSTEMS}
         eph = _reissued(table.ephemerides, first, last, svs)
         only_gps = {s[:1] for s in eph.satellites()} == {"G"}
         (path / ("BRDC_GN.rnx" if only_gps else "BRDC_MN.rnx")).write_text(_nav_file(eph), encoding="ascii")
