@@ -63,8 +63,9 @@ def _d19(v: float) -> str:
     return f"{v:19.12E}".replace("E", "D")
 
 
-def _rinex_record(rec: dict[str, float | int | str], sources: int, health: int, bgd_e5a: float = BGD_E5A) -> str:
-    """One RINEX 3.04 Galileo navigation record (Table A8)."""
+def _record_text(rec: dict[str, Any], tail: list[tuple[float, ...]]) -> str:
+    """One RINEX 3.04 navigation record: the epoch line, the four orbit lines every system shares (GPS
+    layout), then the system's own last lines `tail`."""
     t = GPS_EPOCH + timedelta(seconds=float(rec["toc_s"]))
     f = {k: float(v) for k, v in rec.items() if k != "sv_id"}
     rows = [
@@ -72,12 +73,20 @@ def _rinex_record(rec: dict[str, float | int | str], sources: int, health: int, 
         (f["cuc"], f["e"], f["cus"], f["sqrt_a"]),
         (f["toe_sow"], f["cic"], f["omega0"], f["cis"]),
         (f["i0"], f["crc"], f["omega"], f["omega_dot"]),
-        (f["idot"], float(sources), f["week"], 0.0),
-        (3.12, float(health), bgd_e5a, f["tgd"]),
-        (f["toe_sow"] - 30.0,),
+        *tail,
     ]
     head = f"{rec['sv_id']} {t:%Y %m %d %H %M %S}" + "".join(_d19(f[k]) for k in ("af0", "af1", "af2"))
     return head + "\n" + "".join("    " + "".join(_d19(v) for v in row) + "\n" for row in rows)
+
+
+def _rinex_record(rec: dict[str, Any], sources: int, health: int, bgd_e5a: float = BGD_E5A) -> str:
+    """One Galileo record (Table A8): data sources, SISA, health, the two BGDs, transmission time."""
+    tail = [
+        (float(rec["idot"]), float(sources), float(rec["week"]), 0.0),
+        (3.12, float(health), bgd_e5a, float(rec["tgd"])),
+        (float(rec["toe_sow"]) - 30.0,),
+    ]
+    return _record_text(rec, tail)
 
 
 def _nav_file(path: Path, records: list[str]) -> Path:
@@ -319,19 +328,12 @@ def test_a_rinex_beidou_record_and_the_rtcm_one_give_the_same_orbit(tmp_path: Pa
     bdt["toc_s"] = float(rec["toc_s"]) - 14.0
     bdt["toe_sow"] = float(rec["toe_sow"]) - 14.0
     bdt["week"] = int(rec["week"]) - 1356
-    t = GPS_EPOCH + timedelta(seconds=float(bdt["toc_s"]))
-    f = {k: float(v) for k, v in bdt.items() if k != "sv_id"}
-    rows = [
-        (f["iode"], f["crs"], f["delta_n"], f["m0"]),
-        (f["cuc"], f["e"], f["cus"], f["sqrt_a"]),
-        (f["toe_sow"], f["cic"], f["omega0"], f["cis"]),
-        (f["i0"], f["crc"], f["omega"], f["omega_dot"]),
-        (f["idot"], 0.0, f["week"], 0.0),
-        (2.0, f["health"], f["tgd"], -1.38e-8),
-        (f["toe_sow"] - 60.0, 1.0),
+    tail = [
+        (float(bdt["idot"]), 0.0, float(bdt["week"]), 0.0),
+        (2.0, float(bdt["health"]), float(bdt["tgd"]), -1.38e-8),  # SatH1, TGD1, TGD2
+        (float(bdt["toe_sow"]) - 60.0, 1.0),  # transmission time, AODC
     ]
-    text = f"C02 {t:%Y %m %d %H %M %S}" + "".join(_d19(f[k]) for k in ("af0", "af1", "af2")) + "\n"
-    text += "".join("    " + "".join(_d19(v) for v in row) + "\n" for row in rows)
+    text = _record_text(bdt, tail)
     header = f"{'     3.04':<20}{'N: GNSS NAV DATA':<20}{'C: BDS':<20}RINEX VERSION / TYPE\n{'':60}END OF HEADER\n"
     (tmp_path / "BRDC_CN.rnx").write_text(header + text)
     nav = read_rinex_nav_file(tmp_path / "BRDC_CN.rnx").ephemerides
