@@ -12,7 +12,8 @@ within its growing uncertainty (`CoastingCheck`):
   solution, a short wander) does not leave the reference's uncertainty for long and is not confirmed:
   its inertial evidence does not count, and the incident keeps only its other evidence classes;
 - it *ends* at the first fix after the departure from which GNSS agrees with the reference again for
-  `agree_s` seconds, with an interval from the last disagreeing fix to that one, or at the end of the
+  `agree_s` seconds (back within the reference's 3 sigma or `min_departure_m`, not merely under the
+  clean envelope), with an interval from the last disagreeing fix to that one, or at the end of the
   log when GNSS never agrees again.
 
 The reconstructed track is the INS solution with the GNSS left out over the whole incident (its
