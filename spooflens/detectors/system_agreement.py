@@ -1,5 +1,5 @@
 """Do the satellite systems agree? A receiver's position from its GPS satellites alone against the one
-from its Galileo satellites alone.
+from its Galileo (or BeiDou) satellites alone.
 
 The open SDR spoofers (gps-sdr-sim and its descendants) transmit GPS L1 C/A and nothing else. Before a
 multi-constellation receiver they move every GPS pseudorange consistently, so GPS-only RAIM finds
