@@ -22,44 +22,17 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
-import numpy as np
 from pyrtcm.rtcmhelpers import calc_crc24q
 
+from readers.navbits import WEEK_S, BitReader, near_in_week, sfrbx_words
 from spooflens.epoch_table import Skipped
 
-WEEK_S = 604_800
 GST_WEEK_OFFSET = 1024  # GPS week of GST week 0
 GALILEO_GNSS_ID = 2
-SFRBX_HEADER = 8
 INAV_WORDS = 8
 ANDROID_PAGE_BYTES = 29
 PAGE_S = 2.0  # a nominal page (even + odd part) lasts 2 s; word 5's time of week is its start
 SEMICIRCLE = math.pi
-
-
-def _bits(value: int, width: int, pos: int, n: int) -> int:
-    return (value >> (width - pos - n)) & ((1 << n) - 1)
-
-
-def _signed(v: int, n: int) -> int:
-    return v - (1 << n) if v >> (n - 1) else v
-
-
-class _Word:
-    """Big-endian bit reader over one 128-bit I/NAV data word."""
-
-    def __init__(self, value: int) -> None:
-        self.value = value
-
-    def u(self, pos: int, n: int) -> int:
-        return _bits(self.value, 128, pos, n)
-
-    def s(self, pos: int, n: int) -> int:
-        return _signed(self.u(pos, n), n)
-
-    @property
-    def type(self) -> int:
-        return self.u(0, 6)
 
 
 class _AlertPage(Exception):
@@ -69,18 +42,18 @@ class _AlertPage(Exception):
 def page_word(page: int) -> int | None:
     """The 128-bit data word of a 256-bit nominal page (even part in the high 128 bits, as u-blox sends
     it), or None when it is an alert page, its parts are out of order or the CRC fails."""
-    even, odd = page >> 128, page & ((1 << 128) - 1)
-    if _bits(even, 128, 1, 1) or _bits(odd, 128, 1, 1):
+    even, odd = BitReader(page >> 128, 128), BitReader(page & ((1 << 128) - 1), 128)
+    if even.u(1, 1) or odd.u(1, 1):
         raise _AlertPage
-    if _bits(even, 128, 0, 1) != 0 or _bits(odd, 128, 0, 1) != 1:
+    if even.u(0, 1) != 0 or odd.u(0, 1) != 1:
         return None
-    covered = (_bits(even, 128, 0, 114) << 82) | _bits(odd, 128, 0, 82)  # 196 bits, padded to 200
-    if calc_crc24q(covered.to_bytes(25, "big")) != _bits(odd, 128, 82, 24):
+    covered = (even.u(0, 114) << 82) | odd.u(0, 82)  # 196 bits, padded to 200
+    if calc_crc24q(covered.to_bytes(25, "big")) != odd.u(82, 24):
         return None
-    return (_bits(even, 128, 2, 112) << 16) | _bits(odd, 128, 2, 16)
+    return (even.u(2, 112) << 16) | odd.u(2, 16)
 
 
-def _word1(w: _Word) -> dict[str, float]:
+def _word1(w: BitReader) -> dict[str, float]:
     return {
         "iod": w.u(6, 10),
         "toe_sow": w.u(16, 14) * 60.0,
@@ -90,7 +63,7 @@ def _word1(w: _Word) -> dict[str, float]:
     }
 
 
-def _word2(w: _Word) -> dict[str, float]:
+def _word2(w: BitReader) -> dict[str, float]:
     return {
         "iod": w.u(6, 10),
         "omega0": w.s(16, 32) * 2.0**-31 * SEMICIRCLE,
@@ -100,7 +73,7 @@ def _word2(w: _Word) -> dict[str, float]:
     }
 
 
-def _word3(w: _Word) -> dict[str, float]:
+def _word3(w: BitReader) -> dict[str, float]:
     return {
         "iod": w.u(6, 10),
         "omega_dot": w.s(16, 24) * 2.0**-43 * SEMICIRCLE,
@@ -112,7 +85,7 @@ def _word3(w: _Word) -> dict[str, float]:
     }
 
 
-def _word4(w: _Word) -> dict[str, float]:
+def _word4(w: BitReader) -> dict[str, float]:
     return {
         "iod": w.u(6, 10),
         "svid": w.u(16, 6),
@@ -125,7 +98,7 @@ def _word4(w: _Word) -> dict[str, float]:
     }
 
 
-def _word5(w: _Word) -> dict[str, float]:
+def _word5(w: BitReader) -> dict[str, float]:
     # ionosphere (NeQuick a_i0..2 and the region flags: 41 bits) first, then the group delays
     return {
         "bgd_e5a": w.s(47, 10) * 2.0**-32,
@@ -140,12 +113,6 @@ def _word5(w: _Word) -> dict[str, float]:
 _DECODE = {1: _word1, 2: _word2, 3: _word3, 4: _word4, 5: _word5}
 
 
-def _near(sow: float, ref_s: float) -> float:
-    """GPS seconds of a seconds-of-week value in the week that puts it within half a week of `ref_s`."""
-    t = (ref_s // WEEK_S) * WEEK_S + sow
-    return t + WEEK_S * round((ref_s - t) / WEEK_S)
-
-
 @dataclass
 class InavDecoder:
     """Collects I/NAV pages (`add`: an RXM-SFRBX payload; `add_word`: a checked 128-bit word);
@@ -157,16 +124,12 @@ class InavDecoder:
 
     def add(self, payload: bytes, now_gps_s: float | None = None) -> None:
         """One RXM-SFRBX payload of a Galileo satellite; `now_gps_s`: the receiver's GPS time when it came."""
-        if len(payload) < SFRBX_HEADER:
-            raise ValueError(f"RXM-SFRBX of {len(payload)} bytes")
-        gnss_id, sv, num_words = payload[0], payload[1], payload[4]
-        if len(payload) != SFRBX_HEADER + 4 * num_words:
-            raise ValueError(f"RXM-SFRBX with {num_words} words in {len(payload)} bytes")
-        if gnss_id != GALILEO_GNSS_ID or num_words != INAV_WORDS or not 1 <= sv <= 36:
+        gnss_id, sv, words = sfrbx_words(payload)
+        if gnss_id != GALILEO_GNSS_ID or len(words) != INAV_WORDS or not 1 <= sv <= 36:
             self.counts["not Galileo I/NAV"] += 1
             return
         page = 0
-        for w in np.frombuffer(payload[SFRBX_HEADER:], "<u4"):
+        for w in words:
             page = (page << 32) | int(w)
         self._add_page(sv, page, now_gps_s)
 
@@ -193,16 +156,17 @@ class InavDecoder:
 
     def add_word(self, sv: int, word: int, now_gps_s: float | None = None) -> None:
         """One checked 128-bit I/NAV data word of satellite E`sv`."""
-        w = _Word(word)
-        decode = _DECODE.get(w.type)
+        w = BitReader(word, 128)
+        kind = w.u(0, 6)  # the word type
+        decode = _DECODE.get(kind)
         if decode is None:
             return
         fields_ = decode(w)
-        if w.type == 4 and fields_["svid"] != sv:
+        if kind == 4 and fields_["svid"] != sv:
             self.counts["word 4 of another satellite"] += 1
             return
         parts = self.words.setdefault(sv, {})
-        parts[w.type] = (fields_, now_gps_s)
+        parts[kind] = (fields_, now_gps_s)
         self._assemble(sv, parts)
 
     def _assemble(self, sv: int, parts: dict[int, tuple[dict[str, float], float | None]]) -> None:
@@ -213,13 +177,13 @@ class InavDecoder:
             return
         w1, w2, w3, w4, w5 = (parts[k][0] for k in (1, 2, 3, 4, 5))
         sent_s = float(w5["week"]) * WEEK_S + float(w5["tow"])
-        toe_s = _near(float(w1["toe_sow"]), sent_s)
+        toe_s = near_in_week(float(w1["toe_sow"]), sent_s)
         toe_week = int(toe_s // WEEK_S)
         record: dict[str, float | int | str] = {
             "sv_id": f"E{sv:02d}",
             "week": toe_week,
             "toe_sow": toe_s - toe_week * WEEK_S,
-            "toc_s": _near(float(w4["toc_sow"]), sent_s),
+            "toc_s": near_in_week(float(w4["toc_sow"]), sent_s),
             "af0": w4["af0"],
             "af1": w4["af1"],
             "af2": w4["af2"],

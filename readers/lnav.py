@@ -26,13 +26,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from readers.navbits import WEEK_S, BitReader, near_in_week, sfrbx_words
 from spooflens.epoch_table import Skipped
 from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
 
-WEEK_S = 604_800
 SEMICIRCLE = math.pi  # LNAV angles are in semicircles
 TLM_PREAMBLE = 0x8B
-SFRBX_HEADER = 8
 GPS_GNSS_ID = 0
 
 # IS-GPS-200 Table 20-XIV: the data bits (1..24) each parity bit D25..D30 sums, and which of the
@@ -77,23 +76,7 @@ def _source_words(words30: list[int]) -> list[int] | None:
     return None
 
 
-class _Bits:
-    """Big-endian bit reader over a subframe's 240 data bits (24 per word, parity removed)."""
-
-    def __init__(self, words24: list[int]) -> None:
-        self.value = 0
-        for w in words24:
-            self.value = (self.value << 24) | w
-
-    def u(self, pos: int, n: int) -> int:
-        return (self.value >> (240 - pos - n)) & ((1 << n) - 1)
-
-    def s(self, pos: int, n: int) -> int:
-        v = self.u(pos, n)
-        return v - (1 << n) if v >> (n - 1) else v
-
-
-def _subframe1(b: _Bits) -> dict[str, float]:
+def _subframe1(b: BitReader) -> dict[str, float]:
     tgd = b.s(160, 8)
     return {
         "week10": b.u(48, 10),
@@ -108,7 +91,7 @@ def _subframe1(b: _Bits) -> dict[str, float]:
     }
 
 
-def _subframe2(b: _Bits) -> dict[str, float]:
+def _subframe2(b: BitReader) -> dict[str, float]:
     return {
         "iode": b.u(48, 8),
         "crs": b.s(56, 16) * 2.0**-5,
@@ -123,7 +106,7 @@ def _subframe2(b: _Bits) -> dict[str, float]:
     }
 
 
-def _subframe3(b: _Bits) -> dict[str, float]:
+def _subframe3(b: BitReader) -> dict[str, float]:
     return {
         "cic": b.s(48, 16) * 2.0**-29,
         "omega0": b.s(64, 32) * 2.0**-31 * SEMICIRCLE,
@@ -137,7 +120,7 @@ def _subframe3(b: _Bits) -> dict[str, float]:
     }
 
 
-def _klobuchar(b: _Bits) -> Klobuchar | None:
+def _klobuchar(b: BitReader) -> Klobuchar | None:
     """Subframe 4 page 18 (SV ID 56): ionosphere alpha/beta; None for any other page."""
     if b.u(50, 6) != 56:
         return None
@@ -147,13 +130,6 @@ def _klobuchar(b: _Bits) -> Klobuchar | None:
     alpha = tuple(raw[k] * scale_a[k] for k in range(4))
     beta = tuple(raw[4 + k] * scale_b[k] for k in range(4))
     return Klobuchar(alpha, beta)  # type: ignore[arg-type]
-
-
-def _near(sow: float, week: int, tow: float) -> float:
-    """GPS seconds of a seconds-of-week value in the week that puts it within half a week of (week, tow)."""
-    t = week * WEEK_S + sow
-    ref = week * WEEK_S + tow
-    return t + WEEK_S * round((ref - t) / WEEK_S)
 
 
 @dataclass
@@ -170,15 +146,10 @@ class LnavDecoder:
     def add(self, payload: bytes, ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
         """One RXM-SFRBX payload. `ref_gps_s`: the capture's GPS time near it (resolves the 10-bit week);
         `now_gps_s`: the receiver's GPS time when the message came (its latest epoch), if known."""
-        if len(payload) < SFRBX_HEADER:
-            raise ValueError(f"RXM-SFRBX of {len(payload)} bytes")
-        gnss_id, sv, num_words = payload[0], payload[1], payload[4]
-        if len(payload) != SFRBX_HEADER + 4 * num_words:
-            raise ValueError(f"RXM-SFRBX with {num_words} words in {len(payload)} bytes")
-        if gnss_id != GPS_GNSS_ID or num_words != 10 or not 1 <= sv <= 32:
+        gnss_id, sv, words = sfrbx_words(payload)
+        if gnss_id != GPS_GNSS_ID or len(words) != 10 or not 1 <= sv <= 32:
             self.counts["not GPS L1 C/A LNAV"] += 1
             return
-        words = np.frombuffer(payload[SFRBX_HEADER:], "<u4").astype(np.int64)
         self.add_words(sv, [int(w) for w in words], ref_gps_s, now_gps_s)
 
     def add_words(self, sv: int, words: list[int], ref_gps_s: float | None, now_gps_s: float | None = None) -> None:
@@ -193,7 +164,7 @@ class LnavDecoder:
         if data is None:
             self.counts["parity failed"] += 1
             return
-        bits = _Bits(data)
+        bits = BitReader(sum(w << (24 * (9 - k)) for k, w in enumerate(data)), 240)  # parity removed
         sf_id = bits.u(43, 3)
         tow = bits.u(24, 17) * 6.0  # time of the next subframe's start; this one began 6 s earlier
         self.counts[f"subframe {sf_id}"] += 1
@@ -234,8 +205,8 @@ class LnavDecoder:
         ref_week = int(ref // WEEK_S)
         week += 1024 * round((ref_week - week) / 1024)
         tow = float(sf1["tow"])
-        toe_s = _near(float(sf2["toe_sow"]), week, tow)
-        toc_s = _near(float(sf1["toc_sow"]), week, tow)
+        toe_s = near_in_week(float(sf2["toe_sow"]), week * WEEK_S + tow)
+        toc_s = near_in_week(float(sf1["toc_sow"]), week * WEEK_S + tow)
         toe_week = int(toe_s // WEEK_S)
         record: dict[str, float | int | str] = {
             "sv_id": sv_id,

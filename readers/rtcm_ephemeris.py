@@ -23,21 +23,19 @@ from typing import Any
 
 from pyrtcm import RTCMReader
 
+from readers.navbits import WEEK_S, near_in_week
 from spooflens.epoch_table import Skipped
 from spooflens.gnss.ephemeris import BDT_OFFSET_S, BDT_WEEK_OFFSET
 
 RTCM_EPHEMERIS = frozenset({1019, 1042, 1045, 1046})
-WEEK_S = 604_800
 GST_WEEK_OFFSET = 1024
 PI = math.pi
 Record = dict[str, float | int | str]
 
 
 def _times(week: int, toe_sow: float, toc_sow: float) -> dict[str, float | int]:
-    toe_s = week * WEEK_S + toe_sow
-    toc_s = week * WEEK_S + toc_sow
-    toc_s += WEEK_S * round((toe_s - toc_s) / WEEK_S)  # toc in the week that puts it near toe
-    return {"week": week, "toe_sow": toe_sow, "toc_s": toc_s}
+    """The record's times, toc in the week that puts it near toe."""
+    return {"week": week, "toe_sow": toe_sow, "toc_s": near_in_week(toc_sow, week * WEEK_S + toe_sow)}
 
 
 def _gps(msg: Any, ref_gps_s: float) -> Record:
@@ -69,12 +67,10 @@ def _galileo(msg: Any) -> Record:
 
 
 def _beidou(msg: Any) -> Record:
-    week = int(msg.DF489) + BDT_WEEK_OFFSET
-    toc_s = week * WEEK_S + float(msg.DF493) + BDT_OFFSET_S
-    toe_sow = float(msg.DF505) + BDT_OFFSET_S  # on the GPS scale, past the week's end if need be
-    toc_s += WEEK_S * round((week * WEEK_S + toe_sow - toc_s) / WEEK_S)
+    # on the GPS scale: toe_sow may pass the week's end
+    times = _times(int(msg.DF489) + BDT_WEEK_OFFSET, float(msg.DF505) + BDT_OFFSET_S, float(msg.DF493) + BDT_OFFSET_S)
     return {
-        "sv_id": f"C{int(msg.DF488):02d}", "week": week, "toe_sow": toe_sow, "toc_s": toc_s,
+        "sv_id": f"C{int(msg.DF488):02d}", **times,
         "af0": msg.DF496, "af1": msg.DF495, "af2": msg.DF494, "tgd": msg.DF513 * 1e-9,
         "sqrt_a": msg.DF504, "e": msg.DF502, "m0": msg.DF500 * PI, "delta_n": msg.DF499 * PI,
         "omega": msg.DF511 * PI, "i0": msg.DF509 * PI, "idot": msg.DF491 * PI,
