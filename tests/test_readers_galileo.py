@@ -145,8 +145,7 @@ def test_galileo_orbits_move_with_galileos_gravitational_constant() -> None:
 
 
 def _records(eph: GpsEphemerides) -> list[dict[str, Any]]:
-    names = ["sv_id", "week", "toe_sow", "toc_s", "health", "iode", *QUANTUM]
-    return [{k: getattr(eph, k)[i].item() for k in names} for i in range(len(eph))]
+    return [{k: r[k] for k in ("sv_id", "week", "toe_sow", "toc_s", "health", "iode", *QUANTUM)} for r in eph.records()]
 
 
 def _payload(sv: int, words: list[int]) -> bytes:

@@ -15,6 +15,7 @@ signal travels is the receiver side's business (`spooflens.gnss.geometry`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -116,9 +117,13 @@ class GpsEphemerides:
     def combined(cls, parts: list[GpsEphemerides]) -> GpsEphemerides:
         """Several sets of records as one (the first ionosphere model given wins; duplicates are harmless:
         the nearest toe wins)."""
-        names = [f.name for f in fields(cls) if f.name != "iono"]
-        recs = [{k: getattr(e, k)[i].item() for k in names} for e in parts for i in range(len(e))]
+        recs = [r for e in parts for r in e.records()]
         return cls.from_records(recs, iono=next((e.iono for e in parts if e.iono), None))
+
+    def records(self) -> list[dict[str, Any]]:
+        """One dict per record, the keys of `from_records`: what builds these records again."""
+        names = [f.name for f in fields(self) if f.name != "iono"]
+        return [{k: getattr(self, k)[i].item() for k in names} for i in range(len(self))]
 
     def __len__(self) -> int:
         return len(self.sv_id)

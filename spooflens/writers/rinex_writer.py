@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import re
 import shutil
-from dataclasses import fields
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -109,8 +109,7 @@ def _d19(v: float) -> str:
     return f"{v:19.12E}".replace("E", "D")
 
 
-def _nav_record(eph: GpsEphemerides, i: int) -> str:
-    r = {f.name: getattr(eph, f.name)[i] for f in fields(eph) if f.name != "iono"}
+def _nav_record(r: dict[str, Any]) -> str:
     t = _calendar(float(r["toc_s"]))
     fit = 4.0 if np.isinf(r["max_age_s"]) else 2 * float(r["max_age_s"]) / 3600.0
     galileo = str(r["sv_id"]).startswith("E")
@@ -135,13 +134,11 @@ def _nav_record(eph: GpsEphemerides, i: int) -> str:
 def _reissued(eph: GpsEphemerides, first_s: float, last_s: float, svs: set[str]) -> GpsEphemerides:
     """Records of the satellites in `svs` covering [first_s, last_s]: a real file's records as they are,
     a synthetic (never-expiring) record re-issued every two hours with its elements carried along."""
-    recs: list[dict[str, float | int | str]] = []
-    names = [f.name for f in fields(eph) if f.name != "iono"]
+    recs: list[dict[str, Any]] = []
     toe = eph.toe_s
-    for i in range(len(eph)):
-        if str(eph.sv_id[i]) not in svs:
+    for i, r in enumerate(eph.records()):
+        if str(r["sv_id"]) not in svs:
             continue
-        r = {k: getattr(eph, k)[i].item() for k in names}
         if np.isfinite(r["max_age_s"]):
             if toe[i] + r["max_age_s"] >= first_s and toe[i] - r["max_age_s"] <= last_s:
                 recs.append(r)
@@ -189,7 +186,7 @@ def _nav_file(eph: GpsEphemerides) -> str:
             _label("GPSB " + "".join(f"{v:12.4E}".replace("E", "D") for v in eph.iono.beta), "IONOSPHERIC CORR")
         )
     head.append(_label("", "END OF HEADER"))
-    return "".join(head) + "".join(_nav_record(eph, i) for i in range(len(eph)))
+    return "".join(head) + "".join(_nav_record(r) for r in eph.records())
 
 
 def _safe(name: str) -> str:
