@@ -1,7 +1,7 @@
 """Satellite states for logs of raw observations that carry no ephemerides (GnssLogger, DataFlash GRXS).
 
-The navigation file is the one named with `--topic nav=FILE`, else a GPS RINEX navigation file in the
-log's directory whose GPS or Galileo records cover the log's time (the one covering most of it when several do;
+The navigation file is the one named with `--topic nav=FILE`, else a RINEX navigation file in the log's
+directory whose records cover the log's time (the one covering most of it when several do;
 `hour1820.16n` beside a log of 2016-06-30). Satellite positions, velocities and clocks then come from
 `spooflens.gnss.ephemeris.states_at_transmission`, as for RINEX observation files.
 """
@@ -16,7 +16,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers.orbits import state_columns
-from readers.rinex import NavFile, is_gps_nav, read_rinex_nav_file
+from readers.rinex import NavFile, is_broadcast_nav, read_rinex_nav_file
 from spooflens.epoch_table import Skipped, StreamInfo
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import GpsEphemerides
@@ -47,7 +47,7 @@ def navigation_for(
         return nav
     t = np.unique(np.round(np.asarray(t_gps_s, dtype=float)))
     best: tuple[float, NavFile] | None = None
-    for p in sorted(q for q in log.parent.iterdir() if q.is_file() and q != log and is_gps_nav(q)):
+    for p in sorted(q for q in log.parent.iterdir() if q.is_file() and q != log and is_broadcast_nav(q)):
         try:
             nav = read_rinex_nav_file(p)
         except ReaderError as err:
@@ -87,8 +87,9 @@ def add_satellite_states(
     skipped: list[Skipped],
     none_reason: str = NO_NAV_FILE,
 ) -> pd.DataFrame:
-    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of their GPS and Galileo
-    satellites; `none_reason` says why there are no ephemerides when `ephemerides` is None."""
+    """`rows` (t_ns on the GPS clock, sv_id, pseudorange_m) with the sv_* columns of the satellites whose
+    orbits are modelled (`readers.orbits`); `none_reason` says why there are no ephemerides when
+    `ephemerides` is None."""
     columns = state_columns(
         ephemerides,
         rows["sv_id"].to_numpy(str),

@@ -81,7 +81,7 @@ def _beidou(msg: Any) -> Record:
 
 
 def rtcm_ephemerides(frames: list[bytes], ref_gps_s: float | None) -> tuple[list[Record], list[Skipped]]:
-    """The distinct GPS and Galileo records of whole RTCM3 frames, and what was not used."""
+    """The distinct GPS, BeiDou and Galileo records of whole RTCM3 frames, and what was not used."""
     records: dict[tuple[object, ...], Record] = {}
     counts: Counter[str] = Counter()
     decoders: dict[int, Callable[[Any], Record]] = {

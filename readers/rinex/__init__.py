@@ -49,7 +49,7 @@ from pathlib import Path
 
 from readers import ReaderFormat
 from readers.rinex.assembly import APPROX_POSITION_KEY, obs_files, read_rinex
-from readers.rinex.navigation import NavFile, find_nav_files, is_gps_nav, read_rinex_nav, read_rinex_nav_file
+from readers.rinex.navigation import NavFile, find_nav_files, is_broadcast_nav, read_rinex_nav, read_rinex_nav_file
 from readers.rinex.observation import (
     BAND_HZ,
     CODE_PRIORITY,
@@ -80,7 +80,7 @@ __all__ = [
     "TextLines",
     "carrier_frequency_hz",
     "find_nav_files",
-    "is_gps_nav",
+    "is_broadcast_nav",
     "is_rinex_obs",
     "obs_files",
     "parse_fixed",

@@ -84,7 +84,7 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
 def _add_satellite_states(
     rows: dict[str, np.ndarray], navs: list[NavFile], obs_name: str, receiver_id: str, skipped: list[Skipped]
 ) -> None:
-    """Fill the sv_* columns of GPS and Galileo rows from the broadcast orbits; count every row left without."""
+    """Fill the sv_* columns of the modelled systems' rows from the broadcast orbits; count every row left without."""
     eph = (navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)) if navs else None
     reason = f"no navigation file found for {obs_name} (give one with --topic nav=FILE); no satellite states"
     rows |= state_columns(eph, rows["sv_id"], rows["t_ns"] / 1e9, rows["pseudorange_m"], receiver_id, skipped, reason)

@@ -33,9 +33,9 @@ GALILEO_E5A_CLOCK = 1 << 8
 E1B_HEALTH = 0b111  # E1-B data validity and signal health
 
 
-def is_gps_nav(path: Path) -> bool:
-    """True for a RINEX navigation file that can hold GPS or Galileo orbits (RINEX 2 'N', RINEX 3 GPS,
-    Galileo or mixed)."""
+def is_broadcast_nav(path: Path) -> bool:
+    """True for a RINEX navigation file that can hold orbits this tool models (RINEX 2 'N', RINEX 3 GPS,
+    Galileo, BeiDou or mixed)."""
     line = first_line(path)
     if "RINEX VERSION / TYPE" not in line or line[20:21].upper() != "N":
         return False
@@ -44,7 +44,7 @@ def is_gps_nav(path: Path) -> bool:
 
 @dataclass(frozen=True)
 class NavFile:
-    """A navigation file's GPS and Galileo records, with what was skipped and why."""
+    """A navigation file's GPS, Galileo and BeiDou records, with what was skipped and why."""
 
     path: Path
     version: float
@@ -87,7 +87,7 @@ def _nav_number(text: str) -> float | None:
 
 
 def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str]:
-    """One GPS or Galileo broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records
+    """One GPS, Galileo or BeiDou broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records
     keys."""
     first = lines[0]
     system = "G" if version < 3 else first[:1].upper()
@@ -174,8 +174,8 @@ def _klobuchar(lines: list[str]) -> Klobuchar | None:
 
 
 def read_rinex_nav_file(path: Path | str) -> NavFile:
-    """Read a RINEX 2 GPS or RINEX 3 (GPS, Galileo or mixed) navigation file, keeping the GPS and
-    Galileo I/NAV records.
+    """Read a RINEX 2 GPS or RINEX 3 (GPS, Galileo, BeiDou or mixed) navigation file, keeping the GPS,
+    Galileo I/NAV and BeiDou records.
 
     Records that are cut short or hold a field that is not a number are skipped and counted; other
     systems' records are counted as skipped. ReaderError if no record is usable.
@@ -240,7 +240,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
 
 
 def read_rinex_nav(path: Path | str) -> GpsEphemerides:
-    """GPS and Galileo broadcast ephemerides of a RINEX navigation file (`read_rinex_nav_file` for what was skipped)."""
+    """The broadcast ephemerides of a RINEX navigation file (`read_rinex_nav_file` for what was skipped)."""
     return read_rinex_nav_file(path).ephemerides
 
 
@@ -268,4 +268,4 @@ def find_nav_files(obs: Path, topics: Mapping[str, str] | None = None) -> list[P
     siblings = _nav_siblings(obs)
     if siblings:
         return siblings[:1]
-    return sorted(p for p in obs.parent.iterdir() if p.is_file() and p != obs and is_gps_nav(p))
+    return sorted(p for p in obs.parent.iterdir() if p.is_file() and p != obs and is_broadcast_nav(p))

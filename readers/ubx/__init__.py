@@ -14,8 +14,9 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   same solution again and is counted, not used.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
-  RINEX-style. GPS and Galileo satellite states from the broadcast ephemerides in the capture's own
-  RXM-SFRBX messages (`readers/lnav.py`, `readers/inav.py`), else from a RINEX navigation file
+  RINEX-style. GPS, Galileo and BeiDou satellite states from the broadcast ephemerides in the capture's
+  own RXM-SFRBX messages (`readers/lnav.py`, `readers/inav.py`) and in the RTCM3 stream fed to it
+  (`readers/rtcm_ephemeris.py`), else from a RINEX navigation file
   (`--topic nav=FILE`, or one beside the capture covering its time), so RAIM and the raw-measurement
   detectors run on the capture.
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
@@ -287,9 +288,8 @@ def _with_satellite_states(
         stream = ephemeris_stream(eph, RECEIVER, "UBX", f"{' + '.join(sources)} ({systems})", len(eph), t0_ns)
         return add_satellite_states(obs, eph, RECEIVER, skipped), stream, eph
     reason = (
-        "no GPS, Galileo or BeiDou ephemeris in the capture (RXM-SFRBX, RTCM3 1019/1042/1046) and no navigation "
-        "file "
-        "covers it (give one with --topic nav=FILE); no satellite states"
+        "no GPS, Galileo or BeiDou ephemeris in the capture (RXM-SFRBX, RTCM3 1019/1042/1046) and no "
+        "navigation file covers it (give one with --topic nav=FILE); no satellite states"
     )
     nav = navigation_for(path, topics, obs["t_ns"].to_numpy() / 1e9, skipped) if ref_s is not None else None
     rows = add_satellite_states(obs, nav.ephemerides if nav else None, RECEIVER, skipped, reason)

@@ -1,5 +1,6 @@
-"""GPS and Galileo broadcast ephemerides and where each satellite is: IS-GPS-200 (Table 20-IV) orbit
-and clock, which the Galileo OS SIS ICD (5.1.1) repeats with its own gravitational constant.
+"""GPS, Galileo and BeiDou broadcast ephemerides and where each satellite is: IS-GPS-200 (Table 20-IV)
+orbit and clock, which the Galileo OS SIS ICD (5.1.1) repeats with its own gravitational constant and the
+BDS-SIS-ICD (5.2.4) with CGCS2000's constants, BDT and a tilted frame for its geostationary satellites.
 
 One code path serves real navigation files (`readers.rinex.read_rinex_nav`) and the simulator's
 synthetic constellation (`synthetic_constellation`: the same Keplerian elements with the harmonic
