@@ -47,7 +47,7 @@ from readers import ReaderFormat
 from readers.dataflash import Columns, DataFlash, is_dataflash, open_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
 from readers.rinex import NavFile
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, SECONDS_PER_WEEK
 from spooflens.navigation.rotations import quat_multiply
@@ -150,6 +150,20 @@ def gps_clock(gps: pd.DataFrame | None) -> tuple[str, int, str]:
     return "gps", offset, f"GPS clock from GPS week/ms of {int(ok.sum())} 3D fixes (median offset to TimeUS)"
 
 
+def _time_offsets(gps: pd.DataFrame) -> FloatArray:
+    """`time_offset_s` per receiver instance: its GPS week/ms against TimeUS (the boot clock)."""
+    week = gps["GWk"].to_numpy(np.int64)
+    receiver_ns = (week * 604_800_000 + gps["GMS"].to_numpy(np.int64)) * 1_000_000
+    clock_ns = gps["TimeUS"].to_numpy(np.int64) * 1000
+    valid = (week > 0) & (gps["Status"].to_numpy(np.int64) >= 3)
+    out = np.full(len(gps), np.nan)
+    inst = gps["inst"].to_numpy(np.int64)
+    for i in np.unique(inst):
+        mine = inst == i
+        out[mine] = time_offset_s(receiver_ns[mine], clock_ns[mine], valid[mine])
+    return out
+
+
 def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: dict[str, str]) -> pd.DataFrame:
     """Fix rows (schema columns, t_ns) of the GPS rows with a fix, plus `msg` and `ofs`: the message each
     row came from and its offset in the file."""
@@ -201,6 +215,8 @@ def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: d
     ):
         if src in gps:
             cols[col] = gps[src].to_numpy(float)
+    if "GWk" in gps and "GMS" in gps:
+        cols["time_offset_s"] = _time_offsets(gps)
     fixes = pd.DataFrame(cols)
     no_fix = fix_type == FixType.NO_FIX
     for rid in dict.fromkeys(names[no_fix]):

@@ -62,7 +62,15 @@ from readers import ReaderFormat
 from readers.inav import InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns, gps_utc_offset_ns
+from spooflens.epoch_table import (
+    EpochTable,
+    Skipped,
+    StreamInfo,
+    build_table,
+    gps_ns_of_unix_ns,
+    gps_utc_offset_ns,
+    time_offset_s,
+)
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, GpsEphemerides
 from spooflens.navigation.rotations import matrix_to_quat
@@ -559,7 +567,10 @@ def read_gnsslogger(
         meta["sensor_clock"] = f"elapsedRealtimeNanos + median offset to {len(good)} GPS fixes' UnixTimeMillis"
     if fixes is not None and len(fixes):
         t_ns = from_unix_ns(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000)
-        fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=t_ns)
+        # the fix's own (GNSS) time against the monotonic clock at which the phone made it
+        elapsed = fixes["elapsed_ns"].to_numpy(np.int64)
+        offset = time_offset_s(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000, elapsed, elapsed > 0)
+        fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=t_ns, time_offset_s=offset)
         if raw is not None and len(raw.epochs):
             ep = raw.epochs.sort_values("t_ns")
             if "Agc" in records:

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.epoch_table import Skipped, StreamInfo
+from spooflens.epoch_table import Skipped, StreamInfo, time_offset_s
 from spooflens.navigation.rotations import quat_from_rotvec, quat_multiply, quat_to_rotvec
 from spooflens.schema import FixType, SpoofingFlag
 
@@ -346,6 +346,16 @@ def _unavailable_as_nan(values: FloatArray | None, sentinel: str) -> FloatArray 
     return np.where(bad, np.nan, values)
 
 
+def _time_offset(rec: Mapping[str, np.ndarray]) -> FloatArray:
+    """The receiver's UTC (`time_utc_usec`, 0 = unknown) against the boot clock at the moment it refers
+    to (`timestamp` + `timestamp_time_relative`, which the u-blox driver fills): `time_offset_s`."""
+    utc = np.nan_to_num(np.asarray(rec["time_utc_usec"], dtype=float)).astype(np.int64)
+    boot = np.asarray(rec["timestamp"]).astype(np.int64)
+    if "timestamp_time_relative" in rec:
+        boot = boot + np.nan_to_num(np.asarray(rec["timestamp_time_relative"], dtype=float)).astype(np.int64)
+    return time_offset_s(utc * 1000, boot * 1000, utc > 0)
+
+
 @dataclass
 class GpsColumns:
     columns: dict[str, np.ndarray]
@@ -396,6 +406,8 @@ def gps_columns(rec: Mapping[str, np.ndarray], units: PositionUnits) -> GpsColum
         "authentication_state": _f(rec, "authentication_state"),
     }
     cols |= {k: v for k, v in optional.items() if v is not None}
+    if "time_utc_usec" in rec:
+        cols["time_offset_s"] = _time_offset(rec)
     fix = rec.get("fix_type")
     cols["fix_type"] = (
         _codes(fix, FIX_TYPES, FixType.UNKNOWN, n) if fix is not None else np.full(n, FixType.FIX_3D, dtype=np.int8)

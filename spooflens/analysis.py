@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 MIN_FIXES = 3
 MIN_IMU_SAMPLES = 50
 MIN_AUTOPILOT_ROWS = 20
+MIN_TIMED_FIXES = 20
 
 # Every analysis, in the order it runs. One line per module; the module declares the rest.
 ANALYSIS_MODULES: tuple[str, ...] = (
@@ -37,6 +38,7 @@ ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.receiver_evidence",
     "spooflens.detectors.autopilot_ekf",
     "spooflens.detectors.heading_reference",
+    "spooflens.detectors.receiver_time",
     "spooflens.detectors.raim",
     "spooflens.detectors.system_agreement",
     "spooflens.detectors.satellite_signals",
@@ -110,6 +112,17 @@ def _has_headings(table: EpochTable) -> str | None:
     return None if len(table.frame("headings")) else "a compass heading (NMEA HDT, HDG, THS or VHW)"
 
 
+def _has_time_offset(table: EpochTable) -> str | None:
+    fixes = table.fixes
+    n = int(np.isfinite(fixes["time_offset_s"].to_numpy(dtype=float)).sum()) if "time_offset_s" in fixes else 0
+    return (
+        None
+        if n >= MIN_TIMED_FIXES
+        else "the receiver's time beside the log's own clock (PX4 time_utc_usec, ArduPilot GWk/GMS, GnssLogger "
+        f"Fix, NMEA with logger times; {n} fixes, {MIN_TIMED_FIXES} needed)"
+    )
+
+
 def _has_fleet(table: EpochTable) -> str | None:
     """One log is never a fleet: `spooflens fleet` runs the fleet analysis with the other vehicles' logs."""
     return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
@@ -127,6 +140,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "fleet": _has_fleet,
     "autopilot_ekf": _has_autopilot_ekf,
     "headings": _has_headings,
+    "time_offset": _has_time_offset,
 }
 
 

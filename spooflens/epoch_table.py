@@ -67,6 +67,18 @@ def utc_gps_offset_ns(utc_ns: np.ndarray | int) -> np.ndarray:
     return np.searchsorted(_LEAP_UTC_NS, np.asarray(utc_ns, dtype=np.int64), side="right").astype(np.int64) * NS
 
 
+def time_offset_s(receiver_ns: np.ndarray, clock_ns: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """The `time_offset_s` fixes column: the receiver's time minus the log's clock (both ns, any epochs),
+    less the median over the valid rows, in seconds (NaN where not valid). Differenced in integers, so
+    a UNIX time of 1.7e18 ns against a boot clock keeps its nanoseconds."""
+    diff = np.asarray(receiver_ns, dtype=np.int64) - np.asarray(clock_ns, dtype=np.int64)
+    ok = np.ones(len(diff), dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+    if not ok.any():
+        return np.full(len(diff), np.nan)
+    centre = int(np.median(diff[ok]))
+    return np.where(ok, (diff - centre) / 1e9, np.nan)
+
+
 def gps_ns_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
     """UTC nanoseconds since 1970 -> GPS nanoseconds since 1980-01-06 (leap seconds added)."""
     utc = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS

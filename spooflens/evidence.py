@@ -4,7 +4,7 @@ Four tests on one filter's innovations are one piece of evidence, not four: a de
 class of reference it uses, and an incident's confidence counts the distinct classes that agree
 (`spooflens.verdict`). A class is *independent* when its reference is something a spoofer of this
 receiver cannot move (the vehicle's own inertial sensors, a second antenna, a surveyed station, other
-vehicles, a gyrocompass, the other satellites' signals and the broadcast orbits). The receiver's own
+vehicles, a gyrocompass, the other satellites' signals and the broadcast orbits, the logger's clock). The receiver's own
 outputs checked against each other, and what the receiver says about itself, are evidence too, but a
 single such class alone never makes a spoofing verdict: real receivers jump and complain without an
 attacker.
@@ -21,6 +21,7 @@ class Evidence(StrEnum):
     GNSS_ONLY = "gnss_only"
     RECEIVER = "receiver"
     RAW_MEASUREMENT = "raw_measurement"
+    LOG_CLOCK = "log_clock"
     INERTIAL = "inertial"
     SECOND_RECEIVER = "second_receiver"
     KNOWN_STATION = "known_station"
@@ -48,6 +49,12 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
     Evidence.RAW_MEASUREMENT: EvidenceInfo(
         "raw-measurement consistency",
         "each satellite's pseudorange and rate against the other satellites and the broadcast orbits",
+        True,
+    ),
+    Evidence.LOG_CLOCK: EvidenceInfo(
+        "log clock",
+        "the log's own clock (the autopilot's or phone's boot clock, the logging host's time), which the "
+        "receiver does not set",
         True,
     ),
     Evidence.INERTIAL: EvidenceInfo("inertial reference", "the vehicle's inertial sensors (and odometry)", True),

@@ -97,6 +97,15 @@ FIX_COLUMNS: tuple[Column, ...] = (
     Column("spoofing_state", "float64", "-", "receiver spoofing state code as logged (meaning in metadata)", False),
     Column("authentication_state", "float64", "-", "signal authentication state code (e.g. OSNMA)", False),
     Column("cn0_mean_dbhz", "float64", "dB-Hz", "mean C/N0 of the satellites tracked at this fix", False),
+    Column(
+        "time_offset_s",
+        "float64",
+        "s",
+        "the receiver's own time of this fix (UTC or GPS time) minus the log's clock at this row (the "
+        "autopilot's or phone's boot clock, the logging host's time), less its median over the receiver's "
+        "rows: constant but for the logger's drift and latency; NaN where unknown",
+        False,
+    ),
 )
 
 OBSERVATION_COLUMNS: tuple[Column, ...] = (

@@ -46,7 +46,7 @@ from readers.nmea.sentences import (
     POSITION_KINDS,
     Decoded,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
 from spooflens.schema import FixType
 
 DAY_S = 86_400
@@ -160,6 +160,15 @@ def assign_epochs(rx: Receiver) -> None:
                 epoch.sentences.extend(pending)
                 pending = []
             current = key
+
+
+def _own_time_ns(rx: Receiver, epoch: Epoch) -> int:
+    """The receiver's time of an epoch with its own date where a sentence of the epoch carries one (RMC,
+    ZDA): a spoofer's date moves it, while the log's clock follows the date most of the log has."""
+    dated = next((d for d in epoch.sentences if d.day is not None and math.isfinite(d.tod_s)), None)
+    if dated is not None and dated.day is not None:
+        return round((dated.day * DAY_S + dated.tod_s) * NS)
+    return round(rx.clock_s(epoch.key) * NS)
 
 
 @dataclass
@@ -386,6 +395,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         times_by_file[id(f)] = line_times(f, anchors, clock)
     for rx in rxs:
         rows: list[tuple[int, dict[str, float]]] = []
+        own_ns: list[int | None] = []  # the receiver's own date and time of each row, against the logger's
         invalid = 0
         kinds = Counter(d.kind for d in rx.sentences)
         line_t = times_by_file[id(rx.file)]
@@ -398,15 +408,18 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
                 invalid += 1
                 continue
             gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
+            own: int | None = None
             if logger:
                 t_ns = line_t.get(epoch.first_line)
                 if t_ns is not None and epoch.gnss and math.isfinite(rx.day_anchor_s):
                     offsets.append((gnss_ns - t_ns) / NS)
+                    own = _own_time_ns(rx, epoch)
             else:
                 t_ns = gnss_ns
             if t_ns is None:
                 continue
             rows.append((int(t_ns), values))
+            own_ns.append(own)
             fix_epochs.setdefault((rx.receiver_id, int(t_ns)), (epoch, rx.file.scan.path))
             sat_rows += [(int(t_ns), rx.receiver_id, *sat) for sat in epoch_satellites(epoch)]
         if invalid:
@@ -424,6 +437,10 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         for k, v in cols.items():
             frame[k] = v
         frame["fix_type"] = fix_type
+        if any(o is not None for o in own_ns):
+            known = np.array([o is not None for o in own_ns])
+            own_arr = np.array([o if o is not None else 0 for o in own_ns], dtype=np.int64)
+            frame["time_offset_s"] = time_offset_s(own_arr, frame["t_ns"].to_numpy(np.int64), known)
         fix_parts.append(frame)
         streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, len(rows)))
     if offsets:

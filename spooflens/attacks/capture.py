@@ -8,8 +8,9 @@ inflate, its noise and jamming indicators rise and the C/N0 first falls; once lo
 the C/N0 sits above its old level (a spoofer is louder than the sky) and the velocity jumps before the
 spoofer starts dragging the position. The drag itself is a ramp, a step or a pull, with the reported
 velocity consistent with the false track (the spoofer controls the Doppler too). When the spoofer
-switches off, the receiver loses and re-acquires the real sky once more. Indicators the log does not
-have (NaN columns) stay NaN.
+switches off, the receiver loses and re-acquires the real sky once more. A spoofer whose time is not
+GNSS time (`clock` s off) moves the receiver's time against the log's clock while it is captured.
+Indicators the log does not have (NaN columns) stay NaN.
 """
 
 from __future__ import annotations
@@ -121,6 +122,9 @@ def apply_capture(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Atta
             else:
                 y = x * (1.0 + (worst - 1.0) * transient) * np.where(during, captured, 1.0)
             fixes.iloc[rows, cols.get_loc(c)] = y
+        if "time_offset_s" in cols:  # the receiver keeps the spoofer's time while it is captured
+            off = fx["time_offset_s"].to_numpy(dtype=float)
+            fixes.iloc[rows, cols.get_loc("time_offset_s")] = off + p["clock"] * during
         cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
         fixes.iloc[rows, cols.get_loc("cn0_mean_dbhz")] = cn0 - 8.0 * transient + p["cn0"] * during
         # the fix drops out in the middle of each transient

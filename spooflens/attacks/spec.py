@@ -239,8 +239,10 @@ KINDS: dict[Kind, KindSpec] = {
         "drops out for a moment), reported accuracies and DOP inflated, noise and jamming indicator up, C/N0 "
         "down then `cn0` dB above its old level, a velocity transient of `jump` m/s; then the drag: the "
         "position pulled at `rate` m/s (`drag=ramp`), moved by `offset` m (`step`) or pulled to `offset` m "
-        "over 60 s (`pull`), the reported velocity consistent with it; when the spoofer switches off at "
-        "`end`, the receiver loses and re-acquires the real sky again",
+        "over 60 s (`pull`), the reported velocity consistent with it; a spoofer `clock` s off GNSS time "
+        "moves the receiver's time against the log's clock while it is captured (PX4, ArduPilot and CSV "
+        "copies write it); when the spoofer switches off at `end`, the receiver loses and re-acquires the "
+        "real sky again",
         (
             Param("drag", "text", "ramp", "how the position is dragged: ramp, step or pull"),
             Param("rate", "float", 3.0, "m/s per axis of the ramp"),
@@ -250,6 +252,12 @@ KINDS: dict[Kind, KindSpec] = {
             Param("jump", "float", 3.0, "m/s of the velocity transient"),
             Param("acc", "float", 4.0, "reported accuracy inflation at the worst of the takeover"),
             Param("cn0", "float", 4.0, "dB the spoofed signals are stronger than the real ones"),
+            Param(
+                "clock",
+                "float",
+                0.0,
+                "s the spoofer's time differs from GNSS time (moves the receiver's time against the log's clock)",
+            ),
             Param("seed", "count", 0, "random seed of the transient"),
             *_WINDOW,
         ),

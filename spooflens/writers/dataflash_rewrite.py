@@ -3,7 +3,8 @@
 Each fix row of the table came from one GPS (or GPS2) message at a known offset in the file
 (`readers.ardupilot.gps_fixes`); its Lat/Lng/Alt fields are rewritten with the spoofed position (the
 attack's change is added to the logged AMSL altitude, so the ellipsoidal conversion cancels), and with
-`velocities` its Spd/GCrs/VZ too. Messages keep their length and place, so pymavlink and every other
+`velocities` its Spd/GCrs/VZ too, and where the attack moved the receiver's time (`time_offset_s`) its
+GWk/GMS. Messages keep their length and place, so pymavlink and every other
 DataFlash tool read the copy as they read the original. The autopilot's own EKF messages (XKF*) and
 raw observations (GRXS) are left as logged: the copy shows what the receiver was made to report, not
 what the autopilot would have done with it.
@@ -22,7 +23,17 @@ from readers.dataflash import open_dataflash
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 
-_PACK = {"L": ("<i", 1e7), "e": ("<i", 100.0), "E": ("<I", 100.0), "f": ("<f", 1.0), "d": ("<d", 1.0), "i": ("<i", 1.0)}
+_PACK = {
+    "L": ("<i", 1e7),
+    "e": ("<i", 100.0),
+    "E": ("<I", 100.0),
+    "f": ("<f", 1.0),
+    "d": ("<d", 1.0),
+    "i": ("<i", 1.0),
+    "I": ("<I", 1.0),
+    "H": ("<H", 1.0),
+}
+WEEK_MS = 604_800_000
 
 
 def _field_writer(log, name: str, column: str):  # type: ignore[no-untyped-def]
@@ -44,17 +55,27 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
     _, offset_ns, _ = gps_clock(gps)
     rows = gps_fixes(gps, offset_ns, [], {})
     key = ["receiver_id", "t_s"]
-    before = table.fixes[[*key, "lat_deg", "lon_deg", "height_m"]]
-    after = spoofed.fixes[[*key, "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]]
+    before = table.fixes[[*key, "lat_deg", "lon_deg", "height_m", "time_offset_s"]]
+    after = spoofed.fixes[
+        [*key, "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps", "time_offset_s"]
+    ]
     change = before.merge(after, on=key, suffixes=("_0", ""))
     change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
+    if {"GWk", "GMS"} <= set(gps.columns):
+        rows = rows.merge(gps[["ofs", "GWk", "GMS"]], on="ofs", how="left")
     rows = rows.rename(columns={c: f"{c}_log" for c in rows.columns if c not in ("receiver_id", "t_ns", "msg", "ofs")})
     plan = rows.merge(change, on=["receiver_id", "t_ns"], how="inner")
     data = bytearray(log.data)
+    clock_ms = np.round(np.nan_to_num(plan["time_offset_s"] - plan["time_offset_s_0"]) * 1000).astype(np.int64)
+    timed = bool(np.any(clock_ms != 0)) and {"GWk_log", "GMS_log"} <= set(plan.columns)
+    moved = ("GWk", "GMS") if timed else ()
     fields = {
-        name: {c: _field_writer(log, name, c) for c in ("Lat", "Lng", "Alt", "Spd", "GCrs", "VZ")}
+        name: {c: _field_writer(log, name, c) for c in ("Lat", "Lng", "Alt", "Spd", "GCrs", "VZ", *moved)}
         for name in plan["msg"].unique()
     }
+    if timed:  # the spoofer's time: GPS week and ms of week moved together
+        gps_ms = plan["GWk_log"].to_numpy(np.int64) * WEEK_MS + plan["GMS_log"].to_numpy(np.int64) + clock_ms
+        plan["GWk_new"], plan["GMS_new"] = gps_ms // WEEK_MS, gps_ms % WEEK_MS
     changed = 0
     for r in plan.itertuples(index=False):
         f = fields[r.msg]
@@ -66,9 +87,11 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
                 "GCrs": float(np.degrees(np.arctan2(r.vel_e_mps, r.vel_n_mps)) % 360.0),
                 "VZ": -float(r.vel_u_mps),
             }
+        if timed:
+            values |= {"GWk": float(r.GWk_new), "GMS": float(r.GMS_new)}
         for col, value in values.items():
             pos, code, scale = f[col]
-            raw = round(value * scale) if code in ("<i", "<I") else value
+            raw = round(value * scale) if code[1] in "iIH" else value
             struct.pack_into(code, data, r.ofs + pos, raw)
         changed += 1
     Path(dst).write_bytes(bytes(data))

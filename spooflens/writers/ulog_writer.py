@@ -276,6 +276,8 @@ def write_ulog(table: EpochTable, path: Path, boot_offset_s: float = 10.0) -> No
         t_us = (table.absolute_ns(fx["t_s"].to_numpy()) // 1000 - boot_us).astype(np.int64)
         utc = table.unix_ns(fx["t_s"].to_numpy())
         utc_us = (utc // 1000).astype(np.int64) if clock and utc is not None else np.zeros(len(fx), np.int64)
+        if clock and "time_offset_s" in fx:  # the receiver's own time, as it stood against the log's clock
+            utc_us += np.round(np.nan_to_num(fx["time_offset_s"].to_numpy(dtype=float)) * 1e6).astype(np.int64)
         device_id = int(table.metadata.get(f"px4.device_id.{rid}", "0"))
         g = log.topic("sensor_gps", SENSOR_GPS_V1_14 if legacy else SENSOR_GPS, len(fx), multi_id=k)
         _gps_rows(g, fx, t_us, utc_us, legacy, device_id)

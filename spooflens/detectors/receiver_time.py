@@ -1,0 +1,237 @@
+"""The receiver's time against the log's own clock: a reference the spoofer of the receiver cannot move.
+
+A receiver's time comes from the signals it tracks; the log's clock does not (an autopilot's boot
+clock, a phone's elapsed-realtime clock, the logging host's time). Their difference (`time_offset_s`,
+filled by the readers that have both: PX4 `time_utc_usec`, ArduPilot `GWk`/`GMS`, GnssLogger `Fix`
+times, NMEA with logger times) stays constant but for the logger's crystal drift (tens of ppm: a few
+ms a minute) and the latency of each message (ms to tens of ms). A spoofer that does not copy GNSS time
+to within a fraction of a second moves it at once and keeps it moved: a signal generator started from
+a navigation file (gps-sdr-sim run from a file made earlier), a recording of the sky replayed later, a
+spoofer set to a time of its own. A spoofer synchronised to GNSS time (or a meaconer's microseconds of
+delay) is not seen here.
+
+Per receiver: the offset's change d against its own median over the minute ending 5 s before
+(`baseline_s`, `guard_s`), against max(8 robust sigma of d over the log, 0.25 s). An alarm opens when 3
+fixes in a row over at least a second are beyond that, and lasts while the offset stays beyond it against
+the baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last
+fix on the old time to the first on the new one. Two steps are not spoofing and are reported as
+findings, never alarms: an exact whole number of seconds (1-20) within the receiver's first 15 minutes
+in the log, held to its end (a receiver that started with its firmware's default leap seconds learns
+the broadcast ones within 12.5 minutes), and a step of the logger's clock rather than the receiver's
+(between the two fixes the receiver's time advanced by a fix period, the logger's did not: a host clock
+set by NTP). Choices where nothing published fixes a number: the level (8 sigma, 0.25 s) is far above
+the latencies of real loggers (ArduPilot 5 Hz GPS rows, 31 ms robust sigma; a phone's fixes, 4 ms),
+and the duration rule is the one every other change detector here uses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from spooflens.analysis import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series
+from spooflens.evidence import Evidence
+
+FloatArray = NDArray[np.float64]
+NAME = "receiver_time"
+
+
+@dataclass(frozen=True)
+class ReceiverTimeOptions:
+    baseline_s: float = 60.0
+    guard_s: float = 5.0
+    z_alarm: float = 8.0
+    min_step_s: float = 0.25
+    min_scale_s: float = 0.001  # loggers stamp milliseconds
+    min_fixes: int = 3
+    min_duration_s: float = 1.0
+    leap_window_s: float = 900.0  # broadcast UTC parameters come every 12.5 min
+    max_leap_s: int = 20
+
+
+@dataclass(frozen=True)
+class Step:
+    """One change of the receiver's time: fixes first..last (indices) on the new time."""
+
+    first: int
+    last: int
+    step_s: float
+    kind: str  # "spoofing", "leap seconds" or "logger clock"
+
+
+def _trailing_median(t: FloatArray, x: FloatArray, span_s: float, guard_s: float) -> FloatArray:
+    """Median of x over the fixes in [t - guard - span, t - guard] (NaN where there are fewer than 3)."""
+    med = pd.Series(x, index=pd.to_timedelta(t, unit="s")).rolling(pd.Timedelta(seconds=span_s), min_periods=3)
+    m = med.median().to_numpy(dtype=float)
+    ok = np.isfinite(m)
+    if ok.sum() < 2:
+        return np.full(len(t), np.nan)
+    return np.interp(t - guard_s, t[ok], m[ok], left=np.nan)
+
+
+def _humane(seconds: float) -> str:
+    s = abs(seconds)
+    if s < 120:
+        return ""
+    if s < 2 * 86400:
+        return f" (= {int(s // 3600)} h {int(s % 3600 // 60):02d} min)"
+    return f" (= {s / 86400:.1f} days)"
+
+
+@dataclass
+class ReceiverClockTest:
+    receiver_id: str
+    t: FloatArray
+    offset: FloatArray
+    change: FloatArray  # offset minus its trailing baseline
+    scale_s: float
+    threshold_s: float
+    steps: list[Step]
+
+
+def _kind(
+    t: FloatArray, x: FloatArray, first: int, last: int, step: float, scale: float, opts: ReceiverTimeOptions
+) -> str:
+    """Spoofing, or one of the two steps that are not (see the module docstring)."""
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    tolerance = 0.5 * period + 3.0 * scale
+    dt_log = t[first] - t[first - 1]
+    dt_receiver = dt_log + x[first] - x[first - 1]
+    if abs(dt_receiver - period) <= tolerance < abs(dt_log - period):
+        return "logger clock"
+    n = round(step)
+    whole = abs(step - n) <= max(3.0 * scale, 0.02) and 1 <= abs(n) <= opts.max_leap_s
+    if whole and last == len(t) - 1 and t[first] - t[0] <= opts.leap_window_s:
+        return "leap seconds"
+    return "spoofing"
+
+
+def _scale(x: FloatArray, floor: float) -> float:
+    """Robust sigma of the offset's latency jitter from fix-to-fix differences: a step moves one difference,
+    however long the attack lasts (a scale read off the change against the baseline grows with it)."""
+    dx = np.diff(x)
+    if not len(dx):
+        return floor
+    return max(1.4826 * float(np.median(np.abs(dx - np.median(dx)))) / np.sqrt(2.0), floor)
+
+
+def judge_receiver(rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOptions) -> ReceiverClockTest:
+    """The steps of one receiver's time offset (t sorted, x finite). Fixes inside a step are left out of
+    the baseline of the fixes after it, so the return to the old time is not a second step."""
+    scale = _scale(x, opts.min_scale_s)
+    thr = max(opts.z_alarm * scale, opts.min_step_s)
+    clean = x.copy()
+    base = _trailing_median(t, clean, opts.baseline_s, opts.guard_s)
+    change = x - base
+    steps: list[Step] = []
+    i = 1
+    while i < len(t):
+        over = np.isfinite(change[i:]) & (np.abs(np.nan_to_num(change[i:])) > thr)
+        run = np.flatnonzero(over)
+        if not len(run):
+            break
+        k0 = i + int(run[0])
+        k_end = k0
+        while k_end + 1 < len(t) and over[k_end + 1 - i]:
+            k_end += 1
+        if k_end - k0 + 1 < opts.min_fixes or t[k_end] - t[k0] < opts.min_duration_s:
+            i = k_end + 1
+            continue
+        away = np.abs(x[k0:] - base[k0]) > thr
+        last = len(t) - 1  # back on the frozen baseline for min_fixes fixes in a row ends it
+        for b in np.flatnonzero(~away).tolist():
+            if b + opts.min_fixes <= len(away) and not away[b : b + opts.min_fixes].any():
+                last = k0 + b - 1
+                break
+        step = float(np.median(x[k0 : last + 1]) - base[k0])
+        steps.append(Step(k0, last, step, _kind(t, x, k0, last, step, scale, opts)))
+        clean[k0 : last + 1] = np.nan
+        base[last + 1 :] = _trailing_median(t, clean, opts.baseline_s, opts.guard_s)[last + 1 :]
+        change[last + 1 :] = x[last + 1 :] - base[last + 1 :]
+        i = last + 1
+    return ReceiverClockTest(rid, t, x, change, scale, thr, steps)
+
+
+def _finding(test: ReceiverClockTest, s: Step) -> Finding:
+    t0, t1 = float(test.t[s.first]), float(test.t[s.last])
+    until = "to the end of the log" if s.last == len(test.t) - 1 else f"until {t1:.1f} s"
+    moved = f"{s.step_s:+.3f} s{_humane(s.step_s)}"
+    text = {
+        "spoofing": f"{test.receiver_id}: the receiver's time moved {moved} against the log's own clock at "
+        f"{t0:.1f} s, {until}: a spoofer's clock or a recording replayed",
+        "leap seconds": f"{test.receiver_id}: the receiver's UTC moved by exactly {round(s.step_s)} s at {t0:.1f} "
+        "s: it learned the leap seconds from the broadcast UTC parameters (not counted)",
+        "logger clock": f"{test.receiver_id}: the logger's clock stepped by {-s.step_s:+.3f} s at {t0:.1f} s while "
+        "the receiver's time ran on (not counted)",
+    }[s.kind]
+    return Finding(text, t0, t1, receiver_id=test.receiver_id)
+
+
+def run_receiver_time(fixes: pd.DataFrame, opts: ReceiverTimeOptions | None = None) -> DetectorResult:
+    opts = opts or ReceiverTimeOptions()
+    result = DetectorResult(name=NAME, ran=True, evidence=Evidence.LOG_CLOCK)
+    words = []
+    for rid, rx in fixes.groupby("receiver_id", sort=False):
+        x = rx["time_offset_s"].to_numpy(dtype=float)
+        t = rx["t_s"].to_numpy(dtype=float)
+        ok = np.isfinite(x)
+        if ok.sum() < MIN_TIMED_FIXES:
+            continue
+        test = judge_receiver(str(rid), t[ok], x[ok], opts)
+        words.append(f"{rid}: robust sigma {test.scale_s * 1e3:.1f} ms, alarm level {test.threshold_s:.3f} s")
+        result.series.append(Series(f"{rid}/time_offset", test.t, test.offset, "s"))
+        result.series.append(Series(f"{rid}/offset_change", test.t, test.change, "s", test.threshold_s))
+        for s in test.steps:
+            result.findings.append(_finding(test, s))
+            if s.kind != "spoofing":
+                continue
+            moved = np.abs(test.offset[s.first : s.last + 1] - (test.offset[s.first] - test.change[s.first]))
+            peak = s.first + int(np.argmax(moved))
+            confirmed = min(s.first + opts.min_fixes - 1, s.last)
+            result.alarms.append(
+                Alarm(
+                    float(test.t[confirmed]),
+                    float(test.t[s.last]),
+                    float(moved[peak - s.first] / test.threshold_s),
+                    float(test.t[peak]),
+                    onset_s=float(test.t[s.first]),
+                    onset_interval_s=(float(test.t[s.first - 1]), float(test.t[s.first])),
+                    receiver_id=str(rid),
+                )
+            )
+        result.extras[f"{rid}/steps_s"] = [round(s.step_s, 6) for s in test.steps]
+    if not words:
+        return DetectorResult.skipped(
+            NAME, f"no receiver has {MIN_TIMED_FIXES} fixes with their own time", Evidence.LOG_CLOCK
+        )
+    result.reason = "; ".join(words)
+    result.alarms.sort(key=lambda a: a.start_s)
+    return result
+
+
+def _run(ctx: AnalysisContext) -> list[DetectorResult]:
+    return [run_receiver_time(ctx.table.fixes)]
+
+
+ANALYSIS = AnalysisSpec(
+    NAME,
+    "the receiver's time against the log's own clock",
+    ("fixes", "time_offset"),
+    _run,
+    (
+        DetectorInfo(
+            NAME,
+            Evidence.LOG_CLOCK,
+            "steps of the receiver's time against the log's own clock",
+            "A spoofer that does not copy GNSS time to a fraction of a second (a generator run from a "
+            "navigation file, a replayed recording) moves the receiver's time against the autopilot's, the "
+            "phone's or the logging host's clock. Change against the trailing minute, 8 robust sigma and at "
+            "least 0.25 s, for 3 fixes and 1 s; leap-second updates and logger clock steps are findings.",
+            "none seen on real logs (the level is 8 robust sigma and at least 0.25 s)",
+        ),
+    ),
+)

@@ -1,0 +1,152 @@
+"""receiver_time: steps of the receiver's time against the log's own clock."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import real_log
+from px4_support import BOOT_UTC_US, current_log, flight
+
+from readers import read_log
+from spooflens.cli import main
+from spooflens.detectors.receiver_time import run_receiver_time
+from spooflens.evidence import Evidence
+
+
+def _fixes(t: np.ndarray, offset: np.ndarray) -> pd.DataFrame:
+    return pd.DataFrame({"t_s": t, "receiver_id": "gps", "time_offset_s": offset})
+
+
+def _logger(seconds: float = 1800.0, rate_hz: float = 5.0, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """A logger's view of a healthy receiver: 30 ppm of crystal drift, 20 ms of latency jitter and a
+    message now and then 150 ms late."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    x = 30e-6 * t + rng.normal(0.0, 0.02, len(t))
+    late = rng.random(len(t)) < 0.01
+    return t, x - np.where(late, 0.15, 0.0)
+
+
+def test_a_healthy_receiver_raises_nothing() -> None:
+    t, x = _logger()
+    result = run_receiver_time(_fixes(t, x))
+    assert result.ran and result.evidence == Evidence.LOG_CLOCK
+    assert not result.alarms and not result.findings
+    assert "robust sigma 2" in result.reason and "alarm level 0.250 s" in result.reason  # 8 x 20 ms < 0.25 s
+
+
+@pytest.mark.parametrize("step", [0.4, -2.7, 3600.0, -86_400.3])
+def test_a_spoofer_clock_is_an_alarm_from_the_step_to_the_return(step: float) -> None:
+    t, x = _logger()
+    attacked = (t >= 600.0) & (t < 900.0)
+    result = run_receiver_time(_fixes(t, x + step * attacked))
+    assert len(result.alarms) == 1  # the return to the old time is no second step
+    a = result.alarms[0]
+    assert a.onset_interval_s == (pytest.approx(599.8), pytest.approx(600.0))
+    assert a.start_s == pytest.approx(600.4)  # three fixes on the new time
+    assert a.end_s == pytest.approx(899.8)
+    assert a.receiver_id == "gps"
+    assert result.extras["gps/steps_s"] == [pytest.approx(step, abs=0.01)]
+    (finding,) = result.findings
+    assert "against the log's own clock at 600.0 s, until 899.8 s" in finding.text
+
+
+def test_whole_seconds_early_in_the_log_are_the_leap_seconds_being_learned() -> None:
+    t, x = _logger()
+    result = run_receiver_time(_fixes(t, x + 1.0 * (t >= 300.0)))
+    assert not result.alarms
+    (finding,) = result.findings
+    assert "exactly 1 s at 300.0 s" in finding.text and "not counted" in finding.text
+    # the same step after the 15 minutes in which broadcast UTC parameters arrive is not that
+    late = run_receiver_time(_fixes(t, x + 1.0 * (t >= 1200.0)))
+    assert len(late.alarms) == 1 and late.alarms[0].onset_s == pytest.approx(1200.0)
+
+
+def test_a_step_of_the_loggers_own_clock_is_not_the_receivers() -> None:
+    t, x = _logger()
+    stepped = t >= 700.0
+    # the host's clock is set 5.3 s ahead (NTP): the rows move on, the receiver's time does not
+    result = run_receiver_time(_fixes(t + 5.3 * stepped, x - 5.3 * stepped))
+    assert not result.alarms
+    (finding,) = result.findings
+    assert (
+        "logger's clock stepped by +5.2" in finding.text
+        and "at 705.3 s while the receiver's time ran on" in finding.text
+    )
+
+
+@pytest.mark.parametrize(
+    "relative",
+    [
+        "ardupilot_dataflash/flightdata_center_0003.bin",
+        "android_gnsslogger/gnss_lib_py/pixel6.txt",
+        "android_gnsslogger/gnss_lib_py/pixel6.nmea",
+    ],
+)
+def test_real_logs_have_the_offset_and_no_alarm(relative: str) -> None:
+    table = read_log(real_log(relative))
+    x = table.fixes["time_offset_s"].to_numpy(dtype=float)
+    assert np.isfinite(x).mean() > 0.9 and np.nanmax(np.abs(x)) < 0.07  # latency jitter only
+    result = run_receiver_time(table.fixes)
+    assert result.ran and not result.alarms and not result.findings
+
+
+def test_px4_table_with_the_spoofers_utc(tmp_path: Path) -> None:
+    f = flight(np.round(np.arange(1.0, 240.0, 0.2), 6))
+    t_us = np.round(f["t_s"] * 1e6).astype(np.int64)
+    jump = np.where(f["t_s"] >= 100.0, 3_600_000_000, 0)
+    pd.DataFrame(
+        {
+            "timestamp": t_us,
+            "lat": f["lat_deg"],
+            "lon": f["lon_deg"],
+            "alt_ellipsoid": f["height_m"],
+            "vel_n_m_s": f["vel_n_mps"],
+            "vel_e_m_s": f["vel_e_mps"],
+            "fix_type": 3,
+            "time_utc_usec": BOOT_UTC_US + t_us + jump,
+            "timestamp_time_relative": 0,
+        }
+    ).to_csv(tmp_path / "gps.csv", index=False)
+    fixes = read_log(tmp_path / "gps.csv").fixes
+    x = fixes["time_offset_s"].to_numpy()  # less its median: the spoofed time fills most of this log
+    np.testing.assert_allclose(x - x[0], np.where(f["t_s"] >= 100.0, 3600.0, 0.0))
+    (alarm,) = run_receiver_time(fixes).alarms
+    # t_s counts from the first row (boot 1.0 s): boot 100 s is 99 s into the log
+    assert alarm.onset_interval_s == (pytest.approx(98.8), pytest.approx(99.0))
+
+
+def test_real_ardupilot_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
+    """The real flight's GPS messages rewritten by `inject` (GWk/GMS moved with the position): the
+    receiver's time alone makes an independent class; the position step alone is an anomaly."""
+    src = real_log("ardupilot_dataflash/flightdata_center_0003.bin")
+    verdicts = {}
+    for clock in (0.0, 3600.5):
+        out = tmp_path / f"clock{clock:g}.bin"
+        attack = f"capture:start=20,drag=step,offset=300,clock={clock}"
+        assert main(["inject", str(src), "--attack", attack, "-o", str(out)]) == 0
+        report = tmp_path / f"clock{clock:g}.json"
+        main(["analyze", str(out), "-o", str(tmp_path / "x.rrd"), "--json", str(report), "--quiet"])
+        verdicts[clock] = json.loads(report.read_text())
+    clean, spoofed = verdicts[0.0]["verdict"], verdicts[3600.5]["verdict"]
+    assert not clean["spoofed"] and not any("log_clock" in i["evidence"] for i in clean["incidents"])
+    assert spoofed["spoofed"]
+    incident = spoofed["incidents"][0]
+    assert incident["confidence"] == "high" and incident["evidence"] == ["gnss_only", "log_clock"]
+    assert incident["onset_s"] == pytest.approx(24.0, abs=0.3) and incident["ongoing_at_end"]
+    assert any("time moved +3600.5" in str(f) for f in spoofed["findings"])
+
+
+def test_px4_ulog_inject_writes_the_spoofers_time(tmp_path: Path) -> None:
+    src, out = tmp_path / "clean.ulg", tmp_path / "spoofed.ulg"
+    current_log(src, attack_s=None)
+    assert run_receiver_time(read_log(src).fixes).findings == []
+    assert main(["inject", str(src), "--attack", "capture:start=20,clock=-7.25", "-o", str(out)]) == 0
+    result = run_receiver_time(read_log(out).fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_s == pytest.approx(24.0)  # captured after the 4 s takeover
+    assert "time moved -7.250 s against the log's own clock at 24.0 s, to the end of the log" in result.findings[0].text
