@@ -114,6 +114,10 @@ def _odometry(m: Any) -> tuple[float, ...]:
     return (p.x, p.y, p.z, v.x, v.y, v.z, w.z)
 
 
+def _time_reference(m: Any) -> tuple[float, ...]:
+    return (float(m.time_ref.sec), float(m.time_ref.nanosec))
+
+
 def extract(kind: str, msg: Any) -> tuple[int, tuple[float, ...]]:
     """(header stamp ns, raw values) of a deserialised message of `kind`."""
     return stamp_ns(msg.header), KINDS[kind].extract(msg)
@@ -621,6 +625,9 @@ KINDS: dict[str, RosKind] = {
         layout=_ODOMETRY_LAYOUT,
         picks=_ODOMETRY_PICKS,
     ),
+    # nmea_navsat_driver and others: the receiver's time of a sentence (`time_ref`) beside the host's
+    # time it came at (the header stamp)
+    "time_reference": RosKind(("sensor_msgs/msg/TimeReference",), "timeref", ("ref_sec", "ref_nsec"), _time_reference),
 }
 KIND_BY_TYPE = {t: kind for kind, spec in KINDS.items() for t in spec.msgtypes}
 ROLE_BY_KIND = {kind: spec.role for kind, spec in KINDS.items()}

@@ -35,7 +35,7 @@ from readers.ros_messages import (
     odometry_columns,
     velocity_columns,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
@@ -264,6 +264,7 @@ class StreamCollector:
         skipped = list(self.skipped)
         frames: dict[str, list[pd.DataFrame]] = {"fixes": [], "imu": [], "odometry": [], "truth": []}
         infos: list[StreamInfo] = []
+        # rows attached to a receiver's fixes: GNSS velocity and time reference topics
         velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
         spans: dict[tuple[str, str], tuple[int, int]] = {}  # streams merged into another frame
         for s in self.streams.values():
@@ -319,6 +320,12 @@ class StreamCollector:
                 infos.append(StreamInfo("vel", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
                 if len(stamps):
                     spans[("vel", s.topic)] = (int(np.min(stamps)), int(np.max(stamps)))
+            elif s.role == "timeref":
+                receiver_ns = values[:, 0].astype(np.int64) * 1_000_000_000 + values[:, 1].astype(np.int64)
+                velocities[s.topic] = (stamps, {"time_offset_s": time_offset_s(receiver_ns, stamps)})
+                infos.append(StreamInfo("timeref", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
+                if len(stamps):
+                    spans[("timeref", s.topic)] = (int(np.min(stamps)), int(np.max(stamps)))
             elif s.role == "odom":
                 frames["odometry"].append(
                     pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
@@ -326,7 +333,7 @@ class StreamCollector:
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
             del values  # the raw rows are in the frame now: free them before the next stream and build_table
         fixes, attached = merge_velocities(frames["fixes"], velocities, self.overrides, skipped)
-        infos = [replace(i, receiver=attached.get(i.topic, "")) if i.role == "vel" else i for i in infos]
+        infos = [replace(i, receiver=attached.get(i.topic, "")) if i.role in ("vel", "timeref") else i for i in infos]
         out = {
             "fixes": fixes,
             "imu": _concat(frames["imu"]),
@@ -376,17 +383,21 @@ def match_velocities(fix_ns: np.ndarray, vel_ns: np.ndarray) -> np.ndarray:
     return out
 
 
+def _what(cols: Mapping[str, np.ndarray]) -> str:
+    return "time reference" if "time_offset_s" in cols else "GNSS velocity"
+
+
 def merge_velocities(
     fixes: list[pd.DataFrame],
     velocities: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]],
     overrides: Mapping[str, str] | None,
     skipped: list[Skipped],
 ) -> tuple[pd.DataFrame | None, dict[str, str]]:
-    """Attach each velocity topic to one receiver (`velocity_receiver`) and its rows to that receiver's
-    fixes (`match_velocities`); returns the fixes and velocity topic -> receiver."""
+    """Attach each velocity (or time reference) topic to one receiver (`velocity_receiver`) and its rows to
+    that receiver's fixes (`match_velocities`); returns the fixes and topic -> receiver."""
     if not fixes:
         if velocities:
-            skipped += [Skipped(t, "GNSS velocity without any fix stream", len(v[0])) for t, v in velocities.items()]
+            skipped += [Skipped(t, f"{_what(v[1])} without any fix stream", len(v[0])) for t, v in velocities.items()]
         return None, {}
     by_topic = {str(f["receiver_id"].iloc[0]) if len(f) else "": f for f in fixes}
     attached: dict[str, str] = {}
@@ -407,7 +418,7 @@ def merge_velocities(
         unmatched = len(vt) - len(np.unique(match[ok]))
         if unmatched > 0:
             skipped.append(
-                Skipped(vtopic, f"velocity rows with no fix of {target} within half a fix period", unmatched)
+                Skipped(vtopic, f"{_what(vcols)} rows with no fix of {target} within half a fix period", unmatched)
             )
         by_topic[target] = f
     return pd.concat(list(by_topic.values()), ignore_index=True), attached

@@ -10,6 +10,8 @@ import pandas as pd
 import pytest
 from conftest import real_log
 from px4_support import BOOT_UTC_US, current_log, flight
+from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_typestore
 
 from readers import read_log
 from spooflens.cli import main
@@ -150,3 +152,38 @@ def test_px4_ulog_inject_writes_the_spoofers_time(tmp_path: Path) -> None:
     (alarm,) = result.alarms
     assert alarm.onset_s == pytest.approx(24.0)  # captured after the 4 s takeover
     assert "time moved -7.250 s against the log's own clock at 24.0 s, to the end of the log" in result.findings[0].text
+
+
+def _navsat_bag(path: Path, spoof_from_s: float, clock_s: float) -> None:
+    """nmea_navsat_driver's topics at 1 Hz for 10 min: /fix and /time_reference (the sentence's UTC beside
+    the host's time it came at), the host 0.35 s behind GNSS and 10 ms of serial latency jitter."""
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    Fix, Status = ts.types["sensor_msgs/msg/NavSatFix"], ts.types["sensor_msgs/msg/NavSatStatus"]
+    Ref = ts.types["sensor_msgs/msg/TimeReference"]
+    rng = np.random.default_rng(5)
+    t0 = 1_700_000_000
+    with Writer(path) as w:
+        fix_conn = w.add_connection("/gps/fix", "sensor_msgs/msg/NavSatFix", typestore=ts)
+        ref_conn = w.add_connection("/gps/time_reference", "sensor_msgs/msg/TimeReference", typestore=ts)
+        for k in range(600):
+            host_ns = (t0 + k) * 10**9 + int(rng.normal(0.0, 0.01) * 1e9)
+            gnss_ns = (t0 + k) * 10**9 + 350_000_000 + (int(clock_s * 1e9) if k >= spoof_from_s else 0)
+            header = Header(seq=k, stamp=Time(sec=host_ns // 10**9, nanosec=host_ns % 10**9), frame_id="gps")
+            fix = Fix(header, Status(0, 1), 42.0 + k * 1e-6, -71.0, 30.0, np.zeros(9), 0)
+            w.write(fix_conn, host_ns, ts.serialize_ros1(fix, "sensor_msgs/msg/NavSatFix"))
+            ref = Ref(header, Time(sec=gnss_ns // 10**9, nanosec=gnss_ns % 10**9), "gps")
+            w.write(ref_conn, host_ns, ts.serialize_ros1(ref, "sensor_msgs/msg/TimeReference"))
+
+
+def test_ros_time_reference_is_the_receivers_time(tmp_path: Path) -> None:
+    clean, spoofed = tmp_path / "clean.bag", tmp_path / "spoofed.bag"
+    _navsat_bag(clean, spoof_from_s=1e9, clock_s=0.0)
+    _navsat_bag(spoofed, spoof_from_s=300, clock_s=-41.7)
+    table = read_log(clean)
+    assert next(s for s in table.streams if s.topic == "/gps/time_reference").receiver == "/gps/fix"
+    x = table.fixes["time_offset_s"].to_numpy()
+    assert np.isfinite(x).all() and np.abs(x).max() < 0.05
+    assert not run_receiver_time(table.fixes).alarms
+    (alarm,) = run_receiver_time(read_log(spoofed).fixes).alarms
+    assert alarm.onset_interval_s == (pytest.approx(299.0, abs=0.05), pytest.approx(300.0, abs=0.05))

@@ -1,17 +1,18 @@
 """The receiver's time against the log's own clock: a reference the spoofer of the receiver cannot move.
 
-A receiver's time comes from the signals it tracks; the log's clock does not (an autopilot's boot
-clock, a phone's elapsed-realtime clock, the logging host's time). Their difference (`time_offset_s`,
-filled by the readers that have both: PX4 `time_utc_usec`, ArduPilot `GWk`/`GMS`, GnssLogger `Fix`
-times, NMEA with logger times) stays constant but for the logger's crystal drift (tens of ppm: a few
-ms a minute) and the latency of each message (ms to tens of ms). A spoofer that does not copy GNSS time
-to within a fraction of a second moves it at once and keeps it moved: a signal generator started from
-a navigation file (gps-sdr-sim run from a file made earlier), a recording of the sky replayed later, a
-spoofer set to a time of its own. A spoofer synchronised to GNSS time (or a meaconer's microseconds of
-delay) is not seen here.
+A receiver's time comes from the signals it tracks; the log's clock does not (an autopilot's boot clock, a
+phone's elapsed-realtime clock, the logging host's time). Their difference (`time_offset_s`, filled by
+the readers that have both: PX4 `time_utc_usec`, ArduPilot `GWk`/`GMS`, GnssLogger `Fix` times, NMEA
+with logger times, ROS `sensor_msgs/TimeReference`) stays constant but for the logger's crystal drift
+(tens of ppm: a few ms a minute) and the latency of each message (ms to tens of ms). A spoofer that does
+not copy GNSS time to within a fraction of a second moves it at once and keeps it moved: a signal
+generator started from a navigation file (gps-sdr-sim run from a file made earlier), a recording of the
+sky replayed later, a spoofer set to a time of its own. A spoofer synchronised to GNSS time (or a
+meaconer's microseconds of delay) is not seen here.
 
 Per receiver: the offset's change d against its own median over the minute ending 5 s before
-(`baseline_s`, `guard_s`), against max(8 robust sigma of d over the log, 0.25 s). An alarm opens when 3
+(`baseline_s`, `guard_s`), against max(8 robust sigma, 0.25 s), the sigma from fix-to-fix differences of
+the offset (a step moves one of them, however long the attack lasts). An alarm opens when 3
 fixes in a row over at least a second are beyond that, and lasts while the offset stays beyond it against
 the baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last
 fix on the old time to the first on the new one. Two steps are not spoofing and are reported as
@@ -20,7 +21,7 @@ in the log, held to its end (a receiver that started with its firmware's default
 the broadcast ones within 12.5 minutes), and a step of the logger's clock rather than the receiver's
 (between the two fixes the receiver's time advanced by a fix period, the logger's did not: a host clock
 set by NTP). Choices where nothing published fixes a number: the level (8 sigma, 0.25 s) is far above
-the latencies of real loggers (ArduPilot 5 Hz GPS rows, 31 ms robust sigma; a phone's fixes, 4 ms),
+the latencies of real loggers (ArduPilot 5 Hz GPS rows: 20 ms robust sigma; a phone's fixes: 1 ms),
 and the duration rule is the one every other change detector here uses.
 """
 
