@@ -57,15 +57,17 @@ def test_a_spoofer_clock_is_an_alarm_from_the_step_to_the_return(step: float) ->
     assert "against the log's own clock at 600.0 s, until 899.8 s" in finding.text
 
 
-def test_whole_seconds_early_in_the_log_are_the_leap_seconds_being_learned() -> None:
+def test_utc_back_by_a_second_early_in_the_log_is_the_leap_seconds_being_learned() -> None:
     t, x = _logger()
-    result = run_receiver_time(_fixes(t, x + 1.0 * (t >= 300.0)))
+    result = run_receiver_time(_fixes(t, x - 1.0 * (t >= 300.0)))
     assert not result.alarms
     (finding,) = result.findings
-    assert "exactly 1 s at 300.0 s" in finding.text and "not counted" in finding.text
-    # the same step after the 15 minutes in which broadcast UTC parameters arrive is not that
-    late = run_receiver_time(_fixes(t, x + 1.0 * (t >= 1200.0)))
-    assert len(late.alarms) == 1 and late.alarms[0].onset_s == pytest.approx(1200.0)
+    assert "exactly -1 s at 300.0 s" in finding.text and "not counted" in finding.text
+    # after the 15 minutes in which broadcast UTC parameters arrive, or forward (no default is ahead of
+    # today's 18 leap seconds), or 5 s, it is not that
+    for step, at in ((-1.0, 1200.0), (1.0, 300.0), (-5.0, 300.0)):
+        late = run_receiver_time(_fixes(t, x + step * (t >= at)))
+        assert len(late.alarms) == 1 and late.alarms[0].onset_s == pytest.approx(at)
 
 
 def test_a_step_of_the_loggers_own_clock_is_not_the_receivers() -> None:
@@ -187,3 +189,10 @@ def test_ros_time_reference_is_the_receivers_time(tmp_path: Path) -> None:
     assert not run_receiver_time(table.fixes).alarms
     (alarm,) = run_receiver_time(read_log(spoofed).fixes).alarms
     assert alarm.onset_interval_s == (pytest.approx(299.0, abs=0.05), pytest.approx(300.0, abs=0.05))
+    # inject moves the time references with the fixes they belong to
+    injected = tmp_path / "injected.bag"
+    assert main(["inject", str(clean), "--attack", "capture:start=200,clock=5", "-o", str(injected)]) == 0
+    result = run_receiver_time(read_log(injected).fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_s == pytest.approx(204.0, abs=0.05)
+    assert result.extras["/gps/fix/steps_s"] == [pytest.approx(5.0, abs=0.01)]

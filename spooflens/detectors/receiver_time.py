@@ -16,9 +16,10 @@ the offset (a step moves one of them, however long the attack lasts). An alarm o
 fixes in a row over at least a second are beyond that, and lasts while the offset stays beyond it against
 the baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last
 fix on the old time to the first on the new one. Two steps are not spoofing and are reported as
-findings, never alarms: an exact whole number of seconds (1-20) within the receiver's first 15 minutes
-in the log, held to its end (a receiver that started with its firmware's default leap seconds learns
-the broadcast ones within 12.5 minutes), and a step of the logger's clock rather than the receiver's
+findings, never alarms: UTC moving back by exactly 1 or 2 s within the receiver's first 15 minutes in
+the log, held to its end (a receiver that started with an old firmware's default leap seconds learns the
+broadcast ones within 12.5 minutes; there have been 18 since 1980, the last in 2017, so a default is
+never ahead), and a step of the logger's clock rather than the receiver's
 (between the two fixes the receiver's time advanced by a fix period, the logger's did not: a host clock
 set by NTP). Choices where nothing published fixes a number: the level (8 sigma, 0.25 s) is far above
 the latencies of real loggers (ArduPilot 5 Hz GPS rows: 20 ms robust sigma; a phone's fixes: 1 ms),
@@ -51,7 +52,7 @@ class ReceiverTimeOptions:
     min_fixes: int = 3
     min_duration_s: float = 1.0
     leap_window_s: float = 900.0  # broadcast UTC parameters come every 12.5 min
-    max_leap_s: int = 20
+    max_leap_s: int = 2  # firmware of 2015 or later defaults to 17 or 18 of today's 18
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,7 @@ def _kind(
     if abs(dt_receiver - period) <= tolerance < abs(dt_log - period):
         return "logger clock"
     n = round(step)
-    whole = abs(step - n) <= max(3.0 * scale, 0.02) and 1 <= abs(n) <= opts.max_leap_s
+    whole = abs(step - n) <= max(3.0 * scale, 0.02) and -opts.max_leap_s <= n <= -1
     if whole and last == len(t) - 1 and t[first] - t[0] <= opts.leap_window_s:
         return "leap seconds"
     return "spoofing"

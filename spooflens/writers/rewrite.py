@@ -1,12 +1,13 @@
 """Rewrite a log in its own format with new fix values, every other message untouched.
 
 This is how `spooflens inject` makes a spoofed copy of a real log: fix (and, if asked, GNSS velocity)
-messages are matched to rows of the modified fixes frame by the stamp the reader used (header stamp,
-or log time when the stamp is zero), decoded, changed and re-encoded; everything else is copied byte
-for byte, with its original log time. Containers: MCAP (ROS1, ROS2, JSON, protobuf channels), ROS1
-bags, ROS2 bags (sqlite3 or MCAP storage). CSV and ULog logs are rewritten through their writers
-(a ULog keeps only the streams spooflens maps, which the caller reports); RINEX observation files by
-editing their fields in place (`rinex_rewrite.py`), so attacks on raw pseudoranges land too.
+messages, and time references where the attack moved the receiver's time, are matched to rows of the
+modified fixes frame by the stamp the reader used (header stamp, or log time when the stamp is zero),
+decoded, changed and re-encoded; everything else is copied byte for byte, with its original log time.
+Containers: MCAP (ROS1, ROS2, JSON, protobuf channels), ROS1 bags, ROS2 bags (sqlite3 or MCAP
+storage). CSV and ULog logs are rewritten through their writers (a ULog keeps only the streams
+spooflens maps, which the caller reports); RINEX observation files by editing their fields in place
+(`rinex_rewrite.py`), so attacks on raw pseudoranges land too.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ class _Plan:
     fixes: dict[str, Replacement]
     # velocity topic -> (receiver topic, velocity stamp -> the fix stamp whose values it carries)
     velocity_of: dict[str, tuple[str, dict[int, int]]]
+    # time reference topic -> its message stamp -> ns the attack moved the receiver's time (inject's `clock`)
+    clock_of: dict[str, dict[int, int]] = dataclasses.field(default_factory=dict)
     changed: int = 0
 
 
@@ -65,7 +68,26 @@ def _plan(table: EpochTable, spoofed: pd.DataFrame, velocities: bool, velocity_s
             vel_ns = velocity_stamps[s.topic]
             match = match_velocities(fix_ns, vel_ns)
             velocity_of[s.topic] = (target, {int(vel_ns[j]): int(fix_ns[i]) for i, j in enumerate(match) if j >= 0})
-    return _Plan(fixes, velocity_of)
+    return _Plan(fixes, velocity_of, _clock_plan(table, spoofed, velocity_stamps))
+
+
+def _clock_plan(table: EpochTable, spoofed: pd.DataFrame, stamps: dict[str, np.ndarray]) -> dict[str, dict[int, int]]:
+    """For each time reference topic, the change of the receiver's time at each of its messages, matched to
+    the fixes as the reader matched them; only the messages the attack moved."""
+    key = ["receiver_id", "t_s"]
+    moved = table.fixes[[*key, "time_offset_s"]].merge(spoofed[[*key, "time_offset_s"]], on=key, suffixes=("_0", ""))
+    delta = np.nan_to_num(moved["time_offset_s"].to_numpy(float) - moved["time_offset_s_0"].to_numpy(float))
+    out: dict[str, dict[int, int]] = {}
+    for s in table.streams:
+        if s.role != "timeref" or s.topic not in stamps:
+            continue
+        mine = (moved["receiver_id"] == s.receiver).to_numpy()
+        fix_ns = table.absolute_ns(moved["t_s"].to_numpy()[mine])
+        ref_ns = stamps[s.topic]
+        match = match_velocities(fix_ns, ref_ns)
+        d_ns = np.round(delta[mine] * 1e9).astype(np.int64)
+        out[s.topic] = {int(ref_ns[j]): int(d_ns[i]) for i, j in enumerate(match) if j >= 0 and d_ns[i] != 0}
+    return out
 
 
 def _ros_stamp(msg: Any) -> int:
@@ -96,6 +118,15 @@ class _RosEditor:
                 return None
             self.plan.changed += 1
             return bytes(self.serialize(ros_messages.edit(kind, msg, self.plan.fixes[target][match], True), msgtype))
+        if kind == "time_reference" and self.plan.clock_of.get(topic):
+            msg = self.deserialize(raw, msgtype)
+            shift = self.plan.clock_of[topic].get(_ros_stamp(msg) or log_time)
+            if shift is None:
+                return None
+            ref = int(msg.time_ref.sec) * 1_000_000_000 + int(msg.time_ref.nanosec) + shift
+            time_ref = dataclasses.replace(msg.time_ref, sec=ref // 1_000_000_000, nanosec=ref % 1_000_000_000)
+            self.plan.changed += 1
+            return bytes(self.serialize(dataclasses.replace(msg, time_ref=time_ref), msgtype))
         return None
 
 
@@ -153,7 +184,8 @@ def _mcap_summary(src: Path, reader: Any) -> Any:
 
 
 def _velocity_stamps_mcap(src: Path, topics: list[str]) -> dict[str, np.ndarray]:
-    """The stamp the reader gave each message of the velocity topics (header stamp, else log time)."""
+    """The stamp the reader gave each message of the velocity (and time reference) topics (header stamp,
+    else log time)."""
     stamps: dict[str, list[int]] = {t: [] for t in topics}
     with src.open("rb") as f:
         reader = make_reader(f)
@@ -270,8 +302,8 @@ def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochT
 def rewrite_container(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """MCAP files and ROS bags: every message copied, the fix messages edited in place."""
     is_mcap = sniff_format(src) == "mcap"
-    vel_topics = [s.topic for s in table.streams if s.role == "vel"] if velocities else []
-    stamps = (_velocity_stamps_mcap if is_mcap else _velocity_stamps_bag)(src, vel_topics) if vel_topics else {}
+    topics = [s.topic for s in table.streams if (s.role == "vel" and velocities) or s.role == "timeref"]
+    stamps = (_velocity_stamps_mcap if is_mcap else _velocity_stamps_bag)(src, topics) if topics else {}
     plan = _plan(table, spoofed.fixes, velocities, stamps)
     if is_mcap:
         _rewrite_mcap(src, dst, plan)
