@@ -167,7 +167,7 @@ def _nav_record(fields: list[str], raw_lines_before: int) -> NavRecord | None:
     return NavRecord(svid, kind, data, raw_lines_before)
 
 
-def _split_file(
+def split_file(
     path: Path, skipped: list[Skipped], nav: list[NavRecord] | None = None
 ) -> tuple[dict[str, Records], dict[str, str]]:
     try:
@@ -452,6 +452,25 @@ def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"t_ns": t_ns[keep], "agc_rec": db[keep]}).groupby("t_ns", as_index=False).mean()
 
 
+def gps_fixes(path: Path, records: dict[str, Records], skipped: list[Skipped]) -> pd.DataFrame | None:
+    """The GPS provider's fixes with their `unix_ms` (the fix's own time) and `elapsed_ns`, or None."""
+    return _fixes(path, records["Fix"].frame(), skipped) if "Fix" in records else None
+
+
+def fix_clock(fixes: pd.DataFrame) -> tuple[int | None, IntArray]:
+    """(UnixTimeMillis minus elapsedRealtimeNanos, median over the fixes with both, ns; or None) and each
+    fix's time on the phone's clock (UNIX ns): elapsedRealtimeNanos plus that offset, else UnixTimeMillis.
+    A fix is placed by when the phone made it, not by the time it carries, which a spoofer moves (that
+    difference is `time_offset_s`)."""
+    unix_ns = fixes["unix_ms"].to_numpy(np.int64) * 1_000_000
+    elapsed = fixes["elapsed_ns"].to_numpy(np.int64)
+    known = elapsed > 0
+    if not known.any():
+        return None, unix_ns
+    offset = int(np.median(unix_ns[known] - elapsed[known]))
+    return offset, np.where(known, elapsed + offset, unix_ns)
+
+
 def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame:
     n = len(fix)
     provider = _col(fix, "Provider")
@@ -543,7 +562,7 @@ def read_gnsslogger(
     path = Path(path)
     skipped: list[Skipped] = []
     nav_records: list[NavRecord] = []
-    records, meta = _split_file(path, skipped, nav_records)
+    records, meta = split_file(path, skipped, nav_records)
     if progress:
         progress(1, 3)
     frames: dict[str, pd.DataFrame] = {}
@@ -556,21 +575,16 @@ def read_gnsslogger(
     def from_unix_ns(unix_ns: IntArray) -> IntArray:
         return gps_ns_of_unix_ns(unix_ns) if reference == "gps" else unix_ns
 
-    fixes = _fixes(path, records["Fix"].frame(), skipped) if "Fix" in records else None
-    # elapsedRealtimeNanos -> UTC: the GPS fixes carry both clocks
-    clock_offset: int | None = None
-    if fixes is not None and len(fixes) and (fixes["elapsed_ns"] > 0).any():
-        good = fixes[fixes["elapsed_ns"] > 0]
-        clock_offset = int(
-            np.median(good["unix_ms"].to_numpy(np.int64) * 1_000_000 - good["elapsed_ns"].to_numpy(np.int64))
-        )
-        meta["sensor_clock"] = f"elapsedRealtimeNanos + median offset to {len(good)} GPS fixes' UnixTimeMillis"
+    fixes = gps_fixes(path, records, skipped)
+    clock_offset, phone_ns = fix_clock(fixes) if fixes is not None else (None, np.zeros(0, np.int64))
+    if clock_offset is not None:
+        good = int((fixes["elapsed_ns"] > 0).sum()) if fixes is not None else 0
+        meta["sensor_clock"] = f"elapsedRealtimeNanos + median offset to {good} GPS fixes' UnixTimeMillis"
     if fixes is not None and len(fixes):
-        t_ns = from_unix_ns(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000)
         # the fix's own (GNSS) time against the monotonic clock at which the phone made it
         elapsed = fixes["elapsed_ns"].to_numpy(np.int64)
         offset = time_offset_s(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000, elapsed, elapsed > 0)
-        fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=t_ns, time_offset_s=offset)
+        fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=from_unix_ns(phone_ns), time_offset_s=offset)
         if raw is not None and len(raw.epochs):
             ep = raw.epochs.sort_values("t_ns")
             if "Agc" in records:

@@ -196,3 +196,17 @@ def test_ros_time_reference_is_the_receivers_time(tmp_path: Path) -> None:
     (alarm,) = result.alarms
     assert alarm.onset_s == pytest.approx(204.0, abs=0.05)
     assert result.extras["/gps/fix/steps_s"] == [pytest.approx(5.0, abs=0.01)]
+
+
+def test_real_phone_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
+    """The Pixel 6's Fix lines rewritten with UnixTimeMillis 30.5 s back from the capture on: the fixes stay
+    where the phone's clock put them, the time they carry is the alarm."""
+    src = real_log("android_gnsslogger/gnss_lib_py/pixel6.txt")
+    out = tmp_path / "pixel6_spoofed.txt"
+    assert main(["inject", str(src), "--attack", "capture:start=200,clock=-30.5", "-o", str(out)]) == 0
+    clean, spoofed = read_log(src), read_log(out)
+    np.testing.assert_allclose(spoofed.fixes["t_s"], clean.fixes["t_s"])
+    result = run_receiver_time(spoofed.fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_interval_s == (pytest.approx(198.0, abs=0.05), pytest.approx(204.0, abs=0.05))
+    assert result.extras["phone/steps_s"] == [pytest.approx(-30.5, abs=0.01)]

@@ -301,7 +301,9 @@ def test_status_records_give_the_satellites_frame(tmp_path: Path) -> None:
     assert (g05["cn0_dbhz"] == 41.5).all() and (g05["elevation_deg"] == 35.0).all()
     assert list(sky.groupby("sv_id")["used"].first()) == [0.0, 1.0, 1.0]
     gps_fix_t = table.fixes["t_s"].to_numpy()[:20]
-    np.testing.assert_allclose(np.unique(sky["t_s"]), gps_fix_t, atol=1e-6)  # the same clock as the fixes
+    # the same clock as the fixes: theirs is when the phone made them (elapsedRealtimeNanos), a few ms off
+    # the time they carry, which these Status lines were given
+    np.testing.assert_allclose(np.unique(sky["t_s"]), gps_fix_t, atol=0.01)
     counted = {s.reason: s.count for s in table.skipped if s.stream == "Status"}
     assert counted == {"no UnixTimeMillis": 1, "no satellite id (constellation, svid)": 20}
     assert next(s for s in table.streams if s.role == "satellites").count == 20

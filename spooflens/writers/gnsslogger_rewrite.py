@@ -1,10 +1,11 @@
 """Spoofed copies of Android GnssLogger logs: GPS-provider Fix lines edited, every other line kept.
 
 Each fix row of the table came from one `Fix` line of the GPS provider; its latitude, longitude and
-altitude fields are replaced by the spoofed values (and, with `velocities`, its speed and bearing), in
-the field positions the file's own `# Fix,...` header gives. Raw measurement lines are left as logged:
-an attack on the fixes only is what a location-spoofing app does; attacks on raw pseudoranges are
-written to RINEX or CSV copies (see the README).
+altitude fields are replaced by the spoofed values (and, with `velocities`, its speed and bearing; where
+the attack moved the receiver's time, its UnixTimeMillis), in the field positions the file's own `#
+Fix,...` header gives. Lines are found as the reader placed them: by the phone's clock (`fix_clock`).
+Raw measurement lines are left as logged: an attack on the fixes only is what a location-spoofing app
+does; attacks on raw pseudoranges are written to RINEX or CSV copies (see the README).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from readers.gnsslogger import FIX_NAMES
+from readers.gnsslogger import FIX_NAMES, fix_clock, gps_fixes, split_file
 from spooflens.epoch_table import EpochTable, gps_ns_of_unix_ns
 from spooflens.errors import WriterError
 
@@ -50,6 +51,18 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
             strict=True,
         )
     )
+    # what the attack did to the receiver's time (ms, by row): the fix line's UnixTimeMillis moves with it
+    key = ["receiver_id", "t_s"]
+    moved = table.fixes[[*key, "time_offset_s"]].merge(fixes[[*key, "time_offset_s"]], on=key, suffixes=("_0", ""))
+    shift_ms = np.round(np.nan_to_num(moved["time_offset_s"] - moved["time_offset_s_0"]) * 1000).astype(np.int64)
+    clock_ms = dict(zip(table.absolute_ns(moved["t_s"].to_numpy()).tolist(), shift_ms.tolist(), strict=True))
+    # each fix line's row, found as the reader placed it (by the phone's clock, `fix_clock`)
+    read = gps_fixes(src, split_file(src, [])[0], [])
+    row_of: dict[int, int] = {}
+    if read is not None and len(read):
+        phone_ns = fix_clock(read)[1]
+        placed = gps_ns_of_unix_ns(phone_ns) if table.time_reference == "gps" else phone_ns
+        row_of = dict(zip(read["unix_ms"].tolist(), np.asarray(placed).tolist(), strict=True))
     changed = 0
     out = []
     for line in lines:
@@ -62,15 +75,17 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
             out.append(line)
             continue
         try:
-            unix_ns = int(fields[1 + i_time]) * 1_000_000
+            unix_ms = int(fields[1 + i_time])
         except ValueError:
             out.append(line)
             continue
-        t_ns = int(gps_ns_of_unix_ns(unix_ns)) if table.time_reference == "gps" else unix_ns
-        v = values.get(t_ns)
-        if v is None:
+        row = row_of.get(unix_ms)
+        v = values.get(row) if row is not None else None
+        if v is None or row is None:
             out.append(line)
             continue
+        if clock_ms.get(row, 0):
+            fields[1 + i_time] = str(unix_ms + clock_ms[row])
         lat, lon, h, ve, vn = v
         fields[1 + i_lat], fields[1 + i_lon], fields[1 + i_alt] = f"{lat:.10f}", f"{lon:.10f}", repr(h)
         if velocities and i_speed is not None and i_bearing is not None and np.isfinite([ve, vn]).all():
