@@ -20,7 +20,11 @@ like a program). Only the vehicle that sent most GPS_RAW_INT messages is read.
 
 Time: the messages' own boot-time stamps (`time_boot_ms`, or `time_usec` when it is not a UNIX time),
 put on UTC with `SYSTEM_TIME` (the vehicle's own GPS-derived UNIX time, median offset) when it was
-sent, else with the ground station's receive times (median offset; link latency included).
+sent, else with the ground station's receive times (median offset; link latency included). A GPS
+message whose `time_usec` is a UNIX time (ArduPilot's: the receiver's own) is placed by the ground
+station's receive time less the link's latency (the median of the receive times against the boot-stamped
+messages' own) instead, since a spoofer moves the receiver's time; that time against the ground
+station's clock is `time_offset_s`.
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ import pandas as pd
 from readers import ReaderFormat
 from readers.ardupilot import _attitude_at
 from spooflens.constants import STANDARD_GRAVITY
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
@@ -165,18 +169,29 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         t = int(fields.get("time_usec", 0))
         return t * 1000 if t >= UNIX_US_MIN else round(t_gcs * 1e9)
 
+    # the link's latency: the ground station's receive times against the boot-stamped messages' own times
+    sent = [(t, b) for v in msgs.values() for t, _, f in v if (b := _boot_us(f)) is not None and t > 0]
+    latency = int(np.median([t * 1e9 - (b * 1000 + offset_ns) for t, b in sent])) if sent else 0
     frames: dict[str, pd.DataFrame] = {}
     streams: list[StreamInfo] = []
     fix_rows = []
     for kind in ("GPS_RAW_INT", "GPS2_RAW"):
-        for t_gcs, _, f in msgs.get(kind, []):
+        rows = msgs.get(kind, [])
+        gcs_ns = np.array([round(t * 1e9) for t, _, _ in rows], dtype=np.int64)
+        own_ns = np.array([int(f.get("time_usec", 0)) * 1000 for _, _, f in rows], dtype=np.int64)
+        # ArduPilot sends the receiver's own UNIX time: a spoofer moves it, so the row is placed by the
+        # ground station's clock (less the link's latency) and the difference is `time_offset_s`
+        unix = own_ns >= UNIX_US_MIN * 1000
+        offsets = time_offset_s(own_ns, gcs_ns, unix)
+        for i, (t_gcs, _, f) in enumerate(rows):
             fix_type = _FIX.get(int(f["fix_type"]), FixType.NO_FIX)
             ell = int(f.get("alt_ellipsoid", 0) or 0)
             vel = f["vel"] / 100.0 if f["vel"] != 65535 else np.nan
             cog = np.radians(f["cog"] / 100.0) if f["cog"] != 65535 else np.nan
             fix_rows.append(
                 {
-                    "t_ns": stamp_ns(t_gcs, f),
+                    "t_ns": int(gcs_ns[i]) - latency if unix[i] else stamp_ns(t_gcs, f),
+                    "time_offset_s": offsets[i],
                     "receiver_id": kind,
                     "lat_deg": f["lat"] * 1e-7,
                     "lon_deg": f["lon"] * 1e-7,

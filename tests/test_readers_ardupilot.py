@@ -16,6 +16,7 @@ import pytest
 from readers import read_log, sniff_format
 from readers.ardupilot import attitude_quaternion
 from spooflens.cli import main
+from spooflens.detectors.receiver_time import run_receiver_time
 from spooflens.geodesy import geodetic_to_enu
 from spooflens.navigation.rotations import quat_to_matrix
 
@@ -209,8 +210,12 @@ def test_inject_round_trip_patches_only_gps_messages(tmp_path: Path) -> None:
 # MAVLink telemetry: no real .tlog is available, so this one is written with pymavlink's encoder
 
 
-def write_tlog(path: Path, seconds: float = 30.0, gps_hz: int = 5, imu_hz: int = 50) -> tuple[int, int]:
-    """A vehicle flying north at 2 m/s, level, nose east: GPS_RAW_INT, SCALED_IMU, ATTITUDE, SYSTEM_TIME."""
+def write_tlog(
+    path: Path, seconds: float = 30.0, gps_hz: int = 5, imu_hz: int = 50, gps_unix_from_s: float | None = None
+) -> tuple[int, int]:
+    """A vehicle flying north at 2 m/s, level, nose east: GPS_RAW_INT, SCALED_IMU, ATTITUDE, SYSTEM_TIME.
+    With `gps_unix_from_s` GPS_RAW_INT carries the receiver's UNIX time (ArduPilot), 7.5 s ahead from
+    that time on (a spoofer's clock)."""
     os.environ.setdefault("MAVLINK20", "1")
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -228,7 +233,11 @@ def write_tlog(path: Path, seconds: float = 30.0, gps_hz: int = 5, imu_hz: int =
             (
                 t_ms,
                 mav.gps_raw_int_encode(
-                    t_ms * 1000,
+                    t_ms * 1000
+                    if gps_unix_from_s is None
+                    else t0_unix_us
+                    + (t_ms - boot0_ms) * 1000
+                    + (7_500_000 if (t_ms - boot0_ms) / 1000 >= gps_unix_from_s else 0),
                     3,
                     round(lat * 1e7),
                     100_000_000,
@@ -273,6 +282,19 @@ def test_tlog_written_by_pymavlink_reads_back(tmp_path: Path) -> None:
     np.testing.assert_allclose(t.imu["az_mps2"], -9.80665)
     C = quat_to_matrix(t.imu[["qw", "qx", "qy", "qz"]].to_numpy()[0])
     np.testing.assert_allclose(C @ [1, 0, 0], [1, 0, 0], atol=1e-6)  # nose east (float32 yaw)
+
+
+def test_tlog_gps_with_the_receivers_unix_time_is_placed_by_the_ground_station(tmp_path: Path) -> None:
+    """ArduPilot's GPS_RAW_INT carries the receiver's UNIX time; a spoofer 7.5 s ahead from 60 s on leaves
+    the fixes where the ground station received them and shows in `time_offset_s`."""
+    path = tmp_path / "ardupilot.tlog"
+    write_tlog(path, seconds=120.0, gps_unix_from_s=60.0)
+    fixes = read_log(path).fixes
+    np.testing.assert_allclose(np.diff(fixes["t_s"]), 0.2, atol=1e-6)  # no jump where the time jumps
+    x = fixes["time_offset_s"].to_numpy()
+    np.testing.assert_allclose(x - x[0], np.where(fixes["t_s"] >= 60.0, 7.5, 0.0), atol=1e-6)
+    (alarm,) = run_receiver_time(fixes).alarms
+    assert alarm.onset_s == pytest.approx(60.0)
 
 
 def test_tlog_with_garbage_keeps_the_rest(tmp_path: Path) -> None:
