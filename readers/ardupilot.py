@@ -47,7 +47,7 @@ from readers import ReaderFormat
 from readers.dataflash import Columns, DataFlash, is_dataflash, open_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
 from readers.rinex import NavFile
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, SECONDS_PER_WEEK
 from spooflens.navigation.rotations import quat_multiply
@@ -217,6 +217,7 @@ def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: d
             cols[col] = gps[src].to_numpy(float)
     if "GWk" in gps and "GMS" in gps:
         cols["time_offset_s"] = _time_offsets(gps)
+        meta |= log_clock("TimeUS, the autopilot's boot clock", True)
     fixes = pd.DataFrame(cols)
     no_fix = fix_type == FixType.NO_FIX
     for rid in dict.fromkeys(names[no_fix]):

@@ -69,6 +69,7 @@ from spooflens.epoch_table import (
     build_table,
     gps_ns_of_unix_ns,
     gps_utc_offset_ns,
+    log_clock,
     time_offset_s,
 )
 from spooflens.errors import ReaderError
@@ -584,6 +585,8 @@ def read_gnsslogger(
         # the fix's own (GNSS) time against the monotonic clock at which the phone made it
         elapsed = fixes["elapsed_ns"].to_numpy(np.int64)
         offset = time_offset_s(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000, elapsed, elapsed > 0)
+        if (elapsed > 0).any():
+            meta |= log_clock("elapsedRealtimeNanos, the phone's boot clock", True)
         fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=from_unix_ns(phone_ns), time_offset_s=offset)
         if raw is not None and len(raw.epochs):
             ep = raw.epochs.sort_values("t_ns")

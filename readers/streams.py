@@ -35,7 +35,7 @@ from readers.ros_messages import (
     odometry_columns,
     velocity_columns,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
@@ -340,7 +340,12 @@ class StreamCollector:
             "odometry": _concat(frames["odometry"]),
             "truth": _concat(frames["truth"]),
         }
-        return build_table(self.path, self.fmt, time_reference, out, infos, skipped, stream_spans_ns=spans)
+        metadata = (
+            log_clock("the header stamps (the host's clock)", False) if any(i.role == "timeref" for i in infos) else {}
+        )
+        return build_table(
+            self.path, self.fmt, time_reference, out, infos, skipped, stream_spans_ns=spans, metadata=metadata
+        )
 
 
 def _concat(parts: list[pd.DataFrame]) -> pd.DataFrame | None:

@@ -42,7 +42,7 @@ import pandas as pd
 from readers import ReaderFormat
 from readers.ardupilot import _attitude_at
 from spooflens.constants import STANDARD_GRAVITY
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
@@ -183,6 +183,8 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         # ground station's clock (less the link's latency) and the difference is `time_offset_s`
         unix = own_ns >= UNIX_US_MIN * 1000
         offsets = time_offset_s(own_ns, gcs_ns, unix)
+        if unix.any():
+            meta |= log_clock("the ground station's receive time, less the link latency", False)
         for i, (t_gcs, _, f) in enumerate(rows):
             fix_type = _FIX.get(int(f["fix_type"]), FixType.NO_FIX)
             ell = int(f.get("alt_ellipsoid", 0) or 0)

@@ -79,6 +79,12 @@ def time_offset_s(receiver_ns: np.ndarray, clock_ns: np.ndarray, valid: np.ndarr
     return np.where(ok, (diff - centre) / 1e9, np.nan)
 
 
+def log_clock(description: str, monotonic: bool) -> dict[str, str]:
+    """Metadata saying which clock `time_offset_s` is against: a monotonic boot clock cannot step, a host's
+    wall clock can (NTP), which `receiver_time` tells apart from the receiver's own steps."""
+    return {"time_offset.clock": description, "time_offset.monotonic": "yes" if monotonic else "no"}
+
+
 def gps_ns_of_unix_ns(unix_ns: np.ndarray | int) -> np.ndarray:
     """UTC nanoseconds since 1970 -> GPS nanoseconds since 1980-01-06 (leap seconds added)."""
     utc = np.asarray(unix_ns, dtype=np.int64) - GPS_EPOCH_UNIX_NS

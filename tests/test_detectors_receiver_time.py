@@ -83,6 +83,22 @@ def test_a_step_of_the_loggers_own_clock_is_not_the_receivers() -> None:
     )
 
 
+def test_against_a_boot_clock_a_time_that_ran_on_across_a_gap_is_the_receivers_step() -> None:
+    """The fixes stop for 8 s (the takeover) and the spoofer resumes at the time of the last real fix: a
+    host clock's step would look the same, a monotonic boot clock cannot step."""
+    t, x = _logger()
+    keep = (t < 700.0) | (t >= 708.0)
+    t, x = t[keep], x[keep] - 8.0 * (t[keep] >= 708.0)  # the first fix after the gap one period on
+    host = run_receiver_time(_fixes(t, x))
+    assert not host.alarms and "logger's clock stepped" in host.findings[0].text
+    boot = run_receiver_time(_fixes(t, x), clock="TimeUS, the autopilot's boot clock", monotonic=True)
+    (alarm,) = boot.alarms
+    assert alarm.onset_interval_s == (pytest.approx(699.8), pytest.approx(708.0))
+    assert (
+        "moved -7.98" in boot.findings[0].text and "against TimeUS, the autopilot's boot clock" in boot.findings[0].text
+    )
+
+
 @pytest.mark.parametrize(
     "relative",
     [
@@ -136,13 +152,17 @@ def test_real_ardupilot_log_with_a_spoofer_clock_injected(tmp_path: Path) -> Non
         report = tmp_path / f"clock{clock:g}.json"
         main(["analyze", str(out), "-o", str(tmp_path / "x.rrd"), "--json", str(report), "--quiet"])
         verdicts[clock] = json.loads(report.read_text())
+    assert verdicts[0.0]["metadata"]["time_offset.monotonic"] == "yes"
     clean, spoofed = verdicts[0.0]["verdict"], verdicts[3600.5]["verdict"]
     assert not clean["spoofed"] and not any("log_clock" in i["evidence"] for i in clean["incidents"])
     assert spoofed["spoofed"]
     incident = spoofed["incidents"][0]
     assert incident["confidence"] == "high" and incident["evidence"] == ["gnss_only", "log_clock"]
     assert incident["onset_s"] == pytest.approx(24.0, abs=0.3) and incident["ongoing_at_end"]
-    assert any("time moved +3600.5" in str(f) for f in spoofed["findings"])
+    assert any(
+        "time moved +3600.5" in str(f) and "against TimeUS, the autopilot's boot clock" in str(f)
+        for f in spoofed["findings"]
+    )
 
 
 def test_px4_ulog_inject_writes_the_spoofers_time(tmp_path: Path) -> None:

@@ -46,7 +46,7 @@ from readers.nmea.sentences import (
     POSITION_KINDS,
     Decoded,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, time_offset_s
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.schema import FixType
 
 DAY_S = 86_400
@@ -445,6 +445,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, len(rows)))
     if offsets:
         metadata["clock.gnss_minus_logger_s"] = f"{float(np.median(offsets)):.3f}"
+        metadata |= log_clock("the logger's time stamps (a host's clock)", False)
 
     heading_parts, heading_streams = _headings(files, times_by_file, skipped)
     satellites = None

@@ -12,18 +12,19 @@ meaconer's microseconds of delay) is not seen here.
 
 Per receiver: the offset's change d against its own median over the minute ending 5 s before
 (`baseline_s`, `guard_s`), against max(8 robust sigma, 0.25 s), the sigma from fix-to-fix differences of
-the offset (a step moves one of them, however long the attack lasts). An alarm opens when 3
-fixes in a row over at least a second are beyond that, and lasts while the offset stays beyond it against
-the baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last
-fix on the old time to the first on the new one. Two steps are not spoofing and are reported as
-findings, never alarms: UTC moving back by exactly 1 or 2 s within the receiver's first 15 minutes in
-the log, held to its end (a receiver that started with an old firmware's default leap seconds learns the
+the offset (a step moves one of them, however long the attack lasts). An alarm opens when 3 fixes in a
+row over at least a second are beyond that, and lasts while the offset stays beyond it against the
+baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last fix
+on the old time to the first on the new one. Two steps are not spoofing and are reported as findings,
+never alarms: UTC moving back by exactly 1 or 2 s within the receiver's first 15 minutes in the log,
+held to its end (a receiver that started with an old firmware's default leap seconds learns the
 broadcast ones within 12.5 minutes; there have been 18 since 1980, the last in 2017, so a default is
-never ahead), and a step of the logger's clock rather than the receiver's
-(between the two fixes the receiver's time advanced by a fix period, the logger's did not: a host clock
-set by NTP). Choices where nothing published fixes a number: the level (8 sigma, 0.25 s) is far above
-the latencies of real loggers (ArduPilot 5 Hz GPS rows: 20 ms robust sigma; a phone's fixes: 1 ms),
-and the duration rule is the one every other change detector here uses.
+never ahead), and a step of the logger's clock rather than the receiver's (between the two fixes the
+receiver's time advanced by a fix period, the logger's did not: a host clock set by NTP; only where the
+log's clock is a host's, never against a monotonic boot clock). Choices where nothing published fixes a
+number: the level (8 sigma, 0.25 s) is far above the latencies of real loggers (ArduPilot 5 Hz GPS rows:
+20 ms robust sigma; a phone's fixes: 1 ms), and the duration rule is the one every other change detector
+here uses.
 """
 
 from __future__ import annotations
@@ -96,14 +97,23 @@ class ReceiverClockTest:
 
 
 def _kind(
-    t: FloatArray, x: FloatArray, first: int, last: int, step: float, scale: float, opts: ReceiverTimeOptions
+    t: FloatArray,
+    x: FloatArray,
+    first: int,
+    last: int,
+    step: float,
+    scale: float,
+    opts: ReceiverTimeOptions,
+    monotonic: bool,
 ) -> str:
-    """Spoofing, or one of the two steps that are not (see the module docstring)."""
+    """Spoofing, or one of the two steps that are not (see the module docstring). A monotonic boot clock
+    cannot step, so there a receiver's time that ran on across a gap in the fixes is the receiver's step
+    (a spoofer that resumes at the time of the last real fix), never the logger's."""
     period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     tolerance = 0.5 * period + 3.0 * scale
     dt_log = t[first] - t[first - 1]
     dt_receiver = dt_log + x[first] - x[first - 1]
-    if abs(dt_receiver - period) <= tolerance < abs(dt_log - period):
+    if not monotonic and abs(dt_receiver - period) <= tolerance < abs(dt_log - period):
         return "logger clock"
     n = round(step)
     whole = abs(step - n) <= max(3.0 * scale, 0.02) and -opts.max_leap_s <= n <= -1
@@ -121,7 +131,9 @@ def _scale(x: FloatArray, floor: float) -> float:
     return max(1.4826 * float(np.median(np.abs(dx - np.median(dx)))) / np.sqrt(2.0), floor)
 
 
-def judge_receiver(rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOptions) -> ReceiverClockTest:
+def judge_receiver(
+    rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOptions, monotonic: bool = False
+) -> ReceiverClockTest:
     """The steps of one receiver's time offset (t sorted, x finite). Fixes inside a step are left out of
     the baseline of the fixes after it, so the return to the old time is not a second step."""
     scale = _scale(x, opts.min_scale_s)
@@ -150,7 +162,7 @@ def judge_receiver(rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOpt
                 last = k0 + b - 1
                 break
         step = float(np.median(x[k0 : last + 1]) - base[k0])
-        steps.append(Step(k0, last, step, _kind(t, x, k0, last, step, scale, opts)))
+        steps.append(Step(k0, last, step, _kind(t, x, k0, last, step, scale, opts, monotonic)))
         clean[k0 : last + 1] = np.nan
         base[last + 1 :] = _trailing_median(t, clean, opts.baseline_s, opts.guard_s)[last + 1 :]
         change[last + 1 :] = x[last + 1 :] - base[last + 1 :]
@@ -158,12 +170,12 @@ def judge_receiver(rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOpt
     return ReceiverClockTest(rid, t, x, change, scale, thr, steps)
 
 
-def _finding(test: ReceiverClockTest, s: Step) -> Finding:
+def _finding(test: ReceiverClockTest, s: Step, clock: str) -> Finding:
     t0, t1 = float(test.t[s.first]), float(test.t[s.last])
     until = "to the end of the log" if s.last == len(test.t) - 1 else f"until {t1:.1f} s"
     moved = f"{s.step_s:+.3f} s{_humane(s.step_s)}"
     text = {
-        "spoofing": f"{test.receiver_id}: the receiver's time moved {moved} against the log's own clock at "
+        "spoofing": f"{test.receiver_id}: the receiver's time moved {moved} against {clock} at "
         f"{t0:.1f} s, {until}: a spoofer's clock or a recording replayed",
         "leap seconds": f"{test.receiver_id}: the receiver's UTC moved by exactly {round(s.step_s)} s at {t0:.1f} "
         "s: it learned the leap seconds from the broadcast UTC parameters (not counted)",
@@ -173,7 +185,14 @@ def _finding(test: ReceiverClockTest, s: Step) -> Finding:
     return Finding(text, t0, t1, receiver_id=test.receiver_id)
 
 
-def run_receiver_time(fixes: pd.DataFrame, opts: ReceiverTimeOptions | None = None) -> DetectorResult:
+def run_receiver_time(
+    fixes: pd.DataFrame,
+    opts: ReceiverTimeOptions | None = None,
+    clock: str = "the log's own clock",
+    monotonic: bool = False,
+) -> DetectorResult:
+    """The test for every receiver with its own time; `clock` and `monotonic` say what the readers put it
+    against (the table's `time_offset.clock` and `time_offset.monotonic` metadata)."""
     opts = opts or ReceiverTimeOptions()
     result = DetectorResult(name=NAME, ran=True, evidence=Evidence.LOG_CLOCK)
     words = []
@@ -183,12 +202,12 @@ def run_receiver_time(fixes: pd.DataFrame, opts: ReceiverTimeOptions | None = No
         ok = np.isfinite(x)
         if ok.sum() < MIN_TIMED_FIXES:
             continue
-        test = judge_receiver(str(rid), t[ok], x[ok], opts)
+        test = judge_receiver(str(rid), t[ok], x[ok], opts, monotonic)
         words.append(f"{rid}: robust sigma {test.scale_s * 1e3:.1f} ms, alarm level {test.threshold_s:.3f} s")
         result.series.append(Series(f"{rid}/time_offset", test.t, test.offset, "s"))
         result.series.append(Series(f"{rid}/offset_change", test.t, test.change, "s", test.threshold_s))
         for s in test.steps:
-            result.findings.append(_finding(test, s))
+            result.findings.append(_finding(test, s, clock))
             if s.kind != "spoofing":
                 continue
             moved = np.abs(test.offset[s.first : s.last + 1] - (test.offset[s.first] - test.change[s.first]))
@@ -210,13 +229,15 @@ def run_receiver_time(fixes: pd.DataFrame, opts: ReceiverTimeOptions | None = No
         return DetectorResult.skipped(
             NAME, f"no receiver has {MIN_TIMED_FIXES} fixes with their own time", Evidence.LOG_CLOCK
         )
-    result.reason = "; ".join(words)
+    result.reason = f"against {clock}: " + "; ".join(words)
     result.alarms.sort(key=lambda a: a.start_s)
     return result
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return [run_receiver_time(ctx.table.fixes)]
+    meta = ctx.table.metadata
+    clock = meta.get("time_offset.clock", "the log's own clock")
+    return [run_receiver_time(ctx.table.fixes, clock=clock, monotonic=meta.get("time_offset.monotonic") == "yes")]
 
 
 ANALYSIS = AnalysisSpec(
