@@ -22,6 +22,7 @@ from readers.ardupilot import gps_clock, gps_fixes, gps_rows
 from readers.dataflash import open_dataflash
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
+from spooflens.writers.clock_shift import clock_shifts
 
 _PACK = {
     "L": ("<i", 1e7),
@@ -55,18 +56,17 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
     _, offset_ns, _ = gps_clock(gps)
     rows = gps_fixes(gps, offset_ns, [], {})
     key = ["receiver_id", "t_s"]
-    before = table.fixes[[*key, "lat_deg", "lon_deg", "height_m", "time_offset_s"]]
-    after = spoofed.fixes[
-        [*key, "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps", "time_offset_s"]
-    ]
+    before = table.fixes[[*key, "lat_deg", "lon_deg", "height_m"]]
+    after = spoofed.fixes[[*key, "lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]]
     change = before.merge(after, on=key, suffixes=("_0", ""))
     change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
+    change = change.merge(clock_shifts(table, spoofed.fixes), on=["receiver_id", "t_ns"], how="left")
     if {"GWk", "GMS"} <= set(gps.columns):
         rows = rows.merge(gps[["ofs", "GWk", "GMS"]], on="ofs", how="left")
     rows = rows.rename(columns={c: f"{c}_log" for c in rows.columns if c not in ("receiver_id", "t_ns", "msg", "ofs")})
     plan = rows.merge(change, on=["receiver_id", "t_ns"], how="inner")
     data = bytearray(log.data)
-    clock_ms = np.round(np.nan_to_num(plan["time_offset_s"] - plan["time_offset_s_0"]) * 1000).astype(np.int64)
+    clock_ms = np.round(plan["shift_s"].fillna(0.0).to_numpy() * 1000).astype(np.int64)
     timed = bool(np.any(clock_ms != 0)) and {"GWk_log", "GMS_log"} <= set(plan.columns)
     moved = ("GWk", "GMS") if timed else ()
     fields = {

@@ -17,6 +17,7 @@ import numpy as np
 from readers.gnsslogger import FIX_NAMES, fix_clock, gps_fixes, split_file
 from spooflens.epoch_table import EpochTable, gps_ns_of_unix_ns
 from spooflens.errors import WriterError
+from spooflens.writers.clock_shift import clock_shifts
 
 
 def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
@@ -52,10 +53,9 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
         )
     )
     # what the attack did to the receiver's time (ms, by row): the fix line's UnixTimeMillis moves with it
-    key = ["receiver_id", "t_s"]
-    moved = table.fixes[[*key, "time_offset_s"]].merge(fixes[[*key, "time_offset_s"]], on=key, suffixes=("_0", ""))
-    shift_ms = np.round(np.nan_to_num(moved["time_offset_s"] - moved["time_offset_s_0"]) * 1000).astype(np.int64)
-    clock_ms = dict(zip(table.absolute_ns(moved["t_s"].to_numpy()).tolist(), shift_ms.tolist(), strict=True))
+    shifts = clock_shifts(table, fixes)
+    shift_ms = np.round(shifts["shift_s"].to_numpy() * 1000).astype(np.int64)
+    clock_ms = dict(zip(shifts["t_ns"].tolist(), shift_ms.tolist(), strict=True))
     # each fix line's row, found as the reader placed it (by the phone's clock, `fix_clock`)
     read = gps_fixes(src, split_file(src, [])[0], [])
     row_of: dict[int, int] = {}

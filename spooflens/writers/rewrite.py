@@ -35,6 +35,7 @@ from readers import formats, foxglove_messages, ros_messages, sniff_format
 from readers.streams import match_velocities, velocity_receiver
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError, one_line
+from spooflens.writers.clock_shift import clock_shifts
 
 # stamp ns -> (lat, lon, h, ve, vn, vu) per receiver topic
 Replacement = dict[int, tuple[float, float, float, float, float, float]]
@@ -74,18 +75,16 @@ def _plan(table: EpochTable, spoofed: pd.DataFrame, velocities: bool, velocity_s
 def _clock_plan(table: EpochTable, spoofed: pd.DataFrame, stamps: dict[str, np.ndarray]) -> dict[str, dict[int, int]]:
     """For each time reference topic, the change of the receiver's time at each of its messages, matched to
     the fixes as the reader matched them; only the messages the attack moved."""
-    key = ["receiver_id", "t_s"]
-    moved = table.fixes[[*key, "time_offset_s"]].merge(spoofed[[*key, "time_offset_s"]], on=key, suffixes=("_0", ""))
-    delta = np.nan_to_num(moved["time_offset_s"].to_numpy(float) - moved["time_offset_s_0"].to_numpy(float))
+    shifts = clock_shifts(table, spoofed)
     out: dict[str, dict[int, int]] = {}
     for s in table.streams:
         if s.role != "timeref" or s.topic not in stamps:
             continue
-        mine = (moved["receiver_id"] == s.receiver).to_numpy()
-        fix_ns = table.absolute_ns(moved["t_s"].to_numpy()[mine])
+        mine = shifts[shifts["receiver_id"] == s.receiver]
+        fix_ns = mine["t_ns"].to_numpy()
         ref_ns = stamps[s.topic]
         match = match_velocities(fix_ns, ref_ns)
-        d_ns = np.round(delta[mine] * 1e9).astype(np.int64)
+        d_ns = np.round(mine["shift_s"].to_numpy() * 1e9).astype(np.int64)
         out[s.topic] = {int(ref_ns[j]): int(d_ns[i]) for i, j in enumerate(match) if j >= 0 and d_ns[i] != 0}
     return out
 
