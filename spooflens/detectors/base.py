@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.evidence import Evidence
@@ -167,3 +168,17 @@ def rise_start(t: FloatArray, score: FloatArray, start_s: float, quiet_level: fl
     while k > 0 and score[k - 1] <= score[k]:
         k -= 1
     return k, last_quiet
+
+
+def trailing_median(t: FloatArray, x: FloatArray, span_s: float, gap_s: float) -> FloatArray:
+    """Per column of x (N, k), the median over the samples in [t - gap - span, t - gap]: a baseline the last
+    `gap_s` cannot move (NaN where fewer than 3 samples are in the window, and before any)."""
+    idx = pd.to_timedelta(t, unit="s")
+    out = np.full(x.shape, np.nan)
+    for j in range(x.shape[1]):
+        med = pd.Series(x[:, j], index=idx).rolling(pd.Timedelta(seconds=span_s), min_periods=3).median()
+        m = med.to_numpy(dtype=float)
+        ok = np.isfinite(m)
+        if ok.sum() >= 2:
+            out[:, j] = np.interp(t - gap_s, t[ok], m[ok], left=np.nan)
+    return out

@@ -56,6 +56,7 @@ from spooflens.detectors.base import (
     alarm_intervals,
     nearest,
     rise_start,
+    trailing_median,
 )
 from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic, metres_per_radian
@@ -221,19 +222,6 @@ def _z(r: FloatArray, quiet: NDArray[np.bool_], floor: float) -> tuple[FloatArra
     return out, scales
 
 
-def _trailing_median(t: FloatArray, x: FloatArray, span_s: float, gap_s: float) -> FloatArray:
-    """Per component, the median of x over the fixes in [t - gap - span, t - gap] (NaN before any)."""
-    idx = pd.to_timedelta(t, unit="s")
-    out = np.full(x.shape, np.nan)
-    for j in range(x.shape[1]):
-        med = pd.Series(x[:, j], index=idx).rolling(pd.Timedelta(seconds=span_s), min_periods=3).median()
-        m = med.to_numpy(dtype=float)
-        ok = np.isfinite(m)
-        if ok.sum() >= 2:
-            out[:, j] = np.interp(t - gap_s, t[ok], m[ok], left=np.nan)
-    return out
-
-
 def _earth(r: FloatArray, sin_h: FloatArray, cos_h: FloatArray) -> FloatArray:
     """Along/across residuals back to east/north where both are known (a turn does not rotate a current
     misfit there); across alone stays as it is."""
@@ -352,7 +340,7 @@ def judge_receiver(
         # east/north where both components are known; it needs no baseline from the whole log, so an
         # attack filling most of the log still shows where it began
         flat = _earth(r, sin_f, cos_f)
-        baseline = _trailing_median(t, flat, opts.baseline_s, opts.window_s)
+        baseline = trailing_median(t, flat, opts.baseline_s, opts.window_s)
         z_change[name], change_scales = _z(flat - baseline, quiet_fix, floor)
         change_parts[name] = (flat, baseline, change_scales)
         if name == "track":

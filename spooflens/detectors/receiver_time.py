@@ -36,7 +36,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.analysis import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, trailing_median
 from spooflens.evidence import Evidence
 
 FloatArray = NDArray[np.float64]
@@ -64,16 +64,6 @@ class Step:
     last: int
     step_s: float
     kind: str  # "spoofing", "leap seconds" or "logger clock"
-
-
-def _trailing_median(t: FloatArray, x: FloatArray, span_s: float, guard_s: float) -> FloatArray:
-    """Median of x over the fixes in [t - guard - span, t - guard] (NaN where there are fewer than 3)."""
-    med = pd.Series(x, index=pd.to_timedelta(t, unit="s")).rolling(pd.Timedelta(seconds=span_s), min_periods=3)
-    m = med.median().to_numpy(dtype=float)
-    ok = np.isfinite(m)
-    if ok.sum() < 2:
-        return np.full(len(t), np.nan)
-    return np.interp(t - guard_s, t[ok], m[ok], left=np.nan)
 
 
 def _humane(seconds: float) -> str:
@@ -139,7 +129,7 @@ def judge_receiver(
     scale = _scale(x, opts.min_scale_s)
     thr = max(opts.z_alarm * scale, opts.min_step_s)
     clean = x.copy()
-    base = _trailing_median(t, clean, opts.baseline_s, opts.guard_s)
+    base = trailing_median(t, clean[:, None], opts.baseline_s, opts.guard_s)[:, 0]
     change = x - base
     steps: list[Step] = []
     i = 1
@@ -164,7 +154,7 @@ def judge_receiver(
         step = float(np.median(x[k0 : last + 1]) - base[k0])
         steps.append(Step(k0, last, step, _kind(t, x, k0, last, step, scale, opts, monotonic)))
         clean[k0 : last + 1] = np.nan
-        base[last + 1 :] = _trailing_median(t, clean, opts.baseline_s, opts.guard_s)[last + 1 :]
+        base[last + 1 :] = trailing_median(t, clean[:, None], opts.baseline_s, opts.guard_s)[:, 0][last + 1 :]
         change[last + 1 :] = x[last + 1 :] - base[last + 1 :]
         i = last + 1
     return ReceiverClockTest(rid, t, x, change, scale, thr, steps)
