@@ -138,6 +138,14 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     return gps.sort_values(["inst", "TimeUS"], kind="stable").reset_index(drop=True)
 
 
+WEEK_MS = 604_800_000
+
+
+def gps_time_ns(gps: pd.DataFrame) -> NDArray[np.int64]:
+    """Each GPS row's own time (GPS week `GWk` and ms of week `GMS`), ns since the GPS epoch."""
+    return (gps["GWk"].to_numpy(np.int64) * WEEK_MS + gps["GMS"].to_numpy(np.int64)) * 1_000_000
+
+
 def gps_clock(gps: pd.DataFrame | None) -> tuple[str, int, str]:
     """(time reference, offset ns added to TimeUS * 1000, how it was found)."""
     if gps is None or "GWk" not in gps or "GMS" not in gps:
@@ -145,17 +153,17 @@ def gps_clock(gps: pd.DataFrame | None) -> tuple[str, int, str]:
     ok = (gps["GWk"] > 0) & (gps["Status"] >= 3)
     if not ok.any():
         return "boot", 0, "GPS rows carry no week number (GWk 0): boot clock (TimeUS)"
-    gps_ns = (gps.loc[ok, "GWk"].astype(np.int64) * 604_800_000 + gps.loc[ok, "GMS"].astype(np.int64)) * 1_000_000
-    offset = int(np.median(gps_ns.to_numpy() - gps.loc[ok, "TimeUS"].to_numpy(np.int64) * 1000))
+    ok_rows = ok.to_numpy()
+    gps_ns = gps_time_ns(gps)[ok_rows]
+    offset = int(np.median(gps_ns - gps["TimeUS"].to_numpy(np.int64)[ok_rows] * 1000))
     return "gps", offset, f"GPS clock from GPS week/ms of {int(ok.sum())} 3D fixes (median offset to TimeUS)"
 
 
 def _time_offsets(gps: pd.DataFrame) -> FloatArray:
     """`time_offset_s` per receiver instance: its GPS week/ms against TimeUS (the boot clock)."""
-    week = gps["GWk"].to_numpy(np.int64)
-    receiver_ns = (week * 604_800_000 + gps["GMS"].to_numpy(np.int64)) * 1_000_000
+    receiver_ns = gps_time_ns(gps)
     clock_ns = gps["TimeUS"].to_numpy(np.int64) * 1000
-    valid = (week > 0) & (gps["Status"].to_numpy(np.int64) >= 3)
+    valid = (gps["GWk"].to_numpy(np.int64) > 0) & (gps["Status"].to_numpy(np.int64) >= 3)
     out = np.full(len(gps), np.nan)
     inst = gps["inst"].to_numpy(np.int64)
     for i in np.unique(inst):

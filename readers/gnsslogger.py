@@ -578,15 +578,14 @@ def read_gnsslogger(
 
     fixes = gps_fixes(path, records, skipped)
     clock_offset, phone_ns = fix_clock(fixes) if fixes is not None else (None, np.zeros(0, np.int64))
-    if clock_offset is not None:
-        good = int((fixes["elapsed_ns"] > 0).sum()) if fixes is not None else 0
+    if clock_offset is not None and fixes is not None:
+        good = int((fixes["elapsed_ns"] > 0).sum())
         meta["sensor_clock"] = f"elapsedRealtimeNanos + median offset to {good} GPS fixes' UnixTimeMillis"
+        meta |= log_clock("elapsedRealtimeNanos, the phone's boot clock", True)
     if fixes is not None and len(fixes):
         # the fix's own (GNSS) time against the monotonic clock at which the phone made it
         elapsed = fixes["elapsed_ns"].to_numpy(np.int64)
         offset = time_offset_s(fixes["unix_ms"].to_numpy(np.int64) * 1_000_000, elapsed, elapsed > 0)
-        if (elapsed > 0).any():
-            meta |= log_clock("elapsedRealtimeNanos, the phone's boot clock", True)
         fx = fixes.drop(columns=["unix_ms", "elapsed_ns"]).assign(t_ns=from_unix_ns(phone_ns), time_offset_s=offset)
         if raw is not None and len(raw.epochs):
             ep = raw.epochs.sort_values("t_ns")

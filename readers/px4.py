@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.epoch_table import Skipped, StreamInfo, time_offset_s
+from spooflens.epoch_table import Skipped, StreamInfo, log_clock, time_offset_s
 from spooflens.navigation.rotations import quat_from_rotvec, quat_multiply, quat_to_rotvec
 from spooflens.schema import FixType, SpoofingFlag
 
@@ -344,6 +344,10 @@ def _unavailable_as_nan(values: FloatArray | None, sentinel: str) -> FloatArray 
         return None
     bad = values < 0 if sentinel == "negative" else values == 65535
     return np.where(bad, np.nan, values)
+
+
+# what `time_offset_s` is against in a PX4 log (ULog or CSV export)
+PX4_LOG_CLOCK = log_clock("the autopilot's boot clock (timestamp + timestamp_time_relative)", True)
 
 
 def _time_offset(rec: Mapping[str, np.ndarray]) -> FloatArray:

@@ -36,6 +36,7 @@ from readers.px4 import (
     GPS_TOPICS,
     IMU_TOPIC,
     INNOVATION_TOPICS,
+    PX4_LOG_CLOCK,
     RATIO_TOPICS,
     RAW_GPS_TOPICS,
     SATELLITE_TOPIC,
@@ -54,7 +55,7 @@ from readers.px4 import (
     satellites_frame,
     select_receivers,
 )
-from spooflens.epoch_table import Skipped, StreamInfo, log_clock
+from spooflens.epoch_table import Skipped, StreamInfo
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
@@ -292,7 +293,7 @@ def read_px4(files: dict[Path, str], skipped: list[Skipped]) -> Px4Part:
         part.metadata |= receiver_metadata([(s, rec) for s, rec, _ in sources])
         part.metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s, _, _ in sources)
         if any("time_utc_usec" in rec for _, rec, _ in sources):
-            part.metadata |= log_clock("the autopilot's boot clock (timestamp + timestamp_time_relative)", True)
+            part.metadata |= PX4_LOG_CLOCK
     if skies:
         part.frames["satellites"] = pd.concat([frame for frame, _ in skies], ignore_index=True)
         part.streams += [sky_info for _, sky_info in skies]

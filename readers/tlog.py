@@ -147,17 +147,18 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     msgs = {k: [(t, s, f) for t, s, f in v if s == vehicle] for k, v in msgs.items()}
     ardupilot = any(f.get("autopilot") == MAV_AUTOPILOT_ARDUPILOTMEGA for s, f in beats if s == vehicle)
     meta["vehicle"] = f"system {vehicle}" + (" (ArduPilot)" if ardupilot else "")
+    # every boot-stamped message with the ground station's receive time: the clock without SYSTEM_TIME,
+    # and the link's latency
+    sent = [(t, b) for v in msgs.values() for t, _, f in v if (b := _boot_us(f)) is not None and t > 0]
     # boot clock -> UNIX
     sys_time = [f for _, _, f in msgs.get("SYSTEM_TIME", []) if f["time_unix_usec"] > 0 and f["time_boot_ms"] > 0]
     if sys_time:
         offset_ns = int(np.median([f["time_unix_usec"] * 1000 - f["time_boot_ms"] * 1_000_000 for f in sys_time]))
         meta["clock"] = f"vehicle boot time + SYSTEM_TIME offset (median of {len(sys_time)})"
     else:
-        pairs = [(t, _boot_us(f)) for v in msgs.values() for t, _, f in v]
-        diffs = [t * 1e9 - b * 1000 for t, b in pairs if b is not None and t > 0]
-        if not diffs:
+        if not sent:
             raise ReaderError(path, "no message carries a boot-time stamp the log can be timed by")
-        offset_ns = int(np.median(diffs))
+        offset_ns = int(np.median([t * 1e9 - b * 1000 for t, b in sent]))
         meta["clock"] = (
             "vehicle boot time + median offset to the ground station's receive times (link latency included)"
         )
@@ -170,7 +171,6 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         return t * 1000 if t >= UNIX_US_MIN else round(t_gcs * 1e9)
 
     # the link's latency: the ground station's receive times against the boot-stamped messages' own times
-    sent = [(t, b) for v in msgs.values() for t, _, f in v if (b := _boot_us(f)) is not None and t > 0]
     latency = int(np.median([t * 1e9 - (b * 1000 + offset_ns) for t, b in sent])) if sent else 0
     frames: dict[str, pd.DataFrame] = {}
     streams: list[StreamInfo] = []

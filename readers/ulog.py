@@ -28,6 +28,7 @@ from readers.px4 import (
     EKF_TOPICS,
     GPS_TOPICS,
     IMU_TOPIC,
+    PX4_LOG_CLOCK,
     SATELLITE_TOPIC,
     GpsSource,
     Record,
@@ -46,7 +47,7 @@ from readers.px4 import (
     select_receivers,
     utc_offset_us,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gap_losses, log_clock
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gap_losses
 from spooflens.errors import ReaderError, one_line
 from spooflens.schema import FixType
 
@@ -129,7 +130,7 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         )
         metadata["px4.gps_source"] = "; ".join(f"{s.receiver_id}: {s.description}" for s in sources)
         if any("time_utc_usec" in gps_records[(s.topic, s.multi_id)] for s in sources):
-            metadata |= log_clock("the autopilot's boot clock (timestamp + timestamp_time_relative)", True)
+            metadata |= PX4_LOG_CLOCK
         metadata |= receiver_metadata([(s, gps_records[(s.topic, s.multi_id)]) for s in sources])
     skies = [
         sky

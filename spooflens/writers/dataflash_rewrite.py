@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from readers.ardupilot import gps_clock, gps_fixes, gps_rows
+from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows
 from readers.dataflash import open_dataflash
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
@@ -34,7 +34,6 @@ _PACK = {
     "I": ("<I", 1.0),
     "H": ("<H", 1.0),
 }
-WEEK_MS = 604_800_000
 
 
 def _field_writer(log, name: str, column: str):  # type: ignore[no-untyped-def]
