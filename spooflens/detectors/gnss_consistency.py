@@ -97,8 +97,6 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
     """Run the check on one receiver's fixes: (mode, t, normalised residual (N,3), statistic (N,))."""
     t = fixes["t_s"].to_numpy(dtype=float)
     lat, lon, h = (fixes[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "height_m"))
-    p = geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0])
-    ecef, to_enu = geodetic_to_ecef(lat, lon, h), enu_rotation(lat, lon)
     v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
     has_velocity = np.isfinite(v[:, :2]).all(axis=1).mean() >= 0.5
     if has_velocity:
@@ -106,7 +104,8 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
         vertical = np.isfinite(v[:, 2]).mean() >= 0.5
         mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
         good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
-        t, v, ecef, to_enu = t[good], v[good], ecef[good], to_enu[good]
+        t, v = t[good], v[good]
+        ecef, to_enu = geodetic_to_ecef(lat[good], lon[good], h[good]), enu_rotation(lat[good], lon[good])
         if not vertical:
             v = v.copy()
             v[:, 2] = 0.0
@@ -115,7 +114,7 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
             r[:, 2] = np.nan
     else:
         mode = "kinematic plausibility (no reported velocity)"
-        r = _second_difference(t, p)
+        r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))
     scale = _robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m)
     z = r / scale
     stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
