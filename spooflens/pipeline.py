@@ -5,8 +5,10 @@
 
 The sensors' noise is learned from the log (`spooflens.navigation.noise_learning`). An attack inside
 the learning window would teach the filter that the attack is noise, so when the first pass finds
-anything suspicious the noise is learned again with those stretches left out, and the analyses run a
-second time on that filter: the noise is kept fixed through a suspected attack.
+anything suspicious inside the stretch the noise was learned from, the noise is learned again with
+those stretches left out and the analyses run a second time on that filter: the noise is kept fixed
+through a suspected attack. Anything suspected after that stretch could not have taught the filter,
+and the first pass stands.
 """
 
 from __future__ import annotations
@@ -68,6 +70,12 @@ def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tup
     return tuple(merged)
 
 
+def _within_learning(spans: tuple[tuple[float, float], ...], window_s: tuple[float, float]) -> bool:
+    """Whether a suspected stretch touches the fixes the noise was learned from (the initial guess
+    reads every fix up to the learning window's end, the likelihood those inside it)."""
+    return any(a <= window_s[1] for a, _ in spans)
+
+
 def analyze_table(
     table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
 ) -> Analysis:
@@ -83,6 +91,10 @@ def analyze_table(
     ctx, verdict = _one_pass(table, options, on_step, {})
     spans = suspected_spans(verdict)
     if not spans or "navigation" not in ctx.cache:
+        return Analysis(table, options, ctx.results, verdict)
+    if not _within_learning(spans, ctx.navigation().learned.window_s):
+        # the noise was learned before anything suspected began: learning it again without those
+        # stretches gives the same noise, and the second pass the same results
         return Analysis(table, options, ctx.results, verdict)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run

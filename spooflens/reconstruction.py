@@ -351,7 +351,8 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
         envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
         envelopes.append(envelope)
-        later = [i.start_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
+        # a departure from where the next inertial incident's coast begins is that incident's, not this one's
+        later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
         reach = _coast_start(inc) + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
         deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
         check = coasting_check(nav, _coast_start(inc), envelope, deadline, opts, base)

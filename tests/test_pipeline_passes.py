@@ -1,0 +1,43 @@
+"""The analysis's passes: the noise is learned again without what the first pass suspected only when a
+suspected stretch touches the fixes it was learned from; and an inertial glitch shortly before an
+attack is not confirmed by the attack's own departure."""
+
+from __future__ import annotations
+
+from spooflens.analysis import AnalyzeOptions
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.navigation.product import solve_navigation
+from spooflens.pipeline import analyze_table, suspected_spans
+from spooflens.simulation.simulate import simulate
+
+
+def test_an_attack_after_the_learning_window_needs_no_second_pass_and_keeps_its_own_onset() -> None:
+    # 10 Hz GNSS: the noise is learned on the first 300 s; a 30 m step at 500 s. This clean flight has
+    # an inertial glitch (GLRT alone, not confirmed) at 465 s, 35 s before the attack
+    clean = simulate("multirotor", seed=2, duration_s=600.0).table
+    table, _ = apply_attack(clean, parse_attack("step:offset=30,start=500"))
+    analysis = analyze_table(table)
+    assert analysis.passes == 1 and analysis.suspected_s == ()
+    attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
+    # the glitch's coast must not be confirmed by the step: the step is the next incident's departure
+    assert 499.0 <= attack.onset_s <= 500.0 and attack.ongoing_at_end, attack
+    glitch = [i for i in analysis.verdict.incidents if i.end_s < 490.0]
+    assert glitch and not any(i.is_spoofing for i in glitch)
+
+    # what the skipped pass would have learned: the same noise, to the last digit
+    nav = solve_navigation(table, AnalyzeOptions())
+    spans = suspected_spans(analysis.verdict)
+    assert spans and min(a for a, _ in spans) > nav.learned.window_s[1]
+    again = solve_navigation(table, AnalyzeOptions(), exclude=spans, aligned=(nav.inputs, nav.start))
+    assert again.learned.noise == nav.learned.noise and again.learned.imu_scale == nav.learned.imu_scale
+
+
+def test_an_attack_inside_the_learning_window_is_left_out_of_a_second_learning() -> None:
+    # 1 Hz GNSS: the noise is learned on the first 1,500 fixes, which the attack at 500 s falls inside
+    clean = simulate("ship", seed=1, duration_s=600.0).table
+    table, _ = apply_attack(clean, parse_attack("step:offset=30,start=500"))
+    analysis = analyze_table(table)
+    assert analysis.passes == 2
+    assert any(a <= 500.0 <= b for a, b in analysis.suspected_s), analysis.suspected_s
+    attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
+    assert 498.0 <= attack.onset_s <= 500.0 and attack.ongoing_at_end
