@@ -132,10 +132,23 @@ def continued(
     k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
     if k < 0:
         return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
-    opts = replace(
-        opts, initial=NavState.from_vector(sol.state[k]), initial_covariance=sol.P_upd[k], initial_gm=sol.gm[k]
-    )
+    x, P, g = _updated_at(nav, sol, k)
+    opts = replace(opts, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g)
     return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+
+
+def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """`sol`'s state, covariance and sensor errors after epoch k's update; when `sol` kept the covariance
+    of a part of its epochs, refiltered with its own options from the last kept one."""
+    k0 = k - k % sol.P_upd_every
+    x, P, g = sol.state[k0], sol.P_upd[k0 // sol.P_upd_every], sol.gm[k0]
+    if k0 == k:
+        return x, P, g
+    opts = replace(
+        sol.options, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g, record=("P_upd",)
+    )
+    head = run_prepared(nav.inputs.between(float(sol.t[k0]), float(sol.t[k])), opts)
+    return head.state[-1], head.P_upd[-1], head.gm[-1]
 
 
 def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None) -> NavSolution:

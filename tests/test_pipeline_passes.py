@@ -41,3 +41,25 @@ def test_an_attack_inside_the_learning_window_is_left_out_of_a_second_learning()
     assert any(a <= 500.0 <= b for a, b in analysis.suspected_s), analysis.suspected_s
     attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
     assert 498.0 <= attack.onset_s <= 500.0 and attack.ongoing_at_end
+
+
+def test_a_coast_from_the_solution_that_keeps_one_covariance_a_second_is_the_full_solutions() -> None:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from spooflens.navigation.loosely_coupled import ANALYSIS_NEEDS, run_prepared
+    from spooflens.reconstruction import coast
+
+    table = simulate("multirotor", seed=4, duration_s=240.0).table
+    nav = solve_navigation(table, AnalyzeOptions())
+    every = nav.solution.P_upd_every  # one a second: the multirotor's receiver gives 5 fixes a second
+    assert every == round(1.0 / float(np.median(np.diff(nav.solution.t)))) == 5
+    assert len(nav.solution.P_upd) == -(-len(nav.solution.t) // every)
+    full = run_prepared(nav.inputs, replace(nav.solution.options, record=ANALYSIS_NEEDS), nav.start)
+    assert full.P_upd_every == 1 and np.array_equal(full.nu, nav.solution.nu, equal_nan=True)
+    for t_from in (100.0, 123.37, 187.05):  # on a kept epoch, between, just after one
+        thinned, whole = coast(nav, t_from, t_from + 40.0), coast(nav, t_from, t_from + 40.0, base=full)
+        assert np.array_equal(thinned.t, whole.t) and thinned.t[0] > t_from
+        assert np.allclose(thinned.nu, whole.nu, rtol=1e-9, atol=1e-9, equal_nan=True)
+        assert np.allclose(thinned.S_all, whole.S_all, rtol=1e-9, atol=1e-12)

@@ -173,7 +173,7 @@ class NavSolution:
     Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
     Qd: FloatArray  # (M, 24, 24)
     P_pred: FloatArray  # (M, 24, 24) when recorded; else the first epoch only
-    P_upd: FloatArray  # (M, 24, 24)
+    P_upd: FloatArray  # (M, 24, 24); with P_upd_every > 1, epochs 0, P_upd_every, 2 P_upd_every, ... only
     dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
     gm: FloatArray  # (M, 9) estimated sensor errors (receiver, odometry) after the update
     state: FloatArray  # (M, 22) after the update, columns STATE_COLUMNS (C_b^n row-major)
@@ -182,12 +182,20 @@ class NavSolution:
     track_v: FloatArray  # (K, 3)
     track_epoch: NDArray[np.int64]  # (K,) index of the last epoch at or before each block end
     options: FilterOptions = field(default_factory=FilterOptions)
+    P_upd_every: int = 1
     state_names: tuple[str, ...] = STATE_NAMES
     measurement_names: tuple[str, ...] = MEASUREMENT_NAMES
 
     @property
     def innovation(self) -> FloatArray:
         return self.nu
+
+    def with_P_upd_every(self, every: int) -> NavSolution:
+        """This solution keeping the updated covariance of every `every`-th epoch only (copied, so the full
+        array is freed): a run continued from another epoch refilters up to `every` - 1 epochs to reach it."""
+        if self.P_upd_every != 1 or every <= 1:
+            return self
+        return replace(self, P_upd=self.P_upd[::every].copy(), P_upd_every=every)
 
     def error_model(self):
         from spooflens.navigation.solution_model import error_model
@@ -372,7 +380,7 @@ def _run(
     tf = fixes["t_s"].to_numpy(dtype=float)
     keep = (tf >= s.t - 1e-9) & (tf <= pre.t[-1] + 1e-9)
     tf = tf[keep]
-    if len(tf) < 2:
+    if len(tf) < (1 if opts.initial is not None else 2):  # a continued run may cover one epoch
         raise AnalysisError(f"fewer than two GNSS fixes of {receiver_id} inside the IMU's time span")
     # the columns the filter reads, not the frame (noise learning runs this ~90 times; a wide frame's
     # boolean selection was 12% of it)

@@ -28,6 +28,7 @@ from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
 
 ENU = ("east", "north", "up")
+P_UPD_KEPT_S = 1.0  # the navigation solution keeps an updated covariance this often
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,16 @@ def solve_navigation(
     opts = FilterOptions(grade=learned.grade, noise=learned.noise, odometry=learned.odometry, record=ANALYSIS_NEEDS)
     sol = run_prepared(inputs, opts, start)
     smoothed, model = smooth(sol), sol.error_model()
+    # after the smoother, the updated covariances serve only as starting points of continued runs (coasts,
+    # reconstructions): one a second is plenty, and the other 90 % (150 MB per hour at 10 Hz) go
+    sol = sol.with_P_upd_every(max(1, round(P_UPD_KEPT_S / _fix_period_s(sol.t))))
     return Navigation(sol, smoothed, model, learned, inputs, start)
+
+
+def _fix_period_s(t: np.ndarray) -> float:
+    dt = np.diff(t)
+    dt = dt[dt > 0]
+    return float(np.median(dt)) if len(dt) else P_UPD_KEPT_S
 
 
 def _aligned(
