@@ -144,9 +144,7 @@ def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, 
     x, P, g = sol.state[k0], sol.P_upd[k0 // sol.P_upd_every], sol.gm[k0]
     if k0 == k:
         return x, P, g
-    opts = replace(
-        sol.options, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g, record=("P_upd",)
-    )
+    opts = replace(sol.options, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g, record=("P_upd",))
     head = run_prepared(nav.inputs.between(float(sol.t[k0]), float(sol.t[k])), opts)
     return head.state[-1], head.P_upd[-1], head.gm[-1]
 
