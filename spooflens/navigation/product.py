@@ -28,7 +28,7 @@ from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
 
 ENU = ("east", "north", "up")
-P_UPD_KEPT_S = 1.0  # the navigation solution keeps an updated covariance this often
+P_UPD_EVERY = 10  # the navigation solution keeps the updated covariance of every tenth epoch
 
 
 @dataclass(frozen=True)
@@ -62,15 +62,10 @@ def solve_navigation(
     sol = run_prepared(inputs, opts, start)
     smoothed, model = smooth(sol), sol.error_model()
     # after the smoother, the updated covariances serve only as starting points of continued runs (coasts,
-    # reconstructions): one a second is plenty, and the other 90 % (150 MB per hour at 10 Hz) go
-    sol = sol.with_P_upd_every(max(1, round(P_UPD_KEPT_S / _fix_period_s(sol.t))))
+    # reconstructions), which refilter at most P_UPD_EVERY - 1 epochs to reach theirs: the other 90 % go
+    # (150 MB per hour of 10 Hz GNSS, 0.4 GB per day of 1 Hz)
+    sol = sol.with_P_upd_every(P_UPD_EVERY)
     return Navigation(sol, smoothed, model, learned, inputs, start)
-
-
-def _fix_period_s(t: np.ndarray) -> float:
-    dt = np.diff(t)
-    dt = dt[dt > 0]
-    return float(np.median(dt)) if len(dt) else P_UPD_KEPT_S
 
 
 def _aligned(
