@@ -92,14 +92,14 @@ def analyze_table(
     spans = suspected_spans(verdict)
     if not spans or "navigation" not in ctx.cache:
         return Analysis(table, options, ctx.results, verdict)
-    if not _within_learning(spans, ctx.navigation().learned.window_s):
+    first_nav = ctx.navigation()
+    if not _within_learning(spans, first_nav.learned.window_s):
         # the noise was learned before anything suspected began: learning it again without those
         # stretches gives the same noise, and the second pass the same results
         return Analysis(table, options, ctx.results, verdict)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
-    first_nav = ctx.cache["navigation"]
     aligned = (first_nav.inputs, first_nav.start)  # the IMU integrated and the alignment: reused as they are
     del ctx, first_nav
     if on_step:

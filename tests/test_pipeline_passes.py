@@ -4,10 +4,16 @@ attack is not confirmed by the attack's own departure."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
+
 from spooflens.analysis import AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
+from spooflens.navigation.loosely_coupled import ANALYSIS_NEEDS, run_prepared
 from spooflens.navigation.product import solve_navigation
 from spooflens.pipeline import analyze_table, suspected_spans
+from spooflens.reconstruction import coast
 from spooflens.simulation.simulate import simulate
 
 
@@ -44,13 +50,6 @@ def test_an_attack_inside_the_learning_window_is_left_out_of_a_second_learning()
 
 
 def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full_solutions() -> None:
-    from dataclasses import replace
-
-    import numpy as np
-
-    from spooflens.navigation.loosely_coupled import ANALYSIS_NEEDS, run_prepared
-    from spooflens.reconstruction import coast
-
     table = simulate("multirotor", seed=4, duration_s=240.0).table
     nav = solve_navigation(table, AnalyzeOptions())
     every = nav.solution.P_upd_every

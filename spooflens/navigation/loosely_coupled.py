@@ -380,8 +380,10 @@ def _run(
     tf = fixes["t_s"].to_numpy(dtype=float)
     keep = (tf >= s.t - 1e-9) & (tf <= pre.t[-1] + 1e-9)
     tf = tf[keep]
-    if len(tf) < (1 if opts.initial is not None else 2):  # a continued run may cover one epoch
-        raise AnalysisError(f"fewer than two GNSS fixes of {receiver_id} inside the IMU's time span")
+    needed = 1 if opts.initial is not None else 2  # a continued run may cover one epoch
+    if len(tf) < needed:
+        few = "no GNSS fix" if needed == 1 else "fewer than two GNSS fixes"
+        raise AnalysisError(f"{few} of {receiver_id} inside the IMU's time span")
     # the columns the filter reads, not the frame (noise learning runs this ~90 times; a wide frame's
     # boolean selection was 12% of it)
     cols = {c: fixes[c].to_numpy(dtype=float)[keep] for c in _FILTER_COLUMNS}
