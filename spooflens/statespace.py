@@ -71,13 +71,3 @@ class LinearGaussianModel:
             self.state_names,
             self.measurement_names,
         )
-
-
-def nonzero_pattern(X: FloatArray, block: int = 4096) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Where any of the matrices X[k] (shape (N, r, c)) is non-zero, row by row (CSR: row i's columns are
-    col[ptr[i]:ptr[i + 1]]), so a compiled loop can skip what is zero at every epoch."""
-    nz = np.zeros(X.shape[1:], dtype=bool)
-    for i in range(0, X.shape[0], block):  # in blocks: no (N, r, c) boolean temporary
-        nz |= np.any(X[i : i + block] != 0, axis=0)
-    ptr = np.r_[0, np.cumsum(nz.sum(axis=1))].astype(np.int64)
-    return ptr, np.nonzero(nz)[1].astype(np.int64)

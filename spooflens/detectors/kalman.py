@@ -14,6 +14,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.kalman_update import masked_update, observed_parts
+from spooflens.sparse_products import congruence_t, full_pattern
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -140,26 +141,31 @@ def _noise_factor(Q: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=CACHE)
 def information_predict_back(
-    Lam: np.ndarray, alpha: np.ndarray, A: np.ndarray, Q: np.ndarray
+    Lam: np.ndarray, alpha: np.ndarray, A: np.ndarray, Q: np.ndarray, a_ptr: np.ndarray, a_col: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """From information on x_k to information on x_{k-1} through x_k = A x_{k-1} + w, w ~ N(0, Q).
 
     Lambda_{k-1} = A^T (Lambda - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T Lambda) A, and
     alpha_{k-1}  = A^T (I - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T) alpha, with Q = B Qr B^T.
     (The paper's printed step computes G and never uses it: this is the standard form it garbled.)
+    By the matrix inversion lemma both brackets are (I + Lambda Q)^-1 applied to Lambda and to alpha,
+    which needs no factorisation of a singular Q (an eigendecomposition per epoch was most of the
+    offline MLRT's time) and is always solvable: I + Lambda Q has eigenvalues >= 1. A's non-zeros are
+    (a_ptr, a_col) (`spooflens.sparse_products`).
     """
-    B, Qr = _noise_factor(Q, 1e-12)
-    if B.shape[1] == 0:
-        return A.T @ Lam @ A, A.T @ alpha
-    LB = Lam @ B
-    M = B.T @ LB
-    for i in range(M.shape[0]):
-        M[i, i] += 1.0 / Qr[i, i]
-    G = LB @ np.linalg.inv(M)
-    Lam_m = Lam - G @ LB.T
-    alpha_m = alpha - G @ (B.T @ alpha)
-    out = A.T @ Lam_m @ A
-    return 0.5 * (out + out.T), A.T @ alpha_m
+    n = Lam.shape[0]
+    X = Lam @ Q
+    for i in range(n):
+        X[i, i] += 1.0
+    rhs = np.empty((n, n + 1))
+    rhs[:, :n] = Lam
+    rhs[:, n] = alpha
+    sol = np.linalg.solve(X, rhs)
+    Lam_m = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            Lam_m[i, j] = 0.5 * (sol[i, j] + sol[j, i])
+    return congruence_t(A, Lam_m, a_ptr, a_col, np.empty((n, n))), A.T @ sol[:, n]
 
 
 @njit(cache=CACHE)
@@ -189,11 +195,12 @@ def backward_information(
     alpha = np.zeros((cnt, n))
     L = np.zeros((n, n))
     a = np.zeros(n)
+    ptr, col = full_pattern(n, n)
     for k in range(last, first - 1, -1):
         Lam[k - first] = L
         alpha[k - first] = a
         if k == first:
             break
         L, a = information_update(L, a, C[k], R[k], y[k])
-        L, a = information_predict_back(L, a, A[k], Q[k])
+        L, a = information_predict_back(L, a, A[k], Q[k], ptr, col)
     return Lam, alpha

@@ -42,6 +42,7 @@ from spooflens.detectors.kalman import (
     information_update,
 )
 from spooflens.kalman_update import masked_update, observed_parts
+from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -127,6 +128,7 @@ def _info_constant(
     Lam = np.zeros((n, n))
     alpha = np.zeros(n)
     c = 0.0
+    ptr, col = full_pattern(n, n)
     for k in range(last, first, -1):
         yk = y[k]
         rows, _, Rm, ym = observed_parts(C[k], R[k], yk)
@@ -144,7 +146,7 @@ def _info_constant(
                 0.5 * Ba @ np.linalg.solve(M, Ba)
                 - 0.5 * np.linalg.slogdet(np.eye(M.shape[0]) + Qr @ (B.T @ Lam @ B))[1]
             )
-        Lam, alpha = information_predict_back(Lam, alpha, A[k], Q[k])
+        Lam, alpha = information_predict_back(Lam, alpha, A[k], Q[k], ptr, col)
     return Lam, alpha, c
 
 
@@ -296,6 +298,18 @@ def _augmented(
     return Aa, Qa, Ca
 
 
+def augmented_mask(a_mask: NDArray[np.bool_], q: int, ramp: bool) -> NDArray[np.bool_]:
+    """Where `_augmented`'s transition can be non-zero, from where the model's can (`a_mask`)."""
+    n = a_mask.shape[0]
+    na = n + (2 * q if ramp else q)
+    out = np.zeros((na, na), dtype=bool)
+    out[:n, :n] = a_mask
+    out[np.arange(n, na), np.arange(n, na)] = True
+    if ramp:
+        out[np.arange(n, n + q), np.arange(n + q, na)] = True
+    return out
+
+
 OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held at a time
 
 
@@ -315,16 +329,19 @@ def _forward_block(
     hi: int,
     xs: np.ndarray,
     Ps: np.ndarray,
+    a_ptr: np.ndarray,
+    a_col: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
-    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty)."""
+    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty). The
+    augmented transitions' non-zeros are (a_ptr, a_col)."""
     n, q = A.shape[1], rows.shape[0]
+    na = x.shape[0]
     for k in range(lo, hi + 1):
         Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
         if k > 0:
-            x = Aa @ x
-            P = Aa @ P @ Aa.T + Qa
-            P = 0.5 * (P + P.T)
+            x = times_vector(Aa, x, a_ptr, a_col)
+            P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na))) + Qa
         x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k], False)
         if xs.shape[0] > 0:
             xs[k - lo] = x
@@ -348,6 +365,8 @@ def _two_filter_offline(
     last: int,
     block: int,
     stride: int,
+    a_ptr: np.ndarray,
+    a_col: np.ndarray,
 ):
     """`_offline_at` for every `stride`-th epoch m < last (NaN between) of the augmented model over epochs
     0..last, from the forward
@@ -374,7 +393,9 @@ def _two_filter_offline(
         ck_x[b] = x
         ck_P[b] = P
         if b < nb - 1:
-            x, P = _forward_block(A, Q, C, R, y, t, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P)
+            x, P = _forward_block(
+                A, Q, C, R, y, t, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P, a_ptr, a_col
+            )
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
     xs = np.zeros((block, na))
@@ -385,7 +406,7 @@ def _two_filter_offline(
     a = np.zeros(na)
     for b in range(nb - 1, -1, -1):
         lo, hi = b * block, min((b + 1) * block, N) - 1
-        _forward_block(A, Q, C, R, y, t, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps)
+        _forward_block(A, Q, C, R, y, t, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col)
         for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
             Ls[k - lo] = L
             als[k - lo] = a
@@ -393,7 +414,7 @@ def _two_filter_offline(
                 break
             Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
             L, a = information_update(L, a, Ca, R[k], y[k])
-            L, a = information_predict_back(L, a, Aa, Qa)
+            L, a = information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
         for k in range(lo, top + 1):
             if k % stride == 0:
@@ -442,6 +463,7 @@ def _offline(
         last,
         OFFLINE_BLOCK,
         stride,
+        *pattern_of_mask(augmented_mask(nonzero_mask(A), len(rows), ramp)),
     )
     kept = np.arange(last + 1) % stride == 0
     return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])

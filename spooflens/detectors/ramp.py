@@ -23,7 +23,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
-from spooflens.statespace import LinearGaussianModel, nonzero_pattern
+from spooflens.sparse_products import pattern
+from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
 LOG_2PI = math.log(2 * math.pi)
@@ -255,8 +256,8 @@ def ramp_statistics(
         float(np.sum(np.log(sigma**2))),
         log_prior,
         int(min_after),
-        *nonzero_pattern(model.A),
-        *nonzero_pattern(model.C),
+        *pattern(model.A),
+        *pattern(model.C),
     )
     glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds = out
     # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
