@@ -59,18 +59,89 @@ def masked_update(
     S and the updated P are symmetrised against round-off. `with_logdet` False skips the determinant
     (logdet_S NaN) for the filters that never use it (the navigation filter runs some 90 times per log).
     """
-    rows, Ck, Rk, yk = observed_parts(C, R, y)
-    if rows.shape[0] == 0:
-        return x, P, rows, np.empty(0), np.empty((0, 0)), np.empty((0, 0)), np.empty((x.shape[0], 0)), math.nan, 0.0
-    e = yk - Ck @ x
-    PCt = P @ Ck.T
-    S = Ck @ PCt + Rk
-    S = 0.5 * (S + S.T)
-    Sinv = np.linalg.inv(S)
+    rows = observed_rows(y)
+    m = rows.shape[0]
+    n = x.shape[0]
+    if m == 0:
+        return x, P, rows, np.empty(0), np.empty((0, 0)), np.empty((0, 0)), np.empty((n, 0)), math.nan, 0.0
+    # loops rather than matrix products: measurement matrices are mostly zeros (the navigation's H has
+    # 33 of 216 entries) and the operands so small that BLAS calls and temporaries cost more than the sums
+    PCt = np.zeros((n, m))
+    e = np.empty(m)
+    for a in range(m):
+        r = rows[a]
+        v = y[r]
+        for j in range(n):
+            c = C[r, j]
+            if c != 0.0:
+                v -= c * x[j]
+                for i in range(n):
+                    PCt[i, a] += P[i, j] * c
+        e[a] = v
+    S = np.empty((m, m))
+    for a in range(m):
+        for b in range(a + 1):
+            v = 0.5 * (R[rows[a], rows[b]] + R[rows[b], rows[a]])
+            ra, rb = rows[a], rows[b]
+            for j in range(n):
+                ca, cb = C[ra, j], C[rb, j]
+                if ca != 0.0:
+                    v += 0.5 * ca * PCt[j, b]
+                if cb != 0.0:
+                    v += 0.5 * cb * PCt[j, a]
+            S[a, b] = v
+            S[b, a] = v
+    Sinv, logdet = _spd_inverse(S)
+    if math.isnan(logdet):  # not positive definite to working precision: the general inverse
+        Sinv = np.ascontiguousarray(np.linalg.inv(S))
+        logdet = np.linalg.slogdet(S)[1]
     K = PCt @ Sinv
     x_new = x + K @ e
-    P_new = P - K @ PCt.T
-    P_new = 0.5 * (P_new + P_new.T)
+    P_new = np.empty((n, n))  # P - K PCt^T, symmetric: the lower triangle made, the upper mirrored
+    for i in range(n):
+        for j in range(i + 1):
+            v = 0.0
+            for a in range(m):
+                v += K[i, a] * PCt[j, a]
+            v = 0.5 * (P[i, j] + P[j, i]) - v
+            P_new[i, j] = v
+            P_new[j, i] = v
     nis = e @ Sinv @ e
-    logdet = np.linalg.slogdet(S)[1] if with_logdet else math.nan
-    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet
+    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet if with_logdet else math.nan
+
+
+@njit(cache=True)
+def _spd_inverse(S: np.ndarray) -> tuple[np.ndarray, float]:
+    """(S^-1, log det S) of a symmetric positive definite S by Cholesky; log det NaN when S is not."""
+    m = S.shape[0]
+    L = np.zeros((m, m))
+    logdet = 0.0
+    for i in range(m):
+        for j in range(i + 1):
+            v = S[i, j]
+            for c in range(j):
+                v -= L[i, c] * L[j, c]
+            if i == j:
+                if not v > 0.0:
+                    return S, math.nan
+                L[i, i] = math.sqrt(v)
+                logdet += 2.0 * math.log(L[i, i])
+            else:
+                L[i, j] = v / L[j, j]
+    Li = np.zeros((m, m))  # L^-1, lower triangular
+    for j in range(m):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, m):
+            v = 0.0
+            for c in range(j, i):
+                v -= L[i, c] * Li[c, j]
+            Li[i, j] = v / L[i, i]
+    out = np.empty((m, m))  # S^-1 = L^-T L^-1
+    for i in range(m):
+        for j in range(i + 1):
+            v = 0.0
+            for c in range(i, m):
+                v += Li[c, i] * Li[c, j]
+            out[i, j] = v
+            out[j, i] = v
+    return out, logdet

@@ -55,3 +55,19 @@ def test_nothing_observed_leaves_the_state_alone() -> None:
     np.testing.assert_array_equal(x1, x)
     np.testing.assert_array_equal(P1, P)
     np.testing.assert_array_equal(observed_rows(np.array([np.nan, 1.0, np.nan, 2.0])), [1, 3])
+
+
+def test_an_innovation_covariance_that_is_not_positive_definite_takes_the_general_inverse() -> None:
+    """S is inverted by Cholesky; when that fails (here R has a negative variance, so S is indefinite)
+    the update still gives the textbook numbers, from the general inverse."""
+    rng = np.random.default_rng(5)
+    x, P, C = rng.normal(size=3), 0.01 * np.eye(3), np.eye(2, 3)
+    R = np.diag([1.0, -4.0])
+    y = np.array([0.5, -1.0])
+    x1, P1, _rows, _e, S, Sinv, _K, nis, logdet = masked_update(x, P, C, R, y)
+    x2, P2, _e2, S2, nis2, logdet2 = _plain(x, P, C, R, y)
+    assert np.linalg.eigvalsh(S2).min() < 0
+    np.testing.assert_allclose(Sinv @ S, np.eye(2), atol=1e-12)
+    np.testing.assert_allclose(x1, x2, rtol=1e-12)
+    np.testing.assert_allclose(P1, P2, rtol=1e-12, atol=1e-15)
+    assert nis == pytest.approx(nis2) and logdet == pytest.approx(logdet2)
