@@ -1,4 +1,5 @@
-"""Products with a matrix whose zeros are the same at every epoch, compiled.
+"""Products with structured matrices, compiled: a matrix whose zeros are the same at every epoch, and a
+block-diagonal matrix (a dense leading block and a diagonal, `statespace.BlockDiagonal`).
 
 The navigation error model's transition matrices are block-diagonal (a 15 x 15 inertial block and a
 diagonal of Gauss-Markov states: 142 of 576 entries non-zero) and its measurement matrices sparser
@@ -119,3 +120,86 @@ def times_vector(A: np.ndarray, x: np.ndarray, ptr: np.ndarray, col: np.ndarray)
             s += A[i, col[z]] * x[col[z]]
         out[i] = s
     return out
+
+
+@njit(cache=True, nogil=True)
+def block_times_vector(head: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x for A = blockdiag(head, diag(tail))."""
+    h = head.shape[0]
+    out = np.empty(x.shape[0])
+    for i in range(h):
+        s = 0.0
+        for j in range(h):
+            s += head[i, j] * x[j]
+        out[i] = s
+    for i in range(tail.shape[0]):
+        out[h + i] = tail[i] * x[h + i]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def block_times(head: np.ndarray, tail: np.ndarray, X: np.ndarray, ptr: np.ndarray, col: np.ndarray, out: np.ndarray):
+    """out = A X for A = blockdiag(head, diag(tail)), head's non-zeros in (ptr, col)."""
+    h = head.shape[0]
+    times(head, X[:h], ptr, col, out[:h])
+    for i in range(tail.shape[0]):
+        for j in range(X.shape[1]):
+            out[h + i, j] = tail[i] * X[h + i, j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def block_congruence(head: np.ndarray, tail: np.ndarray, P: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out = A P A^T for A = blockdiag(head, diag(tail)) and symmetric P (out exactly symmetric)."""
+    h, r = head.shape[0], tail.shape[0]
+    Phh = np.ascontiguousarray(P[:h, :h])
+    hh = head @ Phh @ head.T
+    for i in range(h):
+        for j in range(i + 1):
+            v = 0.5 * (hh[i, j] + hh[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    if r > 0:
+        cross = head @ np.ascontiguousarray(P[:h, h:])
+        for j in range(r):
+            for i in range(h):
+                v = cross[i, j] * tail[j]
+                out[i, h + j] = v
+                out[h + j, i] = v
+            for i in range(r):
+                out[h + i, h + j] = P[h + i, h + j] * tail[i] * tail[j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def block_congruence_t(head: np.ndarray, tail: np.ndarray, M: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out = A^T M A for A = blockdiag(head, diag(tail)) and symmetric M (out exactly symmetric)."""
+    h, r = head.shape[0], tail.shape[0]
+    hh = head.T @ np.ascontiguousarray(M[:h, :h]) @ head
+    for i in range(h):
+        for j in range(i + 1):
+            v = 0.5 * (hh[i, j] + hh[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    if r > 0:
+        cross = np.ascontiguousarray(head.T) @ np.ascontiguousarray(M[:h, h:])
+        for j in range(r):
+            for i in range(h):
+                v = cross[i, j] * tail[j]
+                out[i, h + j] = v
+                out[h + j, i] = v
+            for i in range(r):
+                out[h + i, h + j] = M[h + i, h + j] * tail[i] * tail[j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def add_block_diagonal(P: np.ndarray, head: np.ndarray, tail: np.ndarray) -> np.ndarray:
+    """P += blockdiag(head, diag(tail)), in place."""
+    h = head.shape[0]
+    for i in range(h):
+        for j in range(h):
+            P[i, j] += head[i, j]
+    for i in range(tail.shape[0]):
+        P[h + i, h + i] += tail[i]
+    return P

@@ -5,6 +5,12 @@ The navigation filter exports its linearised error model in this form and every 
 
 Indexing: epoch k has x_k = A[k] x_{k-1} + w_k, w_k ~ N(0, Q[k]) (A[0], Q[0] unused: x_0 ~ N(x0, P0)),
 and y_k = C[k] x_k + e_k, e_k ~ N(0, R[k]). NaN entries of y[k] are missing measurements.
+
+A and Q are held as `BlockDiagonal`: a dense leading block and a diagonal. The navigation error model
+is that shape (15 inertial error states, then Gauss-Markov sensor errors that evolve each on its own),
+and holding it so is 0.4 of the memory of the full matrices (0.2 GB less per hour of 10 Hz GNSS) and
+less arithmetic in every filter over it; a general model is a leading block of full size and an
+empty diagonal (`BlockDiagonal.full`).
 """
 
 from __future__ import annotations
@@ -18,10 +24,57 @@ FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
+class BlockDiagonal:
+    """Per-epoch (n, n) matrices blockdiag(head[k], diag(tail[k])): head (N, h, h), tail (N, n - h)."""
+
+    head: FloatArray
+    tail: FloatArray
+
+    def __post_init__(self) -> None:
+        N, h, h2 = self.head.shape
+        if h != h2 or self.tail.ndim != 2 or self.tail.shape[0] != N:
+            raise ValueError(f"BlockDiagonal: head {self.head.shape} and tail {self.tail.shape} do not fit")
+
+    @classmethod
+    def full(cls, matrices: FloatArray) -> BlockDiagonal:
+        """General (N, n, n) matrices: all head, no diagonal part."""
+        return cls(matrices, np.zeros((matrices.shape[0], 0)))
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        N, h, _ = self.head.shape
+        n = h + self.tail.shape[1]
+        return (N, n, n)
+
+    def __len__(self) -> int:
+        return int(self.head.shape[0])
+
+    def __getitem__(self, epochs: slice) -> BlockDiagonal:
+        return BlockDiagonal(self.head[epochs], self.tail[epochs])
+
+    def at(self, k: int) -> FloatArray:
+        """The (n, n) matrix of epoch k."""
+        h = self.head.shape[1]
+        out = np.diag(np.r_[np.zeros(h), self.tail[k]])
+        out[:h, :h] = self.head[k]
+        return out
+
+    def dense(self) -> FloatArray:
+        """All epochs as (N, n, n) (for the small models of tests and benchmarks)."""
+        N, n, _ = self.shape
+        h = self.head.shape[1]
+        out = np.zeros((N, n, n))
+        out[:, :h, :h] = self.head
+        idx = np.arange(h, n)
+        out[:, idx, idx] = self.tail
+        return out
+
+
+@dataclass(frozen=True)
 class LinearGaussianModel:
     t: FloatArray  # (N,) epoch times, s since log start
-    A: FloatArray  # (N, n, n) transition into epoch k
-    Q: FloatArray  # (N, n, n) process noise covariance into epoch k
+    A: BlockDiagonal  # (N, n, n) transition into epoch k
+    Q: BlockDiagonal  # (N, n, n) process noise covariance into epoch k
     C: FloatArray  # (N, p, n) measurement matrix
     R: FloatArray  # (N, p, p) measurement noise covariance
     y: FloatArray  # (N, p) measurements, NaN where missing

@@ -20,7 +20,7 @@ from spooflens.detectors.mlrt import (
     ramp_two_filter_offline,
     two_filter_smoother,
 )
-from spooflens.statespace import LinearGaussianModel
+from spooflens.statespace import BlockDiagonal, LinearGaussianModel
 
 
 def random_model(
@@ -49,7 +49,7 @@ def random_model(
     y = np.array(ys)
     if missing:
         y[rng.uniform(size=y.shape) < 0.15] = np.nan
-    return LinearGaussianModel(t, A, Q, C, R, y, np.zeros(n), np.eye(n) * 2.0)
+    return LinearGaussianModel(t, BlockDiagonal.full(A), BlockDiagonal.full(Q), C, R, y, np.zeros(n), np.eye(n) * 2.0)
 
 
 def test_forward_filter_matches_filterpy() -> None:
@@ -59,7 +59,7 @@ def test_forward_filter_matches_filterpy() -> None:
     kf.x, kf.P = m.x0.copy(), m.P0.copy()
     for k in range(m.n_epochs):
         if k:
-            kf.F, kf.Q = m.A[k], m.Q[k]
+            kf.F, kf.Q = m.A.at(k), m.Q.at(k)
             kf.predict()
         kf.H, kf.R = m.C[k], m.R[k]
         kf.update(m.y[k])
@@ -76,7 +76,7 @@ def test_paper_two_filter_equals_willsky_jones_for_a_full_state_jump(
     model = random_model(seed, singular_q=singular_q, missing=missing)
     t = model.n_epochs - 1
     w = model.window(0, t + 1)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A.dense(), w.Q.dense(), w.C, w.R, w.y))
     info, _ = backward_information(A, Q, C, R, y, t, t - L)
     # a backward start this ill-conditioned loses digits in its inverse (condition 1e8 costs 1e-4 of the
     # log-likelihood's constant, seed 931 with L=2): double precision, not the identity, is tested there
@@ -134,7 +134,7 @@ def _wj_ramp(model: LinearGaussianModel, rows: tuple[int, ...], m: int, t: int) 
     mu = np.zeros((model.n_states, q))
     d, info = np.zeros(q), np.zeros((q, q))
     for k in range(m + 1, t + 1):
-        mu_p = model.A[k] @ mu
+        mu_p = model.A.at(k) @ mu
         G = np.zeros((model.n_measurements, q))
         for j, r in enumerate(rows):
             G[r, j] = model.t[k] - model.t[m]
@@ -175,9 +175,8 @@ def test_two_filter_smoother_equals_rts() -> None:
     model = random_model(11)
     xs, Ps = two_filter_smoother(model)
     fwd = forward_filter(model)
-    ref_x, ref_P, _, _ = rts_smoother(
-        fwd.x_upd.copy(), fwd.P_upd.copy(), np.r_[model.A[1:], model.A[-1:]], np.r_[model.Q[1:], model.Q[-1:]]
-    )
+    A, Q = model.A.dense(), model.Q.dense()
+    ref_x, ref_P, _, _ = rts_smoother(fwd.x_upd.copy(), fwd.P_upd.copy(), np.r_[A[1:], A[-1:]], np.r_[Q[1:], Q[-1:]])
     np.testing.assert_allclose(xs, ref_x, rtol=1e-7, atol=1e-9)
     np.testing.assert_allclose(Ps, ref_P, rtol=1e-6, atol=1e-9)
 
@@ -190,7 +189,7 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
     # stacked y = M x0 + sum of noise terms; a jump nu after m adds J nu
     rows_x = [np.eye(n)]
     for k in range(1, t + 1):
-        rows_x.append(model.A[k] @ rows_x[-1])
+        rows_x.append(model.A.at(k) @ rows_x[-1])
     mean = np.zeros((t + 1) * p)
     cov = np.zeros(((t + 1) * p, (t + 1) * p))
 
@@ -200,7 +199,7 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
         T = np.eye(n)
         for k in range(j, t + 1):
             if k > j:
-                T = model.A[k] @ T
+                T = model.A.at(k) @ T
             E[k * p : (k + 1) * p] = model.C[k] @ T
         return E
 
@@ -208,7 +207,7 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
     cov += E0 @ model.P0 @ E0.T
     for j in range(1, t + 1):
         Ej = effect(j)
-        cov += Ej @ model.Q[j] @ Ej.T
+        cov += Ej @ model.Q.at(j) @ Ej.T
     for k in range(t + 1):
         cov[k * p : (k + 1) * p, k * p : (k + 1) * p] += model.R[k]
     y = model.y[: t + 1].ravel()
@@ -243,7 +242,7 @@ def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
     last = 33
     aug = (augment_ramp if ramp else augment_step)(model.window(0, last + 1), rows)
     fwd = forward_filter(aug)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A, aug.Q, aug.C, aug.R, aug.y))
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (aug.A.dense(), aug.Q.dense(), aug.C, aug.R, aug.y))
     Lam, alpha = backward_information(A, Q, C, R, y, last, 0)
     first = -1 if ramp else model.n_states
     expected = np.array(

@@ -80,7 +80,7 @@ def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[
     kf.x, kf.P = model.x0.copy(), model.P0.copy()
     for k in range(min(400, model.n_epochs)):
         if k > 0:
-            kf.F, kf.Q = model.A[k], model.Q[k]
+            kf.F, kf.Q = model.A.at(k), model.Q.at(k)
             kf.predict()
         use = np.isfinite(model.y[k])
         kf.H, kf.R = model.C[k][use], model.R[k][np.ix_(use, use)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from spooflens.sparse_products import congruence, congruence_t, full_pattern, pattern, times, times_vector
 
@@ -44,3 +45,34 @@ def test_a_rectangular_pattern_and_the_full_pattern() -> None:
     assert list(fptr) == [0, 8, 16, 24] and list(fcol[:8]) == list(range(8))
     dense = rng.normal(size=(3, 8))
     np.testing.assert_allclose(times(dense, X, fptr, fcol, np.empty((3, 2))), dense @ X, rtol=1e-12, atol=1e-12)
+
+
+def test_block_diagonal_products_equal_the_dense_products() -> None:
+    from spooflens.sparse_products import (
+        add_block_diagonal,
+        block_congruence,
+        block_congruence_t,
+        block_times,
+        block_times_vector,
+    )
+    from spooflens.statespace import BlockDiagonal
+
+    rng = np.random.default_rng(6)
+    blocks = BlockDiagonal(rng.normal(size=(3, 4, 4)), rng.normal(size=(3, 2)))
+    assert blocks.shape == (3, 6, 6) and len(blocks[1:]) == 2
+    dense = blocks.dense()
+    np.testing.assert_array_equal(dense[2], blocks.at(2))
+    assert np.count_nonzero(dense[0][:4, 4:]) == 0 and np.count_nonzero(dense[0][4:, 4:] - np.diag(blocks.tail[0])) == 0
+    M = rng.normal(size=(6, 6))
+    M = M @ M.T
+    X = rng.normal(size=(6, 3))
+    ptr, col = pattern(blocks.head)
+    for k in range(3):
+        h, t, A = blocks.head[k], blocks.tail[k], dense[k]
+        np.testing.assert_allclose(block_congruence(h, t, M, np.empty((6, 6))), A @ M @ A.T, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(block_congruence_t(h, t, M, np.empty((6, 6))), A.T @ M @ A, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(block_times(h, t, X, ptr, col, np.empty((6, 3))), A @ X, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(block_times_vector(h, t, X[:, 0]), A @ X[:, 0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(add_block_diagonal(M.copy(), h, t), M + A, rtol=0, atol=0)
+    with pytest.raises(ValueError, match="do not fit"):
+        BlockDiagonal(np.zeros((3, 4, 4)), np.zeros((2, 2)))

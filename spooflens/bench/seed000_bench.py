@@ -177,7 +177,7 @@ def _redraw(model: LinearGaussianModel, rng: np.random.Generator) -> LinearGauss
     y = np.empty_like(model.y)
     for k in range(N):
         if k:
-            x = model.A[k] @ x + rng.multivariate_normal(np.zeros(n), model.Q[k], method="eigh")
+            x = model.A.at(k) @ x + rng.multivariate_normal(np.zeros(n), model.Q.at(k), method="eigh")
         y[k] = model.C[k] @ x + rng.multivariate_normal(np.zeros(model.n_measurements), model.R[k])
     return replace(model, y=np.where(np.isfinite(model.y), y, np.nan))
 

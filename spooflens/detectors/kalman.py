@@ -14,7 +14,13 @@ from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.kalman_update import masked_update, observed_parts
-from spooflens.sparse_products import congruence_t, full_pattern
+from spooflens.sparse_products import (
+    add_block_diagonal,
+    block_congruence,
+    block_times_vector,
+    congruence_t,
+    full_pattern,
+)
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -48,8 +54,10 @@ class ForwardResult:
 
 @njit(cache=CACHE, nogil=True)
 def _forward(
-    A: np.ndarray,
-    Q: np.ndarray,
+    A_head: np.ndarray,
+    A_tail: np.ndarray,
+    Q_head: np.ndarray,
+    Q_tail: np.ndarray,
     C: np.ndarray,
     R: np.ndarray,
     y: np.ndarray,
@@ -75,9 +83,8 @@ def _forward(
     P = P0.copy()
     for k in range(N):
         if k > 0:
-            x = A[k] @ x
-            P = A[k] @ P @ A[k].T + Q[k]
-            P = 0.5 * (P + P.T)
+            x = block_times_vector(A_head[k], A_tail[k], x)
+            P = add_block_diagonal(block_congruence(A_head[k], A_tail[k], P, np.empty((n, n))), Q_head[k], Q_tail[k])
         if keep_states:
             xp[k] = x
             Pp[k] = P
@@ -106,8 +113,10 @@ def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> Forw
     (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
     innovations, gains and S does without)."""
     out = _forward(
-        np.ascontiguousarray(model.A),
-        np.ascontiguousarray(model.Q),
+        np.ascontiguousarray(model.A.head),
+        np.ascontiguousarray(model.A.tail),
+        np.ascontiguousarray(model.Q.head),
+        np.ascontiguousarray(model.Q.tail),
         np.ascontiguousarray(model.C),
         np.ascontiguousarray(model.R),
         np.ascontiguousarray(model.y),

@@ -43,7 +43,7 @@ from spooflens.detectors.kalman import (
 )
 from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
-from spooflens.statespace import LinearGaussianModel
+from spooflens.statespace import BlockDiagonal, LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
 LOG_2PI = math.log(2 * math.pi)
@@ -100,7 +100,7 @@ def paper_two_filter(
     w = model.window(0, t + 1)
     fwd = forward_filter(w)
     VF, DF = fwd.V, fwd.D
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A.dense(), w.Q.dense(), w.C, w.R, w.y))
     info_L, info_a = backward_information(A, Q, C, R, y, t, t - L)
     Lam, alpha = info_L[0], info_a[0]  # information on x_{t-L} from y_{t-L+1..t}
     if prior_information is not None:
@@ -158,7 +158,7 @@ def full_jump_constants(model: LinearGaussianModel, res: PaperMlrt) -> FloatArra
     """
     t, L = res.t_index, res.L
     w = model.window(0, t + 1)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A, w.Q, w.C, w.R, w.y))
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (w.A.dense(), w.Q.dense(), w.C, w.R, w.y))
     Lam, alpha, c = _info_constant(A, Q, C, R, y, t, t - L)
     n = model.n_states
     _, logdet_lam = np.linalg.slogdet(Lam)
@@ -195,7 +195,7 @@ def _full_jump_wj(
 def full_jump_wj(model: LinearGaussianModel, t: int, m: NDArray[np.integer] | FloatArray) -> FloatArray:
     """2 log LR of a full-state jump after m, flat prior of density 1, from Willsky-Jones signatures."""
     fwd = forward_filter(model.window(0, t + 1))
-    A = np.ascontiguousarray(model.A[: t + 1])
+    A = model.A[: t + 1].dense()
     C = np.ascontiguousarray(model.C[: t + 1])
     out = []
     for mm in m:
@@ -214,13 +214,13 @@ def augment_ramp(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGau
     n, q, N = model.n_states, len(rows), model.n_epochs
     na = n + 2 * q
     A = np.zeros((N, na, na))
-    A[:, :n, :n] = model.A
+    A[:, :n, :n] = model.A.dense()
     A[:, n : n + q, n : n + q] = np.eye(q)
     A[:, n + q :, n + q :] = np.eye(q)
     dt = np.r_[0.0, np.diff(model.t)]
     A[:, n : n + q, n + q :] = dt[:, None, None] * np.eye(q)
     Q = np.zeros((N, na, na))
-    Q[:, :n, :n] = model.Q
+    Q[:, :n, :n] = model.Q.dense()
     C = np.zeros((N, model.n_measurements, na))
     C[:, :, :n] = model.C
     for j, r in enumerate(rows):
@@ -229,7 +229,16 @@ def augment_ramp(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGau
     P0[:n, :n] = model.P0
     names = (*model.state_names, *[f"theta_{r}" for r in rows], *[f"rate_{r}" for r in rows])
     return LinearGaussianModel(
-        model.t, A, Q, C, model.R, model.y, np.r_[model.x0, np.zeros(2 * q)], P0, names, model.measurement_names
+        model.t,
+        BlockDiagonal.full(A),
+        BlockDiagonal.full(Q),
+        C,
+        model.R,
+        model.y,
+        np.r_[model.x0, np.zeros(2 * q)],
+        P0,
+        names,
+        model.measurement_names,
     )
 
 
@@ -277,16 +286,30 @@ class RampOffline:
 
 @njit(cache=True)
 def _augmented(
-    A: np.ndarray, Q: np.ndarray, C: np.ndarray, n: int, q: int, rows: np.ndarray, dt: float, ramp: bool
+    A_head: np.ndarray,
+    A_tail: np.ndarray,
+    Q_head: np.ndarray,
+    Q_tail: np.ndarray,
+    C: np.ndarray,
+    n: int,
+    q: int,
+    rows: np.ndarray,
+    dt: float,
+    ramp: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp): the same numbers, built when
-    needed rather than stored for every epoch (three (N, na, na) arrays: 0.6 GB per hour at 10 Hz)."""
+    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp) from the model's blocks: the same
+    numbers, built when needed rather than stored for every epoch (three (N, na, na) arrays: 0.6 GB per
+    hour at 10 Hz)."""
     na = n + (2 * q if ramp else q)
+    h = A_head.shape[0]
     Aa = np.zeros((na, na))
     Qa = np.zeros((na, na))
     Ca = np.zeros((C.shape[0], na))
-    Aa[:n, :n] = A
-    Qa[:n, :n] = Q
+    Aa[:h, :h] = A_head
+    Qa[:h, :h] = Q_head
+    for i in range(n - h):
+        Aa[h + i, h + i] = A_tail[i]
+        Qa[h + i, h + i] = Q_tail[i]
     Ca[:, :n] = C
     for j in range(na - n):
         Aa[n + j, n + j] = 1.0
@@ -296,6 +319,15 @@ def _augmented(
     for j in range(q):
         Ca[rows[j], n + j] = 1.0
     return Aa, Qa, Ca
+
+
+def block_mask(A: BlockDiagonal) -> NDArray[np.bool_]:
+    """Where the (n, n) matrices of A can be non-zero: the leading block's non-zeros and the diagonal."""
+    n = A.shape[1]
+    h = A.head.shape[1]
+    out = np.eye(n, dtype=bool)
+    out[:h, :h] = nonzero_mask(A.head)
+    return out
 
 
 def augmented_mask(a_mask: NDArray[np.bool_], q: int, ramp: bool) -> NDArray[np.bool_]:
@@ -315,8 +347,10 @@ OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held
 
 @njit(cache=True)
 def _forward_block(
-    A: np.ndarray,
-    Q: np.ndarray,
+    A_head: np.ndarray,
+    A_tail: np.ndarray,
+    Q_head: np.ndarray,
+    Q_tail: np.ndarray,
     C: np.ndarray,
     R: np.ndarray,
     y: np.ndarray,
@@ -335,10 +369,11 @@ def _forward_block(
     """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
     epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty). The
     augmented transitions' non-zeros are (a_ptr, a_col)."""
-    n, q = A.shape[1], rows.shape[0]
+    n, q = A_head.shape[1] + A_tail.shape[1], rows.shape[0]
     na = x.shape[0]
     for k in range(lo, hi + 1):
-        Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1] if k > 0 else 0.0, ramp)
+        dt = t[k] - t[k - 1] if k > 0 else 0.0
+        Aa, Qa, Ca = _augmented(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, dt, ramp)
         if k > 0:
             x = times_vector(Aa, x, a_ptr, a_col)
             P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na))) + Qa
@@ -351,8 +386,10 @@ def _forward_block(
 
 @njit(cache=True, nogil=True)
 def _two_filter_offline(
-    A: np.ndarray,
-    Q: np.ndarray,
+    A_head: np.ndarray,
+    A_tail: np.ndarray,
+    Q_head: np.ndarray,
+    Q_tail: np.ndarray,
     C: np.ndarray,
     R: np.ndarray,
     y: np.ndarray,
@@ -394,7 +431,24 @@ def _two_filter_offline(
         ck_P[b] = P
         if b < nb - 1:
             x, P = _forward_block(
-                A, Q, C, R, y, t, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P, a_ptr, a_col
+                A_head,
+                A_tail,
+                Q_head,
+                Q_tail,
+                C,
+                R,
+                y,
+                t,
+                rows,
+                ramp,
+                x,
+                P,
+                b * block,
+                (b + 1) * block - 1,
+                no_x,
+                no_P,
+                a_ptr,
+                a_col,
             )
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
@@ -406,13 +460,32 @@ def _two_filter_offline(
     a = np.zeros(na)
     for b in range(nb - 1, -1, -1):
         lo, hi = b * block, min((b + 1) * block, N) - 1
-        _forward_block(A, Q, C, R, y, t, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col)
+        _forward_block(
+            A_head,
+            A_tail,
+            Q_head,
+            Q_tail,
+            C,
+            R,
+            y,
+            t,
+            rows,
+            ramp,
+            ck_x[b].copy(),
+            ck_P[b].copy(),
+            lo,
+            hi,
+            xs,
+            Ps,
+            a_ptr,
+            a_col,
+        )
         for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
             Ls[k - lo] = L
             als[k - lo] = a
             if k == 0:
                 break
-            Aa, Qa, Ca = _augmented(A[k], Q[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
+            Aa, Qa, Ca = _augmented(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
             L, a = information_update(L, a, Ca, R[k], y[k])
             L, a = information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
@@ -447,10 +520,13 @@ def _offline(
     last = model.n_epochs - 1 if last is None else last
     stride = max(1, int(stride))
     # views where the model's arrays are contiguous already (the navigation's are): no copies
-    A, Q, C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.A, model.Q, model.C, model.R, model.y))
+    A, Q = model.A[: last + 1], model.Q[: last + 1]
+    C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.C, model.R, model.y))
     bf, flat = _two_filter_offline(
-        A,
-        Q,
+        np.ascontiguousarray(A.head),
+        np.ascontiguousarray(A.tail),
+        np.ascontiguousarray(Q.head),
+        np.ascontiguousarray(Q.tail),
         C,
         R,
         y,
@@ -463,7 +539,7 @@ def _offline(
         last,
         OFFLINE_BLOCK,
         stride,
-        *pattern_of_mask(augmented_mask(nonzero_mask(A), len(rows), ramp)),
+        *pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp)),
     )
     kept = np.arange(last + 1) % stride == 0
     return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])
@@ -474,10 +550,10 @@ def augment_step(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGau
     n, q, N = model.n_states, len(rows), model.n_epochs
     na = n + q
     A = np.zeros((N, na, na))
-    A[:, :n, :n] = model.A
+    A[:, :n, :n] = model.A.dense()
     A[:, n:, n:] = np.eye(q)
     Q = np.zeros((N, na, na))
-    Q[:, :n, :n] = model.Q
+    Q[:, :n, :n] = model.Q.dense()
     C = np.zeros((N, model.n_measurements, na))
     C[:, :, :n] = model.C
     for j, r in enumerate(rows):
@@ -486,7 +562,16 @@ def augment_step(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGau
     P0[:n, :n] = model.P0
     names = (*model.state_names, *[f"step_{r}" for r in rows])
     return LinearGaussianModel(
-        model.t, A, Q, C, model.R, model.y, np.r_[model.x0, np.zeros(q)], P0, names, model.measurement_names
+        model.t,
+        BlockDiagonal.full(A),
+        BlockDiagonal.full(Q),
+        C,
+        model.R,
+        model.y,
+        np.r_[model.x0, np.zeros(q)],
+        P0,
+        names,
+        model.measurement_names,
     )
 
 
@@ -528,7 +613,7 @@ def two_filter_smoother(model: LinearGaussianModel) -> tuple[FloatArray, FloatAr
     """x_s = P (P_F^-1 x_F + Lambda_B-part), P = (P_F^-1 + Lambda_B)^-1, combining the forward filtered
     estimate with the backward information from the later data (Lambda_B = (P^B_{t|t+1})^-1)."""
     fwd = forward_filter(model)
-    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (model.A, model.Q, model.C, model.R, model.y))
+    A, Q, C, R, y = (np.ascontiguousarray(a) for a in (model.A.dense(), model.Q.dense(), model.C, model.R, model.y))
     Lam, alpha = backward_information(A, Q, C, R, y, model.n_epochs - 1, 0)
     xs = np.zeros_like(fwd.x_upd)
     Ps = np.zeros_like(fwd.P_upd)

@@ -23,7 +23,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
-from spooflens.sparse_products import pattern
+from spooflens.sparse_products import block_times, pattern
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -80,7 +80,8 @@ def _quad_inv(L: np.ndarray, d: np.ndarray, w: np.ndarray) -> float:
 
 @njit(cache=True, nogil=True)
 def _ramp_pass(
-    A: np.ndarray,
+    A_head: np.ndarray,
+    A_tail: np.ndarray,
     C: np.ndarray,
     K: np.ndarray,
     Sinv: np.ndarray,
@@ -98,11 +99,13 @@ def _ramp_pass(
     c_ptr: np.ndarray,
     c_col: np.ndarray,
 ):
-    # Explicit loops over A's and C's non-zero pattern and a hand Cholesky for the q x q matrices: the
-    # navigation model's A is block-diagonal (142 of 576 entries) and BLAS/LAPACK calls on 24 x 3 and
-    # 3 x 3 operands cost more in overhead than in arithmetic (2.1x faster than the matrix-operator form).
+    # Explicit loops over the non-zero pattern of A's leading block and of C, and a hand Cholesky for the
+    # q x q matrices: the navigation model's A is block-diagonal (142 of 576 entries) and BLAS/LAPACK calls
+    # on 24 x 3 and 3 x 3 operands cost more in overhead than in arithmetic (2.1x faster than the
+    # matrix-operator form).
     N = eps.shape[0]
-    n = A.shape[1]
+    h = A_head.shape[1]
+    n = h + A_tail.shape[1]
     p = C.shape[1]
     q = rows.shape[0]
     glr = np.full(N, np.nan)
@@ -132,15 +135,7 @@ def _ramp_pass(
             dt = t[k] - t[m]
             if dt > window_s:
                 break
-            Ak = A[k]
-            for i in range(n):
-                for j in range(q):
-                    mu_p[i, j] = 0.0
-                for z in range(a_ptr[i], a_ptr[i + 1]):
-                    col = a_col[z]
-                    a = Ak[i, col]
-                    for j in range(q):
-                        mu_p[i, j] += a * mu[col, j]
+            block_times(A_head[k], A_tail[k], mu, a_ptr, a_col, mu_p)
             Ck = C[k]
             for r in range(p):
                 for j in range(q):
@@ -243,7 +238,8 @@ def ramp_statistics(
     log_prior = np.log(np.clip(attacks_per_hour * spacing / 3600.0, 1e-300, 0.5))
     sigma = np.asarray(sigma_rate, dtype=float)
     out = _ramp_pass(
-        np.ascontiguousarray(model.A),
+        np.ascontiguousarray(model.A.head),
+        np.ascontiguousarray(model.A.tail),
         np.ascontiguousarray(model.C),
         np.ascontiguousarray(fwd.K),
         np.ascontiguousarray(fwd.Sinv),
@@ -256,7 +252,7 @@ def ramp_statistics(
         float(np.sum(np.log(sigma**2))),
         log_prior,
         int(min_after),
-        *pattern(model.A),
+        *pattern(model.A.head),
         *pattern(model.C),
     )
     glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds = out

@@ -25,6 +25,7 @@ from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
 from spooflens.kalman_update import masked_update
+from spooflens.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
 CACHE = True
@@ -321,8 +322,11 @@ def filter_loop(
     out_H = np.zeros((M if keep_h else 1, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
-    out_Phi = np.zeros((M if keep_phi else 1, NE, NE))
-    out_Qd = np.zeros((M if keep_qd else 1, NE, NE))
+    # Phi and Qd are block-diagonal (the INS block, then each Gauss-Markov state on its own): kept so
+    out_Phi = np.zeros((M if keep_phi else 1, 15, 15))
+    out_Phi_gm = np.zeros((M if keep_phi else 1, NG))
+    out_Qd = np.zeros((M if keep_qd else 1, 15, 15))
+    out_Qd_gm = np.zeros((M if keep_qd else 1, NG))
     P_pred = np.zeros((M if keep_pred else 1, NE, NE))
     P_upd = np.zeros((M if keep_upd else 1, NE, NE))
     out_dx = np.zeros((M, NE))
@@ -345,8 +349,10 @@ def filter_loop(
             target = k
         if target > N - 1:
             target = N - 1
-        Phi_acc = np.eye(NE)
-        Qd_acc = np.zeros((NE, NE))
+        Phi_acc = np.eye(15)
+        Phi_acc_gm = np.ones(NG)
+        Qd_acc = np.zeros((15, 15))
+        Qd_acc_gm = np.zeros(NG)
         while k < target:
             j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
             if j > target:
@@ -372,16 +378,13 @@ def filter_loop(
                 P[15 + i, 15 + i] += qg[i]
             # the epoch-to-epoch Qd and Phi, made only to be kept (nothing else reads them)
             if keep_qd:
-                Qd_acc = _propagate_blocks(Qd_acc, Phi15, decay)
-                for r in range(15):
-                    for c in range(15):
-                        Qd_acc[r, c] += Qd15[r, c]
+                Qd_acc = Phi15 @ Qd_acc @ Phi15.T + Qd15
                 for i in range(NG):
-                    Qd_acc[15 + i, 15 + i] += qg[i]
+                    Qd_acc_gm[i] = Qd_acc_gm[i] * decay[i] * decay[i] + qg[i]
             if keep_phi:
-                Phi_acc[:15, :] = Phi15 @ np.ascontiguousarray(Phi_acc[:15, :])
+                Phi_acc = Phi15 @ Phi_acc
                 for i in range(NG):
-                    Phi_acc[15 + i, :] *= decay[i]
+                    Phi_acc_gm[i] *= decay[i]
             k = j
             track[nt, 0] = x[21]
             track[nt, 1:4] = x[0:3]
@@ -391,8 +394,10 @@ def filter_loop(
         P = 0.5 * (P + P.T)
         if keep_phi:
             out_Phi[e] = Phi_acc
+            out_Phi_gm[e] = Phi_acc_gm
         if keep_qd:
-            out_Qd[e] = Qd_acc
+            out_Qd[e] = 0.5 * (Qd_acc + Qd_acc.T)
+            out_Qd_gm[e] = Qd_acc_gm
         if keep_pred:
             P_pred[e] = P
         elif e == 0:
@@ -471,7 +476,9 @@ def filter_loop(
         nis,
         dof,
         out_Phi,
+        out_Phi_gm,
         out_Qd,
+        out_Qd_gm,
         P_pred,
         P_upd,
         out_dx,
@@ -483,7 +490,9 @@ def filter_loop(
 
 
 @njit(cache=CACHE)
-def rts_closed_loop(P_upd: np.ndarray, Phi: np.ndarray, Qd: np.ndarray, dx: np.ndarray):
+def rts_closed_loop(
+    P_upd: np.ndarray, Phi: np.ndarray, Phi_gm: np.ndarray, Qd: np.ndarray, Qd_gm: np.ndarray, dx: np.ndarray
+):
     """Rauch-Tung-Striebel smoothing of a closed-loop error-state filter (resets at every update).
 
     After a reset the filtered error is zero with covariance P_upd[e]; the next epoch's filtered error,
@@ -491,24 +500,32 @@ def rts_closed_loop(P_upd: np.ndarray, Phi: np.ndarray, Qd: np.ndarray, dx: np.n
     is delta_e = A_e (dx[e+1] + delta_{e+1}), A_e = P_upd[e] Phi[e+1]^T P_pred[e+1]^-1, and
     P_s[e] = P_upd[e] + A_e (P_s[e+1] - P_pred[e+1]) A_e^T, with P_pred[e+1] = Phi[e+1] P_upd[e]
     Phi[e+1]^T + Qd[e+1] made here (the filter does not keep it: 166 MB per hour of 10 Hz GNSS; equal to
-    the filter's block-by-block propagation up to rounding).
+    the filter's block-by-block propagation up to rounding). Phi and Qd come as their blocks (the INS
+    block, and the diagonal of the Gauss-Markov states).
     Returns delta and the smoothed variances (the diagonal of every P_s[e]: all any consumer reads, and
     a 24th of the memory of the full matrices).
     """
     M, n = dx.shape
+    h = Phi.shape[1]
     delta = np.zeros((M, n))
     var = np.zeros((M, n))
     P_next = P_upd[M - 1].copy()
     for i in range(n):
         var[M - 1, i] = P_next[i, i]
+    cross = np.empty((n, n))
     for e in range(M - 2, -1, -1):
-        PhiT = np.ascontiguousarray(Phi[e + 1].T)
-        cross = P_upd[e] @ PhiT
-        pred = Phi[e + 1] @ cross + Qd[e + 1]
-        pred = 0.5 * (pred + pred.T)
+        # cross = P_upd[e] Phi[e+1]^T, Phi block-diagonal
+        Pu = P_upd[e]
+        cross[:, :h] = np.ascontiguousarray(Pu[:, :h]) @ np.ascontiguousarray(Phi[e + 1].T)
+        for j in range(h, n):
+            for i in range(n):
+                cross[i, j] = Pu[i, j] * Phi_gm[e + 1, j - h]
+        pred = add_block_diagonal(
+            block_congruence(Phi[e + 1], Phi_gm[e + 1], Pu, np.empty((n, n))), Qd[e + 1], Qd_gm[e + 1]
+        )
         A = np.linalg.solve(pred.T, cross.T).T
         delta[e] = A @ (dx[e + 1] + delta[e + 1])
-        Ps = P_upd[e] + A @ (P_next - pred) @ A.T
+        Ps = Pu + A @ (P_next - pred) @ A.T
         P_next = 0.5 * (Ps + Ps.T)
         for i in range(n):
             var[e, i] = P_next[i, i]

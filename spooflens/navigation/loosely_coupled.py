@@ -27,6 +27,7 @@ from spooflens.navigation.error_model import (
 )
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.strapdown import NavState, Preintegrated, preintegrate
+from spooflens.statespace import BlockDiagonal
 
 FloatArray = NDArray[np.float64]
 DEFAULT_SIGMA_POS = (3.7, 3.7, 6.0)  # seed 000's R when a log reports no accuracy
@@ -170,8 +171,8 @@ class NavSolution:
     H: FloatArray  # (M, 9, 24)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
-    Phi: FloatArray  # (M, 24, 24) from the previous epoch (identity at the first)
-    Qd: FloatArray  # (M, 24, 24)
+    Phi: BlockDiagonal  # (M, 24, 24) from the previous epoch (identity at the first): 15 x 15 block, diagonal
+    Qd: BlockDiagonal  # (M, 24, 24), the same shape
     P_pred: FloatArray  # (M, 24, 24) when recorded; else the first epoch only
     P_upd: FloatArray  # (M, 24, 24); with P_upd_every > 1, epochs 0, P_upd_every, 2 P_upd_every, ... only
     dx: FloatArray  # (M, 24) update (INS part applied to the nominal state, receiver part kept)
@@ -411,28 +412,30 @@ def _run(
     if opts.initial_covariance is not None:
         P0 = np.array(opts.initial_covariance, dtype=float)
     g0 = np.zeros(len(gm_sigma)) if opts.initial_gm is None else np.array(opts.initial_gm, dtype=float)
-    (z, nu, S, S_all, R, H, nis, dof, Phi, Qd, P_pred, P_upd, dx, gm, states, track, track_epoch) = kernels.filter_loop(
-        pre.t,
-        pre.Qb,
-        pre.G,
-        pre.H,
-        pre.f,
-        s.to_vector(),
-        P0,
-        qc,
-        float(opts.max_block_s),
-        tf,
-        np.c_[np.radians(llh[:, 0]), np.radians(llh[:, 1]), llh[:, 2]],
-        vel,
-        odo,
-        np.ascontiguousarray(R_vb, dtype=float),
-        sigma,
-        use,
-        gm_tau,
-        gm_sigma,
-        g0,
-        _kept(opts.record),
-        opts.compare,
+    (z, nu, S, S_all, R, H, nis, dof, Phi, Phi_gm, Qd, Qd_gm, P_pred, P_upd, dx, gm, states, track, track_epoch) = (
+        kernels.filter_loop(
+            pre.t,
+            pre.Qb,
+            pre.G,
+            pre.H,
+            pre.f,
+            s.to_vector(),
+            P0,
+            qc,
+            float(opts.max_block_s),
+            tf,
+            np.c_[np.radians(llh[:, 0]), np.radians(llh[:, 1]), llh[:, 2]],
+            vel,
+            odo,
+            np.ascontiguousarray(R_vb, dtype=float),
+            sigma,
+            use,
+            gm_tau,
+            gm_sigma,
+            g0,
+            _kept(opts.record),
+            opts.compare,
+        )
     )
     return NavSolution(
         imu_id,
@@ -449,8 +452,8 @@ def _run(
         H,
         nis,
         dof,
-        Phi,
-        Qd,
+        BlockDiagonal(Phi, Phi_gm),
+        BlockDiagonal(Qd, Qd_gm),
         P_pred,
         P_upd,
         dx,

@@ -33,7 +33,7 @@ class SmoothedSolution:
 def smooth(sol: NavSolution) -> SmoothedSolution:
     if sol.P_upd_every != 1:
         raise ValueError("smooth needs every epoch's updated covariance; this solution kept a part of them")
-    delta, var = kernels.rts_closed_loop(sol.P_upd, sol.Phi, sol.Qd, sol.dx)
+    delta, var = kernels.rts_closed_loop(sol.P_upd, sol.Phi.head, sol.Phi.tail, sol.Qd.head, sol.Qd.tail, sol.dx)
     state = np.array([kernels.correct(x, d[:15]) for x, d in zip(sol.state, delta, strict=True)])
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 

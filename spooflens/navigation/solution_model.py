@@ -22,9 +22,11 @@ def error_model(sol: NavSolution) -> LinearGaussianModel:
     M, n = sol.dx.shape
     applied = sol.dx.copy()
     applied[:, 15:] = 0.0
-    u = np.zeros((M, n))
+    u = np.zeros((M, n))  # the Gauss-Markov part stays zero: nothing is applied there
+    head = sol.Phi.head
+    h = head.shape[1]
     for k in range(1, M):
-        u[k] = sol.Phi[k] @ (u[k - 1] + applied[k - 1])
+        u[k, :h] = head[k] @ (u[k - 1, :h] + applied[k - 1, :h])
     y = sol.z + np.einsum("kij,kj->ki", sol.H, u)
     y = np.where(sol.used, y, np.nan)
     return LinearGaussianModel(
