@@ -40,7 +40,7 @@ from spooflens.navigation.loosely_coupled import (
     nis_by_pattern,
     run_prepared,
 )
-from spooflens.navigation.product import Navigation
+from spooflens.navigation.product import P_UPD_EVERY, Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.quantiles import chi2_isf
@@ -144,7 +144,14 @@ def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, 
     x, P, g = sol.state[k0], sol.P_upd[k0 // sol.P_upd_every], sol.gm[k0]
     if k0 == k:
         return x, P, g
-    opts = replace(sol.options, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g, record=("P_upd",))
+    opts = replace(
+        sol.options,
+        initial=NavState.from_vector(x),
+        initial_covariance=P,
+        initial_gm=g,
+        record=("P_upd",),
+        P_upd_every=1,
+    )
     head = run_prepared(nav.inputs.between(float(sol.t[k0]), float(sol.t[k])), opts)
     return head.state[-1], head.P_upd[-1], head.gm[-1]
 
@@ -427,7 +434,11 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
                 if i.is_spoofing
             )
             # what later coasts start from: the states and covariances after each update (no other matrices)
-            base = run_prepared(nav.inputs, nav.options(exclude_windows=windows, record=("P_upd",)), nav.start)
+            base = run_prepared(
+                nav.inputs,
+                nav.options(exclude_windows=windows, record=("P_upd",), P_upd_every=P_UPD_EVERY),
+                nav.start,
+            )
     incidents = _merge_overlapping(incidents)
     confirmed = [i for i in incidents if i.is_spoofing]
     for inc in confirmed:

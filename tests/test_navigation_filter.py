@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,24 @@ def test_smoothed_position_error_is_below_the_filtered_one(ground: tuple[EpochTa
     err = _errors(table, sm.t, sm.state)[settled]
     sigma = np.sqrt(sm.var[settled][:, 6:9])
     assert np.mean(np.abs(err) < 3 * sigma) > 0.97
+
+
+@pytest.mark.parametrize("every", [7, 10])
+def test_smoothing_from_every_nth_updated_covariance_equals_smoothing_from_all(
+    ground: tuple[EpochTable, NavSolution], every: int
+) -> None:
+    """A solution that kept the updated covariance of every n-th epoch only is smoothed as the full one
+    (the smoother makes the others again, so each run of n epochs and the last, shorter one agree)."""
+    table, full = ground
+    opts = FilterOptions(grade=SCENARIOS["ground"].imu_grade, P_upd_every=every)
+    thinned = run_filter(table, options=opts)
+    assert len(thinned.P_upd) == -(-len(thinned.t) // every) and len(thinned.t) % every != 0
+    np.testing.assert_array_equal(thinned.P_upd, full.P_upd[::every])
+    a, b = smooth(full), smooth(thinned)
+    np.testing.assert_allclose(b.delta, a.delta, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(b.var, a.var, rtol=1e-7, atol=1e-12)
+    with pytest.raises(ValueError, match="record="):
+        smooth(run_filter(table, options=replace(opts, record=("Phi", "Qd", "P_upd"))))
 
 
 def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[EpochTable, NavSolution]) -> None:

@@ -54,7 +54,7 @@ def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full
     nav = solve_navigation(table, AnalyzeOptions())
     every = nav.solution.P_upd_every
     assert every == 10 and len(nav.solution.P_upd) == -(-len(nav.solution.t) // every)
-    full = run_prepared(nav.inputs, replace(nav.solution.options, record=ANALYSIS_NEEDS), nav.start)
+    full = run_prepared(nav.inputs, replace(nav.solution.options, record=ANALYSIS_NEEDS, P_upd_every=1), nav.start)
     assert full.P_upd_every == 1 and np.array_equal(full.nu, nav.solution.nu, equal_nan=True)
     for t_from in (100.0, 123.37, 187.05):  # on a kept epoch, between, just after one
         thinned, whole = coast(nav, t_from, t_from + 40.0), coast(nav, t_from, t_from + 40.0, base=full)

@@ -301,8 +301,10 @@ def filter_loop(
     g0: np.ndarray,
     keep: np.ndarray,
     compare: bool = True,
+    upd_every: int = 1,
 ):
-    """The closed-loop filter over all epochs; returns the per-epoch and per-block records.
+    """The closed-loop filter over all epochs; returns the per-epoch and per-block records (the updated
+    covariance of every `upd_every`-th epoch only, when kept).
 
     The 15 INS error states are fed back into the nominal state and reset at every update; the six
     Gauss-Markov receiver-error states are not (they are no error of the INS) and carry their estimate.
@@ -328,7 +330,7 @@ def filter_loop(
     out_Qd = np.zeros((M if keep_qd else 1, 15, 15))
     out_Qd_gm = np.zeros((M if keep_qd else 1, NG))
     P_pred = np.zeros((M if keep_pred else 1, NE, NE))
-    P_upd = np.zeros((M if keep_upd else 1, NE, NE))
+    P_upd = np.zeros(((M - 1) // upd_every + 1 if keep_upd else 1, NE, NE))
     out_dx = np.zeros((M, NE))
     gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
@@ -446,8 +448,8 @@ def filter_loop(
             x = correct(x, dx[:15])
             g = g + dx[15:]
             out_dx[e] = dx
-        if keep_upd:
-            P_upd[e] = P
+        if keep_upd and e % upd_every == 0:
+            P_upd[e // upd_every] = P
         states[e] = x
         gm[e] = g
         if nt > 0 and track[nt - 1, 0] == x[21]:
@@ -491,7 +493,16 @@ def filter_loop(
 
 @njit(cache=CACHE)
 def rts_closed_loop(
-    P_upd: np.ndarray, Phi: np.ndarray, Phi_gm: np.ndarray, Qd: np.ndarray, Qd_gm: np.ndarray, dx: np.ndarray
+    P_upd: np.ndarray,
+    every: int,
+    Phi: np.ndarray,
+    Phi_gm: np.ndarray,
+    Qd: np.ndarray,
+    Qd_gm: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    used: np.ndarray,
+    dx: np.ndarray,
 ):
     """Rauch-Tung-Striebel smoothing of a closed-loop error-state filter (resets at every update).
 
@@ -502,6 +513,9 @@ def rts_closed_loop(
     Phi[e+1]^T + Qd[e+1] made here (the filter does not keep it: 166 MB per hour of 10 Hz GNSS; equal to
     the filter's block-by-block propagation up to rounding). Phi and Qd come as their blocks (the INS
     block, and the diagonal of the Gauss-Markov states).
+    The filter keeps the updated covariance of every `every`-th epoch only (P_upd[i] is epoch i * every's):
+    the smoother runs down in runs of `every` epochs, each run's covariances made again from its first by
+    the filter's own prediction and update (H, R and the rows `used`), so it holds `every` of them.
     Returns delta and the smoothed variances (the diagonal of every P_s[e]: all any consumer reads, and
     a 24th of the memory of the full matrices).
     """
@@ -509,24 +523,38 @@ def rts_closed_loop(
     h = Phi.shape[1]
     delta = np.zeros((M, n))
     var = np.zeros((M, n))
-    P_next = P_upd[M - 1].copy()
-    for i in range(n):
-        var[M - 1, i] = P_next[i, i]
+    run = np.empty((every, n, n))
     cross = np.empty((n, n))
-    for e in range(M - 2, -1, -1):
-        # cross = P_upd[e] Phi[e+1]^T, Phi block-diagonal
-        Pu = P_upd[e]
-        cross[:, :h] = np.ascontiguousarray(Pu[:, :h]) @ np.ascontiguousarray(Phi[e + 1].T)
-        for j in range(h, n):
+    P_next = np.empty((n, n))
+    for lo in range(((M - 1) // every) * every, -1, -every):
+        hi = min(lo + every, M) - 1
+        run[0] = P_upd[lo // every]
+        for e in range(lo + 1, hi + 1):
+            pred = block_congruence(Phi[e], Phi_gm[e], run[e - 1 - lo], np.empty((n, n)))
+            add_block_diagonal(pred, Qd[e], Qd_gm[e])
+            mask = np.full(H.shape[1], np.nan)
+            for i in range(H.shape[1]):
+                if used[e, i]:
+                    mask[i] = 0.0
+            run[e - lo] = masked_update(np.zeros(n), pred, H[e], R[e], mask, False)[1]
+        for e in range(hi, lo - 1, -1):
+            Pu = run[e - lo]
+            if e == M - 1:
+                P_next[:, :] = Pu
+                for i in range(n):
+                    var[e, i] = Pu[i, i]
+                continue
+            # cross = P_upd[e] Phi[e+1]^T, Phi block-diagonal
+            cross[:, :h] = np.ascontiguousarray(Pu[:, :h]) @ np.ascontiguousarray(Phi[e + 1].T)
+            for j in range(h, n):
+                for i in range(n):
+                    cross[i, j] = Pu[i, j] * Phi_gm[e + 1, j - h]
+            pred = block_congruence(Phi[e + 1], Phi_gm[e + 1], Pu, np.empty((n, n)))
+            add_block_diagonal(pred, Qd[e + 1], Qd_gm[e + 1])
+            A = np.linalg.solve(pred.T, cross.T).T
+            delta[e] = A @ (dx[e + 1] + delta[e + 1])
+            Ps = Pu + A @ (P_next - pred) @ A.T
+            P_next = 0.5 * (Ps + Ps.T)
             for i in range(n):
-                cross[i, j] = Pu[i, j] * Phi_gm[e + 1, j - h]
-        pred = add_block_diagonal(
-            block_congruence(Phi[e + 1], Phi_gm[e + 1], Pu, np.empty((n, n))), Qd[e + 1], Qd_gm[e + 1]
-        )
-        A = np.linalg.solve(pred.T, cross.T).T
-        delta[e] = A @ (dx[e + 1] + delta[e + 1])
-        Ps = Pu + A @ (P_next - pred) @ A.T
-        P_next = 0.5 * (Ps + Ps.T)
-        for i in range(n):
-            var[e, i] = P_next[i, i]
+                var[e, i] = P_next[i, i]
     return delta, var

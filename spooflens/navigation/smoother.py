@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from spooflens.navigation import kernels
 from spooflens.navigation.kernels import local_radii
-from spooflens.navigation.loosely_coupled import NavSolution
+from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution
 
 FloatArray = NDArray[np.float64]
 
@@ -31,9 +31,24 @@ class SmoothedSolution:
 
 
 def smooth(sol: NavSolution) -> SmoothedSolution:
-    if sol.P_upd_every != 1:
-        raise ValueError("smooth needs every epoch's updated covariance; this solution kept a part of them")
-    delta, var = kernels.rts_closed_loop(sol.P_upd, sol.Phi.head, sol.Phi.tail, sol.Qd.head, sol.Qd.tail, sol.dx)
+    M = len(sol.t)
+    if len(sol.Phi) != M or len(sol.Qd) != M or (sol.P_upd_every > 1 and len(sol.H) != M):
+        raise ValueError(
+            "smooth needs the solution's Phi and Qd (and H when it kept a part of the updated covariances): "
+            f"run the filter with record={SMOOTHER_NEEDS!r}"
+        )
+    delta, var = kernels.rts_closed_loop(
+        sol.P_upd,
+        sol.P_upd_every,
+        sol.Phi.head,
+        sol.Phi.tail,
+        sol.Qd.head,
+        sol.Qd.tail,
+        sol.H,
+        sol.R,
+        sol.used,
+        sol.dx,
+    )
     state = np.array([kernels.correct(x, d[:15]) for x, d in zip(sol.state, delta, strict=True)])
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
