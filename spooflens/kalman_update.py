@@ -95,8 +95,15 @@ def masked_update(
     if math.isnan(logdet):  # not positive definite to working precision: the general inverse
         Sinv = np.ascontiguousarray(np.linalg.inv(S))
         logdet = np.linalg.slogdet(S)[1]
-    K = PCt @ Sinv
-    x_new = x + K @ e
+    K = np.empty((n, m))
+    x_new = x.copy()
+    for i in range(n):
+        for b in range(m):
+            v = 0.0
+            for a in range(m):
+                v += PCt[i, a] * Sinv[a, b]
+            K[i, b] = v
+            x_new[i] += v * e[b]
     P_new = np.empty((n, n))  # P - K PCt^T, symmetric: the lower triangle made, the upper mirrored
     for i in range(n):
         for j in range(i + 1):
@@ -106,7 +113,10 @@ def masked_update(
             v = 0.5 * (P[i, j] + P[j, i]) - v
             P_new[i, j] = v
             P_new[j, i] = v
-    nis = e @ Sinv @ e
+    nis = 0.0
+    for a in range(m):
+        for b in range(m):
+            nis += e[a] * Sinv[a, b] * e[b]
     return x_new, P_new, rows, e, S, Sinv, K, nis, logdet if with_logdet else math.nan
 
 

@@ -167,7 +167,7 @@ def block_congruence(head: np.ndarray, tail: np.ndarray, P: np.ndarray, out: np.
                 out[i, h + j] = v
                 out[h + j, i] = v
             for i in range(r):
-                out[h + i, h + j] = P[h + i, h + j] * tail[i] * tail[j]
+                out[h + i, h + j] = P[h + i, h + j] * (tail[i] * tail[j])
     return out
 
 
@@ -189,7 +189,7 @@ def block_congruence_t(head: np.ndarray, tail: np.ndarray, M: np.ndarray, out: n
                 out[i, h + j] = v
                 out[h + j, i] = v
             for i in range(r):
-                out[h + i, h + j] = M[h + i, h + j] * tail[i] * tail[j]
+                out[h + i, h + j] = M[h + i, h + j] * (tail[i] * tail[j])
     return out
 
 

@@ -103,3 +103,25 @@ def test_stationary_free_inertial_oscillates_with_the_schuler_period() -> None:
     period_min = 2 * np.mean(np.diff(crossings)) / 60.0
     assert period_min == pytest.approx(84.4, rel=0.02)
     assert np.max(np.abs(vn)) < 0.11  # bounded oscillation, no growth
+
+
+def test_the_filters_covariance_propagation_equals_the_dense_product() -> None:
+    """Phi P Phi^T for Phi = blockdiag(Phi15, diag(a)) as the filter makes it: with the bias rows of a
+    discretised F (identity rows: half the products) and, for any other Phi15, by the dense form."""
+    from spooflens.navigation.kernels import _propagate_blocks
+
+    rng = np.random.default_rng(2)
+    v, C = np.array([60.0, -20.0, 2.0]), euler_to_matrix(0.1, -0.2, 1.0)
+    s = NavState(0.0, math.radians(47.0), math.radians(8.0), 400.0, v, C)
+    Phi15, _ = discretise(error_dynamics(s, np.array([0.3, -0.1, 9.9])), np.ones(15), 0.1)
+    assert np.array_equal(Phi15[9:], np.eye(15)[9:])
+    G = rng.normal(size=(24, 24))
+    P = 0.5 * (G @ G.T + (G @ G.T).T)  # exactly symmetric, as the filter's
+    a = rng.uniform(0.9, 1.0, 9)
+    for phi in (Phi15, Phi15 + 0.01 * rng.normal(size=(15, 15))):
+        dense = np.zeros((24, 24))
+        dense[:15, :15] = phi
+        dense[15:, 15:] = np.diag(a)
+        out = _propagate_blocks(P, phi, a)
+        np.testing.assert_allclose(out, dense @ P @ dense.T, rtol=1e-12, atol=1e-10)
+        assert np.array_equal(out, out.T)

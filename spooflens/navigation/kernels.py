@@ -51,6 +51,40 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=CACHE)
+def _mm3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a b for 3 x 3 matrices, written out: a BLAS call costs more than the 27 products."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+    return out
+
+
+@njit(cache=CACHE)
+def _mv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """a v for a 3 x 3 matrix (written out, as `_mm3`)."""
+    return np.array(
+        [
+            a[0, 0] * v[0] + a[0, 1] * v[1] + a[0, 2] * v[2],
+            a[1, 0] * v[0] + a[1, 1] * v[1] + a[1, 2] * v[2],
+            a[2, 0] * v[0] + a[2, 1] * v[1] + a[2, 2] * v[2],
+        ]
+    )
+
+
+@njit(cache=CACHE)
+def _mtv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """a^T v for a 3 x 3 matrix."""
+    return np.array(
+        [
+            a[0, 0] * v[0] + a[1, 0] * v[1] + a[2, 0] * v[2],
+            a[0, 1] * v[0] + a[1, 1] * v[1] + a[2, 1] * v[2],
+            a[0, 2] * v[0] + a[1, 2] * v[1] + a[2, 2] * v[2],
+        ]
+    )
+
+
+@njit(cache=CACHE)
 def rotvec_matrix(v: np.ndarray) -> np.ndarray:
     x, y, z = v[0], v[1], v[2]
     a2 = x * x + y * y + z * z
@@ -100,10 +134,10 @@ def increment(
         wi * yj + xi * zj - yi * wj - zi * xj,
         wi * zj - xi * yj + yi * xj - zi * wj,
     )
-    RiT = quat_matrix(wi, xi, yi, zi).T.copy()
+    Ri = quat_matrix(wi, xi, yi, zi)
     T = t[j] - t[i]
-    dv = RiT @ (G[j] - G[i])
-    dp = RiT @ (H[j] - H[i] - G[i] * T)
+    dv = _mtv3(Ri, G[j] - G[i])
+    dp = _mtv3(Ri, H[j] - H[i] - G[i] * T)
     return dC, dv, dp, T
 
 
@@ -127,13 +161,13 @@ def propagate(x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray,
     C = x[6:15].copy().reshape(3, 3)
     bg, ba = x[15:18].copy(), x[18:21].copy()
     bgT = bg * T
-    baT = (dC @ ba) * T
+    baT = _mv3(dC, ba) * T
     dv_b = dv_b - 0.5 * (ba * T + baT) - 0.5 * _cross(bgT, dv_b)
     dp_b = dp_b - (2.0 * ba * T + baT) * (T / 6.0) - _cross(bgT, dp_b) / 3.0
     half = rotvec_matrix(-0.5 * bgT)
-    dC = half @ dC @ half
+    dC = _mm3(_mm3(half, dC), half)
     w_ie, w_en, rmh, rnh = _rates(lat, h, v)
-    Cdv = C @ dv_b
+    Cdv = _mv3(C, dv_b)
     acc0 = -_cross(2 * w_ie + w_en, v)
     acc0[2] -= gravity(lat, h)
     v_mid = v + 0.5 * (Cdv + acc0 * T)
@@ -144,10 +178,10 @@ def propagate(x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray,
     acc = -_cross(2 * w_ie + w_en, v_mid)
     acc[2] -= gravity(lat_mid, h_mid)
     v_new = v + Cdv - 0.5 * _cross(zeta, Cdv) + acc * T
-    Cdp = C @ dp_b
+    Cdp = _mv3(C, dp_b)
     dp_n = v * T + Cdp - _cross(zeta, Cdp) / 3.0 + (0.5 * T * T) * acc
-    C_new = rotvec_matrix(-zeta) @ C @ dC
-    C_new = C_new @ (1.5 * np.eye(3) - 0.5 * (C_new.T @ C_new))  # keep C orthonormal
+    C_new = _mm3(_mm3(rotvec_matrix(-zeta), C), dC)
+    C_new = _mm3(C_new, 1.5 * np.eye(3) - 0.5 * _mm3(C_new.T, C_new))  # keep C orthonormal
     out[0] = lat + dp_n[1] / rmh
     out[1] = x[1] + dp_n[0] / (rnh * math.cos(lat_mid))
     out[2] = h + dp_n[2]
@@ -182,7 +216,7 @@ def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     F[1, 7], F[1, 8] = a1, b1
     F[2, 7], F[2, 8] = a2 + c1, c2
     F[0:3, 9:12] = -C
-    fn_ = C @ f_b
+    fn_ = _mv3(C, f_b)
     fe, fn, fu = fn_[0], fn_[1], fn_[2]
     F[3, 1], F[3, 2], F[4, 0], F[4, 2], F[5, 0], F[5, 1] = -fu, fn, fu, -fe, -fn, fe
     ux, uy, uz = wen_e, 2 * wie_n + wen_n, 2 * wie_u + wen_u
@@ -219,7 +253,7 @@ def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     out = x.copy()
     rm, rn = local_radii(x[0])
     C = x[6:15].copy().reshape(3, 3)
-    out[6:15] = (rotvec_matrix(dx[0:3]) @ C).ravel()  # C = (I + [phi x]) C~
+    out[6:15] = _mm3(rotvec_matrix(dx[0:3]), C).ravel()  # C = (I + [phi x]) C~
     out[3:6] = x[3:6] - dx[3:6]
     out[0] = x[0] - dx[7] / (rm + x[2])
     out[1] = x[1] - dx[6] / ((rn + x[2]) * math.cos(x[0]))
@@ -251,11 +285,11 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
         Hm[3 + i, 18 + i] = -1.0
         Hm[6 + i, 21 + i] = -1.0
     C = x[6:15].copy().reshape(3, 3)
-    M = R_vb @ C.T
+    M = _mm3(R_vb, C.T)
     v = x[3:6]
     vx = np.zeros((3, 3))
     vx[0, 1], vx[0, 2], vx[1, 0], vx[1, 2], vx[2, 0], vx[2, 1] = -v[2], v[1], v[2], -v[0], -v[1], v[0]
-    Mv = M @ vx
+    Mv = _mm3(M, vx)
     for i in range(3):
         for j in range(3):
             Hm[6 + i, j] = -Mv[i, j]
@@ -265,16 +299,47 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
 
 @njit(cache=CACHE)
 def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Phi P Phi^T for Phi = blockdiag(Phi15, diag(a))."""
+    """Phi P Phi^T for Phi = blockdiag(Phi15, diag(a)).
+
+    The biases are random walks, so F's bias rows (9..14) are zero and Phi15's are identity rows: only
+    rows 0..8 of Phi15 P are products, half the work of the dense form. A Phi15 without that shape
+    takes the dense form.
+    """
+    for i in range(9, 15):
+        for j in range(15):
+            if Phi15[i, j] != (1.0 if i == j else 0.0):
+                return block_congruence(Phi15, a, P, np.empty_like(P))
+    n = P.shape[0]
     out = np.empty_like(P)
-    out[:15, :15] = Phi15 @ np.ascontiguousarray(P[:15, :15]) @ Phi15.T
-    cross = Phi15 @ np.ascontiguousarray(P[:15, 15:])
-    for j in range(a.shape[0]):
-        for i in range(15):
-            out[i, 15 + j] = cross[i, j] * a[j]
-            out[15 + j, i] = cross[i, j] * a[j]
-        for i in range(a.shape[0]):
-            out[15 + i, 15 + j] = P[15 + i, 15 + j] * a[i] * a[j]
+    X = np.zeros((9, n))  # rows 0..8 of Phi P
+    for i in range(9):
+        for k in range(15):
+            f = Phi15[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    X[i, j] += f * P[k, j]
+    for i in range(9):
+        for j in range(i + 1):
+            v = 0.0
+            for k in range(15):
+                v += X[i, k] * Phi15[j, k]
+            out[i, j] = v
+            out[j, i] = v
+        for j in range(9, 15):
+            out[i, j] = X[i, j]
+            out[j, i] = X[i, j]
+    for i in range(9, 15):
+        for j in range(9, 15):
+            out[i, j] = P[i, j]
+    for j in range(n - 15):
+        for i in range(9):
+            out[i, 15 + j] = X[i, 15 + j] * a[j]
+            out[15 + j, i] = out[i, 15 + j]
+        for i in range(9, 15):
+            out[i, 15 + j] = P[i, 15 + j] * a[j]
+            out[15 + j, i] = out[i, 15 + j]
+        for i in range(n - 15):
+            out[15 + i, 15 + j] = P[15 + i, 15 + j] * (a[i] * a[j])
     return out
 
 
@@ -393,7 +458,11 @@ def filter_loop(
             track[nt, 4:7] = x[3:6]
             track_epoch[nt] = e - 1
             nt += 1
-        P = 0.5 * (P + P.T)
+        for r in range(NE):  # symmetric against round-off (Qd15 is a product)
+            for c in range(r):
+                v = 0.5 * (P[r, c] + P[c, r])
+                P[r, c] = v
+                P[c, r] = v
         if keep_phi:
             out_Phi[e] = Phi_acc
             out_Phi_gm[e] = Phi_acc_gm
@@ -414,13 +483,14 @@ def filter_loop(
             if not math.isnan(vel[e, i]):
                 z[3 + i] = x[3 + i] - vel[e, i]
         Hm = measurement_matrix(x, R_vb)
-        vb = R_vb @ (x[6:15].copy().reshape(3, 3).T @ x[3:6])
+        vb = _mv3(R_vb, _mtv3(x[6:15].copy().reshape(3, 3), x[3:6]))
         for i in range(3):
             if not math.isnan(odo[e, i]):
                 z[6 + i] = vb[i] - odo[e, i]
-        xp = np.zeros(NE)
-        xp[15:] = g
-        nu = z - Hm @ xp
+        nu = z.copy()  # minus the predicted receiver and odometry errors: H's Gauss-Markov columns times g
+        for i in range(NM):
+            for j in range(NG):
+                nu[i] -= Hm[i, 15 + j] * g[j]
         out_z[e] = z
         out_nu[e] = nu
         if keep_h:
