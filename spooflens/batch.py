@@ -67,6 +67,20 @@ def content_hash(path: Path) -> str:
     return h.hexdigest()
 
 
+def largest_first(jobs: list[LogJob]) -> list[LogJob]:
+    """The order the tasks are given to the workers: the largest logs first (an analysis takes about the
+    time its log's size says), so the last tasks to finish are short ones and the workers end together
+    rather than one waiting on a long log."""
+    return sorted(jobs, key=lambda j: _size(j.path), reverse=True)
+
+
+def _size(path: Path) -> int:
+    """Bytes of a log (a directory: of its files)."""
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
 def _is_log_dir(path: Path) -> bool:
     """A directory that is one log (not a folder of logs)."""
     from readers import sniff_format
@@ -306,11 +320,18 @@ def run_batch(
         try:
             n_workers = len(client.scheduler_info(n_workers=-1)["workers"])
             t_submit = time.perf_counter()
+            by_size = largest_first(jobs)
             futures = [
                 client.submit(
-                    analyse_one, str(j.path), j.digest, str(results / j.name), imu_grade, key=f"spooflens-{j.digest}"
+                    analyse_one,
+                    str(j.path),
+                    j.digest,
+                    str(results / j.name),
+                    imu_grade,
+                    key=f"spooflens-{j.digest}",
+                    priority=len(by_size) - rank,
                 )
-                for j in jobs
+                for rank, j in enumerate(by_size)
             ]
             with progress(show) as report:
                 report("analysing logs", 0, len(futures))

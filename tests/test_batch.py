@@ -86,3 +86,13 @@ def test_batch_analyses_reports_and_skips_on_rerun(fleet: Path, tmp_path: Path, 
     assert [(Path(r["log"]).name, r["status"]) for r in again.analysed] == [("cut.mcap", "failed")]
     assert again.workers == 1
     assert len(pq.read_table(results / "incidents.parquet")) == 1
+
+
+def test_the_largest_logs_are_given_to_the_workers_first(fleet: Path) -> None:
+    from spooflens.batch import LogJob, largest_first
+
+    logs, _ = find_logs((f"{fleet}/**/*",))
+    order = [j.path.name for j in largest_first([LogJob(p, "") for p in sorted(logs)])]
+    sizes = {p.name: sum(f.stat().st_size for f in ([p] if p.is_file() else p.rglob("*")) if f.is_file()) for p in logs}
+    assert order == sorted(sizes, key=lambda name: -sizes[name])
+    assert order[-1] == "cut.mcap"  # the 5 kB truncated file
