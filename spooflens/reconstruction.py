@@ -79,6 +79,8 @@ class CoastingOptions:
     # coast is still sharp; later, an unobservable heading (a hover) makes the coasted velocity drift
     min_departure_mps: float = 0.3
     young_s: float = 10.0
+    # a coasting check first coasts this long past its deadline (then on to the end only when needed)
+    first_look_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -264,25 +266,17 @@ def coasting_check(
     begins by `deadline_s` (default `confirm_window_s` after the onset); then when it ends."""
     opts = opts or CoastingOptions()
     t_ex = onset_s - opts.margin_s
-    sol = coast(nav, t_ex, base=base)
-    t = sol.t
-    ratio = _ratio(sol, opts.p_disagree)
-    kappa = envelope.at(t - t_ex)
-    offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
-    velocity_off = np.hypot(sol.nu[:, 3], sol.nu[:, 4])
-    young = t - t_ex <= opts.young_s
-    away = (np.nan_to_num(offset) > opts.min_departure_m) | (
-        young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
-    )
-    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
-    departure = None
     deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
-    for a, b in _runs(disagree):
-        if t[a] > deadline:
-            break
-        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
-            departure = int(a)
-            break
+    # first a coast just past the deadline: most anomalies are not confirmed, and a coast to the end of a
+    # day-long log for each of them made the check quadratic in the log's length (21 anomalies of a 24 h
+    # voyage: 185 s). Only a departure, or a disagreement still running where that coast ends, needs the
+    # coast to the end; the decision is the one the long coast gives (the same filter over the same span)
+    sol = coast(nav, t_ex, deadline + opts.first_look_s, base=base)
+    t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(sol, t_ex, deadline, envelope, opts)
+    last = (base if base is not None else nav.solution).t[-1]
+    if departure is not None or (open_at_end and t[-1] < last):
+        sol = coast(nav, t_ex, base=base)
+        t, ratio, kappa, offset, disagree, departure, _ = _departure(sol, t_ex, deadline, envelope, opts)
     if departure is None:
         return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2])
     end = end_interval = None
@@ -314,6 +308,32 @@ def coasting_check(
     return CoastingCheck(
         t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from, sol.nu[:, :2]
     )
+
+
+def _departure(
+    sol: NavSolution, t_ex: float, deadline: float, envelope: Envelope, opts: CoastingOptions
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_], int | None, bool]:
+    """(t, ratio, kappa, offset, disagree, departure epoch or None, whether a disagreement that began by
+    the deadline is still running at the coast's last epoch) of a coast from t_ex."""
+    t = sol.t
+    ratio = _ratio(sol, opts.p_disagree)
+    kappa = envelope.at(t - t_ex)
+    offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
+    velocity_off = np.hypot(sol.nu[:, 3], sol.nu[:, 4])
+    young = t - t_ex <= opts.young_s
+    away = (np.nan_to_num(offset) > opts.min_departure_m) | (
+        young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
+    )
+    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
+    departure, open_at_end = None, False
+    for a, b in _runs(disagree):
+        if t[a] > deadline:
+            break
+        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
+            departure = int(a)
+            break
+        open_at_end = b == len(t) - 1
+    return t, ratio, kappa, offset, disagree, departure, open_at_end
 
 
 def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:

@@ -1,0 +1,38 @@
+"""The coasting check looks just past its deadline first and coasts on to the end of the log only for a
+departure (or a disagreement still running where the first look ends): its decisions are those of the
+coast to the end."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from spooflens.analysis import AnalyzeOptions
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.navigation.product import solve_navigation
+from spooflens.reconstruction import CoastingOptions, coasting_check, placebo_coasts
+from spooflens.simulation.simulate import simulate
+
+
+def test_a_short_first_look_decides_as_the_coast_to_the_end() -> None:
+    clean = simulate("multirotor", seed=2, duration_s=600.0).table
+    table, _ = apply_attack(clean, parse_attack("step:offset=30,start=500"))
+    nav = solve_navigation(table, AnalyzeOptions())
+    opts = CoastingOptions()
+    placebo = placebo_coasts(nav, opts)
+    whole = replace(opts, first_look_s=1e9)  # the first look covers the log: one coast to the end
+    for onset, confirmed in ((200.0, False), (499.0, True)):
+        envelope = placebo.envelope((onset, onset + 1.0), [], opts.margin_s, opts.placebo_trim)
+        deadline = onset + opts.confirm_window_s
+        short, full = coasting_check(nav, onset, envelope, opts=opts), coasting_check(nav, onset, envelope, opts=whole)
+        assert short.confirmed is full.confirmed is confirmed
+        assert short.departure_s == full.departure_s and short.end_s == full.end_s
+        assert full.t[-1] == nav.solution.t[-1]
+        if confirmed:  # a departure: coasted on to the end, the same coast
+            np.testing.assert_array_equal(short.t, full.t)
+            np.testing.assert_array_equal(short.offset_m, full.offset_m)
+        else:  # no departure: the coast stopped a first look past the deadline
+            assert short.t[-1] <= deadline + opts.first_look_s < full.t[-1]
+            n = len(short.t)
+            np.testing.assert_array_equal(short.offset_m, full.offset_m[:n])
