@@ -18,6 +18,7 @@ from spooflens.detectors.mlrt import (
     full_jump_wj,
     paper_two_filter,
     ramp_two_filter_offline,
+    step_two_filter_offline,
     two_filter_smoother,
 )
 from spooflens.statespace import BlockDiagonal, LinearGaussianModel
@@ -255,3 +256,22 @@ def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
     np.testing.assert_allclose(off.log_bf[:last], expected[:, 0], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(off.mlr_flat[:last], expected[:, 1], rtol=1e-9, atol=1e-9)
     assert np.isnan(off.log_bf[last]) and len(off.t) == last + 1
+
+
+@pytest.mark.parametrize("block", [7, 256])
+def test_offline_candidates_from_a_later_epoch_are_the_whole_passes_numbers(
+    block: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Candidates from epoch `first` on (the onset sought near an alarm): the backward filter stops below
+    it, and the numbers are the whole pass's, block boundaries or not."""
+    from spooflens.detectors import mlrt
+
+    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
+    model = random_model(6, n=4, p=2, N=40, missing=True)
+    rows, sigma = (0, 1), np.array([0.7, 1.3])
+    for offline in (ramp_two_filter_offline, step_two_filter_offline):
+        whole = offline(model, rows, sigma, last=35)
+        part = offline(model, rows, sigma, last=35, first=17)
+        np.testing.assert_array_equal(part.t, whole.t[17:])
+        np.testing.assert_array_equal(part.log_bf, whole.log_bf[17:])
+        np.testing.assert_array_equal(part.mlr_flat, whole.mlr_flat[17:])

@@ -404,9 +404,10 @@ def _two_filter_offline(
     stride: int,
     a_ptr: np.ndarray,
     a_col: np.ndarray,
+    from_epoch: int = 0,
 ):
-    """`_offline_at` for every `stride`-th epoch m < last (NaN between) of the augmented model over epochs
-    0..last, from the forward
+    """`_offline_at` for every `stride`-th epoch m < last from `from_epoch` on (NaN elsewhere) of the
+    augmented model over epochs 0..last (the backward pass stops below `from_epoch`), from the forward
     filter (`forward_filter`) and the backward information filter (`backward_information`), with the
     numbers those give, in bounded memory: the augmented matrices are made epoch by epoch; the forward
     pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
@@ -460,6 +461,8 @@ def _two_filter_offline(
     a = np.zeros(na)
     for b in range(nb - 1, -1, -1):
         lo, hi = b * block, min((b + 1) * block, N) - 1
+        if hi < from_epoch:
+            break
         _forward_block(
             A_head,
             A_tail,
@@ -489,7 +492,7 @@ def _two_filter_offline(
             L, a = information_update(L, a, Ca, R[k], y[k])
             L, a = information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
-        for k in range(lo, top + 1):
+        for k in range(max(lo, from_epoch), top + 1):
             if k % stride == 0:
                 bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
     return bf, flat
@@ -501,12 +504,15 @@ def ramp_two_filter_offline(
     sigma_rate: FloatArray,
     last: int | None = None,
     stride: int = 1,
+    first: int = 0,
 ) -> RampOffline:
     """2 log BF and the flat MLR for a ramp after every epoch m, using data up to epoch `last` (the
     model `augment_ramp` makes, filtered forward and backward); with `stride` > 1 only every stride-th
     candidate is evaluated (the others are left out of the result): the same numbers there, for a
-    fraction of the cost (the two filters still run over every epoch)."""
-    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True, stride=stride)
+    fraction of the cost (the two filters still run over every epoch). Candidates before epoch `first`
+    are left out too, and the backward filter stops there (an onset sought near an alarm late in a long
+    log costs one forward pass, not two filters over the whole log)."""
+    return _offline(model, rows, np.asarray(sigma_rate, dtype=float), last, ramp=True, stride=stride, first=first)
 
 
 def _offline(
@@ -516,8 +522,10 @@ def _offline(
     last: int | None,
     ramp: bool,
     stride: int = 1,
+    first: int = 0,
 ) -> RampOffline:
     last = model.n_epochs - 1 if last is None else last
+    first = min(max(0, int(first)), last)
     stride = max(1, int(stride))
     # views where the model's arrays are contiguous already (the navigation's are): no copies
     A, Q = model.A[: last + 1], model.Q[: last + 1]
@@ -540,8 +548,10 @@ def _offline(
         OFFLINE_BLOCK,
         stride,
         *pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp)),
+        first,
     )
-    kept = np.arange(last + 1) % stride == 0
+    epochs = np.arange(last + 1)
+    kept = (epochs % stride == 0) & (epochs >= first)
     return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])
 
 
@@ -576,12 +586,16 @@ def augment_step(model: LinearGaussianModel, rows: tuple[int, ...]) -> LinearGau
 
 
 def step_two_filter_offline(
-    model: LinearGaussianModel, rows: tuple[int, ...], sigma_step: FloatArray, last: int | None = None
+    model: LinearGaussianModel,
+    rows: tuple[int, ...],
+    sigma_step: FloatArray,
+    last: int | None = None,
+    first: int = 0,
 ) -> RampOffline:
     """2 log BF of a step of the attacked rows after every epoch m (offset ~ N(0, sigma_step^2) per row),
     from one forward and one backward pass, as `ramp_two_filter_offline` does for a ramp (the model
-    `augment_step` makes)."""
-    return _offline(model, rows, np.asarray(sigma_step, dtype=float), last, ramp=False)
+    `augment_step` makes), candidates from epoch `first` on."""
+    return _offline(model, rows, np.asarray(sigma_step, dtype=float), last, ramp=False, first=first)
 
 
 def onset_posterior(

@@ -240,15 +240,16 @@ def _with_onset_posterior(model: LinearGaussianModel, a: Alarm, opts: Seed000Opt
     """MAP onset and credible interval from the data up to `onset_horizon_s` after the alarm starts."""
     last = int(np.searchsorted(model.t, min(a.end_s, a.start_s + opts.onset_horizon_s)))
     last = min(last, model.n_epochs - 1)
+    lo = a.start_s - opts.window_s
+    first = max(0, int(np.searchsorted(model.t, lo)) - 1)  # the candidates the posterior reads
     ramp, step = both(
-        partial(ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last),
-        partial(step_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_step_m), last=last),
+        partial(ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps), last=last, first=first),
+        partial(step_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_step_m), last=last, first=first),
     )
     # a ramp or a step, equally likely a priori: the onset's evidence is the mixture of both
     mixture = np.logaddexp(0.5 * np.nan_to_num(ramp.log_bf, nan=-np.inf), 0.5 * np.nan_to_num(step.log_bf, nan=-np.inf))
     mixture = mixture + np.log(0.5)
     log_bf = np.where(np.isfinite(ramp.log_bf) | np.isfinite(step.log_bf), 2.0 * mixture, np.nan)
-    lo = a.start_s - opts.window_s
     sel = (ramp.t >= lo) & (ramp.t <= model.t[last]) & np.isfinite(log_bf)
     if sel.sum() < 2:
         return a

@@ -263,6 +263,15 @@ def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=CACHE)
+def correct_all(states: np.ndarray, dx: np.ndarray) -> np.ndarray:
+    """`correct` of every row (a smoothed solution's states from the filtered ones and their errors)."""
+    out = np.empty_like(states)
+    for k in range(states.shape[0]):
+        out[k] = correct(states[k], dx[k, :15])
+    return out
+
+
 NE = 24  # error states: 15 INS + Gauss-Markov errors of GNSS position (3), GNSS velocity (3), odometry (3)
 NG = NE - 15
 NM = 9  # measurement rows: GNSS position (3), GNSS velocity (3), odometry body velocity (3)

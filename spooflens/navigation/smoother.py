@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.geodesy import radii
 from spooflens.navigation import kernels
-from spooflens.navigation.kernels import local_radii
 from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution
 
 FloatArray = NDArray[np.float64]
@@ -49,7 +49,7 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
         sol.used,
         sol.dx,
     )
-    state = np.array([kernels.correct(x, d[:15]) for x, d in zip(sol.state, delta, strict=True)])
+    state = kernels.correct_all(sol.state, delta)
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
 
@@ -67,5 +67,5 @@ def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
     w = np.clip((sol.track_t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
     d = (1 - w) * start + w * end
     lat, lon, h = sol.track_llh.T
-    rm, rn = np.vectorize(local_radii)(lat)
+    rm, rn = radii(lat)
     return np.c_[lat - d[:, 7] / (rm + h), lon - d[:, 6] / ((rn + h) * np.cos(lat)), h - d[:, 8]]
