@@ -77,12 +77,12 @@ def innovation_whiteness(
     """
     z = eps[:, :3] / np.sqrt(np.maximum(np.diagonal(S, axis1=1, axis2=2)[:, :3], 1e-300))
     edges = np.arange(t[0], t[-1] + window_s, window_s)
+    bounds = np.searchsorted(t, edges)  # t increases: each window is a slice (not a mask over the log)
     values = []
-    for a, b in itertools.pairwise(edges):
-        inside = (t >= a) & (t < b)
-        if suspected is not None and suspected[inside].any():
+    for lo, hi in itertools.pairwise(bounds):
+        if suspected is not None and suspected[lo:hi].any():
             continue  # an attack correlates the innovations: the model is judged outside suspected stretches
-        w = z[inside]
+        w = z[lo:hi]
         w = w[np.isfinite(w).all(axis=1)]
         if len(w) < 8:
             continue
