@@ -342,8 +342,12 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
     only on its filtered state and the data after it, so the track over the incident is a whole-log run's
     at a fraction of the memory (the per-epoch matrices the smoother keeps are 0.5 GB per hour of 10 Hz
     GNSS)."""
-    opts = nav.options(
-        exclude_after_s=t_from, exclude_until_s=t_to, exclude_velocity_too=not velocity_honest, record=SMOOTHER_NEEDS
+    opts = nav.options(  # only smoothed: no comparison with GNSS kept (S_all)
+        exclude_after_s=t_from,
+        exclude_until_s=t_to,
+        exclude_velocity_too=not velocity_honest,
+        record=SMOOTHER_NEEDS,
+        compare=False,
     )
     sm = smooth(continued(nav, nav.solution, t_from, opts))
     name = (
