@@ -120,24 +120,35 @@ def masked_update(
     return x_new, P_new, rows, e, S, Sinv, K, nis, logdet if with_logdet else math.nan
 
 
+@njit(cache=True, nogil=True)
+def cholesky_logdet(M: np.ndarray, L: np.ndarray) -> float:
+    """Writes the lower Cholesky factor of M into L; returns log det M, or NaN when M is not positive
+    definite (small matrices: written out, no LAPACK call)."""
+    m = M.shape[0]
+    logdet = 0.0
+    for i in range(m):
+        for j in range(i + 1):
+            v = M[i, j]
+            for c in range(j):
+                v -= L[i, c] * L[j, c]
+            if i == j:
+                if not v > 0.0:
+                    return math.nan
+                L[i, i] = math.sqrt(v)
+                logdet += 2.0 * math.log(L[i, i])
+            else:
+                L[i, j] = v / L[j, j]
+    return logdet
+
+
 @njit(cache=True)
 def _spd_inverse(S: np.ndarray) -> tuple[np.ndarray, float]:
     """(S^-1, log det S) of a symmetric positive definite S by Cholesky; log det NaN when S is not."""
     m = S.shape[0]
     L = np.zeros((m, m))
-    logdet = 0.0
-    for i in range(m):
-        for j in range(i + 1):
-            v = S[i, j]
-            for c in range(j):
-                v -= L[i, c] * L[j, c]
-            if i == j:
-                if not v > 0.0:
-                    return S, math.nan
-                L[i, i] = math.sqrt(v)
-                logdet += 2.0 * math.log(L[i, i])
-            else:
-                L[i, j] = v / L[j, j]
+    logdet = cholesky_logdet(S, L)
+    if math.isnan(logdet):
+        return S, math.nan
     Li = np.zeros((m, m))  # L^-1, lower triangular
     for j in range(m):
         Li[j, j] = 1.0 / L[j, j]

@@ -173,24 +173,9 @@ def block_congruence(head: np.ndarray, tail: np.ndarray, P: np.ndarray, out: np.
 
 @njit(cache=True, nogil=True)
 def block_congruence_t(head: np.ndarray, tail: np.ndarray, M: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """out = A^T M A for A = blockdiag(head, diag(tail)) and symmetric M (out exactly symmetric)."""
-    h, r = head.shape[0], tail.shape[0]
-    hh = head.T @ np.ascontiguousarray(M[:h, :h]) @ head
-    for i in range(h):
-        for j in range(i + 1):
-            v = 0.5 * (hh[i, j] + hh[j, i])
-            out[i, j] = v
-            out[j, i] = v
-    if r > 0:
-        cross = np.ascontiguousarray(head.T) @ np.ascontiguousarray(M[:h, h:])
-        for j in range(r):
-            for i in range(h):
-                v = cross[i, j] * tail[j]
-                out[i, h + j] = v
-                out[h + j, i] = v
-            for i in range(r):
-                out[h + i, h + j] = M[h + i, h + j] * (tail[i] * tail[j])
-    return out
+    """out = A^T M A for A = blockdiag(head, diag(tail)) and symmetric M (out exactly symmetric): A^T is
+    blockdiag(head^T, diag(tail))."""
+    return block_congruence(np.ascontiguousarray(head.T), tail, M, out)
 
 
 @njit(cache=True, nogil=True)

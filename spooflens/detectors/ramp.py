@@ -23,6 +23,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
+from spooflens.kalman_update import cholesky_logdet
 from spooflens.sparse_products import block_times, pattern
 from spooflens.statespace import LinearGaussianModel
 
@@ -42,26 +43,6 @@ class RampStatistics:
     bf_onset: NDArray[np.int64]
     log_odds: FloatArray  # log posterior odds of "a ramp began in the window" vs none (natural log)
     candidates: NDArray[np.int64]  # the candidate onset epochs
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _cholesky_logdet(M: np.ndarray, L: np.ndarray) -> float:
-    """Writes the lower Cholesky factor of M into L; returns log det M, or NaN when M is not positive definite."""
-    q = M.shape[0]
-    logdet = 0.0
-    for i in range(q):
-        for j in range(i + 1):
-            s = M[i, j]
-            for c in range(j):
-                s -= L[i, c] * L[j, c]
-            if i == j:
-                if not s > 0.0:
-                    return math.nan
-                L[i, i] = math.sqrt(s)
-                logdet += 2.0 * math.log(L[i, i])
-            else:
-                L[i, j] = s / L[j, j]
-    return logdet
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -181,7 +162,7 @@ def _ramp_pass(
                     info[j, jj] += v
             if k - m < min_after:
                 continue
-            logdet_i = _cholesky_logdet(info, L)
+            logdet_i = cholesky_logdet(info, L)
             if math.isnan(logdet_i) or logdet_i < -700:
                 continue
             g = _quad_inv(L, d, w)
@@ -189,7 +170,7 @@ def _ramp_pass(
             for j in range(q):
                 for jj in range(q):
                     M[j, jj] = info[j, jj] + sigma_inv[j, jj]
-            ld = _cholesky_logdet(M, L)
+            ld = cholesky_logdet(M, L)
             b = _quad_inv(L, d, w)
             bf = b - (ld + log_sigma_det)
             if math.isnan(glr[k]) or g > glr[k]:
