@@ -73,18 +73,6 @@ def _mv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=CACHE)
-def _mtv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """a^T v for a 3 x 3 matrix."""
-    return np.array(
-        [
-            a[0, 0] * v[0] + a[1, 0] * v[1] + a[2, 0] * v[2],
-            a[0, 1] * v[0] + a[1, 1] * v[1] + a[2, 1] * v[2],
-            a[0, 2] * v[0] + a[1, 2] * v[1] + a[2, 2] * v[2],
-        ]
-    )
-
-
-@njit(cache=CACHE)
 def rotvec_matrix(v: np.ndarray) -> np.ndarray:
     x, y, z = v[0], v[1], v[2]
     a2 = x * x + y * y + z * z
@@ -136,8 +124,8 @@ def increment(
     )
     Ri = quat_matrix(wi, xi, yi, zi)
     T = t[j] - t[i]
-    dv = _mtv3(Ri, G[j] - G[i])
-    dp = _mtv3(Ri, H[j] - H[i] - G[i] * T)
+    dv = _mv3(Ri.T, G[j] - G[i])
+    dp = _mv3(Ri.T, H[j] - H[i] - G[i] * T)
     return dC, dv, dp, T
 
 
@@ -492,7 +480,7 @@ def filter_loop(
             if not math.isnan(vel[e, i]):
                 z[3 + i] = x[3 + i] - vel[e, i]
         Hm = measurement_matrix(x, R_vb)
-        vb = _mv3(R_vb, _mtv3(x[6:15].copy().reshape(3, 3), x[3:6]))
+        vb = _mv3(R_vb, _mv3(x[6:15].copy().reshape(3, 3).T, x[3:6]))
         for i in range(3):
             if not math.isnan(odo[e, i]):
                 z[6 + i] = vb[i] - odo[e, i]
