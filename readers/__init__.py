@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from readers.buffers import release_freed_memory
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import ReaderError, UnsupportedFormatError
 
@@ -117,4 +118,5 @@ def read_log(path: Path | str, topics: Mapping[str, str] | None = None, progress
     fmt = sniff_format(path)
     table = READERS[fmt](path, topics, progress)
     table.validate()
+    release_freed_memory()
     return table

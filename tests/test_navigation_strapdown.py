@@ -14,7 +14,6 @@ from spooflens.navigation.rotations import (
     euler_to_matrix,
     matrix_to_euler,
     matrix_to_quat,
-    prefix_products,
     quat_from_rotvec,
     quat_multiply,
     quat_to_matrix,
@@ -58,14 +57,20 @@ def test_coordinated_turn_has_no_sideways_specific_force() -> None:
 
 @settings(max_examples=30, deadline=None)
 @given(st.lists(st.tuples(*[st.floats(-0.5, 0.5)] * 3), min_size=1, max_size=40))
-def test_prefix_scan_equals_sequential_products(rotvecs: list[tuple[float, float, float]]) -> None:
-    q = quat_from_rotvec(np.array(rotvecs))
-    scan = prefix_products(q)
+def test_preintegrated_attitude_is_the_sequential_product_of_the_rotations(
+    rotvecs: list[tuple[float, float, float]],
+) -> None:
+    """Qb[k] = exp(w_0 dt) ... exp(w_{k-1} dt): the attitude the compiled preintegration carries."""
+    theta = np.array(rotvecs)
+    t = np.arange(len(theta) + 1) * 0.01
+    w = np.vstack([theta / 0.01, np.zeros((1, 3))])
+    pre = preintegrate(t.astype(np.float64), np.zeros_like(w), w)
     acc = np.array([1.0, 0.0, 0.0, 0.0])
-    for k in range(len(q)):
-        np.testing.assert_allclose(quat_to_matrix(scan[k]), quat_to_matrix(acc), atol=1e-12)
-        acc = quat_multiply(acc, q[k])
-    np.testing.assert_allclose(quat_to_matrix(scan[-1]), quat_to_matrix(acc), atol=1e-12)
+    for k, q in enumerate(quat_from_rotvec(theta)):
+        np.testing.assert_allclose(quat_to_matrix(pre.Qb[k]), quat_to_matrix(acc), atol=1e-12)
+        acc = quat_multiply(acc, q)
+    np.testing.assert_allclose(quat_to_matrix(pre.Qb[-1]), quat_to_matrix(acc), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(pre.Qb, axis=1), 1.0, atol=1e-14)
 
 
 @settings(max_examples=50, deadline=None)

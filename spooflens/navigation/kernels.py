@@ -129,6 +129,58 @@ def increment(
     return dC, dv, dp, T
 
 
+@njit(cache=CACHE, inline="always")
+def _rotate(qw: float, qx: float, qy: float, qz: float, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
+    """v turned by the unit quaternion q: v + w t + u x t with t = 2 u x v (`rotations.quat_rotate`)."""
+    s0, s1, s2 = 2.0 * (qy * v2 - qz * v1), 2.0 * (qz * v0 - qx * v2), 2.0 * (qx * v1 - qy * v0)
+    return v0 + qw * s0 + (qy * s2 - qz * s1), v1 + qw * s1 + (qz * s0 - qx * s2), v2 + qw * s2 + (qx * s1 - qy * s0)
+
+
+@njit(cache=CACHE)
+def preintegrate_rows(t: np.ndarray, f: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Qb, G, H) of `strapdown.preintegrate` in one pass over the samples: the body attitude relative to
+    the first sample (unit quaternions), the cumulative velocity increment and its integral in the first
+    body frame. Per sample k -> k+1 (dt, theta = w dt, f dt): the rotation exp(theta), the sculling-
+    corrected increment f dt + theta x f dt / 2 and its integral f dt dt / 2 + theta x f dt dt / 6, both
+    turned into the first body frame by the attitude at k. One loop with no whole-stream temporaries (the
+    vectorised form held a dozen arrays of the stream: 1.4 GB more than its result on a day of 100 Hz)."""
+    N = t.shape[0]
+    Qb = np.empty((N, 4))
+    G = np.zeros((N, 3))
+    H = np.zeros((N, 3))
+    qw, qx, qy, qz = 1.0, 0.0, 0.0, 0.0
+    Qb[0, 0], Qb[0, 1], Qb[0, 2], Qb[0, 3] = qw, qx, qy, qz
+    for k in range(N - 1):
+        dt = t[k + 1] - t[k]
+        t0, t1, t2 = w[k, 0] * dt, w[k, 1] * dt, w[k, 2] * dt
+        f0, f1, f2 = f[k, 0] * dt, f[k, 1] * dt, f[k, 2] * dt
+        c0, c1, c2 = t1 * f2 - t2 * f1, t2 * f0 - t0 * f2, t0 * f1 - t1 * f0
+        v0, v1, v2 = _rotate(qw, qx, qy, qz, f0 + 0.5 * c0, f1 + 0.5 * c1, f2 + 0.5 * c2)
+        p0, p1, p2 = _rotate(
+            qw, qx, qy, qz, 0.5 * f0 * dt + c0 * dt / 6.0, 0.5 * f1 * dt + c1 * dt / 6.0, 0.5 * f2 * dt + c2 * dt / 6.0
+        )
+        H[k + 1, 0] = H[k, 0] + (G[k, 0] * dt + p0)
+        H[k + 1, 1] = H[k, 1] + (G[k, 1] * dt + p1)
+        H[k + 1, 2] = H[k, 2] + (G[k, 2] * dt + p2)
+        G[k + 1, 0] = G[k, 0] + v0
+        G[k + 1, 1] = G[k, 1] + v1
+        G[k + 1, 2] = G[k, 2] + v2
+        a = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        half = 0.5 * a
+        sinc = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(half) / a  # a series keeps tiny angles exact
+        dw, dx, dy, dz = math.cos(half), t0 * sinc, t1 * sinc, t2 * sinc
+        qw, qx, qy, qz = (
+            qw * dw - qx * dx - qy * dy - qz * dz,
+            qw * dx + qx * dw + qy * dz - qz * dy,
+            qw * dy - qx * dz + qy * dw + qz * dx,
+            qw * dz + qx * dy - qy * dx + qz * dw,
+        )
+        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
+        Qb[k + 1, 0], Qb[k + 1, 1], Qb[k + 1, 2], Qb[k + 1, 3] = qw, qx, qy, qz
+    return Qb, G, H
+
+
 @njit(cache=CACHE)
 def _rates(lat: float, h: float, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
     rm, rn = local_radii(lat)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
@@ -140,55 +139,6 @@ def quat_rotate(q: FloatArray, v: FloatArray) -> FloatArray:
     u = q[..., 1:]
     t = 2.0 * np.cross(u, v)
     return v + w * t + np.cross(u, t)
-
-
-@njit(cache=True)
-def quat_rotate_rows(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """`quat_rotate` of row k of v by row k of q, the same arithmetic in the same order (np.cross: a1 b2 -
-    a2 b1, ...), without its whole-stream temporaries."""
-    out = np.empty_like(v)
-    for k in range(v.shape[0]):
-        w, ux, uy, uz = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
-        vx, vy, vz = v[k, 0], v[k, 1], v[k, 2]
-        tx = 2.0 * (uy * vz - uz * vy)
-        ty = 2.0 * (uz * vx - ux * vz)
-        tz = 2.0 * (ux * vy - uy * vx)
-        out[k, 0] = vx + w * tx + (uy * tz - uz * ty)
-        out[k, 1] = vy + w * ty + (uz * tx - ux * tz)
-        out[k, 2] = vz + w * tz + (ux * ty - uy * tx)
-    return out
-
-
-def prefix_products(q: FloatArray) -> FloatArray:
-    """Q[k] = q[0] q[1] ... q[k-1] with Q[0] = identity, by a parallel (Hillis-Steele) scan.
-
-    log2(N) passes of products instead of N sequential ones (the scan's rounding, kept as it was:
-    `_scan_pass` makes each pass in place); renormalised once at the end.
-    """
-    n = len(q)
-    out = np.empty((n + 1, 4))
-    out[0] = (1.0, 0.0, 0.0, 0.0)
-    acc = np.array(q, dtype=float, order="C")
-    step = 1
-    while step < n:
-        _scan_pass(acc, step)
-        step *= 2
-    out[1:] = acc / np.linalg.norm(acc, axis=-1, keepdims=True)
-    return out
-
-
-@njit(cache=True)
-def _scan_pass(acc: np.ndarray, step: int) -> None:
-    """acc[step:] = quat_multiply(acc[:-step], acc[step:]) in place, the same products in the same order
-    (from the end down, so every product reads the pass's old values), with no temporaries: the
-    vectorised form held a dozen arrays of the whole stream (gigabytes on a day-long log)."""
-    for i in range(acc.shape[0] - 1, step - 1, -1):
-        pw, px, py, pz = acc[i - step, 0], acc[i - step, 1], acc[i - step, 2], acc[i - step, 3]
-        qw, qx, qy, qz = acc[i, 0], acc[i, 1], acc[i, 2], acc[i, 3]
-        acc[i, 0] = pw * qw - px * qx - py * qy - pz * qz
-        acc[i, 1] = pw * qx + px * qw + py * qz - pz * qy
-        acc[i, 2] = pw * qy - px * qz + py * qw + pz * qx
-        acc[i, 3] = pw * qz + px * qy - py * qx + pz * qw
 
 
 def euler_to_matrix(roll: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> FloatArray:

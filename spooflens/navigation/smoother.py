@@ -59,13 +59,15 @@ def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
     e = sol.track_epoch
     # correction known at the start of each inter-epoch segment (after epoch e) and at its end (epoch e+1,
     # relative to the nominal propagated from e: the filter's update there plus the smoothed error)
-    start = np.where(e[:, None] >= 0, delta[np.clip(e, 0, M - 1)], 0.0)
+    # (the position errors only, states 6..8: the block-rate track is long, 0.2 GB a column set a day)
+    pos = delta[:, 6:9]
+    start = np.where(e[:, None] >= 0, pos[np.clip(e, 0, M - 1)], 0.0)
     nxt = np.clip(e + 1, 0, M - 1)
-    end = np.where((e + 1 < M)[:, None], sol.dx[nxt] + delta[nxt], start)
+    end = np.where((e + 1 < M)[:, None], sol.dx[nxt, 6:9] + pos[nxt], start)
     t0 = np.where(e >= 0, sol.t[np.clip(e, 0, M - 1)], sol.track_t[0])
     t1 = np.where(e + 1 < M, sol.t[nxt], sol.track_t[-1])
     w = np.clip((sol.track_t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
     d = (1 - w) * start + w * end
     lat, lon, h = sol.track_llh.T
     rm, rn = radii(lat)
-    return np.c_[lat - d[:, 7] / (rm + h), lon - d[:, 6] / ((rn + h) * np.cos(lat)), h - d[:, 8]]
+    return np.c_[lat - d[:, 1] / (rm + h), lon - d[:, 0] / ((rn + h) * np.cos(lat)), h - d[:, 2]]

@@ -35,7 +35,6 @@ from numpy.typing import NDArray
 from spooflens.geodesy import OMEGA_IE, radii
 from spooflens.navigation import kernels
 from spooflens.navigation.kernels import local_radii
-from spooflens.navigation.rotations import prefix_products, quat_from_rotvec, quat_rotate_rows
 
 FloatArray = NDArray[np.float64]
 
@@ -93,22 +92,11 @@ class Preintegrated:
 
 
 def preintegrate(t: FloatArray, f_b: FloatArray, w_b: FloatArray) -> Preintegrated:
-    """Vectorised high-rate part over a whole IMU stream (times increasing)."""
-    t = np.asarray(t, dtype=float)
-    dt = np.diff(t)
-    f = np.asarray(f_b, dtype=float)
-    theta = np.asarray(w_b, dtype=float)[:-1] * dt[:, None]
-    qb = prefix_products(quat_from_rotvec(theta))
-    fdt = f[:-1] * dt[:, None]
-    dv_local = fdt + 0.5 * np.cross(theta, fdt)
-    dv = quat_rotate_rows(qb[:-1], dv_local)
-    G = np.zeros((len(t), 3))
-    G[1:] = np.cumsum(dv, axis=0)
-    # integral of G over each sample: G(k) dt + (rotation-aware) half increment dt
-    dp_local = 0.5 * fdt * dt[:, None] + np.cross(theta, fdt) * dt[:, None] / 6.0
-    H = np.zeros((len(t), 3))
-    H[1:] = np.cumsum(G[:-1] * dt[:, None] + quat_rotate_rows(qb[:-1], dp_local), axis=0)
-    return Preintegrated(t, qb, G, H, f)
+    """The high-rate part over a whole IMU stream (times increasing), compiled (`kernels.preintegrate_rows`)."""
+    t = np.ascontiguousarray(t, dtype=float)
+    f = np.ascontiguousarray(f_b, dtype=float)
+    Qb, G, H = kernels.preintegrate_rows(t, f, np.ascontiguousarray(w_b, dtype=float))
+    return Preintegrated(t, Qb, G, H, f)
 
 
 def rates(lat: float, h: float, v: FloatArray) -> tuple[FloatArray, FloatArray, float, float]:
