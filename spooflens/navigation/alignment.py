@@ -70,13 +70,21 @@ def _kabsch(a: FloatArray, b: FloatArray) -> FloatArray:
     return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
-def _imu_orientation(imu: pd.DataFrame, t: float) -> FloatArray | None:
-    q = imu[["qw", "qx", "qy", "qz"]].to_numpy(dtype=float)
-    ok = np.isfinite(q).all(axis=1)
-    if not ok.any():
-        return None
-    k = int(np.argmin(np.abs(imu["t_s"].to_numpy()[ok] - t)))
-    return quat_to_matrix(q[ok][k])
+def _imu_orientation(imu: pd.DataFrame, t: float, near: int = 4096) -> FloatArray | None:
+    """The log's orientation at the sample nearest `t` that has one. Looked for among the `near` samples
+    on each side first (the columns of a whole day-long stream are half a gigabyte); the whole stream
+    only when none there is nearer than the window's edges."""
+    ts = imu["t_s"].to_numpy(dtype=float)
+    k = int(np.searchsorted(ts, t))
+    for lo, hi in ((max(0, k - near), min(len(ts), k + near)), (0, len(ts))):
+        q = imu[["qw", "qx", "qy", "qz"]].iloc[lo:hi].to_numpy(dtype=float)
+        ok = np.flatnonzero(np.isfinite(q).all(axis=1))
+        if len(ok):
+            best = ok[int(np.argmin(np.abs(ts[lo:hi][ok] - t)))]
+            edge = min(t - ts[lo - 1] if lo > 0 else np.inf, ts[hi] - t if hi < len(ts) else np.inf)
+            if abs(ts[lo + best] - t) <= edge:
+                return quat_to_matrix(q[best])
+    return None
 
 
 def align_from_orientation(
