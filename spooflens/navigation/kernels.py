@@ -448,8 +448,10 @@ def filter_loop(
     out_dx = np.zeros((M, NE))
     gm = np.zeros((M, NG))
     states = np.zeros((M, NX))
-    track = np.zeros((N + 1, 7))  # t, lat, lon, h, ve, vn, vu
-    track_epoch = np.zeros(N + 1, dtype=np.int64)
+    # room for a block per IMU sample, left unwritten (np.empty): only the blocks made take memory (the
+    # zeroed form touched 0.55 GB on a day of 100 Hz for a 50 MB track)
+    track = np.empty((N + 1, 7))  # t, lat, lon, h, ve, vn, vu
+    track_epoch = np.empty(N + 1, dtype=np.int64)
     nt = 0
     x = x0.copy()
     P = P0.copy()
