@@ -158,11 +158,20 @@ def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, 
     return head.state[-1], head.P_upd[-1], head.gm[-1]
 
 
-def coast(nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None) -> NavSolution:
+def coast(
+    nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None
+) -> NavSolution | None:
     """The INS (and odometry) continued from a solution's last epoch at or before `t_from` (the main one,
     or `base`: one that left the incidents already confirmed out) with every later GNSS fix left out
-    (each still compared with it), up to `t_end`."""
+    (each still compared with it), up to `t_end`; None when no fix lies there to compare it with (a
+    GNSS outage: a jammed receiver reports nothing)."""
     sol = base if base is not None else nav.solution
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    tf = nav.inputs.fixes["t_s"].to_numpy(dtype=float)
+    after = -np.inf if k < 0 else float(sol.t[k])
+    compared = int(np.count_nonzero((tf > after) & (tf <= (np.inf if t_end is None else t_end))))
+    if compared < (2 if k < 0 else 1):  # what a run from the start, or a continued one, needs
+        return None
     # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
     opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False)
     return continued(nav, sol, t_from, opts, t_end)
@@ -244,6 +253,8 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
     kept, curves = [], []
     for s in starts:
         sol = coast(nav, float(s), float(s) + H)
+        if sol is None:  # no fix in the horizon: a clean coast needs GNSS to be compared with
+            continue
         r = _ratio(sol, opts.p_disagree)
         fine = np.isfinite(r)
         if fine.sum() < 3:
@@ -271,11 +282,16 @@ def coasting_check(
     # day-long log for each of them made the check quadratic in the log's length (21 anomalies of a 24 h
     # voyage: 185 s). Only a departure, or a disagreement still running where that coast ends, needs the
     # coast to the end; the decision is the one the long coast gives (the same filter over the same span)
+    # (no fix in the first look, a GNSS outage: straight to the coast to the end)
     sol = coast(nav, t_ex, deadline + opts.first_look_s, base=base)
-    t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(sol, t_ex, deadline, envelope, opts)
     last = (base if base is not None else nav.solution).t[-1]
-    if departure is not None or (open_at_end and t[-1] < last):
+    if sol is not None:
+        t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(sol, t_ex, deadline, envelope, opts)
+    if sol is None or departure is not None or (open_at_end and t[-1] < last):
         sol = coast(nav, t_ex, base=base)
+        if sol is None:  # no fix from here to the end: nothing GNSS said can depart from the reference
+            none = np.array([])
+            return CoastingCheck(t_ex, none, none, none, none, False, None, None, None, None, np.zeros((0, 2)))
         t, ratio, kappa, offset, disagree, departure, _ = _departure(sol, t_ex, deadline, envelope, opts)
     if departure is None:
         return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2])

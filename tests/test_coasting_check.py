@@ -36,3 +36,26 @@ def test_a_short_first_look_decides_as_the_coast_to_the_end() -> None:
             assert short.t[-1] <= deadline + opts.first_look_s < full.t[-1]
             n = len(short.t)
             np.testing.assert_array_equal(short.offset_m, full.offset_m[:n])
+
+
+def test_a_gnss_outage_longer_than_a_coast_leaves_nothing_to_compare_and_the_analysis_goes_on() -> None:
+    """No fix for 115 s (a jammed receiver reports nothing), then a 30 m step at 500 s: the clean coasts
+    that fall in the outage are left out, a check starting in it coasts on to the next fixes, and the
+    attack is caught (these coasts used to stop the whole analysis: 'no GNSS fix inside the IMU's time
+    span')."""
+    from spooflens.pipeline import analyze_table
+    from spooflens.reconstruction import coast
+
+    table = simulate("multirotor", seed=2, duration_s=600.0).table
+    table, _ = apply_attack(table, parse_attack("step:offset=30,start=500"))
+    t = table.fixes["t_s"].to_numpy()
+    table.fixes = table.fixes[(t < 205.0) | (t > 320.0)].reset_index(drop=True)
+    nav = solve_navigation(table, AnalyzeOptions())
+    assert coast(nav, 210.0, 300.0) is None
+    opts = CoastingOptions()
+    envelope = placebo_coasts(nav, opts).envelope((210.0, 211.0), [], opts.margin_s, opts.placebo_trim)
+    check = coasting_check(nav, 210.0, envelope, opts=opts)
+    assert check.t[0] > 320.0  # the first fixes after the outage are the first compared
+    analysis = analyze_table(table)
+    attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
+    assert 495.0 <= attack.onset_s <= 501.0 and attack.ongoing_at_end

@@ -58,6 +58,7 @@ def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full
     assert full.P_upd_every == 1 and np.array_equal(full.nu, nav.solution.nu, equal_nan=True)
     for t_from in (100.0, 123.37, 187.05):  # on a kept epoch, between, just after one
         thinned, whole = coast(nav, t_from, t_from + 40.0), coast(nav, t_from, t_from + 40.0, base=full)
+        assert thinned is not None and whole is not None
         assert np.array_equal(thinned.t, whole.t) and thinned.t[0] > t_from
         assert np.allclose(thinned.nu, whole.nu, rtol=1e-9, atol=1e-9, equal_nan=True)
         assert np.allclose(thinned.S_all, whole.S_all, rtol=1e-9, atol=1e-12)

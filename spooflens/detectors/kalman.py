@@ -158,8 +158,8 @@ def information_predict_back(
     alpha_{k-1}  = A^T (I - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T) alpha, with Q = B Qr B^T.
     (The paper's printed step computes G and never uses it: this is the standard form it garbled.)
     By the matrix inversion lemma both brackets are (I + Lambda Q)^-1 applied to Lambda and to alpha,
-    which needs no factorisation of a singular Q (an eigendecomposition per epoch was most of the
-    offline MLRT's time) and is always solvable: I + Lambda Q has eigenvalues >= 1. A's non-zeros are
+    which needs no factorisation of a singular Q (no eigendecomposition and no tolerance for what counts
+    as a zero eigenvalue) and is always solvable: I + Lambda Q has eigenvalues >= 1. A's non-zeros are
     (a_ptr, a_col) (`spooflens.sparse_products`).
     """
     n = Lam.shape[0]

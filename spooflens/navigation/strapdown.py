@@ -1,8 +1,8 @@
 """Strapdown mechanization in the local-level ENU frame, in two rates (Savage's structure).
 
-High rate, vectorised over the whole log (`preintegrate`): every IMU sample holds its rate and specific
-force until the next sample (zero-order hold). The body attitude relative to the first sample, Qb(k),
-is the prefix product of the per-sample rotation quaternions (a parallel scan); specific-force
+High rate, one compiled pass over the whole log (`preintegrate`): every IMU sample holds its rate and
+specific force until the next sample (zero-order hold). The body attitude relative to the first sample,
+Qb(k), is the product of the per-sample rotation quaternions (renormalised at each sample); specific-force
 increments rotated into that first body frame accumulate into G(k) (velocity) and H(k) (its integral),
 so the body-frame velocity and position increments over ANY interval [i, j] follow in O(1):
     dv_b = Qb(i)^-1 (G(j) - G(i)),   dp_b = Qb(i)^-1 (H(j) - H(i) - G(i) (t_j - t_i)).
