@@ -347,14 +347,7 @@ OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held
 
 @njit(cache=True)
 def _forward_block(
-    A_head: np.ndarray,
-    A_tail: np.ndarray,
-    Q_head: np.ndarray,
-    Q_tail: np.ndarray,
-    C: np.ndarray,
-    R: np.ndarray,
-    y: np.ndarray,
-    t: np.ndarray,
+    model: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     rows: np.ndarray,
     ramp: bool,
     x: np.ndarray,
@@ -367,8 +360,10 @@ def _forward_block(
     a_col: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
-    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty). The
-    augmented transitions' non-zeros are (a_ptr, a_col)."""
+    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty). `model`
+    is (A_head, A_tail, Q_head, Q_tail, C, R, y, t); the augmented transitions' non-zeros are (a_ptr,
+    a_col)."""
+    A_head, A_tail, Q_head, Q_tail, C, R, y, t = model
     n, q = A_head.shape[1] + A_tail.shape[1], rows.shape[0]
     na = x.shape[0]
     for k in range(lo, hi + 1):
@@ -415,6 +410,7 @@ def _two_filter_offline(
     information (the whole forward record, gains and augmented matrices were 1.5 GB per hour of 10 Hz
     GNSS; this holds two blocks)."""
     n, q = x0.shape[0], rows.shape[0]
+    model = (A_head, A_tail, Q_head, Q_tail, C, R, y, t)
     na = n + (2 * q if ramp else q)
     first = -1 if ramp else n
     N = last + 1
@@ -431,26 +427,7 @@ def _two_filter_offline(
         ck_x[b] = x
         ck_P[b] = P
         if b < nb - 1:
-            x, P = _forward_block(
-                A_head,
-                A_tail,
-                Q_head,
-                Q_tail,
-                C,
-                R,
-                y,
-                t,
-                rows,
-                ramp,
-                x,
-                P,
-                b * block,
-                (b + 1) * block - 1,
-                no_x,
-                no_P,
-                a_ptr,
-                a_col,
-            )
+            x, P = _forward_block(model, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P, a_ptr, a_col)
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
     xs = np.zeros((block, na))
@@ -463,26 +440,7 @@ def _two_filter_offline(
         lo, hi = b * block, min((b + 1) * block, N) - 1
         if hi < from_epoch:
             break
-        _forward_block(
-            A_head,
-            A_tail,
-            Q_head,
-            Q_tail,
-            C,
-            R,
-            y,
-            t,
-            rows,
-            ramp,
-            ck_x[b].copy(),
-            ck_P[b].copy(),
-            lo,
-            hi,
-            xs,
-            Ps,
-            a_ptr,
-            a_col,
-        )
+        _forward_block(model, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col)
         for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
             Ls[k - lo] = L
             als[k - lo] = a
