@@ -330,6 +330,7 @@ def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> None:
     out = console()
     out.print("Ship voyage, 100 Hz IMU, 1 Hz GNSS (a line per length as it is done):")
     out.print("  length  IMU samples  wall (s)  CPU (s)  CPU per hour (s)  peak RSS (MB)  goal < 2048 MB")
+    longest: dict[str, Any] | None = None
     for h in hours:
         path = workdir / f"ship_{h:g}h.mcap"
         _ensure(path, "write_voyage", h)
@@ -346,3 +347,7 @@ def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> None:
             f"  {h:>4g} h  {r['imu_samples']:>11}  {run['wall_s']:>8.1f}  {r['cpu_s']:>7.1f}  {r['cpu_s'] / h:>16.1f}"
             f"  {run['peak_rss_mb']:>13.0f}  {_met(run['peak_rss_mb'], GOALS['voyage_rss_mb'])}  ({r['verdict'][:60]})"
         )
+        if h == max(hours):
+            longest = r
+    if longest is not None:  # where the longest voyage's time and memory go
+        out.print(_stage_table(f"the {max(hours):g} h voyage by stage", longest["stages"]))
