@@ -172,13 +172,6 @@ def block_congruence(head: np.ndarray, tail: np.ndarray, P: np.ndarray, out: np.
 
 
 @njit(cache=True, nogil=True)
-def block_congruence_t(head: np.ndarray, tail: np.ndarray, M: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """out = A^T M A for A = blockdiag(head, diag(tail)) and symmetric M (out exactly symmetric): A^T is
-    blockdiag(head^T, diag(tail))."""
-    return block_congruence(np.ascontiguousarray(head.T), tail, M, out)
-
-
-@njit(cache=True, nogil=True)
 def add_block_diagonal(P: np.ndarray, head: np.ndarray, tail: np.ndarray) -> np.ndarray:
     """P += blockdiag(head, diag(tail)), in place."""
     h = head.shape[0]
