@@ -83,13 +83,9 @@ def release_freed_memory() -> None:
     analysis's large arrays (allocated with mmap) never reuse. Returning it lowers the peak that follows.
     """
     import ctypes
-    import ctypes.util
 
-    name = ctypes.util.find_library("c")
-    if name is None:
-        return
     try:
-        trim = ctypes.CDLL(name).malloc_trim
+        trim = ctypes.CDLL(None).malloc_trim  # the process's own symbols: libc's, when it is glibc
     except (OSError, AttributeError):  # not glibc
         return
     trim(0)
