@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
 from spooflens.kalman_update import cholesky_logdet
-from spooflens.sparse_products import block_times, pattern
+from spooflens.sparse_products import block_times, pattern, times
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -79,6 +79,7 @@ def _ramp_pass(
     a_col: np.ndarray,
     c_ptr: np.ndarray,
     c_col: np.ndarray,
+    used_rows: np.ndarray,
 ):
     # Explicit loops over the non-zero pattern of A's leading block and of C, and a hand Cholesky for the
     # q x q matrices: the navigation model's A is block-diagonal (142 of 576 entries) and BLAS/LAPACK calls
@@ -106,7 +107,6 @@ def _ramp_pass(
     M = np.zeros((q, q))
     L = np.zeros((q, q))
     w = np.zeros(q)
-    used = np.zeros(p, dtype=np.bool_)
     for ci in range(cands.shape[0]):
         m = cands[ci]
         mu[:] = 0.0
@@ -117,25 +117,15 @@ def _ramp_pass(
             if dt > window_s:
                 break
             block_times(A_head[k], A_tail[k], mu, a_ptr, a_col, mu_p)
-            Ck = C[k]
+            times(C[k], mu_p, c_ptr, c_col, G)  # G = E dt - C mu_p
             for r in range(p):
                 for j in range(q):
-                    G[r, j] = 0.0
-                for z in range(c_ptr[r], c_ptr[r + 1]):
-                    col = c_col[z]
-                    c = Ck[r, col]
-                    for j in range(q):
-                        G[r, j] -= c * mu_p[col, j]
+                    G[r, j] = -G[r, j]
             for j in range(q):
                 G[rows[j], j] += dt
             Kk = K[k]
             Sk = Sinv[k]
-            for r in range(p):
-                used[r] = False
-                for s in range(p):
-                    if Sk[r, s] != 0.0:
-                        used[r] = True
-                        break
+            used = used_rows[k]
             for i in range(n):
                 for j in range(q):
                     v = mu_p[i, j]
@@ -235,6 +225,7 @@ def ramp_statistics(
         int(min_after),
         *pattern(model.A.head),
         *pattern(model.C),
+        np.any(fwd.Sinv != 0.0, axis=2),  # the rows each epoch's update used (once, not per candidate)
     )
     glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds = out
     # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
