@@ -665,12 +665,16 @@ def rts_closed_loop(
                 for i in range(n):
                     var[e, i] = Pu[i, i]
                 continue
-            # cross = P_upd[e] Phi[e+1]^T, Phi block-diagonal
+            # cross = P_upd[e] Phi[e+1]^T and pred = Phi[e+1] cross + Qd[e+1], Phi block-diagonal
             cross[:, :h] = np.ascontiguousarray(Pu[:, :h]) @ np.ascontiguousarray(Phi[e + 1].T)
             for j in range(h, n):
                 for i in range(n):
                     cross[i, j] = Pu[i, j] * Phi_gm[e + 1, j - h]
-            pred = block_congruence(Phi[e + 1], Phi_gm[e + 1], Pu, np.empty((n, n)))
+            pred = np.empty((n, n))
+            pred[:h] = Phi[e + 1] @ np.ascontiguousarray(cross[:h])
+            for i in range(h, n):
+                pred[i] = Phi_gm[e + 1, i - h] * cross[i]
+            pred = 0.5 * (pred + pred.T)
             add_block_diagonal(pred, Qd[e + 1], Qd_gm[e + 1])
             A = np.linalg.solve(pred.T, cross.T).T
             delta[e] = A @ (dx[e + 1] + delta[e + 1])
