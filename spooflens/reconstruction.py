@@ -40,7 +40,7 @@ from spooflens.navigation.loosely_coupled import (
     nis_by_pattern,
     run_prepared,
 )
-from spooflens.navigation.product import P_UPD_EVERY, Navigation
+from spooflens.navigation.product import Navigation
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.quantiles import chi2_isf
@@ -474,11 +474,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
                 if i.is_spoofing
             )
             # what later coasts start from: the states and covariances after each update (no other matrices)
-            base = run_prepared(
-                nav.inputs,
-                nav.options(exclude_windows=windows, record=("P_upd",), P_upd_every=P_UPD_EVERY),
-                nav.start,
-            )
+            base = run_prepared(nav.inputs, nav.options(exclude_windows=windows, record=("P_upd",)), nav.start)
     incidents = _merge_overlapping(incidents)
     confirmed = [i for i in incidents if i.is_spoofing]
     for inc in confirmed:
