@@ -58,9 +58,9 @@ def _vec(m: Any, name: str, keys: str = "xyz") -> list[float]:
 
 def _imu(m: Any) -> tuple[float, ...]:
     has_q = _has(m, "orientation")
-    q = _vec(m, "orientation", "xyzw") if has_q else [0.0, 0.0, 0.0, 0.0]
+    q = _vec(m, "orientation", "wxyz") if has_q else [0.0, 0.0, 0.0, 0.0]
     w, a = _vec(m, "angular_velocity"), _vec(m, "linear_acceleration")
-    return (*q, 0.0 if has_q else -1.0, *w, 0.0, *a, 0.0)
+    return (*a, *w, *q, 0.0 if has_q else -1.0)  # RAW_COLUMNS["imu"]
 
 
 _EXTRACT = {"navsatfix": _location_fix, "imu": _imu}

@@ -130,7 +130,8 @@ def decode_batch(
     for dtype in dict.fromkeys(dtypes[p[0]] for p in picks if p is not None):
         cols = [i for i, p in enumerate(picks) if p is not None and dtypes[p[0]] == dtype]
         size = np.dtype(dtype).itemsize
-        fields = list(dict.fromkeys(picks[i][0] for i in cols))  # type: ignore[index]
+        picked = {picks[i][0] for i in cols}  # type: ignore[index]
+        fields = [f.name for f in layout if f.name in picked]  # in the message's order: the first lies first
         lead = offsets[fields[0]]
         shift = {f: int(offsets[f][0] - lead[0]) for f in fields}  # each field's place after the first field
         if size > 1 and all(

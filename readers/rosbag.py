@@ -58,7 +58,10 @@ def _read_open_bag(
     def deserialize(raw: bytes | memoryview, msgtype: str) -> object:
         return reader.deserialize(bytes(raw), msgtype)
 
-    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections})
+    counts: dict[str, int] = {}
+    for c in reader.connections:
+        counts[c.topic] = counts.get(c.topic, 0) + max(_listed_count(c.msgcount), 0)
+    collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections}, counts)
     total = sum(max(_listed_count(c.msgcount), 0) for c in reader.connections)  # metadata may be damaged
     n = 0
     try:

@@ -50,6 +50,7 @@ Decoded = tuple[int, tuple[float, ...]]
 _QUEUE = 8192  # messages queued per topic before they are decoded as one batch
 # a topic's frame_id is the first non-empty one of its first messages (all decoded in full, one by one)
 _FRAME_ID_MESSAGES = 16
+_MIN_MESSAGE_BYTES = 16  # no message record of any format we read is smaller
 
 
 @dataclass(frozen=True)
@@ -148,12 +149,19 @@ class StreamCollector:
     streams: dict[str, TopicStream] = field(default_factory=dict)
     skipped: list[Skipped] = field(default_factory=list)
 
-    def add_topics(self, topics: Mapping[str, TopicDecl]) -> None:
-        """Declare every topic of the log (roles depend on all of them, so all at once)."""
+    def add_topics(self, topics: Mapping[str, TopicDecl], counts: Mapping[str, int] | None = None) -> None:
+        """Declare every topic of the log (roles depend on all of them, so all at once). `counts`, the
+        messages per topic a file's index lists, lets each topic's rows be stored once, in place; a
+        damaged count cannot ask for more rows than the file has bytes for."""
         roles = assign_roles(self.path, {t: d.kind for t, d in topics.items()}, self.overrides)
+        try:
+            most = self.path.stat().st_size // _MIN_MESSAGE_BYTES
+        except OSError:
+            most = 0
         for topic, decl in topics.items():
             role = roles[topic]
-            buf = RowBuffer(RAW_COLUMNS[decl.kind]) if role and decl.kind and decl.decode else None
+            capacity = min(max(int((counts or {}).get(topic, 0)), 0), most)
+            buf = RowBuffer(RAW_COLUMNS[decl.kind], capacity) if role and decl.kind and decl.decode else None
             self.streams[topic] = TopicStream(topic, decl, role, buf)
 
     def add(self, topic: str, log_time_ns: int, raw: bytes | memoryview) -> None:
@@ -311,7 +319,9 @@ class StreamCollector:
                     )
                 )
             elif s.role == "imu":
-                frames["imu"].append(pd.DataFrame({"t_ns": stamps, "imu_id": s.topic} | imu_columns(values)))
+                frames["imu"].append(
+                    pd.DataFrame({"t_ns": stamps, "imu_id": s.topic} | imu_columns(values), copy=False)
+                )
                 infos.append(
                     StreamInfo("imu", s.topic, s.topic, s.msgtype, len(stamps), body_frame="FLU", frame_id=s.frame_id)
                 )
@@ -349,6 +359,8 @@ class StreamCollector:
 
 
 def _concat(parts: list[pd.DataFrame]) -> pd.DataFrame | None:
+    if len(parts) == 1:  # one stream: its frame as it is (a concat would copy a day of IMU)
+        return parts[0]
     return pd.concat(parts, ignore_index=True) if parts else None
 
 

@@ -396,11 +396,16 @@ def _repair_stream(frame: str, df: pd.DataFrame, stream: _Stream, skipped: list[
     stream.rows = rows
 
 
-def _at(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """values[rows], as a view when the rows are one contiguous run (one sorted stream: the usual case)."""
+def _run(rows: np.ndarray) -> slice | None:
+    """The slice `rows` are, when they are one contiguous run (one sorted stream: the usual case)."""
     if len(rows) and rows[-1] - rows[0] == len(rows) - 1 and (len(rows) < 2 or bool(np.all(np.diff(rows) == 1))):
-        return values[rows[0] : rows[-1] + 1]
-    return values[rows]
+        return slice(int(rows[0]), int(rows[-1]) + 1)
+    return None
+
+
+def _at(values: np.ndarray, rows: np.ndarray, run: slice | None) -> np.ndarray:
+    """values[rows]: a view when they are one contiguous run (`run`, which is `_run(rows)`)."""
+    return values[run] if run is not None else values[rows]
 
 
 class _Gathered(Mapping[str, np.ndarray]):
@@ -408,14 +413,14 @@ class _Gathered(Mapping[str, np.ndarray]):
     columns; copying all of them for every stream would double a large log's memory)."""
 
     def __init__(self, df: pd.DataFrame, rows: np.ndarray, exclude: tuple[str | None, ...] = ()) -> None:
-        self.df, self.rows = df, rows
+        self.df, self.rows, self.run = df, rows, _run(rows)
         self.names = [c for c in df.columns if c not in exclude]
         self.scales: dict[str, float] = {}
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self.names:
             raise KeyError(name)
-        values = _at(self.df[name].to_numpy(), self.rows)
+        values = _at(self.df[name].to_numpy(), self.rows, self.run)
         return values * self.scales[name] if name in self.scales else values
 
     def __iter__(self) -> Iterator[str]:
@@ -430,13 +435,14 @@ def _take(frame: str, df: pd.DataFrame, streams: list[_Stream], t0_ns: int, skip
     reordered; the reader's column released as soon as it is copied), unit scales applied, optional
     values out of range cleared, t_s set."""
     idx = np.concatenate([s.rows for s in streams]) if streams else np.zeros(0, dtype=np.int64)
+    run = _run(idx)
     cols: dict[str, Any] = {}
     for c in list(df.columns):
         if isinstance(df[c].dtype, pd.StringDtype):  # stream ids: kept as strings, not made Python objects
-            cols[c] = _at(df[c].array, idx)
+            cols[c] = _at(df[c].array, idx, run)
             del df[c]
             continue
-        values = _at(df[c].to_numpy(), idx)
+        values = _at(df[c].to_numpy(), idx, run)
         if not values.flags.writeable:  # pandas hands out read-only views; the table's frames are its own
             try:
                 values.flags.writeable = True
@@ -489,7 +495,8 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> boo
     drop = np.zeros(len(imu), dtype=bool)
     for sid in pd.unique(imu["imu_id"]):
         rows = np.flatnonzero((imu["imu_id"] == sid).to_numpy(dtype=bool))
-        t = imu["t_s"].to_numpy()[rows]
+        run = _run(rows)
+        t = _at(imu["t_s"].to_numpy(), rows, run)
         gap = max(t[0] - t_fix[-1], t_fix[0] - t[-1])
         if gap > 3600.0:
             skipped.append(
@@ -505,7 +512,7 @@ def _cross_check(frames: dict[str, pd.DataFrame], skipped: list[Skipped]) -> boo
             continue
         if any(n.stream == str(sid) and "angular rate in deg/s" in n.reason for n in skipped):
             continue  # its range already said deg/s: scaled once
-        motion = {c: imu[c].to_numpy()[rows] for c in plausibility.IMU_MOTION}
+        motion = {c: _at(imu[c].to_numpy(), rows, run) for c in plausibility.IMU_MOTION}
         ratio = plausibility.gyro_turn_ratio(t, motion, t_fix, fix_cols)
         if ratio is not None and 40.0 < ratio < 80.0:
             skipped.append(

@@ -27,3 +27,13 @@ def test_the_nearest_orientation_is_the_whole_streams_nearest() -> None:
             continue
         assert got is not None
         np.testing.assert_array_equal(got, quat_to_matrix(q[ok][int(np.argmin(np.abs(ts[ok] - t)))]))
+
+
+def test_body_axes_to_flu_from_rows_or_columns_equal_the_convention_matrix() -> None:
+    from spooflens.navigation.alignment import TO_FLU, to_flu
+
+    rows = np.random.default_rng(3).normal(size=(50, 3))
+    for frame, M in TO_FLU.items():
+        expected = rows @ M.T
+        np.testing.assert_array_equal(to_flu(rows, frame), expected)
+        np.testing.assert_array_equal(to_flu([rows[:, 0], rows[:, 1], rows[:, 2]], frame), expected)

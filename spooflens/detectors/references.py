@@ -200,8 +200,8 @@ def _ins_reference(
     t_imu = imu["t_s"].to_numpy(float)
     pre = preintegrate(
         t_imu,
-        to_flu(imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(float), body),
-        to_flu(imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy(float), body),
+        to_flu([imu[c].to_numpy(dtype=float) for c in ("ax_mps2", "ay_mps2", "az_mps2")], body),
+        to_flu([imu[c].to_numpy(dtype=float) for c in ("wx_radps", "wy_radps", "wz_radps")], body),
     )
     states = np.asarray(sol.state, dtype=float)
     t_state = states[:, -1]  # the IMU sample time each post-update state refers to

@@ -12,6 +12,7 @@ log has one, else the course over ground along the levelled body x axis.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -43,11 +44,24 @@ TO_FLU = {
 }
 
 
-def to_flu(values: FloatArray, body_frame: str) -> FloatArray:
+def to_flu(values: FloatArray | Sequence[FloatArray], body_frame: str) -> FloatArray:
+    """(N, 3) FLU vectors from (N, 3) rows or three columns in the declared body frame.
+
+    Axis by axis, not a matrix product: the conventions are signed permutations, and a (N, 3) @ (3, 3)
+    product costs more than the whole preintegration; columns are read where they lie (no frame copy)."""
     try:
-        return np.asarray(values, dtype=float) @ TO_FLU[body_frame].T
+        M = TO_FLU[body_frame]
     except KeyError:
         raise AnalysisError(f"unknown IMU body frame {body_frame!r}; known: {sorted(TO_FLU)}") from None
+    cols = [values[:, j] for j in range(3)] if isinstance(values, np.ndarray) else list(values)
+    out = np.zeros((len(cols[0]), 3))
+    for i in range(3):
+        for j in range(3):
+            if M[i, j] == 1.0:
+                out[:, i] += cols[j]
+            elif M[i, j] != 0.0:
+                out[:, i] += M[i, j] * np.asarray(cols[j], dtype=float)
+    return out
 
 
 @dataclass(frozen=True)

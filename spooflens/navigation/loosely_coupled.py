@@ -330,8 +330,8 @@ def prepare(table: EpochTable, imu_id: str | None = None, receiver_id: str | Non
     if len(imu) < 10:
         raise AnalysisError(f"{table.source} [{imu_id}]: only {len(imu)} IMU samples")
     t_imu = imu["t_s"].to_numpy(dtype=float)
-    f_b = to_flu(imu[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(dtype=float), body)
-    w_b = to_flu(imu[["wx_radps", "wy_radps", "wz_radps"]].to_numpy(dtype=float), body)
+    f_b = to_flu([imu[c].to_numpy(dtype=float) for c in ("ax_mps2", "ay_mps2", "az_mps2")], body)
+    w_b = to_flu([imu[c].to_numpy(dtype=float) for c in ("wx_radps", "wy_radps", "wz_radps")], body)
     odometry_ids = tuple(dict.fromkeys(table.odometry["odometry_id"].astype(str)))
     return FilterInputs(table, imu_id, receiver_id, preintegrate(t_imu, f_b, w_b), imu, fixes, odometry_ids)
 
