@@ -188,21 +188,11 @@ def _ins_reference(
     """Restarts only from states after the filter has settled: `settle_s` after its start and not before the
     alignment's window ends (until then the heading is not known to its stated accuracy and a free run
     from it drifts by metres per second in the first turn)."""
-    from spooflens.navigation.alignment import to_flu
-    from spooflens.navigation.strapdown import NavState, preintegrate, propagate
+    from spooflens.navigation.strapdown import NavState, propagate
 
     nav = ctx.navigation()
     sol = nav.solution
-    table = ctx.table
-    imu = table.imu_of(sol.imu_id)
-    info = table.stream("imu", sol.imu_id)
-    body = info.body_frame if info and info.body_frame else "FLU"
-    t_imu = imu["t_s"].to_numpy(float)
-    pre = preintegrate(
-        t_imu,
-        to_flu([imu[c].to_numpy(dtype=float) for c in ("ax_mps2", "ay_mps2", "az_mps2")], body),
-        to_flu([imu[c].to_numpy(dtype=float) for c in ("wx_radps", "wy_radps", "wz_radps")], body),
-    )
+    pre = nav.inputs.pre  # the filter's own preintegration of this IMU (not a second one: 1 GB a day)
     states = np.asarray(sol.state, dtype=float)
     t_state = states[:, -1]  # the IMU sample time each post-update state refers to
     settled = float(sol.t[0]) + settle_s

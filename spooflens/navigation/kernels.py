@@ -137,7 +137,15 @@ def _rotate(qw: float, qx: float, qy: float, qz: float, v0: float, v1: float, v2
 
 
 @njit(cache=CACHE)
-def preintegrate_rows(t: np.ndarray, f: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def preintegrate_rows(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Qb, G, H) of `strapdown.preintegrate` in one pass over the samples: the body attitude relative to
     the first sample (unit quaternions), the cumulative velocity increment and its integral in the first
     body frame. Per sample k -> k+1 (dt, theta = w dt, f dt): the rotation exp(theta), the sculling-
@@ -152,8 +160,8 @@ def preintegrate_rows(t: np.ndarray, f: np.ndarray, w: np.ndarray) -> tuple[np.n
     Qb[0, 0], Qb[0, 1], Qb[0, 2], Qb[0, 3] = qw, qx, qy, qz
     for k in range(N - 1):
         dt = t[k + 1] - t[k]
-        t0, t1, t2 = w[k, 0] * dt, w[k, 1] * dt, w[k, 2] * dt
-        f0, f1, f2 = f[k, 0] * dt, f[k, 1] * dt, f[k, 2] * dt
+        t0, t1, t2 = wx[k] * dt, wy[k] * dt, wz[k] * dt
+        f0, f1, f2 = fx[k] * dt, fy[k] * dt, fz[k] * dt
         c0, c1, c2 = t1 * f2 - t2 * f1, t2 * f0 - t0 * f2, t0 * f1 - t1 * f0
         v0, v1, v2 = _rotate(qw, qx, qy, qz, f0 + 0.5 * c0, f1 + 0.5 * c1, f2 + 0.5 * c2)
         p0, p1, p2 = _rotate(
@@ -398,7 +406,6 @@ def filter_loop(
     Qb: np.ndarray,
     G: np.ndarray,
     H: np.ndarray,
-    f: np.ndarray,
     x0: np.ndarray,
     P0: np.ndarray,
     qc: np.ndarray,
@@ -478,7 +485,8 @@ def filter_loop(
             if j <= k:
                 j = k + 1
             dC, dv_b, dp_b, T = increment(t, Qb, G, H, k, j)
-            f_mean = dv_b / T - x[18:21] if T > 0 else f[k] - x[18:21]
+            # a zero-length block (two samples at one time) has Phi = I and Qd = 0 whatever the force
+            f_mean = dv_b / T - x[18:21] if T > 0 else -x[18:21]
             Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
             decay = np.empty(NG)
             qg = np.empty(NG)

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError
 from spooflens.navigation import kernels
-from spooflens.navigation.alignment import Alignment, align, to_flu
+from spooflens.navigation.alignment import Alignment, align, flu_axes
 from spooflens.navigation.error_model import (
     MEASUREMENT_NAMES,
     STATE_NAMES,
@@ -317,7 +317,7 @@ class FilterInputs:
         end = np.inf if t_end is None else t_end
         k0 = max(int(np.searchsorted(pre.t, t_after, side="right")) - 1, 0)
         k1 = int(np.searchsorted(pre.t, end + 1.0))
-        cut = Preintegrated(pre.t[k0:k1], pre.Qb[k0:k1], pre.G[k0:k1], pre.H[k0:k1], pre.f[k0:k1])
+        cut = pre.between(k0, k1)
         t = self.fixes["t_s"].to_numpy(dtype=float)
         fixes = self.fixes[(t > t_after) & (t <= end)].reset_index(drop=True)
         return replace(self, pre=cut, fixes=fixes)
@@ -330,8 +330,8 @@ def prepare(table: EpochTable, imu_id: str | None = None, receiver_id: str | Non
     if len(imu) < 10:
         raise AnalysisError(f"{table.source} [{imu_id}]: only {len(imu)} IMU samples")
     t_imu = imu["t_s"].to_numpy(dtype=float)
-    f_b = to_flu([imu[c].to_numpy(dtype=float) for c in ("ax_mps2", "ay_mps2", "az_mps2")], body)
-    w_b = to_flu([imu[c].to_numpy(dtype=float) for c in ("wx_radps", "wy_radps", "wz_radps")], body)
+    f_b = flu_axes([imu[c].to_numpy(dtype=float) for c in ("ax_mps2", "ay_mps2", "az_mps2")], body)
+    w_b = flu_axes([imu[c].to_numpy(dtype=float) for c in ("wx_radps", "wy_radps", "wz_radps")], body)
     odometry_ids = tuple(dict.fromkeys(table.odometry["odometry_id"].astype(str)))
     return FilterInputs(table, imu_id, receiver_id, preintegrate(t_imu, f_b, w_b), imu, fixes, odometry_ids)
 
@@ -414,7 +414,6 @@ def _run(
             pre.Qb,
             pre.G,
             pre.H,
-            pre.f,
             s.to_vector(),
             P0,
             qc,

@@ -191,10 +191,10 @@ def estimate_mount(inputs: FilterInputs, odometry_id: str, min_correlation: floa
         kernel = np.ones(10) / 10.0  # 1 s: the wheels' and the IMU's clocks and rates differ
         return np.convolve(x, kernel, mode="same")
 
-    f = np.stack([smooth(np.interp(grid, pre.t, pre.f[:, i])) for i in range(3)], axis=1)
+    f = np.stack([smooth(np.interp(grid, pre.t, a)) for a in pre.f_axes], axis=1)
     vx = smooth(np.interp(grid, to, od["vx_mps"].to_numpy(dtype=float)))
     wz = smooth(np.interp(grid, to, od["wz_radps"].to_numpy(dtype=float)))
-    up = np.mean(pre.f, axis=0)
+    up = np.array([np.mean(a) for a in pre.f_axes])
     if np.linalg.norm(up) < 1e-6:
         return None
     up = up / np.linalg.norm(up)

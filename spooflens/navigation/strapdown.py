@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,6 +76,17 @@ class NavState:
         )
 
 
+Axes = tuple[FloatArray, FloatArray, FloatArray]
+
+
+def axes_of(v: FloatArray | Sequence[FloatArray]) -> Axes:
+    """x, y, z as three contiguous float columns, from (N, 3) rows or three columns (taken as they are
+    when already so: a table's own columns are not copied)."""
+    cols = [v[:, j] for j in range(3)] if isinstance(v, np.ndarray) else list(v)
+    x, y, z = (np.ascontiguousarray(c, dtype=float) for c in cols)
+    return x, y, z
+
+
 @dataclass(frozen=True)
 class Preintegrated:
     """High-rate integrals of one IMU stream; `increment(i, j)` gives any interval's increments."""
@@ -83,19 +95,31 @@ class Preintegrated:
     Qb: FloatArray  # (N, 4) body attitude at t[k] relative to the body at t[0]
     G: FloatArray  # (N, 3) cumulative velocity increment, first-body frame
     H: FloatArray  # (N, 3) cumulative integral of G, first-body frame
-    f: FloatArray  # (N, 3) specific force samples (for F matrices)
+    f_axes: Axes  # the specific force samples (FLU), by axis: the table's columns when the body is FLU
 
     def increment(self, i: int, j: int) -> tuple[FloatArray, FloatArray, FloatArray, float]:
         """(dC_b (3x3), dv_b, dp_b, T) from sample i to sample j, in the body frame at t[i]."""
         dC, dv, dp, T = kernels.increment(self.t, self.Qb, self.G, self.H, int(i), int(j))
         return dC, dv, dp, float(T)
 
+    def f(self, rows: slice | NDArray[np.intp] = slice(None)) -> FloatArray:
+        """(n, 3) specific force at `rows` (a copy of those rows only)."""
+        return np.stack([a[rows] for a in self.f_axes], axis=1)
 
-def preintegrate(t: FloatArray, f_b: FloatArray, w_b: FloatArray) -> Preintegrated:
-    """The high-rate part over a whole IMU stream (times increasing), compiled (`kernels.preintegrate_rows`)."""
+    def between(self, k0: int, k1: int) -> Preintegrated:
+        """Samples k0 to k1 (exclusive), as views."""
+        x, y, z = (a[k0:k1] for a in self.f_axes)
+        return Preintegrated(self.t[k0:k1], self.Qb[k0:k1], self.G[k0:k1], self.H[k0:k1], (x, y, z))
+
+
+def preintegrate(
+    t: FloatArray, f_b: FloatArray | Sequence[FloatArray], w_b: FloatArray | Sequence[FloatArray]
+) -> Preintegrated:
+    """The high-rate part over a whole IMU stream (times increasing), compiled (`kernels.preintegrate_rows`).
+    `f_b` and `w_b` are (N, 3) rows or three columns each (columns are not copied)."""
     t = np.ascontiguousarray(t, dtype=float)
-    f = np.ascontiguousarray(f_b, dtype=float)
-    Qb, G, H = kernels.preintegrate_rows(t, f, np.ascontiguousarray(w_b, dtype=float))
+    f = axes_of(f_b)
+    Qb, G, H = kernels.preintegrate_rows(t, *f, *axes_of(w_b))
     return Preintegrated(t, Qb, G, H, f)
 
 
