@@ -37,7 +37,7 @@ from readers.ros_messages import (
 )
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
-from spooflens.schema import FixType
+from spooflens.schema import FixType, constant_strings
 
 ROLES = ("fix", "fix2", "imu", "vel", "odom", "truth")
 # --topic roles -> the kinds' own role (a second receiver and truth are fix kinds too)
@@ -307,7 +307,9 @@ class StreamCollector:
                     keep = ("lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps")
                     frames["truth"].append(pd.DataFrame({"t_ns": stamps} | {k: cols[k] for k in keep if k in cols}))
                 else:
-                    frames["fixes"].append(pd.DataFrame({"t_ns": stamps, "receiver_id": s.topic} | cols))
+                    frames["fixes"].append(
+                        pd.DataFrame({"t_ns": stamps, "receiver_id": constant_strings(s.topic, len(stamps))} | cols)
+                    )
                 infos.append(
                     StreamInfo(
                         s.role if s.role == "truth" else "fix",
@@ -320,7 +322,10 @@ class StreamCollector:
                 )
             elif s.role == "imu":
                 frames["imu"].append(
-                    pd.DataFrame({"t_ns": stamps, "imu_id": s.topic} | imu_columns(values), copy=False)
+                    pd.DataFrame(
+                        {"t_ns": stamps, "imu_id": constant_strings(s.topic, len(stamps))} | imu_columns(values),
+                        copy=False,
+                    )
                 )
                 infos.append(
                     StreamInfo("imu", s.topic, s.topic, s.msgtype, len(stamps), body_frame="FLU", frame_id=s.frame_id)
@@ -338,7 +343,10 @@ class StreamCollector:
                     spans[("timeref", s.topic)] = (int(np.min(stamps)), int(np.max(stamps)))
             elif s.role == "odom":
                 frames["odometry"].append(
-                    pd.DataFrame({"t_ns": stamps, "odometry_id": s.topic} | odometry_columns(values))
+                    pd.DataFrame(
+                        {"t_ns": stamps, "odometry_id": constant_strings(s.topic, len(stamps))}
+                        | odometry_columns(values)
+                    )
                 )
                 infos.append(StreamInfo("odometry", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
             del values  # the raw rows are in the frame now: free them before the next stream and build_table

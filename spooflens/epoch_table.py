@@ -18,7 +18,7 @@ import pandas as pd
 from spooflens import plausibility
 from spooflens.errors import SchemaError
 from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
-from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems
+from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems, stream_rows
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
 NS = 1_000_000_000
@@ -592,7 +592,7 @@ def _segment_frames(
             continue
         key = STREAM_KEY[name]
         t_all = df["t_ns"].to_numpy()
-        groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
+        groups = [("truth", np.arange(len(df)))] if key is None else stream_rows(df, key)
         for sid, pos in groups:
             order = np.argsort(t_all[pos], kind="stable")
             stray = np.zeros(len(pos), dtype=bool)
@@ -767,7 +767,7 @@ def checked(table: EpochTable) -> EpochTable:
             continue
         key = STREAM_KEY[name]
         drop = np.zeros(len(df), dtype=bool)
-        groups = [("truth", np.arange(len(df)))] if key is None else list(df.groupby(key, sort=False).indices.items())
+        groups = [("truth", np.arange(len(df)))] if key is None else stream_rows(df, key)
         notes = []
         for sid, rows in groups:
             cols = _Gathered(df, np.asarray(rows), exclude=("t_s", key))

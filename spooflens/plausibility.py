@@ -425,11 +425,14 @@ def _gnss_course(fix_t_s: FloatArray, fixes: Columns, start: float, end: float) 
 
 def problems(frames: Mapping[str, pd.DataFrame]) -> list[str]:
     """What is still implausible in finished frames (the pipeline's last guard), one phrase each."""
+    from spooflens.schema import STREAM_KEY
+
     out = []
     for frame, df in frames.items():
         if not len(df):
             continue
-        cols = {c: df[c].to_numpy() for c in df.columns if c != "t_s"}
+        key = STREAM_KEY[frame]  # stream ids are never judged; as numpy they are a Python string a row
+        cols = {c: df[c].to_numpy() for c in df.columns if c not in ("t_s", key)}
         t = df["t_s"].to_numpy(dtype=float)
         if not np.all(np.isfinite(t)) or np.any(np.abs(t) > 1e10):
             out.append(f"{frame}: times not finite or beyond 300 years")

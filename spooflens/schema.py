@@ -298,6 +298,17 @@ def string_array(values: object) -> pd.api.extensions.ExtensionArray:
     return pd.array(strings, dtype="string")
 
 
+def constant_strings(value: str, n: int) -> pd.api.extensions.ExtensionArray:
+    """The schema's string column holding `value` on all `n` rows (a stream id down its frame), made in
+    one piece: a scalar broadcast by pandas is an object array a string at a time (1.5 s on a day of IMU)."""
+    import pyarrow as pa
+
+    raw = value.encode()
+    offsets = np.arange(n + 1, dtype=np.int64) * len(raw)
+    strings = pa.LargeStringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(raw * n))
+    return pd.array(strings, dtype="string")
+
+
 def make_frame(frame: str, columns: Mapping[str, Any], n: int | None = None, copy: bool = True) -> pd.DataFrame:
     """Build a frame from arrays: schema order and dtypes, absent optional columns filled.
 
@@ -327,6 +338,17 @@ def make_frame(frame: str, columns: Mapping[str, Any], n: int | None = None, cop
     return pd.DataFrame(data, copy=False)
 
 
+def stream_rows(df: pd.DataFrame, key: str) -> list[tuple[str, np.ndarray]]:
+    """(stream id, row positions) of each stream of a frame, in order of first appearance; rows with no
+    id belong to none. A `groupby(key).indices` for string ids, 15 times faster: 1.8 s on a day of IMU."""
+    codes, ids = pd.factorize(df[key], sort=False)
+    if len(ids) == 1 and bool(np.all(codes == 0)):
+        return [(str(ids[0]), np.arange(len(df)))]
+    order = np.argsort(codes, kind="stable")
+    bounds = np.searchsorted(codes[order], np.arange(len(ids) + 1))
+    return [(str(sid), order[bounds[i] : bounds[i + 1]]) for i, sid in enumerate(ids)]
+
+
 def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:
     """Every way `df` breaks the schema of `frame`, all at once (empty list if none)."""
     problems: list[str] = []
@@ -350,11 +372,7 @@ def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:
         if not np.all(np.isfinite(t)):
             problems.append(f"{frame}.t_s: {int((~np.isfinite(t)).sum())} non-finite times")
         key = STREAM_KEY[frame]
-        groups = (
-            [t]
-            if key is None or key not in df.columns
-            else [g["t_s"].to_numpy(dtype=float) for _, g in df.groupby(key, sort=False)]
-        )
+        groups = [t] if key is None or key not in df.columns else [t[rows] for _, rows in stream_rows(df, key)]
         if any(np.any(np.diff(g) < 0) for g in groups):
             problems.append(f"{frame}.t_s: not increasing within a stream")
     if frame in ("fixes", "truth") and {"lat_deg", "lon_deg"} <= set(df.columns) and len(df):

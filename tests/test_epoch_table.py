@@ -79,3 +79,19 @@ def test_make_frame_rejects_unknown_columns_and_fills_optional_ones() -> None:
 def test_schema_markdown_lists_every_column() -> None:
     md = schema_markdown()
     assert all(f"`{c.name}`" in md for spec in FRAMES.values() for c in spec)
+
+
+def test_stream_rows_are_the_groups_of_the_stream_key_in_order_of_first_appearance() -> None:
+    from spooflens.schema import stream_rows, string_array
+
+    ids = ["/b", "/a", "/b", None, "/c", "/a", "/b"]
+    df = pd.DataFrame({"imu_id": pd.Series(string_array(np.array(ids, dtype=object))), "x": np.arange(7.0)})
+    got = stream_rows(df, "imu_id")
+    expected = df.groupby("imu_id", sort=False).indices
+    assert [sid for sid, _ in got] == list(expected) == ["/b", "/a", "/c"]
+    for sid, rows in got:
+        np.testing.assert_array_equal(rows, expected[sid])
+    one = pd.DataFrame({"imu_id": pd.Series(string_array(np.array(["/imu"] * 5, dtype=object)))})
+    ((sid, rows),) = stream_rows(one, "imu_id")
+    assert sid == "/imu"
+    np.testing.assert_array_equal(rows, np.arange(5))
