@@ -79,3 +79,28 @@ def test_euler_and_quaternion_round_trips(roll: float, pitch: float, yaw: float)
     C = euler_to_matrix(roll, pitch, yaw)
     np.testing.assert_allclose(quat_to_matrix(matrix_to_quat(C)), C, atol=1e-12)
     np.testing.assert_allclose(euler_to_matrix(*matrix_to_euler(C)), C, atol=1e-9)
+
+
+def test_integrals_kept_at_checkpoints_give_every_increment_bit_for_bit() -> None:
+    """A long stream keeps its integrals every few samples and makes the others again from the nearest:
+    increments, integrals and cut streams equal those of integrals kept at every sample, exactly."""
+    truth = generate(PROFILES["aircraft"], 100.0)
+    keep = truth.t <= 120.0
+    f, w = ideal_imu(truth)
+    f = f[keep] + np.random.default_rng(5).normal(0.0, 0.05, (int(keep.sum()), 3))  # noise: no round numbers
+    dense = preintegrate(truth.t[keep], f, w[keep], every=1)
+    sparse = preintegrate(truth.t[keep], f, w[keep], every=8)
+    assert len(sparse.Qb) == -(-len(dense.t) // 8)
+    for i, j in [(0, 1), (3, 5), (7, 8), (8, 16), (5, 300), (9, 10), (0, len(dense.t) - 1), (401, 1234), (16, 16)]:
+        for a, b in zip(dense.increment(i, j), sparse.increment(i, j), strict=True):
+            np.testing.assert_array_equal(a, b)
+    rows = np.array([0, 1, 7, 8, 9, 30, 31, 31, 500, 2])
+    for a, b in zip(dense.integrals(rows), sparse.integrals(rows), strict=True):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(dense.integrals(13), sparse.integrals(13), strict=True):
+        np.testing.assert_array_equal(a, b)
+    for k0, k1 in [(0, 700), (16, 900), (13, 611)]:  # a cut from a checkpoint, and from between two
+        cut_dense, cut_sparse = dense.between(k0, k1), sparse.between(k0, k1)
+        for i, j in [(0, 9), (3, 250), (1, k1 - k0 - 1)]:
+            for a, b in zip(cut_dense.increment(i, j), cut_sparse.increment(i, j), strict=True):
+                np.testing.assert_array_equal(a, b)

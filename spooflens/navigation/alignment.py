@@ -164,7 +164,8 @@ def align(
     p = geodetic_to_enu(fixes["lat_deg"], fixes["lon_deg"], fixes["height_m"], lat0, lon0, h0)
     g = float(normal_gravity(np.radians(lat0), h0))
     s = int(np.clip(np.searchsorted(pre.t, tf[first]), 0, len(pre.t) - 1))
-    qs_inv = quat_conjugate(pre.Qb[s])
+    q_s, G_s, H_s = pre.integrals(s)
+    qs_inv = quat_conjugate(q_s)
     window = min_window_s
     while True:
         sel = (tf >= tf[first]) & (tf <= tf[first] + window) & (tf <= pre.t[-1])
@@ -173,7 +174,7 @@ def align(
             raise AnalysisError("too few GNSS fixes inside the IMU's time span to align the INS")
         k = np.clip(np.searchsorted(pre.t, tf[idx]), 0, len(pre.t) - 1)
         tau = pre.t[k] - pre.t[s]
-        dH = quat_rotate(qs_inv, pre.H[k] - pre.H[s] - pre.G[s] * tau[:, None])
+        dH = quat_rotate(qs_inv, pre.integrals(k)[2] - H_s - G_s * tau[:, None])
         P = p[idx] - p[first]
         grav = np.outer(0.5 * tau**2, [0.0, 0.0, -g]) + _earth_terms(np.radians(lat0), h0, g, tau, P)
         # p0 and v0 enter linearly: project them out (onto the complement of [1, tau]), then the
@@ -240,7 +241,7 @@ def _refine_yaw_with_bias(
     standard deviation from the curvature of the misfit (Delta chi^2 = 1).
     """
     span = slice(s, k[-1] + 1)
-    rot = quat_to_matrix(quat_multiply(quat_conjugate(pre.Qb[s])[None, :], pre.Qb[span]))
+    rot = quat_to_matrix(quat_multiply(quat_conjugate(pre.integrals(s)[0])[None, :], pre.integrals(span)[0]))
     dt = np.diff(pre.t[span])
 
     def cumint(x: FloatArray) -> FloatArray:

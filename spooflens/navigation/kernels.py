@@ -109,31 +109,59 @@ def quat_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
     return out
 
 
-@njit(cache=CACHE)
-def increment(
-    t: np.ndarray, Qb: np.ndarray, G: np.ndarray, H: np.ndarray, i: int, j: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
-    wi, xi, yi, zi = Qb[i, 0], Qb[i, 1], Qb[i, 2], Qb[i, 3]
-    wj, xj, yj, zj = Qb[j, 0], Qb[j, 1], Qb[j, 2], Qb[j, 3]
-    dC = quat_matrix(
-        wi * wj + xi * xj + yi * yj + zi * zj,
-        wi * xj - xi * wj - yi * zj + zi * yj,
-        wi * yj + xi * zj - yi * wj - zi * xj,
-        wi * zj - xi * yj + yi * xj - zi * wj,
-    )
-    Ri = quat_matrix(wi, xi, yi, zi)
-    T = t[j] - t[i]
-    dv = _mv3(Ri.T, G[j] - G[i])
-    dp = _mv3(Ri.T, H[j] - H[i] - G[i] * T)
-    return dC, dv, dp, T
-
-
 @njit(cache=CACHE, inline="always")
 def _rotate(qw: float, qx: float, qy: float, qz: float, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
     """v turned by the unit quaternion q: v + w t + u x t with t = 2 u x v (`rotations.quat_rotate`)."""
     s0, s1, s2 = 2.0 * (qy * v2 - qz * v1), 2.0 * (qz * v0 - qx * v2), 2.0 * (qx * v1 - qy * v0)
     return v0 + qw * s0 + (qy * s2 - qz * s1), v1 + qw * s1 + (qz * s0 - qx * s2), v2 + qw * s2 + (qx * s1 - qy * s0)
+
+
+@njit(cache=CACHE, inline="always")
+def _advance(
+    qw: float,
+    qx: float,
+    qy: float,
+    qz: float,
+    g0: float,
+    g1: float,
+    g2: float,
+    h0: float,
+    h1: float,
+    h2: float,
+    dt: float,
+    fx: float,
+    fy: float,
+    fz: float,
+    wx: float,
+    wy: float,
+    wz: float,
+) -> tuple[float, float, float, float, float, float, float, float, float, float]:
+    """The integrals at sample k+1 from those at k and sample k (dt = t[k+1] - t[k]): the rotation
+    exp(theta), theta = w dt; the sculling-corrected increment f dt + theta x f dt / 2 and its integral
+    f dt dt / 2 + theta x f dt dt / 6, both turned into the first body frame by the attitude at k.
+    The one statement of the step, so integrals made again from a checkpoint equal the first pass's
+    bit for bit."""
+    t0, t1, t2 = wx * dt, wy * dt, wz * dt
+    f0, f1, f2 = fx * dt, fy * dt, fz * dt
+    c0, c1, c2 = t1 * f2 - t2 * f1, t2 * f0 - t0 * f2, t0 * f1 - t1 * f0
+    v0, v1, v2 = _rotate(qw, qx, qy, qz, f0 + 0.5 * c0, f1 + 0.5 * c1, f2 + 0.5 * c2)
+    p0, p1, p2 = _rotate(
+        qw, qx, qy, qz, 0.5 * f0 * dt + c0 * dt / 6.0, 0.5 * f1 * dt + c1 * dt / 6.0, 0.5 * f2 * dt + c2 * dt / 6.0
+    )
+    h0, h1, h2 = h0 + (g0 * dt + p0), h1 + (g1 * dt + p1), h2 + (g2 * dt + p2)
+    g0, g1, g2 = g0 + v0, g1 + v1, g2 + v2
+    a = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    half = 0.5 * a
+    sinc = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(half) / a  # a series keeps tiny angles exact
+    dw, dx, dy, dz = math.cos(half), t0 * sinc, t1 * sinc, t2 * sinc
+    qw, qx, qy, qz = (
+        qw * dw - qx * dx - qy * dy - qz * dz,
+        qw * dx + qx * dw + qy * dz - qz * dy,
+        qw * dy - qx * dz + qy * dw + qz * dx,
+        qw * dz + qx * dy - qy * dx + qz * dw,
+    )
+    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return qw / norm, qx / norm, qy / norm, qz / norm, g0, g1, g2, h0, h1, h2
 
 
 @njit(cache=CACHE)
@@ -145,48 +173,173 @@ def preintegrate_rows(
     wx: np.ndarray,
     wy: np.ndarray,
     wz: np.ndarray,
+    every: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Qb, G, H) of `strapdown.preintegrate` in one pass over the samples: the body attitude relative to
-    the first sample (unit quaternions), the cumulative velocity increment and its integral in the first
-    body frame. Per sample k -> k+1 (dt, theta = w dt, f dt): the rotation exp(theta), the sculling-
-    corrected increment f dt + theta x f dt / 2 and its integral f dt dt / 2 + theta x f dt dt / 6, both
-    turned into the first body frame by the attitude at k. One loop with no whole-stream temporaries (the
-    vectorised form held a dozen arrays of the stream: 1.4 GB more than its result on a day of 100 Hz)."""
+    """(Qb, G, H) of `strapdown.preintegrate` at samples 0, every, 2 every, ...: the body attitude
+    relative to the first sample (unit quaternions), the cumulative velocity increment and its integral
+    in the first body frame (`_advance`). One loop with no whole-stream temporaries (the vectorised form
+    held a dozen arrays of the stream: 1.4 GB more than its result on a day of 100 Hz)."""
     N = t.shape[0]
-    Qb = np.empty((N, 4))
-    G = np.zeros((N, 3))
-    H = np.zeros((N, 3))
-    qw, qx, qy, qz = 1.0, 0.0, 0.0, 0.0
-    Qb[0, 0], Qb[0, 1], Qb[0, 2], Qb[0, 3] = qw, qx, qy, qz
-    for k in range(N - 1):
-        dt = t[k + 1] - t[k]
-        t0, t1, t2 = wx[k] * dt, wy[k] * dt, wz[k] * dt
-        f0, f1, f2 = fx[k] * dt, fy[k] * dt, fz[k] * dt
-        c0, c1, c2 = t1 * f2 - t2 * f1, t2 * f0 - t0 * f2, t0 * f1 - t1 * f0
-        v0, v1, v2 = _rotate(qw, qx, qy, qz, f0 + 0.5 * c0, f1 + 0.5 * c1, f2 + 0.5 * c2)
-        p0, p1, p2 = _rotate(
-            qw, qx, qy, qz, 0.5 * f0 * dt + c0 * dt / 6.0, 0.5 * f1 * dt + c1 * dt / 6.0, 0.5 * f2 * dt + c2 * dt / 6.0
-        )
-        H[k + 1, 0] = H[k, 0] + (G[k, 0] * dt + p0)
-        H[k + 1, 1] = H[k, 1] + (G[k, 1] * dt + p1)
-        H[k + 1, 2] = H[k, 2] + (G[k, 2] * dt + p2)
-        G[k + 1, 0] = G[k, 0] + v0
-        G[k + 1, 1] = G[k, 1] + v1
-        G[k + 1, 2] = G[k, 2] + v2
-        a = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        half = 0.5 * a
-        sinc = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(half) / a  # a series keeps tiny angles exact
-        dw, dx, dy, dz = math.cos(half), t0 * sinc, t1 * sinc, t2 * sinc
-        qw, qx, qy, qz = (
-            qw * dw - qx * dx - qy * dy - qz * dz,
-            qw * dx + qx * dw + qy * dz - qz * dy,
-            qw * dy - qx * dz + qy * dw + qz * dx,
-            qw * dz + qx * dy - qy * dx + qz * dw,
-        )
-        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
-        Qb[k + 1, 0], Qb[k + 1, 1], Qb[k + 1, 2], Qb[k + 1, 3] = qw, qx, qy, qz
+    M = (N + every - 1) // every
+    Qb = np.empty((M, 4))
+    G = np.empty((M, 3))
+    H = np.empty((M, 3))
+    qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for k in range(N):
+        if k % every == 0:
+            c = k // every
+            Qb[c, 0], Qb[c, 1], Qb[c, 2], Qb[c, 3] = qw, qx, qy, qz
+            G[c, 0], G[c, 1], G[c, 2] = g0, g1, g2
+            H[c, 0], H[c, 1], H[c, 2] = h0, h1, h2
+        if k < N - 1:
+            qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = _advance(
+                qw, qx, qy, qz, g0, g1, g2, h0, h1, h2, t[k + 1] - t[k], fx[k], fy[k], fz[k], wx[k], wy[k], wz[k]
+            )
     return Qb, G, H
+
+
+@njit(cache=CACHE)
+def _advance_to(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+    x: np.ndarray,
+    k: int,
+    i: int,
+) -> None:
+    """x (qw, qx, qy, qz, G (3), H (3)): the integrals at sample k, advanced in place to sample i >= k."""
+    qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9]
+    while k < i:
+        qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = _advance(
+            qw, qx, qy, qz, g0, g1, g2, h0, h1, h2, t[k + 1] - t[k], fx[k], fy[k], fz[k], wx[k], wy[k], wz[k]
+        )
+        k += 1
+    x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9] = qw, qx, qy, qz, g0, g1, g2, h0, h1, h2
+
+
+@njit(cache=CACHE)
+def integrals_at(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+    Qb: np.ndarray,
+    G: np.ndarray,
+    H: np.ndarray,
+    every: int,
+    i: int,
+) -> np.ndarray:
+    """(qw, qx, qy, qz, G (3), H (3)) at sample i: the checkpoint at or before it, advanced."""
+    c = i // every
+    x = np.empty(10)
+    x[0:4] = Qb[c]
+    x[4:7] = G[c]
+    x[7:10] = H[c]
+    _advance_to(t, fx, fy, fz, wx, wy, wz, x, c * every, i)
+    return x
+
+
+@njit(cache=CACHE)
+def integrals_rows(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+    Qb: np.ndarray,
+    G: np.ndarray,
+    H: np.ndarray,
+    every: int,
+    rows: np.ndarray,
+) -> np.ndarray:
+    """(len(rows), 10) integrals (`integrals_at`) at each row; increasing rows advance from the last."""
+    out = np.empty((rows.shape[0], 10))
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        if r > 0 and rows[r - 1] <= i and i - rows[r - 1] <= i % every:
+            x = out[r - 1].copy()
+            _advance_to(t, fx, fy, fz, wx, wy, wz, x, rows[r - 1], i)
+        else:
+            x = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, i)
+        out[r] = x
+    return out
+
+
+@njit(cache=CACHE)
+def integrals_from(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+    Qb: np.ndarray,
+    G: np.ndarray,
+    H: np.ndarray,
+    every: int,
+    a: np.ndarray,
+    i: int,
+    j: int,
+) -> np.ndarray:
+    """The integrals at sample j, given those at sample i (`a`): advanced from i when that is nearer
+    than j's checkpoint (a filter's consecutive blocks share their ends), else from the checkpoint."""
+    if i <= j and j - i <= j % every:
+        b = a.copy()
+        _advance_to(t, fx, fy, fz, wx, wy, wz, b, i, j)
+        return b
+    return integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, j)
+
+
+@njit(cache=CACHE)
+def increment_between(a: np.ndarray, b: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dC_b, dv_b, dp_b) from the integrals at one sample (`a`) to those at a later one (`b`), T apart,
+    in the body frame at the first (see strapdown.py)."""
+    wi, xi, yi, zi = a[0], a[1], a[2], a[3]
+    wj, xj, yj, zj = b[0], b[1], b[2], b[3]
+    dC = quat_matrix(
+        wi * wj + xi * xj + yi * yj + zi * zj,
+        wi * xj - xi * wj - yi * zj + zi * yj,
+        wi * yj + xi * zj - yi * wj - zi * xj,
+        wi * zj - xi * yj + yi * xj - zi * wj,
+    )
+    Ri = quat_matrix(wi, xi, yi, zi)
+    dv = _mv3(Ri.T, b[4:7] - a[4:7])
+    dp = _mv3(Ri.T, b[7:10] - a[7:10] - a[4:7] * T)
+    return dC, dv, dp
+
+
+@njit(cache=CACHE)
+def increment(
+    t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
+    Qb: np.ndarray,
+    G: np.ndarray,
+    H: np.ndarray,
+    every: int,
+    i: int,
+    j: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
+    a = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, i)
+    b = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, a, i, j)
+    T = t[j] - t[i]
+    dC, dv, dp = increment_between(a, b, T)
+    return dC, dv, dp, T
 
 
 @njit(cache=CACHE)
@@ -403,9 +556,16 @@ def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.nda
 @njit(cache=CACHE, nogil=True)
 def filter_loop(
     t: np.ndarray,
+    fx: np.ndarray,
+    fy: np.ndarray,
+    fz: np.ndarray,
+    wx: np.ndarray,
+    wy: np.ndarray,
+    wz: np.ndarray,
     Qb: np.ndarray,
     G: np.ndarray,
     H: np.ndarray,
+    every: int,
     x0: np.ndarray,
     P0: np.ndarray,
     qc: np.ndarray,
@@ -467,6 +627,7 @@ def filter_loop(
     if k > N - 1:
         k = N - 1
     x[21] = t[k]
+    at_k = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, k)  # kept as k moves: blocks share ends
     qc15 = qc[:15].copy()
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
@@ -484,7 +645,10 @@ def filter_loop(
                 j = target
             if j <= k:
                 j = k + 1
-            dC, dv_b, dp_b, T = increment(t, Qb, G, H, k, j)
+            at_j = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, at_k, k, j)
+            T = t[j] - t[k]
+            dC, dv_b, dp_b = increment_between(at_k, at_j, T)
+            at_k = at_j
             # a zero-length block (two samples at one time) has Phi = I and Qd = 0 whatever the force
             f_mean = dv_b / T - x[18:21] if T > 0 else -x[18:21]
             Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
@@ -589,7 +753,10 @@ def filter_loop(
         j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
         if j <= k:
             j = k + 1
-        dC, dv_b, dp_b, T = increment(t, Qb, G, H, k, j)
+        at_j = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, at_k, k, j)
+        T = t[j] - t[k]
+        dC, dv_b, dp_b = increment_between(at_k, at_j, T)
+        at_k = at_j
         x = propagate(x, dC, dv_b, dp_b, T)
         k = j
         track[nt, 0] = x[21]
