@@ -198,20 +198,27 @@ def preintegrate_rows(
     return Qb, G, H
 
 
+# An IMU stream as the kernels take it (`strapdown.Preintegrated.kernel_args`): (t, fx, fy, fz, wx, wy,
+# wz, Qb, G, H, every), the sample times and FLU columns, and the integrals at every `every`-th sample.
+Stream = tuple[
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    int,
+]
+
+
 @njit(cache=CACHE)
-def _advance_to(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    x: np.ndarray,
-    k: int,
-    i: int,
-) -> None:
+def _advance_to(stream: Stream, x: np.ndarray, k: int, i: int) -> None:
     """x (qw, qx, qy, qz, G (3), H (3)): the integrals at sample k, advanced in place to sample i >= k."""
+    t, fx, fy, fz, wx, wy, wz = stream[0], stream[1], stream[2], stream[3], stream[4], stream[5], stream[6]
     qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9]
     while k < i:
         qw, qx, qy, qz, g0, g1, g2, h0, h1, h2 = _advance(
@@ -222,82 +229,43 @@ def _advance_to(
 
 
 @njit(cache=CACHE)
-def integrals_at(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    Qb: np.ndarray,
-    G: np.ndarray,
-    H: np.ndarray,
-    every: int,
-    i: int,
-) -> np.ndarray:
+def integrals_at(stream: Stream, i: int) -> np.ndarray:
     """(qw, qx, qy, qz, G (3), H (3)) at sample i: the checkpoint at or before it, advanced."""
+    Qb, G, H, every = stream[7], stream[8], stream[9], stream[10]
     c = i // every
     x = np.empty(10)
     x[0:4] = Qb[c]
     x[4:7] = G[c]
     x[7:10] = H[c]
-    _advance_to(t, fx, fy, fz, wx, wy, wz, x, c * every, i)
+    _advance_to(stream, x, c * every, i)
     return x
 
 
 @njit(cache=CACHE)
-def integrals_rows(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    Qb: np.ndarray,
-    G: np.ndarray,
-    H: np.ndarray,
-    every: int,
-    rows: np.ndarray,
-) -> np.ndarray:
+def integrals_rows(stream: Stream, rows: np.ndarray) -> np.ndarray:
     """(len(rows), 10) integrals (`integrals_at`) at each row; increasing rows advance from the last."""
+    every = stream[10]
     out = np.empty((rows.shape[0], 10))
     for r in range(rows.shape[0]):
         i = rows[r]
         if r > 0 and rows[r - 1] <= i and i - rows[r - 1] <= i % every:
             x = out[r - 1].copy()
-            _advance_to(t, fx, fy, fz, wx, wy, wz, x, rows[r - 1], i)
+            _advance_to(stream, x, rows[r - 1], i)
         else:
-            x = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, i)
+            x = integrals_at(stream, i)
         out[r] = x
     return out
 
 
 @njit(cache=CACHE)
-def integrals_from(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    Qb: np.ndarray,
-    G: np.ndarray,
-    H: np.ndarray,
-    every: int,
-    a: np.ndarray,
-    i: int,
-    j: int,
-) -> np.ndarray:
+def integrals_from(stream: Stream, a: np.ndarray, i: int, j: int) -> np.ndarray:
     """The integrals at sample j, given those at sample i (`a`): advanced from i when that is nearer
     than j's checkpoint (a filter's consecutive blocks share their ends), else from the checkpoint."""
-    if i <= j and j - i <= j % every:
+    if i <= j and j - i <= j % stream[10]:
         b = a.copy()
-        _advance_to(t, fx, fy, fz, wx, wy, wz, b, i, j)
+        _advance_to(stream, b, i, j)
         return b
-    return integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, j)
+    return integrals_at(stream, j)
 
 
 @njit(cache=CACHE)
@@ -319,25 +287,11 @@ def increment_between(a: np.ndarray, b: np.ndarray, T: float) -> tuple[np.ndarra
 
 
 @njit(cache=CACHE)
-def increment(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    Qb: np.ndarray,
-    G: np.ndarray,
-    H: np.ndarray,
-    every: int,
-    i: int,
-    j: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def increment(stream: Stream, i: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
-    a = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, i)
-    b = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, a, i, j)
-    T = t[j] - t[i]
+    a = integrals_at(stream, i)
+    b = integrals_from(stream, a, i, j)
+    T = stream[0][j] - stream[0][i]
     dC, dv, dp = increment_between(a, b, T)
     return dC, dv, dp, T
 
@@ -555,17 +509,7 @@ def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.nda
 
 @njit(cache=CACHE, nogil=True)
 def filter_loop(
-    t: np.ndarray,
-    fx: np.ndarray,
-    fy: np.ndarray,
-    fz: np.ndarray,
-    wx: np.ndarray,
-    wy: np.ndarray,
-    wz: np.ndarray,
-    Qb: np.ndarray,
-    G: np.ndarray,
-    H: np.ndarray,
-    every: int,
+    stream: Stream,
     x0: np.ndarray,
     P0: np.ndarray,
     qc: np.ndarray,
@@ -590,6 +534,7 @@ def filter_loop(
     The 15 INS error states are fed back into the nominal state and reset at every update; the six
     Gauss-Markov receiver-error states are not (they are no error of the INS) and carry their estimate.
     """
+    t = stream[0]
     M = tf.shape[0]
     N = t.shape[0]
     out_z = np.full((M, NM), np.nan)
@@ -627,7 +572,7 @@ def filter_loop(
     if k > N - 1:
         k = N - 1
     x[21] = t[k]
-    at_k = integrals_at(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, k)  # kept as k moves: blocks share ends
+    at_k = integrals_at(stream, k)  # kept as k moves: blocks share ends
     qc15 = qc[:15].copy()
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
@@ -645,7 +590,7 @@ def filter_loop(
                 j = target
             if j <= k:
                 j = k + 1
-            at_j = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, at_k, k, j)
+            at_j = integrals_from(stream, at_k, k, j)
             T = t[j] - t[k]
             dC, dv_b, dp_b = increment_between(at_k, at_j, T)
             at_k = at_j
@@ -753,7 +698,7 @@ def filter_loop(
         j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
         if j <= k:
             j = k + 1
-        at_j = integrals_from(t, fx, fy, fz, wx, wy, wz, Qb, G, H, every, at_k, k, j)
+        at_j = integrals_from(stream, at_k, k, j)
         T = t[j] - t[k]
         dC, dv_b, dp_b = increment_between(at_k, at_j, T)
         at_k = at_j

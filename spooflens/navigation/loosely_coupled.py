@@ -410,7 +410,7 @@ def _run(
     g0 = np.zeros(len(gm_sigma)) if opts.initial_gm is None else np.array(opts.initial_gm, dtype=float)
     (z, nu, S, S_all, R, H, nis, dof, Phi, Phi_gm, Qd, Qd_gm, P_pred, P_upd, dx, gm, states, track, track_epoch) = (
         kernels.filter_loop(
-            *pre.kernel_args(),
+            pre.kernel_args(),
             s.to_vector(),
             P0,
             qc,

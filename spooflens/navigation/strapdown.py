@@ -87,19 +87,6 @@ def axes_of(v: FloatArray | Sequence[FloatArray]) -> Axes:
     return x, y, z
 
 
-KernelArgs = tuple[
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    FloatArray,
-    int,
-]
 # a stream up to this long keeps its integrals at every sample; a longer one at every CHECKPOINT_EVERY-th,
 # the rest made again from the nearest when asked for (0.6 GB less for a day of 100 Hz)
 DENSE_SAMPLES = 1_000_000
@@ -122,13 +109,13 @@ class Preintegrated:
     w_axes: Axes  # the angular rate samples (FLU), by axis
     every: int = 1
 
-    def kernel_args(self) -> KernelArgs:
+    def kernel_args(self) -> kernels.Stream:
         """What the compiled kernels take for this stream: t, the six sample columns, the integrals, every."""
         return (self.t, *self.f_axes, *self.w_axes, self.Qb, self.G, self.H, self.every)
 
     def increment(self, i: int, j: int) -> tuple[FloatArray, FloatArray, FloatArray, float]:
         """(dC_b (3x3), dv_b, dp_b, T) from sample i to sample j, in the body frame at t[i]."""
-        dC, dv, dp, T = kernels.increment(*self.kernel_args(), int(i), int(j))
+        dC, dv, dp, T = kernels.increment(self.kernel_args(), int(i), int(j))
         return dC, dv, dp, float(T)
 
     def integrals(self, rows: slice | NDArray[np.intp] | int) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -136,7 +123,7 @@ class Preintegrated:
         if self.every == 1:
             return self.Qb[rows], self.G[rows], self.H[rows]
         idx = np.arange(len(self.t))[rows]
-        out = kernels.integrals_rows(*self.kernel_args(), np.atleast_1d(idx).astype(np.int64))
+        out = kernels.integrals_rows(self.kernel_args(), np.atleast_1d(idx).astype(np.int64))
         if np.ndim(idx) == 0:
             return out[0, 0:4], out[0, 4:7], out[0, 7:10]
         return out[:, 0:4], out[:, 4:7], out[:, 7:10]
