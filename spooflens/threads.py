@@ -67,6 +67,17 @@ def _mark() -> None:
     _inside.active = True
 
 
+def _forget_pool() -> None:
+    """In a forked child: the pool's threads did not come along, so work handed to it would wait for
+    ever (the fuzz sandbox forks a process that has analysed a log); the child makes its own."""
+    global _lock, _pool, _pool_size
+    _lock = threading.Lock()
+    _pool, _pool_size = None, 0
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
 def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
     """Every call's result, in order; side by side when more than one thread is allowed (an exception is
     raised as the sequential run would have raised it, after the others finish)."""

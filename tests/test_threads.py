@@ -98,3 +98,22 @@ def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() ->
             np.testing.assert_array_equal(sa.values, sb.values, err_msg=f"{a.name}/{sa.name}")
         for ca, cb in zip(a.curves, b.curves, strict=True):
             np.testing.assert_array_equal(ca.y, cb.y, err_msg=f"{a.name}/{ca.name}")
+
+
+def test_a_forked_child_of_a_process_that_used_the_pool_runs_pieces_side_by_side_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The fuzz sandbox forks a server that has analysed a log: its pool's threads stay behind, so the
+    child must make its own pool, not wait for ever on the parent's (each run timed out before)."""
+    import os
+    import signal
+
+    monkeypatch.setenv(threads.ENV, "2")
+    assert threads.in_parallel([lambda: 1, lambda: 2]) == [1, 2]  # the parent's pool exists now
+    pid = os.fork()
+    if pid == 0:  # the child: a hang is ended by the alarm, and shows as a signal below
+        signal.alarm(20)
+        ok = threads.in_parallel([lambda: 3, lambda: 4]) == [3, 4]
+        os._exit(0 if ok else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
