@@ -80,3 +80,13 @@ def test_outcomes(outcome: tuple[int, str | None, str]) -> None:
     code, killed, name = outcome
     assert RunResult(code, killed, 100.0, 1.0, "").outcome == name
     assert RunResult(None, "signal 11", 100.0, 1.0, "").outcome == "signal"
+
+
+def test_an_analysis_ends_in_a_sandbox_that_warmed_up_by_analysing(tmp_path: Path) -> None:
+    """`bench fuzz --command both` warms its server with an analysis, whose worker threads stay in the
+    server; every forked analysis after it waited on them for ever until the child made its own pool."""
+    warm = ["analyze", str(SAMPLE_LOGS / "ground.bag"), "-o", str(tmp_path / "warm.rrd"), "--quiet"]
+    with Sandbox(warm) as box:
+        argv = ["analyze", str(SAMPLE_LOGS / "ground.bag"), "-o", str(tmp_path / "again.rrd"), "--quiet"]
+        result = box.run(argv, tmp_path / "again", Limits(timeout_s=120.0))
+    assert result.outcome == "exit-0", result
