@@ -635,7 +635,18 @@ def _segment_frames(
     offset = int(starts[0])
     for k in range(n_seg):
         layout.append((offset, int(starts[k]), int(ends[k])))
-        offset += int(ends[k] - starts[k]) + int(SEGMENT_GAP_S * 1e9)
+        offset += int(ends[k]) - int(starts[k]) + int(SEGMENT_GAP_S * 1e9)  # Python ints: no wrap-around
+    if offset >= MAX_STAMP_NS:  # spans no clock holds laid end to end: corrupt time fields, not a join
+        skipped.append(
+            Skipped(
+                "<log>",
+                f"time jumps back {n_seg - 1} time(s), but the recordings' spans add up beyond any clock "
+                "(corrupt time fields): not split into recordings",
+                n_seg,
+                "not segmented",
+            )
+        )
+        return frames_ns, []
     out = {}
     for name, df in frames_ns.items():
         if df is None or not len(df):

@@ -239,3 +239,17 @@ def test_time_stamps_beyond_any_clock_are_dropped_and_counted_not_an_overflow() 
     lost = [s for s in out.skipped if "beyond any clock" in s.reason]
     assert [(s.stream, s.count, s.action) for s in lost] == [(str(table.fixes["receiver_id"].iloc[0]), 2, "lost")]
     assert len(out.fixes) == len(table.fixes) - 2 and len(out.segments) == 2
+
+
+def test_recordings_whose_spans_add_up_beyond_any_clock_are_not_laid_end_to_end() -> None:
+    """A flipped bit in a schema made an IMU's stamps wild: its 'recordings' spanned 10^18 ns each, and
+    laying them end to end overflowed int64 (the fuzz run's one internal error). Now: not split, and said."""
+    from spooflens.epoch_table import Skipped, _segment_frames
+
+    # 46 groups of 5 stamps 1 s apart, the groups 1.1e17 ns apart: 4.95e18 ns in all (groups, not strays)
+    one = (np.arange(46, dtype=np.int64)[:, None] * 110_000_000_000_000_000 + np.arange(5) * 1_000_000_000).ravel()
+    imu = pd.DataFrame({"t_ns": np.r_[one, one], "imu_id": "/imu"})  # the clock jumps back once
+    skipped: list[Skipped] = []
+    frames, layout = _segment_frames({"imu": imu}, skipped)
+    assert layout == [] and frames["imu"] is imu
+    assert [s.action for s in skipped] == ["not segmented"] and "beyond any clock" in skipped[0].reason

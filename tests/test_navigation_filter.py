@@ -116,6 +116,18 @@ def test_a_filter_over_checkpointed_integrals_is_the_filter_over_integrals_at_ev
     np.testing.assert_array_equal(a2.state, b2.state)
 
 
+def test_a_solution_with_covariances_that_are_not_finite_cannot_be_smoothed_and_says_so(
+    ground: tuple[EpochTable, NavSolution],
+) -> None:
+    """An IMU whose stamps a damaged schema made wild left NaN covariances; the smoother's LinAlgError was
+    an internal error (the fuzz run's), now the navigation's reason for not running."""
+    from spooflens.errors import AnalysisError
+
+    _, sol = ground
+    with pytest.raises(AnalysisError, match="the smoother met a covariance it cannot invert"):
+        smooth(replace(sol, P_upd=np.full_like(sol.P_upd, np.nan)))
+
+
 def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[EpochTable, NavSolution]) -> None:
     """A textbook KF (filterpy) on the exported linear model gives the same innovations and S."""
     _, sol = ground

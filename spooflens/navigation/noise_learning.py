@@ -270,8 +270,9 @@ def _scored_epochs(
     worst: list[tuple[float, float, float]] = []
     for a, b in itertools.pairwise(edges):
         w = mask & (t >= a) & (t < b)
-        if w.sum() >= 3:
-            worst.append((float(np.nanmean(sol.nis[w] / np.maximum(sol.dof[w], 1))), a, b))
+        per_dof = sol.nis[w] / np.maximum(sol.dof[w], 1)
+        if w.sum() >= 3 and np.isfinite(per_dof).any():  # a window with no update has nothing to rank
+            worst.append((float(np.nanmean(per_dof)), a, b))
     worst.sort(reverse=True)
     for _, a, b in worst[: int(opts.trim_fraction * len(worst))]:
         mask &= ~((t >= a) & (t < b))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from spooflens.errors import AnalysisError
 from spooflens.geodesy import radii
 from spooflens.navigation import kernels
 from spooflens.navigation.loosely_coupled import SMOOTHER_NEEDS, NavSolution
@@ -37,7 +38,19 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
             "smooth needs the solution's Phi and Qd (and H when it kept a part of the updated covariances): "
             f"run the filter with record={SMOOTHER_NEEDS!r}"
         )
-    delta, var = kernels.rts_closed_loop(
+    try:
+        delta, var = _rts(sol)
+    except np.linalg.LinAlgError as err:  # non-finite covariances: an IMU whose times or values are damage
+        raise AnalysisError(
+            f"INS {sol.imu_id}: the smoother met a covariance it cannot invert ({err}); the IMU's times or "
+            "values do not carry a navigation"
+        ) from None
+    state = kernels.correct_all(sol.state, delta)
+    return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
+
+
+def _rts(sol: NavSolution) -> tuple[FloatArray, FloatArray]:
+    return kernels.rts_closed_loop(  # type: ignore[no-any-return]
         sol.P_upd,
         sol.P_upd_every,
         sol.Phi.head,
@@ -49,8 +62,6 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
         sol.used,
         sol.dx,
     )
-    state = kernels.correct_all(sol.state, delta)
-    return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
 
 def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
