@@ -215,11 +215,11 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
     if declared:
         assert summary is not None
         schemas, channels = dict(summary.schemas), dict(summary.channels)
-        counts: dict[str, int] = {}
-        for cid, n in (summary.statistics.channel_message_counts if summary.statistics else {}).items():
-            if cid in channels:
-                counts[channels[cid].topic] = counts.get(channels[cid].topic, 0) + n
-        collector.add_topics(_declarations(decoders, schemas, channels), counts)
+        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+        collector.add_topics(
+            _declarations(decoders, schemas, channels),
+            ((channels[cid].topic, n) for cid, n in counts.items() if cid in channels),
+        )
     n_read = 0
     problem = ""
 

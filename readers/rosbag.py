@@ -58,11 +58,9 @@ def _read_open_bag(
     def deserialize(raw: bytes | memoryview, msgtype: str) -> object:
         return reader.deserialize(bytes(raw), msgtype)
 
-    counts: dict[str, int] = {}
-    for c in reader.connections:
-        counts[c.topic] = counts.get(c.topic, 0) + max(_listed_count(c.msgcount), 0)
+    counts = [(c.topic, max(_listed_count(c.msgcount), 0)) for c in reader.connections]  # metadata may be damaged
     collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections}, counts)
-    total = sum(max(_listed_count(c.msgcount), 0) for c in reader.connections)  # metadata may be damaged
+    total = sum(n for _, n in counts)
     n = 0
     try:
         for conn, t_ns, raw in reader.messages():

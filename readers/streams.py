@@ -11,7 +11,7 @@ and a cross-check of the fast path).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -149,18 +149,22 @@ class StreamCollector:
     streams: dict[str, TopicStream] = field(default_factory=dict)
     skipped: list[Skipped] = field(default_factory=list)
 
-    def add_topics(self, topics: Mapping[str, TopicDecl], counts: Mapping[str, int] | None = None) -> None:
+    def add_topics(self, topics: Mapping[str, TopicDecl], counts: Iterable[tuple[str, int]] = ()) -> None:
         """Declare every topic of the log (roles depend on all of them, so all at once). `counts`, the
-        messages per topic a file's index lists, lets each topic's rows be stored once, in place; a
-        damaged count cannot ask for more rows than the file has bytes for."""
+        (topic, messages) a file's index lists per channel or connection (a topic's are added up), lets
+        each topic's rows be stored once, in place; a damaged count cannot ask for more rows than the
+        file has bytes for."""
         roles = assign_roles(self.path, {t: d.kind for t, d in topics.items()}, self.overrides)
+        listed: dict[str, int] = {}
+        for topic, n in counts:
+            listed[topic] = listed.get(topic, 0) + max(int(n), 0)
         try:
             most = self.path.stat().st_size // _MIN_MESSAGE_BYTES
         except OSError:
             most = 0
         for topic, decl in topics.items():
             role = roles[topic]
-            capacity = min(max(int((counts or {}).get(topic, 0)), 0), most)
+            capacity = min(listed.get(topic, 0), most)
             buf = RowBuffer(RAW_COLUMNS[decl.kind], capacity) if role and decl.kind and decl.decode else None
             self.streams[topic] = TopicStream(topic, decl, role, buf)
 

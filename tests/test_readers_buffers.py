@@ -66,7 +66,7 @@ def test_a_damaged_message_count_cannot_ask_for_more_rows_than_the_file_has_byte
     path = tmp_path / "log.mcap"
     path.write_bytes(b"\0" * 1600)
     collector = StreamCollector(path, "mcap")
-    collector.add_topics({"/imu": ros_topic("sensor_msgs/msg/Imu", "cdr", lambda raw, t: None)}, {"/imu": 10**15})
+    collector.add_topics({"/imu": ros_topic("sensor_msgs/msg/Imu", "cdr", lambda raw, t: None)}, [("/imu", 10**15)])
     buffer = collector.streams["/imu"].buffer
     assert buffer is not None
     buffer.append(1, tuple(float(i) for i in range(len(buffer.columns))))
