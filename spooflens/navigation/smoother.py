@@ -39,7 +39,18 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
             f"run the filter with record={SMOOTHER_NEEDS!r}"
         )
     try:
-        delta, var = _rts(sol)
+        delta, var = kernels.rts_closed_loop(
+            sol.P_upd,
+            sol.P_upd_every,
+            sol.Phi.head,
+            sol.Phi.tail,
+            sol.Qd.head,
+            sol.Qd.tail,
+            sol.H,
+            sol.R,
+            sol.used,
+            sol.dx,
+        )
     except np.linalg.LinAlgError as err:  # non-finite covariances: an IMU whose times or values are damage
         raise AnalysisError(
             f"INS {sol.imu_id}: the smoother met a covariance it cannot invert ({err}); the IMU's times or "
@@ -47,21 +58,6 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
         ) from None
     state = kernels.correct_all(sol.state, delta)
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
-
-
-def _rts(sol: NavSolution) -> tuple[FloatArray, FloatArray]:
-    return kernels.rts_closed_loop(  # type: ignore[no-any-return]
-        sol.P_upd,
-        sol.P_upd_every,
-        sol.Phi.head,
-        sol.Phi.tail,
-        sol.Qd.head,
-        sol.Qd.tail,
-        sol.H,
-        sol.R,
-        sol.used,
-        sol.dx,
-    )
 
 
 def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
