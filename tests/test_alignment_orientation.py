@@ -30,10 +30,10 @@ def test_the_nearest_orientation_is_the_whole_streams_nearest() -> None:
 
 
 def test_body_axes_to_flu_from_rows_or_columns_equal_the_convention_matrix() -> None:
-    from spooflens.navigation.alignment import TO_FLU, to_flu
+    from spooflens.navigation.alignment import TO_FLU, flu_axes
 
     rows = np.random.default_rng(3).normal(size=(50, 3))
     for frame, M in TO_FLU.items():
         expected = rows @ M.T
-        np.testing.assert_array_equal(to_flu(rows, frame), expected)
-        np.testing.assert_array_equal(to_flu([rows[:, 0], rows[:, 1], rows[:, 2]], frame), expected)
+        np.testing.assert_array_equal(np.stack(flu_axes(rows, frame), axis=1), expected)
+        np.testing.assert_array_equal(np.stack(flu_axes([rows[:, 0], rows[:, 1], rows[:, 2]], frame), axis=1), expected)

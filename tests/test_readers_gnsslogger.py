@@ -14,7 +14,7 @@ from readers.gnsslogger import _orientation_quaternion
 from readers.rinex import read_rinex
 from spooflens.cli import main
 from spooflens.geodesy import geodetic_to_enu
-from spooflens.navigation.alignment import TO_FLU, to_flu
+from spooflens.navigation.alignment import TO_FLU, flu_axes
 from spooflens.navigation.rotations import quat_to_matrix
 from spooflens.navigation.single_point import solve_logged, with_solved_fixes
 
@@ -156,9 +156,12 @@ def test_orientation_inverts_android_get_orientation() -> None:
 
 def test_android_body_frame_is_rfu_when_lying_flat() -> None:
     # flat, screen up, top of the phone forward: the gravity reaction reads +z, the top edge is forward
-    np.testing.assert_allclose(to_flu(np.array([[0.0, 0.0, 9.81]]), "ANDROID"), [[0.0, 0.0, 9.81]])
-    np.testing.assert_allclose(to_flu(np.array([[0.0, 1.0, 0.0]]), "ANDROID"), [[1.0, 0.0, 0.0]])
-    np.testing.assert_allclose(to_flu(np.array([[1.0, 0.0, 0.0]]), "ANDROID"), [[0.0, -1.0, 0.0]])  # right
+    def to_flu(row: list[float]) -> np.ndarray:
+        return np.stack(flu_axes(np.array([row]), "ANDROID"), axis=1)
+
+    np.testing.assert_allclose(to_flu([0.0, 0.0, 9.81]), [[0.0, 0.0, 9.81]])
+    np.testing.assert_allclose(to_flu([0.0, 1.0, 0.0]), [[1.0, 0.0, 0.0]])
+    np.testing.assert_allclose(to_flu([1.0, 0.0, 0.0]), [[0.0, -1.0, 0.0]])  # right
     assert np.linalg.det(TO_FLU["ANDROID"]) == pytest.approx(1.0)
 
 

@@ -65,11 +65,6 @@ def flu_axes(values: FloatArray | Sequence[FloatArray], body_frame: str) -> Axes
     return out[0], out[1], out[2]
 
 
-def to_flu(values: FloatArray | Sequence[FloatArray], body_frame: str) -> FloatArray:
-    """(N, 3) FLU vectors from (N, 3) rows or three columns in the declared body frame."""
-    return np.stack(flu_axes(values, body_frame), axis=1)
-
-
 @dataclass(frozen=True)
 class Alignment:
     t0: float
@@ -241,7 +236,8 @@ def _refine_yaw_with_bias(
     standard deviation from the curvature of the misfit (Delta chi^2 = 1).
     """
     span = slice(s, k[-1] + 1)
-    rot = quat_to_matrix(quat_multiply(quat_conjugate(pre.integrals(s)[0])[None, :], pre.integrals(span)[0]))
+    q = pre.integrals(span)[0]  # its first row is the attitude at s
+    rot = quat_to_matrix(quat_multiply(quat_conjugate(q[0])[None, :], q))
     dt = np.diff(pre.t[span])
 
     def cumint(x: FloatArray) -> FloatArray:
