@@ -14,8 +14,8 @@ def _huge_pages_stall() -> bool:
 
     numpy asks for them on every large array (madvise). Where the kernel then compacts on the first
     touch (THP defrag "always", "madvise" or "defer+madvise"; the machine our benchmark figures come
-    from has "madvise"), those touches stall: reading a 4 h voyage took 3.8-4.6 s with them and 3.0 s
-    without, a 1 h log end to end 10.4 s and 9.2 s."""
+    from has "madvise"), those touches stall: by hand, reading a 4 h voyage took 3.8-4.6 s with them and
+    3.0 s without, a 1 h log end to end about 10 % longer."""
     try:
         setting = Path("/sys/kernel/mm/transparent_hugepage/defrag").read_text()
     except OSError:
