@@ -16,28 +16,29 @@ _BLOCK_ROWS = 65536
 
 class RowBuffer:
     """Appends (stamp_ns, values...) rows one at a time (`append`) or many at once (`extend`);
-    `arrays()` returns them as one int64 and one float64 array.
+    `arrays()` returns the stamps and each column as an array of its own.
 
-    Values are held column by column, so `values[:, k]` is contiguous and the schema's columns can be
-    the rows themselves. Given the stream's message count (`capacity`, e.g. from an MCAP summary) the
-    rows go straight into one array of that size and `arrays()` copies nothing; otherwise they fill
-    blocks of `_BLOCK_ROWS` joined at the end."""
+    Every column is its own array, so the schema's columns can be the rows themselves and a raw column
+    no schema column keeps (an orientation covariance read only to tell whether there is an
+    orientation) is freed once its rows are read. Given the stream's message count (`capacity`, e.g.
+    from an MCAP summary) the rows go straight into arrays of that size and `arrays()` copies nothing;
+    otherwise they fill blocks of `_BLOCK_ROWS` joined at the end."""
 
     def __init__(self, columns: Sequence[str], capacity: int = 0) -> None:
         self.columns = tuple(columns)
         self._capacity = max(int(capacity), 0)
         self._stamps: list[NDArray[np.int64]] = []  # closed blocks, each exactly as long as its rows
-        self._values: list[NDArray[np.float64]] = []  # (columns, rows) each
+        self._values: list[list[NDArray[np.float64]]] = []  # a column each
         self._open_stamps: NDArray[np.int64] | None = None  # the block being filled
-        self._open_values: NDArray[np.float64] | None = None
+        self._open_values: list[NDArray[np.float64]] = []
         self._fill = 0
         self.count = 0
 
     def _close(self) -> None:
-        if self._open_stamps is not None and self._open_values is not None and self._fill:
+        if self._open_stamps is not None and self._fill:
             self._stamps.append(self._open_stamps[: self._fill])
-            self._values.append(self._open_values[:, : self._fill])
-        self._open_stamps = self._open_values = None
+            self._values.append([column[: self._fill] for column in self._open_values])
+        self._open_stamps, self._open_values = None, []
         self._fill = 0
 
     def _room(self) -> int:
@@ -46,14 +47,15 @@ class RowBuffer:
             self._close()
             size = self._capacity - self.count if self.count < self._capacity else _BLOCK_ROWS
             self._open_stamps = np.empty(size, dtype=np.int64)
-            self._open_values = np.empty((len(self.columns), size), dtype=np.float64)
+            self._open_values = [np.empty(size, dtype=np.float64) for _ in self.columns]
         return len(self._open_stamps) - self._fill
 
     def append(self, stamp_ns: int, values: Sequence[float]) -> None:
         self._room()
-        assert self._open_stamps is not None and self._open_values is not None
+        assert self._open_stamps is not None
         self._open_stamps[self._fill] = stamp_ns
-        self._open_values[:, self._fill] = values
+        for column, value in zip(self._open_values, values, strict=True):
+            column[self._fill] = value
         self._fill += 1
         self.count += 1
 
@@ -63,37 +65,35 @@ class RowBuffer:
         done = 0
         while done < len(stamps):
             n = min(self._room(), len(stamps) - done)
-            assert self._open_stamps is not None and self._open_values is not None
+            assert self._open_stamps is not None
             self._open_stamps[self._fill : self._fill + n] = stamps[done : done + n]
-            self._open_values[:, self._fill : self._fill + n] = values[done : done + n].T
+            for k, column in enumerate(self._open_values):
+                column[self._fill : self._fill + n] = values[done : done + n, k]
             self._fill += n
             self.count += n
             done += n
 
-    def arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        """All rows, in order, as (rows,) stamps and (rows, columns) values (a view of column storage);
-        the buffer is emptied. One block is handed over as it is; several are joined, each freed as soon
-        as it is copied, so the rows exist about once, not twice."""
+    def arrays(self) -> tuple[NDArray[np.int64], dict[str, NDArray[np.float64]]]:
+        """All rows, in order: (rows,) stamps and {column name: (rows,) values}; the buffer is emptied.
+        One block is handed over as it is; several are joined a column at a time, each block's column
+        freed as soon as it is copied, so the rows exist about once, not twice."""
         self._close()
-        if len(self._stamps) == 1:
-            stamps, values = self._stamps.pop(), self._values.pop()
-            self.count = 0
-            return stamps, values.T
-        n = sum(len(b) for b in self._stamps)
-        stamps = np.empty(n, dtype=np.int64)
-        values = np.empty((len(self.columns), n), dtype=np.float64)
-        pos = 0
-        while self._stamps:
-            block_t, block_v = self._stamps.pop(0), self._values.pop(0)
-            stamps[pos : pos + len(block_t)] = block_t
-            values[:, pos : pos + len(block_t)] = block_v
-            pos += len(block_t)
-            del block_t, block_v
+        blocks, self._values = self._values, []
+        stamp_blocks, self._stamps = self._stamps, []
+        stamps = stamp_blocks[0] if len(stamp_blocks) == 1 else np.concatenate([_NO_STAMPS, *stamp_blocks])
+        columns: dict[str, NDArray[np.float64]] = {}
+        for k, name in enumerate(self.columns):
+            parts = [block[k] for block in blocks]
+            for block in blocks:
+                block[k] = _EMPTY  # the block's column lives on only in `parts`, freed once joined
+            columns[name] = parts[0] if len(parts) == 1 else np.concatenate(parts or [_EMPTY])
+            del parts
         self.count = 0
-        return stamps, values.T
+        return stamps, columns
 
-    def column(self, values: NDArray[np.float64], name: str) -> NDArray[np.float64]:
-        return values[:, self.columns.index(name)]
+
+_EMPTY = np.empty(0, dtype=np.float64)
+_NO_STAMPS = np.empty(0, dtype=np.int64)
 
 
 def release_freed_memory() -> None:

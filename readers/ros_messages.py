@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +29,7 @@ from readers.ros_batch import Field, Pick, decode_batch
 from spooflens.schema import FixType
 
 FloatArray = NDArray[np.float64]
+RawRows = Mapping[str, FloatArray]  # a stream's raw columns by name (`RowBuffer.arrays`)
 
 Row = Callable[[str], float]  # a table row: column name -> value
 FixValues = tuple[float, float, float, float, float, float]  # lat, lon, h, ve, vn, vu
@@ -196,12 +197,9 @@ def _map_codes(codes: FloatArray, table: dict[int, FixType]) -> NDArray[np.int8]
     return out
 
 
-def fix_columns(kind: str, v: FloatArray) -> dict[str, np.ndarray]:
+def fix_columns(kind: str, v: RawRows) -> dict[str, np.ndarray]:
     """Schema `fixes` columns (without t_s/receiver_id) from raw NavSatFix or GPSFix rows."""
-    cols = RAW_COLUMNS[kind]
-
-    def c(name: str) -> FloatArray:
-        return v[:, cols.index(name)]
+    c = v.__getitem__
 
     out: dict[str, np.ndarray] = {"lat_deg": c("lat"), "lon_deg": c("lon"), "height_m": c("alt")}
     if kind == "navsatfix":
@@ -228,16 +226,12 @@ def fix_columns(kind: str, v: FloatArray) -> dict[str, np.ndarray]:
     return out
 
 
-def imu_columns(v: FloatArray) -> dict[str, np.ndarray]:
+def imu_columns(v: RawRows) -> dict[str, np.ndarray]:
     """Schema `imu` columns from raw Imu rows; orientation NaN where the message says it has none.
 
     The columns are `v`'s own (its orientation cleared in place): a day of 100 Hz IMU is 0.7 GB, which
     a copy would hold twice while the frame is made."""
-    cols = RAW_COLUMNS["imu"]
-
-    def c(name: str) -> FloatArray:
-        return v[:, cols.index(name)]
-
+    c = v.__getitem__
     no_orientation = (c("ocov0") == -1) | ((c("qx") == 0) & (c("qy") == 0) & (c("qz") == 0) & (c("qw") == 0))
     out = {
         "ax_mps2": c("ax"),
@@ -253,23 +247,17 @@ def imu_columns(v: FloatArray) -> dict[str, np.ndarray]:
     return out
 
 
-def velocity_columns(kind: str, v: FloatArray) -> dict[str, np.ndarray]:
+def velocity_columns(v: RawRows) -> dict[str, np.ndarray]:
     """ENU velocity and its 1-sigma accuracy from raw twist rows (GNSS drivers publish ENU)."""
-    cols = RAW_COLUMNS[kind]
-    var = v[:, [cols.index("cov_ve"), cols.index("cov_vn"), cols.index("cov_vu")]]
+    var = np.column_stack([v["cov_ve"], v["cov_vn"], v["cov_vu"]])
     acc = np.sqrt(np.abs(np.mean(var, axis=1)))
     acc[~(np.all(var > 0, axis=1))] = np.nan
-    return {
-        "vel_e_mps": v[:, cols.index("ve")],
-        "vel_n_mps": v[:, cols.index("vn")],
-        "vel_u_mps": v[:, cols.index("vu")],
-        "vel_acc_mps": acc,
-    }
+    return {"vel_e_mps": v["ve"], "vel_n_mps": v["vn"], "vel_u_mps": v["vu"], "vel_acc_mps": acc}
 
 
-def odometry_columns(v: FloatArray) -> dict[str, np.ndarray]:
+def odometry_columns(v: RawRows) -> dict[str, np.ndarray]:
     names = ("x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps", "wz_radps")
-    return {n: v[:, i] for i, n in enumerate(names)}
+    return dict(zip(names, v.values(), strict=True))
 
 
 # --- the reverse direction, for writers: table rows -> messages ---------------------------------------

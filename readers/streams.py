@@ -335,12 +335,13 @@ class StreamCollector:
                     StreamInfo("imu", s.topic, s.topic, s.msgtype, len(stamps), body_frame="FLU", frame_id=s.frame_id)
                 )
             elif s.role == "vel":
-                velocities[s.topic] = (stamps, velocity_columns(s.kind, values))
+                velocities[s.topic] = (stamps, velocity_columns(values))
                 infos.append(StreamInfo("vel", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
                 if len(stamps):
                     spans[("vel", s.topic)] = (int(np.min(stamps)), int(np.max(stamps)))
             elif s.role == "timeref":
-                receiver_ns = values[:, 0].astype(np.int64) * 1_000_000_000 + values[:, 1].astype(np.int64)
+                seconds, nanoseconds = values["ref_sec"], values["ref_nsec"]
+                receiver_ns = seconds.astype(np.int64) * 1_000_000_000 + nanoseconds.astype(np.int64)
                 velocities[s.topic] = (stamps, {"time_offset_s": time_offset_s(receiver_ns, stamps)})
                 infos.append(StreamInfo("timeref", s.topic, s.topic, s.msgtype, len(stamps), frame_id=s.frame_id))
                 if len(stamps):

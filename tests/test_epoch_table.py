@@ -95,3 +95,22 @@ def test_stream_rows_are_the_groups_of_the_stream_key_in_order_of_first_appearan
     ((sid, rows),) = stream_rows(one, "imu_id")
     assert sid == "/imu"
     np.testing.assert_array_equal(rows, np.arange(5))
+
+
+def test_a_constant_stream_id_column_reads_as_its_rows_and_holds_one_shared_block() -> None:
+    from spooflens.schema import _SHARED_ROWS, constant_strings, schema_problems, stream_rows
+
+    n = 3 * _SHARED_ROWS + 17
+    ids = pd.Series(constant_strings("/imu/data", n))
+    assert isinstance(ids.dtype, pd.StringDtype) and len(ids) == n and not ids.hasnans
+    assert (ids == "/imu/data").all() and ids.iloc[-1] == "/imu/data" and ids.iloc[_SHARED_ROWS] == "/imu/data"
+    chunks = ids.array._pa_array.chunks
+    assert len(chunks) == 4 and all(c.buffers()[2].address == chunks[0].buffers()[2].address for c in chunks)
+    for empty_or_short in (0, 1, 5):
+        assert list(constant_strings("/gps", empty_or_short)) == ["/gps"] * empty_or_short
+    other = pd.DataFrame({"t_s": np.arange(4.0), "imu_id": constant_strings("/imu2", 4)})
+    both = pd.concat([pd.DataFrame({"t_s": np.arange(float(n)), "imu_id": ids}), other], ignore_index=True)
+    got = dict(stream_rows(both, "imu_id"))
+    np.testing.assert_array_equal(got["/imu2"], np.arange(n, n + 4))
+    assert len(got["/imu/data"]) == n
+    assert not [p for p in schema_problems("imu", both) if "imu_id" in p]
