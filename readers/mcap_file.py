@@ -16,7 +16,9 @@ import json
 import os
 import struct
 import zlib
+from collections import deque
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -35,6 +37,7 @@ from readers.ros_batch import gather
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError, one_line
+from spooflens.threads import thread_count
 
 Progress = Callable[[int, int], None]
 _RECORD_SIZE_LIMIT = 1 << 30  # a corrupt length field must not make us allocate more than this
@@ -120,6 +123,37 @@ def _decompress(chunk: Chunk) -> bytes:
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise ValueError("chunk CRC mismatch")
     return data
+
+
+class _DecompressingAhead:
+    """Chunks decompressed (and their CRC checked) a few ahead, in a thread of its own, while the reader
+    decodes the ones before: zstd, lz4 and crc32 release the GIL, so the two overlap. `push` a chunk and
+    get back, in file order, the chunks whose turn has come, each with a call giving its bytes (or
+    raising what decompressing it raised); `drain` gives the rest. With one thread allowed
+    (`SPOOFLENS_THREADS=1`, a batch worker) each chunk is decompressed when its turn comes."""
+
+    def __init__(self, ahead: int = 4) -> None:
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="spooflens-mcap") if thread_count() >= 2 else None
+        self._ahead = ahead
+        self._queue: deque[tuple[Chunk, list[bytes], Callable[[], bytes]]] = deque()
+
+    def push(self, chunk: Chunk, indexes: list[bytes]) -> Iterator[tuple[Chunk, list[bytes], Callable[[], bytes]]]:
+        if self._pool is None:
+            yield chunk, indexes, lambda: _decompress(chunk)
+            return
+        future: Future[bytes] = self._pool.submit(_decompress, chunk)
+        self._queue.append((chunk, indexes, future.result))
+        while len(self._queue) > self._ahead:
+            yield self._queue.popleft()
+
+    def drain(self) -> Iterator[tuple[Chunk, list[bytes], Callable[[], bytes]]]:
+        while self._queue:
+            yield self._queue.popleft()
+
+    def close(self) -> None:
+        self._queue.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _walk_chunk(data: bytes) -> tuple[list[int], list[Schema | Channel]]:
@@ -237,11 +271,11 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
 
     group: list[tuple[np.ndarray, np.ndarray]] = []  # (chunk bytes, message record offsets) not decoded yet
 
-    def chunk_messages(chunk: Chunk, indexes: list[bytes]) -> None:
+    def chunk_messages(chunk: Chunk, indexes: list[bytes], decompressed: Callable[[], bytes]) -> None:
         """A chunk's message records, queued for `decode_group` (without a summary: kept per message)."""
         nonlocal n_read
         try:
-            data = _decompress(chunk)
+            data = decompressed()
             buf = np.frombuffer(data, dtype=np.uint8)
             offsets = _indexed_offsets(buf, indexes) if declared else None
             if offsets is None:
@@ -302,6 +336,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
 
     chunk: Chunk | None = None
     indexes: list[bytes] = []
+    ahead = _DecompressingAhead()
     try:
         with path.open("rb") as f:
             for op, body in _top_level_records(f):
@@ -309,8 +344,12 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                     indexes.append(body)
                     continue
                 if chunk is not None:
-                    chunk_messages(chunk, indexes)
+                    for queued in ahead.push(chunk, indexes):
+                        chunk_messages(*queued)
                     chunk, indexes = None, []
+                if op != _OP_CHUNK:  # a record outside the chunks: every chunk before it first, in order
+                    for queued in ahead.drain():
+                        chunk_messages(*queued)
                 if op == _OP_SCHEMA:
                     schema = Schema.read(ReadDataStream(io.BytesIO(body)))
                     schemas[schema.id] = schema
@@ -324,8 +363,14 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                     chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
     except (McapError, ValueError, OverflowError, struct.error, EOFError, OSError, MemoryError) as err:
         problem = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
-    if chunk is not None:  # the last chunk, complete even when what follows it is not
-        chunk_messages(chunk, indexes)
+    try:
+        if chunk is not None:  # the last chunk, complete even when what follows it is not
+            for queued in ahead.push(chunk, indexes):
+                chunk_messages(*queued)
+        for queued in ahead.drain():
+            chunk_messages(*queued)
+    finally:
+        ahead.close()
     decode_group()
     if problem:
         if n_read == 0 and not channels:

@@ -13,6 +13,7 @@ import sqlite3
 import struct
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
@@ -212,6 +213,37 @@ def test_an_mcap_zstd_frame_declaring_gigabytes_is_damage_not_a_memory_error(tmp
     table = read_log(bad)
     assert any("zstd frame declares" in s.reason and s.action == "lost" for s in table.skipped)
     assert main(["inspect", str(bad)]) == 3
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_mcap_chunks_decompressed_ahead_are_decoded_in_file_order_and_a_damaged_one_is_lost_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: int
+) -> None:
+    """Chunks are decompressed a few ahead in a thread of their own (one thread: each when its turn
+    comes). Either way the table is the same, row for row, and a chunk whose data is damaged in the
+    middle of the file loses its own messages only, counted."""
+    import readers.mcap_file
+
+    src = ROOT / "sample_logs" / "spoofed_flight.mcap"
+    data = bytearray(src.read_bytes())
+    chunks = _mcap_records(bytes(data), 0x06)
+    assert len(chunks) > 4, "too few chunks to read any ahead (four are)"
+    middle = chunks[len(chunks) // 2]
+    frame = data.index(b"\x28\xb5\x2f\xfd", middle)
+    data[frame + 40 : frame + 48] = bytes(b ^ 0xFF for b in data[frame + 40 : frame + 48])
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    monkeypatch.setattr(readers.mcap_file, "thread_count", lambda: threads)
+    full, table = read_log(src), read_log(bad)
+    lost = [s for s in table.skipped if "unreadable" in s.reason and s.action == "lost"]
+    assert len(lost) == 1 and "chunk starting at log time" in lost[0].reason
+    assert 0 < len(full.imu) - len(table.imu) < len(full.imu) / 3
+    t = table.imu["t_s"].to_numpy()
+    assert (t[1:] >= t[:-1]).all()
+    monkeypatch.setattr(readers.mcap_file, "thread_count", lambda: 3 - threads)
+    other = read_log(bad)
+    pd.testing.assert_frame_equal(other.imu, table.imu)
+    pd.testing.assert_frame_equal(other.fixes, table.fixes)
 
 
 @pytest.fixture(scope="module")
