@@ -173,7 +173,14 @@ def coast(
     if compared < (2 if k < 0 else 1):  # what a run from the start, or a continued one, needs
         return None
     # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
-    opts = replace(sol.options, exclude_after_s=t_from, exclude_until_s=None, exclude_velocity_too=True, record=False)
+    opts = replace(
+        sol.options,
+        exclude_after_s=t_from,
+        exclude_until_s=None,
+        exclude_velocity_too=True,
+        record=False,
+        compare=True,
+    )
     return continued(nav, sol, t_from, opts, t_end)
 
 

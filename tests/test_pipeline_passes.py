@@ -62,3 +62,5 @@ def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full
         assert np.array_equal(thinned.t, whole.t) and thinned.t[0] > t_from
         assert np.allclose(thinned.nu, whole.nu, rtol=1e-9, atol=1e-9, equal_nan=True)
         assert np.allclose(thinned.S_all, whole.S_all, rtol=1e-9, atol=1e-12)
+        assert len(thinned.S_all) == len(thinned.t)  # a coast is compared with the GNSS it leaves out
+    assert len(nav.solution.S_all) == 1  # the solution itself is not: no (M, 9, 9) kept for nothing
