@@ -287,12 +287,21 @@ def increment_between(a: np.ndarray, b: np.ndarray, T: float) -> tuple[np.ndarra
 
 
 @njit(cache=CACHE)
-def increment(stream: Stream, i: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
-    a = integrals_at(stream, i)
+def step_to(
+    stream: Stream, a: np.ndarray, i: int, j: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """(the integrals at j, dC_b, dv_b, dp_b, T) from sample i, whose integrals are `a`, to sample j:
+    the increment in the body frame at t[i] (see strapdown.py)."""
     b = integrals_from(stream, a, i, j)
     T = stream[0][j] - stream[0][i]
     dC, dv, dp = increment_between(a, b, T)
+    return b, dC, dv, dp, T
+
+
+@njit(cache=CACHE)
+def increment(stream: Stream, i: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
+    _, dC, dv, dp, T = step_to(stream, integrals_at(stream, i), i, j)
     return dC, dv, dp, T
 
 
@@ -590,10 +599,7 @@ def filter_loop(
                 j = target
             if j <= k:
                 j = k + 1
-            at_j = integrals_from(stream, at_k, k, j)
-            T = t[j] - t[k]
-            dC, dv_b, dp_b = increment_between(at_k, at_j, T)
-            at_k = at_j
+            at_k, dC, dv_b, dp_b, T = step_to(stream, at_k, k, j)
             # a zero-length block (two samples at one time) has Phi = I and Qd = 0 whatever the force
             f_mean = dv_b / T - x[18:21] if T > 0 else -x[18:21]
             Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
@@ -698,10 +704,7 @@ def filter_loop(
         j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
         if j <= k:
             j = k + 1
-        at_j = integrals_from(stream, at_k, k, j)
-        T = t[j] - t[k]
-        dC, dv_b, dp_b = increment_between(at_k, at_j, T)
-        at_k = at_j
+        at_k, dC, dv_b, dp_b, T = step_to(stream, at_k, k, j)
         x = propagate(x, dC, dv_b, dp_b, T)
         k = j
         track[nt, 0] = x[21]
