@@ -7,6 +7,7 @@ spooflens.statespace: x_k = A[k] x_{k-1} + w_k (A[0] unused), y_k = C[k] x_k + e
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,67 +65,94 @@ def _forward(
     x0: np.ndarray,
     P0: np.ndarray,
     keep_states: bool = True,
+    continued: bool = False,
+    carry: int = -1,
 ):
-    N, p = y.shape
+    """The filter over the epochs of the arrays from (x0, P0): the prior of the first epoch, or, when
+    `continued`, the estimate after the epoch before it (a block of a longer log: the first epoch is
+    predicted too). The last two returned are the estimate after epoch `carry` (the last when -1)."""
+    B, p = y.shape
+    if carry < 0:
+        carry = B - 1
     n = x0.shape[0]
-    eps = np.full((N, p), np.nan)
-    S_out = np.zeros((N, p, p))
-    Sinv_out = np.zeros((N, p, p))
-    K_out = np.zeros((N, n, p))
-    Ns = N if keep_states else 0
+    eps = np.full((B, p), np.nan)
+    S_out = np.zeros((B, p, p))
+    Sinv_out = np.zeros((B, p, p))
+    K_out = np.zeros((B, n, p))
+    Ns = B if keep_states else 0
     xp = np.zeros((Ns, n))
     Pp = np.zeros((Ns, n, n))
     xu = np.zeros((Ns, n))
     Pu = np.zeros((Ns, n, n))
-    nis = np.full(N, np.nan)
-    logdet = np.zeros(N)
-    dof = np.zeros(N, dtype=np.int64)
+    nis = np.full(B, np.nan)
+    logdet = np.zeros(B)
+    dof = np.zeros(B, dtype=np.int64)
     x = x0.copy()
     P = P0.copy()
-    for k in range(N):
-        if k > 0:
-            x = block_times_vector(A_head[k], A_tail[k], x)
-            P = add_block_diagonal(block_congruence(A_head[k], A_tail[k], P, np.empty((n, n))), Q_head[k], Q_tail[k])
+    x_carry = x0.copy()
+    P_carry = P0.copy()
+    for b in range(B):
+        if b > 0 or continued:
+            x = block_times_vector(A_head[b], A_tail[b], x)
+            P = add_block_diagonal(block_congruence(A_head[b], A_tail[b], P, np.empty((n, n))), Q_head[b], Q_tail[b])
         if keep_states:
-            xp[k] = x
-            Pp[k] = P
+            xp[b] = x
+            Pp[b] = P
         for i in range(p):
-            S_out[k, i, i] = 1.0
-        x, P, rows, e, S, Sinv, K, nis_k, logdet_k = masked_update(x, P, C[k], R[k], y[k])
+            S_out[b, i, i] = 1.0
+        x, P, rows, e, S, Sinv, K, nis_k, logdet_k = masked_update(x, P, C[b], R[b], y[b])
         m = rows.shape[0]
         if m > 0:
-            nis[k] = nis_k
-            logdet[k] = logdet_k
-            dof[k] = m
+            nis[b] = nis_k
+            logdet[b] = logdet_k
+            dof[b] = m
             for a in range(m):
-                eps[k, rows[a]] = e[a]
-                K_out[k, :, rows[a]] = K[:, a]
-                for b in range(m):
-                    S_out[k, rows[a], rows[b]] = S[a, b]
-                    Sinv_out[k, rows[a], rows[b]] = Sinv[a, b]
+                eps[b, rows[a]] = e[a]
+                K_out[b, :, rows[a]] = K[:, a]
+                for c in range(m):
+                    S_out[b, rows[a], rows[c]] = S[a, c]
+                    Sinv_out[b, rows[a], rows[c]] = Sinv[a, c]
         if keep_states:
-            xu[k] = x
-            Pu[k] = P
-    return eps, S_out, Sinv_out, K_out, xp, Pp, xu, Pu, nis, logdet, dof
+            xu[b] = x
+            Pu[b] = P
+        if b == carry:
+            x_carry = x.copy()
+            P_carry = P.copy()
+    return eps, S_out, Sinv_out, K_out, xp, Pp, xu, Pu, nis, logdet, dof, x_carry, P_carry
+
+
+_ModelArrays = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+
+
+def _model_arrays(model: LinearGaussianModel, epochs: slice = slice(None)) -> _ModelArrays:
+    """The arrays `_forward` reads, of `epochs` (views where the model's are contiguous already)."""
+    A, Q = model.A[epochs], model.Q[epochs]
+    c = np.ascontiguousarray
+    return c(A.head), c(A.tail), c(Q.head), c(Q.tail), c(model.C[epochs]), c(model.R[epochs]), c(model.y[epochs])
 
 
 def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> ForwardResult:
     """The forward filter; without `keep_states` the state estimates and their covariances are not kept
     (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
     innovations, gains and S does without)."""
-    out = _forward(
-        np.ascontiguousarray(model.A.head),
-        np.ascontiguousarray(model.A.tail),
-        np.ascontiguousarray(model.Q.head),
-        np.ascontiguousarray(model.Q.tail),
-        np.ascontiguousarray(model.C),
-        np.ascontiguousarray(model.R),
-        np.ascontiguousarray(model.y),
-        model.x0.astype(float),
-        np.ascontiguousarray(model.P0),
-        keep_states,
-    )
-    return ForwardResult(*out)
+    out = _forward(*_model_arrays(model), model.x0.astype(float), np.ascontiguousarray(model.P0), keep_states)
+    return ForwardResult(*out[:-2])
+
+
+def forward_blocks(
+    model: LinearGaussianModel, block: int, reach: Callable[[int], int]
+) -> Iterator[tuple[int, int, ForwardResult]]:
+    """The forward filter (without states) a block of `block` epochs at a time: (lo, hi, result over
+    epochs lo..reach(hi) - 1). A consumer that reads some epochs past each block's end (a sliding window)
+    gets them from `reach`; the next block starts from the estimate after hi - 1, so every epoch's numbers
+    are those of `forward_filter`, and only a block and its reach are held at a time."""
+    x, P = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+    N, block = model.n_epochs, max(1, block)
+    for lo in range(0, N, block):
+        hi = min(lo + block, N)
+        end = max(hi, min(reach(hi), N))
+        *out, x, P = _forward(*_model_arrays(model, slice(lo, end)), x, P, False, lo > 0, hi - 1 - lo)
+        yield lo, hi, ForwardResult(*out)
 
 
 @njit(cache=CACHE)

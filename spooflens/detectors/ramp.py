@@ -80,23 +80,29 @@ def _ramp_pass(
     c_ptr: np.ndarray,
     c_col: np.ndarray,
     used_rows: np.ndarray,
-):
+    off: int,
+    glr: np.ndarray,
+    glr_m: np.ndarray,
+    mlr: np.ndarray,
+    mlr_m: np.ndarray,
+    lbf: np.ndarray,
+    lbf_m: np.ndarray,
+    lodds: np.ndarray,
+) -> None:
+    """The candidates `cands` (epochs of the log, with their `log_prior`) into the log's statistics
+    (glr ... lodds, updated in place). The other arrays (the model's A and C, the forward filter's K,
+    S^-1 and innovations, t, `used_rows`) hold epochs off.. of the log: every epoch within `window_s` after
+    the last candidate. Candidates in increasing order, a block after another, give each epoch's
+    statistics exactly as one pass over the log."""
     # Explicit loops over the non-zero pattern of A's leading block and of C, and a hand Cholesky for the
     # q x q matrices: the navigation model's A is block-diagonal (142 of 576 entries) and BLAS/LAPACK calls
     # on 24 x 3 and 3 x 3 operands cost more in overhead than in arithmetic (2.1x faster than the
     # matrix-operator form).
-    N = eps.shape[0]
+    end = off + eps.shape[0]
     h = A_head.shape[1]
     n = h + A_tail.shape[1]
     p = C.shape[1]
     q = rows.shape[0]
-    glr = np.full(N, np.nan)
-    glr_m = np.full(N, -1)
-    mlr = np.full(N, np.nan)
-    mlr_m = np.full(N, -1)
-    lbf = np.full(N, np.nan)
-    lbf_m = np.full(N, -1)
-    lodds = np.full(N, -np.inf)
     e0 = np.where(np.isnan(eps), 0.0, eps)
     mu = np.zeros((n, q))
     mu_p = np.zeros((n, q))
@@ -112,20 +118,21 @@ def _ramp_pass(
         mu[:] = 0.0
         d[:] = 0.0
         info[:] = 0.0
-        for k in range(m + 1, N):
-            dt = t[k] - t[m]
+        for k in range(m + 1, end):
+            kb = k - off
+            dt = t[kb] - t[m - off]
             if dt > window_s:
                 break
-            block_times(A_head[k], A_tail[k], mu, a_ptr, a_col, mu_p)
-            times(C[k], mu_p, c_ptr, c_col, G)  # G = E dt - C mu_p
+            block_times(A_head[kb], A_tail[kb], mu, a_ptr, a_col, mu_p)
+            times(C[kb], mu_p, c_ptr, c_col, G)  # G = E dt - C mu_p
             for r in range(p):
                 for j in range(q):
                     G[r, j] = -G[r, j]
             for j in range(q):
                 G[rows[j], j] += dt
-            Kk = K[k]
-            Sk = Sinv[k]
-            used = used_rows[k]
+            Kk = K[kb]
+            Sk = Sinv[kb]
+            used = used_rows[kb]
             for i in range(n):
                 for j in range(q):
                     v = mu_p[i, j]
@@ -143,7 +150,7 @@ def _ramp_pass(
             for j in range(q):
                 v = 0.0
                 for r in range(p):
-                    v += SG[r, j] * e0[k, r]
+                    v += SG[r, j] * e0[kb, r]
                 d[j] += v
                 for jj in range(q):
                     v = 0.0
@@ -175,7 +182,6 @@ def _ramp_pass(
             v = log_prior[ci] + 0.5 * bf
             hi = max(lodds[k], v)
             lodds[k] = hi + math.log(math.exp(lodds[k] - hi) + math.exp(v - hi))
-    return glr, glr_m, mlr, mlr_m, lbf, lbf_m, lodds
 
 
 def candidate_grid(t: FloatArray, step_s: float) -> NDArray[np.int64]:
@@ -185,6 +191,79 @@ def candidate_grid(t: FloatArray, step_s: float) -> NDArray[np.int64]:
         if t[k] - t[out[-1]] >= step_s - 1e-9:
             out.append(k)
     return np.array(out, dtype=np.int64)
+
+
+class RampPass:
+    """The three statistics for every epoch of `model`, filled a block of candidates at a time from the
+    forward filter over that block and the epochs it reaches (`reach`): see `ramp_statistics`."""
+
+    def __init__(
+        self,
+        model: LinearGaussianModel,
+        rows: tuple[int, ...],
+        window_s: float,
+        step_s: float,
+        sigma_rate: FloatArray,
+        attacks_per_hour: float,
+        min_after: int = 1,
+    ) -> None:
+        self.model, self.window_s, self.min_after = model, float(window_s), int(min_after)
+        self.t = model.t.astype(float)
+        self.rows = np.array(rows, dtype=np.int64)
+        self.cands = candidate_grid(self.t, step_s)
+        spacing = np.diff(np.r_[self.t[self.cands], self.t[self.cands[-1]] + step_s])
+        self.log_prior = np.log(np.clip(attacks_per_hour * spacing / 3600.0, 1e-300, 0.5))
+        sigma = np.asarray(sigma_rate, dtype=float)
+        self.sigma_inv, self.log_sigma_det = np.diag(1.0 / sigma**2), float(np.sum(np.log(sigma**2)))
+        self.patterns = (*pattern(model.A.head), *pattern(model.C))  # over the whole log, as one pass
+        N = model.n_epochs
+        self.glr, self.mlr, self.lbf = (np.full(N, np.nan) for _ in range(3))
+        self.glr_m, self.mlr_m, self.lbf_m = (np.full(N, -1) for _ in range(3))
+        self.lodds = np.full(N, -np.inf)
+
+    def reach(self, hi: int) -> int:
+        """One past the last epoch the candidates before epoch `hi` read (those within the window)."""
+        # a margin over the window: t[k] - t[m] <= window must never fall outside by a rounding
+        return int(np.searchsorted(self.t, self.t[hi - 1] + self.window_s + 1e-6, side="right"))
+
+    def add(self, lo: int, hi: int, fwd: ForwardResult) -> None:
+        """The candidates in epochs lo..hi - 1, from `fwd`: the forward filter over epochs lo..reach(hi) - 1."""
+        c0, c1 = np.searchsorted(self.cands, [lo, hi])
+        end = lo + fwd.eps.shape[0]
+        epochs = slice(lo, end)
+        A, C = self.model.A[epochs], self.model.C[epochs]
+        _ramp_pass(
+            np.ascontiguousarray(A.head),
+            np.ascontiguousarray(A.tail),
+            np.ascontiguousarray(C),
+            np.ascontiguousarray(fwd.K),
+            np.ascontiguousarray(fwd.Sinv),
+            np.ascontiguousarray(fwd.eps),
+            self.t[epochs],
+            self.rows,
+            self.cands[c0:c1],
+            self.window_s,
+            self.sigma_inv,
+            self.log_sigma_det,
+            self.log_prior[c0:c1],
+            self.min_after,
+            *self.patterns,
+            np.any(fwd.Sinv != 0.0, axis=2),  # the rows each epoch's update used (once, not per candidate)
+            lo,
+            self.glr,
+            self.glr_m,
+            self.mlr,
+            self.mlr_m,
+            self.lbf,
+            self.lbf_m,
+            self.lodds,
+        )
+
+    def result(self) -> RampStatistics:
+        # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
+        return RampStatistics(
+            self.glr, self.glr_m, self.mlr, self.mlr_m, self.lbf, self.lbf_m, self.lodds, candidates=self.cands
+        )
 
 
 def ramp_statistics(
@@ -197,36 +276,13 @@ def ramp_statistics(
     attacks_per_hour: float,
     min_after: int = 1,
 ) -> RampStatistics:
-    """All three statistics for every epoch, candidates every `step_s` within `window_s` of it.
+    """All three statistics for every epoch, candidates every `step_s` within `window_s` of it, from the
+    forward filter over the whole log (`RampPass` takes it a block at a time).
 
     A candidate m is judged only from epoch m + min_after on (the paper's L: at least L samples after it).
     Prior for the calibrated variant: ramp rate theta ~ N(0, diag(sigma_rate^2)); an onset in a candidate's
     interval with probability attacks_per_hour * interval / 3600 (so the log odds are a posterior).
     """
-    t = model.t.astype(float)
-    cands = candidate_grid(t, step_s)
-    spacing = np.diff(np.r_[t[cands], t[cands[-1]] + step_s])
-    log_prior = np.log(np.clip(attacks_per_hour * spacing / 3600.0, 1e-300, 0.5))
-    sigma = np.asarray(sigma_rate, dtype=float)
-    out = _ramp_pass(
-        np.ascontiguousarray(model.A.head),
-        np.ascontiguousarray(model.A.tail),
-        np.ascontiguousarray(model.C),
-        np.ascontiguousarray(fwd.K),
-        np.ascontiguousarray(fwd.Sinv),
-        np.ascontiguousarray(fwd.eps),
-        t,
-        np.array(rows, dtype=np.int64),
-        cands,
-        float(window_s),
-        np.diag(1.0 / sigma**2),
-        float(np.sum(np.log(sigma**2))),
-        log_prior,
-        int(min_after),
-        *pattern(model.A.head),
-        *pattern(model.C),
-        np.any(fwd.Sinv != 0.0, axis=2),  # the rows each epoch's update used (once, not per candidate)
-    )
-    glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds = out
-    # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
-    return RampStatistics(glr, glr_onset, mlr, mlr_onset, log_bf, bf_onset, log_odds, candidates=cands)
+    ramp = RampPass(model, rows, window_s, step_s, sigma_rate, attacks_per_hour, min_after)
+    ramp.add(0, model.n_epochs, fwd)
+    return ramp.result()

@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, Curve, DetectorResult, Series, Track, alarm_intervals
 from spooflens.detectors.innovation_test import position_nis, threshold
-from spooflens.detectors.kalman import forward_filter
+from spooflens.detectors.kalman import forward_blocks
 from spooflens.detectors.mlrt import onset_posterior, ramp_two_filter_offline, step_two_filter_offline
-from spooflens.detectors.ramp import RampStatistics, ramp_statistics
+from spooflens.detectors.ramp import RampPass, RampStatistics
 from spooflens.evidence import Evidence
 from spooflens.statespace import LinearGaussianModel
 from spooflens.threads import both
@@ -65,17 +65,22 @@ class Seed000Options:
     curve_step_s: float = 1.0
 
 
+def normalised_position_innovations(eps: FloatArray, S: FloatArray) -> FloatArray:
+    """(N, 3) each position innovation over its standard deviation (what `innovation_whiteness` reads)."""
+    return eps[:, :3] / np.sqrt(np.maximum(np.diagonal(S, axis1=1, axis2=2)[:, :3], 1e-300))
+
+
 def innovation_whiteness(
-    t: FloatArray, eps: FloatArray, S: FloatArray, window_s: float = 30.0, suspected: NDArray[np.bool_] | None = None
+    t: FloatArray, z: FloatArray, window_s: float = 30.0, suspected: NDArray[np.bool_] | None = None
 ) -> float:
-    """Median over `window_s` windows of the lag-1 autocorrelation of the normalised position innovations.
+    """Median over `window_s` windows of the lag-1 autocorrelation of the normalised position innovations
+    `z` (`normalised_position_innovations`).
 
     Near 0 when the model fits the log; the median over windows stays near 0 even if an attack (which
     correlates the innovations) covers a minority of the log. A real receiver and IMU the model does not
     describe (time-correlated GNSS errors, unmodelled IMU errors) show up as values near 1: then the
     sequential ramp tests are not to be trusted on this log.
     """
-    z = eps[:, :3] / np.sqrt(np.maximum(np.diagonal(S, axis1=1, axis2=2)[:, :3], 1e-300))
     edges = np.arange(t[0], t[-1] + window_s, window_s)
     bounds = np.searchsorted(t, edges)  # t increases: each window is a slice (not a mask over the log)
     values = []
@@ -100,15 +105,20 @@ class Seed000Statistics:
     ramp: RampStatistics
     posterior: FloatArray  # P(ramp ongoing | data so far)
     whiteness: float  # innovation_whiteness: near 0 when the model fits
-    eps: FloatArray  # the forward filter's innovations and their covariance (for the whiteness check)
-    S: FloatArray
+    z: FloatArray  # the forward filter's normalised position innovations (for the whiteness check)
 
 
-def statistics(model: LinearGaussianModel, opts: Seed000Options) -> Seed000Statistics:
-    fwd = forward_filter(model, keep_states=False)  # innovations, S and gains are all it reads
-    ramp = ramp_statistics(
+# Epochs of the forward filter's gains, S and S^-1 held at a time (a day of 1 Hz GNSS held them all:
+# 0.26 GB); at least a few windows' worth, so a block's reach past its end stays a small part of it
+FORWARD_BLOCK = 8192
+
+
+def statistics(model: LinearGaussianModel, opts: Seed000Options, block: int | None = None) -> Seed000Statistics:
+    """The forward filter's innovations, S and gains, `block` epochs at a time (by default
+    FORWARD_BLOCK, or eight windows when longer), into the KF test's NIS, the ramp statistics and the
+    whiteness check: the same numbers as the filter over the whole log."""
+    ramp = RampPass(
         model,
-        fwd,
         POSITION_ROWS,
         opts.window_s,
         opts.step_s,
@@ -116,16 +126,18 @@ def statistics(model: LinearGaussianModel, opts: Seed000Options) -> Seed000Stati
         opts.attacks_per_hour,
         opts.min_epochs_after_onset,
     )
-    odds = np.exp(np.clip(ramp.log_odds, -700, 700))
-    return Seed000Statistics(
-        model.t,
-        position_nis(fwd),
-        ramp,
-        odds / (1.0 + odds),
-        innovation_whiteness(model.t, fwd.eps, fwd.S),
-        fwd.eps,
-        fwd.S,
-    )
+    N = model.n_epochs
+    kf_nis, z = np.full(N, np.nan), np.full((N, 3), np.nan)
+    if block is None:
+        block = max(FORWARD_BLOCK, 8 * ramp.reach(1)) if N else 1  # the window in epochs near the start
+    for lo, hi, fwd in forward_blocks(model, block, ramp.reach):
+        ramp.add(lo, hi, fwd)
+        n = hi - lo
+        kf_nis[lo:hi] = position_nis(fwd)[:n]
+        z[lo:hi] = normalised_position_innovations(fwd.eps[:n], fwd.S[:n])
+    r = ramp.result()
+    odds = np.exp(np.clip(r.log_odds, -700, 700))
+    return Seed000Statistics(model.t, kf_nis, r, odds / (1.0 + odds), innovation_whiteness(model.t, z), z)
 
 
 def _alarms(
@@ -208,8 +220,7 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
     for res in results:
         for al in res.alarms:
             suspected |= (t >= al.start_s - opts.window_s) & (t <= al.end_s + opts.window_s)
-    fwd_eps, fwd_S = st.eps, st.S
-    whiteness = innovation_whiteness(t, fwd_eps, fwd_S, suspected=suspected)
+    whiteness = innovation_whiteness(t, st.z, suspected=suspected)
     if not np.isfinite(whiteness):  # every window suspected: judge on all of them
         whiteness = st.whiteness
     st = replace(st, whiteness=whiteness)
