@@ -23,6 +23,12 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
+def kernel_array(a: FloatArray) -> FloatArray:
+    """Per-epoch matrices as a compiled kernel reads them: contiguous, but a matrix broadcast over the
+    epochs (stride 0: the navigation's H of a log without odometry) as it is, not copied to every epoch."""
+    return a if a.ndim and a.strides[0] == 0 else np.ascontiguousarray(a)
+
+
 @dataclass(frozen=True)
 class BlockDiagonal:
     """Per-epoch (n, n) matrices blockdiag(head[k], diag(tail[k])): head (N, h, h), tail (N, n - h)."""

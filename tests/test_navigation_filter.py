@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from filterpy.kalman import KalmanFilter
 
@@ -97,7 +98,7 @@ def test_a_filter_over_checkpointed_integrals_is_the_filter_over_integrals_at_ev
     """A long log's IMU keeps its integrals every few samples (`strapdown.DENSE_SAMPLES`): the closed-loop
     filter over them, and over a cut of them (a continued run), is the same bit for bit."""
     from spooflens.navigation.loosely_coupled import initial_state, prepare, run_prepared
-    from spooflens.navigation.strapdown import preintegrate
+    from spooflens.navigation.strapdown import NavState, preintegrate
 
     table, _ = ground
     inputs = prepare(table)
@@ -108,12 +109,57 @@ def test_a_filter_over_checkpointed_integrals_is_the_filter_over_integrals_at_ev
     a, b = run_prepared(inputs, opts, start), run_prepared(sparse, opts, start)
     for name in ("state", "nis", "S", "P_upd", "track_llh"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
-    k0 = int(np.searchsorted(pre.t, a.t[len(a.t) // 3])) // 8 * 8 + 3  # the cut starts between checkpoints
-    t_cut = float(pre.t[k0]) + 1e-4
-    cont = replace(opts, initial=start[0])
-    a2 = run_prepared(inputs.between(t_cut), cont, start)
-    b2 = run_prepared(sparse.between(t_cut), cont, start)
-    np.testing.assert_array_equal(a2.state, b2.state)
+    # a cut between checkpoints makes its integrals again: the same numbers at every sample
+    k0 = int(np.searchsorted(pre.t, a.t[len(a.t) // 3])) // 8 * 8 + 3
+    dense_cut, sparse_cut = pre.between(k0, len(pre.t)), sparse.pre.between(k0, len(pre.t))
+    rows = np.arange(len(dense_cut.t))
+    for x, y in zip(dense_cut.integrals(rows), sparse_cut.integrals(rows), strict=True):
+        np.testing.assert_array_equal(x, y)
+    # a run continued from an epoch's update starts from the checkpoint before it: the integrals are views
+    # (not made again to the log's end), and the run is the one over the integrals at every sample
+    e = len(a.t) // 3
+    cont = replace(opts, initial=NavState.from_vector(a.state[e]), initial_covariance=a.P_upd[e], initial_gm=a.gm[e])
+    cut = sparse.between(float(a.t[e]))
+    assert np.shares_memory(cut.pre.Qb, sparse.pre.Qb) and cut.pre.t[0] <= a.state[e, 21]
+    a2, b2 = run_prepared(inputs.between(float(a.t[e])), cont), run_prepared(cut, cont)
+    for name in ("state", "nis", "S", "P_upd", "track_llh"):
+        np.testing.assert_array_equal(getattr(a2, name), getattr(b2, name))
+    np.testing.assert_array_equal(a2.state[-5:], a.state[-5:])
+
+
+def test_without_odometry_the_solution_keeps_one_h_and_everything_reads_it_as_the_per_epoch_copies(
+    ground: tuple[EpochTable, NavSolution],
+) -> None:
+    """A log without odometry has the same H at every epoch (its odometry rows, never used, zero): the
+    solution keeps one, seen at every epoch (0.15 GB a day of 1 Hz GNSS). The smoother, the detectors'
+    model, seed 000's filters and the offline MLRT give what they give from per-epoch copies; with
+    odometry measured, H is kept per epoch."""
+    from spooflens.detectors.mlrt import ramp_two_filter_offline
+    from spooflens.detectors.seed000 import Seed000Options, statistics
+    from spooflens.navigation.loosely_coupled import OdometryAiding, prepare, run_prepared
+
+    table, sol = ground
+    assert sol.H.strides[0] == 0 and not sol.H.flags.writeable and sol.H.shape == (len(sol.t), 9, 24)
+    copies = np.array(sol.H)
+    assert (copies[:, 6:9, :6] == 0).all() and (copies[:, 6:9, 21:] == -np.eye(3)).all()
+    dense = replace(sol, H=copies)
+    a, b = smooth(sol), smooth(dense)
+    np.testing.assert_array_equal(a.delta, b.delta)
+    np.testing.assert_array_equal(a.var, b.var)
+    m1, m2 = sol.error_model(), dense.error_model()
+    np.testing.assert_array_equal(m1.y, m2.y)
+    s1, s2 = statistics(m1, Seed000Options()), statistics(m2, Seed000Options())
+    np.testing.assert_array_equal(s1.ramp.log_bf, s2.ramp.log_bf)
+    np.testing.assert_array_equal(s1.kf_nis, s2.kf_nis)
+    o1, o2 = (ramp_two_filter_offline(m, (0, 1, 2), np.full(3, 3.0), stride=10) for m in (m1, m2))
+    np.testing.assert_array_equal(o1.log_bf, o2.log_bf)
+    # odometry (here the truth's velocity in the body frame, as wheels would give it) is an H per epoch
+    inputs = prepare(table)
+    odo = pd.DataFrame({"t_s": sol.t, "odometry_id": "wheels", "vx_mps": 1.0, "vy_mps": 0.0, "vz_mps": 0.0})
+    aided = replace(inputs, table=replace(table, odometry=odo))
+    opts = FilterOptions(grade=SCENARIOS["ground"].imu_grade, odometry=OdometryAiding(np.eye(3), odometry_id="wheels"))
+    with_odometry = run_prepared(aided, opts)
+    assert with_odometry.H.strides[0] != 0 and np.ptp(with_odometry.H[:, 6:9, :6], axis=0).max() > 0
 
 
 def test_a_solution_with_covariances_that_are_not_finite_cannot_be_smoothed_and_says_so(

@@ -43,7 +43,7 @@ from spooflens.detectors.kalman import (
 )
 from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
-from spooflens.statespace import BlockDiagonal, LinearGaussianModel
+from spooflens.statespace import BlockDiagonal, LinearGaussianModel, kernel_array
 
 FloatArray = NDArray[np.float64]
 LOG_2PI = math.log(2 * math.pi)
@@ -487,7 +487,7 @@ def _offline(
     stride = max(1, int(stride))
     # views where the model's arrays are contiguous already (the navigation's are): no copies
     A, Q = model.A[: last + 1], model.Q[: last + 1]
-    C, R, y = (np.ascontiguousarray(a[: last + 1]) for a in (model.C, model.R, model.y))
+    C, R, y = (kernel_array(a[: last + 1]) for a in (model.C, model.R, model.y))
     bf, flat = _two_filter_offline(
         np.ascontiguousarray(A.head),
         np.ascontiguousarray(A.tail),

@@ -536,9 +536,11 @@ def filter_loop(
     keep: np.ndarray,
     compare: bool = True,
     upd_every: int = 1,
+    odometry_measured: bool = True,
 ):
     """The closed-loop filter over all epochs; returns the per-epoch and per-block records (the updated
-    covariance of every `upd_every`-th epoch only, when kept).
+    covariance of every `upd_every`-th epoch only, when kept; H only once when no epoch has odometry:
+    then it is the same at every epoch).
 
     The 15 INS error states are fed back into the nominal state and reset at every update; the six
     Gauss-Markov receiver-error states are not (they are no error of the INS) and carry their estimate.
@@ -556,7 +558,8 @@ def filter_loop(
     # H P H^T + R of every row, used or not: what a coasting run is compared with (`compare`)
     out_S_all = np.zeros((M if compare else 1, NM, NM))
     out_R = np.zeros((M, NM, NM))
-    out_H = np.zeros((M if keep_h else 1, NM, NE))
+    # without odometry H's rows for it are never read, and zeroed H is the same at every epoch: one kept
+    out_H = np.zeros((M if keep_h and odometry_measured else 1, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
     # Phi and Qd are block-diagonal (the INS block, then each Gauss-Markov state on its own): kept so
@@ -657,6 +660,8 @@ def filter_loop(
             if not math.isnan(vel[e, i]):
                 z[3 + i] = x[3 + i] - vel[e, i]
         Hm = measurement_matrix(x, R_vb)
+        if not odometry_measured:
+            Hm[6:9, :6] = 0.0
         vb = _mv3(R_vb, _mv3(x[6:15].copy().reshape(3, 3).T, x[3:6]))
         for i in range(3):
             if not math.isnan(odo[e, i]):
@@ -667,7 +672,7 @@ def filter_loop(
                 nu[i] -= Hm[i, 15 + j] * g[j]
         out_z[e] = z
         out_nu[e] = nu
-        if keep_h:
+        if keep_h and (odometry_measured or e == 0):
             out_H[e] = Hm
         for i in range(NM):
             out_R[e, i, i] = sigma[e, i] ** 2

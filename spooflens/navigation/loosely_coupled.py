@@ -113,8 +113,12 @@ SMOOTHER_NEEDS = ("Phi", "Qd", "H", "P_upd")  # H: to make the updated covarianc
 ANALYSIS_NEEDS = ("Phi", "Qd", "H", "P_upd")
 
 
+def _recorded_names(record: bool | tuple[str, ...]) -> tuple[str, ...]:
+    return RECORDED if record is True else () if record is False else record
+
+
 def _kept(record: bool | tuple[str, ...]) -> NDArray[np.bool_]:
-    names = RECORDED if record is True else () if record is False else record
+    names = _recorded_names(record)
     unknown = set(names) - set(RECORDED)
     if unknown:
         raise ValueError(f"FilterOptions.record names {sorted(unknown)!r}; it can keep {RECORDED!r}")
@@ -148,7 +152,7 @@ def nis_by_pattern(
     for pattern in np.unique(present[dof > 0], axis=0):
         k = np.flatnonzero((present == pattern).all(axis=1))
         r = idx[pattern]
-        nis[k] = quadratic_forms(nu[k][:, r], S[k][:, r][:, :, r])
+        nis[k] = quadratic_forms(nu[np.ix_(k, r)], S[np.ix_(k, r, r)])  # those rows only, not all 9 x 9
     return nis, dof
 
 
@@ -171,7 +175,7 @@ class NavSolution:
     # H, Phi, Qd, P_pred and P_upd not named in options.record hold one epoch only (not kept), and S_all
     # too without options.compare.
     R: FloatArray  # (M, 9, 9)
-    H: FloatArray  # (M, 9, 24)
+    H: FloatArray  # (M, 9, 24); without odometry one matrix seen at every epoch (read-only, stride 0)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
     Phi: BlockDiagonal  # (M, 24, 24) from the previous epoch (identity at the first): 15 x 15 block, diagonal
@@ -316,6 +320,9 @@ class FilterInputs:
         pre = self.pre
         end = np.inf if t_end is None else t_end
         k0 = max(int(np.searchsorted(pre.t, t_after, side="right")) - 1, 0)
+        # from the integrals' checkpoint at or before it: views, not integrals made again to the log's end
+        # (a continued run starts at its initial state's time, however early its samples begin)
+        k0 -= k0 % pre.every
         k1 = int(np.searchsorted(pre.t, end + 1.0))
         cut = pre.between(k0, k1)
         t = self.fixes["t_s"].to_numpy(dtype=float)
@@ -390,6 +397,7 @@ def _run(
         vel = np.full_like(vel, np.nan)  # a velocity with no noise learned (e.g. an axis missing) is not used
     llh = np.column_stack([cols["lat_deg"], cols["lon_deg"], cols["height_m"]])
     odo = np.full((len(tf), 3), np.nan) if odometry is None else np.asarray(odometry, dtype=float)[keep]
+    odometry_measured = bool(np.isfinite(odo).any())
     R_vb = opts.odometry.R_vb if opts.odometry is not None else np.eye(3)
     use = np.ones((len(tf), 9), dtype=np.bool_)
     use[:, 6:9] = opts.odometry is not None
@@ -428,8 +436,12 @@ def _run(
             _kept(opts.record),
             opts.compare,
             max(1, int(opts.P_upd_every)),
+            odometry_measured,
         )
     )
+    if not odometry_measured and "H" in _recorded_names(opts.record):
+        # one matrix for every epoch, seen as (M, 9, 24) without its copies (0.15 GB a day of 1 Hz GNSS)
+        H = np.broadcast_to(H[0], (len(tf), *H.shape[1:]))
     return NavSolution(
         imu_id,
         receiver_id,
