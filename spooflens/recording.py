@@ -6,7 +6,8 @@ evidence class with its threshold, and the event log; one tab per detector panel
 
 Everything time-indexed is sent column-wise with `send_columns` (never a per-sample `log`), in blocks
 of `BLOCK_ROWS` rows so a day-long IMU series never exists as one more whole-length copy (the time
-columns, the stacked axes, Rerun's own Arrow copy) beside the table, on two timelines: `time`
+columns, the stacked axes, Rerun's own Arrow copy) beside the table, and the writer waits for Rerun
+to write what was sent every `FLUSH_BYTES` (its file sink is slower than the sending), on two timelines: `time`
 (seconds since the log start, every log has it) and `log_time` (the log's own UTC clock, when it has
 one). Statistics over candidate onsets are sent on a
 timeline of their own, `candidate_onset`. Histograms are static bar charts under `histograms/`, one
@@ -40,6 +41,9 @@ COLOURS = {"reported": (230, 60, 50), "reconstructed": (40, 180, 90), "truth": (
 BAR_COLOURS = ((60, 120, 230), (230, 60, 50), (120, 120, 120), (200, 160, 40), (40, 180, 90), (150, 80, 200))
 _UNSAFE = re.compile(r"[^A-Za-z0-9_\-./]")
 BLOCK_ROWS = 100_000  # rows per send_columns call
+# Rerun writes the file in threads of its own, slower than the columns are sent: without waiting for it
+# now and then, a day of 100 Hz IMU series queued in memory (0.6 GB) until the end
+FLUSH_BYTES = 64_000_000
 
 
 def entity(*parts: str) -> str:
@@ -63,6 +67,14 @@ class RecordingWriter:
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
         self.rec.save(str(path), default_blueprint=default_blueprint(panels, keys, bar_views))
         self.origin = _reference_point(table)
+        self._queued_bytes = 0
+
+    def _sent(self, nbytes: int) -> None:
+        """Count what was sent; past FLUSH_BYTES, wait for Rerun to write it (bounded memory)."""
+        self._queued_bytes += nbytes
+        if self._queued_bytes >= FLUSH_BYTES:
+            self.rec.flush()
+            self._queued_bytes = 0
 
     def close(self) -> None:
         self.rec.disconnect()
@@ -86,6 +98,7 @@ class RecordingWriter:
         for a in range(0, len(t), BLOCK_ROWS):
             b = a + BLOCK_ROWS
             self.rec.send_columns(path, indexes=self._indexes(t[a:b]), columns=rr.Scalars.columns(scalars=v[a:b]))
+            self._sent(v[a:b].nbytes + 16 * len(t[a:b]))
 
     def track(
         self,
@@ -116,6 +129,7 @@ class RecordingWriter:
             self.rec.send_columns(
                 entity("local", name, "position"), indexes=index, columns=rr.Points3D.columns(positions=enu[a:b])
             )
+            self._sent(latlon[a:b].nbytes + enu[a:b].nbytes + 32 * len(t[a:b]))
 
     def histogram(self, origin: str, hist: Histogram) -> None:
         """Each set of bars of `hist` as a static bar chart under `origin`."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from pipeline_support import circling_table
 from rerun.chunk import RrdReader
 
@@ -79,3 +80,32 @@ def test_each_detector_and_unit_gets_its_own_panel_of_real_entities(tmp_path: Pa
     assert "/detectors/navigation/innovation_position_sigma" in panels["navigation (m)"]
     alarming = [r.name for r in results if r.alarms and not r.advisory]
     assert next(iter(panels)).split(" ")[0] in alarming  # the first tab shows a detector that alarmed
+
+
+def test_the_writer_waits_for_rerun_to_write_what_it_sent_so_a_long_log_is_not_queued_in_memory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rerun writes the file in threads of its own, slower than the columns are sent: the writer flushes
+    every FLUSH_BYTES sent (a day of 100 Hz IMU series queued 0.6 GB otherwise), and the file holds the
+    same rows however often it does."""
+    import rerun as rr
+
+    import spooflens.recording as recording
+
+    table = circling_table(ramp_mps=3.0)
+    results = run_analyses(table)
+    flushes = []
+    real_flush = rr.RecordingStream.flush
+
+    def counted(self: rr.RecordingStream, **kw: float) -> None:
+        flushes.append(1)
+        real_flush(self, **kw)
+
+    monkeypatch.setattr(rr.RecordingStream, "flush", counted)
+    write_recording(tmp_path / "once.rrd", table, results)
+    assert flushes == []  # a small log: all of it sent before Rerun is waited for (at the close)
+    monkeypatch.setattr(recording, "FLUSH_BYTES", 10_000)
+    write_recording(tmp_path / "often.rrd", table, results)
+    assert len(flushes) > 10
+    assert _rows(tmp_path / "often.rrd") == _rows(tmp_path / "once.rrd")
+    assert _rows(tmp_path / "often.rrd", static=True) == _rows(tmp_path / "once.rrd", static=True)
