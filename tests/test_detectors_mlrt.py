@@ -224,9 +224,10 @@ def test_full_jump_likelihood_ratio_against_brute_force() -> None:
     del mean
 
 
+@pytest.mark.parametrize("keep_bytes", [0, 64_000_000])
 @pytest.mark.parametrize(("ramp", "block"), [(True, 256), (False, 256), (True, 7), (False, 5)])
 def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
-    ramp: bool, block: int, monkeypatch: pytest.MonkeyPatch
+    ramp: bool, block: int, keep_bytes: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The fused kernel (augmented matrices made per epoch, forward estimates kept only at block starts
     and made again block by block, products over the transitions' non-zeros) gives the numbers of the
@@ -237,6 +238,7 @@ def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
     from spooflens.detectors.mlrt import _offline_at, augment_ramp, augment_step, step_two_filter_offline
 
     monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
+    monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)  # forward estimates made again, or kept
 
     model = random_model(5, n=4, p=2, N=40, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])
@@ -258,15 +260,17 @@ def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
     assert np.isnan(off.log_bf[last]) and len(off.t) == last + 1
 
 
+@pytest.mark.parametrize("keep_bytes", [0, 64_000_000])
 @pytest.mark.parametrize("block", [7, 256])
 def test_offline_candidates_from_a_later_epoch_are_the_whole_passes_numbers(
-    block: int, monkeypatch: pytest.MonkeyPatch
+    block: int, keep_bytes: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Candidates from epoch `first` on (the onset sought near an alarm): the backward filter stops below
-    it, and the numbers are the whole pass's, block boundaries or not."""
+    it, and the numbers are the whole pass's, block boundaries or not, forward estimates kept or not."""
     from spooflens.detectors import mlrt
 
     monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
+    monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)
     model = random_model(6, n=4, p=2, N=40, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])
     for offline in (ramp_two_filter_offline, step_two_filter_offline):
@@ -275,3 +279,24 @@ def test_offline_candidates_from_a_later_epoch_are_the_whole_passes_numbers(
         np.testing.assert_array_equal(part.t, whole.t[17:])
         np.testing.assert_array_equal(part.log_bf, whole.log_bf[17:])
         np.testing.assert_array_equal(part.mlr_flat, whole.mlr_flat[17:])
+
+
+def test_offline_forward_estimates_kept_or_made_again_give_the_same_numbers(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When the epochs evaluated are few enough (`OFFLINE_KEEP_BYTES`), the forward pass keeps its
+    estimates there and none is made again block by block: the numbers are the same bit for bit, for
+    every stride and first candidate."""
+    from spooflens.detectors import mlrt
+
+    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", 6)
+    model = random_model(8, n=4, p=2, N=50, missing=True)
+    rows, sigma = (0, 1), np.array([0.7, 1.3])
+    for stride, first in ((1, 0), (3, 0), (4, 13), (1, 29)):
+        results = []
+        for keep_bytes in (0, 64_000_000):
+            monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)
+            results.append(ramp_two_filter_offline(model, rows, sigma, last=44, stride=stride, first=first))
+        made_again, kept = results
+        assert np.isfinite(kept.log_bf).sum() >= 3
+        np.testing.assert_array_equal(kept.t, made_again.t)
+        np.testing.assert_array_equal(kept.log_bf, made_again.log_bf)
+        np.testing.assert_array_equal(kept.mlr_flat, made_again.mlr_flat)

@@ -343,6 +343,8 @@ def augmented_mask(a_mask: NDArray[np.bool_], q: int, ramp: bool) -> NDArray[np.
 
 
 OFFLINE_BLOCK = 256  # epochs of forward estimates and backward information held at a time
+# the forward estimates at the epochs evaluated are kept (not made again block by block) up to this size
+OFFLINE_KEEP_BYTES = 64_000_000
 
 
 @njit(cache=True)
@@ -358,11 +360,13 @@ def _forward_block(
     Ps: np.ndarray,
     a_ptr: np.ndarray,
     a_col: np.ndarray,
+    every: int = 1,
+    base: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`forward_filter`'s _forward on the augmented model over epochs lo..hi from the estimate after
-    epoch lo - 1 (the prior at lo = 0); each update into xs, Ps[k - lo] when given (non-empty). `model`
-    is (A_head, A_tail, Q_head, Q_tail, C, R, y, t); the augmented transitions' non-zeros are (a_ptr,
-    a_col)."""
+    epoch lo - 1 (the prior at lo = 0); the update of each epoch k >= base * every that is a multiple of
+    `every` into xs, Ps[k // every - base] when given (non-empty). `model` is (A_head, A_tail, Q_head,
+    Q_tail, C, R, y, t); the augmented transitions' non-zeros are (a_ptr, a_col)."""
     A_head, A_tail, Q_head, Q_tail, C, R, y, t = model
     n, q = A_head.shape[1] + A_tail.shape[1], rows.shape[0]
     na = x.shape[0]
@@ -373,9 +377,9 @@ def _forward_block(
             x = times_vector(Aa, x, a_ptr, a_col)
             P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na))) + Qa
         x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k], False)
-        if xs.shape[0] > 0:
-            xs[k - lo] = x
-            Ps[k - lo] = P
+        if xs.shape[0] > 0 and k % every == 0 and k >= base * every:
+            xs[k // every - base] = x
+            Ps[k // every - base] = P
     return x, P
 
 
@@ -400,6 +404,7 @@ def _two_filter_offline(
     a_ptr: np.ndarray,
     a_col: np.ndarray,
     from_epoch: int = 0,
+    keep_forward: bool = False,
 ):
     """`_offline_at` for every `stride`-th epoch m < last from `from_epoch` on (NaN elsewhere) of the
     augmented model over epochs 0..last (the backward pass stops below `from_epoch`), from the forward
@@ -408,7 +413,8 @@ def _two_filter_offline(
     pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
     block, the block's forward estimates made again from its checkpoint and combined with its backward
     information (the whole forward record, gains and augmented matrices were 1.5 GB per hour of 10 Hz
-    GNSS; this holds two blocks)."""
+    GNSS; this holds two blocks). With `keep_forward` the forward pass keeps its estimates at the epochs
+    evaluated instead (when they are few: a curve every tenth epoch), and none is made again."""
     n, q = x0.shape[0], rows.shape[0]
     model = (A_head, A_tail, Q_head, Q_tail, C, R, y, t)
     na = n + (2 * q if ramp else q)
@@ -422,12 +428,15 @@ def _two_filter_offline(
     x[:n] = x0
     P = np.zeros((na, na))
     P[:n, :n] = P0
-    no_x, no_P = np.zeros((0, na)), np.zeros((0, na, na))
+    base = from_epoch // stride
+    kept = (last // stride - base + 1) if keep_forward else 0
+    kept_x, kept_P = np.zeros((kept, na)), np.zeros((kept, na, na))
     for b in range(nb):
         ck_x[b] = x
         ck_P[b] = P
-        if b < nb - 1:
-            x, P = _forward_block(model, rows, ramp, x, P, b * block, (b + 1) * block - 1, no_x, no_P, a_ptr, a_col)
+        if b < nb - 1 or keep_forward:
+            hi = min((b + 1) * block, N) - 1
+            x, P = _forward_block(model, rows, ramp, x, P, b * block, hi, kept_x, kept_P, a_ptr, a_col, stride, base)
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
     xs = np.zeros((block, na))
@@ -440,7 +449,8 @@ def _two_filter_offline(
         lo, hi = b * block, min((b + 1) * block, N) - 1
         if hi < from_epoch:
             break
-        _forward_block(model, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col)
+        if not keep_forward:
+            _forward_block(model, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col, 1, lo)
         for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
             Ls[k - lo] = L
             als[k - lo] = a
@@ -452,7 +462,11 @@ def _two_filter_offline(
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
         for k in range(max(lo, from_epoch), top + 1):
             if k % stride == 0:
-                bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
+                if keep_forward:
+                    xk, Pk = kept_x[k // stride - base], kept_P[k // stride - base]
+                else:
+                    xk, Pk = xs[k - lo], Ps[k - lo]
+                bf[k], flat[k] = _offline_at(xk, Pk, Ls[k - lo], als[k - lo], n, q, Sigma, first)
     return bf, flat
 
 
@@ -488,6 +502,8 @@ def _offline(
     # views where the model's arrays are contiguous already (the navigation's are): no copies
     A, Q = model.A[: last + 1], model.Q[: last + 1]
     C, R, y = (kernel_array(a[: last + 1]) for a in (model.C, model.R, model.y))
+    na = model.n_states + (2 if ramp else 1) * len(rows)
+    kept_bytes = (last // stride - first // stride + 1) * na * (na + 1) * 8
     bf, flat = _two_filter_offline(
         np.ascontiguousarray(A.head),
         np.ascontiguousarray(A.tail),
@@ -507,6 +523,7 @@ def _offline(
         stride,
         *pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp)),
         first,
+        kept_bytes <= OFFLINE_KEEP_BYTES,
     )
     epochs = np.arange(last + 1)
     kept = (epochs % stride == 0) & (epochs >= first)

@@ -104,6 +104,16 @@ def _ramp_pass(
     p = C.shape[1]
     q = rows.shape[0]
     e0 = np.where(np.isnan(eps), 0.0, eps)
+    # each epoch's used rows, in order: the sums below skip the others, whose gains, S^-1 and innovations
+    # are zero (the same sums without their zero terms)
+    B = eps.shape[0]
+    used_idx = np.empty((B, p), dtype=np.int64)
+    n_used = np.zeros(B, dtype=np.int64)
+    for e in range(B):
+        for r in range(p):
+            if used_rows[e, r]:
+                used_idx[e, n_used[e]] = r
+                n_used[e] += 1
     mu = np.zeros((n, q))
     mu_p = np.zeros((n, q))
     G = np.zeros((p, q))
@@ -132,30 +142,30 @@ def _ramp_pass(
                 G[rows[j], j] += dt
             Kk = K[kb]
             Sk = Sinv[kb]
-            used = used_rows[kb]
+            nu = n_used[kb]
+            ur = used_idx[kb]
             for i in range(n):
                 for j in range(q):
                     v = mu_p[i, j]
-                    for r in range(p):
-                        if used[r]:
-                            v += Kk[i, r] * G[r, j]
+                    for z in range(nu):
+                        v += Kk[i, ur[z]] * G[ur[z], j]
                     mu[i, j] = v
-            for r in range(p):
+            for z in range(nu):
+                r = ur[z]
                 for j in range(q):
                     v = 0.0
-                    if used[r]:
-                        for s in range(p):
-                            v += Sk[r, s] * G[s, j]
+                    for z2 in range(nu):
+                        v += Sk[r, ur[z2]] * G[ur[z2], j]
                     SG[r, j] = v
             for j in range(q):
                 v = 0.0
-                for r in range(p):
-                    v += SG[r, j] * e0[kb, r]
+                for z in range(nu):
+                    v += SG[ur[z], j] * e0[kb, ur[z]]
                 d[j] += v
                 for jj in range(q):
                     v = 0.0
-                    for r in range(p):
-                        v += G[r, j] * SG[r, jj]
+                    for z in range(nu):
+                        v += G[ur[z], j] * SG[ur[z], jj]
                     info[j, jj] += v
             if k - m < min_after:
                 continue
