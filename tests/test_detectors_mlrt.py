@@ -300,3 +300,48 @@ def test_offline_forward_estimates_kept_or_made_again_give_the_same_numbers(monk
         np.testing.assert_array_equal(kept.t, made_again.t)
         np.testing.assert_array_equal(kept.log_bf, made_again.log_bf)
         np.testing.assert_array_equal(kept.mlr_flat, made_again.mlr_flat)
+
+
+@pytest.mark.parametrize("window_s", [4.0, 1e9])
+def test_ramp_statistics_equal_the_signature_recursion_written_out_for_each_onset(window_s: float) -> None:
+    """The compiled ramp pass (every candidate within the window advanced together) gives, at every epoch,
+    the best over onsets m of the GLR, flat MLR and 2 log BF from the Willsky-Jones recursion written out
+    with dense matrices one onset at a time, with missing measurements."""
+    from spooflens.detectors.ramp import ramp_statistics
+
+    model = random_model(9, n=4, p=3, N=40, missing=True)
+    rows, sigma = (0, 2), np.array([0.8, 1.6])
+    fwd = forward_filter(model, keep_states=False)
+    r = ramp_statistics(model, fwd, rows, window_s, 0.0, sigma, 0.1, 2)
+    A, C, t, q = model.A.dense(), model.C, model.t, len(rows)
+    E = np.zeros((model.n_measurements, q))
+    E[list(rows), range(q)] = 1.0
+    e0 = np.nan_to_num(fwd.eps)
+    best = {name: np.full(model.n_epochs, -np.inf) for name in ("glr", "mlr", "bf")}
+    for m in range(model.n_epochs):
+        mu, d, info = np.zeros((model.n_states, q)), np.zeros(q), np.zeros((q, q))
+        for k in range(m + 1, model.n_epochs):
+            if t[k] - t[m] > window_s:
+                break
+            mu_p = A[k] @ mu
+            gamma = E * (t[k] - t[m]) - C[k] @ mu_p
+            mu = mu_p + fwd.K[k] @ gamma
+            d += gamma.T @ fwd.Sinv[k] @ e0[k]
+            info += gamma.T @ fwd.Sinv[k] @ gamma
+            if k - m < 2 or np.linalg.eigvalsh(info).min() <= 0:
+                continue
+            glr = d @ np.linalg.solve(info, d)
+            stats = {
+                "glr": glr,
+                "mlr": glr - np.linalg.slogdet(info)[1] + q * math.log(2 * math.pi),
+                "bf": d @ np.linalg.solve(info + np.diag(1 / sigma**2), d)
+                - np.linalg.slogdet(info @ np.diag(sigma**2) + np.eye(q))[1],
+            }
+            for name, value in stats.items():
+                best[name][k] = max(best[name][k], value)
+    for name, got in (("glr", r.glr), ("mlr", r.mlr), ("bf", r.log_bf)):
+        want = best[name]
+        seen = np.isfinite(want)
+        assert seen.sum() > 20
+        np.testing.assert_allclose(got[seen], want[seen], rtol=1e-8, atol=1e-8, err_msg=name)
+        assert np.isnan(got[~seen]).all()

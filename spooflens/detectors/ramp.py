@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
 from spooflens.kalman_update import cholesky_logdet
-from spooflens.sparse_products import block_times, pattern, times
+from spooflens.sparse_products import pattern
 from spooflens.statespace import LinearGaussianModel
 
 FloatArray = NDArray[np.float64]
@@ -57,6 +57,20 @@ def _quad_inv(L: np.ndarray, d: np.ndarray, w: np.ndarray) -> float:
         w[i] = s / L[i, i]
         out += w[i] * w[i]
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _axpy(a: float, x: np.ndarray, y: np.ndarray) -> None:
+    """y += a x over contiguous slices, indexed from 0 (no negative-index wrap: the loop vectorises)."""
+    for c in range(y.shape[0]):
+        y[c] += a * x[c]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _multiply_add(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """out += x * y elementwise, as `_axpy`."""
+    for c in range(out.shape[0]):
+        out[c] += x[c] * y[c]
 
 
 @njit(cache=True, nogil=True)
@@ -94,10 +108,15 @@ def _ramp_pass(
     S^-1 and innovations, t, `used_rows`) hold epochs off.. of the log: every epoch within `window_s` after
     the last candidate. Candidates in increasing order, a block after another, give each epoch's
     statistics exactly as one pass over the log."""
+    # All the candidates within the window of an epoch advance together, the candidate the innermost
+    # (contiguous) index of every array, so each sum runs over the candidates side by side (SIMD) in
+    # the order of one candidate at a time: every candidate's numbers are those of its own loop.
     # Explicit loops over the non-zero pattern of A's leading block and of C, and a hand Cholesky for the
     # q x q matrices: the navigation model's A is block-diagonal (142 of 576 entries) and BLAS/LAPACK calls
-    # on 24 x 3 and 3 x 3 operands cost more in overhead than in arithmetic (2.1x faster than the
-    # matrix-operator form).
+    # on 24 x 3 and 3 x 3 operands cost more in overhead than in arithmetic.
+    nc = cands.shape[0]
+    if nc == 0:
+        return
     end = off + eps.shape[0]
     h = A_head.shape[1]
     n = h + A_tail.shape[1]
@@ -114,72 +133,116 @@ def _ramp_pass(
             if used_rows[e, r]:
                 used_idx[e, n_used[e]] = r
                 n_used[e] += 1
-    mu = np.zeros((n, q))
-    mu_p = np.zeros((n, q))
-    G = np.zeros((p, q))
-    SG = np.zeros((p, q))
-    d = np.zeros(q)
-    info = np.zeros((q, q))
+    mu = np.zeros((n, q, nc))
+    mu_p = np.zeros((n, q, nc))
+    G = np.zeros((p, q, nc))
+    SG = np.zeros((p, q, nc))
+    d = np.zeros((q, nc))
+    info = np.zeros((q, q, nc))
+    dt = np.zeros(nc)
+    part = np.zeros(nc)
+    dc = np.zeros(q)
+    info_c = np.zeros((q, q))
     M = np.zeros((q, q))
     L = np.zeros((q, q))
     w = np.zeros(q)
-    for ci in range(cands.shape[0]):
-        m = cands[ci]
-        mu[:] = 0.0
-        d[:] = 0.0
-        info[:] = 0.0
-        for k in range(m + 1, end):
-            kb = k - off
-            dt = t[kb] - t[m - off]
-            if dt > window_s:
+    ca, cb = 0, 0  # the candidates within the window: ca..cb - 1
+    k = cands[0] + 1
+    while k < end:
+        kb = k - off
+        while cb < nc and cands[cb] < k:
+            cb += 1
+        while ca < cb and t[kb] - t[cands[ca] - off] > window_s:
+            ca += 1
+        if ca == cb:  # none: on to the next candidate's first epoch
+            if cb == nc:
                 break
-            block_times(A_head[kb], A_tail[kb], mu, a_ptr, a_col, mu_p)
-            times(C[kb], mu_p, c_ptr, c_col, G)  # G = E dt - C mu_p
-            for r in range(p):
-                for j in range(q):
-                    G[r, j] = -G[r, j]
+            k = cands[cb] + 1
+            continue
+        for c in range(ca, cb):
+            dt[c] = t[kb] - t[cands[c] - off]
+        # mu_p = A mu (A block-diagonal, its head's non-zeros in a_ptr, a_col)
+        for i in range(h):
             for j in range(q):
-                G[rows[j], j] += dt
-            Kk = K[kb]
-            Sk = Sinv[kb]
-            nu = n_used[kb]
-            ur = used_idx[kb]
-            for i in range(n):
+                for c in range(ca, cb):
+                    mu_p[i, j, c] = 0.0
+            for z in range(a_ptr[i], a_ptr[i + 1]):
+                col = a_col[z]
+                a = A_head[kb, i, col]
                 for j in range(q):
-                    v = mu_p[i, j]
-                    for z in range(nu):
-                        v += Kk[i, ur[z]] * G[ur[z], j]
-                    mu[i, j] = v
-            for z in range(nu):
-                r = ur[z]
-                for j in range(q):
-                    v = 0.0
-                    for z2 in range(nu):
-                        v += Sk[r, ur[z2]] * G[ur[z2], j]
-                    SG[r, j] = v
+                    _axpy(a, mu[col, j, ca:cb], mu_p[i, j, ca:cb])
+        for i in range(n - h):
+            a = A_tail[kb, i]
             for j in range(q):
-                v = 0.0
+                for c in range(ca, cb):
+                    mu_p[h + i, j, c] = a * mu[h + i, j, c]
+        # G = E dt - C mu_p
+        for r in range(p):
+            for j in range(q):
+                for c in range(ca, cb):
+                    G[r, j, c] = 0.0
+            for z in range(c_ptr[r], c_ptr[r + 1]):
+                col = c_col[z]
+                a = C[kb, r, col]
+                for j in range(q):
+                    _axpy(a, mu_p[col, j, ca:cb], G[r, j, ca:cb])
+            for j in range(q):
+                for c in range(ca, cb):
+                    G[r, j, c] = -G[r, j, c]
+        for j in range(q):
+            for c in range(ca, cb):
+                G[rows[j], j, c] += dt[c]
+        nu = n_used[kb]
+        ur = used_idx[kb]
+        # mu = mu_p + K G
+        for i in range(n):
+            for j in range(q):
+                for c in range(ca, cb):
+                    mu[i, j, c] = mu_p[i, j, c]
                 for z in range(nu):
-                    v += SG[ur[z], j] * e0[kb, ur[z]]
-                d[j] += v
-                for jj in range(q):
-                    v = 0.0
-                    for z in range(nu):
-                        v += G[ur[z], j] * SG[ur[z], jj]
-                    info[j, jj] += v
+                    _axpy(K[kb, i, ur[z]], G[ur[z], j, ca:cb], mu[i, j, ca:cb])
+        # SG = S^-1 G
+        for z in range(nu):
+            r = ur[z]
+            for j in range(q):
+                for c in range(ca, cb):
+                    SG[r, j, c] = 0.0
+                for z2 in range(nu):
+                    _axpy(Sinv[kb, r, ur[z2]], G[ur[z2], j, ca:cb], SG[r, j, ca:cb])
+        # d += SG^T eps, info += G^T SG
+        for j in range(q):
+            for c in range(ca, cb):
+                part[c] = 0.0
+            for z in range(nu):
+                _axpy(e0[kb, ur[z]], SG[ur[z], j, ca:cb], part[ca:cb])
+            for c in range(ca, cb):
+                d[j, c] += part[c]
+            for jj in range(q):
+                for c in range(ca, cb):
+                    part[c] = 0.0
+                for z in range(nu):
+                    _multiply_add(G[ur[z], j, ca:cb], SG[ur[z], jj, ca:cb], part[ca:cb])
+                for c in range(ca, cb):
+                    info[j, jj, c] += part[c]
+        for c in range(ca, cb):  # in the candidates' order: the maxima and the odds as one at a time
+            m = cands[c]
             if k - m < min_after:
                 continue
-            logdet_i = cholesky_logdet(info, L)
+            for j in range(q):
+                dc[j] = d[j, c]
+                for jj in range(q):
+                    info_c[j, jj] = info[j, jj, c]
+            logdet_i = cholesky_logdet(info_c, L)
             if math.isnan(logdet_i) or logdet_i < -700:
                 continue
-            g = _quad_inv(L, d, w)
+            g = _quad_inv(L, dc, w)
             f = g - logdet_i + q * 1.8378770664093453
             for j in range(q):
                 for jj in range(q):
-                    M[j, jj] = info[j, jj] + sigma_inv[j, jj]
+                    M[j, jj] = info_c[j, jj] + sigma_inv[j, jj]
             ld = cholesky_logdet(M, L)
-            b = _quad_inv(L, d, w)
-            bf = b - (ld + log_sigma_det)
+            bq = _quad_inv(L, dc, w)
+            bf = bq - (ld + log_sigma_det)
             if math.isnan(glr[k]) or g > glr[k]:
                 glr[k] = g
                 glr_m[k] = m
@@ -189,9 +252,10 @@ def _ramp_pass(
             if math.isnan(lbf[k]) or bf > lbf[k]:
                 lbf[k] = bf
                 lbf_m[k] = m
-            v = log_prior[ci] + 0.5 * bf
-            hi = max(lodds[k], v)
-            lodds[k] = hi + math.log(math.exp(lodds[k] - hi) + math.exp(v - hi))
+            v = log_prior[c] + 0.5 * bf
+            top = max(lodds[k], v)
+            lodds[k] = top + math.log(math.exp(lodds[k] - top) + math.exp(v - top))
+        k += 1
 
 
 def candidate_grid(t: FloatArray, step_s: float) -> NDArray[np.int64]:
