@@ -67,6 +67,22 @@ def _axpy(a: float, x: np.ndarray, y: np.ndarray) -> None:
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _pattern_times(
+    A: np.ndarray, ptr: np.ndarray, col: np.ndarray, X: np.ndarray, out: np.ndarray, ca: int, cb: int
+) -> None:
+    """out[i, :, ca:cb] = (A X)[i] for every row i of A, the candidates ca..cb - 1 side by side; A's
+    non-zeros in (ptr, col), summed in their order as `sparse_products.times` does."""
+    for i in range(A.shape[0]):
+        for j in range(X.shape[1]):
+            for c in range(ca, cb):
+                out[i, j, c] = 0.0
+        for z in range(ptr[i], ptr[i + 1]):
+            a = A[i, col[z]]
+            for j in range(X.shape[1]):
+                _axpy(a, X[col[z], j, ca:cb], out[i, j, ca:cb])
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _multiply_add(x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out += x * y elementwise, as `_axpy`."""
     for c in range(out.shape[0]):
@@ -162,30 +178,15 @@ def _ramp_pass(
         for c in range(ca, cb):
             dt[c] = t[kb] - t[cands[c] - off]
         # mu_p = A mu (A block-diagonal, its head's non-zeros in a_ptr, a_col)
-        for i in range(h):
-            for j in range(q):
-                for c in range(ca, cb):
-                    mu_p[i, j, c] = 0.0
-            for z in range(a_ptr[i], a_ptr[i + 1]):
-                col = a_col[z]
-                a = A_head[kb, i, col]
-                for j in range(q):
-                    _axpy(a, mu[col, j, ca:cb], mu_p[i, j, ca:cb])
+        _pattern_times(A_head[kb], a_ptr, a_col, mu, mu_p, ca, cb)
         for i in range(n - h):
             a = A_tail[kb, i]
             for j in range(q):
                 for c in range(ca, cb):
                     mu_p[h + i, j, c] = a * mu[h + i, j, c]
         # G = E dt - C mu_p
+        _pattern_times(C[kb], c_ptr, c_col, mu_p, G, ca, cb)
         for r in range(p):
-            for j in range(q):
-                for c in range(ca, cb):
-                    G[r, j, c] = 0.0
-            for z in range(c_ptr[r], c_ptr[r + 1]):
-                col = c_col[z]
-                a = C[kb, r, col]
-                for j in range(q):
-                    _axpy(a, mu_p[col, j, ca:cb], G[r, j, ca:cb])
             for j in range(q):
                 for c in range(ca, cb):
                     G[r, j, c] = -G[r, j, c]
