@@ -740,7 +740,7 @@ def filter_loop(
     )
 
 
-@njit(cache=CACHE)
+@njit(cache=CACHE, nogil=True)
 def rts_closed_loop(
     P_upd: np.ndarray,
     every: int,

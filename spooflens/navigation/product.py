@@ -5,6 +5,7 @@ that compares GNSS with the inertial sensors, and drawn in the recording (not it
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, le
 from spooflens.navigation.smoother import SmoothedSolution, smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
+from spooflens.threads import both
 
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
@@ -70,7 +72,8 @@ def solve_navigation(
         compare=False,  # only coasts are compared with the GNSS they leave out (S_all: 56 MB a day)
     )
     sol = run_prepared(inputs, opts, start)
-    smoothed, model = smooth(sol), sol.error_model()
+    # the smoother (compiled, without the GIL) beside the error model's recursion (numpy, a Python loop)
+    smoothed, model = both(partial(smooth, sol), sol.error_model)
     return Navigation(sol, smoothed, model, learned, inputs, start)
 
 
