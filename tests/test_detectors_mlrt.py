@@ -307,12 +307,12 @@ def test_ramp_statistics_equal_the_signature_recursion_written_out_for_each_onse
     """The compiled ramp pass (every candidate within the window advanced together) gives, at every epoch,
     the best over onsets m of the GLR, flat MLR and 2 log BF from the Willsky-Jones recursion written out
     with dense matrices one onset at a time, with missing measurements."""
-    from spooflens.detectors.ramp import ramp_statistics
+    from spooflens.detectors.ramp import RampPass
 
     model = random_model(9, n=4, p=3, N=40, missing=True)
     rows, sigma = (0, 2), np.array([0.8, 1.6])
     fwd = forward_filter(model, keep_states=False)
-    r = ramp_statistics(model, fwd, rows, window_s, 0.0, sigma, 0.1, 2)
+    r = RampPass(model, rows, window_s, 0.0, sigma, 0.1, 2).whole_log(fwd)
     A, C, t, q = model.A.dense(), model.C, model.t, len(rows)
     E = np.zeros((model.n_measurements, q))
     E[list(rows), range(q)] = 1.0

@@ -105,7 +105,7 @@ def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() 
     ramp statistics, NIS and whiteness are those of one filter and one pass over the whole log."""
     from spooflens.detectors.innovation_test import position_nis
     from spooflens.detectors.kalman import forward_filter
-    from spooflens.detectors.ramp import ramp_statistics
+    from spooflens.detectors.ramp import RampPass
     from spooflens.detectors.seed000 import normalised_position_innovations, statistics
 
     sim = simulate("ground", seed=5, duration_s=240.0)
@@ -113,9 +113,8 @@ def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() 
     model = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade)).error_model()
     opts = Seed000Options()
     fwd = forward_filter(model, keep_states=False)
-    whole = ramp_statistics(
-        model, fwd, (0, 1, 2), opts.window_s, opts.step_s, np.array(opts.sigma_rate_mps), opts.attacks_per_hour, 3
-    )
+    sigma = np.array(opts.sigma_rate_mps)
+    whole = RampPass(model, (0, 1, 2), opts.window_s, opts.step_s, sigma, opts.attacks_per_hour, 3).whole_log(fwd)
     assert np.isfinite(whole.glr).sum() > 100
     z = normalised_position_innovations(fwd.eps, fwd.S)
     # blocks shorter than the 30 s window, so candidates read far into the next block; and one block

@@ -32,7 +32,7 @@ from spooflens.console import console, fmt, progress, show_progress
 from spooflens.detectors.innovation_test import position_nis
 from spooflens.detectors.kalman import forward_filter
 from spooflens.detectors.mlrt import paper_two_filter
-from spooflens.detectors.ramp import ramp_statistics
+from spooflens.detectors.ramp import RampPass
 from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
 from spooflens.navigation.strapdown import NavState
 from spooflens.simulation.simulate import SCENARIOS, simulate
@@ -81,7 +81,7 @@ def method_statistics(
 ) -> dict[str, FloatArray]:
     """Each method's decision statistic per epoch, oriented so that 'alarm' is 'statistic > threshold'."""
     fwd = forward_filter(model)
-    r = ramp_statistics(model, fwd, (0, 1, 2), window_s, step_s, np.array(opts.sigma_rate), opts.attacks_per_hour, 1)
+    r = RampPass(model, (0, 1, 2), window_s, step_s, np.array(opts.sigma_rate), opts.attacks_per_hour, 1).whole_log(fwd)
     odds = np.exp(np.clip(r.log_odds, -700, 700))
     out = {
         "KF": position_nis(fwd),

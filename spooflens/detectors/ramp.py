@@ -269,8 +269,14 @@ def candidate_grid(t: FloatArray, step_s: float) -> NDArray[np.int64]:
 
 
 class RampPass:
-    """The three statistics for every epoch of `model`, filled a block of candidates at a time from the
-    forward filter over that block and the epochs it reaches (`reach`): see `ramp_statistics`."""
+    """The three statistics for every epoch of `model`, candidates every `step_s` within `window_s` of it,
+    filled a block of candidates at a time from the forward filter over that block and the epochs it
+    reaches (`reach`), or at once from the filter over the whole log (`whole_log`).
+
+    A candidate m is judged only from epoch m + min_after on (the paper's L: at least L samples after it).
+    Prior for the calibrated variant: ramp rate theta ~ N(0, diag(sigma_rate^2)); an onset in a candidate's
+    interval with probability attacks_per_hour * interval / 3600 (so the log odds are a posterior).
+    """
 
     def __init__(
         self,
@@ -334,30 +340,13 @@ class RampPass:
             self.lodds,
         )
 
+    def whole_log(self, fwd: ForwardResult) -> RampStatistics:
+        """The statistics from `fwd`, the forward filter over the whole log."""
+        self.add(0, self.model.n_epochs, fwd)
+        return self.result()
+
     def result(self) -> RampStatistics:
         # log odds of "some candidate" vs the no-attack prior (1 - P(attack in window) ~ 1)
         return RampStatistics(
             self.glr, self.glr_m, self.mlr, self.mlr_m, self.lbf, self.lbf_m, self.lodds, candidates=self.cands
         )
-
-
-def ramp_statistics(
-    model: LinearGaussianModel,
-    fwd: ForwardResult,
-    rows: tuple[int, ...],
-    window_s: float,
-    step_s: float,
-    sigma_rate: FloatArray,
-    attacks_per_hour: float,
-    min_after: int = 1,
-) -> RampStatistics:
-    """All three statistics for every epoch, candidates every `step_s` within `window_s` of it, from the
-    forward filter over the whole log (`RampPass` takes it a block at a time).
-
-    A candidate m is judged only from epoch m + min_after on (the paper's L: at least L samples after it).
-    Prior for the calibrated variant: ramp rate theta ~ N(0, diag(sigma_rate^2)); an onset in a candidate's
-    interval with probability attacks_per_hour * interval / 3600 (so the log odds are a posterior).
-    """
-    ramp = RampPass(model, rows, window_s, step_s, sigma_rate, attacks_per_hour, min_after)
-    ramp.add(0, model.n_epochs, fwd)
-    return ramp.result()
