@@ -372,7 +372,7 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
         record=SMOOTHER_NEEDS,
         compare=False,
     )
-    sm = smooth(continued(nav, nav.solution, t_from, opts))
+    sm = smooth(continued(nav, nav.solution, t_from, opts), variances=False)
     name = (
         "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
         if velocity_honest

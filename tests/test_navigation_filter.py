@@ -162,8 +162,9 @@ def test_without_odometry_the_solution_keeps_one_h_and_everything_reads_it_as_th
     assert with_odometry.H.strides[0] != 0 and np.ptp(with_odometry.H[:, 6:9, :6], axis=0).max() > 0
 
 
+@pytest.mark.parametrize("variances", [True, False])
 def test_a_solution_with_covariances_that_are_not_finite_cannot_be_smoothed_and_says_so(
-    ground: tuple[EpochTable, NavSolution],
+    ground: tuple[EpochTable, NavSolution], variances: bool
 ) -> None:
     """An IMU whose stamps a damaged schema made wild left NaN covariances; the smoother's LinAlgError was
     an internal error (the fuzz run's), now the navigation's reason for not running."""
@@ -171,7 +172,49 @@ def test_a_solution_with_covariances_that_are_not_finite_cannot_be_smoothed_and_
 
     _, sol = ground
     with pytest.raises(AnalysisError, match="the smoother met a covariance it cannot invert"):
-        smooth(replace(sol, P_upd=np.full_like(sol.P_upd, np.nan)))
+        smooth(replace(sol, P_upd=np.full_like(sol.P_upd, np.nan)), variances=variances)
+
+
+def test_the_smoothed_error_without_variances_is_the_full_smoothers(ground: tuple[EpochTable, NavSolution]) -> None:
+    """The drawn tracks need the smoothed error only: one solve per epoch instead of the gain and the
+    covariance recursion gives the same error and track to rounding."""
+    _, sol = ground
+    full, mean_only = smooth(sol), smooth(sol, variances=False)
+    assert full.var.shape == (len(sol.t), 24) and mean_only.var.shape == (len(sol.t), 0)
+    assert np.abs(full.delta).max() > 1e-3  # something to compare
+    np.testing.assert_allclose(mean_only.delta, full.delta, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(mean_only.state, full.state, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(mean_only.track_llh[:, :2], full.track_llh[:, :2], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(mean_only.track_llh[:, 2], full.track_llh[:, 2], rtol=0, atol=1e-9)
+
+
+def test_the_filters_log_det_s_is_that_of_its_used_rows_and_the_likelihood_reads_it(
+    ground: tuple[EpochTable, NavSolution],
+) -> None:
+    """Noise learning scores a run by sum(nis + log det S) over the used rows; the filter's log det is
+    that of numpy's determinant of those rows, NaN where no row was used, and a NaN among the scored
+    epochs (S not positive definite) makes the candidate unusable."""
+    from spooflens.navigation.noise_learning import score
+
+    table, sol = ground
+    some = sol.dof > 0
+    for e in np.flatnonzero(some)[:: max(1, some.sum() // 200)]:
+        rows = np.flatnonzero(sol.used[e])
+        sign, expected = np.linalg.slogdet(sol.S[e][np.ix_(rows, rows)])
+        assert sign > 0 and sol.logdet_S[e] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+    t_out = float(sol.t[len(sol.t) // 2])
+    opts = FilterOptions(grade=sol.grade, exclude_after_s=t_out, exclude_until_s=t_out + 5.0, exclude_velocity_too=True)
+    gap = run_filter(table, options=opts)
+    assert (gap.dof == 0).sum() >= 10 and np.isnan(gap.logdet_S[gap.dof == 0]).all()
+    assert np.isfinite(gap.logdet_S[gap.dof > 0]).all()
+    sel = np.isfinite(sol.nis) & some
+    assert score(sol) == pytest.approx(np.sum(sol.nis[sel]) + np.sum(sol.logdet_S[sel]), rel=1e-15)
+    broken = sol.logdet_S.copy()
+    broken[np.flatnonzero(sel)[5]] = np.nan
+    assert score(replace(sol, logdet_S=broken)) == np.inf
+    mask = np.zeros(len(sol.t), dtype=bool)
+    mask[np.flatnonzero(sel)[6:]] = True  # the broken epoch not scored
+    assert np.isfinite(score(replace(sol, logdet_S=broken), mask))
 
 
 def test_open_loop_error_model_reproduces_the_filters_innovations(ground: tuple[EpochTable, NavSolution]) -> None:

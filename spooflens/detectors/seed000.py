@@ -290,7 +290,7 @@ def reconstructed_track(table, sol, onset_s: float, end_s: float | None, velocit
         initial=initial,
         exclude_velocity_too=not velocity_honest,
     )
-    sm = smooth(run_filter(table, sol.imu_id, sol.receiver_id, opts))
+    sm = smooth(run_filter(table, sol.imu_id, sol.receiver_id, opts), variances=False)
     name = (
         "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
         if velocity_honest

@@ -24,7 +24,7 @@ from spooflens.constants import WGS84_GAMMA_E as _GE
 from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
-from spooflens.kalman_update import masked_update
+from spooflens.kalman_update import cholesky_logdet, masked_update
 from spooflens.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
@@ -562,6 +562,8 @@ def filter_loop(
     out_H = np.zeros((M if keep_h and odometry_measured else 1, NM, NE))
     nis = np.full(M, np.nan)
     dof = np.zeros(M, dtype=np.int64)
+    # log det S of the used rows (the likelihood noise learning maximises); NaN where S is not positive definite
+    logdet = np.full(M, np.nan)
     # Phi and Qd are block-diagonal (the INS block, then each Gauss-Markov state on its own): kept so
     out_Phi = np.zeros((M if keep_phi else 1, 15, 15))
     out_Phi_gm = np.zeros((M if keep_phi else 1, NG))
@@ -691,6 +693,7 @@ def filter_loop(
         if n_used > 0:
             nis[e] = nis_e
             dof[e] = n_used
+            logdet[e] = cholesky_logdet(S, np.empty((n_used, n_used)))
             for a in range(n_used):
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
@@ -726,6 +729,7 @@ def filter_loop(
         out_H,
         nis,
         dof,
+        logdet,
         out_Phi,
         out_Phi_gm,
         out_Qd,
@@ -752,6 +756,7 @@ def rts_closed_loop(
     R: np.ndarray,
     used: np.ndarray,
     dx: np.ndarray,
+    variances: bool = True,
 ):
     """Rauch-Tung-Striebel smoothing of a closed-loop error-state filter (resets at every update).
 
@@ -766,12 +771,14 @@ def rts_closed_loop(
     the smoother runs down in runs of `every` epochs, each run's covariances made again from its first by
     the filter's own prediction and update (H, R and the rows `used`), so it holds `every` of them.
     Returns delta and the smoothed variances (the diagonal of every P_s[e]: all any consumer reads, and
-    a 24th of the memory of the full matrices).
+    a 24th of the memory of the full matrices). Without `variances` (M, 0) of them: the smoothed error
+    alone needs A_e times one vector, pred^-1 v by one solve, not the gain A_e (24 right-hand sides)
+    and the covariance recursion, about four fifths of the backward pass's arithmetic.
     """
     M, n = dx.shape
     h = Phi.shape[1]
     delta = np.zeros((M, n))
-    var = np.zeros((M, n))
+    var = np.zeros((M, n if variances else 0))
     run = np.empty((every, n, n))
     cross = np.empty((n, n))
     P_next = np.empty((n, n))
@@ -790,7 +797,7 @@ def rts_closed_loop(
             Pu = run[e - lo]
             if e == M - 1:
                 P_next[:, :] = Pu
-                for i in range(n):
+                for i in range(var.shape[1]):
                     var[e, i] = Pu[i, i]
                 continue
             # cross = P_upd[e] Phi[e+1]^T and pred = Phi[e+1] cross + Qd[e+1], Phi block-diagonal
@@ -804,6 +811,9 @@ def rts_closed_loop(
                 pred[i] = Phi_gm[e + 1, i - h] * cross[i]
             pred = 0.5 * (pred + pred.T)
             add_block_diagonal(pred, Qd[e + 1], Qd_gm[e + 1])
+            if not variances:  # A v = cross pred^-1 v (pred symmetric)
+                delta[e] = cross @ np.linalg.solve(pred, dx[e + 1] + delta[e + 1])
+                continue
             A = np.linalg.solve(pred.T, cross.T).T
             delta[e] = A @ (dx[e + 1] + delta[e + 1])
             Ps = Pu + A @ (P_next - pred) @ A.T

@@ -178,6 +178,7 @@ class NavSolution:
     H: FloatArray  # (M, 9, 24); without odometry one matrix seen at every epoch (read-only, stride 0)
     nis: FloatArray  # (M,)
     dof: NDArray[np.int64]  # (M,)
+    logdet_S: FloatArray  # (M,) log det S of the used rows; NaN where S is not positive definite, or none used
     Phi: BlockDiagonal  # (M, 24, 24) from the previous epoch (identity at the first): 15 x 15 block, diagonal
     Qd: BlockDiagonal  # (M, 24, 24), the same shape
     P_pred: FloatArray  # (M, 24, 24) when recorded; else the first epoch only
@@ -416,28 +417,47 @@ def _run(
     if opts.initial_covariance is not None:
         P0 = np.array(opts.initial_covariance, dtype=float)
     g0 = np.zeros(len(gm_sigma)) if opts.initial_gm is None else np.array(opts.initial_gm, dtype=float)
-    (z, nu, S, S_all, R, H, nis, dof, Phi, Phi_gm, Qd, Qd_gm, P_pred, P_upd, dx, gm, states, track, track_epoch) = (
-        kernels.filter_loop(
-            pre.kernel_args(),
-            s.to_vector(),
-            P0,
-            qc,
-            float(opts.max_block_s),
-            tf,
-            np.c_[np.radians(llh[:, 0]), np.radians(llh[:, 1]), llh[:, 2]],
-            vel,
-            odo,
-            np.ascontiguousarray(R_vb, dtype=float),
-            sigma,
-            use,
-            gm_tau,
-            gm_sigma,
-            g0,
-            _kept(opts.record),
-            opts.compare,
-            max(1, int(opts.P_upd_every)),
-            odometry_measured,
-        )
+    (
+        z,
+        nu,
+        S,
+        S_all,
+        R,
+        H,
+        nis,
+        dof,
+        logdet_S,
+        Phi,
+        Phi_gm,
+        Qd,
+        Qd_gm,
+        P_pred,
+        P_upd,
+        dx,
+        gm,
+        states,
+        track,
+        track_epoch,
+    ) = kernels.filter_loop(
+        pre.kernel_args(),
+        s.to_vector(),
+        P0,
+        qc,
+        float(opts.max_block_s),
+        tf,
+        np.c_[np.radians(llh[:, 0]), np.radians(llh[:, 1]), llh[:, 2]],
+        vel,
+        odo,
+        np.ascontiguousarray(R_vb, dtype=float),
+        sigma,
+        use,
+        gm_tau,
+        gm_sigma,
+        g0,
+        _kept(opts.record),
+        opts.compare,
+        max(1, int(opts.P_upd_every)),
+        odometry_measured,
     )
     if not odometry_measured and "H" in _recorded_names(opts.record):
         # one matrix for every epoch, seen as (M, 9, 24) without its copies (0.15 GB a day of 1 Hz GNSS)
@@ -457,6 +477,7 @@ def _run(
         H,
         nis,
         dof,
+        logdet_S,
         BlockDiagonal(Phi, Phi_gm),
         BlockDiagonal(Qd, Qd_gm),
         P_pred,

@@ -251,9 +251,8 @@ def score(sol: NavSolution, mask: NDArray[np.bool_] | None = None) -> float:
         sel &= mask
     if not sel.any():
         return float("inf")
-    S = np.where(sol.used[sel][:, :, None] & sol.used[sel][:, None, :], sol.S[sel], np.eye(sol.S.shape[1]))
-    sign, logdet = np.linalg.slogdet(S)
-    if np.any(sign <= 0):
+    logdet = sol.logdet_S[sel]  # the filter's own, NaN where S was not positive definite
+    if np.isnan(logdet).any():
         return float("inf")
     return float(np.sum(sol.nis[sel]) + np.sum(logdet))
 
@@ -285,13 +284,16 @@ def _search(
     params: dict[str, float],
     names: Sequence[str],
     opts: LearnOptions,
+    best: float | None = None,
 ) -> tuple[float, dict[str, float]]:
     """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps).
 
     Each step's two candidates (up and down) are run side by side (`threads.in_parallel`) and judged in
     that order, the first that improves taken: the path and the answer are those of trying them one
-    after the other; only the second run is wasted when the first already improved."""
-    best = objective(make(params))
+    after the other; only the second run is wasted when the first already improved. `best`: the score of
+    `params` when known (not run again)."""
+    if best is None:
+        best = objective(make(params))
     for _ in range(opts.sweeps):
         before = best
         for name in names:
@@ -405,7 +407,7 @@ def learn_noise(
     grid = [{**params, "b_h": b, "b_v": 2.0 * b} for b in opts.wander_grid_m]
     values = objective.many([options(g) for g in grid])
     params = grid[int(np.argmin(values))]
-    best, params = _search(objective, options, params, list(params), opts)
+    best, params = _search(objective, options, params, list(params), opts, min(values))
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)
         if R_vb is not None:

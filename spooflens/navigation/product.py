@@ -73,7 +73,7 @@ def solve_navigation(
     )
     sol = run_prepared(inputs, opts, start)
     # the smoother (compiled, without the GIL) beside the error model's recursion (numpy, a Python loop)
-    smoothed, model = both(partial(smooth, sol), sol.error_model)
+    smoothed, model = both(partial(smooth, sol, variances=False), sol.error_model)
     return Navigation(sol, smoothed, model, learned, inputs, start)
 
 

@@ -25,13 +25,15 @@ class SmoothedSolution:
     t: FloatArray  # (M,) GNSS epochs
     state: FloatArray  # (M, 22) smoothed nominal state (layout of NavSolution.state)
     delta: FloatArray  # (M, 24) smoothed error of the filtered state
-    var: FloatArray  # (M, 24) smoothed variances (the diagonal of the smoothed covariance)
+    var: FloatArray  # (M, 24) smoothed variances (the diagonal of the smoothed covariance); (M, 0) not asked
     track_t: FloatArray  # (K,) block-rate times
     track_llh: FloatArray  # (K, 3) smoothed lat, lon (rad), h
     gm: FloatArray  # (M, 9) smoothed sensor errors (Gauss-Markov states)
 
 
-def smooth(sol: NavSolution) -> SmoothedSolution:
+def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
+    """The smoothed solution; without `variances` the smoothed error and track alone (equal to rounding,
+    a fifth of the backward pass's arithmetic: all a drawn track needs)."""
     M = len(sol.t)
     if len(sol.Phi) != M or len(sol.Qd) != M or (sol.P_upd_every > 1 and len(sol.H) != M):
         raise ValueError(
@@ -50,6 +52,7 @@ def smooth(sol: NavSolution) -> SmoothedSolution:
             sol.R,
             sol.used,
             sol.dx,
+            variances,
         )
     except np.linalg.LinAlgError as err:  # non-finite covariances: an IMU whose times or values are damage
         raise AnalysisError(
