@@ -68,27 +68,37 @@ def masked_update(
     # 33 of 216 entries) and the operands so small that BLAS calls and temporaries cost more than the sums
     PCt = np.zeros((n, m))
     e = np.empty(m)
+    nonzero = np.empty((m, n + 1), dtype=np.int64)  # each used row's nonzero columns, ascending, then n
     for a in range(m):
         r = rows[a]
         v = y[r]
+        k = 0
         for j in range(n):
             c = C[r, j]
             if c != 0.0:
                 v -= c * x[j]
+                nonzero[a, k] = j
+                k += 1
                 for i in range(n):
                     PCt[i, a] += P[i, j] * c
+        nonzero[a, k] = n
         e[a] = v
     S = np.empty((m, m))
     for a in range(m):
         for b in range(a + 1):
             v = 0.5 * (R[rows[a], rows[b]] + R[rows[b], rows[a]])
             ra, rb = rows[a], rows[b]
-            for j in range(n):
-                ca, cb = C[ra, j], C[rb, j]
-                if ca != 0.0:
-                    v += 0.5 * ca * PCt[j, b]
-                if cb != 0.0:
-                    v += 0.5 * cb * PCt[j, a]
+            # the columns where either row is nonzero, ascending (the terms of the dense sum, in its order)
+            ia, ib = 0, 0
+            while nonzero[a, ia] < n or nonzero[b, ib] < n:
+                ja, jb = nonzero[a, ia], nonzero[b, ib]
+                j = min(ja, jb)
+                if ja == j:
+                    v += 0.5 * C[ra, j] * PCt[j, b]
+                    ia += 1
+                if jb == j:
+                    v += 0.5 * C[rb, j] * PCt[j, a]
+                    ib += 1
             S[a, b] = v
             S[b, a] = v
     Sinv, logdet = _spd_inverse(S)

@@ -45,38 +45,65 @@ def local_radii(lat: float) -> tuple[float, float]:
     return A_M * (1 - E2) / w**3, A_M / w
 
 
+# The 3-vector and 3 x 3 helpers come in two forms, one statement each: on scalars and into given arrays
+# (what the per-block mechanization uses: a block made ~40 small arrays, most of its time), and the
+# array-returning forms over them.
+
+
+@njit(cache=CACHE, inline="always")
+def _cross_s(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple[float, float, float]:
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
 @njit(cache=CACHE)
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    c0, c1, c2 = _cross_s(a[0], a[1], a[2], b[0], b[1], b[2])
+    return np.array([c0, c1, c2])
+
+
+@njit(cache=CACHE, inline="always")
+def _mm3_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """out = a b for 3 x 3 matrices (out neither a nor b), written out: a BLAS call costs more than the
+    27 products."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
 
 
 @njit(cache=CACHE)
 def _mm3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a b for 3 x 3 matrices, written out: a BLAS call costs more than the 27 products."""
     out = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+    _mm3_into(a, b, out)
     return out
 
 
-@njit(cache=CACHE)
-def _mv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """a v for a 3 x 3 matrix (written out, as `_mm3`)."""
-    return np.array(
-        [
-            a[0, 0] * v[0] + a[0, 1] * v[1] + a[0, 2] * v[2],
-            a[1, 0] * v[0] + a[1, 1] * v[1] + a[1, 2] * v[2],
-            a[2, 0] * v[0] + a[2, 1] * v[1] + a[2, 2] * v[2],
-        ]
+@njit(cache=CACHE, inline="always")
+def _mv3_s(a: np.ndarray, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
+    """a v for a 3 x 3 matrix (written out, as `_mm3_into`)."""
+    return (
+        a[0, 0] * v0 + a[0, 1] * v1 + a[0, 2] * v2,
+        a[1, 0] * v0 + a[1, 1] * v1 + a[1, 2] * v2,
+        a[2, 0] * v0 + a[2, 1] * v1 + a[2, 2] * v2,
     )
 
 
 @njit(cache=CACHE)
+def _mv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    c0, c1, c2 = _mv3_s(a, v[0], v[1], v[2])
+    return np.array([c0, c1, c2])
+
+
+@njit(cache=CACHE)
 def rotvec_matrix(v: np.ndarray) -> np.ndarray:
-    x, y, z = v[0], v[1], v[2]
-    a2 = x * x + y * y + z * z
     out = np.empty((3, 3))
+    _rotvec_into(v[0], v[1], v[2], out)
+    return out
+
+
+@njit(cache=CACHE, inline="always")
+def _rotvec_into(x: float, y: float, z: float, out: np.ndarray) -> None:
+    """out = exp([v x]), the rotation by the rotation vector v = (x, y, z)."""
+    a2 = x * x + y * y + z * z
     if a2 < 1e-18:
         s, c = 1.0, 0.5
     else:
@@ -91,7 +118,6 @@ def rotvec_matrix(v: np.ndarray) -> np.ndarray:
     out[2, 0] = c * x * z - s * y
     out[2, 1] = c * y * z + s * x
     out[2, 2] = 1 - c * (x * x + y * y)
-    return out
 
 
 @njit(cache=CACHE)
@@ -305,52 +331,90 @@ def increment(stream: Stream, i: int, j: int) -> tuple[np.ndarray, np.ndarray, n
     return dC, dv, dp, T
 
 
-@njit(cache=CACHE)
-def _rates(lat: float, h: float, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+@njit(cache=CACHE, inline="always")
+def _rates(lat: float, h: float, v0: float, v1: float) -> tuple[float, float, float, float, float, float, float, float]:
+    """omega_ie^n (east, north, up), omega_en^n (east, north, up), R_M + h, R_N + h."""
     rm, rn = local_radii(lat)
     rmh, rnh = rm + h, rn + h
-    w_ie = np.array([0.0, OMEGA_IE * math.cos(lat), OMEGA_IE * math.sin(lat)])
-    w_en = np.array([-v[1] / rmh, v[0] / rnh, v[0] * math.tan(lat) / rnh])
-    return w_ie, w_en, rmh, rnh
+    return (
+        0.0,
+        OMEGA_IE * math.cos(lat),
+        OMEGA_IE * math.sin(lat),
+        -v1 / rmh,
+        v0 / rnh,
+        v0 * math.tan(lat) / rnh,
+        rmh,
+        rnh,
+    )
 
 
 @njit(cache=CACHE)
 def propagate(x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray, T: float) -> np.ndarray:
-    """One low-rate block of the mechanization (equations in strapdown.py)."""
+    """One low-rate block of the mechanization (equations in strapdown.py), on scalars: the only arrays
+    made are the new state and one scratch of 3 x 3 matrices."""
     out = x.copy()
     if T <= 0.0:
         return out
     lat, h = x[0], x[2]
-    v = x[3:6].copy()
-    C = x[6:15].copy().reshape(3, 3)
-    bg, ba = x[15:18].copy(), x[18:21].copy()
-    bgT = bg * T
-    baT = _mv3(dC, ba) * T
-    dv_b = dv_b - 0.5 * (ba * T + baT) - 0.5 * _cross(bgT, dv_b)
-    dp_b = dp_b - (2.0 * ba * T + baT) * (T / 6.0) - _cross(bgT, dp_b) / 3.0
-    half = rotvec_matrix(-0.5 * bgT)
-    dC = _mm3(_mm3(half, dC), half)
-    w_ie, w_en, rmh, rnh = _rates(lat, h, v)
-    Cdv = _mv3(C, dv_b)
-    acc0 = -_cross(2 * w_ie + w_en, v)
-    acc0[2] -= gravity(lat, h)
-    v_mid = v + 0.5 * (Cdv + acc0 * T)
-    lat_mid = lat + 0.5 * T * v_mid[1] / rmh
-    h_mid = h + 0.5 * T * v_mid[2]
-    w_ie, w_en, rmh, rnh = _rates(lat_mid, h_mid, v_mid)
-    zeta = (w_ie + w_en) * T
-    acc = -_cross(2 * w_ie + w_en, v_mid)
-    acc[2] -= gravity(lat_mid, h_mid)
-    v_new = v + Cdv - 0.5 * _cross(zeta, Cdv) + acc * T
-    Cdp = _mv3(C, dp_b)
-    dp_n = v * T + Cdp - _cross(zeta, Cdp) / 3.0 + (0.5 * T * T) * acc
-    C_new = _mm3(_mm3(rotvec_matrix(-zeta), C), dC)
-    C_new = _mm3(C_new, 1.5 * np.eye(3) - 0.5 * _mm3(C_new.T, C_new))  # keep C orthonormal
-    out[0] = lat + dp_n[1] / rmh
-    out[1] = x[1] + dp_n[0] / (rnh * math.cos(lat_mid))
-    out[2] = h + dp_n[2]
-    out[3:6] = v_new
-    out[6:15] = C_new.ravel()
+    v0, v1, v2 = x[3], x[4], x[5]
+    m = np.empty((6, 3, 3))
+    C = m[0]
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = x[6 + 3 * i + j]
+    ba0, ba1, ba2 = x[18], x[19], x[20]
+    bgT0, bgT1, bgT2 = x[15] * T, x[16] * T, x[17] * T
+    d0, d1, d2 = _mv3_s(dC, ba0, ba1, ba2)
+    baT0, baT1, baT2 = d0 * T, d1 * T, d2 * T
+    c0, c1, c2 = _cross_s(bgT0, bgT1, bgT2, dv_b[0], dv_b[1], dv_b[2])
+    dv0 = dv_b[0] - 0.5 * (ba0 * T + baT0) - 0.5 * c0
+    dv1 = dv_b[1] - 0.5 * (ba1 * T + baT1) - 0.5 * c1
+    dv2 = dv_b[2] - 0.5 * (ba2 * T + baT2) - 0.5 * c2
+    c0, c1, c2 = _cross_s(bgT0, bgT1, bgT2, dp_b[0], dp_b[1], dp_b[2])
+    dp0 = dp_b[0] - (2.0 * ba0 * T + baT0) * (T / 6.0) - c0 / 3.0
+    dp1 = dp_b[1] - (2.0 * ba1 * T + baT1) * (T / 6.0) - c1 / 3.0
+    dp2 = dp_b[2] - (2.0 * ba2 * T + baT2) * (T / 6.0) - c2 / 3.0
+    half, product, dCc = m[1], m[2], m[3]
+    _rotvec_into(-0.5 * bgT0, -0.5 * bgT1, -0.5 * bgT2, half)
+    _mm3_into(half, dC, product)
+    _mm3_into(product, half, dCc)
+    ie0, ie1, ie2, en0, en1, en2, rmh, rnh = _rates(lat, h, v0, v1)
+    Cdv0, Cdv1, Cdv2 = _mv3_s(C, dv0, dv1, dv2)
+    c0, c1, c2 = _cross_s(2.0 * ie0 + en0, 2.0 * ie1 + en1, 2.0 * ie2 + en2, v0, v1, v2)
+    a0, a1, a2 = -c0, -c1, -c2 - gravity(lat, h)
+    vm0 = v0 + 0.5 * (Cdv0 + a0 * T)
+    vm1 = v1 + 0.5 * (Cdv1 + a1 * T)
+    vm2 = v2 + 0.5 * (Cdv2 + a2 * T)
+    lat_mid = lat + 0.5 * T * vm1 / rmh
+    h_mid = h + 0.5 * T * vm2
+    ie0, ie1, ie2, en0, en1, en2, rmh, rnh = _rates(lat_mid, h_mid, vm0, vm1)
+    z0, z1, z2 = (ie0 + en0) * T, (ie1 + en1) * T, (ie2 + en2) * T
+    c0, c1, c2 = _cross_s(2.0 * ie0 + en0, 2.0 * ie1 + en1, 2.0 * ie2 + en2, vm0, vm1, vm2)
+    a0, a1, a2 = -c0, -c1, -c2 - gravity(lat_mid, h_mid)
+    c0, c1, c2 = _cross_s(z0, z1, z2, Cdv0, Cdv1, Cdv2)
+    out[3] = v0 + Cdv0 - 0.5 * c0 + a0 * T
+    out[4] = v1 + Cdv1 - 0.5 * c1 + a1 * T
+    out[5] = v2 + Cdv2 - 0.5 * c2 + a2 * T
+    Cdp0, Cdp1, Cdp2 = _mv3_s(C, dp0, dp1, dp2)
+    c0, c1, c2 = _cross_s(z0, z1, z2, Cdp0, Cdp1, Cdp2)
+    dpn0 = v0 * T + Cdp0 - c0 / 3.0 + (0.5 * T * T) * a0
+    dpn1 = v1 * T + Cdp1 - c1 / 3.0 + (0.5 * T * T) * a1
+    dpn2 = v2 * T + Cdp2 - c2 / 3.0 + (0.5 * T * T) * a2
+    turn, C_new, CtC = m[1], m[4], m[5]
+    _rotvec_into(-z0, -z1, -z2, turn)
+    _mm3_into(turn, C, product)
+    _mm3_into(product, dCc, C_new)
+    _mm3_into(C_new.T, C_new, CtC)
+    for i in range(3):  # keep C orthonormal: C (3 I - C^T C) / 2
+        for j in range(3):
+            CtC[i, j] = 1.5 * (1.0 if i == j else 0.0) - 0.5 * CtC[i, j]
+    _mm3_into(C_new, CtC, product)
+    out[0] = lat + dpn1 / rmh
+    out[1] = x[1] + dpn0 / (rnh * math.cos(lat_mid))
+    out[2] = h + dpn2
+    for i in range(3):
+        for j in range(3):
+            out[6 + 3 * i + j] = product[i, j]
     out[21] = x[21] + T
     return out
 
@@ -403,10 +467,19 @@ def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
 
 @njit(cache=CACHE)
 def discretise(F: np.ndarray, qc: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """Phi = I + F T + (F T)^2 / 2 and Qd = T/2 (Phi Qc Phi^T + Qc), the sums written in place."""
     FT = F * T
-    Phi = np.eye(15) + FT + 0.5 * (FT @ FT)
-    Qd = (0.5 * T) * ((Phi * qc) @ Phi.T)
+    Phi = FT @ FT
     for i in range(15):
+        for j in range(15):
+            Phi[i, j] = ((1.0 if i == j else 0.0) + FT[i, j]) + 0.5 * Phi[i, j]
+    for i in range(15):
+        for j in range(15):
+            FT[i, j] = Phi[i, j] * qc[j]  # F T is not read again: its room holds Phi Qc
+    Qd = FT @ Phi.T
+    for i in range(15):
+        for j in range(15):
+            Qd[i, j] = (0.5 * T) * Qd[i, j]
         Qd[i, i] += 0.5 * T * qc[i]
     return Phi, Qd
 
@@ -588,16 +661,31 @@ def filter_loop(
     x[21] = t[k]
     at_k = integrals_at(stream, k)  # kept as k moves: blocks share ends
     qc15 = qc[:15].copy()
+    # made once and filled in place: small arrays made afresh at every block and epoch were a tenth of a
+    # noise-learning run
+    Phi_acc = np.eye(15)
+    Phi_acc_gm = np.ones(NG)
+    Qd_acc = np.zeros((15, 15))
+    Qd_acc_gm = np.zeros(NG)
+    decay = np.empty(NG)
+    qg = np.empty(NG)
+    z = np.empty(NM)
+    nu = np.empty(NM)
+    nu_used = np.empty(NM)
+    no_prior = np.zeros(NE)  # the error state before an update (closed loop: reset at every update)
+    L = np.empty((NM, NM))
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
         if target < k:
             target = k
         if target > N - 1:
             target = N - 1
-        Phi_acc = np.eye(15)
-        Phi_acc_gm = np.ones(NG)
-        Qd_acc = np.zeros((15, 15))
-        Qd_acc_gm = np.zeros(NG)
+        if keep_phi:
+            Phi_acc = np.eye(15)
+            Phi_acc_gm[:] = 1.0
+        if keep_qd:
+            Qd_acc = np.zeros((15, 15))
+            Qd_acc_gm[:] = 0.0
         while k < target:
             j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
             if j > target:
@@ -608,8 +696,6 @@ def filter_loop(
             # a zero-length block (two samples at one time) has Phi = I and Qd = 0 whatever the force
             f_mean = dv_b / T - x[18:21] if T > 0 else -x[18:21]
             Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
-            decay = np.empty(NG)
-            qg = np.empty(NG)
             for i in range(NG):
                 decay[i] = math.exp(-T / gm_tau[i])
                 qg[i] = gm_sigma[i] ** 2 * (1.0 - decay[i] * decay[i])
@@ -654,7 +740,7 @@ def filter_loop(
             P_pred[0] = P  # the detectors' model starts from it
         lead = tf[e] - x[21]
         rm, rn = local_radii(x[0])
-        z = np.full(NM, np.nan)
+        z[:] = np.nan
         z[0] = (x[1] - llh[e, 1]) * (rn + x[2]) * math.cos(x[0]) + x[3] * lead
         z[1] = (x[0] - llh[e, 0]) * (rm + x[2]) + x[4] * lead
         z[2] = x[2] - llh[e, 2] + x[5] * lead
@@ -664,11 +750,17 @@ def filter_loop(
         Hm = measurement_matrix(x, R_vb)
         if not odometry_measured:
             Hm[6:9, :6] = 0.0
-        vb = _mv3(R_vb, _mv3(x[6:15].copy().reshape(3, 3).T, x[3:6]))
-        for i in range(3):
-            if not math.isnan(odo[e, i]):
-                z[6 + i] = vb[i] - odo[e, i]
-        nu = z.copy()  # minus the predicted receiver and odometry errors: H's Gauss-Markov columns times g
+        if odometry_measured:  # the INS velocity in the vehicle frame, R_vb C^T v
+            vb = _mv3_s(
+                R_vb,
+                x[6] * x[3] + x[9] * x[4] + x[12] * x[5],
+                x[7] * x[3] + x[10] * x[4] + x[13] * x[5],
+                x[8] * x[3] + x[11] * x[4] + x[14] * x[5],
+            )
+            for i in range(3):
+                if not math.isnan(odo[e, i]):
+                    z[6 + i] = vb[i] - odo[e, i]
+        nu[:] = z  # minus the predicted receiver and odometry errors: H's Gauss-Markov columns times g
         for i in range(NM):
             for j in range(NG):
                 nu[i] -= Hm[i, 15 + j] * g[j]
@@ -684,21 +776,20 @@ def filter_loop(
                 S_all[i, i] += sigma[e, i] ** 2
             out_S_all[e] = S_all
         # the rows left out (not used, or not measured) are NaN: the one masked update every filter makes
-        nu_used = np.full(NM, np.nan)
         for i in range(NM):
-            if use[e, i] and not math.isnan(z[i]):
-                nu_used[i] = nu[i]
-        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(np.zeros(NE), P, Hm, out_R[e], nu_used, False)
+            nu_used[i] = nu[i] if use[e, i] and not math.isnan(z[i]) else np.nan
+        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(no_prior, P, Hm, out_R[e], nu_used, False)
         n_used = rows.shape[0]
         if n_used > 0:
             nis[e] = nis_e
             dof[e] = n_used
-            logdet[e] = cholesky_logdet(S, np.empty((n_used, n_used)))
+            logdet[e] = cholesky_logdet(S, L)
             for a in range(n_used):
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
             x = correct(x, dx[:15])
-            g = g + dx[15:]
+            for i in range(NG):
+                g[i] += dx[15 + i]
             out_dx[e] = dx
         if keep_upd and e % upd_every == 0:
             P_upd[e // upd_every] = P
