@@ -285,7 +285,7 @@ class RampOffline:
 
 
 @njit(cache=True)
-def _augmented(
+def _augmented_into(
     A_head: np.ndarray,
     A_tail: np.ndarray,
     Q_head: np.ndarray,
@@ -296,15 +296,16 @@ def _augmented(
     rows: np.ndarray,
     dt: float,
     ramp: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp) from the model's blocks: the same
-    numbers, built when needed rather than stored for every epoch (three (N, na, na) arrays: 0.6 GB per
-    hour at 10 Hz)."""
-    na = n + (2 * q if ramp else q)
+    Aa: np.ndarray,
+    Qa: np.ndarray,
+    Ca: np.ndarray,
+) -> None:
+    """One epoch of `augment_ramp` (ramp) or `augment_step` (not ramp) from the model's blocks, written into
+    Aa, Qa, Ca: the same numbers, built when needed rather than stored for every epoch (three (N, na, na)
+    arrays: 0.6 GB per hour at 10 Hz). The three are zero wherever it writes nothing (zeros made once, or
+    an earlier epoch's: the passes over every epoch fill the same three, not ~16 kB of new zeros each)."""
+    na = Aa.shape[0]
     h = A_head.shape[0]
-    Aa = np.zeros((na, na))
-    Qa = np.zeros((na, na))
-    Ca = np.zeros((C.shape[0], na))
     Aa[:h, :h] = A_head
     Qa[:h, :h] = Q_head
     for i in range(n - h):
@@ -318,7 +319,6 @@ def _augmented(
             Aa[n + j, n + q + j] = dt
     for j in range(q):
         Ca[rows[j], n + j] = 1.0
-    return Aa, Qa, Ca
 
 
 def block_mask(A: BlockDiagonal) -> NDArray[np.bool_]:
@@ -331,7 +331,7 @@ def block_mask(A: BlockDiagonal) -> NDArray[np.bool_]:
 
 
 def augmented_mask(a_mask: NDArray[np.bool_], q: int, ramp: bool) -> NDArray[np.bool_]:
-    """Where `_augmented`'s transition can be non-zero, from where the model's can (`a_mask`)."""
+    """Where `_augmented_into`'s transition can be non-zero, from where the model's can (`a_mask`)."""
     n = a_mask.shape[0]
     na = n + (2 * q if ramp else q)
     out = np.zeros((na, na), dtype=bool)
@@ -370,12 +370,14 @@ def _forward_block(
     A_head, A_tail, Q_head, Q_tail, C, R, y, t = model
     n, q = A_head.shape[1] + A_tail.shape[1], rows.shape[0]
     na = x.shape[0]
+    Aa, Qa, Ca = np.zeros((na, na)), np.zeros((na, na)), np.zeros((C.shape[1], na))
     for k in range(lo, hi + 1):
         dt = t[k] - t[k - 1] if k > 0 else 0.0
-        Aa, Qa, Ca = _augmented(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, dt, ramp)
+        _augmented_into(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, dt, ramp, Aa, Qa, Ca)
         if k > 0:
             x = times_vector(Aa, x, a_ptr, a_col)
-            P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na))) + Qa
+            P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na)))
+            P += Qa
         x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k], False)
         if xs.shape[0] > 0 and k % every == 0 and k >= base * every:
             xs[k // every - base] = x
@@ -445,6 +447,7 @@ def _two_filter_offline(
     als = np.zeros((block, na))
     L = np.zeros((na, na))
     a = np.zeros(na)
+    Aa, Qa, Ca = np.zeros((na, na)), np.zeros((na, na)), np.zeros((C.shape[1], na))
     for b in range(nb - 1, -1, -1):
         lo, hi = b * block, min((b + 1) * block, N) - 1
         if hi < from_epoch:
@@ -456,7 +459,9 @@ def _two_filter_offline(
             als[k - lo] = a
             if k == 0:
                 break
-            Aa, Qa, Ca = _augmented(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp)
+            _augmented_into(
+                A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp, Aa, Qa, Ca
+            )
             L, a = information_update(L, a, Ca, R[k], y[k])
             L, a = information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
