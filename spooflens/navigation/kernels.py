@@ -45,20 +45,13 @@ def local_radii(lat: float) -> tuple[float, float]:
     return A_M * (1 - E2) / w**3, A_M / w
 
 
-# The 3-vector and 3 x 3 helpers come in two forms, one statement each: on scalars and into given arrays
-# (what the per-block mechanization uses: a block made ~40 small arrays, most of its time), and the
-# array-returning forms over them.
+# The 3-vector and 3 x 3 helpers work on scalars or into given arrays (what the per-block mechanization
+# uses: a block made ~40 small arrays, most of its time); the array-returning forms are over them.
 
 
 @njit(cache=CACHE, inline="always")
 def _cross_s(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple[float, float, float]:
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-
-
-@njit(cache=CACHE)
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    c0, c1, c2 = _cross_s(a[0], a[1], a[2], b[0], b[1], b[2])
-    return np.array([c0, c1, c2])
 
 
 @njit(cache=CACHE, inline="always")
@@ -661,8 +654,8 @@ def filter_loop(
     x[21] = t[k]
     at_k = integrals_at(stream, k)  # kept as k moves: blocks share ends
     qc15 = qc[:15].copy()
-    # made once and filled in place: small arrays made afresh at every block and epoch were a tenth of a
-    # noise-learning run
+    # made once and filled in place: noise learning runs this loop ~95 times, and small arrays made afresh
+    # at every block and epoch cost it allocation time, not arithmetic
     Phi_acc = np.eye(15)
     Phi_acc_gm = np.ones(NG)
     Qd_acc = np.zeros((15, 15))
