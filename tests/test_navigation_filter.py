@@ -270,3 +270,19 @@ def test_husky_bag_end_to_end_with_the_rotated_imu(husky_bag: Path) -> None:
     # the levelled attitude puts the IMU's +y (where gravity appears) up
     C = sol.state[0, 6:15].reshape(3, 3)
     assert (C @ np.array([0.0, 1.0, 0.0]))[2] > 0.95
+
+
+def test_the_smoothed_track_corrected_a_chunk_at_a_time_is_the_whole_tracks(
+    ground: tuple[EpochTable, NavSolution], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A day-long track is corrected `TRACK_CHUNK` blocks at a time (its temporaries were the voyage's
+    memory peak): chunks of 7 blocks, which cut inter-epoch segments anywhere, give the same track."""
+    from spooflens.navigation import smoother
+
+    _, sol = ground
+    whole = smooth(sol, variances=False)
+    monkeypatch.setattr(smoother, "TRACK_CHUNK", 7)
+    chunked = smooth(sol, variances=False)
+    assert len(sol.track_t) > 10 * 7
+    np.testing.assert_array_equal(chunked.track_llh, whole.track_llh)
+    assert np.abs(whole.track_llh - sol.track_llh).max() > 0  # the correction moved the track

@@ -63,10 +63,25 @@ def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
 
 
+# block-rate track rows corrected at a time: a day of 1 Hz GNSS has 0.86 M blocks, and the correction's
+# dozen temporaries over all of them (0.1 GB) were the day-long voyage's memory peak
+TRACK_CHUNK = 65_536
+
+
 def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
     """Block-rate track with the smoothed position correction interpolated between epochs."""
+    out = np.empty((len(sol.track_t), 3))
+    for lo in range(0, len(out), TRACK_CHUNK):
+        rows = slice(lo, lo + TRACK_CHUNK)
+        out[rows] = _corrected(sol, delta, sol.track_epoch[rows], sol.track_t[rows], sol.track_llh[rows])
+    return out
+
+
+def _corrected(
+    sol: NavSolution, delta: FloatArray, e: NDArray[np.int64], track_t: FloatArray, track_llh: FloatArray
+) -> FloatArray:
+    """Rows of the block-rate track (their epochs `e`, times and positions) with the smoothed correction."""
     M = len(sol.t)
-    e = sol.track_epoch
     # correction known at the start of each inter-epoch segment (after epoch e) and at its end (epoch e+1,
     # relative to the nominal propagated from e: the filter's update there plus the smoothed error)
     # (the position errors only, states 6..8: the block-rate track is long, 0.2 GB a column set a day)
@@ -76,8 +91,8 @@ def _smoothed_track(sol: NavSolution, delta: FloatArray) -> FloatArray:
     end = np.where((e + 1 < M)[:, None], sol.dx[nxt, 6:9] + pos[nxt], start)
     t0 = np.where(e >= 0, sol.t[np.clip(e, 0, M - 1)], sol.track_t[0])
     t1 = np.where(e + 1 < M, sol.t[nxt], sol.track_t[-1])
-    w = np.clip((sol.track_t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
+    w = np.clip((track_t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
     d = (1 - w) * start + w * end
-    lat, lon, h = sol.track_llh.T
+    lat, lon, h = track_llh.T
     rm, rn = radii(lat)
     return np.c_[lat - d[:, 1] / (rm + h), lon - d[:, 0] / ((rn + h) * np.cos(lat)), h - d[:, 2]]
