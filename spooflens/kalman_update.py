@@ -56,8 +56,10 @@ def masked_update(
 
     Returns (x, P, rows, e, S, Sinv, K, nis, logdet_S) with e, S, Sinv, K over the observed rows only
     (K is n x m). With nothing observed, x and P come back unchanged, nis is NaN and logdet_S 0.
-    S and the updated P are symmetrised against round-off. `with_logdet` False skips the determinant
-    (logdet_S NaN) for the filters that never use it (the navigation filter runs some 90 times per log).
+    S and the updated P are symmetrised against round-off. log det S comes from the Cholesky factor the
+    inverse needs; when S is not positive definite to working precision, from numpy's determinant, or
+    with `with_logdet` False NaN (no determinant beyond the factor: the navigation filter runs some 90
+    times per log, and its likelihood has no use for an S that is not a covariance).
     """
     rows = observed_rows(y)
     m = rows.shape[0]
@@ -104,7 +106,7 @@ def masked_update(
     Sinv, logdet = _spd_inverse(S)
     if math.isnan(logdet):  # not positive definite to working precision: the general inverse
         Sinv = np.ascontiguousarray(np.linalg.inv(S))
-        logdet = np.linalg.slogdet(S)[1]
+        logdet = np.linalg.slogdet(S)[1] if with_logdet else math.nan
     K = np.empty((n, m))
     x_new = x.copy()
     for i in range(n):
@@ -127,7 +129,7 @@ def masked_update(
     for a in range(m):
         for b in range(m):
             nis += e[a] * Sinv[a, b] * e[b]
-    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet if with_logdet else math.nan
+    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet
 
 
 @njit(cache=True, nogil=True)

@@ -74,3 +74,19 @@ def test_an_innovation_covariance_that_is_not_positive_definite_takes_the_genera
     np.testing.assert_allclose(x1, x2, rtol=1e-12)
     np.testing.assert_allclose(P1, P2, rtol=1e-12, atol=1e-15)
     assert nis == pytest.approx(nis2) and logdet == pytest.approx(logdet2)
+
+
+def test_without_logdet_the_determinant_is_the_cholesky_factors_or_nan_when_s_is_not_a_covariance() -> None:
+    """`with_logdet` False computes no determinant beyond the Cholesky factor the inverse needs: log det S
+    of a positive definite S all the same (the navigation filter's likelihood reads it), NaN for an
+    indefinite S, and the update's numbers unchanged either way."""
+    rng = np.random.default_rng(7)
+    x, P, C, y = rng.normal(size=4), _spd(rng, 4), rng.normal(size=(3, 4)), rng.normal(size=3)
+    R = _spd(rng, 3)
+    full, bare = masked_update(x, P, C, R, y), masked_update(x, P, C, R, y, False)
+    assert bare[8] == full[8] == pytest.approx(np.linalg.slogdet(full[4])[1], rel=1e-12)
+    x, P, C, R, y = rng.normal(size=3), 0.01 * np.eye(3), np.eye(2, 3), np.diag([1.0, -4.0]), np.array([0.5, -1.0])
+    full, bare = masked_update(x, P, C, R, y), masked_update(x, P, C, R, y, False)
+    assert np.isfinite(full[8]) and np.isnan(bare[8])
+    for a, b in zip(full[:8], bare[:8], strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -24,7 +24,7 @@ from spooflens.constants import WGS84_GAMMA_E as _GE
 from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
-from spooflens.kalman_update import cholesky_logdet, masked_update
+from spooflens.kalman_update import masked_update
 from spooflens.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
@@ -666,7 +666,6 @@ def filter_loop(
     nu = np.empty(NM)
     nu_used = np.empty(NM)
     no_prior = np.zeros(NE)  # the error state before an update (closed loop: reset at every update)
-    L = np.empty((NM, NM))
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
         if target < k:
@@ -771,12 +770,12 @@ def filter_loop(
         # the rows left out (not used, or not measured) are NaN: the one masked update every filter makes
         for i in range(NM):
             nu_used[i] = nu[i] if use[e, i] and not math.isnan(z[i]) else np.nan
-        dx, P, rows, _, S, _, _, nis_e, _ = masked_update(no_prior, P, Hm, out_R[e], nu_used, False)
+        dx, P, rows, _, S, _, _, nis_e, logdet_e = masked_update(no_prior, P, Hm, out_R[e], nu_used, False)
         n_used = rows.shape[0]
         if n_used > 0:
             nis[e] = nis_e
             dof[e] = n_used
-            logdet[e] = cholesky_logdet(S, L)
+            logdet[e] = logdet_e  # its Cholesky factor's; NaN where S is not positive definite
             for a in range(n_used):
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
