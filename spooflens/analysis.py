@@ -161,7 +161,8 @@ class AnalysisContext:
     table: EpochTable
     options: AnalyzeOptions
     cache: dict[str, Any] = field(default_factory=dict)
-    results: list[DetectorResult] = field(default_factory=list)  # of the analyses that ran before
+    # of the analyses that ran before (one that finishes `Later` joins them when every analysis has run)
+    results: list[DetectorResult] = field(default_factory=list)
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
         if key not in self.cache:
@@ -188,11 +189,20 @@ class DetectorInfo:
 
 
 @dataclass(frozen=True)
+class Later:
+    """An analysis's results that wait on work begun in the background (the navigation's smoothed
+    track): the analyses after it run meanwhile, and its results take their place in the run order when
+    every analysis has run (an error raised then counts as raised by the analysis)."""
+
+    finish: Callable[[], list[DetectorResult]]
+
+
+@dataclass(frozen=True)
 class AnalysisSpec:
     name: str
     description: str
     needs: tuple[str, ...]
-    run: Callable[[AnalysisContext], list[DetectorResult]]
+    run: Callable[[AnalysisContext], list[DetectorResult] | Later]
     detectors: tuple[DetectorInfo, ...] = ()
 
     def missing(self, table: EpochTable) -> list[str]:
@@ -237,6 +247,7 @@ def run_analyses(
 
 
 def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
+    later: list[tuple[int, AnalysisSpec, Later]] = []  # where each one's results go in ctx.results
     for spec in analyses():
         missing = spec.missing(ctx.table)
         if missing:
@@ -245,7 +256,22 @@ def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None
         if on_step:
             on_step(spec.name)
         try:
-            ctx.results.extend(_declared(spec, r) for r in spec.run(ctx))
+            out = spec.run(ctx)
         except SpooflensError as err:
             ctx.results.extend(_not_run(spec, str(err)))
+            continue
+        if isinstance(out, Later):
+            later.append((len(ctx.results), spec, out))
+        else:
+            ctx.results.extend(_declared(spec, r) for r in out)
+    finished = [(at, _finished(spec, pending)) for at, spec, pending in later]
+    for at, results in reversed(finished):  # the last first: the earlier places stay where they were
+        ctx.results[at:at] = results
     return ctx.results
+
+
+def _finished(spec: AnalysisSpec, pending: Later) -> list[DetectorResult]:
+    try:
+        return [_declared(spec, r) for r in pending.finish()]
+    except SpooflensError as err:
+        return _not_run(spec, str(err))

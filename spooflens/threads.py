@@ -1,9 +1,10 @@
 """Independent pieces of one analysis on the machine's cores.
 
 The heavy work of an analysis is compiled numba loops that release the GIL (`nogil=True`): the noise
-learning's candidate filter runs, seed 000's windowed ramp pass and its offline two-filter pass. Where
-two of them do not depend on each other they run side by side in threads, with results identical to
-running them one after the other (the callers keep the sequential order of decisions).
+learning's candidate filter runs, seed 000's windowed ramp pass and its offline two-filter pass, the
+smoother. Where two of them do not depend on each other they run side by side in threads, with results
+identical to running them one after the other (the callers keep the sequential order of decisions);
+work whose result is needed only later is `started` and read from its future.
 
 `SPOOFLENS_THREADS` sets how many threads (default: the cores, at most 2, since the independent pieces
 come in pairs). `spooflens batch` sets one per task: its workers already fill the cores.
@@ -14,7 +15,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import TypeVar
 
@@ -94,6 +95,20 @@ def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
         if error is not None:
             raise error
     return [first, *(f.result() for f in futures)]
+
+
+def started(call: Callable[[], T]) -> Future[T]:
+    """`call` begun on another thread when more than one is allowed, its result (or exception) waiting in
+    the future; else made now, the future already done."""
+    size = thread_count()
+    if size >= 2 and not getattr(_inside, "active", False):
+        return _executor(size).submit(call)
+    done: Future[T] = Future()
+    try:
+        done.set_result(call())
+    except Exception as err:  # noqa: BLE001 - kept for `result()` to raise, as a background run's would be
+        done.set_exception(err)
+    return done
 
 
 A = TypeVar("A")

@@ -169,10 +169,16 @@ def test_a_solution_with_covariances_that_are_not_finite_cannot_be_smoothed_and_
     """An IMU whose stamps a damaged schema made wild left NaN covariances; the smoother's LinAlgError was
     an internal error (the fuzz run's), now the navigation's reason for not running."""
     from spooflens.errors import AnalysisError
+    from spooflens.navigation.smoother import check_smoothable
 
     _, sol = ground
+    damaged = replace(sol, P_upd=np.full_like(sol.P_upd, np.nan))
     with pytest.raises(AnalysisError, match="the smoother met a covariance it cannot invert"):
-        smooth(replace(sol, P_upd=np.full_like(sol.P_upd, np.nan)), variances=variances)
+        smooth(damaged, variances=variances)
+    # found before the smoother is begun in the background, so the navigation fails as it always did
+    with pytest.raises(AnalysisError, match="the smoother met a covariance it cannot invert"):
+        check_smoothable(damaged)
+    check_smoothable(sol)
 
 
 def test_the_smoothed_error_without_variances_is_the_full_smoothers(ground: tuple[EpochTable, NavSolution]) -> None:

@@ -74,6 +74,34 @@ def test_a_piece_that_splits_again_runs_its_parts_in_its_own_thread() -> None:
         assert threads.in_parallel([inner, inner, inner]) == [[1, 2]] * 3
 
 
+def test_a_started_call_runs_beside_the_caller_and_its_future_holds_the_answer_or_the_error() -> None:
+    meet = threading.Barrier(2, timeout=10)  # only passes when the call runs while the caller goes on
+
+    def piece() -> str:
+        meet.wait()
+        return threading.current_thread().name
+
+    with threads.limited(2):
+        running = threads.started(piece)
+        meet.wait()
+        assert running.result() != threading.current_thread().name
+
+    def bad() -> int:
+        raise ValueError("piece failed")
+
+    for n in (1, 2):
+        with threads.limited(n):
+            failed = threads.started(bad)
+            with pytest.raises(ValueError, match="piece failed"):
+                failed.result()
+
+
+def test_with_one_thread_a_started_call_is_made_at_once_in_the_caller() -> None:
+    with threads.limited(1):
+        done = threads.started(lambda: threading.current_thread().name)
+    assert done.done() and done.result() == threading.current_thread().name
+
+
 def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() -> None:
     """Noise learning's candidate runs and seed 000's two passes side by side change nothing but the
     count of filter runs (a candidate run after one that already improved is wasted)."""
@@ -89,6 +117,7 @@ def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() ->
     # one thread stops at the first better candidate; two run the pair and may waste the second
     assert nav1.learned.evaluations <= nav2.learned.evaluations
     np.testing.assert_array_equal(nav1.solution.nis, nav2.solution.nis)
+    np.testing.assert_array_equal(nav1.smoothed.track_llh, nav2.smoothed.track_llh)  # begun in the background
     assert any(r.alarms for r in det1)  # the onset posteriors (ramp and step side by side) ran
     for a, b in zip(det1, det2, strict=True):
         assert [(x.start_s, x.end_s, x.onset_s, x.onset_interval_s) for x in a.alarms] == [

@@ -4,12 +4,13 @@ that compares GNSS with the inertial sensors, and drawn in the recording (not it
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo
+from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later
 from spooflens.detectors.base import DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.navigation.alignment import Alignment, heading_from_course
@@ -24,10 +25,10 @@ from spooflens.navigation.loosely_coupled import (
     run_prepared,
 )
 from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, learn_noise
-from spooflens.navigation.smoother import SmoothedSolution, smooth
+from spooflens.navigation.smoother import SmoothedSolution, check_smoothable, smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
-from spooflens.threads import both
+from spooflens.threads import started
 
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
@@ -39,11 +40,17 @@ P_UPD_EVERY = 10
 @dataclass(frozen=True)
 class Navigation:
     solution: NavSolution  # P_pred holds the first epoch only (ANALYSIS_NEEDS)
-    smoothed: SmoothedSolution
+    # begun in the background: the detectors after the navigation read the model, only its drawn track
+    # waits for the smoother (seed 000's two passes and the smoother fill both cores)
+    smoothing: Future[SmoothedSolution]
     model: LinearGaussianModel  # the linearised error model the model-based detectors run on
     learned: LearnedNoise  # the sensor noise learned from this log, and how
     inputs: FilterInputs  # what every further pass of the filter reuses (reconstruction, coasting)
     start: tuple[NavState, Alignment | None]
+
+    @property
+    def smoothed(self) -> SmoothedSolution:
+        return self.smoothing.result()
 
     def options(self, **changes: object) -> FilterOptions:
         """The filter options of this solution, with changes (e.g. GNSS excluded over an incident)."""
@@ -72,9 +79,9 @@ def solve_navigation(
         compare=False,  # only coasts are compared with the GNSS they leave out (S_all: 56 MB a day)
     )
     sol = run_prepared(inputs, opts, start)
-    # the smoother (compiled, without the GIL) beside the error model's recursion (numpy, a Python loop)
-    smoothed, model = both(partial(smooth, sol, variances=False), sol.error_model)
-    return Navigation(sol, smoothed, model, learned, inputs, start)
+    check_smoothable(sol)  # its one failure raised here, as when the smoother ran in the foreground
+    smoothing = started(partial(smooth, sol, variances=False))  # compiled, without the GIL
+    return Navigation(sol, smoothing, sol.error_model(), learned, inputs, start)
 
 
 def _aligned(
@@ -94,8 +101,12 @@ def _aligned(
     return inputs, start
 
 
-def _run(ctx: AnalysisContext) -> list[DetectorResult]:
+def _run(ctx: AnalysisContext) -> Later:
     nav = ctx.navigation()
+    return Later(partial(_result, nav))  # the smoothed track: the detectors after this one run meanwhile
+
+
+def _result(nav: Navigation) -> list[DetectorResult]:
     sol, sm = nav.solution, nav.smoothed
     settled = sol.t > sol.t[0] + 20.0
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)

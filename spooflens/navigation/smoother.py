@@ -40,6 +40,7 @@ def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
             "smooth needs the solution's Phi and Qd (and H when it kept a part of the updated covariances): "
             f"run the filter with record={SMOOTHER_NEEDS!r}"
         )
+    check_smoothable(sol)
     try:
         delta, var = kernels.rts_closed_loop(
             sol.P_upd,
@@ -54,13 +55,24 @@ def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
             sol.dx,
             variances,
         )
-    except np.linalg.LinAlgError as err:  # non-finite covariances: an IMU whose times or values are damage
-        raise AnalysisError(
-            f"INS {sol.imu_id}: the smoother met a covariance it cannot invert ({err}); the IMU's times or "
-            "values do not carry a navigation"
-        ) from None
+    except np.linalg.LinAlgError as err:
+        raise _cannot_invert(sol, str(err)) from None
     state = kernels.correct_all(sol.state, delta)
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
+
+
+def check_smoothable(sol: NavSolution) -> None:
+    """Raise the smoother's error now if the filter kept a covariance that is not finite (an IMU whose
+    times or values are damage): what makes the smoother fail, found before it is begun in the background."""
+    if not np.isfinite(sol.P_upd).all():
+        raise _cannot_invert(sol, "not finite")
+
+
+def _cannot_invert(sol: NavSolution, why: str) -> AnalysisError:
+    return AnalysisError(
+        f"INS {sol.imu_id}: the smoother met a covariance it cannot invert ({why}); the IMU's times or "
+        "values do not carry a navigation"
+    )
 
 
 # block-rate track rows corrected at a time: a day of 1 Hz GNSS has 0.86 M blocks, and the correction's
