@@ -5,8 +5,10 @@ attack is not confirmed by the attack's own departure."""
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
+import pytest
 
 from spooflens.analysis import AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
@@ -47,6 +49,40 @@ def test_an_attack_inside_the_learning_window_is_left_out_of_a_second_learning()
     assert any(a <= 500.0 <= b for a, b in analysis.suspected_s), analysis.suspected_s
     attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
     assert 498.0 <= attack.onset_s <= 500.0 and attack.ongoing_at_end
+
+
+def test_the_learning_runs_stop_at_the_last_scored_epoch_and_learn_what_runs_to_the_windows_end_learn(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The filter is causal, so candidate runs that stop at the last scored epoch give every score, and
+    so the learned noise, bit for bit; a second pass whose suspected stretch runs past the window's end
+    runs only the span before it."""
+    from spooflens.navigation import noise_learning
+    from spooflens.navigation.imu_models import grade
+
+    table = simulate("aircraft", seed=4, duration_s=330.0).table
+    nav = solve_navigation(table, AnalyzeOptions())
+    preset = grade("consumer_mems")
+    t0 = float(nav.inputs.fixes["t_s"].iloc[0])
+    suspected = ((t0 + 150.0, t0 + 1e6),)
+    ends: list[float] = []
+    cut = noise_learning._up_to_last_scored
+
+    def spy(*args: Any) -> Any:
+        inputs, mask = cut(*args)
+        ends.append(float(inputs.fixes["t_s"].iloc[-1]))
+        assert len(mask) == len(inputs.fixes)
+        return inputs, mask
+
+    learned = {}
+    for name, stop in (("stopped", spy), ("whole", lambda inputs, t, mask: (inputs, mask))):
+        monkeypatch.setattr(noise_learning, "_up_to_last_scored", stop)
+        learned[name] = [
+            noise_learning.learn_noise(nav.inputs, preset, nav.start, None, exclude) for exclude in ((), suspected)
+        ]
+    assert learned["stopped"] == learned["whole"]  # noise, IMU scale, run count and likelihood, exactly
+    assert learned["whole"][1].neg_log_likelihood != learned["whole"][0].neg_log_likelihood
+    assert t0 + 120.0 < ends[1] < t0 + 150.0  # the second pass's runs stop where the suspected stretch begins
 
 
 def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full_solutions() -> None:

@@ -278,6 +278,17 @@ def _scored_epochs(
     return mask
 
 
+def _up_to_last_scored(
+    inputs: FilterInputs, t: FloatArray, mask: NDArray[np.bool_]
+) -> tuple[FilterInputs, NDArray[np.bool_]]:
+    """The inputs and the score mask up to the last scored epoch. The filter is causal: nothing after that
+    epoch changes a score, so the candidate runs stop there (a second pass, whose suspected stretch runs
+    to the window's end, scores only the epochs before it: a sample flight's second learning is half as
+    long)."""
+    t_last = float(t[np.flatnonzero(mask)[-1]])
+    return inputs.between(-np.inf, t_last), mask[: int(np.searchsorted(t, t_last, side="right"))]
+
+
 def _search(
     objective: _Objective,
     make: Callable[[dict[str, float]], FilterOptions],
@@ -359,6 +370,7 @@ def learn_noise(
             tuple(exclude),
         )
 
+    objective.inputs, objective.score_mask = _up_to_last_scored(sub, first.t, objective.score_mask)
     params: dict[str, float] = {
         "imu": 1.0,
         "w_h": noise.white_pos_m[0],
