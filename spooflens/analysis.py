@@ -7,7 +7,8 @@ recording, report and CLI pick it up from the declaration. `run_analyses` runs e
 inputs are present and says, for each detector it could not run, exactly what was missing.
 
 Work several analyses share (the GNSS/INS navigation solution) is computed once, on first use,
-through the `AnalysisContext`.
+through the `AnalysisContext`. An analysis whose results wait on work begun in the background (the
+navigation's smoothed track) returns `Later`: the analyses after it run meanwhile.
 """
 
 from __future__ import annotations

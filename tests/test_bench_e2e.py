@@ -1,8 +1,8 @@
-"""`spooflens bench e2e --repeat N`: the run reported is the median one, with the spread beside it."""
+"""`spooflens bench e2e`: the median run of `--repeat N` with the spread beside it; what a product holds."""
 
 from __future__ import annotations
 
-from spooflens.bench.e2e_bench import _median_run, _spread
+from spooflens.bench.e2e_bench import _median_run, _spread, held_bytes
 
 
 def test_the_median_run_is_reported_whole_and_the_lower_middle_of_an_even_count() -> None:
@@ -11,3 +11,25 @@ def test_the_median_run_is_reported_whole_and_the_lower_middle_of_an_even_count(
     assert _median_run([{"wall_s": w} for w in (4.0, 1.0, 3.0, 2.0)]) == {"wall_s": 2.0}
     assert _spread(runs) == " (8.00-12.00)"
     assert _spread(runs[:1]) == ""  # one run: no spread to show
+
+
+def test_what_a_product_holds_counts_each_array_once_through_fields_dicts_and_finished_futures() -> None:
+    from concurrent.futures import Future
+    from dataclasses import dataclass
+
+    import numpy as np
+
+    @dataclass
+    class Product:
+        big: np.ndarray
+        again: np.ndarray  # the same array under a second path
+        smoothing: Future[dict[str, np.ndarray]]
+
+    track = np.zeros(250_000)  # 2 MB
+    done: Future[dict[str, np.ndarray]] = Future()
+    done.set_result({"track": track})
+    big = np.zeros(500_000)
+    failed: Future[np.ndarray] = Future()
+    failed.set_exception(ValueError("no smoothing"))
+    held = held_bytes({"nav": Product(big, big, done), "broken": failed, "pending": Future()})
+    assert held == {"nav.big": 4.0, "nav.smoothing.result()[track]": 2.0}

@@ -128,9 +128,11 @@ def profile_analysis(log: str, out_file: str) -> dict[str, Any]:
 
 
 def held_bytes(roots: dict[str, Any], min_mb: float = 1.0) -> dict[str, float]:
-    """MB of every numpy array and DataFrame reachable through dataclass fields and dicts from `roots`
-    (each array counted once, under the first path that reaches it), largest first."""
+    """MB of every numpy array and DataFrame reachable through dataclass fields, dicts and finished
+    futures (the smoothed solution) from `roots` (each array counted once, under the first path that
+    reaches it), largest first."""
     import dataclasses
+    from concurrent.futures import Future
 
     import numpy as np
     import pandas as pd
@@ -149,6 +151,8 @@ def held_bytes(roots: dict[str, Any], min_mb: float = 1.0) -> dict[str, float]:
         elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
             for f in dataclasses.fields(obj):
                 visit(f"{path}.{f.name}", getattr(obj, f.name), depth + 1)
+        elif isinstance(obj, Future) and obj.done() and obj.exception() is None:
+            visit(f"{path}.result()", obj.result(), depth + 1)
         elif isinstance(obj, dict):
             for k, v in obj.items():
                 visit(f"{path}[{k}]", v, depth + 1)
