@@ -271,8 +271,10 @@ def analyze(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary and HTML report."""
-    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
+    for hint, path in (("--output", output), ("--json", json_path), ("--html", html_path)):
+        check_writable(path, hint)
+    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
     summaries = write_outputs(analyses, output, json_path, html_path)
     n = len(analyses)
     for k, (analysis, summary) in enumerate(zip(analyses, summaries, strict=True)):
@@ -284,6 +286,20 @@ def analyze(
             html = segment_path(html_path, k, n) if html_path else None
             _print_analysis(summary, segment_path(output, k, n), json_path, html)
     return finish(log, analyses, fail_on_spoof)
+
+
+def check_writable(path: Path | None, hint: str, may_be_folder: bool = False) -> None:
+    """An output that cannot be written is a usage error, said before the log is read (it was an internal
+    error after the whole analysis). `may_be_folder`: a log format written as a folder."""
+    if path is None:
+        return
+    folder = path.parent
+    if path.is_dir() and not may_be_folder:
+        raise click.BadParameter(f"{path} is a folder, not a file", param_hint=hint)
+    if not folder.is_dir():
+        raise click.BadParameter(f"{path}: there is no folder {folder}", param_hint=hint)
+    if not os.access(folder, os.W_OK):
+        raise click.BadParameter(f"{path}: the folder {folder} cannot be written", param_hint=hint)
 
 
 def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None, html_path: Path | None) -> list[dict]:
@@ -374,6 +390,7 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
     from spooflens.writers.rewrite import rewrite_log
 
     spec = parse_attack(attack_text)
+    check_writable(output, "--output", may_be_folder=True)
     table = _read(log, _parse_topics(topics), show_progress(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
     note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))

@@ -137,3 +137,29 @@ def test_velocity_rows_are_rewritten_for_the_receiver_the_reader_chose(tmp_path:
     late = b0["t_s"].to_numpy() >= 20
     np.testing.assert_allclose(b1["vel_e_mps"][late], b0["vel_e_mps"][late] + 3.0, atol=1e-9)
     np.testing.assert_allclose(b1["vel_e_mps"][~late], b0["vel_e_mps"][~late], atol=1e-12)
+
+
+def test_an_output_that_cannot_be_written_is_a_usage_error_before_the_analysis(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It was an internal error (Rerun's, or the file system's) after the whole analysis had run; `report` and
+    `inject` alike."""
+    log = str(SAMPLE / "ground_ros2.mcap")
+    for option, path, said in (
+        ("-o", tmp_path / "none" / "x.rrd", "there is no folder"),
+        ("--json", tmp_path, "is a folder"),
+        ("--html", tmp_path / "none" / "r.html", "there is no folder"),
+    ):
+        args = ["analyze", log, "-o", str(tmp_path / "ok.rrd"), option, str(path), "--quiet"]
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err and "internal error" not in err
+        assert not (tmp_path / "ok.rrd").exists()  # nothing analysed, nothing written
+    nowhere = str(tmp_path / "none" / "x")
+    for args in (
+        ["report", log, "-o", nowhere, "--quiet"],
+        ["inject", log, "--attack", "step:start=20", "-o", nowhere],
+    ):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert "there is no folder" in err and "internal error" not in err

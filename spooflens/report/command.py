@@ -41,12 +41,14 @@ def report(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG and write the operator report: one self-contained HTML page (opens offline anywhere)."""
-    from spooflens.cli import _print_analysis, segment_path, segments_summary
+    from spooflens.cli import _print_analysis, check_writable, segment_path, segments_summary
     from spooflens.report import write_report
     from spooflens.summary import build_summary
 
-    analyses = analyse_log(log, topics, imu_grade, quiet)
     output = output or Path(log.name.rstrip("/")).with_suffix(".html")
+    check_writable(output, "--output")
+    check_writable(json_path, "--json")
+    analyses = analyse_log(log, topics, imu_grade, quiet)
     summaries = []
     for k, analysis in enumerate(analyses):
         path = segment_path(output, k, len(analyses))
