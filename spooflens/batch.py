@@ -401,6 +401,9 @@ def command(
     quiet: bool,
 ) -> int:
     """Analyse every log PATTERNS match ('logs/**/*', quoted) on dask: per-log outputs, a fleet table."""
+    from spooflens.cli import make_output_folder
+
+    make_output_folder(output, "--output")
     result = run_batch(patterns, output, scheduler, workers, imu_grade, show=not quiet and show_progress())
     if quiet:
         failed = sum(r["status"] == "failed" for r in result.analysed)

@@ -302,6 +302,16 @@ def check_writable(path: Path | None, hint: str, may_be_folder: bool = False) ->
         raise click.BadParameter(f"{path}: the folder {folder} cannot be written", param_hint=hint)
 
 
+def make_output_folder(path: Path, hint: str) -> None:
+    """The folder outputs go to, made if missing; one that cannot be made is a usage error, said before
+    any log is read."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise click.BadParameter(f"{path}: cannot make this folder ({err.strerror or err})", param_hint=hint) from None
+    check_writable(path / "x", hint)
+
+
 def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None, html_path: Path | None) -> list[dict]:
     """Write the recording (always), the JSON summary and the operator report of a log's analyses (one per
     recording it joins: `.segN` outputs, one JSON), as `analyze` does (`batch` writes through here too);

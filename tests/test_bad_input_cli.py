@@ -163,3 +163,16 @@ def test_an_output_that_cannot_be_written_is_a_usage_error_before_the_analysis(
         assert main(args) == 2
         err = capsys.readouterr().err
         assert "there is no folder" in err and "internal error" not in err
+
+
+def test_an_output_folder_that_cannot_be_made_is_a_usage_error_before_any_log_is_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`batch` made it after finding the logs (an internal error), `fleet` after analysing them all."""
+    a_file = tmp_path / "a_file"
+    a_file.write_text("not a folder")
+    log = str(SAMPLE / "ground_ros2.mcap")
+    for args in (["batch", log, "-o", str(a_file / "results")], ["fleet", log, log, "-o", str(a_file / "out")]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert "cannot make this folder" in err and "internal error" not in err

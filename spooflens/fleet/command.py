@@ -247,13 +247,15 @@ def command(logs: tuple[Path, ...], out_dir: Path, reference_sats: str, min_offs
     from its own reference, their homology over time, and a common-attack finding in each verdict."""
     if len(logs) < 2:
         raise click.UsageError("fleet needs at least two logs")
+    from spooflens.cli import make_output_folder
+
+    make_output_folder(out_dir, "--output")
     sats = tuple(s.strip().upper() for s in reference_sats.replace(",", "+").split("+") if s.strip())
     opts = FleetOptions(min_offset_m=min_offset, reference_sats=sats)
     with progress(not quiet and show_progress()) as report:
         vehicles, fh, notes = run_fleet(list(logs), opts, report)
     if len(vehicles) < 2:
         raise SpooflensError("fewer than two logs could be read: " + "; ".join(notes))
-    out_dir.mkdir(parents=True, exist_ok=True)
     write_fleet_recording(out_dir / "fleet.rrd", vehicles, fh)
     summary = fleet_summary(vehicles, fh, notes, opts)
     (out_dir / "fleet.json").write_text(json.dumps(summary, indent=2))
