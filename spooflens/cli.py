@@ -492,6 +492,7 @@ def simulate(
     lazy={
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
+        "learning": "spooflens.bench.learning_bench:command",
         "seed000": "spooflens.bench.seed000_bench:command",
         "realworld": "spooflens.bench.realworld_bench:command",
         "report": "spooflens.bench.report_bench:command",
