@@ -40,7 +40,6 @@ def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
             "smooth needs the solution's Phi and Qd (and H when it kept a part of the updated covariances): "
             f"run the filter with record={SMOOTHER_NEEDS!r}"
         )
-    check_smoothable(sol)
     try:
         delta, var = kernels.rts_closed_loop(
             sol.P_upd,
@@ -55,7 +54,7 @@ def smooth(sol: NavSolution, variances: bool = True) -> SmoothedSolution:
             sol.dx,
             variances,
         )
-    except np.linalg.LinAlgError as err:
+    except np.linalg.LinAlgError as err:  # non-finite covariances (`check_smoothable` finds them first)
         raise _cannot_invert(sol, str(err)) from None
     state = kernels.correct_all(sol.state, delta)
     return SmoothedSolution(sol.t, state, delta, var, sol.track_t, _smoothed_track(sol, delta), sol.gm + delta[:, 15:])
