@@ -35,18 +35,18 @@ def learn_with_sweeps(table: Any, sweeps: tuple[int, ...], imu_grade: str | None
     """The noise learned from `table` (the analysis's navigation inputs and alignment, its IMU preset
     `imu_grade`) with each number of sweeps: runs, NLL, IMU scale, wander, tau and wall time."""
     from spooflens.analysis import AnalyzeOptions
-    from spooflens.navigation.imu_models import grade
     from spooflens.navigation.noise_learning import LearnOptions, learn_noise
-    from spooflens.navigation.product import solve_navigation
+    from spooflens.navigation.product import imu_preset, solve_navigation
 
     options = AnalyzeOptions(imu_grade=imu_grade)
     nav = solve_navigation(table, options)
-    preset = grade(options.imu_grade or "consumer_mems")
-    odometry_id = nav.inputs.odometry_ids[0] if nav.inputs.odometry_ids else None
+    preset = imu_preset(options)
     rows = []
     for n in sweeps:
         t0 = time.perf_counter()
-        learned = learn_noise(nav.inputs, preset, nav.start, odometry_id, (), replace(LearnOptions(), sweeps=n))
+        learned = learn_noise(
+            nav.inputs, preset, nav.start, nav.inputs.odometry_id, (), replace(LearnOptions(), sweeps=n)
+        )
         rows.append(
             {
                 "sweeps": n,

@@ -315,6 +315,11 @@ class FilterInputs:
     fixes: pd.DataFrame
     odometry_ids: tuple[str, ...]
 
+    @property
+    def odometry_id(self) -> str | None:
+        """The odometry the navigation uses: the log's first, if it has any."""
+        return self.odometry_ids[0] if self.odometry_ids else None
+
     def between(self, t_after: float, t_end: float | None = None) -> FilterInputs:
         """The inputs from t_after (fixes strictly after it) to t_end: a filter run continued from another
         run's epoch at t_after (`FilterOptions.initial*`) covers only this span."""

@@ -57,6 +57,12 @@ class Navigation:
         return replace(self.solution.options, **changes)  # type: ignore[arg-type]
 
 
+def imu_preset(options: AnalyzeOptions) -> ImuGrade:
+    """The IMU noise preset the navigation starts from (`--imu-grade`, else consumer MEMS): the prior the
+    log's noise learning scales."""
+    return grade(options.imu_grade or "consumer_mems")
+
+
 def solve_navigation(
     table: EpochTable,
     options: AnalyzeOptions,
@@ -66,10 +72,9 @@ def solve_navigation(
     """Align, learn the sensors' noise from the log (leaving `exclude` out), filter and smooth.
     `aligned`: the prepared inputs and the alignment of an earlier solution of the same table and
     options (a second pass), which depend on neither the noise nor `exclude`."""
-    preset = grade(options.imu_grade or "consumer_mems")
+    preset = imu_preset(options)
     inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
-    odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
-    learned = learn_noise(inputs, preset, start, odometry_id, exclude)
+    learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude)
     opts = FilterOptions(
         grade=learned.grade,
         noise=learned.noise,
@@ -89,8 +94,7 @@ def _aligned(
 ) -> tuple[FilterInputs, tuple[NavState, Alignment | None]]:
     inputs = prepare(table, options.imu_id, options.receiver_id)
     start = initial_state(inputs, FilterOptions(grade=preset))
-    odometry_id = inputs.odometry_ids[0] if inputs.odometry_ids else None
-    mount = estimate_mount(inputs, odometry_id) if odometry_id is not None else None
+    mount = estimate_mount(inputs, inputs.odometry_id) if inputs.odometry_id is not None else None
     if mount is not None and start[1] is not None:
         # a wheeled vehicle moves along its forward axis: its course fixes the yaw, whatever the log's
         # orientation says (magnetic yaw is often off by a frame convention or a disturbance)
