@@ -293,13 +293,16 @@ def check_writable(path: Path | None, hint: str, may_be_folder: bool = False) ->
     error after the whole analysis). `may_be_folder`: a log format written as a folder."""
     if path is None:
         return
-    folder = path.parent
     if path.is_dir() and not may_be_folder:
         raise click.BadParameter(f"{path} is a folder, not a file", param_hint=hint)
+    _check_folder(path.parent, path, hint)
+
+
+def _check_folder(folder: Path, output: Path, hint: str) -> None:
     if not folder.is_dir():
-        raise click.BadParameter(f"{path}: there is no folder {folder}", param_hint=hint)
+        raise click.BadParameter(f"{output}: there is no folder {folder}", param_hint=hint)
     if not os.access(folder, os.W_OK):
-        raise click.BadParameter(f"{path}: the folder {folder} cannot be written", param_hint=hint)
+        raise click.BadParameter(f"{output}: the folder {folder} cannot be written", param_hint=hint)
 
 
 def make_output_folder(path: Path, hint: str) -> None:
@@ -309,7 +312,7 @@ def make_output_folder(path: Path, hint: str) -> None:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise click.BadParameter(f"{path}: cannot make this folder ({err.strerror or err})", param_hint=hint) from None
-    check_writable(path / "x", hint)
+    _check_folder(path, path, hint)
 
 
 def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None, html_path: Path | None) -> list[dict]:

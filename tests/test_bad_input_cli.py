@@ -176,3 +176,9 @@ def test_an_output_folder_that_cannot_be_made_is_a_usage_error_before_any_log_is
         assert main(args) == 2
         err = capsys.readouterr().err
         assert "cannot make this folder" in err and "internal error" not in err
+    # a results folder that holds folders of its own is still a folder outputs can go to
+    results = tmp_path / "results"
+    (results / "x").mkdir(parents=True)
+    from spooflens.cli import make_output_folder
+
+    make_output_folder(results, "--output")
