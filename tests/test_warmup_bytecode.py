@@ -1,0 +1,36 @@
+"""The warm-up writes the project's bytecode even where PYTHONDONTWRITEBYTECODE forbids Python to."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+from spooflens import warmup
+
+
+def _package(root: Path, source: str) -> Path:
+    folder = root / "pkg"
+    folder.mkdir()
+    (folder / "__init__.py").write_text("")
+    (folder / "mod.py").write_text(source)
+    return folder
+
+
+def test_the_bytecode_is_written_though_python_is_told_not_to(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    folder = _package(tmp_path, "X = 1\n")
+    assert warmup.compile_bytecode((folder,))
+    assert Path(importlib.util.cache_from_source(str(folder / "mod.py"))).is_file()
+
+
+def test_a_module_that_does_not_compile_is_said(tmp_path: Path) -> None:
+    folder = _package(tmp_path, "def broken(:\n")
+    assert not warmup.compile_bytecode((folder,))
+
+
+def test_the_project_packages_are_the_ones_an_analysis_imports() -> None:
+    assert {p.name for p in warmup.PACKAGES} == {"spooflens", "readers"}
+    assert all((p / "__init__.py").is_file() for p in warmup.PACKAGES)
