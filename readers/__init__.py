@@ -37,6 +37,7 @@ READER_MODULES: tuple[str, ...] = (
     "readers.gnsslogger",
     "readers.csv_log",
 )
+CATCH_ALL = "csv"  # sniffed last: any text with commas that starts like a header
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,10 @@ class ReaderFormat:
     `sniff(path, head)` gets the first HEAD_BYTES of a file (b"" for a directory) and says whether this
     format is it; it must be cheap and must not raise. `rewrite` names the function that writes a spoofed
     copy in this format ("module:function", signature of `spooflens.writers.rewrite.rewrite_log`), or
-    None when `inject` cannot write it back.
+    None when `inject` cannot write it back. `folder_of_files`: a directory in this format is a set of
+    files each in this format (NMEA, RINEX, CSV), not a container with a layout of its own (a ROS2 bag,
+    whose storage files are logs by themselves); such a directory that also holds logs of other formats
+    is a folder of separate logs, not one log (`sniff_format` says so).
     """
 
     name: str
@@ -54,6 +58,7 @@ class ReaderFormat:
     read: ReaderFn
     sniff: Callable[[Path, bytes], bool]
     rewrite: str | None = None
+    folder_of_files: bool = False
 
 
 def formats() -> dict[str, ReaderFormat]:
@@ -107,9 +112,40 @@ def sniff_format(path: Path) -> str:
             raise ReaderError(path, "file is empty (0 bytes)")
     for fmt in _declared():
         if fmt.sniff(path, head):
+            if fmt.folder_of_files and path.is_dir():
+                _refuse_a_folder_of_separate_logs(path, fmt.name)
             return fmt.name
     what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
+
+
+def separate_logs(folder: Path, name: str) -> list[tuple[Path, str]]:
+    """(file, format) of each file directly in `folder` that is a log in a format other than `name`. A
+    file that only the last, catch-all sniffing (the spooflens CSV's) takes is no evidence of one: a
+    README with a comma in it is not a log."""
+    found = []
+    for path in sorted(p for p in folder.iterdir() if p.is_file()):
+        try:
+            fmt = sniff_format(path)
+        except ReaderError:
+            continue
+        if fmt not in (name, CATCH_ALL):
+            found.append((path, fmt))
+    return found
+
+
+def _refuse_a_folder_of_separate_logs(folder: Path, name: str) -> None:
+    """A folder read as one log must hold nothing but that log's files: the reader of one format never
+    reads the others, so u-blox captures beside NMEA files (an NMEA reader finds sentences in both), or
+    a phone's GnssLogger and NMEA files beside its RINEX, would be dropped or merged without a word."""
+    others = separate_logs(folder, name)
+    if others:
+        listed = ", ".join(f"{p.name} ({fmt})" for p, fmt in others[:4]) + (" ..." if len(others) > 4 else "")
+        raise UnsupportedFormatError(
+            folder,
+            f"a folder of separate logs, not one {name} log: it also holds {listed}; analyse each file, or "
+            f"all of them with spooflens batch '{folder}/*'",
+        )
 
 
 def read_log(path: Path | str, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:

@@ -317,5 +317,6 @@ FORMATS = (
         read_csv,
         _is_csv,
         rewrite="spooflens.writers.rewrite:rewrite_with_writer",
+        folder_of_files=True,
     ),
 )

@@ -15,7 +15,8 @@ and `logs.parquet` (one row per log: verdict, status, outputs), and a summary on
 What counts as a log: every path the patterns match that the readers recognise by content (the same
 sniffing `analyze` does). A directory that is one log (a ROS2 bag with its metadata.yaml or .db3, a
 CSV, RINEX or NMEA folder) is one log and the files inside it are not taken again; a folder that only
-holds other logs (e.g. flights as .mcap files) is not a log itself. Files no reader recognises (the truth
+holds other logs (e.g. flights as .mcap files) is not a log itself, nor is a CSV, RINEX or NMEA folder
+that also holds logs of another format (`readers.separate_logs`): each of its files is a log. Files no reader recognises (the truth
 and attack sidecars, READMEs) are counted as not logs.
 """
 

@@ -29,7 +29,7 @@ from readers.rinex import (
 )
 from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import ReaderError, WriterError
+from spooflens.errors import ReaderError, UnsupportedFormatError, WriterError
 from spooflens.gnss.ephemeris import C_MPS, GM_GPS, OMEGA_E_GPS, satellite_states
 from spooflens.writers.rinex_rewrite import COMMENT, rewrite_rinex
 
@@ -352,13 +352,17 @@ def test_sniff_format_files_and_directories(tmp_path: Path) -> None:
     assert sniff_format(_need(OBS_0759)) == "rinex"
     assert sniff_format(GSI) == "rinex"
     assert sniff_format(_need(PIXEL)) == "rinex"
-    assert sniff_format(PIXEL.parent) == "rinex"
+    # the phone's folder holds its GnssLogger and NMEA logs beside the RINEX: three logs, not one
+    with pytest.raises(UnsupportedFormatError, match=r"folder of separate logs.*pixel6\.nmea \(nmea\), pixel6\.txt"):
+        sniff_format(PIXEL.parent)
     mixed = tmp_path / "mixed"
     mixed.mkdir()
     shutil.copyfile(OBS_0759, mixed / "a.05o")
     assert sniff_format(mixed) == "rinex"
     (mixed / "fixes.csv").write_text("t_s,lat,lon,alt\n0,1,2,3\n")
-    assert sniff_format(mixed) == "csv"  # CSV detection comes first
+    # CSV detection comes first, and the CSV reader never reads the RINEX file beside: two logs, not one
+    with pytest.raises(UnsupportedFormatError, match=r"not one csv log: it also holds a\.05o \(rinex\)"):
+        sniff_format(mixed)
     (mixed / "fixes.csv").unlink()
     (mixed / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
     assert sniff_format(mixed) == "ros2bag"

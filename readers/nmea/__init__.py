@@ -146,5 +146,6 @@ FORMATS = (
         read_nmea,
         _is_nmea,
         rewrite="spooflens.writers.nmea_rewrite:rewrite_nmea_log",
+        folder_of_files=True,
     ),
 )

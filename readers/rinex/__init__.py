@@ -108,5 +108,6 @@ FORMATS = (
         read_rinex,
         _is_rinex,
         rewrite="spooflens.writers.rinex_rewrite:rewrite_rinex_log",
+        folder_of_files=True,
     ),
 )

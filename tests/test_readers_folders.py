@@ -1,0 +1,73 @@
+"""A folder is one log only when it holds nothing but that log's files: NMEA files of one voyage, a
+RINEX pair, a CSV log. A folder that also holds logs of other formats (u-blox captures beside NMEA, a
+phone's GnssLogger and NMEA files beside its RINEX) is a folder of separate logs: `analyze` says so in
+one line, and `batch` takes each file as its own log rather than dropping them unread."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from conftest import real_log
+
+from readers import separate_logs, sniff_format
+from spooflens.batch import find_logs
+from spooflens.cli import main
+from spooflens.errors import UnsupportedFormatError
+
+SAAB = "nmea_boats/gpsd_saab-r4.log"
+ZEUS = "nmea_boats/gpsd_bundg_zeus_9.log"
+F9R = "ubx_receivers/gpsd_ublox-zed-f9r.log"
+
+
+def _folder(root: Path, name: str, *logs: str) -> Path:
+    folder = root / name
+    folder.mkdir(parents=True)
+    for log in logs:
+        shutil.copyfile(real_log(log), folder / Path(log).name)  # copies: batch resolves links
+    return folder
+
+
+def test_nmea_files_with_a_readme_beside_them_are_one_log(tmp_path: Path) -> None:
+    voyage = _folder(tmp_path, "voyage", SAAB, ZEUS)
+    (voyage / "SOURCE.md").write_text("# where these came from\nrecorded by a, b and c\n")
+    assert sniff_format(voyage / "SOURCE.md") == "csv"  # only the catch-all sniffing takes it
+    assert separate_logs(voyage, "nmea") == []
+    assert sniff_format(voyage) == "nmea"
+
+
+def test_a_u_blox_capture_beside_nmea_files_makes_a_folder_of_separate_logs(tmp_path: Path) -> None:
+    folder = _folder(tmp_path, "receivers", SAAB, F9R)
+    assert sniff_format(folder / Path(F9R).name) == "ubx"
+    assert [(p.name, fmt) for p, fmt in separate_logs(folder, "nmea")] == [(Path(F9R).name, "ubx")]
+    with pytest.raises(UnsupportedFormatError, match=r"folder of separate logs, not one nmea log: .*f9r\.log \(ubx\)"):
+        sniff_format(folder)
+
+
+def test_analyze_of_a_folder_of_separate_logs_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = _folder(tmp_path, "receivers", SAAB, F9R)
+    assert main(["analyze", str(folder), "-o", str(tmp_path / "x.rrd")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(folder) in err and "spooflens batch" in err
+    assert not (tmp_path / "x.rrd").exists()
+
+
+def test_batch_takes_each_log_of_a_folder_of_separate_logs_and_a_voyage_folder_as_one(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    _folder(logs, "receivers", SAAB, F9R)
+    _folder(logs, "voyage", SAAB, ZEUS)
+    found, _ = find_logs((f"{logs}/**/*",))
+    assert sorted(str(p.relative_to(logs)) for p in found) == [
+        "receivers/gpsd_saab-r4.log",
+        "receivers/gpsd_ublox-zed-f9r.log",
+        "voyage",
+    ]
+
+
+def test_the_phone_folder_of_the_real_logs_is_three_logs() -> None:
+    phone = real_log("android_gnsslogger/gnss_lib_py")
+    found, _ = find_logs((str(phone), f"{phone}/*"))  # the folder itself and what it holds
+    assert sorted(p.name for p in found) == ["pixel6.23o", "pixel6.nmea", "pixel6.txt"]
