@@ -16,8 +16,8 @@ What counts as a log: every path the patterns match that the readers recognise b
 sniffing `analyze` does). A directory that is one log (a ROS2 bag with its metadata.yaml or .db3, a
 CSV, RINEX or NMEA folder) is one log and the files inside it are not taken again; a folder that only
 holds other logs (e.g. flights as .mcap files) is not a log itself, nor is a CSV, RINEX or NMEA folder
-that also holds logs of another format (`readers.separate_logs`): each of its files is a log. Files no reader recognises (the truth
-and attack sidecars, READMEs) are counted as not logs.
+that also holds logs of another format (`readers.separate_logs`): each of its files is a log. Files no
+reader recognises (the truth and attack sidecars, READMEs) are counted as not logs.
 """
 
 from __future__ import annotations
