@@ -208,3 +208,21 @@ def test_recording_holds_truth_overview_and_writing_it_started_no_analytics(spoo
     assert "/map/truth/track" in paths  # the truth file beside the log, drawn in blue
     assert {"/overview/GNSS-only_consistency", "/overview/inertial_reference", "/overview/spoofing_incidents"} <= paths
     assert not (spoofed.rerun_config / "rerun").exists()  # no Rerun analytics config: analytics never started
+
+
+def test_many_anomalies_fold_below_the_spoofing_incidents() -> None:
+    from spooflens.report.figures import MAX_LABELLED
+    from spooflens.report.page import INCIDENT_COLUMNS, incidents_table
+
+    def row(i: int, kind: str) -> tuple[object, ...]:
+        return (i, kind, *("-" for _ in INCIDENT_COLUMNS[2:]))
+
+    few = incidents_table([row(1, "spoofing"), row(2, "anomaly")], [True, False])
+    assert "<details>" not in few and few.count("<tr>") == 3
+    n = MAX_LABELLED + 8
+    kinds = [i == 5 for i in range(1, n + 1)]
+    many = incidents_table([row(i, "spoofing" if s else "anomaly") for i, s in enumerate(kinds, 1)], kinds)
+    shown, folded = many.split("<details>")
+    assert "<td>5</td><td>spoofing</td>" in shown and "anomaly" not in shown
+    assert f"{n - 1} anomalies" in folded and folded.count("<td>anomaly</td>") == n - 1
+    assert many.count("<td>spoofing</td>") == 1

@@ -25,7 +25,7 @@ from spooflens.epoch_table import TIME_REFERENCES, EpochTable
 from spooflens.evidence import EVIDENCE, label
 from spooflens.inventory import computed, skipped_or_repaired, stream_rows
 from spooflens.pipeline import Analysis
-from spooflens.report.figures import Plot
+from spooflens.report.figures import MAX_LABELLED, Plot
 from spooflens.report.provenance import InputIdentity
 from spooflens.verdict import Incident, Verdict
 
@@ -162,14 +162,41 @@ def verdict_section(analysis: Analysis) -> str:
                     _departures(d) or "-",
                 )
             )
-        head = ("#", "kind", "onset (estimated)", "first alarm", "end", "detectors", "evidence", "confidence")
-        lines.append(_table((*head, "receivers", "satellites", "GNSS off the reconstructed track"), rows))
+        lines.append(incidents_table(rows, [inc.is_spoofing for inc in verdict.incidents]))
     if verdict.findings:
         lines.append("<h3>Findings</h3><ul>")
         lines += [f"<li>{esc(f.text)} ({f.start_s:.1f}-{f.end_s:.1f} s)</li>" for f in verdict.findings]
         lines.append("</ul>")
     lines.append(_detector_status(results, verdict))
     return "\n".join(lines)
+
+
+INCIDENT_COLUMNS = (
+    "#",
+    "kind",
+    "onset (estimated)",
+    "first alarm",
+    "end",
+    "detectors",
+    "evidence",
+    "confidence",
+    "receivers",
+    "satellites",
+    "GNSS off the reconstructed track",
+)
+
+
+def incidents_table(rows: Sequence[Sequence[object]], spoofing: Sequence[bool]) -> str:
+    """The incidents, a row each. Beyond MAX_LABELLED, the anomalies (one evidence class, not spoofing)
+    fold into a <details> below the spoofing incidents: two hundred of them on a real boat's log buried
+    the page under the verdict."""
+    if len(rows) <= MAX_LABELLED:
+        return _table(INCIDENT_COLUMNS, rows)
+    shown = [r for r, s in zip(rows, spoofing, strict=True) if s]
+    folded = [r for r, s in zip(rows, spoofing, strict=True) if not s]
+    summary = f"{len(folded)} anomalies (one evidence class each, not spoofing): show them"
+    parts = [_table(INCIDENT_COLUMNS, shown)] if shown else []
+    return "".join([*parts, f"<details><summary>{esc(summary)}</summary>{_table(INCIDENT_COLUMNS, folded)}</details>"])
 
 
 def _detector_status(results: Sequence[DetectorResult], verdict: Verdict) -> str:
