@@ -37,7 +37,6 @@ READER_MODULES: tuple[str, ...] = (
     "readers.gnsslogger",
     "readers.csv_log",
 )
-CATCH_ALL = "csv"  # sniffed last: any text with commas that starts like a header
 
 
 @dataclass(frozen=True)
@@ -120,16 +119,14 @@ def sniff_format(path: Path) -> str:
 
 
 def separate_logs(folder: Path, name: str) -> list[tuple[Path, str]]:
-    """(file, format) of each file directly in `folder` that is a log in a format other than `name`. A
-    file that only the last, catch-all sniffing (the spooflens CSV's) takes is no evidence of one: a
-    README with a comma in it is not a log."""
+    """(file, format) of each file directly in `folder` that is a log in a format other than `name`."""
     found = []
     for path in sorted(p for p in folder.iterdir() if p.is_file()):
         try:
             fmt = sniff_format(path)
         except ReaderError:
             continue
-        if fmt not in (name, CATCH_ALL):
+        if fmt != name:
             found.append((path, fmt))
     return found
 

@@ -303,11 +303,22 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     return build_table(path, "csv", reference, merged, streams, skipped, t0_ns=t0, metadata=metadata)
 
 
+# a header naming one of these (or an alias) makes a file a CSV log whatever its name
+_LOG_COLUMNS = {"sv_id", "lat_deg", "ax_mps2", *_TIME_COLUMNS}
+
+
 def _is_csv(path: Path, head: bytes) -> bool:
+    """A `.csv` file of text with commas; a file of another name only when its header row names a time,
+    satellite, latitude or accelerometer column (a README or SOURCE.md with a comma in it is no log)."""
     if path.is_dir():
         return any(path.glob("*.csv"))
     text = head.decode("utf-8", errors="replace")
-    return "\ufffd" not in text and "," in text and text.lstrip().startswith(("#", *"abcdefghijklmnopqrstuvwxyz"))
+    if "\ufffd" in text or "," not in text or not text.lstrip().startswith(("#", *"abcdefghijklmnopqrstuvwxyz")):
+        return False
+    if path.suffix.lower() == ".csv":
+        return True
+    header = next((ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")), "")
+    return any(_canonical(name) in _LOG_COLUMNS for name in header.split(","))
 
 
 FORMATS = (

@@ -32,7 +32,8 @@ def _folder(root: Path, name: str, *logs: str) -> Path:
 def test_nmea_files_with_a_readme_beside_them_are_one_log(tmp_path: Path) -> None:
     voyage = _folder(tmp_path, "voyage", SAAB, ZEUS)
     (voyage / "SOURCE.md").write_text("# where these came from\nrecorded by a, b and c\n")
-    assert sniff_format(voyage / "SOURCE.md") == "csv"  # only the catch-all sniffing takes it
+    with pytest.raises(UnsupportedFormatError):  # text with commas, but no CSV log's header
+        sniff_format(voyage / "SOURCE.md")
     assert separate_logs(voyage, "nmea") == []
     assert sniff_format(voyage) == "nmea"
 
@@ -71,3 +72,16 @@ def test_the_phone_folder_of_the_real_logs_is_three_logs() -> None:
     phone = real_log("android_gnsslogger/gnss_lib_py")
     found, _ = find_logs((str(phone), f"{phone}/*"))  # the folder itself and what it holds
     assert sorted(p.name for p in found) == ["pixel6.23o", "pixel6.nmea", "pixel6.txt"]
+
+
+def test_a_csv_log_of_another_name_needs_a_log_header(tmp_path: Path) -> None:
+    named = tmp_path / "fixes.log"
+    named.write_text("# a logger's export\nt_s,lat,lon,alt\n0,1,2,3\n")
+    assert sniff_format(named) == "csv"
+    prose = tmp_path / "README"
+    prose.write_text("recorded by a, b and c\nwith care\n")
+    with pytest.raises(UnsupportedFormatError, match="unknown format"):
+        sniff_format(prose)
+    odd = tmp_path / "odd.csv"  # a .csv file is the format's own: its columns are judged when read
+    odd.write_text("a,b\n1,2\n")
+    assert sniff_format(odd) == "csv"
