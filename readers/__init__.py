@@ -49,7 +49,9 @@ class ReaderFormat:
     None when `inject` cannot write it back. `folder_of_files`: a directory in this format is a set of
     files each in this format (NMEA, RINEX, CSV), not a container with a layout of its own (a ROS2 bag,
     whose storage files are logs by themselves); such a directory that also holds logs of other formats
-    is a folder of separate logs, not one log (`sniff_format` says so).
+    is a folder of separate logs, not one log (`sniff_format` says so). `companion(path)`: a file of this
+    format that is not a log by itself but data a log reads (a RINEX navigation file beside its
+    observations): `batch` counts it among the paths that are not logs, not among the failed logs.
     """
 
     name: str
@@ -58,6 +60,7 @@ class ReaderFormat:
     sniff: Callable[[Path, bytes], bool]
     rewrite: str | None = None
     folder_of_files: bool = False
+    companion: Callable[[Path], bool] | None = None
 
 
 def formats() -> dict[str, ReaderFormat]:
@@ -116,6 +119,12 @@ def sniff_format(path: Path) -> str:
             return fmt.name
     what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
+
+
+def is_companion(path: Path, name: str) -> bool:
+    """Whether `path`, sniffed as format `name`, is data for a log rather than a log (ReaderFormat.companion)."""
+    fmt = formats()[name]
+    return fmt.companion is not None and fmt.companion(path)
 
 
 def separate_logs(folder: Path, name: str) -> list[tuple[Path, str]]:

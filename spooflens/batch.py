@@ -17,7 +17,8 @@ sniffing `analyze` does). A directory that is one log (a ROS2 bag with its metad
 CSV, RINEX or NMEA folder) is one log and the files inside it are not taken again; a folder that only
 holds other logs (e.g. flights as .mcap files) is not a log itself, nor is a CSV, RINEX or NMEA folder
 that also holds logs of another format (`readers.separate_logs`): each of its files is a log. Files no
-reader recognises (the truth and attack sidecars, READMEs) are counted as not logs.
+reader recognises (the truth and attack sidecars, READMEs) and files that serve a log rather than being
+one (RINEX navigation files: `ReaderFormat.companion`) are counted as not logs.
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ def _is_log_dir(path: Path) -> bool:
 
 def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
     """(logs, paths that are not logs) matched by shell-style `patterns` (`**` recursive)."""
-    from readers import sniff_format
+    from readers import is_companion, sniff_format
 
     matched: list[Path] = []
     for pattern in patterns:
@@ -118,10 +119,11 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
             not_logs.append(p)
             continue
         try:
-            sniff_format(p)
-            logs.append(p)
+            fmt = sniff_format(p)
         except Exception:  # noqa: BLE001 - unknown content: not a log (reported as such)
             not_logs.append(p)
+            continue
+        (not_logs if is_companion(p, fmt) else logs).append(p)
     return logs, not_logs
 
 

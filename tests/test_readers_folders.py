@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import real_log
 
-from readers import separate_logs, sniff_format
+from readers import is_companion, separate_logs, sniff_format
 from spooflens.batch import find_logs
 from spooflens.cli import main
 from spooflens.errors import UnsupportedFormatError
@@ -85,3 +85,15 @@ def test_a_csv_log_of_another_name_needs_a_log_header(tmp_path: Path) -> None:
     odd = tmp_path / "odd.csv"  # a .csv file is the format's own: its columns are judged when read
     odd.write_text("a,b\n1,2\n")
     assert sniff_format(odd) == "csv"
+
+
+def test_rinex_navigation_files_serve_logs_and_are_not_logs_themselves() -> None:
+    phone = real_log("android_gnsslogger/gps-measurement-tools")
+    found, not_logs = find_logs((f"{phone}/*",))
+    assert sorted(p.name for p in found) == [
+        "pseudoranges_log_2016_06_30_21_26_07.txt",
+        "pseudoranges_log_2016_08_22_14_45_50.txt",
+    ]
+    assert {"hour1820.16n", "hour2350.16n"} <= {p.name for p in not_logs}
+    assert is_companion(phone / "hour1820.16n", "rinex")
+    assert not is_companion(real_log("rinex_gsi_pair/07590920.05o"), "rinex")

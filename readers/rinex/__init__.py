@@ -109,5 +109,6 @@ FORMATS = (
         _is_rinex,
         rewrite="spooflens.writers.rinex_rewrite:rewrite_rinex_log",
         folder_of_files=True,
+        companion=lambda path: path.is_file() and not is_rinex_obs(path),  # a navigation file
     ),
 )
