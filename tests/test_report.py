@@ -226,3 +226,5 @@ def test_many_anomalies_fold_below_the_spoofing_incidents() -> None:
     assert "<td>5</td><td>spoofing</td>" in shown and "anomaly" not in shown
     assert f"{n - 1} anomalies" in folded and folded.count("<td>anomaly</td>") == n - 1
     assert many.count("<td>spoofing</td>") == 1
+    all_spoofing = incidents_table([row(i, "spoofing") for i in range(1, n + 1)], [True] * n)
+    assert "<details>" not in all_spoofing and all_spoofing.count("<td>spoofing</td>") == n

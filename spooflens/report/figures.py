@@ -115,7 +115,7 @@ def incident_colour(i: int, inc: Incident) -> str:
 
 def _bands(ax: Axes, bands: Iterable[tuple[float, float, str, float]]) -> None:
     """Vertical bands (start, end, colour, alpha) over the axes' height, one collection per colour and
-    alpha: a band per patch took 4 ms, a minute for a log with two hundred anomalies."""
+    alpha: a patch per band took 4 ms, 12 s of the report of a log with two hundred anomalies."""
     groups: dict[tuple[str, float], list[list[tuple[float, float]]]] = defaultdict(list)
     for a, b, colour, alpha in bands:
         groups[(colour, alpha)].append([(a, 0.0), (a, 1.0), (b, 1.0), (b, 0.0)])

@@ -190,7 +190,7 @@ def incidents_table(rows: Sequence[Sequence[object]], spoofing: Sequence[bool]) 
     """The incidents, a row each. Beyond MAX_LABELLED, the anomalies (one evidence class, not spoofing)
     fold into a <details> below the spoofing incidents: two hundred of them on a real boat's log buried
     the page under the verdict."""
-    if len(rows) <= MAX_LABELLED:
+    if len(rows) <= MAX_LABELLED or all(spoofing):
         return _table(INCIDENT_COLUMNS, rows)
     shown = [r for r, s in zip(rows, spoofing, strict=True) if s]
     folded = [r for r, s in zip(rows, spoofing, strict=True) if not s]
