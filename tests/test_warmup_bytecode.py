@@ -13,7 +13,7 @@ from spooflens import warmup
 
 def _package(root: Path, source: str) -> Path:
     folder = root / "pkg"
-    folder.mkdir()
+    folder.mkdir(parents=True)
     (folder / "__init__.py").write_text("")
     (folder / "mod.py").write_text(source)
     return folder
@@ -26,9 +26,11 @@ def test_the_bytecode_is_written_though_python_is_told_not_to(tmp_path: Path, mo
     assert Path(importlib.util.cache_from_source(str(folder / "mod.py"))).is_file()
 
 
-def test_a_module_that_does_not_compile_is_said(tmp_path: Path) -> None:
-    folder = _package(tmp_path, "def broken(:\n")
-    assert not warmup.compile_bytecode((folder,))
+def test_a_module_that_does_not_compile_is_said_and_the_next_package_still_compiles(tmp_path: Path) -> None:
+    broken = _package(tmp_path / "a", "def broken(:\n")
+    sound = _package(tmp_path / "b", "X = 1\n")
+    assert not warmup.compile_bytecode((broken, sound))
+    assert Path(importlib.util.cache_from_source(str(sound / "mod.py"))).is_file()
 
 
 def test_the_project_packages_are_the_ones_an_analysis_imports() -> None:
