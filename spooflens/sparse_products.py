@@ -12,8 +12,9 @@ over it. The results equal the dense products (the same sums, without the zero t
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
+
+from spooflens.jit import njit
 
 IntArray = NDArray[np.int64]
 

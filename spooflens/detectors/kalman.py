@@ -11,9 +11,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
+from spooflens.jit import njit
 from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.sparse_products import (
     add_block_diagonal,

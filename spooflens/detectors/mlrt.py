@@ -31,7 +31,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import (
@@ -41,6 +40,7 @@ from spooflens.detectors.kalman import (
     information_predict_back,
     information_update,
 )
+from spooflens.jit import njit
 from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
 from spooflens.statespace import BlockDiagonal, LinearGaussianModel, kernel_array

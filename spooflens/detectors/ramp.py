@@ -19,10 +19,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from spooflens.detectors.kalman import ForwardResult
+from spooflens.jit import njit
 from spooflens.kalman_update import cholesky_logdet
 from spooflens.sparse_products import pattern
 from spooflens.statespace import LinearGaussianModel

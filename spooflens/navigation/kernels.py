@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from spooflens.constants import WGS84_A_M as A_M
 from spooflens.constants import WGS84_E2 as E2
@@ -24,6 +23,7 @@ from spooflens.constants import WGS84_GAMMA_E as _GE
 from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
+from spooflens.jit import njit
 from spooflens.kalman_update import masked_update
 from spooflens.sparse_products import add_block_diagonal, block_congruence
 
