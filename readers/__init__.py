@@ -117,6 +117,8 @@ def sniff_format(path: Path) -> str:
             if fmt.folder_of_files and path.is_dir():
                 _refuse_a_folder_of_separate_logs(path, fmt.name)
             return fmt.name
+    if path.is_dir():
+        _refuse_a_folder_of_separate_logs(path, None)
     what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
 
@@ -127,30 +129,34 @@ def is_companion(path: Path, name: str) -> bool:
     return fmt.companion is not None and fmt.companion(path)
 
 
-def separate_logs(folder: Path, name: str) -> list[tuple[Path, str]]:
-    """(file, format) of each file directly in `folder` that is a log in a format other than `name`."""
+def separate_logs(folder: Path, name: str | None) -> list[tuple[Path, str]]:
+    """(file, format) of each file directly in `folder` that is a log in a format other than `name`
+    (None: in any format); data for a log (a RINEX navigation file) is no log."""
     found = []
     for path in sorted(p for p in folder.iterdir() if p.is_file()):
         try:
             fmt = sniff_format(path)
         except ReaderError:
             continue
-        if fmt != name:
+        if fmt != name and not is_companion(path, fmt):
             found.append((path, fmt))
     return found
 
 
-def _refuse_a_folder_of_separate_logs(folder: Path, name: str) -> None:
-    """A folder read as one log must hold nothing but that log's files: the reader of one format never
-    reads the others, so u-blox captures beside NMEA files (an NMEA reader finds sentences in both), or
-    a phone's GnssLogger and NMEA files beside its RINEX, would be dropped or merged without a word."""
+def _refuse_a_folder_of_separate_logs(folder: Path, name: str | None) -> None:
+    """A folder read as one log (format `name`) must hold nothing but that log's files: the reader of one
+    format never reads the others, so u-blox captures beside NMEA files (an NMEA reader finds sentences in
+    both), or a phone's GnssLogger and NMEA files beside its RINEX, would be dropped or merged without a
+    word. A folder that is no log itself (`name` None) but holds logs (a folder of MCAP files, of bags)
+    is refused the same way, naming them."""
     others = separate_logs(folder, name)
     if others:
         listed = ", ".join(f"{p.name} ({fmt})" for p, fmt in others[:4]) + (" ..." if len(others) > 4 else "")
+        what = f"not one {name} log: it also holds" if name is not None else "it holds"
         raise UnsupportedFormatError(
             folder,
-            f"a folder of separate logs, not one {name} log: it also holds {listed}; analyse each file, or "
-            f"all of them with spooflens batch '{folder}/*'",
+            f"a folder of separate logs, {what} {listed}; analyse each file, or all of them with "
+            f"spooflens batch '{folder}/*'",
         )
 
 

@@ -287,7 +287,10 @@ def _is_ros1_bag(path: Path, head: bytes) -> bool:
 
 
 def _is_ros2_bag(path: Path, head: bytes) -> bool:
-    return path.is_dir() and ((path / "metadata.yaml").exists() or any(path.glob("*.db3")) or any(path.glob("*.mcap")))
+    """A ROS2 bag is a folder with its metadata.yaml, or with an sqlite3 database (its storage alone,
+    which the bag reader explains when the metadata is missing). A folder of .mcap files without the
+    metadata is not one bag: each MCAP file is a log by itself (`sniff_format` says so)."""
+    return path.is_dir() and ((path / "metadata.yaml").exists() or any(path.glob("*.db3")))
 
 
 FORMATS = (

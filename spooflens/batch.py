@@ -88,11 +88,9 @@ def _is_log_dir(path: Path) -> bool:
     from readers import sniff_format
 
     try:
-        fmt = sniff_format(path)
+        sniff_format(path)
     except Exception:  # noqa: BLE001 - not a log: that is all sniffing says
         return False
-    if fmt == "ros2bag":  # the bag reader also takes a folder of .mcap files: only a real bag is one log
-        return (path / "metadata.yaml").exists() or any(path.glob("*.db3"))
     return True
 
 

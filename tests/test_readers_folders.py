@@ -97,3 +97,20 @@ def test_rinex_navigation_files_serve_logs_and_are_not_logs_themselves() -> None
     assert {"hour1820.16n", "hour2350.16n"} <= {p.name for p in not_logs}
     assert is_companion(phone / "hour1820.16n", "rinex")
     assert not is_companion(real_log("rinex_gsi_pair/07590920.05o"), "rinex")
+
+
+def test_a_folder_of_mcap_files_without_a_bag_s_metadata_is_a_folder_of_separate_logs(tmp_path: Path) -> None:
+    samples = Path(__file__).resolve().parents[1] / "sample_logs"
+    folder = tmp_path / "flights"
+    folder.mkdir()
+    for name in ("ground_ros2.mcap", "dual_receiver.mcap"):
+        shutil.copyfile(samples / name, folder / name)
+    # not a ROS2 bag (no metadata.yaml, no database): each file is a log the MCAP reader takes alone
+    with pytest.raises(
+        UnsupportedFormatError, match=r"folder of separate logs, it holds dual_receiver\.mcap \(mcap\), ground_ros2"
+    ):
+        sniff_format(folder)
+    assert sorted(p.name for p in find_logs((str(folder / "*"),))[0]) == ["dual_receiver.mcap", "ground_ros2.mcap"]
+    assert find_logs((str(folder),)) == ([], [])  # the folder itself is no log (its files are)
+    bag = samples / "ground_ros2_sqlite3"
+    assert sniff_format(bag) == "ros2bag" and find_logs((str(bag),))[0] == [bag]
