@@ -279,7 +279,7 @@ def analyze(
     n = len(analyses)
     for k, (analysis, summary) in enumerate(zip(analyses, summaries, strict=True)):
         if n > 1 and not quiet:
-            console().print(f"[bold]recording {k + 1} of {n}[/] (the log joins {n}; its clock starts again)")
+            console().print(f"[bold]recording {k + 1} of {n}[/] (each of the log's {n} recordings on its own)")
         if quiet:
             click.echo((f"recording {k + 1} of {n}: " if n > 1 else "") + analysis.verdict.headline)
         else:

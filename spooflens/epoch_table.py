@@ -577,38 +577,43 @@ def _drop_impossible_stamps(frames_ns: dict[str, pd.DataFrame], skipped: list[Sk
         frames_ns[name] = df[~bad].reset_index(drop=True)
 
 
-def _segment_frames(
-    frames_ns: dict[str, pd.DataFrame], skipped: list[Skipped]
-) -> tuple[dict[str, pd.DataFrame], list[tuple[int, int, int]]]:
-    """Split a log that joins recordings at each time reversal: the frames with the stamps of recording
-    k moved after recording k-1 (gap SEGMENT_GAP_S), and (offset_ns, own t0_ns, end_ns) per recording.
-    Streams are matched recording by recording in the order read; a stream with fewer recordings than
-    the most-split one goes to those its time span overlaps."""
-    # (frame, stream) -> (row positions, recording index of each); a stray stamp (a corrupt time far from
-    # the rest, dropped later by the stream's repair) makes no recording of its own
-    runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
-    for name, df in frames_ns.items():
-        if df is None or not len(df):
-            continue
-        key = STREAM_KEY[name]
-        t_all = df["t_ns"].to_numpy()
-        groups = [("truth", np.arange(len(df)))] if key is None else stream_rows(df, key)
-        for sid, pos in groups:
-            order = np.argsort(t_all[pos], kind="stable")
-            stray = np.zeros(len(pos), dtype=bool)
-            stray[order] = plausibility.stray_stamps(t_all[pos][order])
-            pos = np.asarray(pos)[~stray]
-            runs[(name, str(sid))] = (pos, _runs_of(t_all[pos]))
-    n_seg = 1 + max((int(r.max()) for _, r in runs.values() if len(r)), default=0)
-    if n_seg == 1:
-        return frames_ns, []
+RECORDING_GAP_NS = 86_400 * 1_000_000_000  # a day in which no stream has a stamp: separate recordings
+MAX_SILENT_RECORDINGS = 16  # more day-long silences than this are scattered corrupt stamps, not recordings
+
+
+def _covered(t_sorted: np.ndarray) -> list[tuple[int, int]]:
+    """The spans of a stream's sorted stamps, cut where it is silent for more than RECORDING_GAP_NS."""
+    if not len(t_sorted):
+        return []
+    cut = np.flatnonzero(np.diff(t_sorted) > RECORDING_GAP_NS)
+    starts, ends = t_sorted[np.r_[0, cut + 1]], t_sorted[np.r_[cut, len(t_sorted) - 1]]
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def _silence_bounds(spans: list[tuple[int, int]]) -> np.ndarray:
+    """The first stamp of each recording after the first: where the union of every stream's spans is
+    broken by more than RECORDING_GAP_NS."""
+    bounds = []
+    end = None
+    for a, b in sorted(spans):
+        if end is not None and a - end > RECORDING_GAP_NS:
+            bounds.append(a)
+        end = b if end is None else max(end, b)
+    return np.array(bounds, dtype=np.int64)
+
+
+def _match_recordings(
+    frames_ns: dict[str, pd.DataFrame],
+    runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]],
+    n_seg: int,
+    seg_of: dict[str, np.ndarray],
+) -> None:
+    """Each row's recording (into `seg_of`) when the clock went back: a stream split as often as the most
+    split one keeps its runs; another stream's runs go to the recordings their time spans overlap."""
     ref_key = max((k for k, (_, r) in runs.items() if len(r) and r.max() == n_seg - 1), key=lambda k: len(runs[k][1]))
     ref_pos, ref_runs = runs[ref_key]
     ref_t = frames_ns[ref_key[0]]["t_ns"].to_numpy()[ref_pos]
     ref_ranges = [(ref_t[ref_runs == k].min(), ref_t[ref_runs == k].max()) for k in range(n_seg)]
-    seg_of: dict[str, np.ndarray] = {
-        name: np.full(len(df), -1, dtype=np.int64) for name, df in frames_ns.items() if df is not None
-    }  # -1: a stray stamp, left where it is
     for (name, _), (pos, r) in runs.items():
         if not len(r):
             continue
@@ -620,6 +625,58 @@ def _segment_frames(
             a, b = t[r == k].min(), t[r == k].max()
             overlap = [min(b, hi) - max(a, lo) for lo, hi in ref_ranges]
             seg_of[name][pos[r == k]] = int(np.argmax(overlap))
+
+
+def _segment_frames(
+    frames_ns: dict[str, pd.DataFrame], skipped: list[Skipped]
+) -> tuple[dict[str, pd.DataFrame], list[tuple[int, int, int]]]:
+    """Split a log that joins recordings at each time reversal: the frames with the stamps of recording
+    k moved after recording k-1 (gap SEGMENT_GAP_S), and (offset_ns, own t0_ns, end_ns) per recording.
+    Streams are matched recording by recording in the order read; a stream with fewer recordings than
+    the most-split one goes to those its time span overlaps. A log whose time never goes back but in
+    which every stream is silent for more than a day (RECORDING_GAP_NS: a folder of NMEA files from
+    different years, a logger that kept one file across voyages) is split there the same way."""
+    # (frame, stream) -> (row positions, recording index of each); a stray stamp (a corrupt time far from
+    # the rest, dropped later by the stream's repair) makes no recording of its own
+    runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    spans: list[tuple[int, int]] = []
+    for name, df in frames_ns.items():
+        if df is None or not len(df):
+            continue
+        key = STREAM_KEY[name]
+        t_all = df["t_ns"].to_numpy()
+        groups = [("truth", np.arange(len(df)))] if key is None else stream_rows(df, key)
+        for sid, pos in groups:
+            order = np.argsort(t_all[pos], kind="stable")
+            t_sorted = t_all[pos][order]
+            stray_sorted = plausibility.stray_stamps(t_sorted)
+            spans += _covered(t_sorted[~stray_sorted].astype(np.int64))
+            stray = np.zeros(len(pos), dtype=bool)
+            stray[order] = stray_sorted
+            pos = np.asarray(pos)[~stray]
+            runs[(name, str(sid))] = (pos, _runs_of(t_all[pos]))
+    n_seg = 1 + max((int(r.max()) for _, r in runs.values() if len(r)), default=0)
+    seg_of: dict[str, np.ndarray] = {
+        name: np.full(len(df), -1, dtype=np.int64) for name, df in frames_ns.items() if df is not None
+    }  # -1: a stray stamp, left where it is
+    if n_seg > 1:
+        why = f"time jumps back: the log joins {n_seg} recordings; each is analysed on its own"
+        _match_recordings(frames_ns, runs, n_seg, seg_of)
+    else:
+        bounds = _silence_bounds(spans)
+        if not len(bounds):
+            return frames_ns, []
+        if len(bounds) >= MAX_SILENT_RECORDINGS:  # stamps scattered over years: corrupt time fields
+            why = f"no stream has a stamp for more than a day {len(bounds)} times: corrupt time fields, not split"
+            skipped.append(Skipped("<log>", why, len(bounds) + 1, "not segmented"))
+            return frames_ns, []
+        n_seg = len(bounds) + 1
+        why = (
+            f"no stream has a stamp for more than a day {len(bounds)} time(s): the log holds {n_seg} "
+            "recordings; each is analysed on its own"
+        )
+        for (name, _), (pos, _) in runs.items():
+            seg_of[name][pos] = np.searchsorted(bounds, frames_ns[name]["t_ns"].to_numpy()[pos], side="right")
     starts = np.full(n_seg, np.iinfo(np.int64).max, dtype=np.int64)
     ends = np.full(n_seg, np.iinfo(np.int64).min, dtype=np.int64)
     for name, df in frames_ns.items():
@@ -657,14 +714,7 @@ def _segment_frames(
         shift = np.array([layout[k][0] - layout[k][1] for k in range(n_seg)] + [0], dtype=np.int64)
         df["t_ns"] = t + shift[np.where(seg_of[name] < 0, n_seg, seg_of[name])]
         out[name] = df
-    skipped.append(
-        Skipped(
-            "<log>",
-            f"time jumps back: the log joins {n_seg} recordings; each is analysed on its own",
-            n_seg,
-            "segmented",
-        )
-    )
+    skipped.append(Skipped("<log>", why, n_seg, "segmented"))
     return out, layout
 
 

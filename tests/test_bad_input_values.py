@@ -253,3 +253,43 @@ def test_recordings_whose_spans_add_up_beyond_any_clock_are_not_laid_end_to_end(
     frames, layout = _segment_frames({"imu": imu}, skipped)
     assert layout == [] and frames["imu"] is imu
     assert [s.action for s in skipped] == ["not segmented"] and "beyond any clock" in skipped[0].reason
+
+
+def test_a_day_in_which_no_stream_has_a_stamp_separates_recordings_and_wild_stamps_do_not() -> None:
+    """A folder of NMEA files from different years (the real `nmea_boats`: 2011 and 2018) never goes back
+    in time, yet holds separate recordings; an hour's silence does not separate them, nor do stamps a
+    corrupt field scattered over years."""
+    from spooflens.epoch_table import Skipped, _segment_frames
+
+    day_ns, s_ns = 86_400_000_000_000, 1_000_000_000
+    t0 = 1_306_933_631 * s_ns
+    ship_2011 = t0 + np.arange(12) * s_ns
+    ship_2018 = t0 + 2_637 * day_ns + np.arange(150) * s_ns
+    boat_2018 = ship_2018[-1] + 355 * s_ns + np.arange(300) * s_ns  # six minutes later: the same recording
+    fixes = pd.DataFrame(
+        {
+            "t_ns": np.r_[ship_2011, ship_2018, boat_2018],
+            "receiver_id": ["a"] * 12 + ["b"] * 150 + ["c"] * 300,
+        }
+    )
+    headings = pd.DataFrame({"t_ns": ship_2011 + s_ns // 2, "heading_id": "a/HDT"})
+    skipped: list[Skipped] = []
+    frames, layout = _segment_frames({"fixes": fixes, "headings": headings}, skipped)
+    assert [(start, end) for _, start, end in layout] == [
+        (ship_2011[0], ship_2011[-1] + s_ns // 2),
+        (ship_2018[0], boat_2018[-1]),
+    ]
+    assert [s.action for s in skipped] == ["segmented"] and "more than a day" in skipped[0].reason
+    second = frames["fixes"]["t_ns"].to_numpy()[12:]
+    assert second[0] - (ship_2011[-1] + s_ns // 2) == 60 * s_ns  # laid SEGMENT_GAP_S after the first
+    assert np.array_equal(np.diff(second), np.diff(np.r_[ship_2018, boat_2018]))
+    # an hour's silence: one recording
+    skipped = []
+    hour = pd.DataFrame({"t_ns": np.r_[ship_2011, ship_2011 + 3_600 * s_ns], "receiver_id": "a"})
+    assert _segment_frames({"fixes": hour}, skipped) == ({"fixes": hour}, []) and skipped == []
+    # 20 groups of 5 stamps, years apart: corrupt time fields, not 20 recordings
+    wild = pd.DataFrame(
+        {"t_ns": (np.arange(20)[:, None] * 400 * day_ns + np.arange(5) * s_ns).ravel(), "imu_id": "/imu"}
+    )
+    frames, layout = _segment_frames({"imu": wild}, skipped)
+    assert layout == [] and frames["imu"] is wild and [s.action for s in skipped] == ["not segmented"]

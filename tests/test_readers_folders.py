@@ -114,3 +114,14 @@ def test_a_folder_of_mcap_files_without_a_bag_s_metadata_is_a_folder_of_separate
     assert find_logs((str(folder),)) == ([], [])  # the folder itself is no log (its files are)
     bag = samples / "ground_ros2_sqlite3"
     assert sniff_format(bag) == "ros2bag" and find_logs((str(bag),))[0] == [bag]
+
+
+def test_the_real_boat_folder_holds_a_2011_recording_and_a_2018_one() -> None:
+    from readers import read_log
+
+    table = read_log(real_log("nmea_boats"))
+    assert len(table.segments) == 2
+    first, second = table.segment(0), table.segment(1)
+    assert first.receivers() == ["gpsd_saab-r4.log/GP"] and first.absolute_iso(0.0).startswith("2011-06-01")
+    assert second.receivers() == ["gpsd_bundg_zeus_9.log/GP", "signalk_plaka.log/GP"]
+    assert second.absolute_iso(0.0).startswith("2018-08-20") and second.duration_s < 5 * 3600
