@@ -578,6 +578,7 @@ def _drop_impossible_stamps(frames_ns: dict[str, pd.DataFrame], skipped: list[Sk
 
 
 RECORDING_GAP_NS = 86_400 * 1_000_000_000  # a day in which no stream has a stamp: separate recordings
+GNSS_FRAMES = ("fixes", "observations")  # a recording has GNSS of its own
 MAX_SILENT_RECORDINGS = 16  # more day-long silences than this are scattered corrupt stamps, not recordings
 
 
@@ -640,6 +641,7 @@ def _segment_frames(
     # the rest, dropped later by the stream's repair) makes no recording of its own
     runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     spans: list[tuple[int, int]] = []
+    gnss_starts: list[int] = []  # where each span of a GNSS stream begins
     for name, df in frames_ns.items():
         if df is None or not len(df):
             continue
@@ -650,7 +652,11 @@ def _segment_frames(
             order = np.argsort(t_all[pos], kind="stable")
             t_sorted = t_all[pos][order]
             stray_sorted = plausibility.stray_stamps(t_sorted)
-            spans += _covered(t_sorted[~stray_sorted].astype(np.int64))
+            kept = t_sorted[~stray_sorted] if stray_sorted.any() else t_sorted
+            covered = _covered(kept.astype(np.int64, copy=False))
+            spans += covered
+            if name in GNSS_FRAMES:
+                gnss_starts += [a for a, _ in covered]
             stray = np.zeros(len(pos), dtype=bool)
             stray[order] = stray_sorted
             pos = np.asarray(pos)[~stray]
@@ -665,6 +671,10 @@ def _segment_frames(
     else:
         bounds = _silence_bounds(spans)
         if not len(bounds):
+            return frames_ns, []
+        if len(np.unique(np.searchsorted(bounds, gnss_starts, side="right"))) < len(bounds) + 1:
+            # a stretch without GNSS is no recording to analyse but a stream on another clock (an IMU
+            # years off: the cross-check leaves it out)
             return frames_ns, []
         if len(bounds) >= MAX_SILENT_RECORDINGS:  # stamps scattered over years: corrupt time fields
             why = f"no stream has a stamp for more than a day {len(bounds)} times: corrupt time fields, not split"
