@@ -591,13 +591,15 @@ def _covered(t_sorted: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
-def _silence_bounds(spans: list[tuple[int, int]]) -> np.ndarray:
+def _silence_bounds(spans: list[tuple[int, int]], ranges: list[tuple[int, int]]) -> np.ndarray:
     """The first stamp of each recording after the first: where the union of every stream's spans is
-    broken by more than RECORDING_GAP_NS."""
+    broken by more than RECORDING_GAP_NS and no stream (first to last stamp, `ranges`) goes on across
+    the silence. A stream on both sides is one source whose own clock jumped (a receiver's time spoofed
+    forward, its date set wrong): evidence for the detectors, kept in one recording."""
     bounds = []
     end = None
     for a, b in sorted(spans):
-        if end is not None and a - end > RECORDING_GAP_NS:
+        if end is not None and a - end > RECORDING_GAP_NS and not any(lo < a <= hi for lo, hi in ranges):
             bounds.append(a)
         end = b if end is None else max(end, b)
     return np.array(bounds, dtype=np.int64)
@@ -635,12 +637,14 @@ def _segment_frames(
     k moved after recording k-1 (gap SEGMENT_GAP_S), and (offset_ns, own t0_ns, end_ns) per recording.
     Streams are matched recording by recording in the order read; a stream with fewer recordings than
     the most-split one goes to those its time span overlaps. A log whose time never goes back but in
-    which every stream is silent for more than a day (RECORDING_GAP_NS: a folder of NMEA files from
-    different years, a logger that kept one file across voyages) is split there the same way."""
+    which every stream is silent for more than a day (RECORDING_GAP_NS), and no stream has stamps on
+    both sides of the silence (a folder of NMEA files from different years), is split there the same
+    way."""
     # (frame, stream) -> (row positions, recording index of each); a stray stamp (a corrupt time far from
     # the rest, dropped later by the stream's repair) makes no recording of its own
     runs: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
     spans: list[tuple[int, int]] = []
+    ranges: list[tuple[int, int]] = []  # each stream's first and last stamp
     gnss_starts: list[int] = []  # where each span of a GNSS stream begins
     for name, df in frames_ns.items():
         if df is None or not len(df):
@@ -655,6 +659,8 @@ def _segment_frames(
             kept = t_sorted[~stray_sorted] if stray_sorted.any() else t_sorted
             covered = _covered(kept.astype(np.int64, copy=False))
             spans += covered
+            if covered:
+                ranges.append((covered[0][0], covered[-1][1]))
             if name in GNSS_FRAMES:
                 gnss_starts += [a for a, _ in covered]
             stray = np.zeros(len(pos), dtype=bool)
@@ -669,7 +675,7 @@ def _segment_frames(
         why = f"time jumps back: the log joins {n_seg} recordings; each is analysed on its own"
         _match_recordings(frames_ns, runs, n_seg, seg_of)
     else:
-        bounds = _silence_bounds(spans)
+        bounds = _silence_bounds(spans, ranges)
         if not len(bounds):
             return frames_ns, []
         if len(np.unique(np.searchsorted(bounds, gnss_starts, side="right"))) < len(bounds) + 1:

@@ -287,11 +287,18 @@ def test_a_day_in_which_no_stream_has_a_stamp_separates_recordings_and_wild_stam
     skipped = []
     hour = pd.DataFrame({"t_ns": np.r_[ship_2011, ship_2011 + 3_600 * s_ns], "receiver_id": "a"})
     assert _segment_frames({"fixes": hour}, skipped) == ({"fixes": hour}, []) and skipped == []
+    # one receiver whose time jumps a week forward (spoofed, or its date set wrong): one recording, the
+    # jump left for the detectors
+    jumped = pd.DataFrame({"t_ns": np.r_[ship_2011, ship_2011[-1] + 7 * day_ns + ship_2011 - t0], "receiver_id": "a"})
+    assert _segment_frames({"fixes": jumped}, skipped)[1] == [] and skipped == []
     # an IMU on another clock, years off: no recording of its own (no GNSS in it); the cross-check drops it
     imu = pd.DataFrame({"t_ns": ship_2011 - 1_000 * day_ns, "imu_id": "/imu"})
     assert _segment_frames({"fixes": hour, "imu": imu}, skipped)[1] == [] and skipped == []
-    # 20 groups of 5 fixes, years apart: corrupt time fields, not 20 recordings
+    # scattered stamps of one stream: no recordings (the stream goes on across every silence)
     wild = (np.arange(20)[:, None] * 400 * day_ns + np.arange(5) * s_ns).ravel()
     scattered = pd.DataFrame({"t_ns": wild, "receiver_id": "a"})
+    assert _segment_frames({"fixes": scattered}, skipped)[1] == [] and skipped == []
+    # 20 receivers each in another year: corrupt time fields, not 20 recordings (and said)
+    scattered["receiver_id"] = np.repeat([f"rx{k}" for k in range(20)], 5)
     frames, layout = _segment_frames({"fixes": scattered}, skipped)
     assert layout == [] and frames["fixes"] is scattered and [s.action for s in skipped] == ["not segmented"]
