@@ -51,7 +51,8 @@ class ReaderFormat:
     whose storage files are logs by themselves); such a directory that also holds logs of other formats
     is a folder of separate logs, not one log (`sniff_format` says so). `companion(path)`: a file of this
     format that is not a log by itself but data a log reads (a RINEX navigation file beside its
-    observations): `batch` counts it among the paths that are not logs, not among the failed logs.
+    observations, a log's `LOG.truth.csv`): `batch` counts it among the paths that are not logs, not
+    among the failed logs, and it makes no folder a folder of separate logs.
     """
 
     name: str

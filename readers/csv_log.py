@@ -35,6 +35,7 @@ from readers.csv_text import MAX_T0_NS, header_comments, parse_t0_ns, read_rows,
 from spooflens.epoch_table import TIME_REFERENCES, EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.schema import BODY_FRAMES, FRAMES, FixType
+from spooflens.truth import SUFFIX as TRUTH_SUFFIX
 
 Progress = Callable[[int, int], None]
 
@@ -307,11 +308,17 @@ def read_csv(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
 _LOG_COLUMNS = {"sv_id", "lat_deg", "ax_mps2", *_TIME_COLUMNS}
 
 
+def _is_truth_file(path: Path) -> bool:
+    """A log's ground truth beside it (`LOG.truth.csv`): data for that log, not a log (nor does it make
+    its folder a CSV log)."""
+    return path.name.endswith(TRUTH_SUFFIX)
+
+
 def _is_csv(path: Path, head: bytes) -> bool:
     """A `.csv` file of text with commas; a file of another name only when its header row names a time,
     satellite, latitude or accelerometer column (a README or SOURCE.md with a comma in it is no log)."""
     if path.is_dir():
-        return any(path.glob("*.csv"))
+        return any(not _is_truth_file(p) for p in path.glob("*.csv"))
     text = head.decode("utf-8", errors="replace")
     if "\ufffd" in text or "," not in text or not text.lstrip().startswith(("#", *"abcdefghijklmnopqrstuvwxyz")):
         return False
@@ -329,5 +336,6 @@ FORMATS = (
         _is_csv,
         rewrite="spooflens.writers.rewrite:rewrite_with_writer",
         folder_of_files=True,
+        companion=_is_truth_file,
     ),
 )

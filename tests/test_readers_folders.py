@@ -125,3 +125,13 @@ def test_the_real_boat_folder_holds_a_2011_recording_and_a_2018_one() -> None:
     assert first.receivers() == ["gpsd_saab-r4.log/GP"] and first.absolute_iso(0.0).startswith("2011-06-01")
     assert second.receivers() == ["gpsd_bundg_zeus_9.log/GP", "signalk_plaka.log/GP"]
     assert second.absolute_iso(0.0).startswith("2018-08-20") and second.duration_s < 5 * 3600
+
+
+def test_the_sample_folder_names_its_logs_not_their_truth_files() -> None:
+    samples = Path(__file__).resolve().parents[1] / "sample_logs"
+    truth = samples / "ground.bag.truth.csv"
+    assert sniff_format(truth) == "csv" and is_companion(truth, "csv")  # data for ground.bag, no log
+    with pytest.raises(
+        UnsupportedFormatError, match=r"it holds dual_receiver\.mcap \(mcap\), ground\.bag \(ros1bag\),"
+    ):
+        sniff_format(samples)  # not "not one csv log": truth files make no CSV folder
