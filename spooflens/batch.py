@@ -128,8 +128,8 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
 def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> dict[str, Any]:
     """The task: analyse one log and write its outputs; never raises (a failure is a record)."""
     from spooflens.analysis import AnalyzeOptions
-    from spooflens.cli import _damaged, _read, segments_summary, write_outputs
-    from spooflens.errors import NoGnssError, SpooflensError
+    from spooflens.cli import _damaged, _read, require_gnss, segments_summary, write_outputs
+    from spooflens.errors import SpooflensError
     from spooflens.pipeline import analyze_segments
     from spooflens.threads import limited
 
@@ -138,8 +138,7 @@ def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> d
     t0 = time.perf_counter()
     try:
         table = _read(path, {}, False)
-        if not len(table.fixes):
-            raise NoGnssError(path, "no GNSS fixes found; nothing analysed")
+        require_gnss(path, table)
         with limited(1):  # one task per core already: a second thread per task would only contend
             analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
         out.mkdir(parents=True, exist_ok=True)

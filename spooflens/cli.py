@@ -150,7 +150,8 @@ def analyse_log(
     """Read and analyse LOG (its truth file beside it joins the table, for drawing only): one analysis per
     recording the log joins (usually one).
 
-    A log without GNSS raises NoGnssError before anything is written: a failed analysis leaves no files.
+    A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
+    files.
     """
     from spooflens.analysis import AnalyzeOptions
     from spooflens.detectors.references import STATION_OPTION, parse_station
@@ -161,10 +162,7 @@ def analyse_log(
     except ValueError as err:
         raise click.BadParameter(str(err), param_hint="--station") from None
     table = _read(log, _parse_topics(topics), not quiet and show_progress())
-    if not len(table.fixes):
-        lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
-        why = f"; lost: {lost}" if lost else ""
-        raise NoGnssError(log, f"no GNSS fixes found (streams: {_stream_names(table)}{why}); nothing written")
+    require_gnss(log, table)
     with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
     for rid, *_ in given_stations:
         if rid is not None and rid not in with_obs:
@@ -181,6 +179,18 @@ def analyse_log(
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
         return analyze_segments(table, options, on_step)
+
+
+def require_gnss(log: Path, table: EpochTable) -> None:
+    """Raise NoGnssError for a log with no GNSS data at all. Raw observations or satellite reports
+    without fixes (a RINEX observation file with no navigation file beside it) are still analysed: the
+    detectors that need only them run (C/N0 across satellites), the others say what they lack."""
+    if len(table.fixes) or len(table.observations) or len(table.satellites):
+        return
+    lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
+    why = f"; lost: {lost}" if lost else ""
+    found = f"no GNSS fixes, raw observations or satellite reports found (streams: {_stream_names(table)}{why})"
+    raise NoGnssError(log, f"{found}; nothing written")
 
 
 def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool) -> int:

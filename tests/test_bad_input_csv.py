@@ -61,7 +61,11 @@ def test_a_bad_t0_comment_is_refused_in_one_line(
     # with no fixes left there is nothing to analyse: one line that says why
     assert main(["analyze", str(log), "-o", str(tmp_path / "x.rrd"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no GNSS fixes found" in err[0] and "fixes.csv: lost 1 (file not read: # t0_ns:" in err[0]
+    assert (
+        len(err) == 1
+        and "no GNSS fixes, raw observations or satellite reports found" in err[0]
+        and "fixes.csv: lost 1 (file not read: # t0_ns:" in err[0]
+    )
     assert why in err[0] and not (tmp_path / "x.rrd").exists()
     # a single CSV file with a bad clock is refused outright
     assert main(["inspect", str(log / "fixes.csv")]) == 2

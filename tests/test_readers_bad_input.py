@@ -147,7 +147,12 @@ def test_cli_on_a_log_without_gnss_fails_and_writes_nothing(tmp_path: Path, caps
         ["analyze", str(path), "-o", str(outputs[0]), "--json", str(outputs[1]), "--html", str(outputs[2]), "--quiet"]
     )
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and "no GNSS fixes found" in err[0] and "imu_only.mcap" in err[0]
+    assert (
+        code == 2
+        and len(err) == 1
+        and "no GNSS fixes, raw observations or satellite reports found" in err[0]
+        and "imu_only.mcap" in err[0]
+    )
     assert "nothing written" in err[0] and not any(p.exists() for p in outputs)
 
 

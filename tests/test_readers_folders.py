@@ -135,3 +135,20 @@ def test_the_sample_folder_names_its_logs_not_their_truth_files() -> None:
         UnsupportedFormatError, match=r"it holds dual_receiver\.mcap \(mcap\), ground\.bag \(ros1bag\),"
     ):
         sniff_format(samples)  # not "not one csv log": truth files make no CSV folder
+
+
+def test_a_rinex_observation_file_without_navigation_is_analysed_by_what_needs_only_observations(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The real phone RINEX `pixel6.23o` has no navigation file beside it: no fixes, no satellite
+    positions. It was refused ("no GNSS fixes"); its C/N0 across satellites is still evidence."""
+    import json
+
+    log = real_log("android_gnsslogger/gnss_lib_py/pixel6.23o")
+    out = tmp_path / "p6.json"
+    assert main(["analyze", str(log), "-o", str(tmp_path / "p6.rrd"), "--json", str(out), "--quiet"]) == 0
+    summary = json.loads(out.read_text())
+    ran = {a["name"]: a for a in summary["analyses"] if a.get("ran")}
+    assert "satellite_signals" in ran and "raim" not in ran
+    assert summary["verdict"]["headline"].startswith("NO SPOOFING DETECTED by 1 detector")
+    assert capsys.readouterr().out.strip().startswith("NO SPOOFING DETECTED")
