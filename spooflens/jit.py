@@ -40,11 +40,11 @@ class LazyKernel:
         self.__module__ = function.__module__
         self.__doc__ = function.__doc__
 
-    def __call__(self, *args: Any) -> Any:
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
         if self.dispatcher is None:
             dispatch_all()
         assert self.dispatcher is not None
-        return self.dispatcher(*args)
+        return self.dispatcher(*args, **kwargs)
 
     def __repr__(self) -> str:
         return f"<kernel {self.__module__}.{self.__qualname__}, not compiled yet>"
@@ -84,7 +84,3 @@ def dispatch_all() -> None:
                 if isinstance(value, LazyKernel) and value.dispatcher is not None:
                     names[key] = value.dispatcher
 
-
-def numba_loaded() -> bool:
-    """Whether a kernel has been called (and numba imported) in this process."""
-    return _numba_njit is not None
