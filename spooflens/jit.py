@@ -83,4 +83,3 @@ def dispatch_all() -> None:
             for key, value in list(names.items()):
                 if isinstance(value, LazyKernel) and value.dispatcher is not None:
                     names[key] = value.dispatcher
-
