@@ -100,6 +100,10 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
 
     matched: list[Path] = []
     for pattern in patterns:
+        literal = not any(c in pattern for c in "*?[")
+        if literal and Path(pattern).is_dir() and not _is_log_dir(Path(pattern)):
+            # a folder named as it is (`spooflens batch flights/`) means the logs in it, at any depth
+            pattern = glob.escape(pattern.rstrip("/")) + "/**/*"
         hits = sorted(glob.glob(pattern, recursive=True)) or ([pattern] if Path(pattern).exists() else [])  # noqa: PTH207
         matched += [Path(h) for h in hits]
     matched = list(dict.fromkeys(p.resolve() for p in matched))

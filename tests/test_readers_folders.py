@@ -66,6 +66,8 @@ def test_batch_takes_each_log_of_a_folder_of_separate_logs_and_a_voyage_folder_a
         "receivers/gpsd_ublox-zed-f9r.log",
         "voyage",
     ]
+    assert find_logs((str(logs),)) == find_logs((f"{logs}/**/*",))  # a folder named as it is: every depth
+    assert find_logs((str(logs / "voyage"),))[0] == [(logs / "voyage").resolve()]  # a folder that is one log
 
 
 def test_the_phone_folder_of_the_real_logs_is_three_logs() -> None:
@@ -111,7 +113,8 @@ def test_a_folder_of_mcap_files_without_a_bag_s_metadata_is_a_folder_of_separate
     ):
         sniff_format(folder)
     assert sorted(p.name for p in find_logs((str(folder / "*"),))[0]) == ["dual_receiver.mcap", "ground_ros2.mcap"]
-    assert find_logs((str(folder),)) == ([], [])  # the folder itself is no log (its files are)
+    # the folder named as it is: the logs in it
+    assert sorted(p.name for p in find_logs((str(folder),))[0]) == ["dual_receiver.mcap", "ground_ros2.mcap"]
     bag = samples / "ground_ros2_sqlite3"
     assert sniff_format(bag) == "ros2bag" and find_logs((str(bag),))[0] == [bag]
 
