@@ -155,3 +155,20 @@ def test_a_rinex_observation_file_without_navigation_is_analysed_by_what_needs_o
     assert "satellite_signals" in ran and "raim" not in ran
     assert summary["verdict"]["headline"].startswith("NO SPOOFING DETECTED by 1 detector")
     assert capsys.readouterr().out.strip().startswith("NO SPOOFING DETECTED")
+
+
+def test_raw_observations_with_satellite_positions_and_no_fixes_are_solved_and_analysed(tmp_path: Path) -> None:
+    """The meaconed sample without its receiver's fixes: refused before ("no GNSS fixes"); its pseudoranges
+    give the fixes, and the meaconing at 120 s is found as with them."""
+    import json
+
+    samples = Path(__file__).resolve().parents[1] / "sample_logs"
+    log = tmp_path / "raw_only"
+    shutil.copytree(samples / "meaconed_raw", log)
+    (log / "fixes.csv").unlink()
+    out = tmp_path / "raw.json"
+    assert main(["analyze", str(log), "-o", str(tmp_path / "raw.rrd"), "--json", str(out), "--quiet"]) == 0
+    summary = json.loads(out.read_text())
+    assert [c["action"] for c in summary["computed"]] == ["computed"]
+    spoofing = [i for i in summary["verdict"]["incidents"] if i["spoofing"]]
+    assert spoofing and abs(spoofing[0]["start_s"] - 120.0) <= 2.0
