@@ -1,7 +1,8 @@
 """Numba's `njit`, with numba imported only when a compiled kernel is first called.
 
 Importing numba takes about a quarter of a second, and loading its cached kernels more. A log without
-an IMU (NMEA, RINEX, a phone's GnssLogger file) runs none of the kernels, yet every module that defines
+an IMU (an NMEA, RINEX or u-blox receiver log, raw observations included) runs none of the kernels
+(the navigation filter and the inertial detectors need IMU samples), yet every module that defines
 one is imported when the analyses register. So `njit` here wraps each kernel in a `LazyKernel`; the
 first call of any of them imports numba, makes the real dispatchers of all kernels defined so far and
 puts them in place of the wrappers in the globals of spooflens' and readers' modules. Numba looks up a
