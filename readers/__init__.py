@@ -100,8 +100,27 @@ READERS: dict[str, ReaderFn] = _Registry()
 
 
 def sniff_format(path: Path) -> str:
-    """Format name of `path` from its content; raises ReaderError for what no reader knows."""
+    """Format name of `path` from its content; raises ReaderError for what no reader knows (for a folder
+    that is no log but holds logs, naming them)."""
     path = Path(path)
+    name, head = _sniffed(path)
+    if name is not None:
+        return name
+    if path.is_dir():
+        _refuse_a_folder_of_separate_logs(path, None)
+    what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
+    raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
+
+
+def recognised_format(path: Path) -> str | None:
+    """Format name of `path`, None when no reader knows it, without listing what a folder that is no log
+    holds (`batch` asks this of every folder it matches); raises ReaderError for what cannot be read at
+    all, and for a folder in a format of files that also holds logs of another."""
+    return _sniffed(Path(path))[0]
+
+
+def _sniffed(path: Path) -> tuple[str | None, bytes]:
+    """(format name or None, the head read) of `path`."""
     if not path.exists():
         raise ReaderError(path, "no such file or directory")
     mode = path.stat().st_mode
@@ -117,11 +136,8 @@ def sniff_format(path: Path) -> str:
         if fmt.sniff(path, head):
             if fmt.folder_of_files and path.is_dir():
                 _refuse_a_folder_of_separate_logs(path, fmt.name)
-            return fmt.name
-    if path.is_dir():
-        _refuse_a_folder_of_separate_logs(path, None)
-    what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
-    raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
+            return fmt.name, head
+    return None, head
 
 
 def is_companion(path: Path, name: str) -> bool:

@@ -85,13 +85,12 @@ def _size(path: Path) -> int:
 
 def _is_log_dir(path: Path) -> bool:
     """A directory that is one log (not a folder of logs)."""
-    from readers import sniff_format
+    from readers import recognised_format
 
     try:
-        sniff_format(path)
+        return recognised_format(path) is not None
     except Exception:  # noqa: BLE001 - not a log: that is all sniffing says
         return False
-    return True
 
 
 def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
