@@ -81,7 +81,9 @@ os.register_at_fork(after_in_child=_forget_pool)
 
 def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
     """Every call's result, in order; side by side when more than one thread is allowed (an exception is
-    raised as the sequential run would have raised it, after the others finish)."""
+    raised as the sequential run would have raised it, after the others finish). A call still queued when
+    this thread is done with the first (the pool busy with work `started` earlier) runs on this thread
+    rather than being waited for."""
     size = thread_count()
     if size < 2 or len(calls) < 2 or getattr(_inside, "active", False):
         return [call() for call in calls]
@@ -90,6 +92,9 @@ def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
     try:
         first = calls[0]()
     finally:
+        for k, future in enumerate(futures):
+            if future.cancel():  # not begun: nothing is gained by waiting for a worker
+                futures[k] = _run_now(calls[k + 1])
         rest = [f.exception() for f in futures]  # wait for all before anything is raised
     for error in rest:
         if error is not None:
@@ -103,6 +108,11 @@ def started(call: Callable[[], T]) -> Future[T]:
     size = thread_count()
     if size >= 2 and not getattr(_inside, "active", False):
         return _executor(size).submit(call)
+    return _run_now(call)
+
+
+def _run_now(call: Callable[[], T]) -> Future[T]:
+    """`call` made on this thread, its result (or exception) in a future that is done."""
     done: Future[T] = Future()
     try:
         done.set_result(call())

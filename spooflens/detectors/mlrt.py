@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +45,7 @@ from spooflens.jit import njit
 from spooflens.kalman_update import masked_update, observed_parts
 from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
 from spooflens.statespace import BlockDiagonal, LinearGaussianModel, kernel_array
+from spooflens.threads import both, in_parallel
 
 FloatArray = NDArray[np.float64]
 LOG_2PI = math.log(2 * math.pi)
@@ -406,7 +408,6 @@ def _two_filter_offline(
     a_ptr: np.ndarray,
     a_col: np.ndarray,
     from_epoch: int = 0,
-    keep_forward: bool = False,
 ):
     """`_offline_at` for every `stride`-th epoch m < last from `from_epoch` on (NaN elsewhere) of the
     augmented model over epochs 0..last (the backward pass stops below `from_epoch`), from the forward
@@ -415,8 +416,9 @@ def _two_filter_offline(
     pass keeps only its estimate before every `block` epochs; the backward pass then runs down block by
     block, the block's forward estimates made again from its checkpoint and combined with its backward
     information (the whole forward record, gains and augmented matrices were 1.5 GB per hour of 10 Hz
-    GNSS; this holds two blocks). With `keep_forward` the forward pass keeps its estimates at the epochs
-    evaluated instead (when they are few: a curve every tenth epoch), and none is made again."""
+    GNSS; this holds two blocks). When the epochs evaluated are few (a curve every tenth epoch),
+    `_forward_kept`, `_backward_kept` and `_offline_kept` give the same numbers, the two passes side by
+    side and none made again."""
     n, q = x0.shape[0], rows.shape[0]
     model = (A_head, A_tail, Q_head, Q_tail, C, R, y, t)
     na = n + (2 * q if ramp else q)
@@ -426,19 +428,14 @@ def _two_filter_offline(
     # forward pass: the estimate after epoch b * block - 1 (the prior for block 0)
     ck_x = np.zeros((nb, na))
     ck_P = np.zeros((nb, na, na))
-    x = np.zeros(na)
-    x[:n] = x0
-    P = np.zeros((na, na))
-    P[:n, :n] = P0
-    base = from_epoch // stride
-    kept = (last // stride - base + 1) if keep_forward else 0
-    kept_x, kept_P = np.zeros((kept, na)), np.zeros((kept, na, na))
+    x, P = _augmented_prior(x0, P0, na)
+    nothing_x, nothing_P = np.zeros((0, na)), np.zeros((0, na, na))
     for b in range(nb):
         ck_x[b] = x
         ck_P[b] = P
-        if b < nb - 1 or keep_forward:
+        if b < nb - 1:
             hi = min((b + 1) * block, N) - 1
-            x, P = _forward_block(model, rows, ramp, x, P, b * block, hi, kept_x, kept_P, a_ptr, a_col, stride, base)
+            x, P = _forward_block(model, rows, ramp, x, P, b * block, hi, nothing_x, nothing_P, a_ptr, a_col)
     bf = np.full(N, np.nan)
     flat = np.full(N, np.nan)
     xs = np.zeros((block, na))
@@ -452,27 +449,138 @@ def _two_filter_offline(
         lo, hi = b * block, min((b + 1) * block, N) - 1
         if hi < from_epoch:
             break
-        if not keep_forward:
-            _forward_block(model, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col, 1, lo)
-        for k in range(hi, lo - 1, -1):  # backward_information: Lam[k] from the data after k
+        _forward_block(model, rows, ramp, ck_x[b].copy(), ck_P[b].copy(), lo, hi, xs, Ps, a_ptr, a_col, 1, lo)
+        for k in range(hi, lo - 1, -1):
             Ls[k - lo] = L
             als[k - lo] = a
             if k == 0:
                 break
-            _augmented_into(
-                A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp, Aa, Qa, Ca
-            )
-            L, a = information_update(L, a, Ca, R[k], y[k])
-            L, a = information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
+            L, a = _information_back(model, n, q, rows, ramp, k, L, a, Aa, Qa, Ca, a_ptr, a_col)
         top = hi if hi < N - 1 else hi - 1  # the last epoch has no data after it
         for k in range(max(lo, from_epoch), top + 1):
             if k % stride == 0:
-                if keep_forward:
-                    xk, Pk = kept_x[k // stride - base], kept_P[k // stride - base]
-                else:
-                    xk, Pk = xs[k - lo], Ps[k - lo]
-                bf[k], flat[k] = _offline_at(xk, Pk, Ls[k - lo], als[k - lo], n, q, Sigma, first)
+                bf[k], flat[k] = _offline_at(xs[k - lo], Ps[k - lo], Ls[k - lo], als[k - lo], n, q, Sigma, first)
     return bf, flat
+
+
+@njit(cache=True)
+def _augmented_prior(x0: np.ndarray, P0: np.ndarray, na: int) -> tuple[np.ndarray, np.ndarray]:
+    """The augmented model's prior: the model's, and the added states known to be zero."""
+    n = x0.shape[0]
+    x = np.zeros(na)
+    x[:n] = x0
+    P = np.zeros((na, na))
+    P[:n, :n] = P0
+    return x, P
+
+
+@njit(cache=True)
+def _information_back(
+    model: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    n: int,
+    q: int,
+    rows: np.ndarray,
+    ramp: bool,
+    k: int,
+    L: np.ndarray,
+    a: np.ndarray,
+    Aa: np.ndarray,
+    Qa: np.ndarray,
+    Ca: np.ndarray,
+    a_ptr: np.ndarray,
+    a_col: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`backward_information`'s step from the information of the data after epoch k to that of the data
+    after k - 1 (k >= 1), on the augmented model made into Aa, Qa, Ca."""
+    A_head, A_tail, Q_head, Q_tail, C, R, y, t = model
+    _augmented_into(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp, Aa, Qa, Ca)
+    L, a = information_update(L, a, Ca, R[k], y[k])
+    return information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
+
+
+@njit(cache=True, nogil=True)
+def _forward_kept(
+    model: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    x0: np.ndarray,
+    P0: np.ndarray,
+    rows: np.ndarray,
+    ramp: bool,
+    last: int,
+    stride: int,
+    a_ptr: np.ndarray,
+    a_col: np.ndarray,
+    from_epoch: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_two_filter_offline`'s forward pass over epochs 0..last, its estimates kept at every stride-th
+    epoch from `from_epoch // stride * stride` on (row k // stride - from_epoch // stride)."""
+    n, q = x0.shape[0], rows.shape[0]
+    na = n + (2 * q if ramp else q)
+    base = from_epoch // stride
+    kept = last // stride - base + 1
+    xs, Ps = np.zeros((kept, na)), np.zeros((kept, na, na))
+    x, P = _augmented_prior(x0, P0, na)
+    _forward_block(model, rows, ramp, x, P, 0, last, xs, Ps, a_ptr, a_col, stride, base)
+    return xs, Ps
+
+
+@njit(cache=True, nogil=True)
+def _backward_kept(
+    model: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    n: int,
+    rows: np.ndarray,
+    ramp: bool,
+    last: int,
+    stride: int,
+    a_ptr: np.ndarray,
+    a_col: np.ndarray,
+    from_epoch: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_two_filter_offline`'s backward information filter from `last` down to `from_epoch`: the
+    information (L, a) of the data after every stride-th epoch, indexed as `_forward_kept` keeps them."""
+    q = rows.shape[0]
+    na = n + (2 * q if ramp else q)
+    base = from_epoch // stride
+    kept = last // stride - base + 1
+    Ls, als = np.zeros((kept, na, na)), np.zeros((kept, na))
+    L = np.zeros((na, na))
+    a = np.zeros(na)
+    Aa, Qa, Ca = np.zeros((na, na)), np.zeros((na, na)), np.zeros((model[4].shape[1], na))
+    for k in range(last, from_epoch - 1, -1):
+        if k % stride == 0:
+            Ls[k // stride - base] = L
+            als[k // stride - base] = a
+        if k == 0:
+            break
+        L, a = _information_back(model, n, q, rows, ramp, k, L, a, Aa, Qa, Ca, a_ptr, a_col)
+    return Ls, als
+
+
+@njit(cache=True, nogil=True)
+def _offline_kept(
+    xs: np.ndarray,
+    Ps: np.ndarray,
+    Ls: np.ndarray,
+    als: np.ndarray,
+    n: int,
+    q: int,
+    Sigma: np.ndarray,
+    first: int,
+    last: int,
+    stride: int,
+    from_epoch: int,
+    lo: int,
+    hi: int,
+    bf: np.ndarray,
+    flat: np.ndarray,
+) -> None:
+    """`_offline_at` of the kept estimates and information into bf[k], flat[k] at every stride-th epoch k
+    in lo..hi - 1 that is a candidate (from `from_epoch`, below `last`: the last epoch has no data after
+    it)."""
+    base = from_epoch // stride
+    for k in range(max(lo, from_epoch), min(hi, last)):
+        if k % stride == 0:
+            i = k // stride - base
+            bf[k], flat[k] = _offline_at(xs[i], Ps[i], Ls[i], als[i], n, q, Sigma, first)
 
 
 def ramp_two_filter_offline(
@@ -509,7 +617,7 @@ def _offline(
     C, R, y = (kernel_array(a[: last + 1]) for a in (model.C, model.R, model.y))
     na = model.n_states + (2 if ramp else 1) * len(rows)
     kept_bytes = (last // stride - first // stride + 1) * na * (na + 1) * 8
-    bf, flat = _two_filter_offline(
+    parts = (
         np.ascontiguousarray(A.head),
         np.ascontiguousarray(A.tail),
         np.ascontiguousarray(Q.head),
@@ -518,18 +626,26 @@ def _offline(
         R,
         y,
         np.ascontiguousarray(model.t[: last + 1], dtype=float),
-        model.x0.astype(float),
-        np.ascontiguousarray(model.P0, dtype=float),
-        np.array(rows, dtype=np.int64),
-        ramp,
-        np.diag(sigma**2),
-        last,
-        OFFLINE_BLOCK,
-        stride,
-        *pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp)),
-        first,
-        kept_bytes <= OFFLINE_KEEP_BYTES,
     )
+    x0, P0 = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+    rows_index, Sigma = np.array(rows, dtype=np.int64), np.diag(sigma**2)
+    a_ptr, a_col = pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp))
+    jumping = -1 if ramp else model.n_states  # `_offline_at`'s `first`
+    if 2 * kept_bytes <= OFFLINE_KEEP_BYTES:  # the estimates and the information at the epochs evaluated
+        (xs, Ps), (Ls, als) = both(
+            partial(_forward_kept, parts, x0, P0, rows_index, ramp, last, stride, a_ptr, a_col, first),
+            partial(_backward_kept, parts, model.n_states, rows_index, ramp, last, stride, a_ptr, a_col, first),
+        )
+        bf, flat = np.full(last + 1, np.nan), np.full(last + 1, np.nan)
+        middle = (first + last) // 2  # each half's candidates on a thread of their own
+        evaluate = partial(
+            _offline_kept, xs, Ps, Ls, als, model.n_states, len(rows), Sigma, jumping, last, stride, first
+        )
+        in_parallel([partial(evaluate, first, middle, bf, flat), partial(evaluate, middle, last + 1, bf, flat)])
+    else:
+        bf, flat = _two_filter_offline(
+            *parts, x0, P0, rows_index, ramp, Sigma, last, OFFLINE_BLOCK, stride, a_ptr, a_col, first
+        )
     epochs = np.arange(last + 1)
     kept = (epochs % stride == 0) & (epochs >= first)
     return RampOffline(model.t[: last + 1][kept], bf[kept], flat[kept])
