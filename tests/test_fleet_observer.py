@@ -85,7 +85,10 @@ def test_eq26_is_the_error_dynamics_and_theorem2_is_not(designed):
     miss = 0.0
     for k in range(20):
         sim = np.concatenate([d.gamma_obar.T @ run.e_x[k, i] for i, d in enumerate(decs_x)])
-        assert sim == pytest.approx(e26, abs=1e-12 * max(1.0, np.abs(run.x[k]).max()))
+        # relative to the larger of the states and the errors (the unobservable errors of the unstable
+        # agents outgrow the states: 5e7 against 2e5 by epoch 20, equal to 6e-15 of themselves)
+        scale = max(1.0, float(np.abs(run.x[k]).max()), float(np.abs(e26).max()))
+        assert sim == pytest.approx(e26, abs=1e-12 * scale)
         miss = max(miss, float(np.abs(sim - et2).max()))
         e26, et2 = M26 @ e26, Mt2 @ et2
     assert miss > 0.5
