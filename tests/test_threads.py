@@ -38,6 +38,25 @@ def test_one_thread_runs_the_pieces_in_the_caller_one_after_the_other() -> None:
     assert seen == [threading.current_thread().name] * 3
 
 
+def test_a_piece_queued_behind_busy_workers_runs_on_the_calling_thread() -> None:
+    # both workers held by work started earlier (the smoother, the windowed pass): the caller does not
+    # sit waiting for one of them, it runs the queued piece itself, and the answers keep their order
+    release = threading.Event()
+    with threads.limited(2):
+        busy = [threads.started(lambda: release.wait(10)) for _ in range(2)]
+        caller = threading.current_thread().name
+        ran_on: list[str] = []
+
+        def piece(value: int) -> int:
+            ran_on.append(threading.current_thread().name)
+            return value
+
+        assert threads.in_parallel([lambda: piece(1), lambda: piece(2), lambda: piece(3)]) == [1, 2, 3]
+        assert not release.is_set() and ran_on == [caller] * 3
+        release.set()
+        assert all(b.result(10) for b in busy)
+
+
 def test_the_environment_sets_the_threads_and_nonsense_is_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(threads.ENV, "1")
     assert threads.thread_count() == 1
