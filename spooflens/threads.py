@@ -27,7 +27,9 @@ _MAX_DEFAULT = 2
 _lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0
-_inside = threading.local()  # set in the pool's threads: a piece never waits on the pool it runs in
+# set in the pool's threads: work `started` there runs at once (its future may be waited for while every
+# worker is busy); `in_parallel` may nest, since it never waits for a call that has not begun
+_inside = threading.local()
 _limit: int | None = None  # set by `limited`
 
 
@@ -82,10 +84,11 @@ os.register_at_fork(after_in_child=_forget_pool)
 def in_parallel(calls: Sequence[Callable[[], T]]) -> list[T]:
     """Every call's result, in order; side by side when more than one thread is allowed (an exception is
     raised as the sequential run would have raised it, after the others finish). A call still queued when
-    this thread is done with the first (the pool busy with work `started` earlier) runs on this thread
-    rather than being waited for."""
+    this thread is done with the first (the pool busy with work `started` earlier, or with the pieces of
+    the call this one is part of) runs on this thread rather than being waited for: so a piece may run
+    pieces of its own side by side, and no thread ever waits for work that has not begun."""
     size = thread_count()
-    if size < 2 or len(calls) < 2 or getattr(_inside, "active", False):
+    if size < 2 or len(calls) < 2:
         return [call() for call in calls]
     pool = _executor(size)
     futures = [pool.submit(call) for call in calls[1:]]

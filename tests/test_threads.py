@@ -57,6 +57,24 @@ def test_a_piece_queued_behind_busy_workers_runs_on_the_calling_thread() -> None
         assert all(b.result(10) for b in busy)
 
 
+def test_a_piece_on_the_pool_runs_its_own_pieces_side_by_side_and_never_waits_for_a_queued_one() -> None:
+    meet = threading.Barrier(2, timeout=10)  # passes only when the two inner pieces run together
+
+    def inner(value: int) -> int:
+        meet.wait()
+        return value
+
+    def outer() -> list[int]:  # runs on a worker; the other worker is free
+        return threads.in_parallel([lambda: inner(1), lambda: inner(2)])
+
+    def nested_when_busy() -> list[int]:  # both workers taken by the outer pieces: runs its own
+        return threads.in_parallel([lambda: 3, lambda: 4])
+
+    with threads.limited(2):
+        assert threads.in_parallel([lambda: 0, outer]) == [0, [1, 2]]
+        assert threads.in_parallel([nested_when_busy, nested_when_busy, nested_when_busy]) == [[3, 4]] * 3
+
+
 def test_the_environment_sets_the_threads_and_nonsense_is_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(threads.ENV, "1")
     assert threads.thread_count() == 1

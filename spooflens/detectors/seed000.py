@@ -159,16 +159,14 @@ def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> li
     """The four detectors' results (statistics, thresholds, alarms, onsets, curves)."""
     opts = opts or Seed000Options()
     offline = opts.offline and model.n_epochs > 3
-    # the offline pass over the whole log needs nothing of the windowed one: both at once, the offline
-    # pass on this thread, so that its own two filters can run side by side too (a piece running on the
-    # pool runs what it starts itself one after the other)
-    off, st = both(
+    # the offline pass over the whole log needs nothing of the windowed one: both at once
+    st, off = both(
+        partial(statistics, model, opts),
         partial(
             ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps), stride=_stride(model, opts)
         )
         if offline
         else _none,
-        partial(statistics, model, opts),
     )
     t, r = st.t, st.ramp
     kf_thr = opts.kf_threshold if opts.kf_threshold is not None else threshold(opts.kf_p_false_alarm, 3)
