@@ -36,3 +36,17 @@ def test_a_module_that_does_not_compile_is_said_and_the_next_package_still_compi
 def test_the_project_packages_are_the_ones_an_analysis_imports() -> None:
     assert {p.name for p in warmup.PACKAGES} == {"spooflens", "readers"}
     assert all((p / "__init__.py").is_file() for p in warmup.PACKAGES)
+
+
+def test_the_warm_up_reaches_both_forms_of_the_offline_pass() -> None:
+    # the kept form (two filters side by side) on a short log, the bounded form a day-long log takes
+    from spooflens.detectors import mlrt
+
+    car = warmup.SAMPLES / "ground_ros2.mcap"
+    names = [name for name, _ in warmup.warm([car])]
+    assert names == ["ground_ros2.mcap", "ground_ros2.mcap (long-log offline pass)"]
+    assert mlrt.OFFLINE_KEEP_BYTES == 64_000_000  # put back
+    from spooflens.detectors import mlrt as loaded  # the dispatchers, now that kernels have run
+
+    for kernel in (loaded._forward_kept, loaded._two_filter_offline):
+        assert getattr(kernel, "signatures", None), kernel

@@ -498,6 +498,15 @@ def _information_back(
     return information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
 
 
+@njit(cache=True)
+def _kept_rows(n: int, q: int, ramp: bool, span: tuple[int, int, int]) -> tuple[int, int, int]:
+    """(augmented states, first kept row's stride index, rows kept) of the stride-th epochs from
+    `from_epoch // stride * stride` to `last` (`span` is (last, stride, from_epoch))."""
+    last, stride, from_epoch = span
+    base = from_epoch // stride
+    return n + (2 * q if ramp else q), base, last // stride - base + 1
+
+
 @njit(cache=True, nogil=True)
 def _forward_kept(
     model: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
@@ -505,21 +514,17 @@ def _forward_kept(
     P0: np.ndarray,
     rows: np.ndarray,
     ramp: bool,
-    last: int,
-    stride: int,
-    a_ptr: np.ndarray,
-    a_col: np.ndarray,
-    from_epoch: int,
+    span: tuple[int, int, int],
+    pattern: tuple[np.ndarray, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
     """`_two_filter_offline`'s forward pass over epochs 0..last, its estimates kept at every stride-th
-    epoch from `from_epoch // stride * stride` on (row k // stride - from_epoch // stride)."""
-    n, q = x0.shape[0], rows.shape[0]
-    na = n + (2 * q if ramp else q)
-    base = from_epoch // stride
-    kept = last // stride - base + 1
+    epoch from `from_epoch // stride * stride` on (row k // stride - from_epoch // stride), for `span`
+    (last, stride, from_epoch); `pattern` is (a_ptr, a_col)."""
+    last, stride, _ = span
+    na, base, kept = _kept_rows(x0.shape[0], rows.shape[0], ramp, span)
     xs, Ps = np.zeros((kept, na)), np.zeros((kept, na, na))
     x, P = _augmented_prior(x0, P0, na)
-    _forward_block(model, rows, ramp, x, P, 0, last, xs, Ps, a_ptr, a_col, stride, base)
+    _forward_block(model, rows, ramp, x, P, 0, last, xs, Ps, pattern[0], pattern[1], stride, base)
     return xs, Ps
 
 
@@ -529,18 +534,14 @@ def _backward_kept(
     n: int,
     rows: np.ndarray,
     ramp: bool,
-    last: int,
-    stride: int,
-    a_ptr: np.ndarray,
-    a_col: np.ndarray,
-    from_epoch: int,
+    span: tuple[int, int, int],
+    pattern: tuple[np.ndarray, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
     """`_two_filter_offline`'s backward information filter from `last` down to `from_epoch`: the
     information (L, a) of the data after every stride-th epoch, indexed as `_forward_kept` keeps them."""
+    last, stride, from_epoch = span
     q = rows.shape[0]
-    na = n + (2 * q if ramp else q)
-    base = from_epoch // stride
-    kept = last // stride - base + 1
+    na, base, kept = _kept_rows(n, q, ramp, span)
     Ls, als = np.zeros((kept, na, na)), np.zeros((kept, na))
     L = np.zeros((na, na))
     a = np.zeros(na)
@@ -551,7 +552,7 @@ def _backward_kept(
             als[k // stride - base] = a
         if k == 0:
             break
-        L, a = _information_back(model, n, q, rows, ramp, k, L, a, Aa, Qa, Ca, a_ptr, a_col)
+        L, a = _information_back(model, n, q, rows, ramp, k, L, a, Aa, Qa, Ca, pattern[0], pattern[1])
     return Ls, als
 
 
@@ -632,9 +633,10 @@ def _offline(
     a_ptr, a_col = pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp))
     jumping = -1 if ramp else model.n_states  # `_offline_at`'s `first`
     if 2 * kept_bytes <= OFFLINE_KEEP_BYTES:  # the estimates and the information at the epochs evaluated
+        span = (last, stride, first)
         (xs, Ps), (Ls, als) = both(
-            partial(_forward_kept, parts, x0, P0, rows_index, ramp, last, stride, a_ptr, a_col, first),
-            partial(_backward_kept, parts, model.n_states, rows_index, ramp, last, stride, a_ptr, a_col, first),
+            partial(_forward_kept, parts, x0, P0, rows_index, ramp, span, (a_ptr, a_col)),
+            partial(_backward_kept, parts, model.n_states, rows_index, ramp, span, (a_ptr, a_col)),
         )
         bf, flat = np.full(last + 1, np.nan), np.full(last + 1, np.nan)
         middle = (first + last) // 2  # each half's candidates on a thread of their own
