@@ -46,7 +46,5 @@ def test_the_warm_up_reaches_both_forms_of_the_offline_pass() -> None:
     names = [name for name, _ in warmup.warm([car])]
     assert names == ["ground_ros2.mcap", "ground_ros2.mcap (long-log offline pass)"]
     assert mlrt.OFFLINE_KEEP_BYTES == 64_000_000  # put back
-    from spooflens.detectors import mlrt as loaded  # the dispatchers, now that kernels have run
-
-    for kernel in (loaded._forward_kept, loaded._two_filter_offline):
+    for kernel in (mlrt._forward_kept, mlrt._two_filter_offline):  # dispatchers now: kernels have run
         assert getattr(kernel, "signatures", None), kernel

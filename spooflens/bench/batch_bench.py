@@ -8,7 +8,7 @@ with the cluster's start and the fleet tables, is printed beside it. Goal: 2 wor
 On a machine shared with other work the second core is not free: the load average is printed, and the
 mean time each log took inside its task (equal for 1 and 2 workers when the cores are free; longer
 with 2 workers when they compete for the CPU with other work). Beside it, the machine's own ceiling: the
-same compiled-free compute loop in two processes at once against one alone (`core_scaling`: 2.0 on two
+same compute loop (small matrix products) in two processes at once against one alone (`core_scaling`: 2.0 on two
 cores that share nothing; virtual cores that share a physical one, or its caches, give less, and no
 batch of independent tasks can beat it).
 """

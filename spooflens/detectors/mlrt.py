@@ -566,9 +566,7 @@ def _offline_kept(
     q: int,
     Sigma: np.ndarray,
     first: int,
-    last: int,
-    stride: int,
-    from_epoch: int,
+    span: tuple[int, int, int],
     lo: int,
     hi: int,
     bf: np.ndarray,
@@ -576,7 +574,8 @@ def _offline_kept(
 ) -> None:
     """`_offline_at` of the kept estimates and information into bf[k], flat[k] at every stride-th epoch k
     in lo..hi - 1 that is a candidate (from `from_epoch`, below `last`: the last epoch has no data after
-    it)."""
+    it), for `span` (last, stride, from_epoch) as `_forward_kept` and `_backward_kept` kept them."""
+    last, stride, from_epoch = span
     base = from_epoch // stride
     for k in range(max(lo, from_epoch), min(hi, last)):
         if k % stride == 0:
@@ -640,9 +639,7 @@ def _offline(
         )
         bf, flat = np.full(last + 1, np.nan), np.full(last + 1, np.nan)
         middle = (first + last) // 2  # each half's candidates on a thread of their own
-        evaluate = partial(
-            _offline_kept, xs, Ps, Ls, als, model.n_states, len(rows), Sigma, jumping, last, stride, first
-        )
+        evaluate = partial(_offline_kept, xs, Ps, Ls, als, model.n_states, len(rows), Sigma, jumping, span)
         in_parallel([partial(evaluate, first, middle, bf, flat), partial(evaluate, middle, last + 1, bf, flat)])
     else:
         bf, flat = _two_filter_offline(
