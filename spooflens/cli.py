@@ -29,6 +29,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError, one_line
 from spooflens.evidence import label
 from spooflens.navigation.imu_models import PRESETS
+from spooflens.threads import side_work
 
 if TYPE_CHECKING:
     from spooflens.pipeline import Analysis
@@ -178,7 +179,13 @@ def analyse_log(
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        return analyze_segments(table, options, on_step)
+        with side_work(_import_writers):
+            return analyze_segments(table, options, on_step)
+
+
+def _import_writers() -> None:
+    """The recording's library, imported while the analysis leaves a core idle (`threads.side_work`)."""
+    import spooflens.recording  # noqa: F401
 
 
 def require_gnss(log: Path, table: EpochTable) -> None:

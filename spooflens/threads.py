@@ -6,6 +6,12 @@ smoother. Where two of them do not depend on each other they run side by side in
 identical to running them one after the other (the callers keep the sequential order of decisions);
 work whose result is needed only later is `started` and read from its future.
 
+A stretch where one compiled loop runs alone (the navigation filter's final pass: nothing else can start
+before it ends) leaves a core idle; work the end of the run needs anyway and that holds the GIL (the
+recording library's import, a fifth of a second) is queued for such a stretch (`side_work`) and begun
+there (`core_idle`). Begun earlier it would only take turns with the analysis for the GIL, and a
+compiled call returning would wait for its turn.
+
 `SPOOFLENS_THREADS` sets how many threads (default: the cores, at most 2, since the independent pieces
 come in pairs). `spooflens batch` sets one per task: its workers already fill the cores.
 """
@@ -16,7 +22,7 @@ import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -31,6 +37,7 @@ _pool_size = 0
 # worker is busy); `in_parallel` may nest, since it never waits for a call that has not begun
 _inside = threading.local()
 _limit: int | None = None  # set by `limited`
+_side: list[Callable[[], object]] = []  # queued by `side_work`, begun by `core_idle`
 
 
 def thread_count() -> int:
@@ -126,6 +133,38 @@ def _run_now(call: Callable[[], T]) -> Future[T]:
 
 A = TypeVar("A")
 B = TypeVar("B")
+
+
+@contextmanager
+def side_work(*calls: Callable[[], object]) -> Iterator[None]:
+    """Within the block, `calls` wait for the first stretch that leaves a core idle (`core_idle`); those
+    not begun by the block's end are dropped (their work is done where it is needed: each call only
+    prepares what later code makes for itself when it is missing, and its errors are ignored)."""
+    with _lock:
+        _side.extend(calls)
+    try:
+        yield
+    finally:
+        with _lock:
+            _side[:] = [call for call in _side if call not in calls]
+
+
+@contextmanager
+def core_idle() -> Iterator[None]:
+    """Around a compiled call that runs alone and releases the GIL: the queued side work begins on
+    another thread meanwhile (when more than one thread is allowed)."""
+    if thread_count() >= 2 and not getattr(_inside, "active", False):
+        with _lock:
+            queued = list(_side)
+            _side.clear()
+        for call in queued:
+            _executor(thread_count()).submit(_quietly, call)
+    yield
+
+
+def _quietly(call: Callable[[], object]) -> None:
+    with suppress(Exception):  # side work only prepares: the code that needs it fails in place
+        call()
 
 
 def both(first: Callable[[], A], second: Callable[[], B]) -> tuple[A, B]:

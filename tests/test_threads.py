@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -137,6 +138,35 @@ def test_with_one_thread_a_started_call_is_made_at_once_in_the_caller() -> None:
     with threads.limited(1):
         done = threads.started(lambda: threading.current_thread().name)
     assert done.done() and done.result() == threading.current_thread().name
+
+
+def test_side_work_begins_beside_a_compiled_stretch_once_and_is_dropped_when_none_comes() -> None:
+    meet = threading.Barrier(2, timeout=10)  # passes only while the side work runs beside the stretch
+    ran: list[str] = []
+
+    def side() -> None:
+        meet.wait()
+        ran.append(threading.current_thread().name)
+
+    def failing() -> None:
+        raise RuntimeError("a side import that fails is left to the code that needs it")
+
+    with threads.limited(2), threads.side_work(failing, side):
+        with threads.core_idle():
+            meet.wait()
+        with threads.core_idle():  # the queue was emptied: nothing runs twice
+            pass
+    deadline = time.monotonic() + 10
+    while not ran and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert len(ran) == 1 and ran[0] != threading.current_thread().name
+
+    never: list[int] = []
+    with threads.limited(1), threads.side_work(lambda: never.append(1)), threads.core_idle():
+        pass  # one thread: no core to spare
+    with threads.limited(2), threads.core_idle():  # the block ended: the queued call went with it
+        pass
+    assert never == [] and threads._side == []
 
 
 def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() -> None:

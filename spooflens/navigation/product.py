@@ -28,7 +28,7 @@ from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, le
 from spooflens.navigation.smoother import SmoothedSolution, check_smoothable, smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.statespace import LinearGaussianModel
-from spooflens.threads import started
+from spooflens.threads import core_idle, started
 
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
@@ -83,7 +83,8 @@ def solve_navigation(
         P_upd_every=P_UPD_EVERY,
         compare=False,  # only coasts are compared with the GNSS they leave out (S_all: 56 MB a day)
     )
-    sol = run_prepared(inputs, opts, start)
+    with core_idle():  # the whole log's filter, alone: the other core takes queued side work
+        sol = run_prepared(inputs, opts, start)
     check_smoothable(sol)  # its one failure raised here, as when the smoother ran in the foreground
     smoothing = started(partial(smooth, sol, variances=False))  # compiled, without the GIL
     return Navigation(sol, smoothing, sol.error_model(), learned, inputs, start)
