@@ -79,13 +79,15 @@ def analyse_end_to_end(log: str, out_dir: str) -> dict[str, Any]:
     stages = _Stages()
     stages.start("import")
     from spooflens.analysis import AnalyzeOptions
-    from spooflens.cli import _read, write_outputs
+    from spooflens.cli import _import_writers, _read, write_outputs
     from spooflens.pipeline import analyze_table
+    from spooflens.threads import side_work
 
     stages.start("read")
     table = _read(Path(log), {}, False)
     stages.start("analysis: start")
-    analysis = analyze_table(table, AnalyzeOptions(), lambda step: stages.start(f"analysis: {step}"))
+    with side_work(_import_writers):  # as `analyze` does: the recording's library imported meanwhile
+        analysis = analyze_table(table, AnalyzeOptions(), lambda step: stages.start(f"analysis: {step}"))
     stages.start("recording + JSON")
     out = Path(out_dir)
     write_outputs([analysis], out / "e2e.rrd", out / "e2e.json", None)
