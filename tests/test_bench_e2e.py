@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from spooflens.bench.e2e_bench import _median_run, _spread, held_bytes
+from pathlib import Path
+
+from spooflens.bench.common import measure_in_child
+from spooflens.bench.e2e_bench import SAMPLE, _median_run, _spread, held_bytes
 
 
 def test_the_median_run_is_reported_whole_and_the_lower_middle_of_an_even_count() -> None:
@@ -33,3 +36,20 @@ def test_what_a_product_holds_counts_each_array_once_through_fields_dicts_and_fi
     failed.set_exception(ValueError("no smoothing"))
     held = held_bytes({"nav": Product(big, big, done), "broken": failed, "pending": Future()})
     assert held == {"nav.big": 4.0, "nav.smoothing.result()[track]": 2.0}
+
+
+def test_the_first_run_by_part_loads_numba_once_and_the_second_analysis_answers_the_same(tmp_path: Path) -> None:
+    parts = measure_in_child("spooflens.bench.e2e_bench", "first_run_parts", str(SAMPLE), str(tmp_path))["result"]
+    names = [s["stage"] for s in parts["stages"]]
+    assert names == [
+        "imports of spooflens analyze",
+        "read",
+        "numba: import and registries",
+        "analysis (first, kernels loaded as called)",
+        "recording + JSON",
+        "analysis (again, same process)",
+        "recording + JSON (again)",
+    ]
+    first, again = parts["verdicts"]
+    assert first == again and first[0].startswith("SPOOFING DETECTED")
+    assert all((tmp_path / f"parts{k}.rrd").stat().st_size > 0 for k in (0, 1))

@@ -233,6 +233,40 @@ def first_run(log: str, cold_cache: bool) -> dict[str, Any]:
     return {"wall_s": wall, "exit": done.returncode, "verdict": done.stdout.strip()[-120:]}
 
 
+def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
+    """Where a first run's time goes, in one new process: the imports `analyze` makes, reading, numba's own
+    start (its import and its registries, scipy.linalg's import among them: numba's BLAS), the analysis
+    (each kernel loaded from the cache at its first call) and the recording; then the same analysis and
+    recording again in that process, which load nothing. The process's own start is not counted."""
+    stages = _Stages()
+    stages.start("imports of spooflens analyze")
+    from spooflens.analysis import AnalyzeOptions
+    from spooflens.cli import _import_writers, _read, write_outputs
+    from spooflens.pipeline import analyze_segments
+    from spooflens.threads import side_work
+
+    stages.start("read")
+    table = _read(Path(log), {}, False)
+    stages.start("numba: import and registries")
+    from numba.core.registry import cpu_target
+
+    from spooflens.jit import dispatch_all
+
+    dispatch_all()
+    cpu_target.target_context.refresh()
+    verdicts = []
+    for k, when in enumerate(("first, kernels loaded as called", "again, same process")):
+        stages.start(f"analysis ({when})")
+        with side_work(_import_writers):
+            analyses = analyze_segments(table, AnalyzeOptions())
+        stages.start("recording + JSON" + (" (again)" if k else ""))
+        out = Path(out_dir)
+        write_outputs(analyses, out / f"parts{k}.rrd", out / f"parts{k}.json", None)
+        verdicts.append([a.verdict.headline for a in analyses])
+    stages.stop()
+    return {"stages": stages.rows, "verdicts": verdicts}
+
+
 def _first_runs(log: Path, label: str, repeat: int) -> Table:
     """`repeat` first runs of `spooflens analyze LOG` (kernels as cached), the median beside the goal."""
     err_console.print(f"first run of `spooflens analyze` on {log.name} ...")
@@ -384,6 +418,10 @@ def command(
     cold = first_run(str(SAMPLE), cold_cache=True)
     t.add_row("empty numba cache (every kernel compiled)", f"{cold['wall_s']:.1f}", "", "")
     out.print(t)
+    with tempfile.TemporaryDirectory() as tmp:
+        parts = measure_in_child(__name__, "first_run_parts", str(SAMPLE), tmp)
+    title = f"first run of spooflens analyze {SAMPLE.name}, by part (one process; its start not counted)"
+    out.print(_stage_table(title, parts["result"]["stages"]))
     gnss_log = workdir / "ship_gnss_only_10min.mcap"
     _ensure(gnss_log, "write_gnss_only")
     out.print(_first_runs(gnss_log, "no IMU: no compiled kernel runs, numba is not imported", repeat))
