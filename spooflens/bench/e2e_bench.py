@@ -37,6 +37,7 @@ from spooflens.bench.common import measure_in_child
 from spooflens.console import console, err_console
 
 GOALS = {"e2e_s": 5.0, "e2e_rss_mb": 1024.0, "read_s": 1.5, "voyage_rss_mb": 2048.0, "first_run_s": 2.0}
+ISSUE_ROSBAGS_LOOP_S = 7.9  # the rosbags loop on the machine the 5 s goal was set on (issue 13)
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "spoofed_flight.mcap"
 
 
@@ -386,6 +387,14 @@ def command(
             f"{read['cpu_s'] / loop['result']['cpu_s']:.2f}",
             "<= 1",
             _met(read["cpu_s"] / loop["result"]["cpu_s"], 1.0),
+        ),
+        (
+            # the machine's speed moves the seconds by a third between sessions; this ratio moves less. The
+            # issue set 5 s where the same loop took 7.9 s: 0.63 of it
+            "end to end wall / rosbags loop CPU",
+            f"{e2e['wall_s'] / loop['result']['cpu_s']:.2f}",
+            f"<= {GOALS['e2e_s'] / ISSUE_ROSBAGS_LOOP_S:.2f}",
+            _met(e2e["wall_s"] / loop["result"]["cpu_s"], GOALS["e2e_s"] / ISSUE_ROSBAGS_LOOP_S),
         ),
         ("recording size (MB)", f"{r['rrd_mb']:.1f}", "", ""),
     ]
