@@ -9,7 +9,9 @@ puts them in place of the wrappers in the globals of spooflens' and readers' mod
 kernel's callees in those globals when it compiles it (at its first call, after this), so compiled code
 calls dispatchers as before; a kernel defined after that is a dispatcher from the start. The dispatchers
 are made from the same functions with the same options, so numba's on-disk cache (keyed by the source
-file and the function) is the one `spooflens.warmup` filled.
+file and the function) is the one `spooflens.warmup` filled. Before all that, a wrapper asks
+`spooflens.aot` for the kernel compiled ahead of time for its arguments' types: when there is one,
+numba is not imported at all.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import sys
 import threading
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
+
+from spooflens import aot
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -43,6 +47,9 @@ class LazyKernel:
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         if self.dispatcher is None:
+            ahead = None if kwargs else aot.compiled(self.function, args)
+            if ahead is not None:  # built at install for these argument types: numba need not start
+                return ahead(*args)
             dispatch_all()
         assert self.dispatcher is not None
         return self.dispatcher(*args, **kwargs)

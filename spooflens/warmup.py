@@ -31,7 +31,12 @@ import compileall
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
+
+from spooflens.errors import one_line
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 # the spoofed flight reaches every kernel (filter, smoother, detectors, the second pass, the coasts that
@@ -56,13 +61,28 @@ def _simulated_spoofed_flight(folder: Path) -> Path:
     return path
 
 
-def warm(logs: list[Path] | None = None) -> list[tuple[str, float]]:
-    """Analyse `logs` (default: see the module) end to end; (log, seconds) of each."""
+def warm(logs: list[Path] | None = None, called: list[tuple[Any, Any]] | None = None) -> list[tuple[str, float]]:
+    """Analyse `logs` (default: see the module) end to end with numba (never the kernels compiled ahead of
+    time); (log, seconds) of each. `called`, when given, receives each (dispatcher, signature) a call
+    from Python compiled or loaded: the signatures `spooflens.aot` builds."""
+    from spooflens import aot
+
+    done: list[tuple[str, float]] = []
+    aot.disabled = True
+    aot.forget()
+    try:
+        _warm_each(logs, called, done)
+    finally:
+        aot.disabled = False
+        aot.forget()
+    return done
+
+
+def _warm_each(logs: list[Path] | None, called: list[tuple[Any, Any]] | None, done: list[tuple[str, float]]) -> None:
     from spooflens.cli import analyse_log, write_outputs
     from spooflens.detectors import mlrt
 
-    done = []
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, _recording_calls(called):
         folder = Path(tmp)
         chosen = logs or default_logs() or [_simulated_spoofed_flight(folder)]
         for log in chosen:
@@ -79,7 +99,33 @@ def warm(logs: list[Path] | None = None) -> list[tuple[str, float]]:
         finally:
             mlrt.OFFLINE_KEEP_BYTES = keep
         done.append((f"{chosen[-1].name} (long-log offline pass)", time.perf_counter() - t0))
-    return done
+
+
+@contextmanager
+def _recording_calls(called: list[tuple[Any, Any]] | None) -> Iterator[None]:
+    """Within the block, every kernel signature a call from Python makes numba compile or load (its
+    first call with those types in this process) is appended to `called`."""
+    if called is None:
+        yield
+        return
+    from numba.core import dispatcher
+
+    target: Any = dispatcher.Dispatcher  # numba's own typing of the class knows no such method
+    plain = target._compile_for_args
+
+    def recording(self: Any, *args: Any, **kws: Any) -> Any:
+        result = plain(self, *args, **kws)
+        if not kws and not any(isinstance(a, dispatcher.OmittedArg) for a in args):
+            cres = self.overloads.get(tuple(self.typeof_pyval(a) for a in args))
+            if cres is not None:
+                called.append((self, cres.signature))
+        return result
+
+    target._compile_for_args = recording
+    try:
+        yield
+    finally:
+        target._compile_for_args = plain
 
 
 def compile_bytecode(packages: tuple[Path, ...] = PACKAGES) -> bool:
@@ -96,9 +142,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"spooflens warm-up: bytecode of {', '.join(p.name for p in PACKAGES)} written", flush=True)
     else:
         print("spooflens warm-up: some modules did not compile to bytecode (they compile at each import)", flush=True)
-    for name, seconds in warm([Path(a) for a in args] or None):
+    called: list[tuple[Any, Any]] = []
+    for name, seconds in warm([Path(a) for a in args] or None, called):
         print(f"spooflens warm-up: {name} analysed in {seconds:.1f} s", flush=True)
     print(f"spooflens warm-up: numba kernels compiled and cached in {time.perf_counter() - t0:.0f} s", flush=True)
+    t1 = time.perf_counter()
+    from spooflens import aot
+
+    try:
+        try:
+            exported = aot.build(called)
+        except Exception:  # noqa: BLE001 - the variants are a guess at what other logs call: without them
+            exported = aot.build(called, regular=False)
+    except Exception as err:  # noqa: BLE001 - without the module every kernel runs from numba's cache, as before
+        print(f"spooflens warm-up: kernels not compiled ahead of time ({one_line(err)}): numba loads them", flush=True)
+    else:
+        took = time.perf_counter() - t1
+        print(f"spooflens warm-up: {exported} kernel signatures compiled ahead of time in {took:.0f} s", flush=True)
     return 0
 
 

@@ -33,6 +33,7 @@ from typing import Any
 import click
 from rich.table import Table
 
+from spooflens import aot
 from spooflens.bench.common import measure_in_child
 from spooflens.console import console, err_console
 
@@ -220,13 +221,16 @@ def write_voyage(path: str, hours: float, block_h: float = 2.0) -> int:
     return write_blocks(Path(path), hours, block_h)
 
 
-def first_run(log: str, cold_cache: bool) -> dict[str, Any]:
+def first_run(log: str, cold_cache: bool, ahead_of_time: bool = True) -> dict[str, Any]:
     """Wall time of `spooflens analyze LOG` in a new process; with `cold_cache`, numba's cache is an empty
-    directory (every kernel compiled, as on a machine where nothing precompiled them)."""
+    directory and the kernels compiled ahead of time are not used (every kernel compiled, as on a machine
+    where nothing precompiled them); without `ahead_of_time`, only numba's cache is used."""
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ)
         if cold_cache:
             env["NUMBA_CACHE_DIR"] = str(Path(tmp, "numba"))
+        if cold_cache or not ahead_of_time:
+            env[aot.ENV] = "0"
         cmd = [sys.executable, "-m", "spooflens.cli", "analyze", log, "-o", str(Path(tmp, "x.rrd")), "--quiet"]
         t0 = time.perf_counter()
         done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False, cwd=tmp)
@@ -235,10 +239,10 @@ def first_run(log: str, cold_cache: bool) -> dict[str, Any]:
 
 
 def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
-    """Where a first run's time goes, in one new process: the imports `analyze` makes, reading, numba's own
-    start (its import and its registries, scipy.linalg's import among them: numba's BLAS), the analysis
-    (each kernel loaded from the cache at its first call) and the recording; then the same analysis and
-    recording again in that process, which load nothing. The process's own start is not counted."""
+    """Where a first run's time goes, in one new process: the imports `analyze` makes, reading, the
+    analysis (a kernel not compiled ahead of time imports numba and loads it from numba's cache at its
+    first call) and the recording; then the same analysis and recording again in that process, which
+    load nothing. The process's own start is not counted."""
     stages = _Stages()
     stages.start("imports of spooflens analyze")
     from spooflens.analysis import AnalyzeOptions
@@ -248,32 +252,28 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
 
     stages.start("read")
     table = _read(Path(log), {}, False)
-    stages.start("numba: import and registries")
-    from numba.core.registry import cpu_target
-
-    from spooflens.jit import dispatch_all
-
-    dispatch_all()
-    cpu_target.target_context.refresh()
     verdicts = []
-    for k, when in enumerate(("first, kernels loaded as called", "again, same process")):
+    numba_imported = []
+    for k, when in enumerate(("first", "again, same process")):
         stages.start(f"analysis ({when})")
         with side_work(_import_writers):
             analyses = analyze_segments(table, AnalyzeOptions())
+        numba_imported.append("numba" in sys.modules)
         stages.start("recording + JSON" + (" (again)" if k else ""))
         out = Path(out_dir)
         write_outputs(analyses, out / f"parts{k}.rrd", out / f"parts{k}.json", None)
         verdicts.append([a.verdict.headline for a in analyses])
     stages.stop()
-    return {"stages": stages.rows, "verdicts": verdicts}
+    return {"stages": stages.rows, "verdicts": verdicts, "numba_imported": numba_imported[0]}
 
 
-def _first_runs(log: Path, label: str, repeat: int) -> Table:
-    """`repeat` first runs of `spooflens analyze LOG` (kernels as cached), the median beside the goal."""
-    err_console.print(f"first run of `spooflens analyze` on {log.name} ...")
-    runs = [first_run(str(log), cold_cache=False) for _ in range(repeat)]
+def _first_runs(log: Path, label: str, repeat: int, ahead_of_time: bool = True, table: Table | None = None) -> Table:
+    """`repeat` first runs of `spooflens analyze LOG` (kernels as installed), the median beside the goal,
+    as a row of `table` (a new one by default)."""
+    err_console.print(f"first run of `spooflens analyze` on {log.name} ({label}) ...")
+    runs = [first_run(str(log), cold_cache=False, ahead_of_time=ahead_of_time) for _ in range(repeat)]
     median = _median_run(runs)
-    t = Table(f"first run of spooflens analyze {log.name}", "wall (s)", "goal", "")
+    t = table or Table(f"first run of spooflens analyze {log.name}", "wall (s)", "goal", "")
     t.add_row(
         label + (f", median of {repeat}" if repeat > 1 else ""),
         f"{median['wall_s']:.1f}" + _spread(runs),
@@ -423,13 +423,15 @@ def command(
         out.print(held)
     if not skip_voyage:
         _voyage(workdir, [float(h) for h in hours.split(",") if h.strip()], memory_limit_mb)
-    t = _first_runs(SAMPLE, "kernels as installed (compiled at install)", repeat)
+    t = _first_runs(SAMPLE, "kernels as installed (compiled ahead of time at install)", repeat)
+    _first_runs(SAMPLE, "numba's cache only (SPOOFLENS_AOT=0)", repeat, ahead_of_time=False, table=t)
     cold = first_run(str(SAMPLE), cold_cache=True)
     t.add_row("empty numba cache (every kernel compiled)", f"{cold['wall_s']:.1f}", "", "")
     out.print(t)
     with tempfile.TemporaryDirectory() as tmp:
         parts = measure_in_child(__name__, "first_run_parts", str(SAMPLE), tmp)
-    title = f"first run of spooflens analyze {SAMPLE.name}, by part (one process; its start not counted)"
+    numba = "numba imported" if parts["result"]["numba_imported"] else "numba never imported"
+    title = f"first run of spooflens analyze {SAMPLE.name}, by part (one process; its start not counted; {numba})"
     out.print(_stage_table(title, parts["result"]["stages"]))
     gnss_log = workdir / "ship_gnss_only_10min.mcap"
     _ensure(gnss_log, "write_gnss_only")
