@@ -7,7 +7,9 @@ own; two are extended:
 - `build_editable` first runs `python -m spooflens.warmup` in that environment, from the source tree:
   numba writes the compiled kernels to the `__pycache__` folders beside the sources, which is where the
   editable install's numba looks (its cache is keyed by the source's content, the CPU and the numba
-  version, so a cache made by the same numba release on the same machine is used as it is).
+  version, so a cache made by the same numba release on the same machine is used as it is); and the
+  kernels an analysis calls are built there into one extension module (`spooflens.aot`: used while
+  the kernel sources, Python, numpy and the CPU are those it was built with).
 
 A warm-up that fails or runs out of time only says so: the install goes on, and the first analysis
 compiles what it needs. `SPOOFLENS_NO_WARMUP=1` skips it (and the build environment's extra

@@ -1,5 +1,5 @@
-"""Compile every numba kernel into numba's on-disk cache, and every module of the project to bytecode,
-before the first analysis needs them.
+"""Compile every numba kernel into numba's on-disk cache and, ahead of time, into one extension module
+(`spooflens.aot`), and every module of the project to bytecode, before the first analysis needs them.
 
     python -m spooflens.warmup [LOG ...]
 
@@ -19,6 +19,10 @@ first import by itself, except where `PYTHONDONTWRITEBYTECODE` is set (common in
 this machine): there every run compiled the sixty-odd modules an analysis imports from source again
 (the sample flight's first run about 5 % slower in paired runs). pip writes the bytecode of what it
 installs into site-packages, but an editable install's sources stay where they are, so it is done here.
+
+Then every kernel signature those analyses called from Python (recorded as numba compiles or loads it)
+is compiled ahead of time into one extension module (`spooflens.aot`), which later analyses use without
+importing numba. A build that fails only says so: numba's cache serves every call then.
 
 `pip install` runs it (`spooflens/_build_backend.py`: the project's build backend, setuptools' with
 this step added), so the first `spooflens analyze` after installing finds every kernel compiled. Run it
