@@ -27,6 +27,7 @@ import importlib.util
 import json
 import os
 import platform
+import re
 import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -97,8 +98,18 @@ def numba_type_key(ty: Any) -> Key | None:
 
 
 def kernel_sources(packages: Sequence[Path] = PACKAGES) -> list[Path]:
-    """The project's source files that define kernels (their text names `njit(`)."""
-    return sorted(p for folder in packages for p in folder.rglob("*.py") if "njit(" in p.read_text())
+    """The project's source files that define kernels (their text names `njit(`), and the project's
+    modules those import (numba freezes a global such as a WGS84 constant into the compiled code)."""
+    root = packages[0].parent
+    names = {folder.name for folder in packages}
+    kernels = {p for folder in packages for p in folder.rglob("*.py") if "njit(" in p.read_text()}
+    imported = set()
+    for path in kernels:
+        for module in re.findall(r"^from ([\w.]+) import", path.read_text(), re.MULTILINE):
+            if module.split(".")[0] in names:
+                base = root.joinpath(*module.split("."))
+                imported |= {p for p in (base.with_suffix(".py"), base / "__init__.py") if p.exists()}
+    return sorted(kernels | imported)
 
 
 def _digests(paths: Iterable[Path]) -> dict[str, str]:
