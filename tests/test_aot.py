@@ -41,8 +41,13 @@ def _analyse(log: Path, out: Path, aot_setting: str) -> tuple[dict, bool]:
 
 def test_the_install_built_the_module_for_the_kernels_an_imu_log_calls() -> None:
     assert aot.MANIFEST.exists(), "no ahead-of-time kernels: run `python -m spooflens.warmup` (pip install -e does)"
-    names = {e["kernel"] for e in json.loads(aot.MANIFEST.read_text())["exports"]}
+    manifest = json.loads(aot.MANIFEST.read_text())
+    names = {e["kernel"] for e in manifest["exports"]}
     assert {"spooflens.navigation.kernels:filter_loop", "spooflens.detectors.kalman:_forward"} <= names
+    # the kernels' files and what they import from the project (constants numba freezes into the code)
+    assert {"spooflens/navigation/kernels.py", "spooflens/kalman_update.py", "spooflens/constants.py"} <= set(
+        manifest["sources"]
+    )
 
 
 def test_an_imu_log_is_analysed_without_numba_and_exactly_as_numba_analyses_it(tmp_path: Path) -> None:
