@@ -89,10 +89,24 @@ def command(n_logs: int, seconds: float, workdir: Path) -> int:
         if failed:
             raise click.ClickException(f"{len(failed)} log(s) failed: {failed[0]['error']}")
         runs[workers] = (r, load)
-    t = Table("workers", "tasks wall (s)", "logs/h", "whole run (s)", "load before", title=f"{len(logs)} logs")
+    t = Table(
+        "workers",
+        "tasks wall (s)",
+        "logs/h",
+        "whole run (s)",
+        "each log in its task (s, mean)",
+        "load before",
+        title=f"{len(logs)} logs",
+    )
     for workers, (r, load) in runs.items():
+        inside = float(np.mean([a["seconds"] for a in r.analysed]))
         t.add_row(
-            str(workers), f"{r.tasks_s:.1f}", f"{len(logs) / r.tasks_s * 3600:.0f}", f"{r.wall_s:.1f}", f"{load:.1f}"
+            str(workers),
+            f"{r.tasks_s:.1f}",
+            f"{len(logs) / r.tasks_s * 3600:.0f}",
+            f"{r.wall_s:.1f}",
+            f"{inside:.2f}",
+            f"{load:.1f}",
         )
     console().print(t)
     speedup = runs[1][0].tasks_s / runs[2][0].tasks_s
