@@ -67,11 +67,58 @@ def masked_update(
     n = x.shape[0]
     if m == 0:
         return x, P, rows, np.empty(0), np.empty((0, 0)), np.empty((0, 0)), np.empty((n, 0)), math.nan, 0.0
+    scratch = update_scratch(n, m)
+    x_new = np.empty(n)
+    P_new = np.empty((n, n))
+    nis, logdet = update_into(x, P, C, R, y, rows, m, with_logdet, scratch, x_new, P_new)
+    _, e, _, S, _, _, Sinv, K = scratch
+    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet
+
+
+UpdateScratch = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+@njit(cache=True)
+def update_scratch(n: int, m: int) -> UpdateScratch:
+    """The working arrays of `update_into` for n states and up to m observed rows: (P C^T, e, each row's
+    nonzero columns, S, its Cholesky factor, that factor's inverse, S^-1, K). A filter makes them once."""
+    return (
+        np.zeros((n, m)),
+        np.empty(m),
+        np.empty((m, n + 1), dtype=np.int64),
+        np.empty((m, m)),
+        np.zeros((m, m)),
+        np.zeros((m, m)),
+        np.empty((m, m)),
+        np.empty((n, m)),
+    )
+
+
+@njit(cache=True)
+def update_into(
+    x: np.ndarray,
+    P: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    rows: np.ndarray,
+    m: int,
+    with_logdet: bool,
+    scratch: UpdateScratch,
+    x_new: np.ndarray,
+    P_new: np.ndarray,
+) -> tuple[float, float]:
+    """`masked_update` of the first m `rows` (m > 0) into x_new and P_new, its e, S, S^-1 and K left in
+    the leading m rows and columns of `scratch` (`update_scratch`, for at least m rows): a filter that
+    updates at every epoch makes no array (its allocations were a fifth of the navigation filter's time).
+    Returns (nis, log det S)."""
+    PCt, e, nonzero, S, L, Li, Sinv, K = scratch
+    n = x.shape[0]
     # loops rather than matrix products: measurement matrices are mostly zeros (the navigation's H has
     # 33 of 216 entries) and the operands so small that BLAS calls and temporaries cost more than the sums
-    PCt = np.zeros((n, m))
-    e = np.empty(m)
-    nonzero = np.empty((m, n + 1), dtype=np.int64)  # each used row's nonzero columns, ascending, then n
+    for i in range(n):
+        for a in range(m):
+            PCt[i, a] = 0.0
     for a in range(m):
         r = rows[a]
         v = y[r]
@@ -86,7 +133,6 @@ def masked_update(
                     PCt[i, a] += P[i, j] * c
         nonzero[a, k] = n
         e[a] = v
-    S = np.empty((m, m))
     for a in range(m):
         for b in range(a + 1):
             v = 0.5 * (R[rows[a], rows[b]] + R[rows[b], rows[a]])
@@ -104,12 +150,13 @@ def masked_update(
                     ib += 1
             S[a, b] = v
             S[b, a] = v
-    Sinv, logdet = _spd_inverse(S)
+    logdet = spd_inverse_into(S, m, L, Li, Sinv)
     if math.isnan(logdet):  # not positive definite to working precision: the general inverse
-        Sinv = np.ascontiguousarray(np.linalg.inv(S))
-        logdet = np.linalg.slogdet(S)[1] if with_logdet else math.nan
-    K = np.empty((n, m))
-    x_new = x.copy()
+        Sm = np.ascontiguousarray(S[:m, :m])
+        Sinv[:m, :m] = np.linalg.inv(Sm)
+        logdet = np.linalg.slogdet(Sm)[1] if with_logdet else math.nan
+    for i in range(n):
+        x_new[i] = x[i]
     for i in range(n):
         for b in range(m):
             v = 0.0
@@ -117,8 +164,7 @@ def masked_update(
                 v += PCt[i, a] * Sinv[a, b]
             K[i, b] = v
             x_new[i] += v * e[b]
-    P_new = np.empty((n, n))  # P - K PCt^T, symmetric: the lower triangle made, the upper mirrored
-    for i in range(n):
+    for i in range(n):  # P - K PCt^T, symmetric: the lower triangle made, the upper mirrored
         for j in range(i + 1):
             v = 0.0
             for a in range(m):
@@ -130,14 +176,19 @@ def masked_update(
     for a in range(m):
         for b in range(m):
             nis += e[a] * Sinv[a, b] * e[b]
-    return x_new, P_new, rows, e, S, Sinv, K, nis, logdet
+    return nis, logdet
 
 
 @njit(cache=True, nogil=True)
 def cholesky_logdet(M: np.ndarray, L: np.ndarray) -> float:
     """Writes the lower Cholesky factor of M into L; returns log det M, or NaN when M is not positive
     definite (small matrices: written out, no LAPACK call)."""
-    m = M.shape[0]
+    return cholesky_logdet_of(M, M.shape[0], L)
+
+
+@njit(cache=True, nogil=True)
+def cholesky_logdet_of(M: np.ndarray, m: int, L: np.ndarray) -> float:
+    """`cholesky_logdet` of the leading m x m block of M."""
     logdet = 0.0
     for i in range(m):
         for j in range(i + 1):
@@ -155,27 +206,25 @@ def cholesky_logdet(M: np.ndarray, L: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _spd_inverse(S: np.ndarray) -> tuple[np.ndarray, float]:
-    """(S^-1, log det S) of a symmetric positive definite S by Cholesky; log det NaN when S is not."""
-    m = S.shape[0]
-    L = np.zeros((m, m))
-    logdet = cholesky_logdet(S, L)
+def spd_inverse_into(S: np.ndarray, m: int, L: np.ndarray, Li: np.ndarray, out: np.ndarray) -> float:
+    """S^-1 of the leading m x m block of a symmetric positive definite S by Cholesky, into `out`
+    (L and Li: room for the factor and its inverse); returns log det S, NaN (out untouched) when S is not
+    positive definite."""
+    logdet = cholesky_logdet_of(S, m, L)
     if math.isnan(logdet):
-        return S, math.nan
-    Li = np.zeros((m, m))  # L^-1, lower triangular
-    for j in range(m):
+        return math.nan
+    for j in range(m):  # L^-1, lower triangular
         Li[j, j] = 1.0 / L[j, j]
         for i in range(j + 1, m):
             v = 0.0
             for c in range(j, i):
                 v -= L[i, c] * Li[c, j]
             Li[i, j] = v / L[i, i]
-    out = np.empty((m, m))  # S^-1 = L^-T L^-1
-    for i in range(m):
+    for i in range(m):  # S^-1 = L^-T L^-1
         for j in range(i + 1):
             v = 0.0
             for c in range(i, m):
                 v += Li[c, i] * Li[c, j]
             out[i, j] = v
             out[j, i] = v
-    return out, logdet
+    return logdet

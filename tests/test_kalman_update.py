@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spooflens.kalman_update import masked_update, observed_rows
+from spooflens.kalman_update import masked_update, observed_rows, update_into, update_scratch
 
 
 def _plain(x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray):
@@ -90,3 +90,28 @@ def test_without_logdet_the_determinant_is_the_cholesky_factors_or_nan_when_s_is
     assert np.isfinite(full[8]) and np.isnan(bare[8])
     for a, b in zip(full[:8], bare[:8], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_an_update_into_a_filters_reused_room_equals_the_update_made_afresh(seed: int) -> None:
+    """The navigation filter keeps one room for every epoch's update, sized for all its rows and holding
+    the last epoch's numbers: the update of fewer rows made in it is the fresh one, bit for bit (S not
+    positive definite too: the general inverse of the leading block)."""
+    rng = np.random.default_rng(seed)
+    n, p = 12, 9
+    x, P, C, R = rng.normal(size=n), _spd(rng, n), rng.normal(size=(p, n)), _spd(rng, p)
+    if seed == 5:
+        R = -R  # S = C P C^T + R not positive definite
+    scratch = update_scratch(n, p)
+    for a in scratch:
+        a[...] = 7  # another epoch's numbers
+    for used in (p, 4, 1):
+        y = rng.normal(size=p)
+        y[rng.permutation(p)[used:]] = np.nan
+        x1, P1, rows, _, S, _, K, nis, logdet = masked_update(x, P, C, R, y, False)
+        x2, P2 = np.full(n, np.nan), np.full((n, n), np.nan)
+        nis2, logdet2 = update_into(x, P, C, R, y, rows, len(rows), False, scratch, x2, P2)
+        m = len(rows)
+        assert np.array_equal(x1, x2) and np.array_equal(P1, P2)
+        assert np.array_equal(S, scratch[3][:m, :m]) and np.array_equal(K, scratch[7][:, :m])
+        assert nis == nis2 and (logdet == logdet2 or (np.isnan(logdet) and np.isnan(logdet2)))

@@ -122,6 +122,7 @@ def test_the_filters_covariance_propagation_equals_the_dense_product() -> None:
         dense = np.zeros((24, 24))
         dense[:15, :15] = phi
         dense[15:, 15:] = np.diag(a)
-        out = _propagate_blocks(P, phi, a)
+        out = np.full((24, 24), np.nan)  # the filter's own room, holding the last block's product
+        _propagate_blocks(P, phi, a, out, np.full((9, 24), np.nan))
         np.testing.assert_allclose(out, dense @ P @ dense.T, rtol=1e-12, atol=1e-10)
         assert np.array_equal(out, out.T)

@@ -24,7 +24,7 @@ from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
 from spooflens.jit import njit
-from spooflens.kalman_update import masked_update
+from spooflens.kalman_update import masked_update, update_into, update_scratch
 from spooflens.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
@@ -113,9 +113,9 @@ def _rotvec_into(x: float, y: float, z: float, out: np.ndarray) -> None:
     out[2, 2] = 1 - c * (x * x + y * y)
 
 
-@njit(cache=CACHE)
-def quat_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    out = np.empty((3, 3))
+@njit(cache=CACHE, inline="always")
+def _quat_into(w: float, x: float, y: float, z: float, out: np.ndarray) -> None:
+    """out = the rotation matrix of the unit quaternion (w, x, y, z)."""
     out[0, 0] = 1 - 2 * (y * y + z * z)
     out[0, 1] = 2 * (x * y - w * z)
     out[0, 2] = 2 * (x * z + w * y)
@@ -125,7 +125,6 @@ def quat_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
     out[2, 0] = 2 * (x * z - w * y)
     out[2, 1] = 2 * (y * z + w * x)
     out[2, 2] = 1 - 2 * (x * x + y * y)
-    return out
 
 
 @njit(cache=CACHE, inline="always")
@@ -250,14 +249,21 @@ def _advance_to(stream: Stream, x: np.ndarray, k: int, i: int) -> None:
 @njit(cache=CACHE)
 def integrals_at(stream: Stream, i: int) -> np.ndarray:
     """(qw, qx, qy, qz, G (3), H (3)) at sample i: the checkpoint at or before it, advanced."""
+    x = np.empty(10)
+    _integrals_at_into(stream, i, x)
+    return x
+
+
+@njit(cache=CACHE)
+def _integrals_at_into(stream: Stream, i: int, x: np.ndarray) -> None:
     Qb, G, H, every = stream[7], stream[8], stream[9], stream[10]
     c = i // every
-    x = np.empty(10)
-    x[0:4] = Qb[c]
-    x[4:7] = G[c]
-    x[7:10] = H[c]
+    for r in range(4):
+        x[r] = Qb[c, r]
+    for r in range(3):
+        x[4 + r] = G[c, r]
+        x[7 + r] = H[c, r]
     _advance_to(stream, x, c * every, i)
-    return x
 
 
 @njit(cache=CACHE)
@@ -277,50 +283,62 @@ def integrals_rows(stream: Stream, rows: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=CACHE)
-def integrals_from(stream: Stream, a: np.ndarray, i: int, j: int) -> np.ndarray:
-    """The integrals at sample j, given those at sample i (`a`): advanced from i when that is nearer
-    than j's checkpoint (a filter's consecutive blocks share their ends), else from the checkpoint."""
+def integrals_from(stream: Stream, a: np.ndarray, i: int, j: int, b: np.ndarray) -> None:
+    """The integrals at sample j into `b`, given those at sample i (`a`): advanced from i when that is
+    nearer than j's checkpoint (a filter's consecutive blocks share their ends), else from the checkpoint."""
     if i <= j and j - i <= j % stream[10]:
-        b = a.copy()
+        for r in range(10):
+            b[r] = a[r]
         _advance_to(stream, b, i, j)
-        return b
-    return integrals_at(stream, j)
+    else:
+        _integrals_at_into(stream, j, b)
 
 
 @njit(cache=CACHE)
-def increment_between(a: np.ndarray, b: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(dC_b, dv_b, dp_b) from the integrals at one sample (`a`) to those at a later one (`b`), T apart,
-    in the body frame at the first (see strapdown.py)."""
+def increment_between(a: np.ndarray, b: np.ndarray, T: float, dC: np.ndarray, dv: np.ndarray, dp: np.ndarray) -> None:
+    """(dC_b, dv_b, dp_b) into the arrays given, from the integrals at one sample (`a`) to those at a
+    later one (`b`), T apart, in the body frame at the first (see strapdown.py)."""
     wi, xi, yi, zi = a[0], a[1], a[2], a[3]
     wj, xj, yj, zj = b[0], b[1], b[2], b[3]
-    dC = quat_matrix(
+    _quat_into(
         wi * wj + xi * xj + yi * yj + zi * zj,
         wi * xj - xi * wj - yi * zj + zi * yj,
         wi * yj + xi * zj - yi * wj - zi * xj,
         wi * zj - xi * yj + yi * xj - zi * wj,
+        dC,
     )
-    Ri = quat_matrix(wi, xi, yi, zi)
-    dv = _mv3(Ri.T, b[4:7] - a[4:7])
-    dp = _mv3(Ri.T, b[7:10] - a[7:10] - a[4:7] * T)
-    return dC, dv, dp
+    # R_i^T (b - a) with R_i the rotation of quaternion a: written out, R_i's columns are the rows of the product
+    r00, r01, r02 = 1 - 2 * (yi * yi + zi * zi), 2 * (xi * yi - wi * zi), 2 * (xi * zi + wi * yi)
+    r10, r11, r12 = 2 * (xi * yi + wi * zi), 1 - 2 * (xi * xi + zi * zi), 2 * (yi * zi - wi * xi)
+    r20, r21, r22 = 2 * (xi * zi - wi * yi), 2 * (yi * zi + wi * xi), 1 - 2 * (xi * xi + yi * yi)
+    g0, g1, g2 = b[4] - a[4], b[5] - a[5], b[6] - a[6]
+    dv[0] = r00 * g0 + r10 * g1 + r20 * g2
+    dv[1] = r01 * g0 + r11 * g1 + r21 * g2
+    dv[2] = r02 * g0 + r12 * g1 + r22 * g2
+    h0, h1, h2 = b[7] - a[7] - a[4] * T, b[8] - a[8] - a[5] * T, b[9] - a[9] - a[6] * T
+    dp[0] = r00 * h0 + r10 * h1 + r20 * h2
+    dp[1] = r01 * h0 + r11 * h1 + r21 * h2
+    dp[2] = r02 * h0 + r12 * h1 + r22 * h2
 
 
 @njit(cache=CACHE)
 def step_to(
-    stream: Stream, a: np.ndarray, i: int, j: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-    """(the integrals at j, dC_b, dv_b, dp_b, T) from sample i, whose integrals are `a`, to sample j:
-    the increment in the body frame at t[i] (see strapdown.py)."""
-    b = integrals_from(stream, a, i, j)
+    stream: Stream, a: np.ndarray, i: int, j: int, b: np.ndarray, dC: np.ndarray, dv: np.ndarray, dp: np.ndarray
+) -> float:
+    """From sample i, whose integrals are `a`, to sample j: the integrals at j into `b` and the increment
+    in the body frame at t[i] into dC, dv, dp (see strapdown.py); returns T. The filter makes no array
+    per block (a block made seven, most of a tuning run's allocations)."""
+    integrals_from(stream, a, i, j, b)
     T = stream[0][j] - stream[0][i]
-    dC, dv, dp = increment_between(a, b, T)
-    return b, dC, dv, dp, T
+    increment_between(a, b, T, dC, dv, dp)
+    return T
 
 
 @njit(cache=CACHE)
 def increment(stream: Stream, i: int, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(dC_b, dv_b, dp_b, T) from sample i to j in the body frame at t[i] (see strapdown.py)."""
-    _, dC, dv, dp, T = step_to(stream, integrals_at(stream, i), i, j)
+    dC, dv, dp = np.empty((3, 3)), np.empty(3), np.empty(3)
+    T = step_to(stream, integrals_at(stream, i), i, j, np.empty(10), dC, dv, dp)
     return dC, dv, dp, T
 
 
@@ -343,14 +361,23 @@ def _rates(lat: float, h: float, v0: float, v1: float) -> tuple[float, float, fl
 
 @njit(cache=CACHE)
 def propagate(x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray, T: float) -> np.ndarray:
-    """One low-rate block of the mechanization (equations in strapdown.py), on scalars: the only arrays
-    made are the new state and one scratch of 3 x 3 matrices."""
-    out = x.copy()
+    """One low-rate block of the mechanization (equations in strapdown.py): the new state."""
+    out = np.empty_like(x)
+    propagate_into(x, dC, dv_b, dp_b, T, out, np.empty((6, 3, 3)))
+    return out
+
+
+@njit(cache=CACHE)
+def propagate_into(
+    x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray, T: float, out: np.ndarray, m: np.ndarray
+) -> None:
+    """`propagate` into `out` (not x), on scalars, with `m` (6 x 3 x 3) the room for its 3 x 3 matrices."""
+    for i in range(x.shape[0]):
+        out[i] = x[i]
     if T <= 0.0:
-        return out
+        return
     lat, h = x[0], x[2]
     v0, v1, v2 = x[3], x[4], x[5]
-    m = np.empty((6, 3, 3))
     C = m[0]
     for i in range(3):
         for j in range(3):
@@ -409,15 +436,22 @@ def propagate(x: np.ndarray, dC: np.ndarray, dv_b: np.ndarray, dp_b: np.ndarray,
         for j in range(3):
             out[6 + 3 * i + j] = product[i, j]
     out[21] = x[21] + T
-    return out
 
 
 @njit(cache=CACHE)
 def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     """F (15 x 15) of the error model (equations in error_model.py)."""
+    F = np.zeros((15, 15))
+    error_dynamics_into(x, f_b[0], f_b[1], f_b[2], F)
+    return F
+
+
+@njit(cache=CACHE)
+def error_dynamics_into(x: np.ndarray, f0: float, f1: float, f2: float, F: np.ndarray) -> None:
+    """`error_dynamics` of force (f0, f1, f2) into F, whose other entries must be zero: every call writes
+    the same entries, so a filter zeroes its F once."""
     lat, h = x[0], x[2]
     ve, vn, vu = x[3], x[4], x[5]
-    C = x[6:15].copy().reshape(3, 3)
     rm, rn = local_radii(lat)
     rmh, rnh = rm + h, rn + h
     sin_l, cos_l = math.sin(lat), math.cos(lat)
@@ -425,7 +459,6 @@ def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     wie_n, wie_u = OMEGA_IE * cos_l, OMEGA_IE * sin_l
     wen_e, wen_n, wen_u = -vn / rmh, ve / rnh, ve * tan_l / rnh
     wx, wy, wz = wen_e, wie_n + wen_n, wie_u + wen_u
-    F = np.zeros((15, 15))
     F[0, 1], F[0, 2], F[1, 0], F[1, 2], F[2, 0], F[2, 1] = wz, -wy, -wz, wx, wy, -wx
     F[0, 4] = -1.0 / rmh
     F[1, 3] = 1.0 / rnh
@@ -436,9 +469,13 @@ def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     F[0, 8] = b0
     F[1, 7], F[1, 8] = a1, b1
     F[2, 7], F[2, 8] = a2 + c1, c2
-    F[0:3, 9:12] = -C
-    fn_ = _mv3(C, f_b)
-    fe, fn, fu = fn_[0], fn_[1], fn_[2]
+    for i in range(3):  # -C and C (C = x[6:15] row-major)
+        for j in range(3):
+            F[i, 9 + j] = -x[6 + 3 * i + j]
+            F[3 + i, 12 + j] = x[6 + 3 * i + j]
+    fe = x[6] * f0 + x[7] * f1 + x[8] * f2
+    fn = x[9] * f0 + x[10] * f1 + x[11] * f2
+    fu = x[12] * f0 + x[13] * f1 + x[14] * f2
     F[3, 1], F[3, 2], F[4, 0], F[4, 2], F[5, 0], F[5, 1] = -fu, fn, fu, -fe, -fn, fe
     ux, uy, uz = wen_e, 2 * wie_n + wen_n, 2 * wie_u + wen_u
     p, q, r = 1.0 / rnh, tan_l / rnh, -1.0 / rmh
@@ -449,48 +486,71 @@ def error_dynamics(x: np.ndarray, f_b: np.ndarray) -> np.ndarray:
     d0, d1, d2 = 0.0, 2 * a1, 2 * a2 + c1
     F[3, 7], F[4, 7], F[5, 7] = vn * d2 - vu * d1, vu * d0 - ve * d2, ve * d1 - vn * d0
     d0, d1, d2 = b0, b1, c2
-    F[3, 8], F[4, 8], F[5, 8] = vn * d2 - vu * d1, vu * d0 - ve * d2, ve * d1 - vn * d0
-    F[5, 8] += 2.0 * gravity(lat, h) / math.sqrt(rmh * rnh)
-    F[3:6, 12:15] = C
+    F[3, 8], F[4, 8] = vn * d2 - vu * d1, vu * d0 - ve * d2
+    F[5, 8] = (ve * d1 - vn * d0) + 2.0 * gravity(lat, h) / math.sqrt(rmh * rnh)
     F[6, 3], F[7, 4], F[8, 5] = 1.0, 1.0, 1.0
     F[6, 6], F[6, 7], F[6, 8] = vu / rnh - tan_l * vn / rmh, ve * tan_l / rmh, -ve / rnh
     F[7, 7], F[7, 8] = vu / rmh, -vn / rmh
-    return F
 
 
 @njit(cache=CACHE)
 def discretise(F: np.ndarray, qc: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """Phi = I + F T + (F T)^2 / 2 and Qd = T/2 (Phi Qc Phi^T + Qc), the sums written in place."""
-    FT = F * T
-    Phi = FT @ FT
+    """Phi = I + F T + (F T)^2 / 2 and Qd = T/2 (Phi Qc Phi^T + Qc)."""
+    Phi, Qd = np.empty((15, 15)), np.empty((15, 15))
+    discretise_into(F, qc, T, np.empty((15, 15)), Phi, Qd)
+    return Phi, Qd
+
+
+@njit(cache=CACHE)
+def discretise_into(F: np.ndarray, qc: np.ndarray, T: float, FT: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> None:
+    """`discretise` into Phi and Qd, the sums written in place (FT: room for F T)."""
+    for i in range(15):
+        for j in range(15):
+            FT[i, j] = F[i, j] * T
+    np.dot(FT, FT, Phi)
     for i in range(15):
         for j in range(15):
             Phi[i, j] = ((1.0 if i == j else 0.0) + FT[i, j]) + 0.5 * Phi[i, j]
     for i in range(15):
         for j in range(15):
             FT[i, j] = Phi[i, j] * qc[j]  # F T is not read again: its room holds Phi Qc
-    Qd = FT @ Phi.T
+    np.dot(FT, Phi.T, Qd)
     for i in range(15):
         for j in range(15):
             Qd[i, j] = (0.5 * T) * Qd[i, j]
         Qd[i, i] += 0.5 * T * qc[i]
-    return Phi, Qd
 
 
 @njit(cache=CACHE)
 def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
     """Feed an error estimate back into the nominal state (closed loop)."""
-    out = x.copy()
+    out = np.empty_like(x)
+    correct_into(x, dx, out, np.empty((2, 3, 3)))
+    return out
+
+
+@njit(cache=CACHE)
+def correct_into(x: np.ndarray, dx: np.ndarray, out: np.ndarray, m: np.ndarray) -> None:
+    """`correct` into `out` (not x), `m` (2 x 3 x 3) the room for its rotations."""
+    for i in range(x.shape[0]):
+        out[i] = x[i]
     rm, rn = local_radii(x[0])
-    C = x[6:15].copy().reshape(3, 3)
-    out[6:15] = _mm3(rotvec_matrix(dx[0:3]), C).ravel()  # C = (I + [phi x]) C~
-    out[3:6] = x[3:6] - dx[3:6]
+    turn, C = m[0], m[1]
+    _rotvec_into(dx[0], dx[1], dx[2], turn)
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = x[6 + 3 * i + j]
+    for i in range(3):  # C = (I + [phi x]) C~
+        for j in range(3):
+            out[6 + 3 * i + j] = turn[i, 0] * C[0, j] + turn[i, 1] * C[1, j] + turn[i, 2] * C[2, j]
+    for i in range(3):
+        out[3 + i] = x[3 + i] - dx[3 + i]
     out[0] = x[0] - dx[7] / (rm + x[2])
     out[1] = x[1] - dx[6] / ((rn + x[2]) * math.cos(x[0]))
     out[2] = x[2] - dx[8]
-    out[15:18] = x[15:18] + dx[9:12]
-    out[18:21] = x[18:21] + dx[12:15]
-    return out
+    for i in range(3):
+        out[15 + i] = x[15 + i] + dx[9 + i]
+        out[18 + i] = x[18 + i] + dx[12 + i]
 
 
 @njit(cache=CACHE)
@@ -516,29 +576,38 @@ def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
     M~ v~ = M v + M dv - M [v x] phi to first order (C = (I + [phi x]) C~), minus the odometry's own
     slowly varying error (wheel-radius scale, skid) as Gauss-Markov states.
     """
-    Hm = np.zeros((NM, NE))
+    Hm = np.empty((NM, NE))
+    measurement_matrix_into(x, R_vb, Hm, np.empty((3, 3, 3)))
+    return Hm
+
+
+@njit(cache=CACHE)
+def measurement_matrix_into(x: np.ndarray, R_vb: np.ndarray, Hm: np.ndarray, m: np.ndarray) -> None:
+    """`measurement_matrix` into Hm, `m` (3 x 3 x 3) the room for its 3 x 3 products."""
+    Hm[:, :] = 0.0
     for i in range(3):
         Hm[i, 6 + i] = 1.0
         Hm[i, 15 + i] = -1.0
         Hm[3 + i, 3 + i] = 1.0
         Hm[3 + i, 18 + i] = -1.0
         Hm[6 + i, 21 + i] = -1.0
-    C = x[6:15].copy().reshape(3, 3)
-    M = _mm3(R_vb, C.T)
-    v = x[3:6]
-    vx = np.zeros((3, 3))
-    vx[0, 1], vx[0, 2], vx[1, 0], vx[1, 2], vx[2, 0], vx[2, 1] = -v[2], v[1], v[2], -v[0], -v[1], v[0]
-    Mv = _mm3(M, vx)
+    M, vx, Mv = m[0], m[1], m[2]
+    for i in range(3):  # M = R_vb C^T
+        for j in range(3):
+            M[i, j] = R_vb[i, 0] * x[6 + 3 * j] + R_vb[i, 1] * x[7 + 3 * j] + R_vb[i, 2] * x[8 + 3 * j]
+    v0, v1, v2 = x[3], x[4], x[5]
+    vx[0, 0], vx[1, 1], vx[2, 2] = 0.0, 0.0, 0.0
+    vx[0, 1], vx[0, 2], vx[1, 0], vx[1, 2], vx[2, 0], vx[2, 1] = -v2, v1, v2, -v0, -v1, v0
+    _mm3_into(M, vx, Mv)
     for i in range(3):
         for j in range(3):
             Hm[6 + i, j] = -Mv[i, j]
             Hm[6 + i, 3 + j] = M[i, j]
-    return Hm
 
 
 @njit(cache=CACHE)
-def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Phi P Phi^T for Phi = blockdiag(Phi15, diag(a)).
+def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray, out: np.ndarray, X: np.ndarray) -> None:
+    """out = Phi P Phi^T for Phi = blockdiag(Phi15, diag(a)) (X: room for 9 x n).
 
     The biases are random walks, so F's bias rows (9..14) are zero and Phi15's are identity rows: only
     rows 0..8 of Phi15 P are products, half the work of the dense form. A Phi15 without that shape
@@ -547,10 +616,10 @@ def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.nda
     for i in range(9, 15):
         for j in range(15):
             if Phi15[i, j] != (1.0 if i == j else 0.0):
-                return block_congruence(Phi15, a, P, np.empty_like(P))
+                block_congruence(Phi15, a, P, out)
+                return
     n = P.shape[0]
-    out = np.empty_like(P)
-    X = np.zeros((9, n))  # rows 0..8 of Phi P
+    X[:, :] = 0.0  # rows 0..8 of Phi P
     for i in range(9):
         for k in range(15):
             f = Phi15[i, k]
@@ -579,7 +648,6 @@ def _propagate_blocks(P: np.ndarray, Phi15: np.ndarray, a: np.ndarray) -> np.nda
             out[15 + j, i] = out[i, 15 + j]
         for i in range(n - 15):
             out[15 + i, 15 + j] = P[15 + i, 15 + j] * (a[i] * a[j])
-    return out
 
 
 @njit(cache=CACHE, nogil=True)
@@ -666,6 +734,21 @@ def filter_loop(
     nu = np.empty(NM)
     nu_used = np.empty(NM)
     no_prior = np.zeros(NE)  # the error state before an update (closed loop: reset at every update)
+    # the working arrays of a block and an update, made once and swapped with what they replace (a block
+    # and an epoch made some 35 small arrays: a fifth of a tuning run went to allocation and reference
+    # counting)
+    at_next = np.empty(10)
+    dC, dv_b, dp_b = np.empty((3, 3)), np.empty(3), np.empty(3)
+    F = np.zeros((15, 15))  # error_dynamics_into writes the same entries every time
+    FT, Phi15, Qd15 = np.empty((15, 15)), np.empty((15, 15)), np.empty((15, 15))
+    P_next = np.empty((NE, NE))
+    X = np.empty((9, NE))
+    x_next = np.empty(NX)
+    m33 = np.empty((6, 3, 3))
+    Hm = np.empty((NM, NE))
+    scratch = update_scratch(NE, NM)
+    rows = np.empty(NM, dtype=np.int64)
+    dx = np.empty(NE)
     for e in range(M):
         target = np.searchsorted(t, tf[e], side="right") - 1
         if target < k:
@@ -684,17 +767,24 @@ def filter_loop(
                 j = target
             if j <= k:
                 j = k + 1
-            at_k, dC, dv_b, dp_b, T = step_to(stream, at_k, k, j)
+            T = step_to(stream, at_k, k, j, at_next, dC, dv_b, dp_b)
+            at_k, at_next = at_next, at_k
             # a zero-length block (two samples at one time) has Phi = I and Qd = 0 whatever the force
-            f_mean = dv_b / T - x[18:21] if T > 0 else -x[18:21]
-            Phi15, Qd15 = discretise(error_dynamics(x, f_mean), qc15, T)
+            if T > 0:
+                f0, f1, f2 = dv_b[0] / T - x[18], dv_b[1] / T - x[19], dv_b[2] / T - x[20]
+            else:
+                f0, f1, f2 = -x[18], -x[19], -x[20]
+            error_dynamics_into(x, f0, f1, f2, F)
+            discretise_into(F, qc15, T, FT, Phi15, Qd15)
             for i in range(NG):
                 decay[i] = math.exp(-T / gm_tau[i])
                 qg[i] = gm_sigma[i] ** 2 * (1.0 - decay[i] * decay[i])
                 g[i] *= decay[i]
-            x = propagate(x, dC, dv_b, dp_b, T)
+            propagate_into(x, dC, dv_b, dp_b, T, x_next, m33)
+            x, x_next = x_next, x
             # Phi = blockdiag(Phi15, diag(a)): propagate the blocks, not 24 x 24 products
-            P = _propagate_blocks(P, Phi15, decay)
+            _propagate_blocks(P, Phi15, decay, P_next, X)
+            P, P_next = P_next, P
             for r in range(15):
                 for c in range(15):
                     P[r, c] += Qd15[r, c]
@@ -739,7 +829,7 @@ def filter_loop(
         for i in range(3):
             if not math.isnan(vel[e, i]):
                 z[3 + i] = x[3 + i] - vel[e, i]
-        Hm = measurement_matrix(x, R_vb)
+        measurement_matrix_into(x, R_vb, Hm, m33)
         if not odometry_measured:
             Hm[6:9, :6] = 0.0
         if odometry_measured:  # the INS velocity in the vehicle frame, R_vb C^T v
@@ -768,18 +858,24 @@ def filter_loop(
                 S_all[i, i] += sigma[e, i] ** 2
             out_S_all[e] = S_all
         # the rows left out (not used, or not measured) are NaN: the one masked update every filter makes
+        n_used = 0
         for i in range(NM):
             nu_used[i] = nu[i] if use[e, i] and not math.isnan(z[i]) else np.nan
-        dx, P, rows, _, S, _, _, nis_e, logdet_e = masked_update(no_prior, P, Hm, out_R[e], nu_used, False)
-        n_used = rows.shape[0]
+            if not math.isnan(nu_used[i]):
+                rows[n_used] = i
+                n_used += 1
         if n_used > 0:
+            nis_e, logdet_e = update_into(no_prior, P, Hm, out_R[e], nu_used, rows, n_used, False, scratch, dx, P_next)
+            P, P_next = P_next, P
             nis[e] = nis_e
             dof[e] = n_used
             logdet[e] = logdet_e  # its Cholesky factor's; NaN where S is not positive definite
+            S = scratch[3]
             for a in range(n_used):
                 for b in range(n_used):
                     out_S[e, rows[a], rows[b]] = S[a, b]
-            x = correct(x, dx[:15])
+            correct_into(x, dx, x_next, m33)
+            x, x_next = x_next, x
             for i in range(NG):
                 g[i] += dx[15 + i]
             out_dx[e] = dx
@@ -795,8 +891,10 @@ def filter_loop(
         j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
         if j <= k:
             j = k + 1
-        at_k, dC, dv_b, dp_b, T = step_to(stream, at_k, k, j)
-        x = propagate(x, dC, dv_b, dp_b, T)
+        T = step_to(stream, at_k, k, j, at_next, dC, dv_b, dp_b)
+        at_k, at_next = at_next, at_k
+        propagate_into(x, dC, dv_b, dp_b, T, x_next, m33)
+        x, x_next = x_next, x
         k = j
         track[nt, 0] = x[21]
         track[nt, 1:4] = x[0:3]
