@@ -10,6 +10,7 @@ written); 4 the verdict is spoofing and --fail-on-spoof was given.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import sys
@@ -19,7 +20,7 @@ import sys
 # container's, or ulimit -v) counts. The system allocator reserves what it uses. Set before pandas loads.
 os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import click
 from rich.table import Table
@@ -562,5 +563,14 @@ def main(argv: list[str] | None = None) -> int:
     return int(code or 0)
 
 
+def run() -> NoReturn:
+    """The console script: `main`, then the process ends. What is still alive goes to the permanent
+    generation first (`gc.freeze`), so the interpreter's last collection does not walk every object of
+    pandas, numba and Rerun only to free them: 0.15 s of a small log's 2 s run."""
+    code = main()
+    gc.freeze()
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
