@@ -756,11 +756,10 @@ def filter_loop(
         if target > N - 1:
             target = N - 1
         if keep_phi:
-            Phi_acc = np.eye(15)
             Phi_acc_gm[:] = 1.0
         if keep_qd:
-            Qd_acc = np.zeros((15, 15))
             Qd_acc_gm[:] = 0.0
+        blocks = 0  # of this epoch
         while k < target:
             j = np.searchsorted(t, t[k] + max_block_s, side="right") - 1
             if j > target:
@@ -790,15 +789,23 @@ def filter_loop(
                     P[r, c] += Qd15[r, c]
             for i in range(NG):
                 P[15 + i, 15 + i] += qg[i]
-            # the epoch-to-epoch Qd and Phi, made only to be kept (nothing else reads them)
+            # the epoch-to-epoch Qd and Phi, made only to be kept (nothing else reads them); an epoch's first
+            # block is its own (Phi15 I and Phi15 0 Phi15^T + Qd15: no products, the same numbers)
             if keep_qd:
-                Qd_acc = Phi15 @ Qd_acc @ Phi15.T + Qd15
+                if blocks == 0:
+                    Qd_acc[:, :] = Qd15
+                else:
+                    Qd_acc = Phi15 @ Qd_acc @ Phi15.T + Qd15
                 for i in range(NG):
                     Qd_acc_gm[i] = Qd_acc_gm[i] * decay[i] * decay[i] + qg[i]
             if keep_phi:
-                Phi_acc = Phi15 @ Phi_acc
+                if blocks == 0:
+                    Phi_acc[:, :] = Phi15
+                else:
+                    Phi_acc = Phi15 @ Phi_acc
                 for i in range(NG):
                     Phi_acc_gm[i] *= decay[i]
+            blocks += 1
             k = j
             track[nt, 0] = x[21]
             track[nt, 1:4] = x[0:3]
@@ -811,10 +818,20 @@ def filter_loop(
                 P[r, c] = v
                 P[c, r] = v
         if keep_phi:
-            out_Phi[e] = Phi_acc
+            if blocks == 0:  # no IMU sample between two epochs: Phi = I
+                out_Phi[e] = 0.0
+                for i in range(15):
+                    out_Phi[e, i, i] = 1.0
+            else:
+                out_Phi[e] = Phi_acc
             out_Phi_gm[e] = Phi_acc_gm
         if keep_qd:
-            out_Qd[e] = 0.5 * (Qd_acc + Qd_acc.T)
+            if blocks == 0:
+                out_Qd[e] = 0.0
+            else:
+                for r in range(15):
+                    for c in range(15):
+                        out_Qd[e, r, c] = 0.5 * (Qd_acc[r, c] + Qd_acc[c, r])
             out_Qd_gm[e] = Qd_acc_gm
         if keep_pred:
             P_pred[e] = P
