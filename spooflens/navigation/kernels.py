@@ -45,8 +45,10 @@ def local_radii(lat: float) -> tuple[float, float]:
     return A_M * (1 - E2) / w**3, A_M / w
 
 
-# The 3-vector and 3 x 3 helpers work on scalars or into given arrays (what the per-block mechanization
-# uses: a block made ~40 small arrays, most of its time); the array-returning forms are over them.
+# The 3-vector and 3 x 3 helpers work on scalars or into given arrays: the filter's loop makes no array
+# per block or epoch (small arrays made afresh were a quarter of a noise-learning run). Each kernel the loop
+# calls has an `_into` form writing into arrays the caller made once; the array-returning form, for the
+# Python wrappers and the tests, is over it.
 
 
 @njit(cache=CACHE, inline="always")
@@ -63,13 +65,6 @@ def _mm3_into(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
             out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
 
 
-@njit(cache=CACHE)
-def _mm3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    out = np.empty((3, 3))
-    _mm3_into(a, b, out)
-    return out
-
-
 @njit(cache=CACHE, inline="always")
 def _mv3_s(a: np.ndarray, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
     """a v for a 3 x 3 matrix (written out, as `_mm3_into`)."""
@@ -78,19 +73,6 @@ def _mv3_s(a: np.ndarray, v0: float, v1: float, v2: float) -> tuple[float, float
         a[1, 0] * v0 + a[1, 1] * v1 + a[1, 2] * v2,
         a[2, 0] * v0 + a[2, 1] * v1 + a[2, 2] * v2,
     )
-
-
-@njit(cache=CACHE)
-def _mv3(a: np.ndarray, v: np.ndarray) -> np.ndarray:
-    c0, c1, c2 = _mv3_s(a, v[0], v[1], v[2])
-    return np.array([c0, c1, c2])
-
-
-@njit(cache=CACHE)
-def rotvec_matrix(v: np.ndarray) -> np.ndarray:
-    out = np.empty((3, 3))
-    _rotvec_into(v[0], v[1], v[2], out)
-    return out
 
 
 @njit(cache=CACHE, inline="always")
