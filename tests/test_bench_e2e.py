@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from spooflens.bench.common import measure_in_child
 from spooflens.bench.e2e_bench import SAMPLE, _median_run, _spread, held_bytes
+from spooflens.bench.e2e_plot import E2EFigures, plot_e2e
 
 
 def test_the_median_run_is_reported_whole_and_the_lower_middle_of_an_even_count() -> None:
@@ -53,3 +56,32 @@ def test_the_first_run_by_part_never_starts_numba_and_the_second_analysis_answer
     assert first == again and first[0].startswith("SPOOFING DETECTED")
     assert parts["numba_imported"] is False  # every kernel it calls was compiled ahead of time at install
     assert all((tmp_path / f"parts{k}.rrd").stat().st_size > 0 for k in (0, 1))
+
+
+def _figures() -> E2EFigures:
+    """The eleventh session's `bench e2e --repeat 5`, as the command collects it."""
+    return E2EFigures(
+        hour_stages=[("import", 0.20), ("read", 0.84), ("analysis: navigation", 1.55), ("recording + JSON", 0.26)],
+        hour_wall_s=4.71,
+        hour_goal_by_loop_s=5.0 / 7.9 * 6.55,
+        voyage=[(1.0, 2.2, 3.5, 376.0), (4.0, 5.9, 7.6, 502.0), (24.0, 35.5, 43.0, 1748.0)],
+        first_runs=[("compiled ahead of time", [1.69, 1.70, 1.72, 1.74, 1.71]), ("empty numba cache", [68.9])],
+    )
+
+
+def test_the_plot_draws_each_measured_part_beside_its_goal(tmp_path: Path) -> None:
+    path = tmp_path / "e2e.svg"
+    plot_e2e(_figures(), path)
+    svg = path.read_text()
+    expected = ("1 h aircraft log end to end: 4.71 s", "goal 5 s", "ratio to the rosbags loop: 4.15 s", "voyage length")
+    for text in expected:
+        assert text in svg, text
+    assert "1.71 s" in svg and "68.90 s" in svg  # each first run's median, written on its bar
+    only_voyage = E2EFigures(voyage=_figures().voyage)
+    plot_e2e(only_voyage, tmp_path / "voyage.png")
+    assert (tmp_path / "voyage.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_plot_of_nothing_measured_is_an_error(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="nothing measured"):
+        plot_e2e(E2EFigures(), tmp_path / "e2e.svg")

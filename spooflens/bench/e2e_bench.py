@@ -35,6 +35,7 @@ from rich.table import Table
 
 from spooflens import aot
 from spooflens.bench.common import measure_in_child
+from spooflens.bench.e2e_plot import E2EFigures, plot_e2e
 from spooflens.console import console, err_console
 
 GOALS = {"e2e_s": 5.0, "e2e_rss_mb": 1024.0, "read_s": 1.5, "voyage_rss_mb": 2048.0, "first_run_s": 2.0}
@@ -267,11 +268,20 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     return {"stages": stages.rows, "verdicts": verdicts, "numba_imported": numba_imported[0]}
 
 
-def _first_runs(log: Path, label: str, repeat: int, ahead_of_time: bool = True, table: Table | None = None) -> Table:
+def _first_runs(
+    log: Path,
+    label: str,
+    repeat: int,
+    ahead_of_time: bool = True,
+    table: Table | None = None,
+    drawn: list[tuple[str, list[float]]] | None = None,
+) -> Table:
     """`repeat` first runs of `spooflens analyze LOG` (kernels as installed), the median beside the goal,
-    as a row of `table` (a new one by default)."""
+    as a row of `table` (a new one by default); their wall times appended to `drawn` under `label`."""
     err_console.print(f"first run of `spooflens analyze` on {log.name} ({label}) ...")
     runs = [first_run(str(log), cold_cache=False, ahead_of_time=ahead_of_time) for _ in range(repeat)]
+    if drawn is not None:
+        drawn.append((label, [float(r["wall_s"]) for r in runs]))
     median = _median_run(runs)
     t = table or Table(f"first run of spooflens analyze {log.name}", "wall (s)", "goal", "")
     t.add_row(
@@ -338,6 +348,13 @@ def _met(value: float, goal: float) -> str:
     show_default=True,
     help="A voyage analysis that needs more memory stops (MemoryError) instead of pressing on the machine.",
 )
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Draw the figures here (.svg, .png, .pdf): the hour by stage, the voyage against its length, the first runs.",
+)
 def command(
     workdir: Path,
     hours: str,
@@ -346,6 +363,7 @@ def command(
     spoofed: bool,
     repeat: int,
     memory_limit_mb: float,
+    plot_path: Path | None,
 ) -> int:
     """The 1 h aircraft log end to end (stages, peak RSS, vs rosbags), a voyage at 1/4/24 h, the first run."""
     workdir.mkdir(parents=True, exist_ok=True)
@@ -361,6 +379,14 @@ def command(
     e2e = _median_run(runs)
     loop = measure_in_child(__name__, "rosbags_loop", str(hour))
     r = e2e["result"]
+    drawn = E2EFigures(
+        hour_stages=[(s["stage"], float(s["wall_s"])) for s in r["stages"]],
+        hour_wall_s=float(e2e["wall_s"]),
+        hour_goal_s=GOALS["e2e_s"],
+        hour_goal_by_loop_s=GOALS["e2e_s"] / ISSUE_ROSBAGS_LOOP_S * float(loop["result"]["cpu_s"]),
+        voyage_rss_goal_mb=GOALS["voyage_rss_mb"],
+        first_run_goal_s=GOALS["first_run_s"],
+    )
     out.print(
         _stage_table(f"1 h aircraft log ({r['imu_samples']} IMU, {r['gnss_epochs']} GNSS): {r['verdict']}", r["stages"])
     )
@@ -422,10 +448,12 @@ def command(
             held.add_row(k, f"{v:.0f}")
         out.print(held)
     if not skip_voyage:
-        _voyage(workdir, [float(h) for h in hours.split(",") if h.strip()], memory_limit_mb)
-    t = _first_runs(SAMPLE, "kernels as installed (compiled ahead of time at install)", repeat)
-    _first_runs(SAMPLE, "numba's cache only (SPOOFLENS_AOT=0)", repeat, ahead_of_time=False, table=t)
+        drawn.voyage = _voyage(workdir, [float(h) for h in hours.split(",") if h.strip()], memory_limit_mb)
+    firsts = drawn.first_runs
+    t = _first_runs(SAMPLE, "kernels as installed (compiled ahead of time at install)", repeat, drawn=firsts)
+    _first_runs(SAMPLE, "numba's cache only (SPOOFLENS_AOT=0)", repeat, ahead_of_time=False, table=t, drawn=firsts)
     cold = first_run(str(SAMPLE), cold_cache=True)
+    firsts.append(("empty numba cache (every kernel compiled)", [float(cold["wall_s"])]))
     t.add_row("empty numba cache (every kernel compiled)", f"{cold['wall_s']:.1f}", "", "")
     out.print(t)
     with tempfile.TemporaryDirectory() as tmp:
@@ -435,12 +463,17 @@ def command(
     out.print(_stage_table(title, parts["result"]["stages"]))
     gnss_log = workdir / "ship_gnss_only_10min.mcap"
     _ensure(gnss_log, "write_gnss_only")
-    out.print(_first_runs(gnss_log, "no IMU: no compiled kernel runs, numba is not imported", repeat))
+    out.print(_first_runs(gnss_log, "no IMU: no compiled kernel runs, numba is not imported", repeat, drawn=firsts))
+    if plot_path is not None:
+        plot_e2e(drawn, plot_path)
+        out.print(f"plot: {plot_path}")
     return 0
 
 
-def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> None:
+def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> list[tuple[float, float, float, float]]:
+    """Analyse a voyage of each length; returns (hours, wall s, CPU s, peak RSS MB) of those that ran."""
     out = console()
+    done: list[tuple[float, float, float, float]] = []
     out.print("Ship voyage, 100 Hz IMU, 1 Hz GNSS (a line per length as it is done):")
     out.print("  length  IMU samples  wall (s)  CPU (s)  CPU per hour (s)  peak RSS (MB)  goal < 2048 MB")
     longest: dict[str, Any] | None = None
@@ -460,7 +493,9 @@ def _voyage(workdir: Path, hours: list[float], limit_mb: float) -> None:
             f"  {h:>4g} h  {r['imu_samples']:>11}  {run['wall_s']:>8.1f}  {r['cpu_s']:>7.1f}  {r['cpu_s'] / h:>16.1f}"
             f"  {run['peak_rss_mb']:>13.0f}  {_met(run['peak_rss_mb'], GOALS['voyage_rss_mb'])}  ({r['verdict'][:60]})"
         )
+        done.append((h, float(run["wall_s"]), float(r["cpu_s"]), float(run["peak_rss_mb"])))
         if h == max(hours):
             longest = r
     if longest is not None:  # where the longest voyage's time and memory go
         out.print(_stage_table(f"the {max(hours):g} h voyage by stage", longest["stages"]))
+    return done
