@@ -8,6 +8,7 @@ linear, is memory bounded below 2 GB?); the first runs' medians with their sprea
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -51,8 +52,10 @@ def plot_e2e(figures: E2EFigures, path: Path) -> None:
 
 
 def _hour(ax: Axes, f: E2EFigures) -> None:
+    from matplotlib import colormaps
+
     left = 0.0
-    colours = ["#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#da8bc3", "#8c8c8c", "#ccb974"]
+    colours = colormaps["tab20"].colors  # type: ignore[attr-defined]
     for k, (stage, wall) in enumerate(f.hour_stages):
         ax.barh(0, wall, left=left, color=colours[k % len(colours)], label=f"{stage} {wall:.2f} s")
         left += wall
@@ -78,7 +81,7 @@ def _voyage(ax: Axes, f: E2EFigures) -> None:
     rss.plot(hours, [v[3] for v in f.voyage], "^--", color="#c44e52", label="peak RSS (MB)")
     rss.axhline(f.voyage_rss_goal_mb, color="#c44e52", ls=":", lw=1)
     rss.set_ylim(0, max(f.voyage_rss_goal_mb, max(v[3] for v in f.voyage)) * 1.1)
-    rss.set_ylabel("peak RSS (MB), goal: below the dotted line", color="#c44e52")
+    rss.set_ylabel("peak RSS (MB); goal: below the dotted line", color="#c44e52", fontsize=8)
     lines = ax.get_legend_handles_labels()
     more = rss.get_legend_handles_labels()
     ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left", fontsize=7)
@@ -86,7 +89,7 @@ def _voyage(ax: Axes, f: E2EFigures) -> None:
 
 
 def _first(ax: Axes, f: E2EFigures) -> None:
-    labels = [label for label, _ in f.first_runs]
+    labels = [textwrap.fill(label, 26) for label, _ in f.first_runs]
     for k, (_, walls) in enumerate(f.first_runs):
         ordered = sorted(walls)
         median = ordered[(len(ordered) - 1) // 2]
