@@ -23,7 +23,7 @@ The filter appends nine first-order Gauss-Markov states for the sensors' own slo
 (receiver position ENU, receiver velocity ENU: real receivers' errors are time-correlated, and a filter
 that takes them as white has innovations with lag-1 autocorrelation near 1; and wheel odometry's scale
 and skid errors, vehicle frame), which enter their measurement rows with -I, and three measurement
-rows for wheel odometry (`kernels.measurement_matrix`).
+rows for wheel odometry (`kernels.measurement_matrix_into`).
 """
 
 from __future__ import annotations

@@ -47,8 +47,8 @@ def local_radii(lat: float) -> tuple[float, float]:
 
 # The 3-vector and 3 x 3 helpers work on scalars or into given arrays: the filter's loop makes no array
 # per block or epoch (small arrays made afresh were a quarter of a noise-learning run). Each kernel the loop
-# calls has an `_into` form writing into arrays the caller made once; the array-returning form, for the
-# Python wrappers and the tests, is over it.
+# calls has an `_into` form writing into arrays the caller made once; where Python wrappers and the tests
+# need an array-returning form, it is over the `_into` one.
 
 
 @njit(cache=CACHE, inline="always")
@@ -504,16 +504,9 @@ def discretise_into(F: np.ndarray, qc: np.ndarray, T: float, FT: np.ndarray, Phi
 
 
 @njit(cache=CACHE)
-def correct(x: np.ndarray, dx: np.ndarray) -> np.ndarray:
-    """Feed an error estimate back into the nominal state (closed loop)."""
-    out = np.empty_like(x)
-    correct_into(x, dx, out, np.empty((2, 3, 3)))
-    return out
-
-
-@njit(cache=CACHE)
 def correct_into(x: np.ndarray, dx: np.ndarray, out: np.ndarray, m: np.ndarray) -> None:
-    """`correct` into `out` (not x), `m` (2 x 3 x 3) the room for its rotations."""
+    """Feed an error estimate back into the nominal state (closed loop): the corrected state into `out`
+    (not x), `m` (2 x 3 x 3) the room for its rotations."""
     for i in range(x.shape[0]):
         out[i] = x[i]
     rm, rn = local_radii(x[0])
@@ -539,8 +532,9 @@ def correct_into(x: np.ndarray, dx: np.ndarray, out: np.ndarray, m: np.ndarray) 
 def correct_all(states: np.ndarray, dx: np.ndarray) -> np.ndarray:
     """`correct` of every row (a smoothed solution's states from the filtered ones and their errors)."""
     out = np.empty_like(states)
+    m = np.empty((2, 3, 3))
     for k in range(states.shape[0]):
-        out[k] = correct(states[k], dx[k, :15])
+        correct_into(states[k], dx[k, :15], out[k], m)
     return out
 
 
@@ -550,22 +544,15 @@ NM = 9  # measurement rows: GNSS position (3), GNSS velocity (3), odometry body 
 
 
 @njit(cache=CACHE)
-def measurement_matrix(x: np.ndarray, R_vb: np.ndarray) -> np.ndarray:
-    """H (9 x 21) at nominal state x: z = INS - measured = H dx + noise.
+def measurement_matrix_into(x: np.ndarray, R_vb: np.ndarray, Hm: np.ndarray, m: np.ndarray) -> None:
+    """H (9 x 24) at nominal state x into Hm, `m` (3 x 3 x 3) the room for its 3 x 3 products:
+    z = INS - measured = H dx + noise.
 
     GNSS rows see the INS error minus the receiver's Gauss-Markov error; odometry rows compare the INS
     velocity turned into the vehicle frame, M v~ with M = R_vb C^T, with the wheels' velocity:
     M~ v~ = M v + M dv - M [v x] phi to first order (C = (I + [phi x]) C~), minus the odometry's own
     slowly varying error (wheel-radius scale, skid) as Gauss-Markov states.
     """
-    Hm = np.empty((NM, NE))
-    measurement_matrix_into(x, R_vb, Hm, np.empty((3, 3, 3)))
-    return Hm
-
-
-@njit(cache=CACHE)
-def measurement_matrix_into(x: np.ndarray, R_vb: np.ndarray, Hm: np.ndarray, m: np.ndarray) -> None:
-    """`measurement_matrix` into Hm, `m` (3 x 3 x 3) the room for its 3 x 3 products."""
     Hm[:, :] = 0.0
     for i in range(3):
         Hm[i, 6 + i] = 1.0
