@@ -102,10 +102,11 @@ def kernel_sources(packages: Sequence[Path] = PACKAGES) -> list[Path]:
     modules those import (numba freezes a global such as a WGS84 constant into the compiled code)."""
     root = packages[0].parent
     names = {folder.name for folder in packages}
-    kernels = {p for folder in packages for p in folder.rglob("*.py") if "njit(" in p.read_text()}
+    texts = {p: p.read_text() for folder in packages for p in folder.rglob("*.py")}
+    kernels = {p for p, text in texts.items() if "njit(" in text}
     imported = set()
     for path in kernels:
-        for module in re.findall(r"^from ([\w.]+) import", path.read_text(), re.MULTILINE):
+        for module in re.findall(r"^from ([\w.]+) import", texts[path], re.MULTILINE):
             if module.split(".")[0] in names:
                 base = root.joinpath(*module.split("."))
                 imported |= {p for p in (base.with_suffix(".py"), base / "__init__.py") if p.exists()}
