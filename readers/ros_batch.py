@@ -55,16 +55,17 @@ def gather(buf: ByteArray, offsets: IntArray, dtype: str) -> NDArray[np.generic]
 
 
 def _gather_rows(buf: ByteArray, first: IntArray, items: IntArray, dtype: str) -> FloatArray:
-    """Values at first[i] + items[j] * itemsize for every message i and pick j, as float64 (m, k)."""
+    """Values at first[i] + items[j] * itemsize for every message i and pick j, as float64 (k, m): a
+    pick's values side by side, as the row buffers keep them."""
     dt = np.dtype(dtype).newbyteorder("<")
     size = dt.itemsize
-    out = np.empty((len(first), len(items)))
+    out = np.empty((len(items), len(first)))
     residue = first % size
     for r in np.flatnonzero(np.bincount(residue, minlength=size)):
         view = np.frombuffer(buf, dtype=dt, count=(len(buf) - int(r)) // size, offset=int(r))
-        rows = np.flatnonzero(residue == r)
+        rows = np.flatnonzero(residue == r) if np.any(residue != r) else slice(None)
         # rows of messages that did not fit start at 0: clipped, their values are never used
-        out[rows] = view[np.minimum(((first[rows] - r) // size)[:, None] + items, len(view) - 1)]
+        out[:, rows] = view[np.minimum(items[:, None] + ((first[rows] - r) // size), len(view) - 1)]
     return out
 
 
@@ -124,7 +125,7 @@ def decode_batch(
         pos = pos + size * f.count
         ok &= base + pos <= ends
     stamps = stamp_sec.astype(np.int64) * 1_000_000_000 + stamp_nsec.astype(np.int64)
-    values = np.full((m, len(picks)), np.nan)
+    values = np.full((len(picks), m), np.nan).T  # (m, k) whose columns are contiguous, as the buffers keep them
     dtypes = {f.name: f.dtype for f in layout}
     safe = ok[:, None]
     for dtype in dict.fromkeys(dtypes[p[0]] for p in picks if p is not None):
@@ -139,7 +140,7 @@ def decode_batch(
         ):
             # the usual case: every value a whole number of items after the first field, in every message
             items = np.array([(shift[picks[i][0]] + size * picks[i][1]) // size for i in cols])  # type: ignore[index]
-            values[:, cols] = _gather_rows(buf, np.where(ok, base + lead, 0), items, dtype)
+            values.T[cols] = _gather_rows(buf, np.where(ok, base + lead, 0), items, dtype)
         else:
             rel = np.stack([offsets[picks[i][0]] + size * picks[i][1] for i in cols], axis=1)  # type: ignore[index]
             absolute = np.where(safe, base[:, None] + rel, 0)
