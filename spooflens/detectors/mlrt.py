@@ -633,9 +633,12 @@ def _offline(
     jumping = -1 if ramp else model.n_states  # `_offline_at`'s `first`
     if 2 * kept_bytes <= OFFLINE_KEEP_BYTES:  # the estimates and the information at the epochs evaluated
         span = (last, stride, first)
-        (xs, Ps), (Ls, als) = both(
-            partial(_forward_kept, parts, x0, P0, rows_index, ramp, span, (a_ptr, a_col)),
+        # the backward filter, twice the forward's work, on this thread: the forward one waits its turn
+        # when the other threads are busy (seed 000's windowed pass, the smoother) and is taken by the
+        # first of them to finish
+        (Ls, als), (xs, Ps) = both(
             partial(_backward_kept, parts, model.n_states, rows_index, ramp, span, (a_ptr, a_col)),
+            partial(_forward_kept, parts, x0, P0, rows_index, ramp, span, (a_ptr, a_col)),
         )
         bf, flat = np.full(last + 1, np.nan), np.full(last + 1, np.nan)
         middle = (first + last) // 2  # each half's candidates on a thread of their own
