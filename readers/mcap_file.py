@@ -4,9 +4,11 @@ Read as a stream of records, so memory holds only the decoded columns. Chunks ar
 their CRC checked one at a time: a corrupt chunk costs its own messages, not the rest of the file; a
 file cut short keeps everything before the cut. A chunk's message records are found from the message
 index records after it (checked to tile the chunk exactly, else the records are walked), and each
-channel's messages of the chunk are decoded together: fixed-layout ROS types straight into numpy
-(`readers.ros_batch`), others one by one. Without a summary section (a recording that was
-never closed) the channels are learnt while reading, and the messages are buffered until the end.
+channel's messages of a group of chunks are decoded together: fixed-layout ROS types straight into
+numpy (`readers.ros_batch`), others one by one. Decompression runs a few chunks ahead, decoding a group
+behind, each in a thread of its own, so reading, decompressing and decoding overlap. Without a summary
+section (a recording that was never closed) the channels are learnt while reading, and the messages are
+buffered until the end.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import zlib
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -156,6 +159,49 @@ class _DecompressingAhead:
             self._pool.shutdown(wait=True, cancel_futures=True)
 
 
+class _DecodingBehind:
+    """Groups of chunks decoded into the streams on a thread of their own, in file order, while the
+    reader reads and indexes the next group (numpy's gathers release the GIL). One group at a time, so
+    at most two groups' bytes are held; whatever else touches the streams waits for it first (`wait`).
+    With one thread allowed each group is decoded when handed over."""
+
+    def __init__(self) -> None:
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="spooflens-decode") if thread_count() >= 2 else None
+        self._busy: Future[None] | None = None
+
+    def submit(self, call: Callable[[], None]) -> None:
+        self.wait()
+        if self._pool is None:
+            call()
+        else:
+            self._busy = self._pool.submit(call)
+
+    def wait(self) -> None:
+        """Until the group handed over last is decoded (raising what decoding it raised)."""
+        busy, self._busy = self._busy, None
+        if busy is not None:
+            busy.result()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _decode_group(
+    collector: StreamCollector, channels: dict[int, Channel], buf: np.ndarray, offsets: np.ndarray
+) -> None:
+    """The message records at `offsets` of `buf` into the collector, each channel's decoded together."""
+    lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
+    channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
+    log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
+    starts = offsets + 31
+    for cid in np.unique(channel_ids):
+        ch = channels.get(int(cid))
+        if ch is not None:
+            sel = channel_ids == cid
+            collector.add_batch(ch.topic, log_times[sel], buf, starts[sel], lengths[sel])
+
+
 def _walk_chunk(data: bytes) -> tuple[list[int], list[Schema | Channel]]:
     """Offsets of the message records of a chunk, plus any schema/channel records, by walking its records."""
     offsets: list[int] = []
@@ -263,6 +309,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         if declared:
             ch = channels.get(channel_id)
             if ch is not None:
+                decoding.wait()
                 collector.add(ch.topic, log_time, data)
         else:
             pending.append((channel_id, log_time, bytes(data)))
@@ -287,6 +334,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                         channels[rec.id] = rec
                 offsets = np.asarray(walked, dtype=np.int64)
         except (ValueError, OverflowError, zstandard.ZstdError, RuntimeError, struct.error) as err:
+            decoding.wait()
             collector.skipped.append(
                 Skipped(
                     "<file>",
@@ -321,15 +369,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
         buf = np.concatenate([b for b, _ in group]) if len(group) > 1 else group[0][0]
         offsets = np.concatenate([o + shift for (_, o), shift in zip(group, shifts, strict=True)])
         group.clear()
-        lengths = np.maximum(gather(buf, offsets + 1, "u8").astype(np.int64) - 22, 0)
-        channel_ids = gather(buf, offsets + 9, "u2").astype(np.int64)
-        log_times = gather(buf, offsets + 15, "u8").astype(np.int64)
-        starts = offsets + 31
-        for cid in np.unique(channel_ids):
-            ch = channels.get(int(cid))
-            if ch is not None:
-                sel = channel_ids == cid
-                collector.add_batch(ch.topic, log_times[sel], buf, starts[sel], lengths[sel])
+        decoding.submit(partial(_decode_group, collector, dict(channels), buf, offsets))
         n_read += len(offsets)
         if progress:
             progress(n_read, total)
@@ -337,6 +377,7 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
     chunk: Chunk | None = None
     indexes: list[bytes] = []
     ahead = _DecompressingAhead()
+    decoding = _DecodingBehind()
     try:
         with path.open("rb") as f:
             for op, body in _top_level_records(f):
@@ -369,9 +410,11 @@ def read_mcap(path: Path, topics: dict[str, str] | None = None, progress: Progre
                 chunk_messages(*queued)
         for queued in ahead.drain():
             chunk_messages(*queued)
+        decode_group()
+        decoding.wait()
     finally:
         ahead.close()
-    decode_group()
+        decoding.close()
     if problem:
         if n_read == 0 and not channels:
             raise ReaderError(path, f"not a readable MCAP file ({problem})")

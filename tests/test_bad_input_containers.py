@@ -219,10 +219,13 @@ def test_an_mcap_zstd_frame_declaring_gigabytes_is_damage_not_a_memory_error(tmp
 def test_mcap_chunks_decompressed_ahead_are_decoded_in_file_order_and_a_damaged_one_is_lost_alone(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: int
 ) -> None:
-    """Chunks are decompressed a few ahead in a thread of their own (one thread: each when its turn
-    comes). Either way the table is the same, row for row, and a chunk whose data is damaged in the
-    middle of the file loses its own messages only, counted."""
+    """Chunks are decompressed a few ahead in a thread of their own and decoded, a group of chunks at a
+    time, in another (one thread: each when its turn comes). Either way the table is the same, row for
+    row, and a chunk whose data is damaged in the middle of the file loses its own messages only,
+    counted. Every chunk a group of its own here: many groups decoded behind the reading."""
     import readers.mcap_file
+
+    monkeypatch.setattr(readers.mcap_file, "_GROUP_BYTES", 1)
 
     src = ROOT / "sample_logs" / "spoofed_flight.mcap"
     data = bytearray(src.read_bytes())
