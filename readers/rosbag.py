@@ -1,24 +1,25 @@
 """ROS1 .bag files and ROS2 bag directories (sqlite3 or MCAP storage), through rosbags' AnyReader.
 
-A ROS1 bag whose index is missing (recording cut short, file truncated) is read by a sequential scan
-of its chunks instead, keeping every message before the damage.
+A cleanly indexed ROS1 bag is read a group of chunks at a time from its own index
+(`readers.rosbag1_chunks`); one whose index is damaged or disagrees with its chunks through rosbags'
+reader and its damage accounting. A ROS1 bag whose index is missing (recording cut short, file
+truncated) is read by a sequential scan of its chunks instead, keeping every message before the damage.
 """
 
 from __future__ import annotations
 
-import bz2
 import sqlite3
 import struct
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-import lz4.frame
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from readers import ReaderFormat
 from readers.ros_messages import normalise_type
+from readers.rosbag1_chunks import MAGIC, OP_BAG_HEADER, OP_CHUNK, OP_CONN, OP_MSG, decompress, fields, read_indexed
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError, one_line
@@ -31,6 +32,10 @@ def read_rosbag(path: Path, topics: dict[str, str] | None = None, progress: Prog
     path = Path(path)
     is_ros1 = path.is_file()
     fmt = "ros1bag" if is_ros1 else "ros2bag"
+    if is_ros1:
+        table = read_indexed(path, topics, progress)  # a cleanly indexed bag: a group of chunks at a time
+        if table is not None:
+            return table
     with tempfile.TemporaryDirectory() as tmp:
         bag_path = path
         if is_ros1 and path.suffix != ".bag":  # AnyReader tells ROS1 from ROS2 by the .bag suffix
@@ -139,18 +144,6 @@ def _sqlite_facts(path: Path) -> str:
 
 # --- sequential ROS1 scan for bags without a usable index -------------------------------------------
 
-_OP_MSG, _OP_BAG_HEADER, _OP_CHUNK, _OP_CONN = 0x02, 0x03, 0x05, 0x07
-
-
-def _fields(header: bytes) -> dict[str, bytes]:
-    out, pos = {}, 0
-    while pos + 4 <= len(header):
-        (n,) = struct.unpack_from("<I", header, pos)
-        name, _, value = header[pos + 4 : pos + 4 + n].partition(b"=")
-        out[name.decode("latin-1")] = value
-        pos += 4 + n
-    return out
-
 
 def _records(data: bytes | memoryview) -> Iterator[tuple[dict[str, bytes], memoryview, int]]:
     """(header fields, data, end offset) of each record of a ROS1 bag body; stops (raising ValueError)
@@ -162,23 +155,13 @@ def _records(data: bytes | memoryview) -> Iterator[tuple[dict[str, bytes], memor
         (hlen,) = struct.unpack_from("<I", view, pos)
         if pos + 8 + hlen > len(view):
             raise ValueError("record header cut short")
-        header = _fields(bytes(view[pos + 4 : pos + 4 + hlen]))
+        header = fields(bytes(view[pos + 4 : pos + 4 + hlen]))
         (dlen,) = struct.unpack_from("<I", view, pos + 4 + hlen)
         start = pos + 8 + hlen
         if start + dlen > len(view):
             raise ValueError("record data cut short")
         pos = start + dlen
         yield header, view[start:pos], pos
-
-
-def _decompress(kind: bytes, data: memoryview, size: int) -> bytes:
-    if kind == b"none":
-        return bytes(data)
-    if kind == b"bz2":
-        return bz2.decompress(data)
-    if kind == b"lz4":
-        return lz4.frame.decompress(bytes(data))
-    raise ValueError(f"unknown chunk compression {kind!r}")
 
 
 def _read_ros1_sequential(path: Path, topics: dict[str, str] | None, progress: Progress | None, why: str) -> EpochTable:
@@ -195,24 +178,24 @@ def _read_ros1_sequential(path: Path, topics: dict[str, str] | None, progress: P
     def take(header: dict[str, bytes], data: memoryview) -> None:
         nonlocal index_pos
         op = header.get("op", b"\0")[0]
-        if op == _OP_CONN:
-            c = _fields(bytes(data))
+        if op == OP_CONN:
+            c = fields(bytes(data))
             conns[struct.unpack("<I", header["conn"])[0]] = (
                 header["topic"].decode("utf-8", "replace"),
                 c["type"].decode("utf-8", "replace"),
                 c.get("message_definition", b"").decode("utf-8", "replace"),
             )
-        elif op == _OP_MSG:
+        elif op == OP_MSG:
             sec, nsec = struct.unpack("<II", header["time"])
             messages.append((struct.unpack("<I", header["conn"])[0], sec * 1_000_000_000 + nsec, bytes(data)))
-        elif op == _OP_BAG_HEADER and "index_pos" in header:
+        elif op == OP_BAG_HEADER and "index_pos" in header:
             (index_pos,) = struct.unpack("<Q", header["index_pos"])
 
     try:
         for header, data, end in _records(body):
-            if header.get("op", b"\0")[0] == _OP_CHUNK:
+            if header.get("op", b"\0")[0] == OP_CHUNK:
                 size = struct.unpack("<I", header["size"])[0]
-                for inner, inner_data, _ in _records(_decompress(header["compression"], data, size)):
+                for inner, inner_data, _ in _records(decompress(header["compression"], data, size)):
                     take(inner, inner_data)
             else:
                 take(header, data)
@@ -279,7 +262,7 @@ def _cut_losses(per_topic: dict[str, int], scanned: int, index_pos: int, problem
     return out
 
 
-ROS1_MAGIC = b"#ROSBAG V2.0\n"
+ROS1_MAGIC = MAGIC
 
 
 def _is_ros1_bag(path: Path, head: bytes) -> bool:
