@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -82,15 +83,20 @@ def test_a_fix_level_attack_on_a_raw_observation_log_moves_the_solved_fixes(tmp_
     assert not clean_json.exists() and not ramp_json.exists()
 
 
-def test_bench_read_leaves_nothing_in_the_current_directory(tmp_path: Path) -> None:
+def test_bench_read_reads_every_format_and_leaves_nothing_in_the_current_directory(tmp_path: Path) -> None:
+    from spooflens.bench.read_bench import OTHER_FORMATS
+
     cwd = Path.cwd()
     os.chdir(tmp_path)
     try:
-        result = CliRunner().invoke(cli, ["bench", "read", "--duration", "3"])
+        result = CliRunner().invoke(cli, ["bench", "read", "--duration", "3", "--formats"])
     finally:
         os.chdir(cwd)
     assert result.exit_code == 0, result.output
     assert list(tmp_path.iterdir()) == []
+    assert "the same 630 messages" in result.output  # 600 IMU samples + 30 fixes
+    for label, *_ in OTHER_FORMATS:  # each read whole
+        assert re.search(rf"{re.escape(label)}\s*│\s*630\s*│", result.output), result.output
 
 
 def test_a_multi_line_error_is_printed_as_one_line(monkeypatch: pytest.MonkeyPatch, capsys) -> None:

@@ -3,6 +3,9 @@
 `spooflens bench read` writes the file, then reads it in separate processes (so each peak RSS is its
 own): our `read_log`, and a plain rosbags AnyReader loop that deserialises every message (the
 baseline a ROS user would write). Goal: ours at least as fast (ratio <= 1) and under 1 GB peak RSS.
+With `--formats` the same hour is also written in every other container a vehicle logs to (a ROS1 bag, a
+ROS2 sqlite3 bag, a ROS1-encoded MCAP, a PX4 ULog, a CSV) and each read the same way; the ROS bags
+beside rosbags' loop over them.
 """
 
 from __future__ import annotations
@@ -80,6 +83,36 @@ def read_with_rosbags(path: str) -> int:
     return n
 
 
+# (label, writer format, file suffix, whether rosbags reads it too)
+OTHER_FORMATS = (
+    ("ROS1 bag", "ros1bag", ".bag", True),
+    ("ROS2 bag (sqlite3)", "ros2bag-sqlite3", "_db3", True),
+    ("MCAP, ROS1 encoding", "mcap-ros1", "_ros1.mcap", False),
+    ("PX4 ULog", "ulog", ".ulg", False),
+    ("CSV", "csv", ".csv", False),
+)
+
+
+def run_formats_bench(
+    workdir: Path, duration_s: float = 3600.0, imu_hz: float = 200.0, fix_hz: float = 10.0
+) -> list[dict[str, Any]]:
+    """The same hour in each of OTHER_FORMATS (written once, kept in `workdir`), read by `read_log` (and
+    rosbags' loop where it reads the format), each in a process of its own."""
+    from spooflens.writers import write_log
+
+    table = None
+    rows = []
+    for label, fmt, suffix, by_rosbags in OTHER_FORMATS:
+        path = Path(workdir) / f"bench_{int(duration_s)}s{suffix}"
+        if not path.exists():
+            table = table if table is not None else synthetic_table(duration_s, imu_hz, fix_hz)
+            write_log(table, path, fmt)
+        ours = measure_in_child(__name__, "read_with_spooflens", str(path))
+        theirs = measure_in_child(__name__, "read_with_rosbags", str(path)) if by_rosbags else None
+        rows.append({"format": label, "file": str(path), "spooflens": ours, "rosbags": theirs})
+    return rows
+
+
 def run_read_bench(
     workdir: Path, duration_s: float = 3600.0, imu_hz: float = 200.0, fix_hz: float = 10.0
 ) -> dict[str, Any]:
@@ -115,7 +148,12 @@ def run_read_bench(
     default=None,
     help="Keep the synthetic MCAP here (reused by the next run); default: a temporary directory, removed after.",
 )
-def command(duration: float, workdir: Path | None) -> int:
+@click.option(
+    "--formats",
+    is_flag=True,
+    help="Also the same log as a ROS1 bag, a ROS2 sqlite3 bag, a ROS1-encoded MCAP, a PX4 ULog and a CSV.",
+)
+def command(duration: float, workdir: Path | None, formats: bool) -> int:
     """Reader speed and memory on a synthetic 200 Hz IMU + 10 Hz fix ROS2 MCAP, beside rosbags."""
     with contextlib.ExitStack() as stack:
         if workdir is None:
@@ -123,6 +161,9 @@ def command(duration: float, workdir: Path | None) -> int:
         workdir.mkdir(parents=True, exist_ok=True)
         with err_console.status("writing the synthetic MCAP and reading it twice..."):
             r = run_read_bench(workdir, duration_s=duration)
+        if formats:
+            with err_console.status("the same log in the other formats: writing each once, reading it..."):
+                other = run_formats_bench(workdir, duration_s=duration)
     t = Table(
         "reader",
         "wall (s)",
@@ -137,4 +178,29 @@ def command(duration: float, workdir: Path | None) -> int:
     click.echo(
         f"wall-time ratio spooflens/rosbags = {r['ratio_wall']:.2f} (goal <= 1.0: {verdict}); peak RSS goal < 1024 MB"
     )
+    if formats:
+        console().print(_formats_table(other, r["messages"]))
     return 0
+
+
+def _formats_table(rows: list[dict[str, Any]], messages: int) -> Table:
+    t = Table(
+        "format",
+        "rows read",
+        "read_log wall (s)",
+        "peak RSS (MB)",
+        "rosbags loop wall (s)",
+        "ratio",
+        title=f"the same {messages} messages (IMU samples and fixes) in other formats",
+    )
+    for row in rows:
+        ours, theirs = row["spooflens"], row["rosbags"]
+        t.add_row(
+            row["format"],
+            str(ours["result"]),
+            f"{ours['wall_s']:.2f}",
+            f"{ours['peak_rss_mb']:.0f}",
+            f"{theirs['wall_s']:.2f}" if theirs else "",
+            f"{ours['wall_s'] / theirs['wall_s']:.2f}" if theirs else "",
+        )
+    return t
