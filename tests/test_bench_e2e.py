@@ -85,3 +85,16 @@ def test_the_plot_draws_each_measured_part_beside_its_goal(tmp_path: Path) -> No
 def test_a_plot_of_nothing_measured_is_an_error(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="nothing measured"):
         plot_e2e(E2EFigures(), tmp_path / "e2e.svg")
+
+
+def test_a_child_reports_its_own_peak_memory_not_that_of_the_process_it_was_started_from() -> None:
+    """ru_maxrss of a child keeps the high water of the process it was forked from: a benchmark holding
+    half a gigabyte made every child it measured look at least that large."""
+    import numpy as np
+
+    from spooflens.bench.common import measure_in_child
+
+    held = np.ones(500_000_000 // 8)  # touched: resident
+    run = measure_in_child("math", "sqrt", 4.0)
+    assert run["result"] == 2.0 and held.sum() > 0
+    assert run["peak_rss_mb"] < 200, run

@@ -34,7 +34,7 @@ import click
 from rich.table import Table
 
 from spooflens import aot
-from spooflens.bench.common import measure_in_child
+from spooflens.bench.common import measure_in_child, peak_rss_mb
 from spooflens.bench.e2e_plot import E2EFigures, plot_e2e
 from spooflens.console import console, err_console
 
@@ -44,10 +44,6 @@ ISSUE_ROSBAGS_LOOP_S = 7.9  # the rosbags loop on the machine the 5 s goal was s
 GOAL_E2E_BY_LOOP = GOALS["e2e_s"] / ISSUE_ROSBAGS_LOOP_S
 COLD_FIRST_RUN = "empty numba cache (every kernel compiled)"
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "spoofed_flight.mcap"
-
-
-def _rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _cpu_s() -> float:
@@ -74,7 +70,7 @@ class _Stages:
                     "stage": self._name,
                     "wall_s": time.perf_counter() - self._t,
                     "cpu_s": _cpu_s() - self._c,
-                    "peak_rss_mb": _rss_mb(),
+                    "peak_rss_mb": peak_rss_mb(),
                 }
             )
         self._name = None
