@@ -13,7 +13,8 @@ records, every message definition readable, and each topic's messages, in time o
 file order. Anything else (`read_indexed` returns None) is left to rosbags' reader and its damage
 accounting, so what a damaged bag loses is counted exactly as before. Each topic's messages come in
 rosbags' order (each connection's by time, ties in file order; a topic's connections merged by time,
-ties to the one listed first), so the table is the same.
+ties to the one listed first), so the table is the same; a message that cannot be deserialised is
+counted with the type library's error (SerdeError) where rosbags' reader names its own wrapper of it.
 """
 
 from __future__ import annotations
@@ -63,6 +64,30 @@ def fields(header: bytes) -> dict[str, bytes]:
     return out
 
 
+def _strict_fields(header: bytes) -> dict[str, bytes]:
+    """`fields`, each whole: a field running past the header, or without '=', is damage."""
+    out, pos = {}, 0
+    while pos < len(header):
+        if pos + 4 > len(header):
+            raise _NotClean("record header cut in a field's length")
+        (n,) = struct.unpack_from("<I", header, pos)
+        name, eq, value = header[pos + 4 : pos + 4 + n].partition(b"=")
+        if pos + 4 + n > len(header) or not eq:
+            raise _NotClean("record header field damaged")
+        out[name.decode("latin-1")] = value
+        pos += 4 + n
+    return out
+
+
+def _text(value: bytes | None, what: str) -> str:
+    try:
+        if value is None:
+            raise UnicodeDecodeError("utf-8", b"", 0, 0, "missing")
+        return value.decode("utf-8")
+    except UnicodeDecodeError:
+        raise _NotClean(f"connection record's {what} missing or not UTF-8") from None
+
+
 def decompress(kind: bytes, data: memoryview, size: int) -> bytes:
     """A chunk's data uncompressed (`size`: the uncompressed size its header gives)."""
     if kind == b"none":
@@ -102,7 +127,7 @@ def _record(f: BinaryIO, op: int) -> tuple[dict[str, bytes], int]:
     (hlen,) = struct.unpack("<I", head)
     if hlen > _MAX_RECORD:
         raise _NotClean("record header length implausible")
-    header = fields(f.read(hlen))
+    header = _strict_fields(f.read(hlen))
     size = f.read(4)
     if len(size) < 4:
         raise _NotClean("record cut short")
@@ -139,13 +164,15 @@ def _index(f: BinaryIO) -> tuple[list[_Connection], list[_Chunk]]:
     conns = []
     for _ in range(n_conns):
         header, dlen = _record(f, OP_CONN)
-        info = fields(_data(f, dlen))
+        # as whole as rosbags' reader wants it: a connection it could not read is left to its accounting
+        info = _strict_fields(_data(f, dlen))
+        _text(info.get("md5sum"), "md5sum")
         conns.append(
             _Connection(
                 _number(header, "conn", "<I"),
-                header.get("topic", b"").decode("utf-8", "replace"),
-                info.get("type", b"").decode("utf-8", "replace"),
-                info.get("message_definition", b"").decode("utf-8", "replace"),
+                _text(header.get("topic"), "topic"),
+                _text(info.get("type"), "type"),
+                _text(info.get("message_definition"), "message_definition"),
             )
         )
     infos = []

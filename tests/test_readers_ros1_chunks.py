@@ -112,3 +112,21 @@ def test_a_bag_whose_index_disagrees_with_its_chunks_is_left_to_rosbags(
     table = read_log(bad)  # rosbags' reader: what it can read, and what it could not, counted
     assert 0 < len(table.imu) <= len(clean.imu)
     _assert_same(table, _by_rosbags(bad, monkeypatch))
+
+
+def test_a_bag_whose_index_lists_a_damaged_connection_is_left_to_rosbags(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The index section's copy of a connection record with its message definition's field length
+    damaged: rosbags' reader refuses the index and the bag is read by the sequential scan, as before."""
+    src = tmp_path / "ground.bag"
+    write_log(simulate(SCENARIOS["ground"], seed=0, duration_s=20.0).table, src, "ros1bag")
+    data = bytearray(src.read_bytes())
+    at = data.rindex(b"message_definition=") - 4  # the last connection record: the index section's
+    data[at : at + 4] = struct.pack("<I", 0xFFFF)
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(data))
+    assert read_indexed(bad, None, None) is None
+    table = read_log(bad)
+    assert any("bag index unusable" in s.reason for s in table.skipped)
+    _assert_same(table, _by_rosbags(bad, monkeypatch))
