@@ -344,7 +344,12 @@ def _stream_rows(frame: str, df: pd.DataFrame) -> list[_Stream]:
     key = STREAM_KEY[frame]
     if key is None:
         return [_Stream("truth", np.arange(len(df)))]
-    codes, uniques = pd.factorize(df[key].astype(str), sort=False)
+    column = df[key]
+    if not column.hasnans:  # one stream, the usual case: no factorising and sorting a day of ids
+        only = column.unique()
+        if len(only) == 1:
+            return [_Stream(str(only[0]), np.arange(len(df)))]
+    codes, uniques = pd.factorize(column.astype(str), sort=False)
     order = np.argsort(codes, kind="stable")
     bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
     return [_Stream(str(u), order[bounds[i] : bounds[i + 1]]) for i, u in enumerate(uniques)]
@@ -549,7 +554,9 @@ def _runs_of(t_ns: np.ndarray, min_jump_ns: int = 2_000_000_000, periods: float 
     `min_jump_ns` and `periods` typical steps. Smaller steps back are jitter, repaired by sorting."""
     if len(t_ns) < 2:
         return np.zeros(len(t_ns), dtype=np.int64)
-    d = np.diff(t_ns.astype(np.int64))
+    d = np.diff(t_ns.astype(np.int64, copy=False))
+    if d.min() >= -min_jump_ns:  # no step back as long as the shortest jump: one run, whatever the steps
+        return np.zeros(len(t_ns), dtype=np.int64)
     pos = d[d > 0]
     step = int(np.median(pos)) if len(pos) else 0
     back = d < -max(min_jump_ns, int(periods * step))
@@ -653,8 +660,10 @@ def _segment_frames(
         t_all = df["t_ns"].to_numpy()
         groups = [("truth", np.arange(len(df)))] if key is None else stream_rows(df, key)
         for sid, pos in groups:
-            order = np.argsort(t_all[pos], kind="stable")
-            t_sorted = t_all[pos][order]
+            t = t_all if len(pos) == len(t_all) else t_all[pos]  # positions in order: all of them, or some
+            # a day of samples is a copy of 70 MB each time: none made for a stream already in order
+            order = None if bool(np.all(t[1:] >= t[:-1])) else np.argsort(t, kind="stable")
+            t_sorted = t if order is None else t[order]
             stray_sorted = plausibility.stray_stamps(t_sorted)
             kept = t_sorted[~stray_sorted] if stray_sorted.any() else t_sorted
             covered = _covered(kept.astype(np.int64, copy=False))
@@ -663,10 +672,11 @@ def _segment_frames(
                 ranges.append((covered[0][0], covered[-1][1]))
             if name in GNSS_FRAMES:
                 gnss_starts += [a for a, _ in covered]
-            stray = np.zeros(len(pos), dtype=bool)
-            stray[order] = stray_sorted
-            pos = np.asarray(pos)[~stray]
-            runs[(name, str(sid))] = (pos, _runs_of(t_all[pos]))
+            if stray_sorted.any():
+                stray = np.zeros(len(pos), dtype=bool)
+                stray[slice(None) if order is None else order] = stray_sorted
+                pos, t = np.asarray(pos)[~stray], t[~stray]
+            runs[(name, str(sid))] = (pos, _runs_of(t))
     n_seg = 1 + max((int(r.max()) for _, r in runs.values() if len(r)), default=0)
     seg_of: dict[str, np.ndarray] = {
         name: np.full(len(df), -1, dtype=np.int64) for name, df in frames_ns.items() if df is not None

@@ -86,16 +86,25 @@ class Scale:
 
 
 def _finite_rows(cols: Columns, names: tuple[str, ...]) -> BoolArray:
-    return np.all([np.isfinite(cols[n]) for n in names], axis=0)
+    ok = np.isfinite(cols[names[0]])
+    for n in names[1:]:  # column by column: no stacked copy of a day's columns
+        ok &= np.isfinite(cols[n])
+    return ok
 
 
 def imu_unit(cols: Columns) -> tuple[list[Scale], str]:
     """Scales that put an IMU stream in m/s^2 and rad/s, or a reason it is in no unit we know ("")."""
     ok = _finite_rows(cols, IMU_MOTION)
-    ok &= np.all([np.abs(cols[n]) < 1e7 for n in IMU_MOTION], axis=0)  # beyond any unit: bad_rows' business
+    for n in IMU_MOTION:
+        ok &= np.abs(cols[n]) < 1e7  # beyond any unit: bad_rows' business
     if not ok.any():
         return [], ""
-    f = np.sqrt(sum(np.square(cols[n][ok]) for n in IMU_MOTION[:3]))
+
+    def at_ok(name: str) -> FloatArray:
+        return cols[name] if every else cols[name][ok]
+
+    every = bool(ok.all())
+    f = np.sqrt(sum(np.square(at_ok(n)) for n in IMU_MOTION[:3]))
     g = float(np.median(f))
     scales = []
     if g < 6.0 or g > 14.0:
@@ -119,7 +128,7 @@ def imu_unit(cols: Columns) -> tuple[list[Scale], str]:
         scales.append(
             Scale(IMU_MOTION[:3], unit[0], f"specific force in {unit[1]} (median |f| = {g:.4g}): scaled to m/s^2")
         )
-    w = np.sqrt(sum(np.square(cols[n][ok]) for n in IMU_MOTION[3:]))
+    w = np.sqrt(sum(np.square(at_ok(n)) for n in IMU_MOTION[3:]))
     p99 = float(np.percentile(w, 99))
     if p99 > GYRO_DEGREES_P99:
         scales.append(
