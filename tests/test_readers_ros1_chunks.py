@@ -130,3 +130,35 @@ def test_a_bag_whose_index_lists_a_damaged_connection_is_left_to_rosbags(
     table = read_log(bad)
     assert any("bag index unusable" in s.reason for s in table.skipped)
     _assert_same(table, _by_rosbags(bad, monkeypatch))
+
+
+def test_a_topic_whose_messages_lie_in_chunks_out_of_time_order_is_left_to_rosbags(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Fixes written late (the second half of the log's first, then the first half): rosbags' reader
+    yields them by time across the chunks, which a group of chunks at a time cannot."""
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    NavSatFix, NavSatStatus = ts.types["sensor_msgs/msg/NavSatFix"], ts.types["sensor_msgs/msg/NavSatStatus"]
+    Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    path = tmp_path / "late.bag"
+    w = Writer(path)
+    w.chunk_threshold = 1024
+    t0 = 1_700_000_000
+    with w:
+        fix = w.add_connection("/gps/fix", NavSatFix.__msgtype__, typestore=ts)
+        for k in [*range(30, 60), *range(30)]:
+            t_ns = (t0 + k) * 10**9
+            msg = NavSatFix(
+                Header(seq=k, stamp=Time(sec=t0 + k, nanosec=0), frame_id="gps"),
+                NavSatStatus(status=0, service=1),
+                47.0 + 1e-5 * k,
+                8.0,
+                400.0,
+                np.zeros(9),
+                0,
+            )
+            w.write(fix, t_ns, ts.serialize_ros1(msg, NavSatFix.__msgtype__))
+    assert read_indexed(path, None, None) is None
+    table = read_log(path)
+    assert len(table.fixes) == 60 and np.all(np.diff(table.fixes["t_s"].to_numpy()) > 0)
+    _assert_same(table, _by_rosbags(path, monkeypatch))
