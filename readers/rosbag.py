@@ -26,6 +26,7 @@ from spooflens.errors import ReaderError, one_line
 
 Progress = Callable[[int, int], None]
 _PROGRESS_EVERY = 20000
+_BATCH = 8192  # messages of a topic joined and decoded together
 
 
 def read_rosbag(path: Path, topics: dict[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
@@ -67,15 +68,26 @@ def _read_open_bag(
     collector.add_topics({c.topic: ros_topic(c.msgtype, encoding, deserialize) for c in reader.connections}, counts)
     total = sum(n for _, n in counts)
     n = 0
+    # each topic's messages gathered and decoded _BATCH at a time: rosbags yields them one by one
+    pending: dict[str, tuple[list[int], list[bytes]]] = {}
+    stopped: Exception | None = None
     try:
         for conn, t_ns, raw in reader.messages():
-            collector.add(conn.topic, t_ns, raw)
+            times, raws = pending.setdefault(conn.topic, ([], []))
+            times.append(t_ns)
+            raws.append(raw)
+            if len(raws) >= _BATCH:
+                collector.add_many(conn.topic, *pending.pop(conn.topic))
             n += 1
             if progress and n % _PROGRESS_EVERY == 0:
                 progress(n, total)
     except Exception as err:  # noqa: BLE001 - keep what was read before the damage
+        stopped = err
+    for topic, (times, raws) in pending.items():
+        collector.add_many(topic, times, raws)
+    if stopped is not None:
         collector.skipped.append(
-            Skipped("<file>", f"reading stopped after {n} of {total} messages: {one_line(err)}", total - n, "lost")
+            Skipped("<file>", f"reading stopped after {n} of {total} messages: {one_line(stopped)}", total - n, "lost")
         )
     else:
         collector.skipped += _missing_messages(reader, collector)

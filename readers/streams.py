@@ -11,7 +11,7 @@ and a cross-check of the fast path).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -139,6 +139,14 @@ def assign_roles(
     return roles
 
 
+def _joined(raws: Sequence[bytes | memoryview]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(uint8 buffer, starts, lengths) of messages laid end to end."""
+    parts = [bytes(r) for r in raws]
+    lengths = np.fromiter(map(len, parts), dtype=np.int64, count=len(parts))
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    return np.frombuffer(b"".join(parts), dtype=np.uint8), starts, lengths
+
+
 @dataclass
 class StreamCollector:
     """Collects the messages of one log; `finish` builds the EpochTable."""
@@ -208,13 +216,17 @@ class StreamCollector:
         """Whether the next message is decoded in full for its frame_id (the first always is: a cross-check)."""
         return s.seen < _FRAME_ID_MESSAGES and not s.frame_id
 
+    def add_many(self, topic: str, log_times_ns: Sequence[int], raws: Sequence[bytes | memoryview]) -> None:
+        """Messages of one topic, in log order, each in bytes of its own (a container that yields them one
+        at a time): decoded as `add` would, without its per-message bookkeeping."""
+        if raws:
+            self.add_batch(topic, np.asarray(log_times_ns, dtype=np.int64), *_joined(raws))
+
     def _flush(self, s: TopicStream) -> None:
-        raws = [bytes(r) for _, r in s.queue]
-        lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
-        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-        times = np.fromiter((t for t, _ in s.queue), dtype=np.int64, count=len(raws))
+        times = np.fromiter((t for t, _ in s.queue), dtype=np.int64, count=len(s.queue))
+        buf, starts, lengths = _joined([r for _, r in s.queue])
         s.queue = []
-        self._decode_many(s, times, np.frombuffer(b"".join(raws), dtype=np.uint8), starts, lengths, counted=True)
+        self._decode_many(s, times, buf, starts, lengths, counted=True)
 
     def _decode_one(self, s: TopicStream, log_time_ns: int, raw: bytes | memoryview) -> None:
         assert s.buffer is not None and s.decl.decode is not None

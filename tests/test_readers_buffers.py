@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import readers.buffers
@@ -88,3 +89,37 @@ def test_a_damaged_message_count_cannot_ask_for_more_rows_than_the_file_has_byte
     assert buffer._open_stamps is None and not buffer._values  # handed over and forgotten
     first = next(iter(values.values()))
     assert first.base is not None and first.base.shape[0] <= 1600 // 16  # the block asked for
+
+
+@pytest.mark.parametrize("batch", [1, 7, 5000])
+def test_messages_handed_over_a_topic_at_a_time_decode_as_one_at_a_time(husky_bag: Path, batch: int) -> None:
+    """`add_many` (a container yielding messages one by one, gathered per topic) against `add`: the same
+    table and the same counts, the first messages decoded in full for their frame_id either way, a
+    damaged message counted alike."""
+    from rosbags.highlevel import AnyReader
+
+    from readers.streams import StreamCollector, ros_topic
+
+    with AnyReader([husky_bag]) as reader:  # open while the collectors decode: its types deserialise
+        messages = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+        decls = {c.topic: ros_topic(c.msgtype, "ros1", reader.deserialize) for c in reader.connections}
+        k = next(i for i, m in enumerate(messages) if m[0] == "/imu/data" and i > 100)
+        messages[k] = (messages[k][0], messages[k][1], messages[k][2][:20])  # cut: cannot be decoded
+        one, many = StreamCollector(husky_bag, "ros1bag"), StreamCollector(husky_bag, "ros1bag")
+        one.add_topics(decls)
+        many.add_topics(decls)
+        pending: dict[str, tuple[list[int], list[bytes]]] = {}
+        for topic, t, raw in messages:
+            one.add(topic, t, raw)
+            times, raws = pending.setdefault(topic, ([], []))
+            times.append(t)
+            raws.append(raw)
+            if len(raws) >= batch:
+                many.add_many(topic, *pending.pop(topic))
+        for topic, (times, raws) in pending.items():
+            many.add_many(topic, times, raws)
+        a, b = one.finish(), many.finish()
+    for name in ("imu", "fixes", "odometry"):
+        pd.testing.assert_frame_equal(getattr(a, name), getattr(b, name))
+    assert a.streams == b.streams and a.skipped == b.skipped
+    assert any("could not be decoded" in s.reason and s.count == 1 for s in b.skipped)
