@@ -102,7 +102,10 @@ def test_messages_handed_over_a_topic_at_a_time_decode_as_one_at_a_time(husky_ba
 
     with AnyReader([husky_bag]) as reader:  # open while the collectors decode: its types deserialise
         messages = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
-        decls = {c.topic: ros_topic(c.msgtype, "ros1", reader.deserialize) for c in reader.connections}
+        decls = {
+            c.topic: ros_topic(c.msgtype, "ros1", lambda raw, msgtype: reader.deserialize(bytes(raw), msgtype))
+            for c in reader.connections
+        }
         k = next(i for i, m in enumerate(messages) if m[0] == "/imu/data" and i > 100)
         messages[k] = (messages[k][0], messages[k][1], messages[k][2][:20])  # cut: cannot be decoded
         one, many = StreamCollector(husky_bag, "ros1bag"), StreamCollector(husky_bag, "ros1bag")
