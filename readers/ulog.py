@@ -47,6 +47,7 @@ from readers.px4 import (
     select_receivers,
     utc_offset_us,
 )
+from readers.ros_batch import gather
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gap_losses
 from spooflens.errors import ReaderError, one_line
 from spooflens.schema import FixType
@@ -209,8 +210,8 @@ def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Dama
     what = ""
     end_us: int | None = None
     subscribed: dict[int, tuple[str, int]] = {}  # msg_id -> (topic, instance), from the 'A' messages
-    counts: dict[int, int] = {}
-    stamps: list[int] = []
+    data_at: list[int] = []  # where each data message's msg_id and timestamp lie: read after the walk
+    kind_d, kind_a = ord("D"), ord("A")
     while pos + 3 <= n:
         size, kind = data[pos] | data[pos + 1] << 8, data[pos + 2]
         if kind not in _MESSAGE_TYPES or pos + 3 + size > n:
@@ -223,21 +224,26 @@ def _damage(path: Path, pyulog_corruption: bool, pyulog_said: str = "") -> _Dama
             what = what or f"corrupt message header at byte {pos} of {n}"
             pos = nxt - 2
             continue
-        if kind == ord("D") and size >= 10:
-            msg_id, t = struct.unpack_from("<HQ", data, pos + 3)
-            stamps.append(t)
-            counts[msg_id] = counts.get(msg_id, 0) + 1
-        elif kind == ord("A") and size > 3:
+        if kind == kind_d and size >= 10:
+            data_at.append(pos + 3)
+        elif kind == kind_a and size > 3:
             multi, msg_id = struct.unpack_from("<BH", data, pos + 3)
             subscribed[msg_id] = (data[pos + 6 : pos + 3 + size].decode("ascii", "replace"), multi)
         pos += 3 + size
+    raw = np.frombuffer(data, dtype=np.uint8)
+    at = np.asarray(data_at, dtype=np.int64)
+    msg_ids = gather(raw, at, "u2").astype(np.int64)
+    stamps = gather(raw, at + 2, "u8")
+    ids, first, n_of = np.unique(msg_ids, return_index=True, return_counts=True)
+    in_order = np.argsort(first)  # by first appearance, as the walk met them
+    counts = dict(zip(ids[in_order].tolist(), n_of[in_order].tolist(), strict=True))
     if 0 < n - pos < 3 and not what:
         what = f"file cut short at byte {n} (a message header cut in half); what followed is lost"
     if pyulog_corruption:
         what = f"{what}; pyulog re-synchronised" if what else "pyulog found corrupt data and re-synchronised"
         what += f" ({pyulog_said})" if pyulog_said else ""
-    if stamps:  # the data's end: a corrupt stamp among a few resynchronised messages must not set it
-        t = np.sort(np.array(stamps, dtype=np.uint64))
+    if len(stamps):  # the data's end: a corrupt stamp among a few resynchronised messages must not set it
+        t = np.sort(stamps.astype(np.uint64))
         top = int(t[int(0.999 * (len(t) - 1))])
         end_us = int(t[t <= top + 60_000_000][-1]) if top < 2**53 else None
     listed: dict[tuple[str, int], int] = {}
