@@ -19,7 +19,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from readers import ReaderFormat
 from readers.ros_messages import normalise_type
-from readers.rosbag1_chunks import MAGIC, OP_BAG_HEADER, OP_CHUNK, OP_CONN, OP_MSG, decompress, fields, read_indexed
+from readers.rosbag1_chunks import MAGIC as ROS1_MAGIC
+from readers.rosbag1_chunks import OP_BAG_HEADER, OP_CHUNK, OP_CONN, OP_MSG, decompress, fields, read_indexed
 from readers.streams import StreamCollector, TopicDecl, ros_topic
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError, one_line
@@ -272,9 +273,6 @@ def _cut_losses(per_topic: dict[str, int], scanned: int, index_pos: int, problem
                 )
             )
     return out
-
-
-ROS1_MAGIC = MAGIC
 
 
 def _is_ros1_bag(path: Path, head: bytes) -> bool:

@@ -53,26 +53,18 @@ class _NotClean(Exception):
     """The bag is not one this path reads: left to rosbags' reader."""
 
 
-def fields(header: bytes) -> dict[str, bytes]:
-    """A ROS1 record header's fields (name=value, each after its 4-byte length)."""
-    out, pos = {}, 0
-    while pos + 4 <= len(header):
-        (n,) = struct.unpack_from("<I", header, pos)
-        name, _, value = header[pos + 4 : pos + 4 + n].partition(b"=")
-        out[name.decode("latin-1")] = value
-        pos += 4 + n
-    return out
-
-
-def _strict_fields(header: bytes) -> dict[str, bytes]:
-    """`fields`, each whole: a field running past the header, or without '=', is damage."""
+def fields(header: bytes, strict: bool = False) -> dict[str, bytes]:
+    """A ROS1 record header's fields (name=value, each after its 4-byte length). `strict`: each whole, a
+    field running past the header or without '=' is damage (`_NotClean`); else what can be read is."""
     out, pos = {}, 0
     while pos < len(header):
         if pos + 4 > len(header):
-            raise _NotClean("record header cut in a field's length")
+            if strict:
+                raise _NotClean("record header cut in a field's length")
+            break
         (n,) = struct.unpack_from("<I", header, pos)
         name, eq, value = header[pos + 4 : pos + 4 + n].partition(b"=")
-        if pos + 4 + n > len(header) or not eq:
+        if strict and (pos + 4 + n > len(header) or not eq):
             raise _NotClean("record header field damaged")
         out[name.decode("latin-1")] = value
         pos += 4 + n
@@ -80,12 +72,12 @@ def _strict_fields(header: bytes) -> dict[str, bytes]:
 
 
 def _text(value: bytes | None, what: str) -> str:
-    try:
-        if value is None:
-            raise UnicodeDecodeError("utf-8", b"", 0, 0, "missing")
-        return value.decode("utf-8")
-    except UnicodeDecodeError:
-        raise _NotClean(f"connection record's {what} missing or not UTF-8") from None
+    if value is not None:
+        try:
+            return value.decode("utf-8")
+        except UnicodeDecodeError:
+            pass
+    raise _NotClean(f"connection record's {what} missing or not UTF-8")
 
 
 def decompress(kind: bytes, data: memoryview, size: int) -> bytes:
@@ -127,7 +119,7 @@ def _record(f: BinaryIO, op: int) -> tuple[dict[str, bytes], int]:
     (hlen,) = struct.unpack("<I", head)
     if hlen > _MAX_RECORD:
         raise _NotClean("record header length implausible")
-    header = _strict_fields(f.read(hlen))
+    header = fields(f.read(hlen), strict=True)
     size = f.read(4)
     if len(size) < 4:
         raise _NotClean("record cut short")
@@ -165,7 +157,7 @@ def _index(f: BinaryIO) -> tuple[list[_Connection], list[_Chunk]]:
     for _ in range(n_conns):
         header, dlen = _record(f, OP_CONN)
         # as whole as rosbags' reader wants it: a connection it could not read is left to its accounting
-        info = _strict_fields(_data(f, dlen))
+        info = fields(_data(f, dlen), strict=True)
         _text(info.get("md5sum"), "md5sum")
         conns.append(
             _Connection(

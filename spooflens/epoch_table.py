@@ -18,7 +18,7 @@ import pandas as pd
 from spooflens import plausibility
 from spooflens.errors import SchemaError
 from spooflens.gnss.ephemeris import GpsEphemerides, Klobuchar
-from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems, stream_rows
+from spooflens.schema import FRAMES, STREAM_KEY, empty_frame, make_frame, schema_problems, single_stream, stream_rows
 
 GPS_EPOCH_UNIX_NS = 315_964_800_000_000_000  # 1980-01-06T00:00:00Z
 NS = 1_000_000_000
@@ -345,11 +345,10 @@ def _stream_rows(frame: str, df: pd.DataFrame) -> list[_Stream]:
     if key is None:
         return [_Stream("truth", np.arange(len(df)))]
     column = df[key]
-    if not column.hasnans:  # one stream, the usual case: no factorising and sorting a day of ids
-        only = column.unique()
-        if len(only) == 1:
-            return [_Stream(str(only[0]), np.arange(len(df)))]
-    codes, uniques = pd.factorize(column.astype(str), sort=False)
+    only = single_stream(column)
+    if only is not None:
+        return [_Stream(only, np.arange(len(df)))]
+    codes, uniques = pd.factorize(column.astype(str), sort=False)  # a row without an id: stream "nan"
     order = np.argsort(codes, kind="stable")
     bounds = np.searchsorted(codes[order], np.arange(len(uniques) + 1))
     return [_Stream(str(u), order[bounds[i] : bounds[i + 1]]) for i, u in enumerate(uniques)]

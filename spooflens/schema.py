@@ -345,14 +345,22 @@ def make_frame(frame: str, columns: Mapping[str, Any], n: int | None = None, cop
     return pd.DataFrame(data, copy=False)
 
 
+def single_stream(column: pd.Series) -> str | None:
+    """The one stream id of a frame's id column when every row has it (the usual case: found without
+    factorising a day of ids, 0.8 s); None otherwise."""
+    if column.hasnans:
+        return None
+    only = column.unique()
+    return str(only[0]) if len(only) == 1 else None
+
+
 def stream_rows(df: pd.DataFrame, key: str) -> list[tuple[str, np.ndarray]]:
     """(stream id, row positions) of each stream of a frame, in order of first appearance; rows with no
     id belong to none. A `groupby(key).indices` for string ids, 15 times faster: 1.8 s on a day of IMU."""
     column = df[key]
-    if not column.hasnans:  # one stream, the usual case: no factorising a day of ids (0.8 s)
-        only = column.unique()
-        if len(only) == 1:
-            return [(str(only[0]), np.arange(len(df)))]
+    only = single_stream(column)
+    if only is not None:
+        return [(only, np.arange(len(df)))]
     codes, ids = pd.factorize(column, sort=False)
     order = np.argsort(codes, kind="stable")
     bounds = np.searchsorted(codes[order], np.arange(len(ids) + 1))
