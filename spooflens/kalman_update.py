@@ -94,7 +94,7 @@ def update_scratch(n: int, m: int) -> UpdateScratch:
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def update_into(
     x: np.ndarray,
     P: np.ndarray,
