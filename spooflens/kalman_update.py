@@ -179,6 +179,34 @@ def update_into(
     return nis, logdet
 
 
+@njit(cache=True, inline="always")
+def masked_update_into(
+    x: np.ndarray,
+    P: np.ndarray,
+    C: np.ndarray,
+    R: np.ndarray,
+    y: np.ndarray,
+    with_logdet: bool,
+    rows: np.ndarray,
+    scratch: UpdateScratch,
+    x_new: np.ndarray,
+    P_new: np.ndarray,
+) -> tuple[int, float, float]:
+    """`masked_update` for a filter that makes its arrays once: the observed rows into `rows` (room for
+    len(y)), the updated estimate into x_new and P_new, e, S, S^-1 and K in the leading rows and columns
+    of `scratch` (`update_scratch(n, len(y))`). Returns (observed rows m, nis, log det S); with m = 0
+    nothing is written (x and P stand)."""
+    m = 0
+    for i in range(y.shape[0]):
+        if not math.isnan(y[i]):
+            rows[m] = i
+            m += 1
+    if m == 0:
+        return 0, math.nan, 0.0
+    nis, logdet = update_into(x, P, C, R, y, rows, m, with_logdet, scratch, x_new, P_new)
+    return m, nis, logdet
+
+
 @njit(cache=True, nogil=True)
 def cholesky_logdet(M: np.ndarray, L: np.ndarray) -> float:
     """Writes the lower Cholesky factor of M into L; returns log det M, or NaN when M is not positive

@@ -33,7 +33,7 @@ def test_a_log_of_gnss_fixes_only_is_analysed_without_importing_numba(tmp_path: 
 def test_the_first_kernel_called_puts_dispatchers_in_place_of_every_wrapper() -> None:
     out = _run(
         "import sys\n"
-        "import spooflens.detectors.kalman as kalman\n"
+        "import spooflens.detectors.mlrt as mlrt\n"
         "import spooflens.kalman_update as update\n"
         "import spooflens.navigation.kernels as kernels\n"
         "from spooflens.jit import LazyKernel\n"
@@ -45,7 +45,7 @@ def test_the_first_kernel_called_puts_dispatchers_in_place_of_every_wrapper() ->
         "assert 'numba' in sys.modules and value == python_value\n"
         # the defining module's names and the names other modules imported from it are the dispatchers
         "assert isinstance(kernels.gravity, Dispatcher) and isinstance(update.masked_update, Dispatcher)\n"
-        "assert kernels.masked_update is update.masked_update is kalman.masked_update\n"
+        "assert kernels.masked_update is update.masked_update is mlrt.masked_update\n"
         "from spooflens.jit import njit\n"
         "assert isinstance(njit(cache=False)(lambda x: x + 1), Dispatcher)\n"  # later kernels: dispatchers
         "print('ok')\n"

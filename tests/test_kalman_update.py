@@ -115,3 +115,36 @@ def test_an_update_into_a_filters_reused_room_equals_the_update_made_afresh(seed
         assert np.array_equal(x1, x2) and np.array_equal(P1, P2)
         assert np.array_equal(S, scratch[3][:m, :m]) and np.array_equal(K, scratch[7][:, :m])
         assert nis == nis2 and (logdet == logdet2 or (np.isnan(logdet) and np.isnan(logdet2)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_masked_update_into_reused_room_equals_the_masked_update(seed: int) -> None:
+    """The detectors' forward filter and the MLRT's forward pass update into arrays made once: each
+    epoch's numbers are `masked_update`'s bit for bit, whatever the last epoch left in the room, and an
+    epoch with nothing observed writes nothing."""
+    from spooflens.kalman_update import masked_update_into
+
+    rng = np.random.default_rng(seed)
+    n, p = 10, 6
+    x, P, C, R = rng.normal(size=n), _spd(rng, n), rng.normal(size=(p, n)), _spd(rng, p)
+    if seed == 5:
+        R = -R  # S not positive definite: the general inverse and numpy's determinant
+    rows, scratch = np.full(p, 99, dtype=np.int64), update_scratch(n, p)
+    for a in scratch:
+        a[...] = 7
+    x_new, P_new = np.full(n, 3.0), np.full((n, n), 3.0)
+    x_prev, P_prev = x_new.copy(), P_new.copy()
+    for used in (p, 3, 0, 1):
+        y = rng.normal(size=p)
+        y[rng.permutation(p)[used:]] = np.nan
+        x1, P1, rows1, e, S, Sinv, K, nis, logdet = masked_update(x, P, C, R, y)
+        m, nis2, logdet2 = masked_update_into(x, P, C, R, y, True, rows, scratch, x_new, P_new)
+        assert m == len(rows1) == used
+        if m == 0:
+            assert np.isnan(nis2) and logdet2 == 0.0 and (x_new == x_prev).all() and (P_new == P_prev).all()
+            continue
+        assert np.array_equal(rows[:m], rows1) and np.array_equal(x_new, x1) and np.array_equal(P_new, P1)
+        assert np.array_equal(scratch[1][:m], e) and np.array_equal(scratch[3][:m, :m], S)
+        assert np.array_equal(scratch[6][:m, :m], Sinv) and np.array_equal(scratch[7][:, :m], K)
+        assert nis2 == nis and logdet2 == logdet
+        x_prev, P_prev = x_new.copy(), P_new.copy()

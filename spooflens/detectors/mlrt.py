@@ -42,7 +42,7 @@ from spooflens.detectors.kalman import (
     information_update,
 )
 from spooflens.jit import njit
-from spooflens.kalman_update import masked_update, observed_parts
+from spooflens.kalman_update import masked_update, masked_update_into, observed_parts, update_scratch
 from spooflens.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
 from spooflens.statespace import BlockDiagonal, LinearGaussianModel, kernel_array
 from spooflens.threads import both, in_parallel
@@ -373,6 +373,10 @@ def _forward_block(
     n, q = A_head.shape[1] + A_tail.shape[1], rows.shape[0]
     na = x.shape[0]
     Aa, Qa, Ca = np.zeros((na, na)), np.zeros((na, na)), np.zeros((C.shape[1], na))
+    # the update's arrays made once; x and P copied first, so the caller's arrays are never written
+    p = y.shape[1]
+    observed, scratch = np.empty(p, dtype=np.int64), update_scratch(na, p)
+    x, P, x_new, P_new = x.copy(), P.copy(), np.empty(na), np.empty((na, na))
     for k in range(lo, hi + 1):
         dt = t[k] - t[k - 1] if k > 0 else 0.0
         _augmented_into(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, dt, ramp, Aa, Qa, Ca)
@@ -380,7 +384,9 @@ def _forward_block(
             x = times_vector(Aa, x, a_ptr, a_col)
             P = congruence(Aa, P, a_ptr, a_col, np.empty((na, na)))
             P += Qa
-        x, P, _, _, _, _, _, _, _ = masked_update(x, P, Ca, R[k], y[k], False)
+        if masked_update_into(x, P, Ca, R[k], y[k], False, observed, scratch, x_new, P_new)[0] > 0:
+            x, x_new = x_new, x
+            P, P_new = P_new, P
         if xs.shape[0] > 0 and k % every == 0 and k >= base * every:
             xs[k // every - base] = x
             Ps[k // every - base] = P
