@@ -38,14 +38,14 @@ def test_the_first_kernel_called_puts_dispatchers_in_place_of_every_wrapper() ->
         "import spooflens.navigation.kernels as kernels\n"
         "from spooflens.jit import LazyKernel\n"
         "assert 'numba' not in sys.modules\n"
-        "assert isinstance(kernels.gravity, LazyKernel) and isinstance(kernels.masked_update, LazyKernel)\n"
+        "assert isinstance(kernels.gravity, LazyKernel) and isinstance(kernels.update_scratch, LazyKernel)\n"
         "python_value = kernels.gravity.function(0.7, 120.0)\n"
         "value = kernels.gravity(0.7, 120.0)\n"
         "from numba.core.dispatcher import Dispatcher\n"
         "assert 'numba' in sys.modules and value == python_value\n"
         # the defining module's names and the names other modules imported from it are the dispatchers
-        "assert isinstance(kernels.gravity, Dispatcher) and isinstance(update.masked_update, Dispatcher)\n"
-        "assert kernels.masked_update is update.masked_update is mlrt.masked_update\n"
+        "assert isinstance(kernels.gravity, Dispatcher) and isinstance(update.update_scratch, Dispatcher)\n"
+        "assert kernels.update_scratch is update.update_scratch is mlrt.update_scratch\n"
         "from spooflens.jit import njit\n"
         "assert isinstance(njit(cache=False)(lambda x: x + 1), Dispatcher)\n"  # later kernels: dispatchers
         "print('ok')\n"

@@ -24,7 +24,7 @@ from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
 from spooflens.jit import njit
-from spooflens.kalman_update import masked_update, update_into, update_scratch
+from spooflens.kalman_update import masked_update_into, update_into, update_scratch
 from spooflens.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
@@ -960,17 +960,20 @@ def rts_closed_loop(
     run = np.empty((every, n, n))
     cross = np.empty((n, n))
     P_next = np.empty((n, n))
+    # the re-made run's arrays, made once (as the filter's own: its update into the run's next covariance)
+    p = H.shape[1]
+    zero, x_new, mask = np.zeros(n), np.empty(n), np.empty(p)
+    rows, scratch, pred_run = np.empty(p, dtype=np.int64), update_scratch(n, p), np.empty((n, n))
     for lo in range(((M - 1) // every) * every, -1, -every):
         hi = min(lo + every, M) - 1
         run[0] = P_upd[lo // every]
         for e in range(lo + 1, hi + 1):
-            pred = block_congruence(Phi[e], Phi_gm[e], run[e - 1 - lo], np.empty((n, n)))
+            pred = block_congruence(Phi[e], Phi_gm[e], run[e - 1 - lo], pred_run)
             add_block_diagonal(pred, Qd[e], Qd_gm[e])
-            mask = np.full(H.shape[1], np.nan)
-            for i in range(H.shape[1]):
-                if used[e, i]:
-                    mask[i] = 0.0
-            run[e - lo] = masked_update(np.zeros(n), pred, H[e], R[e], mask, False)[1]
+            for i in range(p):
+                mask[i] = 0.0 if used[e, i] else np.nan
+            if masked_update_into(zero, pred, H[e], R[e], mask, False, rows, scratch, x_new, run[e - lo])[0] == 0:
+                run[e - lo] = pred
         for e in range(hi, lo - 1, -1):
             Pu = run[e - lo]
             if e == M - 1:
