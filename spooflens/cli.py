@@ -19,6 +19,8 @@ import sys
 # large segments, a gigabyte beyond what a large log really uses, which an address-space limit (a
 # container's, or ulimit -v) counts. The system allocator reserves what it uses. Set before pandas loads.
 os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -26,6 +28,7 @@ import click
 from rich.table import Table
 
 from spooflens.console import LazyGroup, console, progress, show_progress
+from spooflens.early_recording import EarlyRecording
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError, one_line
 from spooflens.evidence import label
@@ -147,10 +150,16 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
 
 
 def analyse_log(
-    log: Path, topics: tuple[str, ...], imu_grade: str | None, quiet: bool, station_texts: tuple[str, ...] = ()
+    log: Path,
+    topics: tuple[str, ...],
+    imu_grade: str | None,
+    quiet: bool,
+    station_texts: tuple[str, ...] = (),
+    recording: EarlyRecording | None = None,
 ) -> list[Analysis]:
     """Read and analyse LOG (its truth file beside it joins the table, for drawing only): one analysis per
-    recording the log joins (usually one).
+    recording the log joins (usually one). `recording`: the log's recording, begun meanwhile
+    (`recording_side_work`).
 
     A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
     files.
@@ -180,12 +189,20 @@ def analyse_log(
             steps.append(name)
             report(f"analysing: {name}", len(steps), len(steps) + 1)
 
-        with side_work(_import_writers):
+        with side_work(recording_side_work(table, recording)):
             return analyze_segments(table, options, on_step)
 
 
+def recording_side_work(table: EpochTable, recording: EarlyRecording | None) -> Callable[[], None]:
+    """What the analysis of `table` may do where it leaves a core idle (`threads.side_work`): begin its
+    recording (a log of one recording), else import the recording's library."""
+    if recording is not None and len(table.segments) < 2:
+        return partial(recording.begin, table)
+    return _import_writers
+
+
 def _import_writers() -> None:
-    """The recording's library, imported while the analysis leaves a core idle (`threads.side_work`)."""
+    """The recording's library, imported while the analysis leaves a core idle."""
     import spooflens.recording  # noqa: F401
 
 
@@ -292,8 +309,12 @@ def analyze(
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     for hint, path in (("--output", output), ("--json", json_path), ("--html", html_path)):
         check_writable(path, hint)
-    analyses = analyse_log(log, topics, imu_grade, quiet, station_texts)
-    summaries = write_outputs(analyses, output, json_path, html_path)
+    recording = EarlyRecording(output)
+    try:
+        analyses = analyse_log(log, topics, imu_grade, quiet, station_texts, recording)
+        summaries = write_outputs(analyses, output, json_path, html_path, recording)
+    finally:
+        recording.abandon()  # begun for an analysis that failed (a taken one is written and in place)
     n = len(analyses)
     for k, (analysis, summary) in enumerate(zip(analyses, summaries, strict=True)):
         if n > 1 and not quiet:
@@ -333,10 +354,16 @@ def make_output_folder(path: Path, hint: str) -> None:
     _check_folder(path, path, hint)
 
 
-def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None, html_path: Path | None) -> list[dict]:
+def write_outputs(
+    analyses: list[Analysis],
+    output: Path,
+    json_path: Path | None,
+    html_path: Path | None,
+    recording: EarlyRecording | None = None,
+) -> list[dict]:
     """Write the recording (always), the JSON summary and the operator report of a log's analyses (one per
     recording it joins: `.segN` outputs, one JSON), as `analyze` does (`batch` writes through here too);
-    returns each recording's summary."""
+    returns each recording's summary. `recording`: the recording begun during the analysis, if any."""
     from spooflens.recording import write_recording
     from spooflens.summary import build_summary
 
@@ -345,7 +372,9 @@ def write_outputs(analyses: list[Analysis], output: Path, json_path: Path | None
     for k, analysis in enumerate(analyses):
         table, verdict = analysis.table, analysis.verdict
         lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-        write_recording(segment_path(output, k, n), table, analysis.results, lines, verdict)
+        path = segment_path(output, k, n)
+        begun = recording.take(path, table) if recording is not None else None
+        write_recording(path, table, analysis.results, lines, verdict, begun)
         summaries.append(build_summary(table, analysis.results, verdict))
         if html_path:
             from spooflens.report import write_report

@@ -53,7 +53,9 @@ def entity(*parts: str) -> str:
 
 
 class RecordingWriter:
-    """Writes one .rrd file; `close` writes the footer."""
+    """Writes one .rrd file; `close` writes the footer. With `final`, the file is written under `path`
+    and moved to `final` when closed (a recording begun before its analysis ends: a failed analysis
+    leaves no half recording, and none in place of an earlier one)."""
 
     def __init__(
         self,
@@ -62,12 +64,20 @@ class RecordingWriter:
         panels: Sequence[tuple[str, list[str]]] = (),
         keys: Sequence[KeyStatistic] = (),
         bar_views: Sequence[tuple[str, str]] = (),
+        final: Path | None = None,
     ) -> None:
         self.table = table
+        self.path, self.final = path, final
         self.rec = rr.RecordingStream(APP_ID, recording_id=f"spooflens:{table.source.name}")
-        self.rec.save(str(path), default_blueprint=default_blueprint(panels, keys, bar_views))
+        # a recording begun early gets its blueprint when the results are known (`set_blueprint`)
+        blueprint = None if final is not None else default_blueprint(panels, keys, bar_views)
+        self.rec.save(str(path), default_blueprint=blueprint)
         self.origin = _reference_point(table)
         self._queued_bytes = 0
+
+    def set_blueprint(self, blueprint: rrb.Blueprint) -> None:
+        """The default blueprint, as `save(default_blueprint=...)` gives it (the default, not forced active)."""
+        rr.send_blueprint(blueprint, make_active=False, make_default=True, recording=self.rec)
 
     def _sent(self, nbytes: int) -> None:
         """Count what was sent; past FLUSH_BYTES, wait for Rerun to write it (bounded memory)."""
@@ -78,6 +88,13 @@ class RecordingWriter:
 
     def close(self) -> None:
         self.rec.disconnect()
+        if self.final is not None:
+            self.path.replace(self.final)
+
+    def abandon(self) -> None:
+        """Close without keeping the file (a recording begun for an analysis that did not end)."""
+        self.rec.disconnect()
+        self.path.unlink(missing_ok=True)
 
     def _indexes(self, t_s: NDArray[np.float64]) -> list[rr.TimeColumn]:
         t = np.asarray(t_s, dtype=float)
@@ -378,39 +395,21 @@ def write_recording(
     results: Sequence[DetectorResult],
     verdict_lines: Sequence[tuple[float, str, str]] = (),
     verdict: Verdict | None = None,
+    begun: RecordingWriter | None = None,
 ) -> None:
     """Write the whole recording of one analysed log (with the verdict, the Overview timeline shows its
-    incidents too)."""
-    w = RecordingWriter(path, table, detector_panels(results), key_statistics(results), histogram_views(results))
+    incidents too). `begun`: a writer that already holds the log's streams (`begin_recording`)."""
+    panels, keys, bars = detector_panels(results), key_statistics(results), histogram_views(results)
+    if begun is None:
+        w = RecordingWriter(path, table, panels, keys, bars)
+    else:
+        w = begun
+        w.set_blueprint(default_blueprint(panels, keys, bars))
     try:
         for lane, lane_t, lane_level in overview_lanes(results, verdict, table.duration_s):
             w.scalars(entity("overview", lane), lane_t, lane_level, [lane])
-        for oid in dict.fromkeys(table.odometry["odometry_id"].astype(str)):
-            _odometry(w, oid, table.odometry[table.odometry["odometry_id"].astype(str) == oid])
-        for rid in table.receivers():
-            fx = table.fixes_of(rid)
-            w.track(
-                entity("reported", rid),
-                fx["t_s"].to_numpy(),
-                fx["lat_deg"].to_numpy(),
-                fx["lon_deg"].to_numpy(),
-                fx["height_m"].to_numpy(),
-                COLOURS["reported"],
-            )
-            _fix_series(w, rid, fx)
-        if len(table.truth):
-            tr = table.truth
-            w.track(
-                "truth",
-                tr["t_s"].to_numpy(),
-                tr["lat_deg"].to_numpy(),
-                tr["lon_deg"].to_numpy(),
-                tr["height_m"].to_numpy(),
-                COLOURS["truth"],
-            )
-        _satellite_series(w, table)
-        for iid in table.imus():
-            _imu_series(w, iid, table.imu_of(iid))
+        if begun is None:
+            write_streams(w, table)
         ev_t: list[float] = [0.0] * len(table.skipped)
         ev_text = [f"reader: {s}" for s in table.skipped]
         ev_level = ["INFO"] * len(table.skipped)
@@ -427,6 +426,49 @@ def write_recording(
         w.events(ev_t, ev_text, ev_level)
     finally:
         w.close()
+
+
+def begin_recording(path: Path, table: EpochTable) -> RecordingWriter:
+    """A recording of `table` begun before its analysis ends: written beside `path` (moved there when
+    `write_recording` closes it), with the log's streams, which need no analysis (`write_streams`)."""
+    w = RecordingWriter(path.with_name(path.name + ".part"), table, final=path)
+    try:
+        write_streams(w, table)
+    except BaseException:
+        w.abandon()
+        raise
+    return w
+
+
+def write_streams(w: RecordingWriter, table: EpochTable) -> None:
+    """What the log itself holds: odometry, each receiver's fixes and their quality, truth, the
+    satellites' C/N0, the IMU."""
+    for oid in dict.fromkeys(table.odometry["odometry_id"].astype(str)):
+        _odometry(w, oid, table.odometry[table.odometry["odometry_id"].astype(str) == oid])
+    for rid in table.receivers():
+        fx = table.fixes_of(rid)
+        w.track(
+            entity("reported", rid),
+            fx["t_s"].to_numpy(),
+            fx["lat_deg"].to_numpy(),
+            fx["lon_deg"].to_numpy(),
+            fx["height_m"].to_numpy(),
+            COLOURS["reported"],
+        )
+        _fix_series(w, rid, fx)
+    if len(table.truth):
+        tr = table.truth
+        w.track(
+            "truth",
+            tr["t_s"].to_numpy(),
+            tr["lat_deg"].to_numpy(),
+            tr["lon_deg"].to_numpy(),
+            tr["height_m"].to_numpy(),
+            COLOURS["truth"],
+        )
+    _satellite_series(w, table)
+    for iid in table.imus():
+        _imu_series(w, iid, table.imu_of(iid))
 
 
 def _detector(w: RecordingWriter, res: DetectorResult) -> None:

@@ -109,3 +109,42 @@ def test_the_writer_waits_for_rerun_to_write_what_it_sent_so_a_long_log_is_not_q
     assert len(flushes) > 10
     assert _rows(tmp_path / "often.rrd") == _rows(tmp_path / "once.rrd")
     assert _rows(tmp_path / "often.rrd", static=True) == _rows(tmp_path / "once.rrd", static=True)
+
+
+def test_a_recording_begun_during_the_analysis_holds_what_one_written_after_it_does(tmp_path: Path) -> None:
+    """`analyze` writes a log's streams while the analysis runs (side work) under a temporary name; the
+    finished file holds the same rows as one written at once, and appears only when complete."""
+    from spooflens.early_recording import EarlyRecording
+
+    table = circling_table(ramp_mps=3.0)
+    results = run_analyses(table)
+    verdict = decide(results)
+    lines = [(0.0, verdict.headline, "WARN")]
+    at_once, begun = tmp_path / "a.rrd", tmp_path / "b.rrd"
+    write_recording(at_once, table, results, lines, verdict)
+    early = EarlyRecording(begun)
+    early.begin(table)
+    part = tmp_path / "b.rrd.part"
+    assert part.exists() and not begun.exists()
+    write_recording(begun, table, results, lines, verdict, early.take(begun, table))
+    assert begun.exists() and not part.exists()
+    assert _rows(begun) == _rows(at_once) and _rows(begun, static=True) == _rows(at_once, static=True)
+    assert _rows(begun)["/imu/imu/specific_force_mps2"] == len(table.imu)
+    early.begin(table)  # side work that starts late, after the recording was taken: nothing
+    assert not part.exists()
+
+
+def test_a_recording_begun_for_an_analysis_that_failed_leaves_the_earlier_file_alone(tmp_path: Path) -> None:
+    from spooflens.early_recording import EarlyRecording
+
+    table = circling_table(ramp_mps=0.0)
+    out = tmp_path / "a.rrd"
+    out.write_bytes(b"an earlier recording")
+    early = EarlyRecording(out)
+    early.begin(table)
+    early.abandon()
+    assert out.read_bytes() == b"an earlier recording" and not (tmp_path / "a.rrd.part").exists()
+    other = EarlyRecording(out)  # begun for one table, asked for another (a log of several recordings)
+    other.begin(table)
+    assert other.take(out, circling_table(ramp_mps=0.0)) is None
+    assert out.read_bytes() == b"an earlier recording" and not (tmp_path / "a.rrd.part").exists()

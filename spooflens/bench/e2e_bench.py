@@ -81,18 +81,20 @@ def analyse_end_to_end(log: str, out_dir: str) -> dict[str, Any]:
     stages = _Stages()
     stages.start("import")
     from spooflens.analysis import AnalyzeOptions
-    from spooflens.cli import _import_writers, _read, write_outputs
+    from spooflens.cli import _read, recording_side_work, write_outputs
+    from spooflens.early_recording import EarlyRecording
     from spooflens.pipeline import analyze_table
     from spooflens.threads import side_work
 
     stages.start("read")
     table = _read(Path(log), {}, False)
     stages.start("analysis: start")
-    with side_work(_import_writers):  # as `analyze` does: the recording's library imported meanwhile
+    out = Path(out_dir)
+    recording = EarlyRecording(out / "e2e.rrd")
+    with side_work(recording_side_work(table, recording)):  # as `analyze` does: the recording begun meanwhile
         analysis = analyze_table(table, AnalyzeOptions(), lambda step: stages.start(f"analysis: {step}"))
     stages.start("recording + JSON")
-    out = Path(out_dir)
-    write_outputs([analysis], out / "e2e.rrd", out / "e2e.json", None)
+    write_outputs([analysis], out / "e2e.rrd", out / "e2e.json", None, recording)
     stages.stop()
     return {
         "stages": stages.rows,
@@ -246,7 +248,8 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     stages = _Stages()
     stages.start("imports of spooflens analyze")
     from spooflens.analysis import AnalyzeOptions
-    from spooflens.cli import _import_writers, _read, write_outputs
+    from spooflens.cli import _read, recording_side_work, write_outputs
+    from spooflens.early_recording import EarlyRecording
     from spooflens.pipeline import analyze_segments
     from spooflens.threads import side_work
 
@@ -256,13 +259,14 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     numba_imported = False
     for k, when in enumerate(("first", "again, same process")):
         stages.start(f"analysis ({when})")
-        with side_work(_import_writers):
+        out = Path(out_dir)
+        recording = EarlyRecording(out / f"parts{k}.rrd")
+        with side_work(recording_side_work(table, recording)):
             analyses = analyze_segments(table, AnalyzeOptions())
         if k == 0:
             numba_imported = "numba" in sys.modules
         stages.start("recording + JSON" + (" (again)" if k else ""))
-        out = Path(out_dir)
-        write_outputs(analyses, out / f"parts{k}.rrd", out / f"parts{k}.json", None)
+        write_outputs(analyses, out / f"parts{k}.rrd", out / f"parts{k}.json", None, recording)
         verdicts.append([a.verdict.headline for a in analyses])
     stages.stop()
     return {"stages": stages.rows, "verdicts": verdicts, "numba_imported": numba_imported}
