@@ -44,6 +44,8 @@ BLOCK_ROWS = 100_000  # rows per send_columns call
 # Rerun writes the file in threads of its own, slower than the columns are sent: without waiting for it
 # now and then, a day of 100 Hz IMU series queued in memory (0.6 GB) until the end
 FLUSH_BYTES = 64_000_000
+# a recording begun during the analysis waits more often: what Rerun holds then adds to the analysis' peak
+EARLY_FLUSH_BYTES = 8_000_000
 
 
 def entity(*parts: str) -> str:
@@ -74,15 +76,16 @@ class RecordingWriter:
         self.rec.save(str(path), default_blueprint=blueprint)
         self.origin = _reference_point(table)
         self._queued_bytes = 0
+        self._flush_bytes = FLUSH_BYTES if final is None else EARLY_FLUSH_BYTES
 
     def set_blueprint(self, blueprint: rrb.Blueprint) -> None:
         """The default blueprint, as `save(default_blueprint=...)` gives it (the default, not forced active)."""
         rr.send_blueprint(blueprint, make_active=False, make_default=True, recording=self.rec)
 
     def _sent(self, nbytes: int) -> None:
-        """Count what was sent; past FLUSH_BYTES, wait for Rerun to write it (bounded memory)."""
+        """Count what was sent; past the writer's limit, wait for Rerun to write it (bounded memory)."""
         self._queued_bytes += nbytes
-        if self._queued_bytes >= FLUSH_BYTES:
+        if self._queued_bytes >= self._flush_bytes:
             self.rec.flush()
             self._queued_bytes = 0
 
@@ -434,6 +437,7 @@ def begin_recording(path: Path, table: EpochTable) -> RecordingWriter:
     w = RecordingWriter(path.with_name(path.name + ".part"), table, final=path)
     try:
         write_streams(w, table)
+        w.rec.flush()  # written out now, not held in Rerun's queue through the analysis' peak of memory
     except BaseException:
         w.abandon()
         raise
