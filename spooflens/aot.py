@@ -113,8 +113,7 @@ def kernel_sources(packages: Sequence[Path] = PACKAGES) -> list[Path]:
     return sorted(kernels | imported)
 
 
-def _digests(paths: Iterable[Path]) -> dict[str, str]:
-    root = PACKAGES[0].parent
+def _digests(paths: Iterable[Path], root: Path = PACKAGES[0].parent) -> dict[str, str]:
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}
 
 

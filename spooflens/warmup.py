@@ -26,12 +26,14 @@ importing numba. A build that fails only says so: numba's cache serves every cal
 
 `pip install` runs it (`spooflens/_build_backend.py`: the project's build backend, setuptools' with
 this step added), so the first `spooflens analyze` after installing finds every kernel compiled. Run it
-by hand after changing a kernel, or on a machine where the install could not (it says so).
+by hand after changing a kernel, or on a machine where the install could not (it says so): when any
+kernel source changed since the last warm-up, it empties numba's cache first (`clear_stale_numba_cache`).
 """
 
 from __future__ import annotations
 
 import compileall
+import json
 import sys
 import tempfile
 import time
@@ -47,6 +49,33 @@ SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 # confirm an incident); the car adds the ground-vehicle paths (course-over-ground yaw)
 SAMPLE_LOGS = ("spoofed_flight.mcap", "ground_ros2.mcap")
 PACKAGES = tuple(Path(__file__).resolve().parents[1] / name for name in ("spooflens", "readers"))
+
+
+NUMBA_CACHE_STAMP = "numba_cache_sources.json"  # in spooflens/__pycache__: the kernel sources numba's cache is of
+
+
+def clear_stale_numba_cache(packages: tuple[Path, ...] = PACKAGES) -> bool:
+    """Empty numba's on-disk cache when any kernel source differs from the last warm-up's; True if it did.
+
+    Numba keys a kernel's cache by its own source file only: a kernel that inlines or calls one defined
+    in another file keeps its old machine code when only that other file changed (the navigation filter
+    inlines `kalman_update.update_into`). So after any change the whole cache is compiled afresh."""
+    from spooflens import aot
+
+    stamp = packages[0] / "__pycache__" / NUMBA_CACHE_STAMP
+    current = aot._digests(aot.kernel_sources(packages), packages[0].parent)
+    try:
+        last = json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        last = None
+    if last == current:
+        return False
+    for folder in packages:
+        for cached in (*folder.rglob("__pycache__/*.nbi"), *folder.rglob("__pycache__/*.nbc")):
+            cached.unlink(missing_ok=True)
+    stamp.parent.mkdir(exist_ok=True)
+    stamp.write_text(json.dumps(current, indent=1))  # what the cache is compiled from from now on
+    return True
 
 
 def default_logs() -> list[Path]:
@@ -146,6 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"spooflens warm-up: bytecode of {', '.join(p.name for p in PACKAGES)} written", flush=True)
     else:
         print("spooflens warm-up: some modules did not compile to bytecode (they compile at each import)", flush=True)
+    if clear_stale_numba_cache():
+        print("spooflens warm-up: kernel sources changed since the last warm-up: numba's cache made afresh", flush=True)
     called: list[tuple[Any, Any]] = []
     for name, seconds in warm([Path(a) for a in args] or None, called):
         print(f"spooflens warm-up: {name} analysed in {seconds:.1f} s", flush=True)
