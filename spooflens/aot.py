@@ -113,7 +113,8 @@ def kernel_sources(packages: Sequence[Path] = PACKAGES) -> list[Path]:
     return sorted(kernels | imported)
 
 
-def _digests(paths: Iterable[Path], root: Path = PACKAGES[0].parent) -> dict[str, str]:
+def digests(paths: Iterable[Path], root: Path = PACKAGES[0].parent) -> dict[str, str]:
+    """sha256 of each file, by its path relative to `root`."""
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in paths}
 
 
@@ -146,7 +147,7 @@ def _load() -> dict[tuple[str, Key], Callable[..., Any]]:
             return {}
         sources = manifest["sources"]
         root = PACKAGES[0].parent
-        if _digests(root / name for name in sources) != sources:
+        if digests(root / name for name in sources) != sources:
             return {}
         path = _library_path()
         loader = importlib.machinery.ExtensionFileLoader(MODULE, str(path))
@@ -237,7 +238,7 @@ def build(signatures: Iterable[tuple[Any, Any]], regular: bool = True) -> int:
             pycc_compiler.compile_extra = plain_compile
         # a new file in its place: a process that has the old one mapped keeps reading the old one
         (Path(tmp) / _library_path().name).replace(_library_path())
-    manifest = {"facts": _build_facts(), "sources": _digests(kernel_sources()), "exports": exports}
+    manifest = {"facts": _build_facts(), "sources": digests(kernel_sources()), "exports": exports}
     MANIFEST.write_text(json.dumps(manifest))
     forget()
     return len(exports)

@@ -99,11 +99,11 @@ def imu_unit(cols: Columns) -> tuple[list[Scale], str]:
         ok &= np.abs(cols[n]) < 1e7  # beyond any unit: bad_rows' business
     if not ok.any():
         return [], ""
+    every = bool(ok.all())
 
     def at_ok(name: str) -> FloatArray:
         return cols[name] if every else cols[name][ok]
 
-    every = bool(ok.all())
     f = np.sqrt(sum(np.square(at_ok(n)) for n in IMU_MOTION[:3]))
     g = float(np.median(f))
     scales = []

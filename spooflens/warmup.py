@@ -42,13 +42,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from spooflens import aot
+from spooflens.aot import PACKAGES
 from spooflens.errors import one_line
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 # the spoofed flight reaches every kernel (filter, smoother, detectors, the second pass, the coasts that
 # confirm an incident); the car adds the ground-vehicle paths (course-over-ground yaw)
 SAMPLE_LOGS = ("spoofed_flight.mcap", "ground_ros2.mcap")
-PACKAGES = tuple(Path(__file__).resolve().parents[1] / name for name in ("spooflens", "readers"))
 
 
 NUMBA_CACHE_STAMP = "numba_cache_sources.json"  # in spooflens/__pycache__: the kernel sources numba's cache is of
@@ -60,10 +61,8 @@ def clear_stale_numba_cache(packages: tuple[Path, ...] = PACKAGES) -> bool:
     Numba keys a kernel's cache by its own source file only: a kernel that inlines or calls one defined
     in another file keeps its old machine code when only that other file changed (the navigation filter
     inlines `kalman_update.update_into`). So after any change the whole cache is compiled afresh."""
-    from spooflens import aot
-
     stamp = packages[0] / "__pycache__" / NUMBA_CACHE_STAMP
-    current = aot._digests(aot.kernel_sources(packages), packages[0].parent)
+    current = aot.digests(aot.kernel_sources(packages), packages[0].parent)
     try:
         last = json.loads(stamp.read_text())
     except (OSError, ValueError):
@@ -98,8 +97,6 @@ def warm(logs: list[Path] | None = None, called: list[tuple[Any, Any]] | None = 
     """Analyse `logs` (default: see the module) end to end with numba (never the kernels compiled ahead of
     time); (log, seconds) of each. `called`, when given, receives each (dispatcher, signature) a call
     from Python compiled or loaded: the signatures `spooflens.aot` builds."""
-    from spooflens import aot
-
     done: list[tuple[str, float]] = []
     aot.disabled = True
     aot.forget()
@@ -182,8 +179,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"spooflens warm-up: {name} analysed in {seconds:.1f} s", flush=True)
     print(f"spooflens warm-up: numba kernels compiled and cached in {time.perf_counter() - t0:.0f} s", flush=True)
     t1 = time.perf_counter()
-    from spooflens import aot
-
     try:
         try:
             exported = aot.build(called)

@@ -257,9 +257,9 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     table = _read(Path(log), {}, False)
     verdicts = []
     numba_imported = False
+    out = Path(out_dir)
     for k, when in enumerate(("first", "again, same process")):
         stages.start(f"analysis ({when})")
-        out = Path(out_dir)
         recording = EarlyRecording(out / f"parts{k}.rrd")
         with side_work(recording_side_work(table, recording)):
             analyses = analyze_segments(table, AnalyzeOptions())
