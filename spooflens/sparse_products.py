@@ -74,16 +74,20 @@ def congruence(A: np.ndarray, M: np.ndarray, ptr: np.ndarray, col: np.ndarray, o
 
 @njit(cache=True, nogil=True)
 def congruence_t(A: np.ndarray, M: np.ndarray, ptr: np.ndarray, col: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """out = A^T M A for symmetric M (out symmetric), A's non-zeros in (ptr, col)."""
+    """out = A^T M A for exactly symmetric M (out symmetric), A's non-zeros in (ptr, col)."""
     n = A.shape[1]
     m = M.shape[0]
-    MA = np.zeros((m, n))  # M A: column c of A's row r adds M[:, r] A[r, c]
+    # (M A)^T = A^T M, built a row at a time: row c of A^T M gathers A[r, c] M[r, :] over A's rows r,
+    # contiguous rows rather than M's and M A's columns, each entry summed in the same order as
+    # (M A)[i, c] += M[i, r] A[r, c] would be (M[i, r] == M[r, i]), so the same bits
+    AtM = np.zeros((n, m))
     for r in range(A.shape[0]):
         for z in range(ptr[r], ptr[r + 1]):
             c = col[z]
             a = A[r, c]
             for i in range(m):
-                MA[i, c] += M[i, r] * a
+                AtM[c, i] += M[r, i] * a
+    MA = np.ascontiguousarray(AtM.T)
     out[:, :] = 0.0
     for r in range(A.shape[0]):  # A^T (M A): row r of A adds A[r, c] (M A)[r, :] to out's row c
         for z in range(ptr[r], ptr[r + 1]):

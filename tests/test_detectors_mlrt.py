@@ -21,6 +21,7 @@ from spooflens.detectors.mlrt import (
     step_two_filter_offline,
     two_filter_smoother,
 )
+from spooflens.sparse_products import pattern
 from spooflens.statespace import BlockDiagonal, LinearGaussianModel
 
 
@@ -345,3 +346,43 @@ def test_ramp_statistics_equal_the_signature_recursion_written_out_for_each_onse
         assert seen.sum() > 20
         np.testing.assert_allclose(got[seen], want[seen], rtol=1e-8, atol=1e-8, err_msg=name)
         assert np.isnan(got[~seen]).all()
+
+
+@pytest.mark.parametrize("noisy", [6, 4])
+def test_a_backward_step_with_noiseless_trailing_states_equals_the_dense_step(noisy: int) -> None:
+    """The step factorises only I + Lambda Q's leading block when the states after `noisy` carry no
+    process noise (an MLRT's augmented attack states): the same information as (I + Lambda Q)^-1 whole."""
+    rng = np.random.default_rng(noisy)
+    n = 6
+    G = rng.normal(size=(n, 2 * n))
+    Lam = G @ G.T
+    alpha = rng.normal(size=n)
+    A = np.eye(n) + 0.2 * rng.normal(size=(n, n))
+    A[np.abs(A) < 0.1] = 0.0  # a sparse transition: the step's products go over its non-zeros
+    B = rng.normal(size=(noisy, noisy))
+    Q = np.zeros((n, n))
+    Q[:noisy, :noisy] = B @ B.T
+    ptr, col = pattern(A[None])
+    L1, a1 = kalman.information_predict_back(Lam, alpha, A, Q, noisy, ptr, col)
+    X = np.eye(n) + Lam @ Q
+    bracket = np.linalg.solve(X, Lam)
+    np.testing.assert_allclose(L1, A.T @ (0.5 * (bracket + bracket.T)) @ A, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(a1, A.T @ np.linalg.solve(X, alpha), rtol=1e-10, atol=1e-10)
+    assert np.array_equal(L1, L1.T)
+
+
+def test_the_information_update_adds_the_observed_rows_only() -> None:
+    rng = np.random.default_rng(8)
+    n, p = 5, 3
+    C = rng.normal(size=(p, n))
+    C[0, 1:] = 0.0  # a row that reads one state
+    F = rng.normal(size=(p, p))
+    R = F @ F.T + np.eye(p)
+    y = np.array([0.4, np.nan, -1.2])
+    Lam, alpha = np.eye(n), rng.normal(size=n)
+    L1, a1 = kalman.information_update(Lam, alpha, C, R, y)
+    used = [0, 2]
+    Cm, Ri = C[used], np.linalg.inv(R[np.ix_(used, used)])
+    np.testing.assert_allclose(L1, Lam + Cm.T @ Ri @ Cm, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(a1, alpha + Cm.T @ Ri @ y[used], rtol=1e-12, atol=1e-12)
+    assert kalman.information_update(Lam, alpha, C, R, np.full(p, np.nan))[0] is Lam

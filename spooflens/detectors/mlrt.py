@@ -148,7 +148,7 @@ def _info_constant(
                 0.5 * Ba @ np.linalg.solve(M, Ba)
                 - 0.5 * np.linalg.slogdet(np.eye(M.shape[0]) + Qr @ (B.T @ Lam @ B))[1]
             )
-        Lam, alpha = information_predict_back(Lam, alpha, A[k], Q[k], ptr, col)
+        Lam, alpha = information_predict_back(Lam, alpha, A[k], Q[k], n, ptr, col)
     return Lam, alpha, c
 
 
@@ -501,7 +501,7 @@ def _information_back(
     A_head, A_tail, Q_head, Q_tail, C, R, y, t = model
     _augmented_into(A_head[k], A_tail[k], Q_head[k], Q_tail[k], C[k], n, q, rows, t[k] - t[k - 1], ramp, Aa, Qa, Ca)
     L, a = information_update(L, a, Ca, R[k], y[k])
-    return information_predict_back(L, a, Aa, Qa, a_ptr, a_col)
+    return information_predict_back(L, a, Aa, Qa, n, a_ptr, a_col)
 
 
 @njit(cache=True)
