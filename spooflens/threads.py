@@ -121,6 +121,14 @@ def started(call: Callable[[], T]) -> Future[T]:
     return _run_now(call)
 
 
+def finished(future: Future[T], call: Callable[[], T]) -> T:
+    """The result of `call`, begun with `started` as `future`: made on this thread when it has not begun
+    yet (every worker busy), so no thread waits for work that has not begun; else waited for."""
+    if future.cancel():
+        return call()
+    return future.result()
+
+
 def _run_now(call: Callable[[], T]) -> Future[T]:
     """`call` made on this thread, its result (or exception) in a future that is done."""
     done: Future[T] = Future()

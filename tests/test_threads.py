@@ -134,6 +134,20 @@ def test_a_started_call_runs_beside_the_caller_and_its_future_holds_the_answer_o
                 failed.result()
 
 
+def test_a_started_call_not_begun_when_its_result_is_wanted_is_made_by_the_caller() -> None:
+    release = threading.Event()
+    caller = threading.current_thread().name
+    with threads.limited(2):
+        busy = [threads.started(lambda: release.wait(10)) for _ in range(2)]
+        queued = threads.started(lambda: threading.current_thread().name)
+        assert threads.finished(queued, lambda: threading.current_thread().name) == caller
+        assert queued.cancelled() and not release.is_set()
+        release.set()
+        assert all(b.result(10) for b in busy)
+        begun = threads.started(lambda: threading.current_thread().name)
+        assert threads.finished(begun, lambda: "made again") != caller  # begun: waited for, not made twice
+
+
 def test_with_one_thread_a_started_call_is_made_at_once_in_the_caller() -> None:
     with threads.limited(1):
         done = threads.started(lambda: threading.current_thread().name)
@@ -194,6 +208,36 @@ def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() ->
             np.testing.assert_array_equal(sa.values, sb.values, err_msg=f"{a.name}/{sa.name}")
         for ca, cb in zip(a.curves, b.curves, strict=True):
             np.testing.assert_array_equal(ca.y, cb.y, err_msg=f"{a.name}/{ca.name}")
+
+
+def test_the_analyses_after_seed000_run_before_its_offline_pass_is_waited_for(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Seed 000 returns `Later`: the innovation tests run while its offline pass finishes, and every
+    result still comes in the run order."""
+    from dataclasses import replace
+
+    from spooflens.analysis import AnalysisContext, run_with_context
+    from spooflens.detectors import innovation_tests
+
+    order: list[str] = []
+    results_of = seed000._results
+
+    def results(*args: object) -> object:
+        order.append("seed000 finished")
+        return results_of(*args)  # type: ignore[arg-type]
+
+    run_tests = innovation_tests.ANALYSIS.run
+
+    def tests_run(ctx: AnalysisContext) -> object:
+        order.append("innovation tests")
+        return run_tests(ctx)
+
+    monkeypatch.setattr(seed000, "_results", results)
+    monkeypatch.setattr(innovation_tests, "ANALYSIS", replace(innovation_tests.ANALYSIS, run=tests_run))
+    table = simulate("aircraft", seed=3, duration_s=60.0).table
+    names = [r.name for r in run_with_context(AnalysisContext(table, AnalyzeOptions()))]
+    assert order == ["innovation tests", "seed000 finished"]
+    declared = [d.name for d in seed000.ANALYSIS.detectors] + [d.name for d in innovation_tests.ANALYSIS.detectors]
+    assert [n for n in names if n in declared] == declared
 
 
 def test_a_forked_child_of_a_process_that_used_the_pool_runs_pieces_side_by_side_again(

@@ -18,21 +18,22 @@ Choices where the paper is vague, all options of `Seed000Options`:
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo, Later
 from spooflens.detectors.base import Alarm, Curve, DetectorResult, Series, Track, alarm_intervals
 from spooflens.detectors.innovation_test import position_nis, threshold
 from spooflens.detectors.kalman import forward_blocks
-from spooflens.detectors.mlrt import onset_posterior, ramp_two_filter_offline, step_two_filter_offline
+from spooflens.detectors.mlrt import RampOffline, onset_posterior, ramp_two_filter_offline, step_two_filter_offline
 from spooflens.detectors.ramp import RampPass, RampStatistics
 from spooflens.evidence import Evidence
 from spooflens.statespace import LinearGaussianModel
-from spooflens.threads import both
+from spooflens.threads import both, finished, started
 
 FloatArray = NDArray[np.float64]
 POSITION_ROWS = (0, 1, 2)
@@ -157,17 +158,33 @@ def _alarms(
 
 def detect(model: LinearGaussianModel, opts: Seed000Options | None = None) -> list[DetectorResult]:
     """The four detectors' results (statistics, thresholds, alarms, onsets, curves)."""
+    return detect_begun(model, opts)()
+
+
+def detect_begun(model: LinearGaussianModel, opts: Seed000Options | None = None) -> Callable[[], list[DetectorResult]]:
+    """`detect`, begun: the offline pass over the whole log (which needs nothing of the windowed one) on
+    another thread, the windowed statistics on this one; the call returned waits for the offline pass
+    and makes the results. Work in between runs beside the offline pass's tail, which it would leave a
+    core idle for (its backward filter is the longest single piece of the analysis)."""
     opts = opts or Seed000Options()
-    offline = opts.offline and model.n_epochs > 3
-    # the offline pass over the whole log needs nothing of the windowed one: both at once
-    st, off = both(
-        partial(statistics, model, opts),
-        partial(
-            ramp_two_filter_offline, model, POSITION_ROWS, np.array(opts.sigma_rate_mps), stride=_stride(model, opts)
-        )
-        if offline
-        else _none,
+    rate = np.array(opts.sigma_rate_mps)
+    offline = (
+        partial(ramp_two_filter_offline, model, POSITION_ROWS, rate, stride=_stride(model, opts))
+        if opts.offline and model.n_epochs > 3
+        else _none
     )
+    pending = started(offline)
+    st = statistics(model, opts)
+    return partial(_results, model, opts, st, partial(finished, pending, offline))
+
+
+def _results(
+    model: LinearGaussianModel,
+    opts: Seed000Options,
+    st: Seed000Statistics,
+    offline: Callable[[], RampOffline | None],
+) -> list[DetectorResult]:
+    off = offline()
     t, r = st.t, st.ramp
     kf_thr = opts.kf_threshold if opts.kf_threshold is not None else threshold(opts.kf_p_false_alarm, 3)
     glrt_thr = opts.glrt_threshold if opts.glrt_threshold is not None else threshold(opts.glrt_p_false_alarm, 3)
@@ -299,8 +316,8 @@ def reconstructed_track(table, sol, onset_s: float, end_s: float | None, velocit
     return Track(name, sm.track_t, np.degrees(sm.track_llh[:, 0]), np.degrees(sm.track_llh[:, 1]), sm.track_llh[:, 2])
 
 
-def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return detect(ctx.navigation().model, Seed000Options())
+def _run(ctx: AnalysisContext) -> Later:
+    return Later(detect_begun(ctx.navigation().model, Seed000Options()))  # the analyses after it run meanwhile
 
 
 _PAPER = "Seed 000 (MLRT for loosely coupled GNSS/INS, after Gustafsson 1996)"
