@@ -215,19 +215,20 @@ def test_the_analyses_after_seed000_run_before_its_offline_pass_is_waited_for(mo
     result still comes in the run order."""
     from dataclasses import replace
 
-    from spooflens.analysis import AnalysisContext, run_with_context
+    from spooflens.analysis import AnalysisContext, Later, run_with_context
     from spooflens.detectors import innovation_tests
+    from spooflens.detectors.base import DetectorResult
 
     order: list[str] = []
     results_of = seed000._results
 
-    def results(*args: object) -> object:
+    def results(*args: object) -> list[DetectorResult]:
         order.append("seed000 finished")
         return results_of(*args)  # type: ignore[arg-type]
 
     run_tests = innovation_tests.ANALYSIS.run
 
-    def tests_run(ctx: AnalysisContext) -> object:
+    def tests_run(ctx: AnalysisContext) -> list[DetectorResult] | Later:
         order.append("innovation tests")
         return run_tests(ctx)
 
