@@ -265,6 +265,8 @@ def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None
             later.append((len(ctx.results), spec, out))
         else:
             ctx.results.extend(_declared(spec, r) for r in out)
+    if on_step and later:  # the time waited for them is theirs, not the last analysis's
+        on_step("finishing " + ", ".join(spec.name for _, spec, _ in later))
     finished = [(at, _finished(spec, pending)) for at, spec, pending in later]
     for at, results in reversed(finished):  # the last first: the earlier places stay where they were
         ctx.results[at:at] = results

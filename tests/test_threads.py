@@ -235,8 +235,10 @@ def test_the_analyses_after_seed000_run_before_its_offline_pass_is_waited_for(mo
     monkeypatch.setattr(seed000, "_results", results)
     monkeypatch.setattr(innovation_tests, "ANALYSIS", replace(innovation_tests.ANALYSIS, run=tests_run))
     table = simulate("aircraft", seed=3, duration_s=60.0).table
-    names = [r.name for r in run_with_context(AnalysisContext(table, AnalyzeOptions()))]
+    steps: list[str] = []
+    names = [r.name for r in run_with_context(AnalysisContext(table, AnalyzeOptions()), steps.append)]
     assert order == ["innovation tests", "seed000 finished"]
+    assert steps[-1] == "finishing navigation, inertial"  # the wait for them is shown as theirs
     declared = [d.name for d in seed000.ANALYSIS.detectors] + [d.name for d in innovation_tests.ANALYSIS.detectors]
     assert [n for n in names if n in declared] == declared
 
