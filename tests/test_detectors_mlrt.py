@@ -386,3 +386,39 @@ def test_the_information_update_adds_the_observed_rows_only() -> None:
     np.testing.assert_allclose(L1, Lam + Cm.T @ Ri @ Cm, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(a1, alpha + Cm.T @ Ri @ y[used], rtol=1e-12, atol=1e-12)
     assert kalman.information_update(Lam, alpha, C, R, np.full(p, np.nan))[0] is Lam
+
+
+@pytest.mark.parametrize("first", [-1, 3])
+def test_one_candidates_bayes_factor_and_flat_mlr_equal_the_integrals_written_out(first: int) -> None:
+    """`_offline_at` takes both figures from one inverse of I + P L (the determinant lemma, Woodbury):
+    the same as the Gaussian integrals with and without the jump, and the jump maximised, written out."""
+    from spooflens.detectors.mlrt import _offline_at
+
+    rng = np.random.default_rng(11 + first)
+    n, q = 5, 2
+    na = n + 2 * q
+    F = rng.normal(size=(na, na - 2))
+    P = F @ F.T  # singular, as a forward covariance with states known exactly
+    G = rng.normal(size=(na, na))
+    L = G @ G.T / na
+    mu, a = rng.normal(size=na), rng.normal(size=na)
+    Sigma = np.diag([0.7, 2.1])
+    B = np.zeros((na, q))
+    j0 = n + q if first < 0 else first
+    B[j0 : j0 + q] = np.eye(q)
+
+    def log_integral2(P_: np.ndarray) -> float:
+        X = np.eye(na) + P_ @ L
+        b = a - L @ mu
+        return -np.linalg.slogdet(X)[1] + b @ np.linalg.solve(X, P_ @ b) - mu @ L @ mu + 2.0 * a @ mu
+
+    bf_expected = log_integral2(P + B @ Sigma @ B.T) - log_integral2(P)
+    Xi = np.linalg.inv(np.eye(na) + P @ L)
+    J = B.T @ L @ Xi @ B
+    Z = Xi - Xi @ B @ np.linalg.solve(J, B.T @ L @ Xi)
+    Minf = Z @ P + Xi @ B @ np.linalg.solve(J, B.T)
+    b = a - L @ mu
+    flat_expected = -np.linalg.slogdet(J)[1] + b @ (Minf - Xi @ P) @ b + q * np.log(2 * np.pi)
+    bf, flat = _offline_at(mu, P, L, a, n, q, Sigma, first)
+    assert bf == pytest.approx(bf_expected, rel=1e-9, abs=1e-9)
+    assert flat == pytest.approx(flat_expected, rel=1e-9, abs=1e-9)
