@@ -267,13 +267,13 @@ def _offline_at(
     Xi = np.linalg.inv(X)
     b = a - L @ mu
     s = Xi @ (P @ b)  # X^-1 P b
-    LX = np.ascontiguousarray(L[j0 : j0 + q]) @ Xi  # B^T L X^-1
-    J = np.ascontiguousarray(LX[:, j0 : j0 + q])
-    u = np.ascontiguousarray(Xi[:, j0 : j0 + q]).T @ b
+    XiB = np.ascontiguousarray(Xi[:, j0 : j0 + q])
+    BL = np.ascontiguousarray(L[j0 : j0 + q])  # B^T L (L symmetric)
+    J = BL @ XiB
+    u = XiB.T @ b
     Bb = np.ascontiguousarray(b[j0 : j0 + q])
     SBb = Sigma @ Bb
-    g = s + np.ascontiguousarray(Xi[:, j0 : j0 + q]) @ SBb  # X^-1 (P b + B Sigma B^T b)
-    h = np.ascontiguousarray(L[j0 : j0 + q]) @ g
+    h = BL @ (s + XiB @ SBb)  # B^T L X^-1 (P b + B Sigma B^T b)
     M = J @ Sigma
     for i in range(q):
         M[i, i] += 1.0
@@ -282,7 +282,7 @@ def _offline_at(
     sJ, ldJ = np.linalg.slogdet(J)
     if sJ <= 0:
         return bf, np.nan
-    v = Bb - np.ascontiguousarray(L[j0 : j0 + q]) @ s
+    v = Bb - BL @ s
     return bf, -ldJ + u @ np.linalg.solve(J, v) + q * 1.8378770664093453
 
 
