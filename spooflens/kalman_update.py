@@ -15,20 +15,22 @@ import numpy as np
 from spooflens.jit import njit
 
 
-@njit(cache=True)
-def observed_rows(y: np.ndarray) -> np.ndarray:
-    """Indices of the entries of y that are not NaN."""
+@njit(cache=True, inline="always")
+def observed_rows_into(y: np.ndarray, rows: np.ndarray) -> int:
+    """The indices of the entries of y that are not NaN into `rows` (room for len(y)); returns how many."""
     m = 0
     for i in range(y.shape[0]):
         if not math.isnan(y[i]):
+            rows[m] = i
             m += 1
-    rows = np.empty(m, dtype=np.int64)
-    j = 0
-    for i in range(y.shape[0]):
-        if not math.isnan(y[i]):
-            rows[j] = i
-            j += 1
-    return rows
+    return m
+
+
+@njit(cache=True)
+def observed_rows(y: np.ndarray) -> np.ndarray:
+    """Indices of the entries of y that are not NaN."""
+    rows = np.empty(y.shape[0], dtype=np.int64)
+    return rows[: observed_rows_into(y, rows)]
 
 
 @njit(cache=True)
@@ -196,11 +198,7 @@ def masked_update_into(
     len(y)), the updated estimate into x_new and P_new, e, S, S^-1 and K in the leading rows and columns
     of `scratch` (`update_scratch(n, len(y))`). Returns (observed rows m, nis, log det S); with m = 0
     nothing is written (x and P stand)."""
-    m = 0
-    for i in range(y.shape[0]):
-        if not math.isnan(y[i]):
-            rows[m] = i
-            m += 1
+    m = observed_rows_into(y, rows)
     if m == 0:
         return 0, math.nan, 0.0
     nis, logdet = update_into(x, P, C, R, y, rows, m, with_logdet, scratch, x_new, P_new)
