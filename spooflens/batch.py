@@ -37,7 +37,7 @@ from typing import Any
 import click
 from rich.table import Table
 
-from spooflens.console import console, progress, show_progress
+from spooflens.output.console import console, progress, show_progress
 
 EXIT_OK, EXIT_DAMAGED = 0, 3
 DONE = "done.json"
@@ -130,10 +130,10 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
 
 def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> dict[str, Any]:
     """The task: analyse one log and write its outputs; never raises (a failure is a record)."""
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.cli import _damaged, _read, require_gnss, segments_summary, write_outputs
     from spooflens.errors import SpooflensError
-    from spooflens.pipeline import analyze_segments
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_segments
     from spooflens.threads import limited
 
     path, out = Path(log), Path(out_dir)

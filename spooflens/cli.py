@@ -27,16 +27,16 @@ from typing import TYPE_CHECKING, NoReturn
 import click
 from rich.table import Table
 
-from spooflens.console import LazyGroup, console, progress, show_progress
-from spooflens.early_recording import EarlyRecording
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError, SpooflensError, one_line
-from spooflens.evidence import label
 from spooflens.navigation.imu_models import PRESETS
+from spooflens.output.console import LazyGroup, console, progress, show_progress
+from spooflens.output.early_recording import EarlyRecording
+from spooflens.pipeline.evidence import label
 from spooflens.threads import side_work
 
 if TYPE_CHECKING:
-    from spooflens.pipeline import Analysis
+    from spooflens.pipeline.run import Analysis
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
 # `simulate --format` choices (spooflens.writers.WRITERS) and those written as directories
@@ -56,8 +56,8 @@ DIRECTORY_FORMATS = ("csv", "rinex", "ros2bag-sqlite3", "ros2bag-mcap")
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
 COMMANDS: dict[str, str] = {
-    "report": "spooflens.report.command:report",
-    "view": "spooflens.viewer:view",
+    "report": "spooflens.output.report.command:report",
+    "view": "spooflens.output.viewer:view",
     "fleet": "spooflens.fleet.command:command",
     "batch": "spooflens.batch:command",
 }
@@ -79,7 +79,7 @@ def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: b
     file beside the log, if any, fills the truth frame (drawn, never analysed)."""
     from readers import read_log
     from spooflens.epoch_table import checked
-    from spooflens.navigation.single_point import with_solved_fixes
+    from spooflens.gnss.solved_fixes import with_solved_fixes
     from spooflens.truth import with_truth_beside
 
     with progress(show_progress) as report:
@@ -115,8 +115,8 @@ topic_option = click.option(
 @topic_option
 def inspect(log: Path, topics: tuple[str, ...]) -> int:
     """List the streams of LOG, what was skipped, and which analyses it supports."""
-    from spooflens.analysis import analyses
     from spooflens.inventory import computed, skipped_or_repaired, stream_rows
+    from spooflens.pipeline.registry import analyses
 
     table = _read(log, _parse_topics(topics), show_progress())
     out = console()
@@ -164,9 +164,9 @@ def analyse_log(
     A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
     files.
     """
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.detectors.references import STATION_OPTION, parse_station
-    from spooflens.pipeline import analyze_segments
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_segments
 
     try:
         given_stations = [parse_station(text) for text in station_texts]
@@ -203,7 +203,7 @@ def recording_side_work(table: EpochTable, recording: EarlyRecording | None) -> 
 
 def _import_writers() -> None:
     """The recording's library, imported while the analysis leaves a core idle."""
-    import spooflens.recording  # noqa: F401
+    import spooflens.output.recording  # noqa: F401
 
 
 def require_gnss(log: Path, table: EpochTable) -> None:
@@ -364,8 +364,8 @@ def write_outputs(
     """Write the recording (always), the JSON summary and the operator report of a log's analyses (one per
     recording it joins: `.segN` outputs, one JSON), as `analyze` does (`batch` writes through here too);
     returns each recording's summary. `recording`: the recording begun during the analysis, if any."""
-    from spooflens.recording import write_recording
-    from spooflens.summary import build_summary
+    from spooflens.output.recording import write_recording
+    from spooflens.output.summary import build_summary
 
     n = len(analyses)
     summaries = []
@@ -377,7 +377,7 @@ def write_outputs(
         write_recording(path, table, analysis.results, lines, verdict, begun)
         summaries.append(build_summary(table, analysis.results, verdict))
         if html_path:
-            from spooflens.report import write_report
+            from spooflens.output.report import write_report
 
             write_report(segment_path(html_path, k, n), analysis)
     if json_path:
@@ -543,13 +543,13 @@ def simulate(
         "read": "spooflens.bench.read_bench:command",
         "nav": "spooflens.bench.nav_bench:command",
         "learning": "spooflens.bench.learning_bench:command",
-        "seed000": "spooflens.bench.seed000_bench:command",
+        "mlrt": "spooflens.bench.mlrt_bench:command",
         "realworld": "spooflens.bench.realworld_bench:command",
         "report": "spooflens.bench.report_bench:command",
-        "seed003": "spooflens.bench.seed003_bench:command",
-        "seed004": "spooflens.bench.seed004_bench:command",
-        "seed001": "spooflens.bench.seed001_bench:command",
-        "seed002": "spooflens.bench.seed002_bench:command",
+        "dual_receiver": "spooflens.bench.dual_receiver_bench:command",
+        "fleet": "spooflens.bench.fleet_bench:command",
+        "range_rate": "spooflens.bench.range_rate_bench:command",
+        "pr_change": "spooflens.bench.pr_change_bench:command",
         "e2e": "spooflens.bench.e2e_bench:command",
         "batch": "spooflens.bench.batch_bench:command",
         "fuzz": "spooflens.bench.fuzz:command",

@@ -8,10 +8,11 @@ import threading
 import numpy as np
 import pytest
 
-from spooflens import analysis, threads
-from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later, run_analyses
+from spooflens import threads
 from spooflens.detectors.base import DetectorResult
 from spooflens.errors import AnalysisError
+from spooflens.pipeline import registry
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later, run_analyses
 from spooflens.simulation.simulate import simulate
 
 
@@ -52,7 +53,7 @@ def test_an_analysis_that_finishes_later_takes_its_place_and_the_ones_after_it_r
         _spec("broken", failing_later),
         _spec("last", lambda ctx: [_done("last")]),
     ]
-    monkeypatch.setattr(analysis, "analyses", lambda: specs)
+    monkeypatch.setattr(registry, "analyses", lambda: specs)
     table = simulate("ground", seed=1, duration_s=5.0).table
     for n in (1, 2):
         order.clear()

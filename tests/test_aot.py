@@ -1,7 +1,7 @@
-"""`spooflens.aot`: the kernels compiled ahead of time at install answer as numba's JIT does, bit for bit,
+"""`spooflens.compile.aot`: the kernels compiled ahead of time at install answer as numba's JIT does, bit for bit,
 without importing numba; anything they were not built for, or built from other sources, goes to numba.
 
-The module is built by `python -m spooflens.warmup`, which `pip install -e` runs (the README's install):
+The module is built by `python -m spooflens.compile.warmup`, which `pip install -e` runs (the README's install):
 a checkout installed that way has it, and these tests say so when it is missing."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from numba import typeof
 
-from spooflens import aot
+from spooflens.compile import aot
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_logs" / "spoofed_flight.mcap"
@@ -40,14 +40,18 @@ def _analyse(log: Path, out: Path, aot_setting: str) -> tuple[dict, bool]:
 
 
 def test_the_install_built_the_module_for_the_kernels_an_imu_log_calls() -> None:
-    assert aot.MANIFEST.exists(), "no ahead-of-time kernels: run `python -m spooflens.warmup` (pip install -e does)"
+    assert aot.MANIFEST.exists(), (
+        "no ahead-of-time kernels: run `python -m spooflens.compile.warmup` (pip install -e does)"
+    )
     manifest = json.loads(aot.MANIFEST.read_text())
     names = {e["kernel"] for e in manifest["exports"]}
-    assert {"spooflens.navigation.kernels:filter_loop", "spooflens.detectors.kalman:_forward"} <= names
+    assert {"spooflens.navigation.kernels:filter_loop", "spooflens.estimation.kalman:_forward"} <= names
     # the kernels' files and what they import from the project (constants numba freezes into the code)
-    assert {"spooflens/navigation/kernels.py", "spooflens/kalman_update.py", "spooflens/constants.py"} <= set(
-        manifest["sources"]
-    )
+    assert {
+        "spooflens/navigation/kernels.py",
+        "spooflens/estimation/kalman_update.py",
+        "spooflens/constants.py",
+    } <= set(manifest["sources"])
 
 
 def test_an_imu_log_is_analysed_without_numba_and_exactly_as_numba_analyses_it(tmp_path: Path) -> None:

@@ -17,7 +17,7 @@ from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import add_enu_offset, geodetic_to_ecef, geodetic_to_enu
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ
-from spooflens.navigation.single_point import solve
+from spooflens.gnss.single_point import solve
 from spooflens.simulation.simulate import simulate
 from spooflens.writers import write_log
 

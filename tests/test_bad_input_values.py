@@ -16,7 +16,7 @@ from spooflens.cli import main
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import AnalysisError
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.run import analyze_table
 from spooflens.writers import write_log
 
 EXTREMES = (1e300, -1e308, 1e308, np.nan, np.inf, -np.inf)

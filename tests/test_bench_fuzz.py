@@ -59,7 +59,7 @@ def test_the_sandbox_sees_crashes_hangs_and_memory(tmp_path: Path) -> None:
         slow = Limits(timeout_s=1.0)
         fifo_dir = tmp_path / "b"
         fifo_dir.mkdir()
-        result: RunResult = box.run(["--debug", "bench", "seed000", "--quick"], fifo_dir, slow)
+        result: RunResult = box.run(["--debug", "bench", "mlrt", "--quick"], fifo_dir, slow)
         assert result.outcome == "timeout" and result.seconds < 10
         # the child starts as big as its warmed-up server (100-300 MB): a 50 MB cap must stop it
         small = Limits(rss_cap_mb=50.0)

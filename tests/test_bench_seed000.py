@@ -1,12 +1,12 @@
-"""The seed-000 benchmark machinery on a couple of runs (the figures come from `spooflens bench seed000`)."""
+"""The seed-000 benchmark machinery on a couple of runs (the figures come from `spooflens bench mlrt`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from spooflens.bench import seed000_bench as sb
-from spooflens.detectors.innovation_test import threshold
+from spooflens.bench import mlrt_bench as sb
+from spooflens.detectors.innovation_tests import threshold
 
 
 def test_kf_threshold_is_the_papers() -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spooflens.bench import seed001_bench as b1
-from spooflens.bench import seed002_bench as b2
+from spooflens.bench import pr_change_bench as b2
+from spooflens.bench import range_rate_bench as b1
 from spooflens.geodesy import ecef_to_enu_vectors
 
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from spooflens.analysis import AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.product import solve_navigation
-from spooflens.reconstruction import CoastingOptions, coasting_check, placebo_coasts
+from spooflens.pipeline.reconstruction import CoastingOptions, coasting_check, placebo_coasts
+from spooflens.pipeline.registry import AnalyzeOptions
 from spooflens.simulation.simulate import simulate
 
 
@@ -43,8 +43,8 @@ def test_a_gnss_outage_longer_than_a_coast_leaves_nothing_to_compare_and_the_ana
     that fall in the outage are left out, a check starting in it coasts on to the next fixes, and the
     attack is caught (these coasts used to stop the whole analysis: 'no GNSS fix inside the IMU's time
     span')."""
-    from spooflens.pipeline import analyze_table
-    from spooflens.reconstruction import coast
+    from spooflens.pipeline.reconstruction import coast
+    from spooflens.pipeline.run import analyze_table
 
     table = simulate("multirotor", seed=2, duration_s=600.0).table
     table, _ = apply_attack(table, parse_attack("step:offset=30,start=500"))

@@ -17,8 +17,8 @@ from pyulog.ulog2csv import convert_ulog2csv
 
 from readers import read_log
 from spooflens.detectors.autopilot_ekf import run_autopilot_ekf
-from spooflens.evidence import Evidence
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.run import analyze_table
 from spooflens.writers.ulog_writer import SENSOR_GPS, Fields, ULogFile
 
 

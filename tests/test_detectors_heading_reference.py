@@ -13,12 +13,12 @@ from conftest import real_log
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
-from spooflens.departure import gnss_departure, reconstructed_tracks
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.detectors.heading_reference import run_heading_reference
-from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.departure import gnss_departure, reconstructed_tracks
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.run import analyze_table
 from spooflens.simulation.sensors import (
     TIDE_PERIOD_S,
     CompassModel,

@@ -10,9 +10,9 @@ from filterpy.kalman import KalmanFilter, rts_smoother
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from spooflens.detectors import kalman
-from spooflens.detectors.kalman import forward_filter
-from spooflens.detectors.mlrt import (
+from spooflens.estimation import kalman, marginalised_likelihood
+from spooflens.estimation.kalman import forward_filter
+from spooflens.estimation.marginalised_likelihood import (
     backward_information,
     full_jump_constants,
     full_jump_wj,
@@ -21,8 +21,8 @@ from spooflens.detectors.mlrt import (
     step_two_filter_offline,
     two_filter_smoother,
 )
-from spooflens.sparse_products import pattern
-from spooflens.statespace import BlockDiagonal, LinearGaussianModel
+from spooflens.estimation.sparse_products import pattern
+from spooflens.estimation.statespace import BlockDiagonal, LinearGaussianModel
 
 
 def random_model(
@@ -104,7 +104,7 @@ def test_a_backward_step_without_process_noise_breaks_the_identity(monkeypatch: 
     def garbled(Lam, alpha, A, Q):
         return A.T @ Lam @ A, A.T @ alpha
 
-    import spooflens.detectors.mlrt as mlrt_module
+    import spooflens.estimation.marginalised_likelihood as mlrt_module
 
     monkeypatch.setattr(
         mlrt_module,
@@ -234,12 +234,18 @@ def test_offline_two_filter_equals_the_stored_filters_on_the_augmented_model(
     and made again block by block, products over the transitions' non-zeros) gives the numbers of the
     explicit augmented model filtered forward and backward and combined per epoch, to rounding, whether
     the epochs fit one block or several."""
-    from spooflens.detectors import mlrt
-    from spooflens.detectors.kalman import backward_information
-    from spooflens.detectors.mlrt import _offline_at, augment_ramp, augment_step, step_two_filter_offline
+    from spooflens.estimation.kalman import backward_information
+    from spooflens.estimation.marginalised_likelihood import (
+        _offline_at,
+        augment_ramp,
+        augment_step,
+        step_two_filter_offline,
+    )
 
-    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
-    monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)  # forward estimates made again, or kept
+    monkeypatch.setattr(marginalised_likelihood, "OFFLINE_BLOCK", block)
+    monkeypatch.setattr(
+        marginalised_likelihood, "OFFLINE_KEEP_BYTES", keep_bytes
+    )  # forward estimates made again, or kept
 
     model = random_model(5, n=4, p=2, N=40, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])
@@ -268,10 +274,9 @@ def test_offline_candidates_from_a_later_epoch_are_the_whole_passes_numbers(
 ) -> None:
     """Candidates from epoch `first` on (the onset sought near an alarm): the backward filter stops below
     it, and the numbers are the whole pass's, block boundaries or not, forward estimates kept or not."""
-    from spooflens.detectors import mlrt
 
-    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", block)
-    monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)
+    monkeypatch.setattr(marginalised_likelihood, "OFFLINE_BLOCK", block)
+    monkeypatch.setattr(marginalised_likelihood, "OFFLINE_KEEP_BYTES", keep_bytes)
     model = random_model(6, n=4, p=2, N=40, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])
     for offline in (ramp_two_filter_offline, step_two_filter_offline):
@@ -286,15 +291,14 @@ def test_offline_forward_estimates_kept_or_made_again_give_the_same_numbers(monk
     """When the epochs evaluated are few enough (`OFFLINE_KEEP_BYTES`), the forward pass keeps its
     estimates there and none is made again block by block: the numbers are the same bit for bit, for
     every stride and first candidate."""
-    from spooflens.detectors import mlrt
 
-    monkeypatch.setattr(mlrt, "OFFLINE_BLOCK", 6)
+    monkeypatch.setattr(marginalised_likelihood, "OFFLINE_BLOCK", 6)
     model = random_model(8, n=4, p=2, N=50, missing=True)
     rows, sigma = (0, 1), np.array([0.7, 1.3])
     for stride, first in ((1, 0), (3, 0), (4, 13), (1, 29)):
         results = []
         for keep_bytes in (0, 64_000_000):
-            monkeypatch.setattr(mlrt, "OFFLINE_KEEP_BYTES", keep_bytes)
+            monkeypatch.setattr(marginalised_likelihood, "OFFLINE_KEEP_BYTES", keep_bytes)
             results.append(ramp_two_filter_offline(model, rows, sigma, last=44, stride=stride, first=first))
         made_again, kept = results
         assert np.isfinite(kept.log_bf).sum() >= 3
@@ -308,7 +312,7 @@ def test_ramp_statistics_equal_the_signature_recursion_written_out_for_each_onse
     """The compiled ramp pass (every candidate within the window advanced together) gives, at every epoch,
     the best over onsets m of the GLR, flat MLR and 2 log BF from the Willsky-Jones recursion written out
     with dense matrices one onset at a time, with missing measurements."""
-    from spooflens.detectors.ramp import RampPass
+    from spooflens.estimation.ramp_signature import RampPass
 
     model = random_model(9, n=4, p=3, N=40, missing=True)
     rows, sigma = (0, 2), np.array([0.8, 1.6])
@@ -392,7 +396,7 @@ def test_the_information_update_adds_the_observed_rows_only() -> None:
 def test_one_candidates_bayes_factor_and_flat_mlr_equal_the_integrals_written_out(first: int) -> None:
     """`_offline_at` takes both figures from one inverse of I + P L (the determinant lemma, Woodbury):
     the same as the Gaussian integrals with and without the jump, and the jump maximised, written out."""
-    from spooflens.detectors.mlrt import _offline_at
+    from spooflens.estimation.marginalised_likelihood import _offline_at
 
     rng = np.random.default_rng(11 + first)
     n, q = 5, 2

@@ -9,8 +9,8 @@ import numpy as np
 from conftest import real_log
 
 from readers import read_log
-from spooflens.analysis import AnalysisContext, AnalyzeOptions
 from spooflens.detectors.raim import run_raim
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 
 LOG = "android_gnsslogger/gps-measurement-tools/pseudoranges_log_2016_06_30_21_26_07.txt"
 NAV = "android_gnsslogger/gps-measurement-tools/hour1820.16n"

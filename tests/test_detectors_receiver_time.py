@@ -16,7 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 from readers import read_log
 from spooflens.cli import main
 from spooflens.detectors.receiver_time import run_receiver_time
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
 
 
 def _fixes(t: np.ndarray, offset: np.ndarray) -> pd.DataFrame:

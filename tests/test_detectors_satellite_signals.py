@@ -13,11 +13,11 @@ import pytest
 from pyubx2 import GET, UBXMessage
 
 from readers import read_log
-from spooflens.analysis import AnalysisContext, AnalyzeOptions
 from spooflens.detectors.base import DetectorResult
 from spooflens.detectors.satellite_signals import HORIZON, SIGNALS, horizon_dip_deg, run_satellite_signals
 from spooflens.epoch_table import EpochTable
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real"
 GSI = REAL / "rinex_gsi_pair" / "07590920.05o"
@@ -126,7 +126,7 @@ def test_a_strong_healthy_satellite_the_receiver_refuses_is_named(tmp_path: Path
 def test_orbits_put_every_real_satellite_above_the_horizon_and_an_invented_position_below_it() -> None:
     if not GSI.exists():
         pytest.skip("the GSI RINEX pair is not present")
-    from spooflens.navigation.single_point import with_solved_fixes
+    from spooflens.gnss.solved_fixes import with_solved_fixes
 
     table = with_solved_fixes(read_log(GSI))
     res = _run(table)
@@ -174,8 +174,8 @@ def test_satellite_reports_survive_a_csv_round_trip(tmp_path: Path) -> None:
 def test_the_recording_draws_every_satellites_cn0_and_elevation(tmp_path: Path) -> None:
     from rerun.chunk import RrdReader
 
-    from spooflens.analysis import run_analyses
-    from spooflens.recording import write_recording
+    from spooflens.output.recording import write_recording
+    from spooflens.pipeline.registry import run_analyses
 
     def ghost(s: int, sats: list[Sat]) -> list[Sat]:
         return [*sats, (31, -25, 10, 46, 0, 1)] if s >= 40 else sats

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from spooflens.attacks import apply_attack, parse_attack
-from spooflens.detectors.seed000 import Seed000Options, detect
-from spooflens.evidence import Evidence
+from spooflens.detectors.mlrt import MlrtOptions, detect
 from spooflens.navigation.loosely_coupled import FilterOptions, run_filter
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.run import analyze_table
 from spooflens.simulation.sensors import GnssNoise
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
@@ -22,7 +22,7 @@ def _run(rate: float, seed: int = 3, start: float = 120.0, scenario: str = "grou
     if rate:
         table, _ = apply_attack(table, parse_attack(f"ramp:rate={rate},axes=en,start={start}"))
     sol = run_filter(table, options=FilterOptions(grade=SCENARIOS[scenario].imu_grade))
-    return {r.name: r for r in detect(sol.error_model(), Seed000Options(**kw))}
+    return {r.name: r for r in detect(sol.error_model(), MlrtOptions(**kw))}
 
 
 def test_clean_log_raises_no_calibrated_alarm() -> None:
@@ -54,7 +54,7 @@ def test_time_correlated_gnss_errors_make_the_ramp_tests_advisory() -> None:
     sc = replace(SCENARIOS["ground"], gnss=GnssNoise((1.5, 1.5, 3.0), 0.08, correlation_s=30.0))
     sim = simulate(sc, seed=2, duration_s=200.0)
     sol = run_filter(sim.table, options=FilterOptions(grade=sc.imu_grade))
-    res = {r.name: r for r in detect(sol.error_model(), Seed000Options(offline=False))}
+    res = {r.name: r for r in detect(sol.error_model(), MlrtOptions(offline=False))}
     whiteness = res["glrt"].extras["innovation_whiteness"]
     assert isinstance(whiteness, float) and whiteness > 0.5
     assert res["glrt"].advisory and res["mlrt_calibrated"].advisory and not res["kf_innovation"].advisory
@@ -103,15 +103,15 @@ def test_every_detector_reports_its_statistic_and_threshold(name: str) -> None:
 def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() -> None:
     """Seed 000 holds the forward filter's gains and S a block at a time (a day of them was 0.26 GB): the
     ramp statistics, NIS and whiteness are those of one filter and one pass over the whole log."""
-    from spooflens.detectors.innovation_test import position_nis
-    from spooflens.detectors.kalman import forward_filter
-    from spooflens.detectors.ramp import RampPass
-    from spooflens.detectors.seed000 import normalised_position_innovations, statistics
+    from spooflens.detectors.innovation_tests import position_nis
+    from spooflens.detectors.mlrt import normalised_position_innovations, statistics
+    from spooflens.estimation.kalman import forward_filter
+    from spooflens.estimation.ramp_signature import RampPass
 
     sim = simulate("ground", seed=5, duration_s=240.0)
     table, _ = apply_attack(sim.table, parse_attack("ramp:rate=1.5,axes=en,start=120"))
     model = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade)).error_model()
-    opts = Seed000Options()
+    opts = MlrtOptions()
     fwd = forward_filter(model, keep_states=False)
     sigma = np.array(opts.sigma_rate_mps)
     whole = RampPass(model, (0, 1, 2), opts.window_s, opts.step_s, sigma, opts.attacks_per_hour, 3).whole_log(fwd)

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from spooflens.analysis import AnalysisContext, AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
-from spooflens.detectors import seed001
-from spooflens.detectors.range_rate import (
+from spooflens.detectors import range_rate
+from spooflens.detectors.references import Reference, ins_reference
+from spooflens.detectors.statistics.pseudorange_rate import (
     RateOptions,
     fit_epochs,
     fit_velocity_error,
@@ -21,12 +21,12 @@ from spooflens.detectors.range_rate import (
     t_threshold,
     window_for_bias,
 )
-from spooflens.detectors.references import Reference, ins_reference
-from spooflens.detectors.scales import lag1_autocorrelation, robust_scale, threshold
-from spooflens.evidence import Evidence
+from spooflens.detectors.statistics.scales import lag1_autocorrelation, robust_scale, threshold
 from spooflens.gnss.geometry import azimuth_elevation
 from spooflens.gnss.grid import observation_grid
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
+from spooflens.pipeline.run import analyze_table
 from spooflens.simulation.simulate import simulate
 
 
@@ -165,11 +165,11 @@ def test_windowed_ins_reference_is_close_to_the_truth(ground_raw, clean_context)
 
 
 def test_clean_simulated_log_stays_clean_and_a_delayed_pair_is_named(ground_raw, clean_context) -> None:
-    clean = seed001.run(clean_context)
+    clean = range_rate.run(clean_context)
     assert [r.name for r in clean] == ["range_rate", "range_rate_ttest"]
     assert clean[0].ran and clean[0].evidence == Evidence.INERTIAL and not clean[0].alarms
     spoofed, truth = apply_attack(ground_raw.table, parse_attack("pr_delay:delay=300,count=2,seed=4,start=150"))
-    res = seed001.run(AnalysisContext(spoofed, AnalyzeOptions()))[0]
+    res = range_rate.run(AnalysisContext(spoofed, AnalyzeOptions()))[0]
     first = res.alarms[0]
     assert 150.0 <= first.start_s <= 151.0
     tracked = set(spoofed.observations.loc[spoofed.observations["t_s"] == 150.0, "sv_id"])

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spooflens.analysis import AnalysisContext, AnalyzeOptions
-from spooflens.detectors import seed002
-from spooflens.detectors.pr_change import (
+from spooflens.detectors import pr_change
+from spooflens.detectors.references import STATION_OPTION, Station, station_reference
+from spooflens.detectors.statistics.pseudorange_change import (
     MS_M,
     Prediction,
     clock_model_residual,
@@ -21,12 +21,12 @@ from spooflens.detectors.pr_change import (
     pseudorange_changes,
     train_esn,
 )
-from spooflens.detectors.references import STATION_OPTION, Station, station_reference
 from spooflens.epoch_table import EpochTable
-from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_geodetic
 from spooflens.gnss.ephemeris import synthetic_constellation
 from spooflens.gnss.grid import observation_grid
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 from spooflens.simulation.observations import ObservationNoise, simulate_observations
 
 STATION = np.array([-3976219.5082, 3382372.5671, 3652512.9849])  # GSI 0759's surveyed site
@@ -173,10 +173,10 @@ def test_detector_on_a_station_given_on_the_command_line(station_log) -> None:
     table = replace(station_log)
     fixes = {"t_s": np.arange(3.0), "receiver_id": ["stn"] * 3, "lat_deg": [lat] * 3, "lon_deg": [lon] * 3}
     table.fixes = make_frame("fixes", fixes | {"height_m": [h] * 3, "fix_type": [2] * 3})
-    none = seed002.run(AnalysisContext(table, AnalyzeOptions()))
+    none = pr_change.run(AnalysisContext(table, AnalyzeOptions()))
     assert not none[0].ran and "known position" in none[0].reason
     opts = AnalyzeOptions(extra={STATION_OPTION: [("stn", lat, lon, h)]})
-    kf, rnn = seed002.run(AnalysisContext(table, opts))
+    kf, rnn = pr_change.run(AnalysisContext(table, opts))
     assert kf.ran and rnn.ran and kf.evidence == Evidence.KNOWN_STATION
     assert not kf.alarms and not rnn.alarms
     grid = observation_grid(table, "stn")
@@ -186,7 +186,7 @@ def test_detector_on_a_station_given_on_the_command_line(station_log) -> None:
     obs.loc[hit, "pseudorange_m"] += 250.0
     obs.loc[hit, "carrier_phase_cycles"] += 250.0 / 0.1902936728
     spoofed = replace(table, observations=obs)
-    kf, rnn = seed002.run(AnalysisContext(spoofed, opts))
+    kf, rnn = pr_change.run(AnalysisContext(spoofed, opts))
     for r in (kf, rnn):
         assert [(a.start_s, a.satellites) for a in r.alarms] == [(400.0, (str(j),))]
         estimate = float(r.findings[0].text.rsplit(f"{j} ", 1)[1].split(" m")[0])

@@ -12,16 +12,16 @@ from scipy import stats
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.attacks.single_antenna_raw import single_antenna_observations
-from spooflens.detectors import rayleigh as ry
-from spooflens.detectors.seed003 import (
+from spooflens.detectors.dual_receiver import (
     BASELINE_ERROR,
     COLLAPSE,
     PR_COLLAPSE,
-    Seed003Options,
+    DualReceiverOptions,
     align_pair,
     detect,
     pseudorange_differences,
 )
+from spooflens.detectors.statistics import rayleigh as ry
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
 GSI = Path(__file__).resolve().parents[1] / ".." / "shared" / "real" / "rinex_gsi_pair"
@@ -137,7 +137,7 @@ def test_align_pair_interpolates_the_denser_receiver_within_its_gap_bound():
     fa, fb = table.fixes_of(a), table.fixes_of(b)
     fa = fa.iloc[::5].reset_index(drop=True)  # receiver a at 1 Hz, b at 5 Hz
     fb = fb.drop(index=range(100, 120)).reset_index(drop=True)  # b loses 4 s
-    pair = align_pair(fa, fb, a, b, Seed003Options())
+    pair = align_pair(fa, fb, a, b, DualReceiverOptions())
     assert len(pair.t) == len(fa) - 4  # the epochs inside b's gap are not guessed
     assert np.all((pair.t < 20.0) | (pair.t > 23.9))
     d = np.linalg.norm(pair.ecef_a - pair.ecef_b, axis=1)
@@ -168,7 +168,7 @@ def test_simulated_pair_clean_then_single_antenna():
 @pytest.fixture(scope="module")
 def gsi():
     from readers import read_log
-    from spooflens.navigation.single_point import with_solved_fixes
+    from spooflens.gnss.solved_fixes import with_solved_fixes
 
     raw = read_log(GSI)
     return raw, with_solved_fixes(raw)
@@ -184,7 +184,9 @@ def test_real_gsi_pair_is_clean_at_defaults(gsi):
     assert facts["baseline_source"].startswith("surveyed")
     assert facts["baseline_m"] == pytest.approx(3335.4, abs=0.1)
     assert facts["rice_sigma"] < 1.0  # the baseline is known to well under a metre
-    t, sd, n = pseudorange_differences(table.observations, table.fixes_of("3040"), "0759", "3040", Seed003Options())
+    t, sd, n = pseudorange_differences(
+        table.observations, table.fixes_of("3040"), "0759", "3040", DualReceiverOptions()
+    )
     assert len(t) == 120 and n.min() >= 6
     assert 1000.0 < np.median(sd) < 2000.0  # the spread of e_i . b over a 3.3 km baseline
 
@@ -199,14 +201,16 @@ def test_real_gsi_pair_with_the_single_antenna_spoofer_of_eq_7g(gsi):
         assert 1800.0 <= first <= 1800.0 + 6 * 30.0, (name, first)
     facts = res[PR_COLLAPSE].extras["0759-3040"]
     assert facts["sigma_s_rayleigh"] < 0.5  # the receivers' own noise (0.2 m) is all that is left
-    t, sd, _ = pseudorange_differences(spoofed.observations, spoofed.fixes_of("3040"), "0759", "3040", Seed003Options())
+    t, sd, _ = pseudorange_differences(
+        spoofed.observations, spoofed.fixes_of("3040"), "0759", "3040", DualReceiverOptions()
+    )
     assert np.median(sd[t >= 1800.0]) == pytest.approx(0.2, rel=0.3)
 
 
 def test_recording_draws_the_histograms_as_bar_charts(gsi, tmp_path):
     from rerun.chunk import RrdReader
 
-    from spooflens.recording import entity, histogram_origin, histogram_views, write_recording
+    from spooflens.output.recording import entity, histogram_origin, histogram_views, write_recording
 
     raw, _ = gsi
     spoofed = single_antenna_observations(raw, "0759", "3040", start_s=1800.0, seed=2)

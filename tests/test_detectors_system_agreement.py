@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from spooflens.analysis import AnalysisContext, AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.detectors.base import DetectorResult
 from spooflens.detectors.system_agreement import SystemAgreementOptions, run_system_agreement
 from spooflens.epoch_table import EpochTable
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
 

@@ -135,7 +135,7 @@ def test_the_bound_holds_when_the_two_norm_is_below_one():
 
 
 def test_printed_gains_depend_on_the_unprinted_basis():
-    # `spooflens bench seed004` tries all 64 pairs of N bases (radius 0.56 to 2.1); two of them here
+    # `spooflens bench fleet` tries all 64 pairs of N bases (radius 0.56 to 2.1); two of them here
     rep = ex.evaluate_printed(starts=2, pairs=[(3, 5), (4, 4)])
     (l1_lo, l1_hi), (l2_lo, l2_hi) = rep.l_radius
     assert l1_lo == pytest.approx(0.38, abs=0.02) and l1_hi == pytest.approx(1.57, abs=0.02)

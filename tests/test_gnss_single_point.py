@@ -18,7 +18,8 @@ from spooflens.gnss.ephemeris import (
     synthetic_constellation,
 )
 from spooflens.gnss.geometry import azimuth_elevation, sagnac_range
-from spooflens.navigation.single_point import SinglePointOptions, solve, with_solved_fixes
+from spooflens.gnss.single_point import SinglePointOptions, solve
+from spooflens.gnss.solved_fixes import with_solved_fixes
 from spooflens.simulation.observations import ObservationNoise, simulate_observations
 from spooflens.simulation.simulate import simulate
 

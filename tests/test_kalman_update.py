@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spooflens.kalman_update import masked_update, observed_rows, update_into, update_scratch
+from spooflens.estimation.kalman_update import masked_update, observed_rows, update_into, update_scratch
 
 
 def _plain(x: np.ndarray, P: np.ndarray, C: np.ndarray, R: np.ndarray, y: np.ndarray):
@@ -122,7 +122,7 @@ def test_the_masked_update_into_reused_room_equals_the_masked_update(seed: int) 
     """The detectors' forward filter and the MLRT's forward pass update into arrays made once: each
     epoch's numbers are `masked_update`'s bit for bit, whatever the last epoch left in the room, and an
     epoch with nothing observed writes nothing."""
-    from spooflens.kalman_update import masked_update_into
+    from spooflens.estimation.kalman_update import masked_update_into
 
     rng = np.random.default_rng(seed)
     n, p = 10, 6

@@ -134,8 +134,8 @@ def test_without_odometry_the_solution_keeps_one_h_and_everything_reads_it_as_th
     solution keeps one, seen at every epoch (0.15 GB a day of 1 Hz GNSS). The smoother, the detectors'
     model, seed 000's filters and the offline MLRT give what they give from per-epoch copies; with
     odometry measured, H is kept per epoch."""
-    from spooflens.detectors.mlrt import ramp_two_filter_offline
-    from spooflens.detectors.seed000 import Seed000Options, statistics
+    from spooflens.detectors.mlrt import MlrtOptions, statistics
+    from spooflens.estimation.marginalised_likelihood import ramp_two_filter_offline
     from spooflens.navigation.loosely_coupled import OdometryAiding, prepare, run_prepared
 
     table, sol = ground
@@ -148,7 +148,7 @@ def test_without_odometry_the_solution_keeps_one_h_and_everything_reads_it_as_th
     np.testing.assert_array_equal(a.var, b.var)
     m1, m2 = sol.error_model(), dense.error_model()
     np.testing.assert_array_equal(m1.y, m2.y)
-    s1, s2 = statistics(m1, Seed000Options()), statistics(m2, Seed000Options())
+    s1, s2 = statistics(m1, MlrtOptions()), statistics(m2, MlrtOptions())
     np.testing.assert_array_equal(s1.ramp.log_bf, s2.ramp.log_bf)
     np.testing.assert_array_equal(s1.kf_nis, s2.kf_nis)
     o1, o2 = (ramp_two_filter_offline(m, (0, 1, 2), np.full(3, 3.0), stride=10) for m in (m1, m2))

@@ -103,7 +103,7 @@ def test_spoofed_log_with_odometry_fails_on_spoof_and_draws_the_wheels(
 
 
 def test_advisory_alarms_say_so_in_the_event_log() -> None:
-    from spooflens.recording import _alarm_events
+    from spooflens.output.recording import _alarm_events
 
     alarm = Alarm(20.0, 30.0, 5.0, 25.0, onset_s=18.0)
     t, text, level = _alarm_events("mlrt", [alarm], advisory=True)
@@ -113,9 +113,9 @@ def test_advisory_alarms_say_so_in_the_event_log() -> None:
 
 
 def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
-    from spooflens.analysis import run_analyses
-    from spooflens.recording import default_blueprint, detector_panels, key_statistics, overview_lanes
-    from spooflens.verdict import decide
+    from spooflens.output.recording import default_blueprint, detector_panels, key_statistics, overview_lanes
+    from spooflens.pipeline.registry import run_analyses
+    from spooflens.pipeline.verdict import decide
 
     results = run_analyses(circling_table(ramp_mps=3.0))
     keys = key_statistics(results)
@@ -137,7 +137,7 @@ def test_recording_opens_on_the_overview_tab_then_the_detectors() -> None:
 
 
 def test_viewer_runs_with_rerun_analytics_disabled(tmp_path: Path) -> None:
-    from spooflens.viewer import private_rerun_config, rerun_binary
+    from spooflens.output.viewer import private_rerun_config, rerun_binary
 
     with private_rerun_config() as env:
         shown = subprocess.run(
@@ -166,7 +166,7 @@ def test_web_viewer_is_served_on_loopback_and_calls_nowhere(tmp_path: Path) -> N
     from this machine; its telemetry, update check and web font are refused before they leave."""
     if chromium_path() is None:
         pytest.fail("chromium is not installed: the README's test command installs it")
-    from spooflens.recording import write_recording
+    from spooflens.output.recording import write_recording
 
     table = circling_table(seconds=60.0)
     rrd = tmp_path / "v.rrd"

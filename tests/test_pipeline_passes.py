@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from spooflens.analysis import AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.loosely_coupled import ANALYSIS_NEEDS, run_prepared
 from spooflens.navigation.product import solve_navigation
-from spooflens.pipeline import analyze_table, suspected_spans
-from spooflens.reconstruction import coast
+from spooflens.pipeline.reconstruction import coast
+from spooflens.pipeline.registry import AnalyzeOptions
+from spooflens.pipeline.run import analyze_table, suspected_spans
 from spooflens.simulation.simulate import simulate
 
 

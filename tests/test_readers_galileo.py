@@ -35,7 +35,7 @@ from spooflens.gnss.ephemeris import (
     synthetic_constellation,
 )
 from spooflens.gnss.geometry import azimuth_elevation
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.run import analyze_table
 from spooflens.simulation.observations import ObservationNoise, simulate_observations
 
 WEEK_S = 604_800

@@ -14,9 +14,10 @@ from readers.gnsslogger import _orientation_quaternion
 from readers.rinex import read_rinex
 from spooflens.cli import main
 from spooflens.geodesy import geodetic_to_enu
+from spooflens.gnss.single_point import solve_logged
+from spooflens.gnss.solved_fixes import with_solved_fixes
 from spooflens.navigation.alignment import TO_FLU, flu_axes
 from spooflens.navigation.rotations import quat_to_matrix
-from spooflens.navigation.single_point import solve_logged, with_solved_fixes
 
 REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "real" / "android_gnsslogger"
 GMT = REAL / "gps-measurement-tools"

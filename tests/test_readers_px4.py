@@ -425,7 +425,7 @@ def test_satellite_info_numbers_shared_in_one_message_are_left_out_and_counted()
 def test_an_sdr_spoofer_locking_every_channel_shows_as_one_c_n0(logs: Path, tmp_path: Path) -> None:
     """Under the attack every satellite_info channel reads 47 dB-Hz (one transmitter); the clean sky
     spreads over 12 dB. The satellite-signal detector names the stretch; the clean log has no alarm."""
-    from spooflens.pipeline import analyze_table
+    from spooflens.pipeline.run import analyze_table
 
     for attack_s, expect in ((30.0, True), (None, False)):
         path = tmp_path / f"sky_{attack_s}.ulg"

@@ -13,7 +13,7 @@ from readers.rinex import rinex_approx_position
 from spooflens.attacks import AttackTruth, sidecar_path
 from spooflens.cli import main
 from spooflens.geodesy import ecef_to_geodetic, geodetic_to_ecef, geodetic_to_enu
-from spooflens.navigation.single_point import with_solved_fixes
+from spooflens.gnss.solved_fixes import with_solved_fixes
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
 GSI = Path(__file__).resolve().parents[2] / "shared" / "real" / "rinex_gsi_pair"

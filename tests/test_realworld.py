@@ -14,9 +14,9 @@ import pytest
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.detectors.receiver_evidence import run_receiver_evidence
-from spooflens.evidence import Evidence, confidence, corroborated
 from spooflens.geodesy import ecef_to_geodetic, geodetic_to_enu
-from spooflens.pipeline import analyze_table
+from spooflens.pipeline.evidence import Evidence, confidence, corroborated
+from spooflens.pipeline.run import analyze_table
 from spooflens.simulation.sensors import ReceiverModel
 from spooflens.simulation.simulate import SCENARIOS, simulate
 
@@ -113,9 +113,10 @@ def test_a_clean_multirotor_flight_is_clean_and_its_imu_needs_no_inflation(multi
 
 
 def test_the_noise_is_learned_from_the_fixes_not_from_what_the_receiver_reports(multirotor) -> None:
-    from spooflens.analysis import AnalysisContext, AnalyzeOptions
+    from spooflens.navigation.product import navigation_of
+    from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 
-    nav = AnalysisContext(multirotor.table, AnalyzeOptions()).navigation()
+    nav = navigation_of(AnalysisContext(multirotor.table, AnalyzeOptions()))
     learned = nav.learned.noise
     model = ReceiverModel(accuracy_factor=5.0)
     real_h = float(np.hypot(model.white_m[0], model.gm_m[0]))
@@ -128,7 +129,7 @@ def test_the_noise_is_learned_from_the_fixes_not_from_what_the_receiver_reports(
 
 def test_raim_excludes_and_names_a_counterfeit_satellite_on_the_real_pair() -> None:
     from readers.rinex import rinex_approx_position
-    from spooflens.navigation.single_point import with_solved_fixes
+    from spooflens.gnss.solved_fixes import with_solved_fixes
 
     table = read_log(GSI)
     spoofed, _ = apply_attack(table, parse_attack("pr_delay:delay=100000,svs=G07,start=0"))

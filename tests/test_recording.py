@@ -9,10 +9,10 @@ import pytest
 from pipeline_support import circling_table
 from rerun.chunk import RrdReader
 
-from spooflens.analysis import run_analyses
-from spooflens.recording import entity, write_recording
-from spooflens.summary import build_summary
-from spooflens.verdict import decide
+from spooflens.output.recording import entity, write_recording
+from spooflens.output.summary import build_summary
+from spooflens.pipeline.registry import run_analyses
+from spooflens.pipeline.verdict import decide
 
 
 def _rows(path: Path, static: bool = False) -> dict[str, int]:
@@ -62,7 +62,7 @@ def test_entity_paths_from_topics_are_clean() -> None:
 
 
 def test_each_detector_and_unit_gets_its_own_panel_of_real_entities(tmp_path: Path) -> None:
-    from spooflens.recording import detector_panels
+    from spooflens.output.recording import detector_panels
 
     table = circling_table(ramp_mps=3.0)
     results = run_analyses(table)
@@ -90,7 +90,7 @@ def test_the_writer_waits_for_rerun_to_write_what_it_sent_so_a_long_log_is_not_q
     same rows however often it does."""
     import rerun as rr
 
-    import spooflens.recording as recording
+    import spooflens.output.recording as recording
 
     table = circling_table(ramp_mps=3.0)
     results = run_analyses(table)
@@ -114,7 +114,7 @@ def test_the_writer_waits_for_rerun_to_write_what_it_sent_so_a_long_log_is_not_q
 def test_a_recording_begun_during_the_analysis_holds_what_one_written_after_it_does(tmp_path: Path) -> None:
     """`analyze` writes a log's streams while the analysis runs (side work) under a temporary name; the
     finished file holds the same rows as one written at once, and appears only when complete."""
-    from spooflens.early_recording import EarlyRecording
+    from spooflens.output.early_recording import EarlyRecording
 
     table = circling_table(ramp_mps=3.0)
     results = run_analyses(table)
@@ -135,7 +135,7 @@ def test_a_recording_begun_during_the_analysis_holds_what_one_written_after_it_d
 
 
 def test_a_recording_begun_for_an_analysis_that_failed_leaves_the_earlier_file_alone(tmp_path: Path) -> None:
-    from spooflens.early_recording import EarlyRecording
+    from spooflens.output.early_recording import EarlyRecording
 
     table = circling_table(ramp_mps=0.0)
     out = tmp_path / "a.rrd"

@@ -211,8 +211,8 @@ def test_recording_holds_truth_overview_and_writing_it_started_no_analytics(spoo
 
 
 def test_many_anomalies_fold_below_the_spoofing_incidents() -> None:
-    from spooflens.report.figures import MAX_LABELLED
-    from spooflens.report.page import INCIDENT_COLUMNS, incidents_table
+    from spooflens.output.report.figures import MAX_LABELLED
+    from spooflens.output.report.page import INCIDENT_COLUMNS, incidents_table
 
     def row(i: int, kind: str) -> tuple[object, ...]:
         return (i, kind, *("-" for _ in INCIDENT_COLUMNS[2:]))

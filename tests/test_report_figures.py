@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from matplotlib.collections import LineCollection, PolyCollection
 
-from spooflens.report import figures
-from spooflens.verdict import Incident
+from spooflens.output.report import figures
+from spooflens.pipeline.verdict import Incident
 
 
 def _incident(k: int) -> Incident:

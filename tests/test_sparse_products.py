@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spooflens.sparse_products import congruence, congruence_t, full_pattern, pattern, times, times_vector
+from spooflens.estimation.sparse_products import congruence, congruence_t, full_pattern, pattern, times, times_vector
 
 
 def _stack(rng: np.random.Generator, N: int, r: int, c: int) -> np.ndarray:
@@ -48,13 +48,13 @@ def test_a_rectangular_pattern_and_the_full_pattern() -> None:
 
 
 def test_block_diagonal_products_equal_the_dense_products() -> None:
-    from spooflens.sparse_products import (
+    from spooflens.estimation.sparse_products import (
         add_block_diagonal,
         block_congruence,
         block_times,
         block_times_vector,
     )
-    from spooflens.statespace import BlockDiagonal
+    from spooflens.estimation.statespace import BlockDiagonal
 
     rng = np.random.default_rng(6)
     blocks = BlockDiagonal(rng.normal(size=(3, 4, 4)), rng.normal(size=(3, 2)))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from spooflens import threads
-from spooflens.analysis import AnalyzeOptions
 from spooflens.attacks import apply_attack, parse_attack
-from spooflens.detectors import seed000
+from spooflens.detectors import mlrt
 from spooflens.navigation.product import solve_navigation
+from spooflens.pipeline.registry import AnalyzeOptions
 from spooflens.simulation.simulate import simulate
 
 
@@ -192,7 +192,7 @@ def test_the_navigation_and_seed000_in_two_threads_answer_exactly_as_in_one() ->
     for n in (1, 2):
         with threads.limited(n):
             nav = solve_navigation(spoofed, AnalyzeOptions())
-            runs.append((nav, seed000.detect(nav.model)))
+            runs.append((nav, mlrt.detect(nav.model)))
     (nav1, det1), (nav2, det2) = runs
     assert nav1.learned.noise == nav2.learned.noise and nav1.learned.imu_scale == nav2.learned.imu_scale
     # one thread stops at the first better candidate; two run the pair and may waste the second
@@ -215,12 +215,12 @@ def test_the_analyses_after_seed000_run_before_its_offline_pass_is_waited_for(mo
     result still comes in the run order."""
     from dataclasses import replace
 
-    from spooflens.analysis import AnalysisContext, Later, run_with_context
     from spooflens.detectors import innovation_tests
     from spooflens.detectors.base import DetectorResult
+    from spooflens.pipeline.registry import AnalysisContext, Later, run_with_context
 
     order: list[str] = []
-    results_of = seed000._results
+    results_of = mlrt._results
 
     def results(*args: object) -> list[DetectorResult]:
         order.append("seed000 finished")
@@ -232,14 +232,14 @@ def test_the_analyses_after_seed000_run_before_its_offline_pass_is_waited_for(mo
         order.append("innovation tests")
         return run_tests(ctx)
 
-    monkeypatch.setattr(seed000, "_results", results)
+    monkeypatch.setattr(mlrt, "_results", results)
     monkeypatch.setattr(innovation_tests, "ANALYSIS", replace(innovation_tests.ANALYSIS, run=tests_run))
     table = simulate("aircraft", seed=3, duration_s=60.0).table
     steps: list[str] = []
     names = [r.name for r in run_with_context(AnalysisContext(table, AnalyzeOptions()), steps.append)]
     assert order == ["innovation tests", "seed000 finished"]
     assert steps[-1] == "finishing navigation, inertial"  # the wait for them is shown as theirs
-    declared = [d.name for d in seed000.ANALYSIS.detectors] + [d.name for d in innovation_tests.ANALYSIS.detectors]
+    declared = [d.name for d in mlrt.ANALYSIS.detectors] + [d.name for d in innovation_tests.ANALYSIS.detectors]
     assert [n for n in names if n in declared] == declared
 
 

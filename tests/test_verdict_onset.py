@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from spooflens.detectors.base import Alarm, DetectorResult
-from spooflens.evidence import Evidence
-from spooflens.verdict import decide
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.verdict import decide
 
 
 def _result(name: str, evidence: Evidence, *alarms: Alarm) -> DetectorResult:

@@ -9,7 +9,7 @@ def test_the_warm_up_empties_numbas_cache_when_any_kernel_source_changed(tmp_pat
     """Numba keys a kernel's cache by its own file: a kernel inlining one from another file kept stale
     code when only that file changed. The warm-up empties the whole cache when any kernel source differs
     from its last run's, and leaves it when none does."""
-    from spooflens.warmup import clear_stale_numba_cache
+    from spooflens.compile.warmup import clear_stale_numba_cache
 
     package, other = tmp_path / "pkg", tmp_path / "other"
     for folder in (package, other):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from spooflens import warmup
+from spooflens.compile import warmup
 
 
 def _package(root: Path, source: str) -> Path:
@@ -40,11 +40,14 @@ def test_the_project_packages_are_the_ones_an_analysis_imports() -> None:
 
 def test_the_warm_up_reaches_both_forms_of_the_offline_pass() -> None:
     # the kept form (two filters side by side) on a short log, the bounded form a day-long log takes
-    from spooflens.detectors import mlrt
+    from spooflens.estimation import marginalised_likelihood
 
     car = warmup.SAMPLES / "ground_ros2.mcap"
     names = [name for name, _ in warmup.warm([car])]
     assert names == ["ground_ros2.mcap", "ground_ros2.mcap (long-log offline pass)"]
-    assert mlrt.OFFLINE_KEEP_BYTES == 64_000_000  # put back
-    for kernel in (mlrt._forward_kept, mlrt._two_filter_offline):  # dispatchers now: kernels have run
+    assert marginalised_likelihood.OFFLINE_KEEP_BYTES == 64_000_000  # put back
+    for kernel in (
+        marginalised_likelihood._forward_kept,
+        marginalised_likelihood._two_filter_offline,
+    ):  # dispatchers now: kernels have run
         assert getattr(kernel, "signatures", None), kernel

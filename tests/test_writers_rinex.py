@@ -14,7 +14,7 @@ from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.geodesy import geodetic_to_enu
-from spooflens.navigation.single_point import with_solved_fixes
+from spooflens.gnss.solved_fixes import with_solved_fixes
 from spooflens.simulation.simulate import SCENARIOS, simulate
 from spooflens.writers import write_log
 

@@ -3,7 +3,7 @@
 A spoofer acts on signals, so these kinds change the observations (pseudorange, carrier phase and
 Doppler consistently: a delayed signal is delayed on code and carrier alike) and never edit fixes by
 hand. The receiver's reported fixes move by exactly what its own single-point solution does: both the
-clean and the attacked observations are solved (`spooflens.navigation.single_point`) and the
+clean and the attacked observations are solved (`spooflens.gnss.single_point`) and the
 difference is added to each fix. A log with observations but no fixes gets its fixes from the
 observations at analysis time, so there is nothing more to move.
 """
@@ -22,7 +22,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import add_enu_offset, ecef_to_enu_vectors, ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from spooflens.gnss.ephemeris import C_MPS, GPS_L1_HZ
 from spooflens.gnss.geometry import line_of_sight, sagnac_range
-from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointSolution, solve_logged
+from spooflens.gnss.single_point import SV_COLUMNS, SV_VEL_COLUMNS, SinglePointSolution, solve_logged
 
 FloatArray = NDArray[np.float64]
 

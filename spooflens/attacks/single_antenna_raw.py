@@ -20,7 +20,7 @@ import pandas as pd
 from spooflens.attacks.spec import AttackError
 from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable
-from spooflens.navigation.single_point import with_solved_fixes
+from spooflens.gnss.solved_fixes import with_solved_fixes
 
 
 def single_antenna_observations(

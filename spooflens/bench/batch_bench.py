@@ -26,7 +26,7 @@ import click
 import numpy as np
 from rich.table import Table
 
-from spooflens.console import console, err_console
+from spooflens.output.console import console, err_console
 
 GOAL_SPEEDUP = 1.8
 

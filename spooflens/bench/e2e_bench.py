@@ -33,10 +33,10 @@ from typing import Any
 import click
 from rich.table import Table
 
-from spooflens import aot
 from spooflens.bench.common import measure_in_child, peak_rss_mb
 from spooflens.bench.e2e_plot import E2EFigures, plot_e2e
-from spooflens.console import console, err_console
+from spooflens.compile import aot
+from spooflens.output.console import console, err_console
 
 GOALS = {"e2e_s": 5.0, "e2e_rss_mb": 1024.0, "read_s": 1.5, "voyage_rss_mb": 2048.0, "first_run_s": 2.0}
 ISSUE_ROSBAGS_LOOP_S = 7.9  # the rosbags loop on the machine the 5 s goal was set on (issue 13)
@@ -80,10 +80,10 @@ def analyse_end_to_end(log: str, out_dir: str) -> dict[str, Any]:
     """What `spooflens analyze LOG -o .rrd --json .json` does, stage by stage (runs in a fresh process)."""
     stages = _Stages()
     stages.start("import")
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.cli import _read, recording_side_work, write_outputs
-    from spooflens.early_recording import EarlyRecording
-    from spooflens.pipeline import analyze_table
+    from spooflens.output.early_recording import EarlyRecording
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_table
     from spooflens.threads import side_work
 
     stages.start("read")
@@ -114,10 +114,10 @@ def profile_analysis(log: str, out_file: str) -> dict[str, Any]:
     import io
     import pstats
 
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.cli import _read
     from spooflens.navigation.product import solve_navigation
-    from spooflens.pipeline import analyze_table
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_table
 
     table = _read(Path(log), {}, False)
     profiler = cProfile.Profile()
@@ -247,10 +247,10 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     load nothing. The process's own start is not counted."""
     stages = _Stages()
     stages.start("imports of spooflens analyze")
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.cli import _read, recording_side_work, write_outputs
-    from spooflens.early_recording import EarlyRecording
-    from spooflens.pipeline import analyze_segments
+    from spooflens.output.early_recording import EarlyRecording
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_segments
     from spooflens.threads import side_work
 
     stages.start("read")

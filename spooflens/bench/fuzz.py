@@ -34,7 +34,7 @@ from rich.table import Table
 
 from spooflens.bench.mutations import Mutant, SeedLog, make_mutant
 from spooflens.bench.sandbox import Limits, RunResult, Sandbox
-from spooflens.console import console, err_console, progress, show_progress
+from spooflens.output.console import console, err_console, progress, show_progress
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE_LOGS = ROOT / "sample_logs"

@@ -23,8 +23,8 @@ import click
 from rich.table import Table
 
 from spooflens.bench.realworld_bench import HUSKY
-from spooflens.console import console, err_console
 from spooflens.navigation.imu_models import PRESETS
+from spooflens.output.console import console, err_console
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "spoofed_flight.mcap"
 # simulated logs: (scenario, seconds); the learning window is the first 1,500 fixes, at least 300 s
@@ -34,9 +34,9 @@ SIMULATED = (("aircraft", 400.0), ("ship", 1600.0))
 def learn_with_sweeps(table: Any, sweeps: tuple[int, ...], imu_grade: str | None = None) -> list[dict[str, Any]]:
     """The noise learned from `table` (the analysis's navigation inputs and alignment, its IMU preset
     `imu_grade`) with each number of sweeps: runs, NLL, IMU scale, wander, tau and wall time."""
-    from spooflens.analysis import AnalyzeOptions
     from spooflens.navigation.noise_learning import LearnOptions, learn_noise
     from spooflens.navigation.product import imu_preset, solve_navigation
+    from spooflens.pipeline.registry import AnalyzeOptions
 
     options = AnalyzeOptions(imu_grade=imu_grade)
     nav = solve_navigation(table, options)

@@ -16,7 +16,7 @@ import click
 from rich.table import Table
 
 from spooflens.bench.common import measure_in_child
-from spooflens.console import console, err_console
+from spooflens.output.console import console, err_console
 
 
 def _scenario(duration_s: float, imu_hz: float, gnss_hz: float):

@@ -21,9 +21,9 @@ import pandas as pd
 from rich.table import Table
 
 from spooflens.bench.common import measure_in_child
-from spooflens.console import console, err_console
 from spooflens.epoch_table import StreamInfo, build_table
 from spooflens.geodesy import enu_to_geodetic
+from spooflens.output.console import console, err_console
 
 T0_NS = 1_750_000_000_000_000_000
 

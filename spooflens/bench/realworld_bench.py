@@ -1,4 +1,4 @@
-"""`spooflens bench realworld`: the whole analysis (`spooflens.pipeline.analyze_table`, exactly what
+"""`spooflens bench realworld`: the whole analysis (`spooflens.pipeline.run.analyze_table`, exactly what
 `spooflens analyze` runs) on simulated vehicles whose receivers behave like real ones, attacked and clean.
 
 Each run draws a receiver (`spooflens.simulation.sensors.realistic_receiver`: Gauss-Markov errors of
@@ -27,7 +27,7 @@ import click
 import numpy as np
 from rich.table import Table
 
-from spooflens.console import console, progress, show_progress
+from spooflens.output.console import console, progress, show_progress
 
 # vehicle -> (scenario, seconds of log)
 VEHICLES: dict[str, tuple[str, float]] = {
@@ -106,7 +106,7 @@ def _orbits_seen(run: Run, table: Any) -> Any:
     """The table as the run's analysis sees it: without Galileo satellite states for GPS_ORBITS_ONLY."""
     if run.vehicle not in GPS_ORBITS_ONLY:
         return table
-    from spooflens.navigation.single_point import SV_COLUMNS, SV_VEL_COLUMNS
+    from spooflens.gnss.single_point import SV_COLUMNS, SV_VEL_COLUMNS
 
     obs = table.observations.copy()
     galileo = obs["sv_id"].astype(str).str.startswith("E").to_numpy()
@@ -116,7 +116,7 @@ def _orbits_seen(run: Run, table: Any) -> Any:
 
 
 def one_run(run: Run) -> dict[str, Any]:
-    from spooflens.pipeline import analyze_table
+    from spooflens.pipeline.run import analyze_table
 
     table, first = _table(run)
     t0 = time.perf_counter()
@@ -170,7 +170,7 @@ def husky_case(path: str, attack: str) -> dict[str, Any]:
     """The real husky bag (clean, consumer IMU, wheel odometry, SBAS fixes) with an injected attack."""
     from readers import read_log
     from spooflens.attacks import apply_attack, parse_attack
-    from spooflens.pipeline import analyze_table
+    from spooflens.pipeline.run import analyze_table
 
     table = read_log(path)
     if attack != "clean":

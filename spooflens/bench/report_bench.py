@@ -17,15 +17,15 @@ from typing import Any
 import click
 from rich.table import Table
 
-from spooflens.console import console, err_console
+from spooflens.output.console import console, err_console
 
 GOAL_MB = 5.0
 
 
 def run_report_bench(duration_s: float = 3600.0, imu_hz: float = 200.0, gnss_hz: float = 10.0) -> dict[str, Any]:
     from spooflens.attacks import apply_attack, parse_attack
-    from spooflens.pipeline import analyze_table
-    from spooflens.report import build_plots, render_report
+    from spooflens.output.report import build_plots, render_report
+    from spooflens.pipeline.run import analyze_table
     from spooflens.simulation.simulate import SCENARIOS, simulate
 
     sc = replace(SCENARIOS["aircraft"], imu_hz=imu_hz, gnss_hz=gnss_hz)

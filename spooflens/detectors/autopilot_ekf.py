@@ -26,7 +26,7 @@ down the rise).
 
 Being the inertial class, an incident it raises in a log that also carries the IMU is held to what
 every inertial incident is held to: spooflens' own INS, coasted from before it, must confirm that GNSS
-left it (`spooflens.reconstruction`). Without an IMU in the log (an ArduPilot log with IMU logging
+left it (`spooflens.pipeline.reconstruction`). Without an IMU in the log (an ArduPilot log with IMU logging
 off, a telemetry log, a GPS-only export) the autopilot's filter is the only inertial reference there is.
 """
 
@@ -38,9 +38,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import MIN_AUTOPILOT_ROWS, AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals, rise_start
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import MIN_AUTOPILOT_ROWS, AnalysisContext, AnalysisSpec, DetectorInfo
 
 FloatArray = NDArray[np.float64]
 NAME = "autopilot_ekf"

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
 
 FloatArray = NDArray[np.float64]
 

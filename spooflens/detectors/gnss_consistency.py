@@ -20,11 +20,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
-from spooflens.evidence import Evidence
+from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import enu_rotation, geodetic_to_ecef, geodetic_to_enu
-from spooflens.quantiles import chi2_isf, halfnorm_ppf
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 FloatArray = NDArray[np.float64]
 NAME = "gnss_consistency"

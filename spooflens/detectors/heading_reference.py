@@ -46,7 +46,6 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import (
     Alarm,
     DetectorResult,
@@ -58,8 +57,9 @@ from spooflens.detectors.base import (
     rise_start,
     trailing_median,
 )
-from spooflens.evidence import Evidence
 from spooflens.geodesy import enu_to_geodetic, metres_per_radian
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 FloatArray = NDArray[np.float64]
 NAME = "heading_reference"

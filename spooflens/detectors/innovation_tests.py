@@ -20,14 +20,28 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import DetectorResult, Series, alarm_intervals
-from spooflens.evidence import Evidence
-from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern
-from spooflens.quantiles import chi2_isf
+from spooflens.estimation.kalman import ForwardResult
+from spooflens.estimation.quantiles import chi2_isf
+from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern, quadratic_forms
+from spooflens.navigation.product import navigation_of
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 FloatArray = NDArray[np.float64]
 POSITION, VELOCITY = (0, 1, 2), (3, 4, 5)
+
+
+def threshold(p_false_alarm: float = 1e-5, dof: int = 3) -> float:
+    """The chi-square level of an innovation test: seed 000's 25.9 is chi2(3) at P_FA 1e-5 per epoch."""
+    return float(chi2_isf(p_false_alarm, dof))
+
+
+def position_nis(fwd: ForwardResult, rows: tuple[int, ...] = POSITION) -> FloatArray:
+    """eps_p^T S_pp^-1 eps_p per epoch of a forward filter (seed 000's KF innovation test; NaN where the
+    position was not measured)."""
+    idx = np.array(rows)
+    return quadratic_forms(fwd.eps[:, idx], fwd.S[:, idx][:, :, idx])
 
 
 @dataclass(frozen=True)
@@ -69,7 +83,7 @@ def nis_test(
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    sol = ctx.navigation().solution
+    sol = navigation_of(ctx).solution
     opts = InnovationTestOptions()
     return [
         nis_test("velocity_innovation", sol, VELOCITY, "velocity", opts),

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series
-from spooflens.evidence import Evidence
 from spooflens.gnss.ephemeris import GpsEphemerides, record_positions
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 NAME = "navigation_message"
 

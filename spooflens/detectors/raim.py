@@ -1,6 +1,6 @@
 """RAIM as a detector: satellites whose pseudoranges disagree with the others and the broadcast orbits.
 
-Runs the fault detection and exclusion of `spooflens.navigation.raim` on every receiver's raw
+Runs the fault detection and exclusion of `spooflens.gnss.fault_exclusion` on every receiver's raw
 observations (with satellite states). A counterfeit satellite, or a spoofer that moved only a few
 satellites, leaves the honest ones to outvote it: it is excluded epoch after epoch, by far more than
 code noise or multipath can explain. An alarm needs the same satellite excluded in `min_epochs`
@@ -18,12 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals, nearest
-from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
-from spooflens.navigation.raim import FAULT, RaimOptions, RaimResult, solve_with_fde
-from spooflens.navigation.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
+from spooflens.gnss.fault_exclusion import FAULT, RaimOptions, RaimResult, solve_with_fde
+from spooflens.gnss.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 NAME = "raim"
 

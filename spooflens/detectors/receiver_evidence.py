@@ -7,7 +7,7 @@ jamming indicators rise, its AGC moves (a strong signal at the antenna), its C/N
 takeover and then sits above its old level (a spoofer is louder than the sky), its own spoofing or
 jamming state goes up. None of these is proof (a bridge, a tunnel, a turn away from the sky do some of
 them too), so this class alone never makes a spoofing verdict; with the GNSS-only or an independent
-class it does (`spooflens.evidence.confidence`).
+class it does (`spooflens.pipeline.evidence.confidence`).
 
 Per receiver and indicator the baseline is the log's own median and a robust scale (1.4826 MAD, with a
 floor per indicator so a constant indicator is not infinitely sensitive), learned from the whole log
@@ -34,9 +34,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.schema import SpoofingFlag
 
 FloatArray = NDArray[np.float64]

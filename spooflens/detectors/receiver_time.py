@@ -35,9 +35,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, trailing_median
-from spooflens.evidence import Evidence
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
 
 FloatArray = NDArray[np.float64]
 NAME = "receiver_time"

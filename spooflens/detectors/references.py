@@ -9,7 +9,7 @@ Two references, each with its evidence class:
   are a small minority) and its first fixes lie within 100 m of the header (a moving receiver's header is
   only where it started; a rough header would bias the differences the detectors use). The station is
   Earth-fixed: zero velocity, the same position at every epoch.
-- the **INS over a window** (`Evidence.INERTIAL`): the GNSS/INS solution (`ctx.navigation()`) is
+- the **INS over a window** (`Evidence.INERTIAL`): the GNSS/INS solution (`navigation_of(ctx)`) is
   corrected by the receiver's own fixes, which a spoofer moves, so it cannot serve as the reference
   as it is. At each observation epoch k the INS is restarted from the filter's state at least
   `window_s` earlier and propagated by the IMU alone (`spooflens.navigation.strapdown`) to epochs k-1 and
@@ -28,12 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
-from spooflens.evidence import Evidence
 from spooflens.geodesy import ecef_to_geodetic, enu_rotation, geodetic_to_ecef, geodetic_to_enu
 from spooflens.gnss.grid import ObservationGrid
+from spooflens.navigation.product import navigation_of
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext
 
 FloatArray = NDArray[np.float64]
 APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"  # readers.rinex.APPROX_POSITION_KEY
@@ -190,7 +191,7 @@ def _ins_reference(
     from it drifts by metres per second in the first turn)."""
     from spooflens.navigation.strapdown import NavState, propagate
 
-    nav = ctx.navigation()
+    nav = navigation_of(ctx)
     sol = nav.solution
     pre = nav.inputs.pre  # the filter's own preintegration of this IMU (not a second one: 1 GB a day)
     states = np.asarray(sol.state, dtype=float)

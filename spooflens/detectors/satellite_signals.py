@@ -39,12 +39,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, nearest
 from spooflens.epoch_table import EpochTable
-from spooflens.evidence import Evidence
 from spooflens.geodesy import geodetic_to_ecef
 from spooflens.gnss.geometry import azimuth_elevation
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 HORIZON = "satellite_horizon"
 SIGNALS = "satellite_signals"

@@ -24,13 +24,13 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals, rise_start
-from spooflens.evidence import Evidence
+from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic
-from spooflens.navigation.raim import RaimOptions, solve_with_fde
-from spooflens.navigation.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
-from spooflens.quantiles import chi2_isf, halfnorm_ppf
+from spooflens.gnss.fault_exclusion import RaimOptions, solve_with_fde
+from spooflens.gnss.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 
 NAME = "system_agreement"
 SYSTEM_NAMES = {"G": "GPS", "E": "Galileo", "R": "GLONASS", "C": "BeiDou", "J": "QZSS"}

@@ -10,7 +10,7 @@ every receiver gets the same attack:
   all-satellite solution - all-satellite solution (a common offset on every satellite is a clock
   change, so n = N gives POV 0).
 POVs are east/north metres in each receiver's local frame. Every solution is the project's single-point
-solver (`spooflens.navigation.single_point.solve`, batched over every run and receiver at once).
+solver (`spooflens.gnss.single_point.solve`, batched over every run and receiver at once).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic
 from spooflens.gnss.ephemeris import Klobuchar
-from spooflens.navigation.single_point import SV_COLUMNS, SinglePointOptions, solve
+from spooflens.gnss.single_point import SV_COLUMNS, SinglePointOptions, solve
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

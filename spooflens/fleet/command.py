@@ -1,6 +1,6 @@
 """`spooflens fleet LOG1 LOG2 ... [-o DIR]`: several vehicles (or receivers) over the same time and area.
 
-Each log is analysed on its own (`spooflens.pipeline.analyze_table`); each vehicle's offset from its
+Each log is analysed on its own (`spooflens.pipeline.run.analyze_table`); each vehicle's offset from its
 own independent reference is put on a common UTC time grid; the homology index of the offsets over time
 says when the vehicles were moved alike (a common attacker), and that goes into each vehicle's verdict
 as fleet evidence with a finding. Writes DIR/fleet.rrd (all tracks, offsets, the index) and
@@ -20,7 +20,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rich.table import Table
 
-from spooflens.console import console, progress, show_progress
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import SpooflensError
@@ -32,9 +31,10 @@ from spooflens.fleet.offsets import (
     overlap_groups,
     vehicle_offsets,
 )
-from spooflens.pipeline import last_fix_s
-from spooflens.recording import APP_ID, COLOURS, entity
-from spooflens.verdict import Verdict, decide
+from spooflens.output.console import console, progress, show_progress
+from spooflens.output.recording import APP_ID, COLOURS, entity
+from spooflens.pipeline.run import last_fix_s
+from spooflens.pipeline.verdict import Verdict, decide
 
 PALETTE = ((230, 60, 50), (60, 120, 230), (40, 180, 90), (200, 160, 40), (150, 80, 200), (20, 180, 200))
 
@@ -63,10 +63,10 @@ def run_fleet(
 ) -> tuple[list[Vehicle], FleetHomology | None, list[str]]:
     """Analyse every log, measure offsets, compute the homology, and redo each verdict with fleet evidence."""
     from readers import read_log
-    from spooflens.analysis import AnalyzeOptions
-    from spooflens.detectors.fleet import NAME, fleet_result
-    from spooflens.navigation.single_point import with_solved_fixes
-    from spooflens.pipeline import analyze_table
+    from spooflens.fleet.detector import NAME, fleet_result
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import analyze_table
 
     notes: list[str] = []
     vehicles: list[Vehicle] = []
@@ -125,7 +125,7 @@ def _intervals(fh: FleetHomology) -> list[dict[str, object]]:
 
 
 def fleet_summary(vehicles: list[Vehicle], fh: FleetHomology | None, notes: list[str], opts: FleetOptions) -> dict:
-    from spooflens.summary import build_summary
+    from spooflens.output.summary import build_summary
 
     out: dict[str, object] = {
         "options": {"min_offset_m": opts.min_offset_m, "p_false_alarm": opts.p_false_alarm},
@@ -152,9 +152,9 @@ def fleet_summary(vehicles: list[Vehicle], fh: FleetHomology | None, notes: list
             "theta_all_median": float(np.median(fh.theta_all[finite])) if finite.any() else None,
             "common_attack": _intervals(fh),
         }
-    from spooflens.summary import _clean
+    from spooflens.output.summary import json_safe
 
-    return dict(_clean(out))
+    return dict(json_safe(out))
 
 
 def write_fleet_recording(path: Path, vehicles: list[Vehicle], fh: FleetHomology | None) -> None:

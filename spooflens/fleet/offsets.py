@@ -20,9 +20,9 @@ from numpy.typing import NDArray
 
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.epoch_table import EpochTable
-from spooflens.evidence import Evidence
 from spooflens.fleet.homology import homology_index, null_quantile
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
+from spooflens.pipeline.evidence import Evidence
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -116,7 +116,7 @@ def _reference(
     opts: FleetOptions,
     max_gap_s: float,
 ) -> tuple[FloatArray | None, str]:
-    from spooflens.detectors.seed003 import surveyed_sites
+    from spooflens.detectors.dual_receiver import surveyed_sites
     from spooflens.geodesy import ecef_to_geodetic
 
     site = surveyed_sites(table).get(rid)
@@ -142,7 +142,7 @@ def _reference(
 def _authentic_subset(
     table: EpochTable, rid: str, t: FloatArray, results: list[DetectorResult], opts: FleetOptions
 ) -> tuple[FloatArray | None, str]:
-    from spooflens.navigation.single_point import SV_COLUMNS, solve_logged
+    from spooflens.gnss.single_point import SV_COLUMNS, solve_logged
 
     obs = table.observations
     obs = obs[(obs["receiver_id"].astype(str) == rid) & np.isfinite(obs[SV_COLUMNS].to_numpy(float)).all(axis=1)]

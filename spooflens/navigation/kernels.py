@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from spooflens.compile.jit import njit
 from spooflens.constants import WGS84_A_M as A_M
 from spooflens.constants import WGS84_E2 as E2
 from spooflens.constants import WGS84_F as F_FLAT
@@ -23,9 +24,8 @@ from spooflens.constants import WGS84_GAMMA_E as _GE
 from spooflens.constants import WGS84_K_SOMIGLIANA as _K
 from spooflens.constants import WGS84_M_GEO as _M
 from spooflens.constants import WGS84_OMEGA_IE as OMEGA_IE
-from spooflens.jit import njit
-from spooflens.kalman_update import masked_update_into, update_into, update_scratch
-from spooflens.sparse_products import add_block_diagonal, block_congruence
+from spooflens.estimation.kalman_update import masked_update_into, update_into, update_scratch
+from spooflens.estimation.sparse_products import add_block_diagonal, block_congruence
 
 NX = 22
 CACHE = True

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError
+from spooflens.estimation.statespace import BlockDiagonal, LinearGaussianModel
 from spooflens.navigation import kernels
 from spooflens.navigation.alignment import Alignment, align, flu_axes
 from spooflens.navigation.error_model import (
@@ -28,7 +29,6 @@ from spooflens.navigation.error_model import (
 )
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.strapdown import NavState, Preintegrated, preintegrate
-from spooflens.statespace import BlockDiagonal
 
 FloatArray = NDArray[np.float64]
 DEFAULT_SIGMA_POS = (3.7, 3.7, 6.0)  # seed 000's R when a log reports no accuracy
@@ -200,10 +200,40 @@ class NavSolution:
     def innovation(self) -> FloatArray:
         return self.nu
 
-    def error_model(self):
-        from spooflens.navigation.solution_model import error_model
+    def error_model(self) -> LinearGaussianModel:
+        """The filter's linearised error model as a LinearGaussianModel, for the model-based detectors.
 
-        return error_model(self)
+        The closed-loop filter corrects its nominal trajectory at every update, so its measurements z_k are
+        relative to a moving linearisation point. Adding back the INS corrections already applied, propagated
+        through the model (u_k = Phi_k (u_{k-1} + dx_{k-1}), u_0 = 0, INS part only: the receiver's
+        Gauss-Markov error states are estimated, never fed back), gives open-loop-equivalent measurements
+        y_k = z_k + H_k u_k that follow ONE linear model: eps_k = Phi_k eps_{k-1} + w_k, y_k = H_k eps_k + e_k.
+        A plain Kalman filter on it, started at zero with P_pred[0], reproduces the closed-loop filter's
+        innovations and covariances exactly (tests/test_navigation_filter.py).
+        """
+        M, n = self.dx.shape
+        applied = self.dx.copy()
+        applied[:, 15:] = 0.0
+        u = np.zeros((M, n))  # the Gauss-Markov part stays zero: nothing is applied there
+        head = self.Phi.head
+        h = head.shape[1]
+        for k in range(1, M):
+            u[k, :h] = head[k] @ (u[k - 1, :h] + applied[k - 1, :h])
+        y = self.z + np.einsum("kij,kj->ki", self.H, u)
+        y = np.where(self.used, y, np.nan)
+        return LinearGaussianModel(
+            # the solution's own arrays, not copies (166 MB each per hour of 10 Hz GNSS): nothing writes them
+            t=self.t,
+            A=self.Phi,
+            Q=self.Qd,
+            C=self.H,
+            R=self.R,
+            y=y,
+            x0=np.zeros(n),
+            P0=self.P_pred[0].copy(),
+            state_names=STATE_NAMES,
+            measurement_names=MEASUREMENT_NAMES,
+        )
 
 
 _FILTER_COLUMNS = (

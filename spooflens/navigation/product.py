@@ -10,9 +10,9 @@ from functools import partial
 
 import numpy as np
 
-from spooflens.analysis import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later
 from spooflens.detectors.base import DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
+from spooflens.estimation.statespace import LinearGaussianModel
 from spooflens.navigation.alignment import Alignment, heading_from_course
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.loosely_coupled import (
@@ -27,9 +27,10 @@ from spooflens.navigation.loosely_coupled import (
 from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, learn_noise
 from spooflens.navigation.smoother import SmoothedSolution, check_smoothable, smooth
 from spooflens.navigation.strapdown import NavState
-from spooflens.statespace import LinearGaussianModel
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later
 from spooflens.threads import core_idle, started
 
+NAVIGATION = "navigation"  # the analysis, its result and the solution it shares with the others
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
 # runs (coasts, reconstructions) make the others again from the last kept (150 MB less per hour of 10 Hz
@@ -106,8 +107,15 @@ def _aligned(
     return inputs, start
 
 
+def navigation_of(ctx: AnalysisContext) -> Navigation:
+    """The GNSS/INS solution of the log's first IMU and receiver, made once per analysis and shared by
+    every analysis that needs it (raises AnalysisError if it cannot run)."""
+    nav: Navigation = ctx.cached(NAVIGATION, lambda: solve_navigation(ctx.table, ctx.options))
+    return nav
+
+
 def _run(ctx: AnalysisContext) -> Later:
-    nav = ctx.navigation()
+    nav = navigation_of(ctx)
     return Later(partial(_result, nav))  # the smoothed track: the detectors after this one run meanwhile
 
 
@@ -117,7 +125,7 @@ def _result(nav: Navigation) -> list[DetectorResult]:
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
     return [
         DetectorResult(
-            "navigation",
+            NAVIGATION,
             True,
             f"INS {sol.imu_id} + GNSS {sol.receiver_id}"
             + (f" + odometry {sol.options.odometry.odometry_id}" if sol.options.odometry else "")
@@ -153,9 +161,9 @@ def _result(nav: Navigation) -> list[DetectorResult]:
 
 
 ANALYSIS = AnalysisSpec(
-    "navigation",
+    NAVIGATION,
     "GNSS/INS filter and smoother: the inertial reference the inertial detectors compare GNSS with",
     ("fixes", "imu"),
     _run,
-    (DetectorInfo("navigation", None, "the GNSS/INS solution, its innovations and the smoothed track"),),
+    (DetectorInfo(NAVIGATION, None, "the GNSS/INS solution, its innovations and the smoothed track"),),
 )

@@ -281,7 +281,7 @@ def _first_sky(eph: GpsEphemerides, sc: Scenario, wanted: int = 6, step_s: float
     a vehicle elsewhere, much of the file's day may have too few of them to solve.
     """
     from spooflens.gnss.geometry import azimuth_elevation
-    from spooflens.navigation.single_point import SinglePointOptions
+    from spooflens.gnss.single_point import SinglePointOptions
 
     rx = geodetic_to_ecef(sc.profile.lat_deg, sc.profile.lon_deg, sc.profile.height_m)
     sats = np.array(eph.satellites())
@@ -310,7 +310,7 @@ def _raw_receiver(
     rng: np.random.Generator,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """One receiver's observations (t_ns-stamped) and the fixes it computes from them."""
-    from spooflens.navigation.single_point import SinglePointOptions, solve
+    from spooflens.gnss.single_point import SinglePointOptions, solve
     from spooflens.simulation.observations import simulate_observations
 
     t_s = truth.t[g_idx]

@@ -72,8 +72,8 @@ def summary_of(log: Path) -> dict[str, Any]:
     """What `spooflens analyze LOG --json` writes, normalised (an error: its one line, as the CLI prints it)."""
     from spooflens.cli import _read, require_gnss, segments_summary
     from spooflens.errors import SpooflensError
-    from spooflens.pipeline import analyze_segments
-    from spooflens.summary import build_summary
+    from spooflens.output.summary import build_summary
+    from spooflens.pipeline.run import analyze_segments
 
     try:
         table = _read(log, {}, show_progress=False)

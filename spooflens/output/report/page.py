@@ -1,0 +1,380 @@
+"""The report page: one self-contained HTML file (inline CSS and SVG, no script, nothing fetched).
+
+Sections in the order an operator reads them: the verdict, the timeline, the track, the evidence,
+data quality, provenance and method notes. Everything is taken from the analysis as declared (the
+verdict, each result's series and alarms, the detector declarations, the table's streams and
+metadata), so a new detector or evidence class shows up without an edit here.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import platform
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, fields, is_dataclass
+from datetime import UTC, datetime
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from spooflens import __version__
+from spooflens.detectors.base import DetectorResult
+from spooflens.epoch_table import TIME_REFERENCES, EpochTable
+from spooflens.inventory import computed, skipped_or_repaired, stream_rows
+from spooflens.output.report.figures import MAX_LABELLED, Plot
+from spooflens.output.report.provenance import InputIdentity
+from spooflens.pipeline.departure import Departure, gnss_departure
+from spooflens.pipeline.evidence import EVIDENCE, label
+from spooflens.pipeline.registry import DetectorInfo
+from spooflens.pipeline.run import Analysis
+from spooflens.pipeline.verdict import Incident, Verdict
+
+CSS = """
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;color:#212529;margin:0;
+background:#f8f9fa}
+main{max-width:1120px;margin:0 auto;padding:12px 20px 40px;background:#fff}
+h1{font-size:20px;margin:8px 0 2px}h2{font-size:17px;border-bottom:2px solid #dee2e6;padding-bottom:3px;margin-top:28px}
+h3{font-size:14.5px;margin:18px 0 4px}
+nav{font-size:13px;color:#495057;margin-bottom:8px}nav a{margin-right:12px;color:#1864ab}
+.verdict{border-radius:6px;padding:12px 16px;margin:10px 0;color:#fff}
+.verdict .big{font-size:24px;font-weight:700;letter-spacing:.02em}
+.spoofed{background:#c92a2a}.clean{background:#2b8a3e}.none{background:#868e96}
+.verdict p{margin:6px 0 0}
+table{border-collapse:collapse;font-size:12.5px;margin:6px 0;width:100%}
+th,td{border:1px solid #dee2e6;padding:3px 6px;text-align:left;vertical-align:top}
+th{background:#f1f3f5}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.muted{color:#868e96}.small{font-size:12px}.advisory{color:#868e96}
+figure.plot{margin:14px 0;border:1px solid #e9ecef;border-radius:4px;padding:6px}
+figure.plot svg{width:100%;height:auto;display:block}
+figcaption{font-size:12px;color:#495057;margin-top:3px}figcaption b{color:#212529}
+code{font-size:12px;background:#f1f3f5;padding:0 3px;border-radius:3px}
+ul{margin:4px 0 4px 18px;padding:0}
+@media print{body{background:#fff}main{max-width:none}figure.plot{break-inside:avoid}}
+"""
+
+
+def esc(x: object) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _table(head: Sequence[str], rows: Iterable[Sequence[object]], numeric: Sequence[int] = ()) -> str:
+    out = ["<table><thead><tr>", *(f"<th>{esc(h)}</th>" for h in head), "</tr></thead><tbody>"]
+    for row in rows:
+        cells = (
+            f'<td class="num">{esc(c)}</td>' if i in numeric else f"<td>{c if isinstance(c, Raw) else esc(c)}</td>"
+            for i, c in enumerate(row)
+        )
+        out += ["<tr>", *cells, "</tr>"]
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+class Raw(str):
+    """Markup already escaped, to put in a table cell as it is."""
+
+
+def _when(table: EpochTable, t_s: float | None) -> str:
+    if t_s is None or not math.isfinite(t_s):
+        return "-"
+    clock = f" ({table.absolute_iso(t_s)})" if table.unix_ns(t_s) is not None else ""
+    return f"{t_s:.2f} s{clock}"
+
+
+def _interval(iv: tuple[float, float] | None) -> str:
+    return f"{iv[0]:.2f}-{iv[1]:.2f} s" if iv else ""
+
+
+def _end(table: EpochTable, inc: Incident) -> str:
+    if inc.ongoing_at_end:
+        return "still going on at the end of the log"
+    iv = getattr(inc, "end_interval_s", None)
+    how = getattr(inc, "end_method", "")
+    return _when(table, inc.end_s) + (f", interval {_interval(iv)}" if iv else "") + (f" ({how})" if how else "")
+
+
+def _departures(deps: Sequence[Departure]) -> str:
+    return "; ".join(
+        f"{d.receiver_id}: peak {d.peak_m:.1f} m at {d.peak_s:.1f} s, {d.end_m:.1f} m at {d.end_s:.1f} s" for d in deps
+    )
+
+
+def _evidence_text(inc: Incident) -> str:
+    """The classes that agreed in time, then any that alarmed in the incident at another time."""
+    agreeing = inc.corroborating
+    text = ", ".join(label(e) for e in agreeing)
+    apart = [label(e) for e in inc.evidence if e not in agreeing]
+    return (text or "none confirmed") + (f" (also, at other times: {', '.join(apart)})" if apart else "")
+
+
+def _incident_sentence(table: EpochTable, inc: Incident, n: int, deps: Sequence[Departure]) -> str:
+    onset = _when(table, inc.onset_s)
+    iv = f" (interval {_interval(inc.onset_interval_s)})" if inc.onset_interval_s else ""
+    evidence = _evidence_text(inc)
+    sats = f" Satellites found inconsistent: {', '.join(inc.satellites)}." if inc.satellites else ""
+    rx = f" Receivers: {', '.join(inc.receivers)}." if inc.receivers else ""
+    far = ""
+    if deps:
+        d = max(deps, key=lambda x: x.peak_m)
+        far = (
+            f" GNSS went up to {d.peak_m:.0f} m from the reconstructed track ({d.end_m:.0f} m at the end of the"
+            " incident)."
+        )
+    return (
+        f"Incident {n}: GNSS spoofed from {onset}{iv} to {_end(table, inc)}; first alarm at "
+        f"{inc.start_s:.2f} s. Agreeing: {', '.join(inc.detectors)} ({evidence}); confidence {inc.confidence}."
+        f"{rx}{sats}{far}"
+    )
+
+
+def verdict_section(analysis: Analysis) -> str:
+    table, verdict, results = analysis.table, analysis.verdict, analysis.results
+    if not verdict.detectors_run:
+        kind, big = "none", "NO VERDICT"
+    elif verdict.spoofed:
+        kind, big = "spoofed", "SPOOFING DETECTED"
+    else:
+        kind, big = "clean", "NO SPOOFING DETECTED"
+    deciding = verdict.deciding_incident
+    deps = gnss_departure(table, results, deciding) if deciding is not None and deciding.is_spoofing else []
+    lines = [f'<div class="verdict {kind}" id="verdict-banner"><div class="big">{big}</div>']
+    lines.append(f"<p>{esc(verdict.headline)}</p>")
+    if deciding is not None and deciding.is_spoofing:
+        n = verdict.incidents.index(deciding) + 1
+        lines.append(f"<p>{esc(_incident_sentence(table, deciding, n, deps))}</p>")
+    lines.append("</div>")
+    if verdict.incidents:
+        rows = []
+        for i, inc in enumerate(verdict.incidents, 1):
+            d = gnss_departure(table, results, inc) if inc is deciding and inc.is_spoofing else []
+            rows.append(
+                (
+                    i,
+                    "spoofing" if inc.is_spoofing else "anomaly (no second class at the same time: not spoofing)",
+                    _when(table, inc.onset_s)
+                    + (f", interval {_interval(inc.onset_interval_s)}" if inc.onset_interval_s else ""),
+                    f"{inc.start_s:.2f} s",
+                    _end(table, inc),
+                    ", ".join(inc.detectors),
+                    _evidence_text(inc),
+                    inc.confidence,
+                    ", ".join(inc.receivers) or "-",
+                    ", ".join(inc.satellites) or "-",
+                    _departures(d) or "-",
+                )
+            )
+        lines.append(incidents_table(rows, [inc.is_spoofing for inc in verdict.incidents]))
+    if verdict.findings:
+        lines.append("<h3>Findings</h3><ul>")
+        lines += [f"<li>{esc(f.text)} ({f.start_s:.1f}-{f.end_s:.1f} s)</li>" for f in verdict.findings]
+        lines.append("</ul>")
+    lines.append(_detector_status(results, verdict))
+    return "\n".join(lines)
+
+
+INCIDENT_COLUMNS = (
+    "#",
+    "kind",
+    "onset (estimated)",
+    "first alarm",
+    "end",
+    "detectors",
+    "evidence",
+    "confidence",
+    "receivers",
+    "satellites",
+    "GNSS off the reconstructed track",
+)
+
+
+def incidents_table(rows: Sequence[Sequence[object]], spoofing: Sequence[bool]) -> str:
+    """The incidents, a row each. Beyond MAX_LABELLED, the anomalies (one evidence class, not spoofing)
+    fold into a <details> below the spoofing incidents: two hundred of them on a real boat's log buried
+    the page under the verdict."""
+    if len(rows) <= MAX_LABELLED or all(spoofing):
+        return _table(INCIDENT_COLUMNS, rows)
+    shown = [r for r, s in zip(rows, spoofing, strict=True) if s]
+    folded = [r for r, s in zip(rows, spoofing, strict=True) if not s]
+    summary = f"{len(folded)} anomalies (one evidence class each, not spoofing): show them"
+    parts = [_table(INCIDENT_COLUMNS, shown)] if shown else []
+    return "".join([*parts, f"<details><summary>{esc(summary)}</summary>{_table(INCIDENT_COLUMNS, folded)}</details>"])
+
+
+def _detector_status(results: Sequence[DetectorResult], verdict: Verdict) -> str:
+    rows = []
+    for r in results:
+        if not r.is_detector:
+            continue
+        status = "counted" if r.name in verdict.detectors_run else "advisory" if r.advisory else "did not run"
+        alarms = len(r.alarms) if r.ran else "-"
+        rows.append((r.name, label(r.evidence) if r.evidence else "", status, alarms, r.reason))
+    if not rows:
+        return ""
+    return "<h3>Detectors</h3>" + _table(("detector", "evidence", "status", "alarms", "note"), rows, numeric=(3,))
+
+
+def _plots(plots: Sequence[Plot]) -> str:
+    return "\n".join(
+        f'<figure class="plot" id="plot-{esc(p.key)}" data-plot="{esc(p.key)}">{p.svg}'
+        f"<figcaption><b>{esc(p.title)}.</b> {esc(p.caption)}</figcaption></figure>"
+        for p in plots
+    )
+
+
+def data_quality_section(table: EpochTable) -> str:
+    rows = [(r.role, r.stream, r.source, r.type, r.count, r.rate, r.span, r.body_frame) for r in stream_rows(table)]
+    out = [
+        f"<p>{esc(table.format)} log, {table.duration_s:.1f} s. Times in seconds since the log start.</p>",
+        _table(("role", "stream", "source", "type", "count", "rate (Hz)", "span (s)", "body frame"), rows),
+    ]
+    lost = skipped_or_repaired(table)
+    out.append("<h3>Skipped or repaired</h3>")
+    out.append(
+        _table(("stream", "action", "count", "reason"), [(s.stream, s.action, s.count, s.reason) for s in lost], (2,))
+        if lost
+        else '<p class="muted">Nothing was skipped or repaired.</p>'
+    )
+    made = computed(table)
+    if made:
+        out.append("<h3>Computed</h3>")
+        out.append(_table(("stream", "count", "how"), [(s.stream, s.count, s.reason) for s in made], (1,)))
+    segments = getattr(table, "segments", None)
+    if segments:
+        out.append("<h3>Segments</h3>")
+        out.append(_records(segments))
+    return "\n".join(out)
+
+
+def _records(items: Iterable[Any]) -> str:
+    """A table of whatever records the table carries (dataclasses, mappings, or plain values)."""
+    items = list(items)
+    if items and all(is_dataclass(x) and not isinstance(x, type) for x in items):
+        head = [f.name for f in fields(items[0])]
+        return _table(head, [[asdict(x).get(h, "") for h in head] for x in items])
+    if items and all(isinstance(x, dict) for x in items):
+        head = list(dict.fromkeys(k for x in items for k in x))
+        return _table(head, [[x.get(h, "") for h in head] for x in items])
+    return "<ul>" + "".join(f"<li>{esc(x)}</li>" for x in items) + "</ul>"
+
+
+def _library_versions() -> str:
+    names = ("numpy", "scipy", "pandas", "matplotlib", "rerun-sdk")
+    out = []
+    for n in names:
+        try:
+            out.append(f"{n} {version(n)}")
+        except PackageNotFoundError:
+            continue
+    return ", ".join([f"Python {platform.python_version()}", *out])
+
+
+def provenance_section(analysis: Analysis, identity: InputIdentity) -> str:
+    table = analysis.table
+    meta = dict(table.metadata)
+    enums = {k.removeprefix("enum."): v for k, v in meta.items() if k.startswith("enum.")}
+    other = {k: v for k, v in meta.items() if not k.startswith("enum.")}
+    options = {k: v for k, v in asdict(analysis.options).items() if v not in (None, {}, "")}
+    start = table.absolute_iso(0.0)
+    rows: list[tuple[str, object]] = [
+        ("file", identity.name),
+        ("path given", str(table.source)),
+        ("size", f"{identity.size_bytes:,} bytes"),
+        ("SHA-256", Raw(f"<code>{esc(identity.sha256)}</code> <span class='muted'>({esc(identity.how)})</span>")),
+        ("format", table.format),
+        ("time reference", f"{table.time_reference}: {TIME_REFERENCES.get(table.time_reference, '')}"),
+        ("log start", f"{start} (t0 = {table.t0_ns} ns in the log's clock)"),
+        ("duration", f"{table.duration_s:.3f} s"),
+        ("spooflens version", __version__),
+        ("options", ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults"),
+        ("libraries", _library_versions()),
+        ("report written", datetime.now(UTC).isoformat(timespec="seconds")),
+    ]
+    rows += [(k, v) for k, v in sorted(other.items())]
+    out = [_table(("what", "value"), rows)]
+    out.append("<h3>Enum meanings applied</h3>")
+    out.append(
+        _table(("column", "meaning applied"), sorted(enums.items()))
+        if enums
+        else '<p class="muted">The log carries no receiver state codes whose meaning had to be chosen.</p>'
+    )
+    return "\n".join(out)
+
+
+def methods_section(results: Sequence[DetectorResult], infos: dict[str, DetectorInfo]) -> str:
+    out = []
+    for r in results:
+        if not r.ran:
+            continue
+        info = infos.get(r.name)
+        head = f"<h3>{esc(r.name)}"
+        if r.evidence is not None:
+            ev = EVIDENCE[r.evidence]
+            head += f' <span class="muted small">{esc(ev.label)}: compares GNSS with {esc(ev.reference)}</span>'
+        out.append(head + "</h3>")
+        parts = []
+        if info is not None:
+            parts.append(esc(info.summary[:1].upper() + info.summary[1:]) + ".")
+            if info.method:
+                parts.append(esc(info.method))
+            if info.p_false_alarm:
+                parts.append(f"Stated false-alarm rate: {esc(info.p_false_alarm)}.")
+        if r.advisory:
+            parts.append("<b>Advisory on this log</b>: its alarms are drawn but do not count in the verdict.")
+        if r.reason:
+            parts.append(f"On this log: {esc(r.reason)}.")
+        out.append(f"<p>{' '.join(parts)}</p>")
+        if r.extras:
+            facts = ", ".join(f"{k} = {_fact(v)}" for k, v in r.extras.items())
+            out.append(f'<p class="small muted">Facts: {esc(facts)}</p>')
+    not_run = [r for r in results if not r.ran]
+    if not_run:
+        out.append("<h3>Did not run</h3><ul>")
+        out += [f"<li><b>{esc(r.name)}</b>: {esc(r.reason)}</li>" for r in not_run]
+        out.append("</ul>")
+    return "\n".join(out)
+
+
+def _fact(v: object) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+SECTIONS = (
+    ("verdict", "Verdict"),
+    ("timeline", "Timeline"),
+    ("track", "Track"),
+    ("evidence", "Evidence"),
+    ("data-quality", "Data quality"),
+    ("provenance", "Provenance"),
+    ("methods", "Method notes"),
+)
+
+
+def page(analysis: Analysis, plots: Sequence[Plot], identity: InputIdentity, infos: dict[str, DetectorInfo]) -> str:
+    by = {s: [p for p in plots if p.section == s] for s in ("timeline", "track", "evidence", "receiver", "curves")}
+    body = {
+        "verdict": verdict_section(analysis),
+        "timeline": _plots(by["timeline"]),
+        "track": _plots(by["track"]) or '<p class="muted">No GNSS or truth track to draw.</p>',
+        "evidence": (
+            _plots(by["evidence"])
+            + ("<h3>Receiver quality</h3>" + _plots(by["receiver"]) if by["receiver"] else "")
+            + ("<h3>Statistics over other axes</h3>" + _plots(by["curves"]) if by["curves"] else "")
+        ),
+        "data-quality": data_quality_section(analysis.table),
+        "provenance": provenance_section(analysis, identity),
+        "methods": methods_section(analysis.results, infos),
+    }
+    nav = "".join(f'<a href="#{k}">{esc(t)}</a>' for k, t in SECTIONS)
+    sections = "\n".join(f'<section id="{k}"><h2>{esc(t)}</h2>\n{body[k]}\n</section>' for k, t in SECTIONS)
+    title = f"spooflens report: {identity.name}"
+    return (
+        "<!DOCTYPE html>\n"
+        '<html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        # nothing on this page may be fetched: no script, no remote image, font or style
+        "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; style-src 'unsafe-inline'; "
+        'img-src data:">'
+        f"<title>{esc(title)}</title><style>{CSS}</style></head>\n<body><main>\n"
+        f"<h1>{esc(title)}</h1><nav>{nav}</nav>\n{sections}\n</main></body></html>\n"
+    )

@@ -1,0 +1,150 @@
+"""The machine-readable summary of an analysis (written by `spooflens analyze --json`).
+
+Every time is given relative to the log start (`*_s`) and in the log's own clock (`*_abs_ns`, integer
+nanoseconds, plus `*_utc` when the log has an absolute clock), so results map back to the raw log.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+from typing import Any
+
+from spooflens import __version__
+from spooflens.detectors.base import Alarm, DetectorResult, Finding
+from spooflens.epoch_table import EpochTable
+from spooflens.inventory import computed, skipped_or_repaired
+from spooflens.pipeline.departure import gnss_departure
+from spooflens.pipeline.evidence import label
+from spooflens.pipeline.verdict import Incident, Verdict
+
+
+def json_safe(x: Any) -> Any:
+    """JSON cannot carry NaN/inf: they become null."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    return x
+
+
+def _time(table: EpochTable, key: str, t_s: float | None) -> dict[str, Any]:
+    if t_s is None:
+        return {f"{key}_s": None}
+    out: dict[str, Any] = {f"{key}_s": round(t_s, 6), f"{key}_abs_ns": int(table.absolute_ns(t_s))}
+    if table.unix_ns(t_s) is not None:
+        out[f"{key}_utc"] = table.absolute_iso(t_s)
+    return out
+
+
+def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, t in (("start", a.start_s), ("end", a.end_s), ("onset", a.onset_s), ("peak", a.peak_s)):
+        out |= _time(table, key, t)
+    out["peak_statistic"] = a.peak_statistic
+    if a.onset_interval_s is not None:
+        out["onset_interval_s"] = list(a.onset_interval_s)
+    if a.receiver_id:
+        out["receiver_id"] = a.receiver_id
+    if a.satellites:
+        out["satellites"] = list(a.satellites)
+    return out
+
+
+def _departure(table: EpochTable, results: list[DetectorResult], inc: Incident) -> list[dict[str, Any]]:
+    """How far GNSS went from the reconstructed track: peak and at the end, per receiver."""
+    out = []
+    for d in gnss_departure(table, results, inc):
+        item: dict[str, Any] = {"receiver_id": d.receiver_id, "track": d.track, "peak_m": round(d.peak_m, 2)}
+        item |= _time(table, "peak", d.peak_s) | {"end_m": round(d.end_m, 2)} | _time(table, "at_end", d.end_s)
+        out.append(item)
+    return out
+
+
+def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "detectors": list(inc.detectors),
+        "confidence": inc.confidence,
+        "spoofing": inc.is_spoofing,
+        "evidence": [str(e) for e in inc.evidence],
+        "evidence_labels": [label(e) for e in inc.evidence],
+        # the classes that alarmed at the same time: what the confidence counts
+        "corroborating_evidence": [str(e) for e in inc.corroborating],
+        "receivers": list(inc.receivers),
+        "satellites": list(inc.satellites),
+        "ongoing_at_end": inc.ongoing_at_end,
+        "end_method": inc.end_method,
+        "gnss_offset_from_reference_peak_m": inc.offset_peak_m,
+        "gnss_offset_from_reference_at_end_m": inc.offset_end_m,
+    }
+    for key, t in (("onset", inc.onset_s), ("start", inc.start_s), ("end", inc.end_s)):
+        d |= _time(table, key, t)
+    if inc.onset_interval_s:
+        d["onset_interval_s"] = list(inc.onset_interval_s)
+    if inc.end_interval_s:
+        d["end_interval_s"] = list(inc.end_interval_s)
+    return d
+
+
+def _finding(table: EpochTable, f: Finding) -> dict[str, Any]:
+    out: dict[str, Any] = {"text": f.text, "satellites": list(f.satellites), "receiver_id": f.receiver_id}
+    for key, t in (("start", f.start_s), ("end", f.end_s)):
+        out |= _time(table, key, t)
+    return out
+
+
+def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "name": r.name,
+        "ran": r.ran,
+        "evidence": str(r.evidence) if r.evidence else None,
+        "evidence_label": label(r.evidence) if r.evidence else None,
+        "advisory": r.advisory,
+        "reason": r.reason,
+        "alarms": [_alarm(table, a) for a in r.alarms],
+    }
+    if r.ran:
+        out["series"] = [
+            {"name": s.name, "unit": s.unit, "threshold": s.threshold, "epochs": len(s.t)} for s in r.series
+        ]
+    if r.extras:
+        out["facts"] = r.extras
+    if r.findings:
+        out["findings"] = [_finding(table, f) for f in r.findings]
+    return out
+
+
+def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Verdict) -> dict[str, Any]:
+    incidents = [_incident(table, inc) for inc in verdict.incidents]
+    # the reconstruction leaves GNSS out during the incident that made the verdict; during any other
+    # incident the track still follows GNSS, so a distance from it would mean nothing
+    deciding = verdict.deciding_incident
+    for inc, d in zip(verdict.incidents, incidents, strict=True):
+        if inc is deciding and inc.is_spoofing:
+            d["gnss_departure"] = _departure(table, results, inc)
+    summary = {
+        "spooflens_version": __version__,
+        "file": str(table.source),
+        "format": table.format,
+        "time_reference": table.time_reference,
+        "t0_abs_ns": table.t0_ns,
+        "metadata": dict(table.metadata),
+        "t0_utc": table.absolute_iso(0.0) if table.unix_ns(0.0) is not None else None,
+        "duration_s": round(table.duration_s, 6),
+        "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
+        "skipped": [asdict(s) for s in skipped_or_repaired(table)],
+        "computed": [asdict(s) for s in computed(table)],
+        "verdict": {
+            "spoofed": verdict.spoofed,
+            "headline": verdict.headline,
+            "incidents": incidents,
+            "detectors_counted": list(verdict.detectors_run),
+            "detectors_advisory": list(verdict.detectors_advisory),
+            "detectors_not_run": list(verdict.detectors_not_run),
+            "findings": [_finding(table, f) for f in verdict.findings],
+        },
+        "analyses": [_analysis(table, r) for r in results],
+    }
+    return dict(json_safe(summary))

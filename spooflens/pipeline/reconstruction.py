@@ -1,0 +1,629 @@
+"""Where the vehicle really was during each incident, and how long each incident really lasted.
+
+Detectors on the closed-loop filter alarm when an attack starts; afterwards the filter follows the
+spoofed fixes and the alarms stop, although the attack goes on. So, for every incident with inertial
+evidence, the filter is run again with that receiver's GNSS left out from the onset on: the INS (and
+wheel odometry when the log has it) coasts, and every later fix is compared with this reference
+within its growing uncertainty (`CoastingCheck`):
+
+- the incident is *confirmed* when GNSS departs from the coasted reference beyond that uncertainty
+  (position and velocity NIS over chi-square(dof) at P_FA `p_disagree` per epoch) for at least
+  `min_disagree_s` within `confirm_window_s` of the onset. A receiver glitch (a jump of an SBAS
+  solution, a short wander) does not leave the reference's uncertainty for long and is not confirmed:
+  its inertial evidence does not count, and the incident keeps only its other evidence classes;
+- it *ends* at the first fix after the departure from which GNSS agrees with the reference again for
+  `agree_s` seconds (back within the reference's 3 sigma or `min_departure_m`, not merely under the
+  clean envelope), with an interval from the last disagreeing fix to that one, or at the end of the
+  log when GNSS never agrees again.
+
+The reconstructed track is the INS solution with the GNSS left out over the whole incident (its
+velocity kept when the GNSS-only check showed the receiver's velocity stayed honest: a position-only
+drag), smoothed, so GNSS after a finished attack ties the gap down.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from spooflens.detectors.base import Track
+from spooflens.errors import SpooflensError
+from spooflens.estimation.quantiles import chi2_isf
+from spooflens.navigation.loosely_coupled import (
+    SMOOTHER_NEEDS,
+    FilterOptions,
+    NavSolution,
+    nis_by_pattern,
+    run_prepared,
+)
+from spooflens.navigation.product import Navigation, navigation_of
+from spooflens.navigation.smoother import smooth
+from spooflens.navigation.strapdown import NavState
+from spooflens.pipeline.evidence import CORROBORATION_S, Evidence
+from spooflens.pipeline.registry import AnalysisContext
+from spooflens.pipeline.verdict import Incident, Verdict
+
+FloatArray = NDArray[np.float64]
+GNSS_ROWS = (0, 1, 2, 3, 4, 5)
+# The check compares horizontal position and velocity: receivers' heights wander by tens of metres
+# (an SBAS solution converging), and the vertical channel of a coasting INS diverges.
+HORIZONTAL_ROWS = (0, 1, 3, 4)
+
+
+@dataclass(frozen=True)
+class CoastingOptions:
+    p_disagree: float = 1e-3
+    margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
+    min_disagree_s: float = 2.0
+    min_disagree_epochs: int = 3
+    # after the incident's last alarm (and before the next incident), within the clean envelope's reach: a
+    # slow pull (0.5 m/s) is 10 m off only after 20 s
+    confirm_window_s: float = 60.0
+    agree_s: float = 10.0
+    min_agree_epochs: int = 5
+    margin_s: float = 1.0  # GNSS is left out from this long before the onset estimate
+    resolution: float = 3.0  # agreement counts while the reference's sigma is below the departure / this
+    placebo_horizon_s: tuple[float, float] = (60.0, 60.0)  # half the log, within these bounds
+    placebo_trim: float = 0.1  # the largest tenth of the clean coasts is left out (another attack, if any)
+    placebo_runs: int = 24
+    settle_s: float = 30.0
+    converge_s: float = 20.0  # a reference younger than this cannot confirm anything (still converging)
+    # GNSS must also have moved this far from the reference: real receivers wander and jump by metres
+    # (an SBAS solution converging, a correction switching), which no spoofing verdict should rest on
+    min_departure_m: float = 10.0
+    # or its velocity this far from the reference's within `young_s` of the coast's start: a velocity pull
+    # is metres off only after many seconds, while its velocity is off from the first pulled fix, when the
+    # coast is still sharp; later, an unobservable heading (a hover) makes the coasted velocity drift
+    min_departure_mps: float = 0.3
+    young_s: float = 10.0
+    # a coasting check first coasts this long past its deadline (then on to the end only when needed)
+    first_look_s: float = 30.0
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """How far GNSS departs from the coasted reference in this log's clean stretches, per horizon since
+    the coasting began: the largest NIS-over-threshold ratio of `runs` coasts started there (never
+    below 1). A real receiver's jumps and a real IMU's drift make it larger than the model says."""
+
+    horizon_s: FloatArray
+    kappa: FloatArray
+    runs: int
+
+    def at(self, h: FloatArray) -> FloatArray:
+        if not len(self.horizon_s):
+            return np.ones_like(h)
+        return np.interp(h, self.horizon_s, self.kappa, left=self.kappa[0], right=self.kappa[-1])
+
+
+@dataclass(frozen=True)
+class CoastingCheck:
+    excluded_from_s: float
+    t: FloatArray
+    ratio: FloatArray  # GNSS against the coasted reference: NIS / chi-square threshold
+    kappa: FloatArray  # the clean envelope at each epoch's horizon
+    offset_m: FloatArray  # horizontal distance GNSS - reference
+    confirmed: bool
+    departure_s: float | None  # start of the first sustained disagreement
+    end_s: float | None  # first fix of sustained agreement after it (None: never, to the end of the log)
+    end_interval_s: tuple[float, float] | None
+    inconclusive_from_s: float | None = None  # the reference became too uncertain to see an end from here
+    offset_en_m: FloatArray | None = None  # (M, 2) GNSS - reference, east and north
+
+
+def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True))
+
+
+def coasting_nis(sol: NavSolution, rows: tuple[int, ...] = GNSS_ROWS) -> tuple[FloatArray, NDArray[np.int64]]:
+    """NIS of the measured GNSS rows against the filter's prediction, whether the rows were used or not."""
+    return nis_by_pattern(sol.nu, sol.S_all, np.isfinite(sol.z[:, np.array(rows)]), rows)
+
+
+def continued(
+    nav: Navigation, sol: NavSolution, t_from: float, opts: FilterOptions, t_end: float | None = None
+) -> NavSolution:
+    """`opts` run from `sol`'s last epoch at or before `t_from` (its state, covariance and sensor errors
+    after that update: the fixes up to it are in them) to `t_end`, or from the log's start when `t_from`
+    comes before `sol`'s first epoch. A smoothed or compared estimate after that epoch is the one a run
+    over the whole log with the same options gives."""
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    if k < 0:
+        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
+    x, P, g = _updated_at(nav, sol, k)
+    opts = replace(opts, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g)
+    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+
+
+def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """`sol`'s state, covariance and sensor errors after epoch k's update; when `sol` kept the covariance
+    of a part of its epochs, refiltered with its own options from the last kept one."""
+    k0 = k - k % sol.P_upd_every
+    x, P, g = sol.state[k0], sol.P_upd[k0 // sol.P_upd_every], sol.gm[k0]
+    if k0 == k:
+        return x, P, g
+    opts = replace(
+        sol.options,
+        initial=NavState.from_vector(x),
+        initial_covariance=P,
+        initial_gm=g,
+        record=("P_upd",),
+        P_upd_every=1,
+    )
+    head = run_prepared(nav.inputs.between(float(sol.t[k0]), float(sol.t[k])), opts)
+    return head.state[-1], head.P_upd[-1], head.gm[-1]
+
+
+def coast(
+    nav: Navigation, t_from: float, t_end: float | None = None, base: NavSolution | None = None
+) -> NavSolution | None:
+    """The INS (and odometry) continued from a solution's last epoch at or before `t_from` (the main one,
+    or `base`: one that left the incidents already confirmed out) with every later GNSS fix left out
+    (each still compared with it), up to `t_end`; None when no fix lies there to compare it with (a
+    GNSS outage: a jammed receiver reports nothing)."""
+    sol = base if base is not None else nav.solution
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    tf = nav.inputs.fixes["t_s"].to_numpy(dtype=float)
+    after = -np.inf if k < 0 else float(sol.t[k])
+    compared = int(np.count_nonzero((tf > after) & (tf <= (np.inf if t_end is None else t_end))))
+    if compared < (2 if k < 0 else 1):  # what a run from the start, or a continued one, needs
+        return None
+    # a coast is only compared with GNSS (t, z, nu, S_all): the per-epoch matrices are not kept
+    opts = replace(
+        sol.options,
+        exclude_after_s=t_from,
+        exclude_until_s=None,
+        exclude_velocity_too=True,
+        record=False,
+        compare=True,
+    )
+    return continued(nav, sol, t_from, opts, t_end)
+
+
+def _ratio(sol: NavSolution, p: float, window_s: float = 1.0) -> FloatArray:
+    """NIS over its chi-square threshold, as a centred running median over `window_s`: a single fix's
+    NIS is mostly receiver noise, so a slow pull (ratio near the margin) would break into short runs."""
+    nis, dof = coasting_nis(sol, HORIZONTAL_ROWS)
+    threshold = np.where(dof > 0, chi2_isf(p, np.maximum(dof, 1)), np.nan)
+    ratio = pd.Series(nis / threshold)
+    dt = np.diff(sol.t)
+    n = round(window_s / float(np.median(dt))) if len(dt) and np.median(dt) > 0 else 1
+    n = max(1, n) | 1
+    return np.asarray(ratio.rolling(n, center=True, min_periods=1).median().where(ratio.notna()), dtype=float)
+
+
+@dataclass(frozen=True)
+class Placebo:
+    """Coasts started all over the log: what GNSS-minus-reference looks like where (most likely) nobody
+    attacked. A coast counts for an incident only up to where it reaches a suspected stretch."""
+
+    starts: FloatArray
+    grid: FloatArray  # horizon, s
+    curves: FloatArray  # (runs, len(grid)) running maximum of the NIS-over-threshold ratio
+
+    def envelope(
+        self,
+        own: tuple[float, float],
+        confirmed: list[tuple[float, float]],
+        margin_s: float,
+        trim: float = 0.1,
+        min_runs: int = 4,
+    ) -> Envelope:
+        """The largest clean departure per horizon over the coasts (and the part of each) before this
+        incident, away from the incidents already confirmed; with fewer than `min_runs` of those, the
+        coasts anywhere away from them, leaving out the largest `trim` (a later attack the loop has not
+        reached yet). Beyond the longest clean horizon the last value holds."""
+        if not len(self.starts):
+            return Envelope(np.array([]), np.array([]), 0)
+        usable = self._clean(own, margin_s)
+        for span in confirmed:
+            usable = np.minimum(usable, self._clean(span, margin_s))
+        # the stretch before the incident is the baseline a later attack or its end cannot spoil
+        earlier = np.minimum(usable, np.clip(own[0] - self.starts, 0.0, None))
+        if (earlier > 0).sum() >= min_runs:
+            usable = earlier
+        runs = np.flatnonzero(usable > 0)
+        if not len(runs):
+            return Envelope(np.array([]), np.array([]), 0)
+        valid = self.grid[None, :] <= usable[:, None]
+        peaks = np.where(valid, self.curves, -np.inf).max(axis=1)
+        drop = runs[np.argsort(peaks[runs])[::-1][: int(trim * len(runs))]]
+        valid[drop] = False
+        kappa = np.where(valid, self.curves, -np.inf).max(axis=0)
+        if not np.isfinite(kappa).any():
+            return Envelope(np.array([]), np.array([]), 0)
+        reach = self.grid[np.isfinite(kappa)].max()
+        kappa = np.where(self.grid <= reach, kappa, kappa[np.isfinite(kappa)][-1])
+        return Envelope(self.grid, np.maximum(kappa, 1.0), int(len(runs) - len(drop)))
+
+    def _clean(self, span: tuple[float, float], margin_s: float) -> FloatArray:
+        """How long each coast runs before it reaches `span` (its full horizon if it never does, 0 if it
+        starts inside it)."""
+        H = float(self.grid[-1])
+        a, b = span[0] - margin_s, span[1] + margin_s
+        inside = (self.starts >= a) & (self.starts <= b)
+        before = self.starts < a
+        return np.where(inside, 0.0, np.where(before, np.minimum(H, a - self.starts), H))
+
+
+def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
+    t = nav.solution.t
+    H = float(np.clip(0.5 * (t[-1] - t[0]), *opts.placebo_horizon_s))
+    starts = np.arange(t[0] + opts.settle_s, t[-1] - H, min(H / 2.0, 30.0))
+    if len(starts) > opts.placebo_runs:
+        starts = starts[np.linspace(0, len(starts) - 1, opts.placebo_runs).round().astype(int)]
+    grid = np.arange(0.0, H + 1.0, 1.0)
+    kept, curves = [], []
+    for s in starts:
+        sol = coast(nav, float(s), float(s) + H)
+        if sol is None:  # no fix in the horizon: a clean coast needs GNSS to be compared with
+            continue
+        r = _ratio(sol, opts.p_disagree)
+        fine = np.isfinite(r)
+        if fine.sum() < 3:
+            continue
+        running = np.maximum.accumulate(np.where(fine, r, 0.0))
+        kept.append(float(s))
+        curves.append(np.interp(grid, sol.t - s, running))
+    return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
+
+
+def coasting_check(
+    nav: Navigation,
+    onset_s: float,
+    envelope: Envelope,
+    deadline_s: float | None = None,
+    opts: CoastingOptions | None = None,
+    base: NavSolution | None = None,
+) -> CoastingCheck:
+    """Coast from `onset_s` and judge GNSS against the reference: confirmed when a sustained departure
+    begins by `deadline_s` (default `confirm_window_s` after the onset); then when it ends."""
+    opts = opts or CoastingOptions()
+    t_ex = onset_s - opts.margin_s
+    deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
+    # first a coast just past the deadline: most anomalies are not confirmed, and a coast to the end of a
+    # day-long log for each of them made the check quadratic in the log's length (21 anomalies of a 24 h
+    # voyage: 185 s). Only a departure, or a disagreement still running where that coast ends, needs the
+    # coast to the end; the decision is the one the long coast gives (the same filter over the same span)
+    # (no fix in the first look, a GNSS outage: straight to the coast to the end)
+    sol = coast(nav, t_ex, deadline + opts.first_look_s, base=base)
+    last = (base if base is not None else nav.solution).t[-1]
+    if sol is not None:
+        t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(sol, t_ex, deadline, envelope, opts)
+    if sol is None or departure is not None or (open_at_end and t[-1] < last):
+        sol = coast(nav, t_ex, base=base)
+        if sol is None:  # no fix from here to the end: nothing GNSS said can depart from the reference
+            none = np.array([])
+            return CoastingCheck(t_ex, none, none, none, none, False, None, None, None, None, np.zeros((0, 2)))
+        t, ratio, kappa, offset, disagree, departure, _ = _departure(sol, t_ex, deadline, envelope, opts)
+    if departure is None:
+        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2])
+    end = end_interval = None
+    # the reference can tell agreement only while its own uncertainty is well below the departure seen so
+    # far beyond that uncertainty; a consumer INS coasting for minutes cannot
+    sigma_ref = np.sqrt(np.maximum(sol.S_all[:, 0, 0], sol.S_all[:, 1, 1]))
+    # the departure seen so far beyond what the reference's own drift explains
+    beyond = np.clip(np.nan_to_num(offset) - 3.0 * sigma_ref, 0.0, None)
+    peak = np.maximum.accumulate(np.where(np.arange(len(t)) >= departure, beyond, 0.0))
+    # judged against the departure reached up to `agree_s` later: a growing one keeps ahead of the drift
+    ahead = peak[np.minimum(np.searchsorted(t, t + opts.agree_s), len(t) - 1)]
+    conclusive = sigma_ref < ahead / opts.resolution
+    # GNSS agrees again when it is back where the reference is (within its uncertainty, or the metres a
+    # receiver wanders), not merely under a clean envelope that a consumer INS's coasts made wide
+    back = np.nan_to_num(offset, nan=np.inf) <= np.maximum(opts.min_departure_m, 3.0 * sigma_ref)
+    agree = ~disagree & np.isfinite(ratio) & conclusive & back
+    lost_at = next((i for i in range(departure, len(t)) if not conclusive[i]), None)
+    for a, b in _runs(agree):
+        if a <= departure:
+            continue
+        if lost_at is not None and a > lost_at:
+            break
+        if b - a + 1 >= opts.min_agree_epochs and t[b] - t[a] >= opts.agree_s:
+            end = float(t[a])
+            last_bad = np.flatnonzero(disagree[:a])
+            end_interval = (float(t[last_bad[-1]]) if len(last_bad) else float(t[a]), end)
+            break
+    inconclusive_from = float(t[lost_at]) if end is None and lost_at is not None else None
+    return CoastingCheck(
+        t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from, sol.nu[:, :2]
+    )
+
+
+def _departure(
+    sol: NavSolution, t_ex: float, deadline: float, envelope: Envelope, opts: CoastingOptions
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_], int | None, bool]:
+    """(t, ratio, kappa, offset, disagree, departure epoch or None, whether a disagreement that began by
+    the deadline is still running at the coast's last epoch) of a coast from t_ex."""
+    t = sol.t
+    ratio = _ratio(sol, opts.p_disagree)
+    kappa = envelope.at(t - t_ex)
+    offset = np.hypot(sol.nu[:, 0], sol.nu[:, 1])
+    velocity_off = np.hypot(sol.nu[:, 3], sol.nu[:, 4])
+    young = t - t_ex <= opts.young_s
+    away = (np.nan_to_num(offset) > opts.min_departure_m) | (
+        young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
+    )
+    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
+    departure, open_at_end = None, False
+    for a, b in _runs(disagree):
+        if t[a] > deadline:
+            break
+        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
+            departure = int(a)
+            break
+        open_at_end = b == len(t) - 1
+    return t, ratio, kappa, offset, disagree, departure, open_at_end
+
+
+def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, velocity_honest: bool) -> Track:
+    """The smoothed trajectory with GNSS (positions, and velocity unless it stayed honest) left out over
+    the incident, `continued` from the main solution's last epoch before it: a smoothed estimate depends
+    only on its filtered state and the data after it, so the track over the incident is a whole-log run's
+    at a fraction of the memory (the per-epoch matrices the smoother keeps are 0.5 GB per hour of 10 Hz
+    GNSS)."""
+    opts = nav.options(  # only smoothed: no comparison with GNSS kept (S_all)
+        exclude_after_s=t_from,
+        exclude_until_s=t_to,
+        exclude_velocity_too=not velocity_honest,
+        record=SMOOTHER_NEEDS,
+        compare=False,
+    )
+    sm = smooth(continued(nav, nav.solution, t_from, opts), variances=False)
+    name = (
+        "reconstructed (INS + GNSS velocity, GNSS positions excluded)"
+        if velocity_honest
+        else "reconstructed (INS alone, GNSS excluded)"
+    )
+    if nav.solution.options.odometry is not None:
+        name = name.replace("INS", "INS + odometry", 1)
+    return Track(name, sm.track_t, np.degrees(sm.track_llh[:, 0]), np.degrees(sm.track_llh[:, 1]), sm.track_llh[:, 2])
+
+
+def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
+    """Confirm, extend and reconstruct every incident that has inertial evidence; the verdict anew."""
+    nav_result = next((r for r in ctx.results if r.name == "navigation" and r.ran), None)
+    candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
+    if nav_result is None or not candidates:
+        return verdict
+    try:
+        nav = navigation_of(ctx)
+    except SpooflensError:
+        return verdict
+    t_last = float(nav.solution.t[-1])
+    opts = CoastingOptions()
+    incidents: list[Incident] = []
+    checks: list[tuple[Incident, CoastingCheck]] = []
+    placebo = placebo_coasts(nav, opts)
+    envelopes = []
+    base: NavSolution | None = None  # the filter with the incidents confirmed so far left out
+    current_check: CoastingCheck | None = None  # the coast that confirmed the last incident
+    ordered = sorted(verdict.incidents, key=lambda i: i.start_s)
+    for n, inc in enumerate(ordered):
+        current = incidents[-1] if incidents and incidents[-1].is_spoofing else None
+        if current is not None and inc.start_s <= current.end_s:
+            # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
+            # start there; its alarms belong to the incident, and inside the stretch where the reference
+            # could no longer tell, they are how the receiver's return to the real sky shows
+            incidents[-1] = _absorb(current, inc, current_check, opts.min_departure_m)
+            continue
+        if Evidence.INERTIAL not in inc.evidence:
+            incidents.append(inc)
+            continue
+        confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
+        envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
+        envelopes.append(envelope)
+        # a departure from where the next inertial incident's coast begins is that incident's, not this one's
+        later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
+        reach = _coast_start(inc) + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
+        deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
+        check = coasting_check(nav, _coast_start(inc), envelope, deadline, opts, base)
+        checks.append((inc, check))
+        young = _coast_start(inc) < float(nav.solution.t[0]) + opts.converge_s
+        if not check.confirmed or young:
+            why = (
+                f"inertial alarm not confirmed: the INS reference had run only "
+                f"{_coast_start(inc) - float(nav.solution.t[0]):.0f} s and was still converging"
+                if young
+                else "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty "
+                "and this log's own clean departures (a receiver glitch, not a sustained departure)"
+            )
+            incidents.append(
+                replace(
+                    inc,
+                    end_method=why,
+                    offset_peak_m=float(np.nanmax(check.offset_m)) if len(check.offset_m) else None,
+                ).with_spans(tuple(sp for sp in inc.spans if sp[0] != Evidence.INERTIAL))
+            )
+            continue
+        current_check = check
+        # the coasting comparison says when GNSS agreed again; alarms after that are the closed-loop
+        # filter's recovery from the spoofed track, not more attack
+        end = check.end_s if check.end_s is not None else t_last
+        sel = (check.t >= check.excluded_from_s) & (check.t <= end)
+        offsets = check.offset_m[sel]
+        if check.end_s is not None:
+            interval, method = check.end_interval_s, "GNSS agreed again with the coasted INS reference"
+        elif check.inconclusive_from_s is not None:
+            interval = (check.inconclusive_from_s, t_last)
+            method = (
+                f"GNSS still departed from the coasted INS reference at {check.inconclusive_from_s:.1f} s, when the "
+                "reference became too uncertain to tell an end: the end lies in the interval"
+            )
+        else:
+            interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
+        onset, onset_interval = _onset_before(ctx, inc, check.departure_s)
+        # the departure itself is the inertial evidence: whatever else alarmed while it lasted agrees
+        departure_span = (Evidence.INERTIAL, _coast_start(inc), end)
+        incidents.append(
+            replace(
+                inc,
+                onset_s=onset,
+                onset_interval_s=onset_interval,
+                end_s=end,
+                end_interval_s=interval,
+                ongoing_at_end=check.end_s is None,
+                end_method=method,
+                offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
+                offset_end_m=float(offsets[-1]) if len(offsets) else None,
+            ).with_spans((*inc.spans, departure_span))
+        )
+        # later coasts start from a filter that left this incident out, not from one that followed the
+        # spoofed fixes and then had to recover from their jump back; made only when a later inertial
+        # incident will coast (one inside this incident is absorbed, none follows one lasting to the end)
+        if any(Evidence.INERTIAL in i.evidence and i.start_s > end for i in ordered[n + 1 :]):
+            windows = tuple(
+                (_coast_start(i) - opts.margin_s, None if i.ongoing_at_end else i.end_s)
+                for i in incidents
+                if i.is_spoofing
+            )
+            # what later coasts start from: the states and covariances after each update (no other matrices)
+            base = run_prepared(nav.inputs, nav.options(exclude_windows=windows, record=("P_upd",)), nav.start)
+    incidents = _merge_overlapping(incidents)
+    confirmed = [i for i in incidents if i.is_spoofing]
+    for inc in confirmed:
+        onset = inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s
+        t_to = None if inc.ongoing_at_end else inc.end_s
+        velocity_honest = any(
+            r.name == "gnss_consistency" and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
+            for r in ctx.results
+        )
+        nav_result.tracks.append(_reconstructed_track(nav, onset - opts.margin_s, t_to, velocity_honest))
+    nav_result.extras["coasting_checks"] = [
+        {
+            "incident_onset_s": inc.onset_s,
+            "confirmed": c.confirmed,
+            "departure_s": c.departure_s,
+            "end_s": c.end_s,
+            "clean_coasts": e.runs,
+            "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
+            "peak_ratio_over_envelope": float(np.nanmax(c.ratio / c.kappa)) if np.isfinite(c.ratio).any() else None,
+        }
+        for (inc, c), e in zip(checks, envelopes, strict=True)
+    ]
+    return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
+
+
+def _jumps_back(
+    check: CoastingCheck | None,
+    inc: Incident,
+    min_jump_m: float,
+    window_s: float = 10.0,
+    settle_s: float = 3.0,
+    share: float = 0.25,
+) -> bool:
+    """Whether GNSS jumped across the transient `inc` by a good part of its distance from the coasted
+    reference: a receiver returning to the real sky drops the spoofer's offset within seconds, while the
+    reference's own drift is smooth (extrapolated linearly from the `window_s` before) and a glitch on a
+    continuing attack moves GNSS by metres. The jump must reach `share` of the distance before it and
+    `min_jump_m` (the departure a confirmation needs)."""
+    if check is None or check.offset_en_m is None:
+        return False
+    t, d = check.t, check.offset_en_m
+    pre = (t >= inc.start_s - window_s) & (t < inc.start_s) & np.isfinite(d).all(axis=1)
+    post = (t >= inc.start_s + settle_s) & (t <= inc.start_s + settle_s + window_s) & np.isfinite(d).all(axis=1)
+    if pre.sum() < 3 or not post.any():
+        return False
+    coef = np.polyfit(t[pre], d[pre], 1)  # (2, 2): slope, intercept per axis
+    drift = np.outer(t[post], coef[0]) + coef[1]
+    jump = float(np.hypot(*np.median(d[post] - drift, axis=0)))
+    distance = float(np.median(np.hypot(d[pre, 0], d[pre, 1])))
+    return jump >= max(share * distance, min_jump_m)
+
+
+def _absorb(current: Incident, inc: Incident, check: CoastingCheck | None, min_jump_m: float) -> Incident:
+    """`inc` (alarms inside a confirmed incident) merged into it; when it starts where the reference could
+    no longer tell whether GNSS agreed, and GNSS comes back toward the reference across it, it marks the
+    end: a spoofer switching off makes the receiver lose and re-acquire the real sky, which the detectors
+    see as a new transient."""
+    merged = replace(
+        current,
+        detectors=tuple(sorted({*current.detectors, *inc.detectors})),
+        receivers=tuple(sorted({*current.receivers, *inc.receivers})),
+        satellites=tuple(sorted({*current.satellites, *inc.satellites})),
+    ).with_spans((*current.spans, *inc.spans))
+    window = current.end_interval_s
+    # the return shows in evidence that does not depend on the filter that followed the spoofed fixes
+    independent_of_filter = any(e != Evidence.INERTIAL for e in inc.evidence)
+    if (
+        current.ongoing_at_end
+        and independent_of_filter
+        and window is not None
+        and window[0] < window[1]
+        and window[0] <= inc.start_s
+        and _jumps_back(check, inc, min_jump_m)
+    ):
+        before = inc.onset_s if inc.onset_s < inc.start_s else inc.start_s - 2.0
+        return replace(
+            merged,
+            end_s=inc.start_s,
+            end_interval_s=(max(window[0], before), inc.start_s),
+            ongoing_at_end=False,
+            end_method=f"the reference could no longer tell after {window[0]:.1f} s; the transient at "
+            f"{inc.start_s:.1f} s ({', '.join(inc.detectors)}) is the receiver returning to the real signals",
+        )
+    return merged
+
+
+def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
+    """Incidents whose extended spans overlap are one incident."""
+    out: list[Incident] = []
+    for inc in sorted(incidents, key=lambda i: i.start_s):
+        if out and inc.start_s <= out[-1].end_s and out[-1].is_spoofing and inc.is_spoofing:
+            prev = out[-1]
+            out[-1] = replace(
+                prev,
+                end_s=max(prev.end_s, inc.end_s),
+                end_interval_s=inc.end_interval_s if inc.end_s >= prev.end_s else prev.end_interval_s,
+                ongoing_at_end=prev.ongoing_at_end or inc.ongoing_at_end,
+                detectors=tuple(sorted({*prev.detectors, *inc.detectors})),
+                receivers=tuple(sorted({*prev.receivers, *inc.receivers})),
+                satellites=tuple(sorted({*prev.satellites, *inc.satellites})),
+            ).with_spans((*prev.spans, *inc.spans))
+        else:
+            out.append(inc)
+    return out
+
+
+def _coast_start(inc: Incident) -> float:
+    return min(inc.onset_s, inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s, inc.start_s)
+
+
+def _span(inc: Incident, opts: CoastingOptions) -> tuple[float, float]:
+    return (_coast_start(inc) - opts.margin_s, inc.end_s + opts.agree_s)
+
+
+def _onset_before(
+    ctx: AnalysisContext, inc: Incident, departure_s: float | None
+) -> tuple[float, tuple[float, float] | None]:
+    """The incident's onset: of the counted detectors' onset estimates in it that precede the confirmed
+    departure, the latest (an estimate with an interval first). Alarms merged into an incident from a
+    glitch just before the attack carry earlier onsets that the departure does not support."""
+    if departure_s is None:
+        return inc.onset_s, inc.onset_interval_s
+    found = [
+        (a.onset_s, a.onset_interval_s)
+        for r in ctx.results
+        if r.is_detector and r.ran and not r.advisory and r.name in inc.detectors
+        for a in r.alarms
+        if a.onset_s is not None
+        and a.onset_s <= departure_s + 1.0
+        and a.end_s >= inc.start_s
+        and a.start_s <= inc.end_s
+    ]
+    with_interval = [f for f in found if f[1] is not None]
+    pool = with_interval or found
+    if not pool:
+        return inc.onset_s, inc.onset_interval_s
+    onset = float(max(pool, key=lambda f: f[0])[0])
+    # the interval: what every estimate within the corroboration window before it says (its own model's
+    # interval alone excludes the truth when the errors are not white or the attack is neither a ramp nor
+    # a step; the detectors that agree bracket it), and at the latest the confirmed departure, which the
+    # attack must precede (a slow receiver error drifting the same way can pull every estimate early)
+    near = [f for f in found if f[0] >= onset - CORROBORATION_S]
+    lows = [f[1][0] if f[1] is not None else f[0] for f in near]
+    highs = [f[1][1] if f[1] is not None else f[0] for f in near]
+    return onset, (float(min(lows)), float(max(*highs, onset, departure_s)))

@@ -1,0 +1,270 @@
+"""Which analyses a log supports, and running them.
+
+An analysis is one module that declares `ANALYSIS` (an `AnalysisSpec`): the streams it needs, the
+detectors it produces with their evidence class, and its run function. `ANALYSIS_MODULES` lists
+them in the order they run; adding a detector is one module plus one line there, and the verdict,
+recording, report and CLI pick it up from the declaration. `run_analyses` runs every analysis whose
+inputs are present and says, for each detector it could not run, exactly what was missing.
+
+Work several analyses share (the GNSS/INS navigation solution) is computed once, on first use,
+through the `AnalysisContext`. An analysis whose results wait on work begun in the background (the
+navigation's smoothed track) returns `Later`: the analyses after it run meanwhile.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from spooflens.detectors.base import DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import SpooflensError
+from spooflens.pipeline.evidence import Evidence
+
+MIN_FIXES = 3
+MIN_IMU_SAMPLES = 50
+MIN_AUTOPILOT_ROWS = 20
+MIN_TIMED_FIXES = 20
+
+# Every analysis, in the order it runs. One line per module; the module declares the rest.
+ANALYSIS_MODULES: tuple[str, ...] = (
+    "spooflens.detectors.gnss_consistency",
+    "spooflens.detectors.receiver_evidence",
+    "spooflens.detectors.autopilot_ekf",
+    "spooflens.detectors.heading_reference",
+    "spooflens.detectors.receiver_time",
+    "spooflens.detectors.raim",
+    "spooflens.detectors.system_agreement",
+    "spooflens.detectors.satellite_signals",
+    "spooflens.detectors.navigation_message",
+    "spooflens.navigation.product",
+    "spooflens.detectors.mlrt",
+    "spooflens.detectors.innovation_tests",
+    "spooflens.detectors.dual_receiver",
+    "spooflens.fleet.detector",
+    "spooflens.detectors.range_rate",
+    "spooflens.detectors.pr_change",
+)
+
+
+def _has_fixes(table: EpochTable) -> str | None:
+    n = len(table.fixes)
+    return None if n >= MIN_FIXES else f"GNSS fixes ({n} found, {MIN_FIXES} needed)"
+
+
+def _has_imu(table: EpochTable) -> str | None:
+    n = len(table.imu)
+    return None if n >= MIN_IMU_SAMPLES else f"IMU samples ({n} found, {MIN_IMU_SAMPLES} needed)"
+
+
+def _has_fix_velocity(table: EpochTable) -> str | None:
+    v = table.fixes[["vel_e_mps", "vel_n_mps"]].to_numpy(dtype=float)
+    return None if len(v) and np.isfinite(v).all(axis=1).any() else "GNSS velocity"
+
+
+def _has_observations(table: EpochTable) -> str | None:
+    return None if len(table.observations) else "raw GNSS observations (pseudoranges)"
+
+
+def _has_satellite_states(table: EpochTable) -> str | None:
+    obs = table.observations
+    if not len(obs):
+        return "raw GNSS observations (pseudoranges)"
+    ok = np.isfinite(obs[["sv_x_m", "sv_y_m", "sv_z_m"]].to_numpy(dtype=float)).all(axis=1)
+    return None if ok.any() else "satellite positions (a navigation file or logged ephemerides)"
+
+
+def _has_satellite_view(table: EpochTable) -> str | None:
+    if len(table.satellites):
+        return None
+    obs = table.observations
+    if len(obs) and (np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any() or _has_satellite_states(table) is None):
+        return None
+    return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions"
+
+
+def _has_received_ephemerides(table: EpochTable) -> str | None:
+    eph = table.ephemerides
+    if eph is not None and np.isfinite(eph.received_s).any():
+        return None
+    return "navigation messages decoded from the signals (u-blox RXM-SFRBX)"
+
+
+def _has_two_receivers(table: EpochTable) -> str | None:
+    n = len(table.receivers())
+    return None if n >= 2 else f"two GNSS receivers ({n} found)"
+
+
+def _has_autopilot_ekf(table: EpochTable) -> str | None:
+    n = len(table.frame("autopilot_ekf"))
+    return (
+        None if n >= MIN_AUTOPILOT_ROWS else f"the autopilot's GNSS innovations ({n} rows, {MIN_AUTOPILOT_ROWS} needed)"
+    )
+
+
+def _has_headings(table: EpochTable) -> str | None:
+    return None if len(table.frame("headings")) else "a compass heading (NMEA HDT, HDG, THS or VHW)"
+
+
+def _has_time_offset(table: EpochTable) -> str | None:
+    fixes = table.fixes
+    n = int(np.isfinite(fixes["time_offset_s"].to_numpy(dtype=float)).sum()) if "time_offset_s" in fixes else 0
+    return (
+        None
+        if n >= MIN_TIMED_FIXES
+        else "the receiver's time beside the log's own clock (PX4 time_utc_usec, ArduPilot GWk/GMS, GnssLogger "
+        f"Fix, NMEA with logger times, ROS TimeReference, tlog GPS_RAW_INT; {n} fixes, {MIN_TIMED_FIXES} needed)"
+    )
+
+
+def _has_fleet(table: EpochTable) -> str | None:
+    """One log is never a fleet: `spooflens fleet` runs the fleet analysis with the other vehicles' logs."""
+    return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
+
+
+REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
+    "fixes": _has_fixes,
+    "imu": _has_imu,
+    "fix_velocity": _has_fix_velocity,
+    "observations": _has_observations,
+    "satellite_states": _has_satellite_states,
+    "satellite_view": _has_satellite_view,
+    "received_ephemerides": _has_received_ephemerides,
+    "two_receivers": _has_two_receivers,
+    "fleet": _has_fleet,
+    "autopilot_ekf": _has_autopilot_ekf,
+    "headings": _has_headings,
+    "time_offset": _has_time_offset,
+}
+
+
+@dataclass
+class AnalyzeOptions:
+    """User choices that analyses read (CLI flags map here)."""
+
+    imu_id: str | None = None
+    receiver_id: str | None = None
+    imu_grade: str | None = None
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass
+class AnalysisContext:
+    """What an analysis runs on; shared work is computed once and cached."""
+
+    table: EpochTable
+    options: AnalyzeOptions
+    cache: dict[str, Any] = field(default_factory=dict)
+    # of the analyses that ran before (one that finishes `Later` joins them when every analysis has run)
+    results: list[DetectorResult] = field(default_factory=list)
+
+    def cached(self, key: str, make: Callable[[], Any]) -> Any:
+        if key not in self.cache:
+            self.cache[key] = make()
+        return self.cache[key]
+
+
+@dataclass(frozen=True)
+class DetectorInfo:
+    """One detector an analysis produces: its name, evidence class and what it tests."""
+
+    name: str
+    evidence: Evidence | None  # None: an analysis product (not counted in the verdict)
+    summary: str
+    method: str = ""  # a paragraph for the report's method notes (seed paper, false-alarm rate)
+    p_false_alarm: str = ""  # the stated false-alarm rate, e.g. "1e-5 per epoch"
+
+
+@dataclass(frozen=True)
+class Later:
+    """An analysis's results that wait on work begun in the background (the navigation's smoothed
+    track): the analyses after it run meanwhile, and its results take their place in the run order when
+    every analysis has run (an error raised then counts as raised by the analysis)."""
+
+    finish: Callable[[], list[DetectorResult]]
+
+
+@dataclass(frozen=True)
+class AnalysisSpec:
+    name: str
+    description: str
+    needs: tuple[str, ...]
+    run: Callable[[AnalysisContext], list[DetectorResult] | Later]
+    detectors: tuple[DetectorInfo, ...] = ()
+
+    def missing(self, table: EpochTable) -> list[str]:
+        return [m for need in self.needs if (m := REQUIREMENTS[need](table)) is not None]
+
+
+def analyses() -> list[AnalysisSpec]:
+    """Every registered analysis, in run order (each module's `ANALYSIS`)."""
+    specs: list[AnalysisSpec] = []
+    for module in ANALYSIS_MODULES:
+        spec = importlib.import_module(module).ANALYSIS
+        if any(s.name == spec.name for s in specs):
+            raise ValueError(f"analysis {spec.name!r} registered twice")
+        specs.append(spec)
+    return specs
+
+
+def detector_infos() -> dict[str, DetectorInfo]:
+    """name -> DetectorInfo of every detector of every analysis."""
+    return {d.name: d for spec in analyses() for d in spec.detectors}
+
+
+def _declared(spec: AnalysisSpec, result: DetectorResult) -> DetectorResult:
+    """A result carries its evidence class from the declaration unless it set one itself."""
+    info = next((d for d in spec.detectors if d.name == result.name), None)
+    if result.evidence is None and info is not None and info.evidence is not None:
+        return replace(result, evidence=info.evidence)
+    return result
+
+
+def _not_run(spec: AnalysisSpec, reason: str) -> list[DetectorResult]:
+    if not spec.detectors:
+        return [DetectorResult.skipped(spec.name, reason)]
+    return [DetectorResult.skipped(d.name, reason, d.evidence) for d in spec.detectors]
+
+
+def run_analyses(
+    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+) -> list[DetectorResult]:
+    """Run every analysis the table supports; the others come back as not run, with the reason."""
+    return run_with_context(AnalysisContext(table, options or AnalyzeOptions()), on_step)
+
+
+def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
+    later: list[tuple[int, AnalysisSpec, Later]] = []  # where each one's results go in ctx.results
+    for spec in analyses():
+        missing = spec.missing(ctx.table)
+        if missing:
+            ctx.results.extend(_not_run(spec, "needs " + ", ".join(dict.fromkeys(missing))))
+            continue
+        if on_step:
+            on_step(spec.name)
+        try:
+            out = spec.run(ctx)
+        except SpooflensError as err:
+            ctx.results.extend(_not_run(spec, str(err)))
+            continue
+        if isinstance(out, Later):
+            later.append((len(ctx.results), spec, out))
+        else:
+            ctx.results.extend(_declared(spec, r) for r in out)
+    if on_step and later:  # the time waited for them is theirs, not the last analysis's
+        on_step("finishing " + ", ".join(spec.name for _, spec, _ in later))
+    finished = [(at, _finished(spec, pending)) for at, spec, pending in later]
+    for at, results in reversed(finished):  # the last first: the earlier places stay where they were
+        ctx.results[at:at] = results
+    return ctx.results
+
+
+def _finished(spec: AnalysisSpec, pending: Later) -> list[DetectorResult]:
+    try:
+        return [_declared(spec, r) for r in pending.finish()]
+    except SpooflensError as err:
+        return _not_run(spec, str(err))

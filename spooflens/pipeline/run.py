@@ -1,0 +1,121 @@
+"""The whole analysis of one log, as every front end runs it (CLI analyze, report, batch, fleet):
+
+    epoch table -> analyses (navigation, detectors) -> verdict -> confirmation and reconstruction of each
+    incident (`spooflens.pipeline.reconstruction`).
+
+The sensors' noise is learned from the log (`spooflens.navigation.noise_learning`). An attack inside
+the learning window would teach the filter that the attack is noise, so when the first pass finds
+anything suspicious inside the stretch the noise was learned from, the noise is learned again with
+those stretches left out and the analyses run a second time on that filter: the noise is kept fixed
+through a suspected attack. Anything suspected after that stretch could not have taught the filter,
+and the first pass stands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from spooflens import plausibility
+from spooflens.detectors.base import DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import AnalysisError, SpooflensError
+from spooflens.navigation.product import NAVIGATION, navigation_of, solve_navigation
+from spooflens.pipeline.reconstruction import reconstruct
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
+from spooflens.pipeline.verdict import Verdict, decide
+from spooflens.schema import FRAMES
+
+SUSPECT_MARGIN_S = 10.0
+
+
+@dataclass
+class Analysis:
+    table: EpochTable
+    options: AnalyzeOptions
+    results: list[DetectorResult]
+    verdict: Verdict
+    passes: int = 1
+    suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
+
+
+def last_fix_s(table: EpochTable) -> float | None:
+    """The time of the log's last GNSS fix: an incident lasting to it lasted to the end of the log."""
+    t = table.fixes["t_s"].to_numpy(dtype=float)
+    return float(np.nanmax(t)) if len(t) and np.isfinite(t).any() else None
+
+
+def _one_pass(
+    table: EpochTable, options: AnalyzeOptions, on_step: Callable[[str], None] | None, cache: dict[str, object]
+) -> tuple[AnalysisContext, Verdict]:
+    ctx = AnalysisContext(table, options, cache=dict(cache))
+    results = run_with_context(ctx, on_step)
+    verdict = decide(results, log_end_s=last_fix_s(table))
+    if on_step and verdict.incidents:
+        on_step("confirmation and reconstruction")
+    return ctx, reconstruct(ctx, verdict)
+
+
+def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
+    """Every incident and anomaly of a verdict, widened by `margin_s`, merged."""
+    spans = sorted((min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s) for i in verdict.incidents)
+    merged: list[tuple[float, float]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], b))
+        else:
+            merged.append((a, b))
+    return tuple(merged)
+
+
+def _within_learning(spans: tuple[tuple[float, float], ...], window_s: tuple[float, float]) -> bool:
+    """Whether a suspected stretch touches the fixes the noise was learned from (the initial guess
+    reads every fix up to the learning window's end, the likelihood those inside it)."""
+    return any(a <= window_s[1] for a, _ in spans)
+
+
+def analyze_table(
+    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+) -> Analysis:
+    options = options or AnalyzeOptions()
+    problems = plausibility.problems({name: table.frame(name) for name in FRAMES})
+    if problems:  # a table built by hand: the readers drop and list such rows (spooflens.epoch_table.checked)
+        raise AnalysisError(
+            f"{table.source}: values no sensor produces ({'; '.join(problems[:4])}); nothing analysed "
+            "(pass the table through spooflens.epoch_table.checked to drop and list them)"
+        )
+    ctx, verdict = _one_pass(table, options, on_step, {})
+    spans = suspected_spans(verdict)
+    if not spans or NAVIGATION not in ctx.cache:
+        return Analysis(table, options, ctx.results, verdict)
+    first_nav = navigation_of(ctx)
+    if not _within_learning(spans, first_nav.learned.window_s):
+        # the noise was learned before anything suspected began: learning it again without those
+        # stretches gives the same noise, and the second pass the same results
+        return Analysis(table, options, ctx.results, verdict)
+    # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
+    # before the second pass builds its own; its results stay for when the second pass cannot run
+    first_results = ctx.results
+    aligned = (first_nav.inputs, first_nav.start)  # the IMU integrated and the alignment: reused as they are
+    del ctx, first_nav
+    if on_step:
+        on_step("learning the noise again without the suspected stretches")
+    try:
+        nav = solve_navigation(table, options, exclude=spans, aligned=aligned)
+    except SpooflensError:
+        return Analysis(table, options, first_results, verdict)
+    del first_results
+    ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
+    return Analysis(table, options, ctx.results, verdict, 2, spans)
+
+
+def analyze_segments(
+    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+) -> list[Analysis]:
+    """One analysis per recording: a log that joins several (its clock jumped back) is never analysed
+    as one interleaved stream."""
+    if len(table.segments) < 2:
+        return [analyze_table(table, options, on_step)]
+    return [analyze_table(table.segment(k), options, on_step) for k in range(len(table.segments))]
