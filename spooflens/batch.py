@@ -130,17 +130,17 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
 
 def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> dict[str, Any]:
     """The task: analyse one log and write its outputs; never raises (a failure is a record)."""
-    from spooflens.cli import _damaged, _read, require_gnss, segments_summary, write_outputs
     from spooflens.errors import SpooflensError
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_segments
+    from spooflens.service import damage, read_table, require_gnss, segments_summary, write_outputs
     from spooflens.threads import limited
 
     path, out = Path(log), Path(out_dir)
     record: dict[str, Any] = {"log": str(path), "sha256": digest, "outputs": str(out)}
     t0 = time.perf_counter()
     try:
-        table = _read(path, {}, False)
+        table = read_table(path, {}, False)
         require_gnss(path, table)
         with limited(1):  # one task per core already: a second thread per task would only contend
             analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
@@ -158,7 +158,7 @@ def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> d
         }
     # a log that joins several recordings: one verdict over all, every recording's incidents
     verdict = segments_summary(summaries)["verdict"]
-    damaged = list(dict.fromkeys(d for a in analyses for d in _damaged(a.table)))
+    damaged = list(dict.fromkeys(d for a in analyses for d in damage(a.table)))
     record |= {
         "status": "damaged" if damaged else "done",
         "error": "; ".join(damaged),
@@ -404,7 +404,7 @@ def command(
     quiet: bool,
 ) -> int:
     """Analyse every log PATTERNS match ('logs/**/*', quoted) on dask: per-log outputs, a fleet table."""
-    from spooflens.cli import make_output_folder
+    from spooflens.service import make_output_folder
 
     make_output_folder(output, "--output")
     result = run_batch(patterns, output, scheduler, workers, imu_grade, show=not quiet and show_progress())

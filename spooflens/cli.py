@@ -1,17 +1,13 @@
 """The `spooflens` command line.
 
 Commands are typed functions returning an exit code; `main()` is the thin shell that turns every
-spooflens error into one line on stderr (never a traceback) and a non-zero exit.
-
-Exit codes: 0 done; 1 internal error (a bug: rerun with --debug); 2 bad input or usage (nothing
-analysed, nothing written); 3 the input was damaged and only what could be read was analysed (outputs
-written); 4 the verdict is spoofing and --fail-on-spoof was given.
+spooflens error into one line on stderr (never a traceback) and a non-zero exit (the codes:
+`spooflens.service`). What the commands share with `report`, `batch`, `fleet` and the benches is there too.
 """
 
 from __future__ import annotations
 
 import gc
-import json
 import os
 import sys
 
@@ -19,26 +15,36 @@ import sys
 # large segments, a gigabyte beyond what a large log really uses, which an address-space limit (a
 # container's, or ulimit -v) counts. The system allocator reserves what it uses. Set before pandas loads.
 os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
-from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 import click
 from rich.table import Table
 
-from spooflens.epoch_table import EpochTable
-from spooflens.errors import NoGnssError, SpooflensError, one_line
+from spooflens.errors import SpooflensError, one_line
 from spooflens.navigation.imu_models import PRESETS
-from spooflens.output.console import LazyGroup, console, progress, show_progress
+from spooflens.output.console import LazyGroup, console, show_progress
 from spooflens.output.early_recording import EarlyRecording
 from spooflens.pipeline.evidence import label
-from spooflens.threads import side_work
+from spooflens.service import (
+    EXIT_BUG,
+    EXIT_DAMAGED,
+    EXIT_INPUT,
+    EXIT_OK,
+    analyse_log,
+    check_writable,
+    damage,
+    finish,
+    parse_topics,
+    print_analysis,
+    read_table,
+    segment_path,
+    write_outputs,
+)
 
 if TYPE_CHECKING:
-    from spooflens.pipeline.run import Analysis
+    pass
 
-EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
 # `simulate --format` choices (spooflens.writers.WRITERS) and those written as directories
 SIMULATE_FORMATS = (
     "mcap-ros2",
@@ -61,34 +67,6 @@ COMMANDS: dict[str, str] = {
     "fleet": "spooflens.fleet.command:command",
     "batch": "spooflens.batch:command",
 }
-
-
-def _parse_topics(values: tuple[str, ...]) -> dict[str, str]:
-    topics = {}
-    for v in values:
-        role, sep, name = v.partition("=")
-        if not sep or not role or not name:
-            raise click.BadParameter(f"{v!r}: expected ROLE=/topic, e.g. fix=/gps2/fix", param_hint="--topic")
-        topics[role.strip()] = name.strip()
-    return topics
-
-
-def _read(log: Path, topics: dict[str, str], show_progress: bool, solve_fixes: bool = True) -> EpochTable:
-    """The log as an epoch table; with `solve_fixes` (every command but `inject`), receivers that logged
-    only raw pseudoranges get fixes from their single-point solution (listed as computed), and the truth
-    file beside the log, if any, fills the truth frame (drawn, never analysed)."""
-    from readers import read_log
-    from spooflens.epoch_table import checked
-    from spooflens.gnss.solved_fixes import with_solved_fixes
-    from spooflens.truth import with_truth_beside
-
-    with progress(show_progress) as report:
-        table = read_log(log, topics=topics or None, progress=lambda done, total: report("reading", done, total))
-    return checked(with_truth_beside(with_solved_fixes(table), log)) if solve_fixes else table
-
-
-def _damaged(table: EpochTable) -> list[str]:
-    return [str(s) for s in table.skipped if s.action == "lost"]
 
 
 @click.group(cls=LazyGroup, lazy=COMMANDS, context_settings={"help_option_names": ["-h", "--help"]})
@@ -118,7 +96,7 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
     from spooflens.inventory import computed, skipped_or_repaired, stream_rows
     from spooflens.pipeline.registry import analyses
 
-    table = _read(log, _parse_topics(topics), show_progress())
+    table = read_table(log, parse_topics(topics), show_progress())
     out = console()
     out.print(
         f"[bold]{table.source}[/]  format {table.format}, {table.duration_s:.1f} s, "
@@ -146,104 +124,7 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
                 d.name, label(d.evidence) if d.evidence else "(product)", "no" if missing else "yes", missing
             )
     out.print(support)
-    return EXIT_DAMAGED if _damaged(table) else EXIT_OK
-
-
-def analyse_log(
-    log: Path,
-    topics: tuple[str, ...],
-    imu_grade: str | None,
-    quiet: bool,
-    station_texts: tuple[str, ...] = (),
-    recording: EarlyRecording | None = None,
-) -> list[Analysis]:
-    """Read and analyse LOG (its truth file beside it joins the table, for drawing only): one analysis per
-    recording the log joins (usually one). `recording`: the log's recording, begun meanwhile
-    (`recording_side_work`).
-
-    A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
-    files.
-    """
-    from spooflens.detectors.references import STATION_OPTION, parse_station
-    from spooflens.pipeline.registry import AnalyzeOptions
-    from spooflens.pipeline.run import analyze_segments
-
-    try:
-        given_stations = [parse_station(text) for text in station_texts]
-    except ValueError as err:
-        raise click.BadParameter(str(err), param_hint="--station") from None
-    table = _read(log, _parse_topics(topics), not quiet and show_progress())
-    require_gnss(log, table)
-    with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
-    for rid, *_ in given_stations:
-        if rid is not None and rid not in with_obs:
-            raise click.BadParameter(
-                f"no receiver {rid!r} with raw observations in {log}; receivers with them: {with_obs or 'none'}",
-                param_hint="--station",
-            )
-    options = AnalyzeOptions(imu_grade=imu_grade, extra={STATION_OPTION: given_stations} if given_stations else {})
-    with progress(not quiet and show_progress()) as report:
-        steps: list[str] = []
-
-        def on_step(name: str) -> None:
-            steps.append(name)
-            report(f"analysing: {name}", len(steps), len(steps) + 1)
-
-        with side_work(recording_side_work(table, recording)):
-            return analyze_segments(table, options, on_step)
-
-
-def recording_side_work(table: EpochTable, recording: EarlyRecording | None) -> Callable[[], None]:
-    """What the analysis of `table` may do where it leaves a core idle (`threads.side_work`): begin its
-    recording (a log of one recording), else import the recording's library."""
-    if recording is not None and len(table.segments) < 2:
-        return partial(recording.begin, table)
-    return _import_writers
-
-
-def _import_writers() -> None:
-    """The recording's library, imported while the analysis leaves a core idle."""
-    import spooflens.output.recording  # noqa: F401
-
-
-def require_gnss(log: Path, table: EpochTable) -> None:
-    """Raise NoGnssError for a log with no GNSS data at all. Raw observations or satellite reports
-    without fixes (a RINEX observation file with no navigation file beside it) are still analysed: the
-    detectors that need only them run (C/N0 across satellites), the others say what they lack."""
-    if len(table.fixes) or len(table.observations) or len(table.satellites):
-        return
-    lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
-    why = f"; lost: {lost}" if lost else ""
-    found = f"no GNSS fixes, raw observations or satellite reports found (streams: {_stream_names(table)}{why})"
-    raise NoGnssError(log, f"{found}; nothing written")
-
-
-def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool) -> int:
-    """The exit code of an analysis that ran: 4 spoofed (with --fail-on-spoof), 3 damaged input, else 0."""
-    damaged = list(dict.fromkeys(d for a in analyses for d in _damaged(a.table)))
-    if damaged:
-        click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
-    if fail_on_spoof and any(a.verdict.spoofed for a in analyses):
-        return EXIT_SPOOFED
-    return EXIT_DAMAGED if damaged else EXIT_OK
-
-
-def segment_path(path: Path, k: int, n: int) -> Path:
-    """An output's path for recording k of n (unchanged for a log of one recording)."""
-    return path if n < 2 else path.with_name(f"{path.stem}.seg{k + 1}{path.suffix}")
-
-
-def segments_summary(summaries: list[dict]) -> dict:
-    """The JSON of a log that joins recordings: each recording's summary, and the verdict over all."""
-    if len(summaries) == 1:
-        return summaries[0]
-    spoofed = [i + 1 for i, s in enumerate(summaries) if s["verdict"]["spoofed"]]
-    headline = (
-        f"SPOOFING DETECTED in recording(s) {', '.join(map(str, spoofed))} of {len(summaries)}"
-        if spoofed
-        else f"NO SPOOFING DETECTED in any of {len(summaries)} recordings"
-    )
-    return {"segments": summaries, "verdict": {"spoofed": bool(spoofed), "headline": headline}}
+    return EXIT_DAMAGED if damage(table) else EXIT_OK
 
 
 station_option = click.option(
@@ -323,108 +204,8 @@ def analyze(
             click.echo((f"recording {k + 1} of {n}: " if n > 1 else "") + analysis.verdict.headline)
         else:
             html = segment_path(html_path, k, n) if html_path else None
-            _print_analysis(summary, segment_path(output, k, n), json_path, html)
+            print_analysis(summary, segment_path(output, k, n), json_path, html)
     return finish(log, analyses, fail_on_spoof)
-
-
-def check_writable(path: Path | None, hint: str, may_be_folder: bool = False) -> None:
-    """An output that cannot be written is a usage error, said before the log is read (it was an internal
-    error after the whole analysis). `may_be_folder`: a log format written as a folder."""
-    if path is None:
-        return
-    if path.is_dir() and not may_be_folder:
-        raise click.BadParameter(f"{path} is a folder, not a file", param_hint=hint)
-    _check_folder(path.parent, path, hint)
-
-
-def _check_folder(folder: Path, output: Path, hint: str) -> None:
-    if not folder.is_dir():
-        raise click.BadParameter(f"{output}: there is no folder {folder}", param_hint=hint)
-    if not os.access(folder, os.W_OK):
-        raise click.BadParameter(f"{output}: the folder {folder} cannot be written", param_hint=hint)
-
-
-def make_output_folder(path: Path, hint: str) -> None:
-    """The folder outputs go to, made if missing; one that cannot be made is a usage error, said before
-    any log is read."""
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise click.BadParameter(f"{path}: cannot make this folder ({err.strerror or err})", param_hint=hint) from None
-    _check_folder(path, path, hint)
-
-
-def write_outputs(
-    analyses: list[Analysis],
-    output: Path,
-    json_path: Path | None,
-    html_path: Path | None,
-    recording: EarlyRecording | None = None,
-) -> list[dict]:
-    """Write the recording (always), the JSON summary and the operator report of a log's analyses (one per
-    recording it joins: `.segN` outputs, one JSON), as `analyze` does (`batch` writes through here too);
-    returns each recording's summary. `recording`: the recording begun during the analysis, if any."""
-    from spooflens.output.recording import write_recording
-    from spooflens.output.summary import build_summary
-
-    n = len(analyses)
-    summaries = []
-    for k, analysis in enumerate(analyses):
-        table, verdict = analysis.table, analysis.verdict
-        lines = [(0.0, f"VERDICT: {verdict.headline}", "WARN" if verdict.spoofed else "INFO")]
-        path = segment_path(output, k, n)
-        begun = recording.take(path, table) if recording is not None else None
-        write_recording(path, table, analysis.results, lines, verdict, begun)
-        summaries.append(build_summary(table, analysis.results, verdict))
-        if html_path:
-            from spooflens.output.report import write_report
-
-            write_report(segment_path(html_path, k, n), analysis)
-    if json_path:
-        json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
-    return summaries
-
-
-def _stream_names(table: EpochTable) -> str:
-    return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
-
-
-def _print_analysis(summary: dict, output: Path | None, json_path: Path | None, html_path: Path | None = None) -> None:
-    out = console()
-    v = summary["verdict"]
-    out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
-    for inc in v["incidents"]:
-        when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
-        kind = "incident" if inc["confidence"] != "low" else "anomaly (no second class at the same time: not spoofing)"
-        apart = [e for e in inc["evidence"] if e not in inc.get("corroborating_evidence", inc["evidence"])]
-        also = f"; at other times {', '.join(apart)}" if apart else ""
-        end = "end of log" if inc.get("ongoing_at_end") else f"{inc['end_s']:.2f} s"
-        sats = f", satellites {'+'.join(inc['satellites'])}" if inc.get("satellites") else ""
-        out.print(
-            f"  {kind}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
-            f"evidence {', '.join(inc.get('corroborating_evidence') or inc['evidence']) or 'none confirmed'}{also} "
-            f"({', '.join(inc['detectors'])}){sats}, "
-            f"confidence {inc['confidence']}"
-        )
-    for f in v.get("findings", []):
-        out.print(f"  finding: {f['text']}")
-    t = Table("analysis", "evidence", "ran", "alarms", "note")
-    for a in summary["analyses"]:
-        alarms = str(len(a["alarms"])) + (" (advisory)" if a.get("advisory") and a["alarms"] else "")
-        t.add_row(a["name"], a.get("evidence_label") or "(product)", "yes" if a["ran"] else "no", alarms, a["reason"])
-    out.print(t)
-    for sk in summary["skipped"]:
-        out.print(f"  skipped: {sk['stream']}: {sk['action']} {sk['count']} ({sk['reason']})")
-    for made in summary.get("computed", []):
-        out.print(f"  computed: {made['stream']}: {made['count']} ({made['reason']})")
-    written = [
-        f"{what}: {path}"
-        for what, path in (("recording", output), ("summary", json_path), ("report", html_path))
-        if path is not None
-    ]
-    out.print("   ".join(written))
-    if output is not None:
-        out.print(f"view it with: spooflens view {output}")
 
 
 @cli.command()
@@ -451,7 +232,7 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
 
     spec = parse_attack(attack_text)
     check_writable(output, "--output", may_be_folder=True)
-    table = _read(log, _parse_topics(topics), show_progress(), solve_fixes=False)
+    table = read_table(log, parse_topics(topics), show_progress(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
     note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))
     truth.write(sidecar_path(output))

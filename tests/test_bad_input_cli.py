@@ -64,9 +64,9 @@ def test_a_fix_level_attack_on_a_raw_observation_log_moves_the_solved_fixes(tmp_
     assert main(["inject", str(tmp_path / "07590920.05o"), "--attack", "ramp:rate=2,start=1200", "-o", str(out)]) == 0
     shutil.copy(tmp_path / "07590920.05n", tmp_path / "ramp.05n")
     clean_json, ramp_json = tmp_path / "c.json", tmp_path / "r.json"
-    from spooflens.cli import _read
+    from spooflens.service import read_table
 
-    clean, ramp = _read(tmp_path / "07590920.05o", {}, False), _read(out, {}, False)
+    clean, ramp = read_table(tmp_path / "07590920.05o", {}, False), read_table(out, {}, False)
     a, b = clean.fixes, ramp.fixes
     assert len(a) == len(b) and len(a) > 100
     enu = geodetic_to_enu(b["lat_deg"], b["lon_deg"], b["height_m"], a["lat_deg"], a["lon_deg"], a["height_m"])
@@ -185,6 +185,6 @@ def test_an_output_folder_that_cannot_be_made_is_a_usage_error_before_any_log_is
     # a results folder that holds folders of its own is still a folder outputs can go to
     results = tmp_path / "results"
     (results / "x").mkdir(parents=True)
-    from spooflens.cli import make_output_folder
+    from spooflens.service import make_output_folder
 
     make_output_folder(results, "--output")

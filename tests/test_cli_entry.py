@@ -7,7 +7,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from spooflens.cli import EXIT_INPUT, EXIT_OK
+from spooflens.service import EXIT_INPUT, EXIT_OK
 
 ROOT = Path(__file__).resolve().parents[1]
 

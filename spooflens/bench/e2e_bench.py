@@ -80,14 +80,14 @@ def analyse_end_to_end(log: str, out_dir: str) -> dict[str, Any]:
     """What `spooflens analyze LOG -o .rrd --json .json` does, stage by stage (runs in a fresh process)."""
     stages = _Stages()
     stages.start("import")
-    from spooflens.cli import _read, recording_side_work, write_outputs
     from spooflens.output.early_recording import EarlyRecording
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_table
+    from spooflens.service import read_table, recording_side_work, write_outputs
     from spooflens.threads import side_work
 
     stages.start("read")
-    table = _read(Path(log), {}, False)
+    table = read_table(Path(log), {}, False)
     stages.start("analysis: start")
     out = Path(out_dir)
     recording = EarlyRecording(out / "e2e.rrd")
@@ -114,12 +114,12 @@ def profile_analysis(log: str, out_file: str) -> dict[str, Any]:
     import io
     import pstats
 
-    from spooflens.cli import _read
     from spooflens.navigation.product import solve_navigation
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_table
+    from spooflens.service import read_table
 
-    table = _read(Path(log), {}, False)
+    table = read_table(Path(log), {}, False)
     profiler = cProfile.Profile()
     profiler.enable()
     analyze_table(table, AnalyzeOptions())
@@ -247,14 +247,14 @@ def first_run_parts(log: str, out_dir: str) -> dict[str, Any]:
     load nothing. The process's own start is not counted."""
     stages = _Stages()
     stages.start("imports of spooflens analyze")
-    from spooflens.cli import _read, recording_side_work, write_outputs
     from spooflens.output.early_recording import EarlyRecording
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_segments
+    from spooflens.service import read_table, recording_side_work, write_outputs
     from spooflens.threads import side_work
 
     stages.start("read")
-    table = _read(Path(log), {}, False)
+    table = read_table(Path(log), {}, False)
     verdicts = []
     numba_imported = False
     out = Path(out_dir)

@@ -109,8 +109,8 @@ def warm(logs: list[Path] | None = None, called: list[tuple[Any, Any]] | None = 
 
 
 def _warm_each(logs: list[Path] | None, called: list[tuple[Any, Any]] | None, done: list[tuple[str, float]]) -> None:
-    from spooflens.cli import analyse_log, write_outputs
     from spooflens.estimation import marginalised_likelihood
+    from spooflens.service import analyse_log, write_outputs
 
     with tempfile.TemporaryDirectory() as tmp, _recording_calls(called):
         folder = Path(tmp)

@@ -247,7 +247,7 @@ def command(logs: tuple[Path, ...], out_dir: Path, reference_sats: str, min_offs
     from its own reference, their homology over time, and a common-attack finding in each verdict."""
     if len(logs) < 2:
         raise click.UsageError("fleet needs at least two logs")
-    from spooflens.cli import make_output_folder
+    from spooflens.service import make_output_folder
 
     make_output_folder(out_dir, "--output")
     sats = tuple(s.strip().upper() for s in reference_sats.replace(",", "+").split("+") if s.strip())

@@ -70,13 +70,13 @@ def _normal(x: Any) -> Any:
 
 def summary_of(log: Path) -> dict[str, Any]:
     """What `spooflens analyze LOG --json` writes, normalised (an error: its one line, as the CLI prints it)."""
-    from spooflens.cli import _read, require_gnss, segments_summary
     from spooflens.errors import SpooflensError
     from spooflens.output.summary import build_summary
     from spooflens.pipeline.run import analyze_segments
+    from spooflens.service import read_table, require_gnss, segments_summary
 
     try:
-        table = _read(log, {}, show_progress=False)
+        table = read_table(log, {}, show_progress=False)
         require_gnss(log, table)
         analyses = analyze_segments(table)
     except SpooflensError as err:

@@ -7,14 +7,8 @@ from pathlib import Path
 
 import click
 
-from spooflens.cli import (
-    analyse_log,
-    fail_on_spoof_option,
-    finish,
-    imu_grade_option,
-    quiet_option,
-    topic_option,
-)
+from spooflens.cli import fail_on_spoof_option, imu_grade_option, quiet_option, topic_option
+from spooflens.service import analyse_log, finish
 
 
 @click.command()
@@ -41,9 +35,9 @@ def report(
     fail_on_spoof: bool,
 ) -> int:
     """Analyse LOG and write the operator report: one self-contained HTML page (opens offline anywhere)."""
-    from spooflens.cli import _print_analysis, check_writable, segment_path, segments_summary
     from spooflens.output.report import write_report
     from spooflens.output.summary import build_summary
+    from spooflens.service import check_writable, print_analysis, segment_path, segments_summary
 
     output = output or Path(log.name.rstrip("/")).with_suffix(".html")
     check_writable(output, "--output")
@@ -59,7 +53,7 @@ def report(
         if quiet:
             click.echo(prefix + analysis.verdict.headline)
         else:
-            _print_analysis(summary, None, json_path)
+            print_analysis(summary, None, json_path)
             click.echo(f"{prefix}report: {path} ({size / 1e6:.2f} MB); open it in any browser, no network needed")
     if json_path:
         json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
