@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from paths import REAL, SAMPLE_LOGS
 
 from readers import read_log
 from spooflens.cli import DIRECTORY_FORMATS, SIMULATE_FORMATS, cli, main
@@ -20,8 +21,8 @@ from spooflens.geodesy import geodetic_to_enu
 from spooflens.navigation.imu_models import PRESETS
 from spooflens.writers import SUFFIX, WRITERS
 
-GSI = Path(__file__).resolve().parents[1].parent / "shared" / "real" / "rinex_gsi_pair"
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs"
+GSI = REAL / "rinex_gsi_pair"
+SAMPLE = SAMPLE_LOGS
 
 
 def test_imu_grade_is_a_choice_listed_in_help(capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,11 +10,12 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from paths import SAMPLE_LOGS
 
 from spooflens.batch import find_logs, run_batch
 from spooflens.cli import main
 
-SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+SAMPLES = SAMPLE_LOGS
 
 
 @pytest.fixture(scope="module")

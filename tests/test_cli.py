@@ -6,10 +6,11 @@ import json
 from pathlib import Path
 
 import pytest
+from paths import SAMPLE_LOGS
 
 from spooflens.cli import main
 
-SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
+SAMPLES = SAMPLE_LOGS
 
 
 def test_inspect_lists_streams_and_supported_analyses(capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,9 +7,9 @@ import sys
 import tomllib
 from pathlib import Path
 
-from spooflens.service import EXIT_INPUT, EXIT_OK
+from paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
+from spooflens.service import EXIT_INPUT, EXIT_OK
 
 
 def _spooflens(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:

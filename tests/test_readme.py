@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import click
+from paths import ROOT
 
 from spooflens.attacks.spec import attacks_markdown
 from spooflens.cli import cli
 from spooflens.schema import schema_markdown
 
-README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+README = (ROOT / "README.md").read_text()
 
 
 def test_schema_section_is_generated_from_the_schema_module() -> None:

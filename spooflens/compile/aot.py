@@ -16,7 +16,7 @@ The module is used only while it matches what it was built from (`MANIFEST`): th
 source file that defines kernels, the Python and numpy versions and the machine's CPU (the code is built
 for it). Anything else, a missing or unreadable module included, leaves every call to numba.
 `SPOOFLENS_AOT=0` does so too. The numbers are numba's own, bit for bit: the same compiler, the same
-code (tests/test_aot.py).
+code (tests/compile/test_aot.py).
 """
 
 from __future__ import annotations

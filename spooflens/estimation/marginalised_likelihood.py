@@ -12,7 +12,7 @@
    `full_jump_constants` gives what the paper drops, so that
        l_t(m) + consts(m) = 2 log p(y | jump after m) - 2 log p(y | no jump)   (flat prior of density 1),
    which `full_jump_wj` computes independently from the Willsky-Jones signature of a full-state jump
-   (d^T I^-1 d - log det I + n log 2 pi). The two agree to rounding (tests/test_detectors_mlrt.py).
+   (d^T I^-1 d - log det I + n log 2 pi). The two agree to rounding (tests/estimation/test_marginalised_likelihood.py).
 
 2. The ramp MLR the paper intends (`ramp_two_filter_offline`): the augmented state [x; theta; r] where
    the integrator theta (in the attacked rows; the paper prints C = [H 0], which would leave theta

@@ -15,7 +15,7 @@ Continuous dynamics (first order; the 1/R^2 terms kept, the e^2 derivatives of R
 with d omega_ie = [0, -W sinL, W cosL] dL, dL = dp_n/(R_M+h), and d omega_en from the transport rate;
 dg_u = 2 g/R dh (free-air gradient). Versus the paper's printed blocks: F11, F12, F21, F14 = -C,
 F25 = C agree; F13/F23/F32/F33 differ because our position error is in metres. F is checked against a
-finite-difference Jacobian of the mechanization in tests/test_navigation_error_model.py.
+finite-difference Jacobian of the mechanization in tests/navigation/test_error_model.py.
 Measurement: z = INS - GNSS, position (ENU metres) then velocity: H = [0 0 I 0 0; 0 I 0 0 0] (6 x 15;
 the paper prints a 3 x 15 H, an erratum: its text says position AND velocity are measured).
 

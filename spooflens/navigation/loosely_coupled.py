@@ -209,7 +209,7 @@ class NavSolution:
         Gauss-Markov error states are estimated, never fed back), gives open-loop-equivalent measurements
         y_k = z_k + H_k u_k that follow ONE linear model: eps_k = Phi_k eps_{k-1} + w_k, y_k = H_k eps_k + e_k.
         A plain Kalman filter on it, started at zero with P_pred[0], reproduces the closed-loop filter's
-        innovations and covariances exactly (tests/test_navigation_filter.py).
+        innovations and covariances exactly (tests/navigation/test_filter.py).
         """
         M, n = self.dx.shape
         applied = self.dx.copy()

@@ -20,7 +20,7 @@ Estimated biases are removed per block to first order, averaging the body rotati
 dp_b - (2I + dC_b) b_a T^2/6 - T/3 b_g x dp_b): that is what lets one preintegration serve the
 closed-loop filter, whose bias estimates change at every GNSS update.
 Discretisation error: third order in the block length for the slow local-level terms; measured by
-tests/test_navigation_strapdown.py against simulated truth.
+tests/navigation/test_strapdown.py against simulated truth.
 """
 
 from __future__ import annotations

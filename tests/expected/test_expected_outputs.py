@@ -1,7 +1,8 @@
 """A fresh analysis of every sample log and real log equals its expected output (tests/expected/*.json).
 
 A change that moves what spooflens reports fails here; if the change is meant, rerun
-`python tests/expected/expected_outputs.py [NAME ...]` and review the diff of the expected files in the commit.
+`python tests/support/expected_outputs.py [NAME ...]` and review the diff of the expected
+files in the commit.
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ def differences(expected: Any, got: Any, where: str = "") -> list[str]:
     return [] if expected == got else [f"{where}: {expected!r} -> {got!r}"]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", list(logs()))
 def test_the_analysis_gives_the_expected_output(name: str) -> None:
     log: Path = logs()[name]

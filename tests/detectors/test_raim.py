@@ -1,0 +1,40 @@
+"""A receiver's reported fixes against the solution of its own pseudoranges (RAIM's), on a real phone."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+import numpy as np
+from paths import real_log
+
+from readers import read_log
+from spooflens.detectors.raim import run_raim
+from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
+
+LOG = "android_gnsslogger/gps-measurement-tools/pseudoranges_log_2016_06_30_21_26_07.txt"
+NAV = "android_gnsslogger/gps-measurement-tools/hour1820.16n"
+
+
+def _own_fix_findings(table) -> list[str]:
+    result = run_raim(AnalysisContext(table, AnalyzeOptions()))
+    return [f.text for f in result.findings if "its reported fixes" in f.text]
+
+
+def test_a_phone_whose_fixes_leave_its_own_pseudoranges_is_a_finding_and_a_clean_one_is_not() -> None:
+    table = read_log(real_log(LOG), {"nav": str(real_log(NAV))})
+    # clean: the phone's fixes lie a median 13 m, at most 53 m, from its own pseudoranges' solution
+    assert _own_fix_findings(table) == []
+    raim = run_raim(AnalysisContext(table, AnalyzeOptions()))
+    distance = next(s for s in raim.series if s.name == "phone/fix_from_own_solution").values
+    assert 5.0 < np.nanmedian(distance) < 20.0 and np.nanmax(distance) < 60.0
+    # the fixes moved 300 m north from 100 s, the raw measurements left as they were (the position
+    # output falsified: what `spooflens inject` makes of a GnssLogger log, or a mock location)
+    fixes = table.fixes.copy()
+    late = fixes["t_s"].to_numpy() >= 100.0
+    fixes.loc[late, "lat_deg"] += np.degrees(300.0 / 6_371_000.0)
+    (text,) = _own_fix_findings(replace(table, fixes=fixes))
+    found = re.search(r"up to (\d+) m from the position its own pseudoranges give .*?, ([\d.]+)-([\d.]+) s", text)
+    assert found, text
+    peak, start = float(found.group(1)), float(found.group(2))
+    assert 280.0 <= peak <= 360.0 and 100.0 <= start <= 101.0

@@ -1,0 +1,232 @@
+"""receiver_time: steps of the receiver's time against the log's own clock."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from paths import real_log
+from px4_support import BOOT_UTC_US, current_log, flight
+from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_typestore
+
+from readers import read_log
+from spooflens.cli import main
+from spooflens.detectors.receiver_time import run_receiver_time
+from spooflens.pipeline.evidence import Evidence
+
+
+def _fixes(t: np.ndarray, offset: np.ndarray) -> pd.DataFrame:
+    return pd.DataFrame({"t_s": t, "receiver_id": "gps", "time_offset_s": offset})
+
+
+def _logger(seconds: float = 1800.0, rate_hz: float = 5.0, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """A logger's view of a healthy receiver: 30 ppm of crystal drift, 20 ms of latency jitter and a
+    message now and then 150 ms late."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate_hz)
+    x = 30e-6 * t + rng.normal(0.0, 0.02, len(t))
+    late = rng.random(len(t)) < 0.01
+    return t, x - np.where(late, 0.15, 0.0)
+
+
+def test_a_healthy_receiver_raises_nothing() -> None:
+    t, x = _logger()
+    result = run_receiver_time(_fixes(t, x))
+    assert result.ran and result.evidence == Evidence.LOG_CLOCK
+    assert not result.alarms and not result.findings
+    assert "robust sigma 2" in result.reason and "alarm level 0.250 s" in result.reason  # 8 x 20 ms < 0.25 s
+
+
+@pytest.mark.parametrize("step", [0.4, -2.7, 3600.0, -86_400.3])
+def test_a_spoofer_clock_is_an_alarm_from_the_step_to_the_return(step: float) -> None:
+    t, x = _logger()
+    attacked = (t >= 600.0) & (t < 900.0)
+    result = run_receiver_time(_fixes(t, x + step * attacked))
+    assert len(result.alarms) == 1  # the return to the old time is no second step
+    a = result.alarms[0]
+    assert a.onset_interval_s == (pytest.approx(599.8), pytest.approx(600.0))
+    assert a.start_s == pytest.approx(600.4)  # three fixes on the new time
+    assert a.end_s == pytest.approx(899.8)
+    assert a.receiver_id == "gps"
+    assert result.extras["gps/steps_s"] == [pytest.approx(step, abs=0.01)]
+    (finding,) = result.findings
+    assert "against the log's own clock at 600.0 s, until 899.8 s" in finding.text
+
+
+def test_utc_back_by_a_second_early_in_the_log_is_the_leap_seconds_being_learned() -> None:
+    t, x = _logger()
+    result = run_receiver_time(_fixes(t, x - 1.0 * (t >= 300.0)))
+    assert not result.alarms
+    (finding,) = result.findings
+    assert "exactly -1 s at 300.0 s" in finding.text and "not counted" in finding.text
+    # after the 15 minutes in which broadcast UTC parameters arrive, or forward (no default is ahead of
+    # today's 18 leap seconds), or 5 s, it is not that
+    for step, at in ((-1.0, 1200.0), (1.0, 300.0), (-5.0, 300.0)):
+        late = run_receiver_time(_fixes(t, x + step * (t >= at)))
+        assert len(late.alarms) == 1 and late.alarms[0].onset_s == pytest.approx(at)
+
+
+def test_a_step_of_the_loggers_own_clock_is_not_the_receivers() -> None:
+    t, x = _logger()
+    stepped = t >= 700.0
+    # the host's clock is set 5.3 s ahead (NTP): the rows move on, the receiver's time does not
+    result = run_receiver_time(_fixes(t + 5.3 * stepped, x - 5.3 * stepped))
+    assert not result.alarms
+    (finding,) = result.findings
+    assert (
+        "logger's clock stepped by +5.2" in finding.text
+        and "at 705.3 s while the receiver's time ran on" in finding.text
+    )
+
+
+def test_against_a_boot_clock_a_time_that_ran_on_across_a_gap_is_the_receivers_step() -> None:
+    """The fixes stop for 8 s (the takeover) and the spoofer resumes at the time of the last real fix: a
+    host clock's step would look the same, a monotonic boot clock cannot step."""
+    t, x = _logger()
+    keep = (t < 700.0) | (t >= 708.0)
+    t, x = t[keep], x[keep] - 8.0 * (t[keep] >= 708.0)  # the first fix after the gap one period on
+    host = run_receiver_time(_fixes(t, x))
+    assert not host.alarms and "logger's clock stepped" in host.findings[0].text
+    boot = run_receiver_time(_fixes(t, x), clock="TimeUS, the autopilot's boot clock", monotonic=True)
+    (alarm,) = boot.alarms
+    assert alarm.onset_interval_s == (pytest.approx(699.8), pytest.approx(708.0))
+    assert (
+        "moved -7.98" in boot.findings[0].text and "against TimeUS, the autopilot's boot clock" in boot.findings[0].text
+    )
+
+
+@pytest.mark.parametrize(
+    "relative",
+    [
+        "ardupilot_dataflash/flightdata_center_0003.bin",
+        "android_gnsslogger/gnss_lib_py/pixel6.txt",
+        "android_gnsslogger/gnss_lib_py/pixel6.nmea",
+    ],
+)
+def test_real_logs_have_the_offset_and_no_alarm(relative: str) -> None:
+    table = read_log(real_log(relative))
+    x = table.fixes["time_offset_s"].to_numpy(dtype=float)
+    assert np.isfinite(x).mean() > 0.9 and np.nanmax(np.abs(x)) < 0.07  # latency jitter only
+    result = run_receiver_time(table.fixes)
+    assert result.ran and not result.alarms and not result.findings
+
+
+def test_px4_table_with_the_spoofers_utc(tmp_path: Path) -> None:
+    f = flight(np.round(np.arange(1.0, 240.0, 0.2), 6))
+    t_us = np.round(f["t_s"] * 1e6).astype(np.int64)
+    jump = np.where(f["t_s"] >= 100.0, 3_600_000_000, 0)
+    pd.DataFrame(
+        {
+            "timestamp": t_us,
+            "lat": f["lat_deg"],
+            "lon": f["lon_deg"],
+            "alt_ellipsoid": f["height_m"],
+            "vel_n_m_s": f["vel_n_mps"],
+            "vel_e_m_s": f["vel_e_mps"],
+            "fix_type": 3,
+            "time_utc_usec": BOOT_UTC_US + t_us + jump,
+            "timestamp_time_relative": 0,
+        }
+    ).to_csv(tmp_path / "gps.csv", index=False)
+    fixes = read_log(tmp_path / "gps.csv").fixes
+    x = fixes["time_offset_s"].to_numpy()  # less its median: the spoofed time fills most of this log
+    np.testing.assert_allclose(x - x[0], np.where(f["t_s"] >= 100.0, 3600.0, 0.0))
+    (alarm,) = run_receiver_time(fixes).alarms
+    # t_s counts from the first row (boot 1.0 s): boot 100 s is 99 s into the log
+    assert alarm.onset_interval_s == (pytest.approx(98.8), pytest.approx(99.0))
+
+
+def test_real_ardupilot_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
+    """The real flight's GPS messages rewritten by `inject` (GWk/GMS moved with the position): the
+    receiver's time alone makes an independent class; the position step alone is an anomaly."""
+    src = real_log("ardupilot_dataflash/flightdata_center_0003.bin")
+    verdicts = {}
+    for clock in (0.0, 3600.5):
+        out = tmp_path / f"clock{clock:g}.bin"
+        attack = f"capture:start=20,drag=step,offset=300,clock={clock}"
+        assert main(["inject", str(src), "--attack", attack, "-o", str(out)]) == 0
+        report = tmp_path / f"clock{clock:g}.json"
+        main(["analyze", str(out), "-o", str(tmp_path / "x.rrd"), "--json", str(report), "--quiet"])
+        verdicts[clock] = json.loads(report.read_text())
+    assert verdicts[0.0]["metadata"]["time_offset.monotonic"] == "yes"
+    clean, spoofed = verdicts[0.0]["verdict"], verdicts[3600.5]["verdict"]
+    assert not clean["spoofed"] and not any("log_clock" in i["evidence"] for i in clean["incidents"])
+    assert spoofed["spoofed"]
+    incident = spoofed["incidents"][0]
+    assert incident["confidence"] == "high" and incident["evidence"] == ["gnss_only", "log_clock"]
+    assert incident["onset_s"] == pytest.approx(24.0, abs=0.3) and incident["ongoing_at_end"]
+    assert any(
+        "time moved +3600.5" in str(f) and "against TimeUS, the autopilot's boot clock" in str(f)
+        for f in spoofed["findings"]
+    )
+
+
+def test_px4_ulog_inject_writes_the_spoofers_time(tmp_path: Path) -> None:
+    src, out = tmp_path / "clean.ulg", tmp_path / "spoofed.ulg"
+    current_log(src, attack_s=None)
+    assert run_receiver_time(read_log(src).fixes).findings == []
+    assert main(["inject", str(src), "--attack", "capture:start=20,clock=-7.25", "-o", str(out)]) == 0
+    result = run_receiver_time(read_log(out).fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_s == pytest.approx(24.0)  # captured after the 4 s takeover
+    assert "time moved -7.250 s against the log's own clock at 24.0 s, to the end of the log" in result.findings[0].text
+
+
+def _navsat_bag(path: Path, spoof_from_s: float, clock_s: float) -> None:
+    """nmea_navsat_driver's topics at 1 Hz for 10 min: /fix and /time_reference (the sentence's UTC beside
+    the host's time it came at), the host 0.35 s behind GNSS and 10 ms of serial latency jitter."""
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    Fix, Status = ts.types["sensor_msgs/msg/NavSatFix"], ts.types["sensor_msgs/msg/NavSatStatus"]
+    Ref = ts.types["sensor_msgs/msg/TimeReference"]
+    rng = np.random.default_rng(5)
+    t0 = 1_700_000_000
+    with Writer(path) as w:
+        fix_conn = w.add_connection("/gps/fix", "sensor_msgs/msg/NavSatFix", typestore=ts)
+        ref_conn = w.add_connection("/gps/time_reference", "sensor_msgs/msg/TimeReference", typestore=ts)
+        for k in range(600):
+            host_ns = (t0 + k) * 10**9 + int(rng.normal(0.0, 0.01) * 1e9)
+            gnss_ns = (t0 + k) * 10**9 + 350_000_000 + (int(clock_s * 1e9) if k >= spoof_from_s else 0)
+            header = Header(seq=k, stamp=Time(sec=host_ns // 10**9, nanosec=host_ns % 10**9), frame_id="gps")
+            fix = Fix(header, Status(0, 1), 42.0 + k * 1e-6, -71.0, 30.0, np.zeros(9), 0)
+            w.write(fix_conn, host_ns, ts.serialize_ros1(fix, "sensor_msgs/msg/NavSatFix"))
+            ref = Ref(header, Time(sec=gnss_ns // 10**9, nanosec=gnss_ns % 10**9), "gps")
+            w.write(ref_conn, host_ns, ts.serialize_ros1(ref, "sensor_msgs/msg/TimeReference"))
+
+
+def test_ros_time_reference_is_the_receivers_time(tmp_path: Path) -> None:
+    clean, spoofed = tmp_path / "clean.bag", tmp_path / "spoofed.bag"
+    _navsat_bag(clean, spoof_from_s=1e9, clock_s=0.0)
+    _navsat_bag(spoofed, spoof_from_s=300, clock_s=-41.7)
+    table = read_log(clean)
+    assert next(s for s in table.streams if s.topic == "/gps/time_reference").receiver == "/gps/fix"
+    x = table.fixes["time_offset_s"].to_numpy()
+    assert np.isfinite(x).all() and np.abs(x).max() < 0.05
+    assert not run_receiver_time(table.fixes).alarms
+    (alarm,) = run_receiver_time(read_log(spoofed).fixes).alarms
+    assert alarm.onset_interval_s == (pytest.approx(299.0, abs=0.05), pytest.approx(300.0, abs=0.05))
+    # inject moves the time references with the fixes they belong to
+    injected = tmp_path / "injected.bag"
+    assert main(["inject", str(clean), "--attack", "capture:start=200,clock=5", "-o", str(injected)]) == 0
+    result = run_receiver_time(read_log(injected).fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_s == pytest.approx(204.0, abs=0.05)
+    assert result.extras["/gps/fix/steps_s"] == [pytest.approx(5.0, abs=0.01)]
+
+
+def test_real_phone_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
+    """The Pixel 6's Fix lines rewritten with UnixTimeMillis 30.5 s back from the capture on: the fixes stay
+    where the phone's clock put them, the time they carry is the alarm."""
+    src = real_log("android_gnsslogger/gnss_lib_py/pixel6.txt")
+    out = tmp_path / "pixel6_spoofed.txt"
+    assert main(["inject", str(src), "--attack", "capture:start=200,clock=-30.5", "-o", str(out)]) == 0
+    clean, spoofed = read_log(src), read_log(out)
+    np.testing.assert_allclose(spoofed.fixes["t_s"], clean.fixes["t_s"])
+    result = run_receiver_time(spoofed.fixes)
+    (alarm,) = result.alarms
+    assert alarm.onset_interval_s == (pytest.approx(198.0, abs=0.05), pytest.approx(204.0, abs=0.05))
+    assert result.extras["phone/steps_s"] == [pytest.approx(-30.5, abs=0.01)]

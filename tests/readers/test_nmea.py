@@ -1,0 +1,321 @@
+"""NMEA 0183: the real boat logs read right, logger layouts, bad input, and inject's in-place round trip."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pymap3d
+import pytest
+from paths import REAL, real_log
+
+from readers import read_log, sniff_format
+from spooflens.cli import main
+from spooflens.epoch_table import EpochTable
+from spooflens.errors import ReaderError
+from spooflens.schema import FixType
+
+BOATS = REAL / "nmea_boats"
+BUNDG, SAAB, PLAKA = BOATS / "gpsd_bundg_zeus_9.log", BOATS / "gpsd_saab-r4.log", BOATS / "signalk_plaka.log"
+PIXEL_NMEA = REAL / "android_gnsslogger" / "gnss_lib_py" / "pixel6.nmea"
+KNOT = 1852 / 3600
+
+
+def _need(path: Path) -> Path:
+    return real_log(str(path.relative_to(REAL)))
+
+
+@pytest.fixture(scope="module")
+def bundg() -> EpochTable:
+    return read_log(_need(BUNDG))
+
+
+@pytest.fixture(scope="module")
+def plaka() -> EpochTable:
+    return read_log(_need(PLAKA))
+
+
+def _write(path: Path, bodies: list[str]) -> Path:
+    path.write_text("\n".join(_sentence(b) for b in bodies) + "\n")
+    return path
+
+
+def _sentence(body: str) -> str:
+    check = 0
+    for c in body.encode():
+        check ^= c
+    return f"${body}*{check:02X}"
+
+
+def _field_degrees(text: str, hemi: str, digits: int) -> float:
+    v = float(text[:digits]) + float(text[digits:]) / 60
+    return -v if hemi in "SW" else v
+
+
+def _raw(path: Path, kind: str) -> dict[str, list[str]]:
+    """Sentences of one kind by their time field, split by hand (independent of the reader)."""
+    out: dict[str, list[str]] = {}
+    for line in path.read_text(errors="replace").splitlines():
+        if line[3:6] == kind and line.startswith("$"):
+            f = line.split("*")[0].split(",")
+            out[f[5] if kind == "GLL" else f[1]] = f
+    return out
+
+
+def _distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    dn = math.radians(lat2 - lat1) * 6_371_000
+    de = math.radians(lon2 - lon1) * 6_371_000 * math.cos(math.radians(lat1))
+    return math.hypot(dn, de)
+
+
+def test_bundg_counts_rates_units(bundg: EpochTable) -> None:
+    assert sniff_format(BUNDG) == "nmea"
+    assert bundg.time_reference == "unix" and bundg.absolute_iso(0.5).startswith("2018-08-20T09:47:36")
+    assert bundg.receivers() == ["GP"]
+    fixes = bundg.fixes
+    assert len(fixes) == 149  # epochs of GGA (138), RMC (146) and GLL (147) times, 09:47:36-09:50:03
+    assert np.median(np.diff(fixes["t_s"])) == pytest.approx(1.0)
+    first = fixes.iloc[0]
+    assert first["height_m"] == pytest.approx(-4 + 46.8)  # GGA MSL altitude + geoid separation
+    assert (first["sats_used"], first["hdop"], first["vdop"]) == (12, 0.60, 0.90)  # GGA numSV, GSA DOPs
+    assert first["fix_type"] == FixType.FIX_3D
+    # mean of the 12 C/N0 values of the first GSV group (39 35 33 37 34 39 33 38 46 32 27 31)
+    assert first["cn0_mean_dbhz"] == pytest.approx(424 / 12)
+    # SDHDG at ~10 Hz: magnetic 229.8 + 1.3 E variation = true 231.1
+    headings = bundg.headings
+    hdg = headings[headings["heading_id"] == "SDHDG"]
+    assert len(hdg) == 1457 and hdg["heading_deg"].iloc[0] == pytest.approx(231.1)
+    assert hdg["water_speed_mps"].isna().all()
+    # SDVHW: the speed log's sentence, true heading 231.3 and 6.6 kn through the water
+    vhw = headings[headings["heading_id"] == "SDVHW"]
+    assert len(vhw) == 150 and set(headings["heading_id"]) == {"SDHDG", "SDVHW"}
+    assert vhw["heading_deg"].iloc[0] == pytest.approx(231.3)
+    assert vhw["water_speed_mps"].iloc[0] == pytest.approx(6.6 * 1852 / 3600)
+    sdhdg = bundg.stream("heading", "SDHDG")
+    assert sdhdg is not None and 9.0 < sdhdg.rate_hz < 10.5
+    unused = {s.stream: s.count for s in bundg.skipped if "does not use" in s.reason}
+    assert unused["WIMWV"] == 300 and unused["SDDPT"] == 149
+
+
+def test_bundg_position_and_velocity_against_independent_values(bundg: EpochTable) -> None:
+    rmc = _raw(BUNDG, "RMC")
+    fixes = bundg.fixes
+    utc = bundg.unix_ns(fixes["t_s"].to_numpy())
+    assert utc is not None
+    tod = [f"{int(u // 1e9) % 86400 // 3600:02d}{int(u // 1e9) % 3600 // 60:02d}{int(u // 1e9) % 60:02d}" for u in utc]
+    checked = 0
+    for (_, row), t in zip(fixes.iterrows(), tod, strict=True):
+        f = rmc.get(t)
+        if f is None:
+            continue
+        lat, lon = _field_degrees(f[3], f[4], 2), _field_degrees(f[5], f[6], 3)
+        # the fix is GGA's; the chartplotter's RMC of the same second differs by its own few metres
+        assert _distance_m(row["lat_deg"], row["lon_deg"], lat, lon) < 6.0
+        assert math.hypot(row["vel_e_mps"], row["vel_n_mps"]) == pytest.approx(float(f[7]) * KNOT, abs=1e-9)
+        checked += 1
+    assert checked > 100
+    # the reported speed agrees with the position change (a boat at ~3 m/s)
+    lat, lon, t = (fixes[c].to_numpy() for c in ("lat_deg", "lon_deg", "t_s"))
+    track = sum(_distance_m(lat[i], lon[i], lat[i + 1], lon[i + 1]) for i in range(len(lat) - 1))
+    speed = np.hypot(fixes["vel_e_mps"], fixes["vel_n_mps"]).mean()
+    assert track / (t[-1] - t[0]) == pytest.approx(speed, rel=0.1)
+
+
+def test_saab_gyro_heading_and_dgps(tmp_path: Path) -> None:
+    table = read_log(_need(SAAB))
+    assert len(table.fixes) == 12 and table.absolute_iso(0).startswith("2011-06-01T13:07:11")
+    assert set(table.fixes["fix_type"]) == {FixType.DGNSS}  # GGA quality 2
+    gll = _raw(SAAB, "GLL")["130711"]
+    first = table.fixes.iloc[0]
+    lat, lon = _field_degrees(gll[1], gll[2], 2), _field_degrees(gll[3], gll[4], 3)
+    assert _distance_m(first.lat_deg, first.lon_deg, lat, lon) < 0.01
+    hdt = [float(ln.split(",")[1]) for ln in SAAB.read_text().splitlines() if ln.startswith("$HEHDT")]
+    assert list(table.headings["heading_deg"]) == hdt and len(hdt) == 12 and set(table.headings["talker"]) == {"HE"}
+    assert any("height set to 0 m" in s.reason for s in table.skipped)  # no altitude in its GGA
+    assert {s.stream: s.count for s in table.skipped}["AIVDO"] == 12
+
+
+def test_plaka_long_voyage_without_dates(plaka: EpochTable) -> None:
+    assert plaka.time_reference == "relative"  # its ZDA sentences carry no date
+    assert len(plaka.fixes) == 7250 and plaka.duration_s == pytest.approx(14845.0)
+    assert np.median(np.diff(plaka.fixes["t_s"])) == pytest.approx(2.0)
+    assert plaka.fixes["lat_deg"].iloc[0] == pytest.approx(60 + 5.071 / 60)
+    assert len(plaka.headings) == 0
+    empty = {s.stream: s.count for s in plaka.skipped if s.reason.startswith("empty")}
+    assert empty == {"GPGSV": 7250, "IIHDT": 14500}
+    # VTG speed against the GLL position change, epoch by epoch (independent sentences of the voyage)
+    f = plaka.fixes
+    lat, lon, t = (f[c].to_numpy() for c in ("lat_deg", "lon_deg", "t_s"))
+    v_pos = np.array([_distance_m(lat[i], lon[i], lat[i + 1], lon[i + 1]) for i in range(len(t) - 1)]) / np.diff(t)
+    v_vtg = np.hypot(f["vel_e_mps"], f["vel_n_mps"]).to_numpy()[:-1]
+    assert np.nanmedian(np.abs(v_pos - v_vtg)) < 0.5
+
+
+def test_gnsslogger_nmea_file_uses_its_logger_times() -> None:
+    table = read_log(_need(PIXEL_NMEA))
+    assert table.format == "nmea" and table.metadata["time_source"] == "logger"
+    assert len(table.fixes) == 48 and table.absolute_iso(0).startswith("2023-11-07T23:42:57")
+    assert abs(float(table.metadata["clock.gnss_minus_logger_s"])) < 2.0
+
+
+BASE_BODIES = [
+    "GPGGA,235958.00,5012.0000,N,00806.0000,W,1,08,0.9,10.0,M,50.0,M,,",
+    "GPRMC,235958.00,A,5012.0000,N,00806.0000,W,10.0,90.0,311219,,,A",
+    "HEHDT,91.5,T",
+    "GPGGA,235959.00,5012.0000,N,00805.9914,W,1,08,0.9,10.0,M,50.0,M,,",
+    "HEHDT,91.6,T",
+    "GPGGA,000000.00,5012.0000,N,00805.9828,W,1,08,0.9,10.0,M,50.0,M,,",
+    "GPRMC,000000.00,A,5012.0000,N,00805.9828,W,10.0,90.0,010120,,,A",
+    "HEHDT,91.7,T",
+    "GPGGA,000001.00,5012.0000,N,00805.9742,W,1,08,0.9,10.0,M,50.0,M,,",
+]
+
+
+def test_midnight_and_year_rollover(tmp_path: Path) -> None:
+    path = tmp_path / "midnight.nmea"
+    path.write_text("\r\n".join(_sentence(b) for b in BASE_BODIES) + "\r\n")
+    table = read_log(path)
+    assert table.absolute_iso(0.0) == "2019-12-31T23:59:58+00:00"
+    assert list(table.fixes["t_s"]) == [0.0, 1.0, 2.0, 3.0]
+    assert table.absolute_iso(3.0) == "2020-01-01T00:00:01+00:00"
+    assert list(table.headings["heading_deg"]) == [91.5, 91.6, 91.7]
+    assert np.all(np.diff(table.headings["t_s"]) > 0)
+
+
+def test_logger_prefixes_tag_blocks_and_two_receivers(tmp_path: Path) -> None:
+    start = 1577836798.0  # 2019-12-31T23:59:58Z
+    lines = []
+    for i, body in enumerate(BASE_BODIES):
+        t = start + 0.4 * i
+        if i % 3 == 0:
+            lines.append(f"{t:.3f} {_sentence(body)}")
+        elif i % 3 == 1:
+            lines.append(f"{round(t * 1000)};N;{_sentence(body)}")
+        else:
+            tag = f"s:bridge,c:{round(t * 1000)}"
+            check = 0
+            for c in tag.encode():
+                check ^= c
+            lines.append(f"\\{tag}*{check:02X}\\{_sentence(body)}")
+    gn = [b.replace("GPGGA", "GNGGA") for b in BASE_BODIES]
+    second = [f"{start + 0.4 * i + 0.1:.3f} {_sentence(b)}" for i, b in enumerate(gn)]
+    path = tmp_path / "mixed.log"
+    path.write_text("# a VDR export\n" + "\n".join(lines + [s for s in second if "GNGGA" in s]) + "\n")
+    table = read_log(path)
+    assert table.metadata["time_source"] == "logger" and table.time_reference == "unix"
+    assert sorted(table.receivers()) == ["GN", "GP", "bridge/GP"]
+    assert table.absolute_iso(0.0).startswith("2019-12-31T23:59:58")
+    assert table.metadata["log_header"] == "a VDR export"
+
+
+def test_two_files_in_a_directory_are_two_receivers(tmp_path: Path) -> None:
+    log = tmp_path / "voyage"
+    log.mkdir()
+    (log / "gps1.nmea").write_text("\n".join(_sentence(b) for b in BASE_BODIES) + "\n")
+    moved = [b.replace("5012.0000,N", "5012.0100,N") for b in BASE_BODIES]
+    (log / "gps2.nmea").write_text("\n".join(_sentence(b) for b in moved) + "\n")
+    (log / "notes.txt").write_text("crew notes\n")
+    table = read_log(log)
+    assert sorted(table.receivers()) == ["gps1.nmea/GP", "gps2.nmea/GP"]
+    a, b = table.fixes_of("gps1.nmea/GP").iloc[0], table.fixes_of("gps2.nmea/GP").iloc[0]
+    assert _distance_m(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg) == pytest.approx(18.5, abs=0.2)  # 0.01'
+    assert any("notes.txt" in s.reason for s in table.skipped)
+
+
+def test_bad_checksum_garbage_and_cut_last_line(tmp_path: Path) -> None:
+    lines = [_sentence(b) for b in BASE_BODIES]
+    lines[3] = lines[3].replace("5012.0000", "5012.9000")  # corrupt: checksum no longer matches
+    data = ("\n".join(lines[:-1]) + "\n").encode() + b"\x00\xff\xfe junk\n" + lines[-1].encode()[:30]
+    path = tmp_path / "damaged.log"
+    path.write_bytes(data)
+    table = read_log(path)
+    lost = {s.reason: s.count for s in table.skipped if s.action == "lost"}
+    assert lost["sentences with a bad checksum"] == 1
+    assert lost["binary garbage (not text)"] == 1
+    assert lost["file cut inside its last sentence"] == 1
+    assert list(table.fixes["t_s"]) == [0.0, 2.0]  # the 23:59:59 GGA was the corrupt one
+
+
+def test_a_zda_year_beyond_64_bits_is_no_date_not_an_overflow(tmp_path: Path) -> None:
+    """The second 10^4 fuzz run wrote -9223372036854775809 into NMEA fields: a ZDA "year" that large
+    overflowed the date arithmetic (OverflowError before). It is no date; the fixes stay."""
+    bodies = [*BASE_BODIES[:2], "GPZDA,235958.00,31,12,-9223372036854775809,00,00", *BASE_BODIES[2:]]
+    path = tmp_path / "zda.log"
+    path.write_text("\n".join(_sentence(b) for b in bodies) + "\n")
+    table = read_log(path)
+    assert len(table.fixes) == len(read_log(_write(tmp_path / "base.log", BASE_BODIES)).fixes)
+
+
+def test_bad_input_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    only_unused = tmp_path / "wind.log"
+    only_unused.write_text(_sentence("WIMWV,57.5,R,13.0,N,A") + "\n")
+    with pytest.raises(ReaderError, match=r"wind.log \[nmea\]: no usable NMEA sentence"):
+        read_log(only_unused)
+    assert main(["inspect", str(only_unused)]) == 2
+    assert "no usable NMEA sentence" in capsys.readouterr().err
+
+
+def test_inspect_and_analyze_real_logs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(_need(SAAB))]) == 0
+    out = capsys.readouterr().out
+    assert "HEHDT" in out and "heading" in out
+    summary = tmp_path / "bundg.json"
+    assert main(["analyze", str(_need(BUNDG)), "-o", str(tmp_path / "b.rrd"), "--json", str(summary), "--quiet"]) == 0
+    verdict = json.loads(summary.read_text())["verdict"]
+    assert verdict["spoofed"] is False  # a clean real voyage
+
+
+def test_inject_round_trip_edits_positions_in_place(bundg: EpochTable, tmp_path: Path) -> None:
+    out = tmp_path / "spoofed.log"
+    assert main(["inject", str(BUNDG), "--attack", "step:start=60,offset=200", "-o", str(out)]) == 0
+    before, after = BUNDG.read_bytes().split(b"\n"), out.read_bytes().split(b"\n")
+    assert len(before) == len(after)
+    changed = [(a, b) for a, b in zip(before, after, strict=True) if a != b]
+    assert changed and all(a[3:6] in (b"GGA", b"RMC", b"GLL") for a, _ in changed)
+    spoofed = read_log(out)
+    assert not [s for s in spoofed.skipped if s.action == "lost"]  # every rewritten checksum is valid
+    truth = json.loads(out.with_name(out.name + ".attack.json").read_text())
+    assert truth["kind"] == "step"
+    t = bundg.fixes["t_s"].to_numpy()
+    a, b = bundg.fixes, spoofed.fixes
+    e, n, _ = pymap3d.geodetic2enu(b.lat_deg, b.lon_deg, b.height_m, a.lat_deg, a.lon_deg, a.height_m)
+    # 200 m east and north, to the 0.0001' (0.19 m east, 0.11 m north) the sentences carry
+    assert np.all(np.hypot(e, n)[t < 60] == 0)
+    assert np.allclose(e[t >= 60], 200, atol=0.15) and np.allclose(n[t >= 60], 200, atol=0.15)
+    assert np.array_equal(a["height_m"], b["height_m"])
+    assert spoofed.headings.equals(bundg.headings)
+
+
+def test_bundg_satellites_from_gsv_and_gsa_agree_with_the_sentences(bundg: EpochTable) -> None:
+    sats = bundg.satellites
+    assert any(s.role == "satellites" and s.msgtype == "NMEA GSV/GSA" for s in bundg.streams)
+    assert set(sats["sv_id"].str[0]) == {"G", "R"}  # GPGSV and GLGSV (GLONASS numbered 65-96)
+    assert sats["elevation_deg"].between(0, 90).all() and sats["azimuth_deg"].between(0, 360).all()
+    assert sats.groupby("t_s")["sv_id"].apply(lambda s: s.is_unique).all()
+    # every satellite a GPGSV sentence lists is in the frame, with its elevation and C/N0
+    lines = (BOATS / "gpsd_bundg_zeus_9.log").read_text(errors="replace").splitlines()
+    first_gsv = next(ln.split("*")[0].split(",") for ln in lines if ln.startswith("$GPGSV,") and ln.split(",")[7])
+    sv, el, cn0 = int(first_gsv[4]), float(first_gsv[5]), float(first_gsv[7])
+    rows = sats[sats["sv_id"] == f"G{sv:02d}"]
+    assert ((rows["elevation_deg"] == el) & (rows["cn0_dbhz"] == cn0)).any()
+    # the epochs' mean C/N0 in the fixes is the mean of the satellites' C/N0
+    mean = sats.groupby("t_s")["cn0_dbhz"].mean()
+    fixes = bundg.fixes.set_index("t_s")["cn0_mean_dbhz"]
+    common = mean.index.intersection(fixes.index)
+    assert len(common) > 100
+    assert np.allclose(mean[common], fixes[common], equal_nan=True)
+
+
+@pytest.mark.parametrize(
+    ("talker", "svid", "expected"),
+    [
+        ("GP", 5, "G05"), ("GP", 46, "S33"), ("GN", 70, "R06"), ("GL", 70, "R06"), ("GA", 11, "E11"),
+        ("GB", 21, "C21"), ("BD", 221, "C21"), ("GP", 195, "J03"), ("GQ", 2, "J02"), ("GP", 120, None),
+    ],
+)  # fmt: skip
+def test_nmea_satellite_numbers(talker: str, svid: int, expected: str | None) -> None:
+    from readers.nmea.assembly import nmea_sv_id
+
+    assert nmea_sv_id(talker, svid) == expected
