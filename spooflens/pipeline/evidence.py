@@ -27,6 +27,7 @@ class Evidence(StrEnum):
     KNOWN_STATION = "known_station"
     FLEET = "fleet"
     HEADING = "heading"
+    INTERFERENCE = "interference"
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,18 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
     ),
     Evidence.FLEET: EvidenceInfo("fleet", "other vehicles' receivers in the same area and time", True),
     Evidence.HEADING: EvidenceInfo("heading reference", "a gyrocompass or magnetic heading", True),
+    # what jams a receiver: never evidence of spoofing by itself (a jammer, a faulty transmitter nearby or
+    # the vehicle's own electronics drown the signals; nothing moves the fix), so it corroborates nothing
+    Evidence.INTERFERENCE: EvidenceInfo(
+        "radio-frequency interference",
+        "the receiver's signal levels (C/N0 of every satellite, AGC, noise and jamming indicators) against "
+        "their own baseline in the log and their documented ranges",
+        False,
+    ),
 }
+
+# classes that say what disturbed the signals, not that GNSS was moved: they make no spoofing incident
+NOT_SPOOFING: frozenset[Evidence] = frozenset({Evidence.INTERFERENCE})
 
 # The order evidence is listed in (report timeline strips, console): self-report first, strongest last.
 ORDER: tuple[Evidence, ...] = tuple(EVIDENCE)
@@ -80,7 +92,9 @@ def confidence(classes: set[Evidence]) -> str:
     high: an independent reference and at least one more class agree, or three classes agree;
     medium: one independent reference alone, or two GNSS-internal classes agree;
     low: a single GNSS-internal class (reported as an anomaly, never called spoofing).
+    Classes that are not spoofing evidence (`NOT_SPOOFING`) count for nothing here.
     """
+    classes = {c for c in classes if c not in NOT_SPOOFING}
     independent = {c for c in classes if EVIDENCE[c].independent}
     if (independent and len(classes) >= 2) or len(classes) >= 3:
         return "high"
