@@ -40,7 +40,6 @@ from rich.table import Table
 
 from spooflens.bench.corpus_logs import Corpus, CorpusLog, NotLog, discover, reader_format
 from spooflens.bench.corpus_runs import (
-    DAMAGED,
     INTERNAL,
     OUTCOMES,
     READ,
@@ -98,9 +97,15 @@ BATTERY: tuple[AttackKind, ...] = (
 
 @dataclass
 class Injected:
+    """An attack `inject` wrote into a copy of the log (or failed to, by an internal error or timeout)."""
+
     kind: str
     record: TaskRecord
     score: Score | None = None  # None when the copy was not made or not analysed
+
+    @property
+    def made(self) -> bool:
+        return self.record.inject is not None and self.record.inject.outcome == READ
 
 
 @dataclass
@@ -108,6 +113,7 @@ class LogResult:
     log: CorpusLog
     clean: TaskRecord | None = None
     injected: list[Injected] = field(default_factory=list)
+    not_attacked: str | None = None  # why no attack was run on this log at all
     not_injected: dict[str, str] = field(default_factory=dict)  # attack -> why it was not run
 
     @property
@@ -156,11 +162,11 @@ def attack_start(name: str, kind: str, span: tuple[float, float]) -> float:
 
 
 def plan_attacks(result: LogResult, limits: Limits, min_span_s: float) -> list[Task]:
-    """The battery's tasks for one log, and in `result.not_injected` each attack it cannot take and why."""
+    """The battery's tasks for one log; why the log takes none (`result.not_attacked`), or each attack
+    it cannot take and why (`result.not_injected`)."""
     log, summary = result.log, result.summary
-    why_not = _why_not_injectable(result)
-    if why_not is not None or summary is None:
-        result.not_injected = {k.name: why_not or "no clean analysis" for k in BATTERY}
+    result.not_attacked = _why_not_injectable(result)
+    if result.not_attacked is not None or summary is None:
         return []
     facts = log_facts(summary)
     tasks = []
@@ -321,7 +327,7 @@ def run_corpus(
             t0 = time.perf_counter()
             attack_tasks = [t for r in results for t in plan_attacks(r, limits, min_span_s)]
             for record in run_tasks(attack_tasks, jobs, scheduler, "injected pass", show):
-                by_name[record.name].injected.append(_scored(by_name[record.name], record))
+                take_injected(by_name[record.name], record)
             order = [k.name for k in BATTERY]
             for r in results:
                 r.injected.sort(key=lambda i: order.index(i.kind))
@@ -332,12 +338,18 @@ def run_corpus(
     return report
 
 
-def _scored(result: LogResult, record: TaskRecord) -> Injected:
+def take_injected(result: LogResult, record: TaskRecord) -> None:
+    """File an injected task's record under its log: an attack `inject` refuses (with its reason) was not
+    run; anything else was, and is scored when the copy was analysed."""
     assert record.attack is not None
-    if record.summary is None or record.truth is None:
-        return Injected(record.attack, record)
-    facts = log_facts(result.summary) if result.summary else None
-    return Injected(record.attack, record, score(record.truth, record.summary, facts.fix_rate_hz if facts else None))
+    if record.inject is not None and record.inject.outcome == REFUSED:
+        result.not_injected[record.attack] = f"inject refuses: {refusal_reason(record.inject.error, result.log.path)}"
+        return
+    scored = None
+    if record.summary is not None and record.truth is not None:
+        facts = log_facts(result.summary) if result.summary else None
+        scored = score(record.truth, record.summary, facts.fix_rate_hz if facts else None)
+    result.injected.append(Injected(record.attack, record, scored))
 
 
 # ---- tables ---------------------------------------------------------------------------------------------
@@ -352,7 +364,7 @@ class GroupRow:
     spoofing: int = 0  # SPOOFING verdicts on logs read
     false_spoofing: int = 0  # of them on clean-sky logs
     anomalies: int = 0  # one-class incidents on logs read
-    attacks: int = 0  # attacked copies analysed and scored
+    attacks: int = 0  # attacked copies made (a copy that could not be analysed is not caught)
     caught: int = 0
     delays: list[float] = field(default_factory=list)
     onset_known: int = 0
@@ -372,10 +384,10 @@ class GroupRow:
                 self.spoofing += 1
                 self.false_spoofing += r.log.clean
         for inj in r.injected:
-            if inj.score is None:
-                continue
-            self.attacks += 1
+            self.attacks += inj.made
             s = inj.score
+            if s is None:
+                continue
             self.caught += s.caught
             if s.caught and s.delay_s is not None:
                 self.delays.append(s.delay_s)
@@ -386,45 +398,60 @@ class GroupRow:
                 self.end_known += 1
                 self.to_end += s.to_end
 
-    def cells(self) -> list[str]:
-        def pct(n: int, d: int) -> str:
-            return f"{n}/{d} ({100 * n / d:.0f}%)" if d else "-"
+    @property
+    def median_delay_s(self) -> float | None:
+        return statistics.median(self.delays) if self.delays else None
 
-        per_hour = f" ({self.anomalies / self.hours:.1f}/h)" if self.hours > 0 else ""
-        return [
+    def to_json(self) -> dict[str, Any]:
+        def share(n: int, d: int) -> float | None:
+            return n / d if d else None
+
+        return {
+            "group": self.group,
+            "logs": self.logs,
+            **{o: self.outcomes[o] for o in OUTCOMES},
+            "hours_read": self.hours,
+            "spoofing_verdicts": self.spoofing,
+            "false_spoofing_clean_sky": self.false_spoofing,
+            "anomalies": self.anomalies,
+            "anomalies_per_hour": self.anomalies / self.hours if self.hours > 0 else None,
+            "attacks": self.attacks,
+            "caught": self.caught,
+            "caught_share": share(self.caught, self.attacks),
+            "median_delay_s": self.median_delay_s,
+            "onset_covered": self.onset_covered,
+            "onset_known": self.onset_known,
+            "to_end": self.to_end,
+            "end_known": self.end_known,
+        }
+
+    def cells(self, injected: bool) -> list[str]:
+        def of(n: int, d: int) -> str:
+            return f"{n}/{d}" if d else "-"
+
+        per_hour = f" ({self.anomalies / self.hours:.1f})" if self.hours > 0 else ""
+        clean = [
             self.group,
             str(self.logs),
-            str(self.outcomes[READ]),
-            str(self.outcomes[DAMAGED]),
-            str(self.outcomes[REFUSED]),
-            str(self.outcomes[INTERNAL]),
-            str(self.outcomes[TIMEOUT]),
+            *(str(self.outcomes[o]) for o in OUTCOMES),
             f"{self.hours:.2f}",
-            f"{self.spoofing} / {self.false_spoofing}",
+            f"{self.spoofing} ({self.false_spoofing})",
             f"{self.anomalies}{per_hour}",
-            pct(self.caught, self.attacks),
-            f"{statistics.median(self.delays):.1f}" if self.delays else "-",
-            pct(self.onset_covered, self.onset_known),
-            pct(self.to_end, self.end_known),
+        ]
+        if not injected:
+            return clean
+        delay = self.median_delay_s
+        return [
+            *clean,
+            of(self.caught, self.attacks),
+            "-" if delay is None else f"{delay:.1f}",
+            of(self.onset_covered, self.onset_known),
+            of(self.to_end, self.end_known),
         ]
 
 
-COLUMNS = (
-    "group",
-    "logs",
-    "read",
-    "damaged",
-    "refused",
-    "internal",
-    "timeout",
-    "hours read",
-    "SPOOFING / false",
-    "anomalies",
-    "attacks caught",
-    "median delay (s)",
-    "onset covered",
-    "to attack end",
-)
+CLEAN_COLUMNS = ("group", "logs", *OUTCOMES, "hours read", "SPOOFING (false)", "anomalies (/h)")
+INJECTED_COLUMNS = ("caught", "median delay s", "onset covered", "to attack end")
 
 
 def grouped(results: Iterable[LogResult], key: Callable[[LogResult], Iterable[str]]) -> list[GroupRow]:
@@ -468,17 +495,15 @@ def false_verdicts(results: Iterable[LogResult], clean_sky: bool = True) -> list
 
 
 def misses(results: Iterable[LogResult]) -> list[dict[str, Any]]:
-    """Every attack of the battery that was run and not caught: the log, the attack, the reason."""
+    """Every attacked copy whose attack was not caught: the log, the attack, the reason."""
     out = []
     for r in results:
         for inj in r.injected:
-            if inj.score is not None and inj.score.caught:
+            if not inj.made or (inj.score is not None and inj.score.caught):
                 continue
             rec = inj.record
             if inj.score is not None:
                 why = inj.score.reason
-            elif rec.inject is not None and rec.inject.outcome != READ:
-                why = f"inject {rec.inject.outcome}: {rec.inject.error}"
             else:
                 failed = rec.analysis
                 why = f"attacked copy {failed.outcome}: {failed.error}" if failed else "attacked copy not analysed"
@@ -507,17 +532,28 @@ def refusals(results: Iterable[LogResult]) -> dict[str, list[str]]:
 
 
 def failures(results: Iterable[LogResult]) -> list[dict[str, str]]:
-    """Internal errors and timeouts of the clean pass, each with its one-line error."""
-    return [
-        {"log": r.log.name, "format": r.log.format, "outcome": r.outcome, "error": r.clean.analysis.error}
-        for r in results
-        if r.outcome in (INTERNAL, TIMEOUT) and r.clean and r.clean.analysis
-    ]
+    """Internal errors and timeouts of either pass (`inject` or `analyze`), each with its one-line error."""
+    out = []
+    for r in results:
+        runs = [("clean", "analyze", r.clean.analysis if r.clean else None)]
+        for inj in r.injected:
+            runs += [(inj.record.attack_text or inj.kind, "inject", inj.record.inject)]
+            runs += [(inj.record.attack_text or inj.kind, "analyze", inj.record.analysis)]
+        for what, command, run in runs:
+            if run is not None and run.outcome in (INTERNAL, TIMEOUT):
+                row = {"log": r.log.name, "format": r.log.format, "run": what, "command": command}
+                out.append(row | {"outcome": run.outcome, "error": run.error})
+    return out
+
+
+def not_attacked(results: Iterable[LogResult]) -> Counter[str]:
+    """why -> logs on which no attack of the battery was run for that reason."""
+    return Counter(r.not_attacked for r in results if r.not_attacked is not None)
 
 
 def not_injected(results: Iterable[LogResult]) -> Counter[str]:
-    """(attack: why) -> logs, over the logs the clean pass read."""
-    return Counter(f"{why}" for r in results for why in r.not_injected.values())
+    """ "attack: why" -> logs that were attacked, but not with that attack."""
+    return Counter(f"{kind}: {why}" for r in results for kind, why in r.not_injected.items())
 
 
 def report_json(report: CorpusReport) -> dict[str, Any]:
@@ -534,6 +570,7 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
                     {"attack": i.kind, "run": i.record.to_json(), "score": asdict(i.score) if i.score else None}
                     for i in r.injected
                 ],
+                "not_attacked": r.not_attacked,
                 "not_injected": r.not_injected,
             }
         )
@@ -543,15 +580,13 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
         "battery": [asdict(k) for k in BATTERY],
         "seconds": report.seconds,
         "selection": report.selection,
-        "tables": {
-            name: [dict(zip(COLUMNS, row.cells(), strict=True)) for row in grouped(report.results, key)]
-            for name, key in GROUPINGS.items()
-        },
+        "tables": {name: [row.to_json() for row in grouped(report.results, key)] for name, key in GROUPINGS.items()},
         "false_spoofing_clean_sky": false_verdicts(report.results),
         "spoofing_not_clean_sky": false_verdicts(report.results, clean_sky=False),
         "internal_errors_and_timeouts": failures(report.results),
         "refusals": refusals(report.results),
         "misses": misses(report.results),
+        "not_attacked": dict(not_attacked(report.results)),
         "not_injected": dict(not_injected(report.results)),
         "not_logs": [{"path": n.name, "why": n.why} for n in report.not_logs],
         "logs": logs,
@@ -570,15 +605,20 @@ def _window(i: dict[str, Any]) -> str:
 def print_report(report: CorpusReport) -> None:
     out = console()
     results = report.results
+    columns = CLEAN_COLUMNS + (() if report.quick else INJECTED_COLUMNS)
     for name, key in GROUPINGS.items():
-        t = Table(*COLUMNS, title=f"By {name}")
+        t = Table(title=f"By {name}")
+        for column in columns:
+            t.add_column(column, no_wrap=column == "group")
         for row in grouped(results, key):
-            t.add_row(*row.cells())
+            t.add_row(*row.cells(not report.quick))
         out.print(t)
     out.print(
-        "[dim]SPOOFING / false: SPOOFING verdicts on logs read / of them on clean-sky logs (no "
-        "not-clean tag); anomalies: one-class incidents on logs read (per hour of them); attacks: "
-        "copies made by spooflens inject and analysed, on logs whose clean verdict is NO SPOOFING[/]"
+        "[dim]read / damaged / refused / internal error / timeout: how `analyze` ended on the log. SPOOFING "
+        "(false): SPOOFING verdicts on logs read (of them on clean-sky logs: no not-clean tag); anomalies: "
+        "one-class incidents on logs read (per hour of them). caught: attacks caught of the copies `inject` made "
+        "(logs whose clean verdict is NO SPOOFING); delay from the attack start to the alarm; onset covered: "
+        "the incident's onset interval holds the attack start; to attack end: the incident lasts as long.[/]"
     )
     false = false_verdicts(results)
     out.print(f"[bold]False SPOOFING verdicts on clean-sky logs: {len(false)}[/]")
@@ -600,7 +640,7 @@ def print_report(report: CorpusReport) -> None:
     broken = failures(results)
     out.print(f"[bold]Internal errors and timeouts: {len(broken)}[/]")
     for b in broken:
-        out.print(f"  {b['outcome']}: {b['log']} ({b['format']}): {b['error']}")
+        out.print(f"  {b['outcome']}: {b['log']} ({b['format']}), {b['run']}, {b['command']}: {b['error']}")
     out.print("[bold]Refusals by reason[/]")
     for reason, names in refusals(results).items():
         shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
@@ -610,9 +650,12 @@ def print_report(report: CorpusReport) -> None:
         out.print(f"[bold]Attacks missed: {len(missed)}[/]")
         for m in missed:
             out.print(f"  {m['log']} ({m['format']}), {m['attack']}: {m['reason']}")
-        out.print("[bold]Attacks not run, and why[/] (one count per log and attack)")
+        out.print("[bold]Logs not attacked, and why[/]")
+        for why, n in not_attacked(results).most_common():
+            out.print(f"  {n} log(s): {why}")
+        out.print("[bold]Attacks a log could not take, and why[/]")
         for why, n in not_injected(results).most_common():
-            out.print(f"  {n} x {why}")
+            out.print(f"  {n} log(s): {why}")
     else:
         out.print("--quick: the injected pass was skipped")
     if report.selection:
