@@ -177,8 +177,8 @@ def plan_attacks(result: LogResult, limits: Limits, min_span_s: float) -> list[T
         span = facts.observation_span_s if kind.needs == "raw observations" else facts.fix_span_s
         span = span or facts.observation_span_s
         if span is None or span[1] - span[0] < min_span_s:
-            length = "none" if span is None else f"{span[1] - span[0]:.0f} s"
-            result.not_injected[kind.name] = f"attacked data too short ({length} < {min_span_s:g} s)"
+            # the length itself is in the clean run's streams; the reason stays the same for every log
+            result.not_injected[kind.name] = f"its data spans less than {min_span_s:g} s"
             continue
         start = attack_start(log.name, kind.name, span)
         tasks.append(Task(str(log.path), log.name, limits, kind.name, kind.text, start, companions_of(log)))
@@ -279,6 +279,7 @@ class CorpusReport:
     timeout_s: float
     jobs: int
     seconds: dict[str, float] = field(default_factory=dict)  # warm-up, clean pass, injected pass, total
+    load: dict[str, float] = field(default_factory=dict)  # the machine's 1-min load average at the start and end
     selection: str = ""  # what --only / --limit left out
 
 
@@ -302,6 +303,7 @@ def run_corpus(
     """Discover the logs of `roots`, run the clean pass and (unless `quick`) the injected pass."""
     limits = limits or Limits(DEFAULT_TIMEOUT_S, DEFAULT_RSS_CAP_MB, 4 * DEFAULT_RSS_CAP_MB)
     t_start = time.perf_counter()
+    load_at_start = os.getloadavg()[0]
     corpus = Corpus()
     for root in roots:
         found = discover(root)
@@ -335,6 +337,8 @@ def run_corpus(
     finally:
         SANDBOXES.close()
     report.seconds["total"] = time.perf_counter() - t_start
+    # the times are the machine's as it was: others' work on a shared machine shows here
+    report.load = {"start": load_at_start, "end": os.getloadavg()[0]}
     return report
 
 
@@ -511,6 +515,27 @@ def misses(results: Iterable[LogResult]) -> list[dict[str, Any]]:
     return out
 
 
+def late_or_misplaced(results: Iterable[LogResult]) -> list[dict[str, Any]]:
+    """Catches whose incident's onset interval does not hold the attack start (an incident that began
+    long before the attack, having absorbed an earlier anomaly, is one)."""
+    out = []
+    for r in results:
+        for inj in r.injected:
+            s = inj.score
+            if s is None or not s.caught or s.onset_covered is not False:
+                continue
+            out.append(
+                {
+                    "log": r.log.name,
+                    "attack": inj.record.attack_text,
+                    "delay_s": s.delay_s,
+                    "onset_interval_s": s.onset_interval_s,
+                    "detectors": s.incident.get("detectors"),
+                }
+            )
+    return out
+
+
 def refusal_reason(error: str, log_path: Path) -> str:
     """A refusal's reason without the log's path, up to its first detail, so that alike refusals group:
     "spooflens: error: /x/a.log [nmea]: no usable NMEA sentence (...): ..." -> "no usable NMEA sentence"."""
@@ -579,6 +604,7 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
         "settings": {"quick": report.quick, "timeout_s": report.timeout_s, "jobs": report.jobs},
         "battery": [asdict(k) for k in BATTERY],
         "seconds": report.seconds,
+        "load_average": report.load,
         "selection": report.selection,
         "tables": {name: [row.to_json() for row in grouped(report.results, key)] for name, key in GROUPINGS.items()},
         "false_spoofing_clean_sky": false_verdicts(report.results),
@@ -586,6 +612,7 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
         "internal_errors_and_timeouts": failures(report.results),
         "refusals": refusals(report.results),
         "misses": misses(report.results),
+        "caught_with_onset_elsewhere": late_or_misplaced(report.results),
         "not_attacked": dict(not_attacked(report.results)),
         "not_injected": dict(not_injected(report.results)),
         "not_logs": [{"path": n.name, "why": n.why} for n in report.not_logs],
@@ -650,6 +677,15 @@ def print_report(report: CorpusReport) -> None:
         out.print(f"[bold]Attacks missed: {len(missed)}[/]")
         for m in missed:
             out.print(f"  {m['log']} ({m['format']}), {m['attack']}: {m['reason']}")
+        elsewhere = late_or_misplaced(results)
+        out.print(f"[bold]Caught, but the onset interval does not hold the attack start: {len(elsewhere)}[/]")
+        for c in elsewhere:
+            delay = "-" if c["delay_s"] is None else f"{c['delay_s']:.1f} s"
+            interval = c["onset_interval_s"] or []
+            out.print(
+                f"  {c['log']}, {c['attack']}: alarm {delay} from the attack start, onset interval "
+                f"{'-'.join(f'{v:.1f}' for v in interval) or '-'} s ({', '.join(c['detectors'] or [])})"
+            )
         out.print("[bold]Logs not attacked, and why[/]")
         for why, n in not_attacked(results).most_common():
             out.print(f"  {n} log(s): {why}")
@@ -662,7 +698,11 @@ def print_report(report: CorpusReport) -> None:
         out.print(f"selection: {report.selection}")
     out.print(f"not logs: {len(report.not_logs)} ({', '.join(sorted({n.why for n in report.not_logs}))})")
     times = ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items())
-    out.print(f"{len(results)} logs, {report.jobs} job(s), time limit {report.timeout_s:g} s per command: {times}")
+    load = ", ".join(f"{k} {v:.1f}" for k, v in report.load.items())
+    out.print(
+        f"{len(results)} logs, {report.jobs} job(s), time limit {report.timeout_s:g} s per command: {times} "
+        f"(load average at {load})"
+    )
 
 
 @click.command("corpus")

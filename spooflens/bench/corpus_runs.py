@@ -83,6 +83,8 @@ def command_result(run: RunResult) -> CommandResult:
         return CommandResult(INTERNAL, run.exit_code, f"{what}{': ' + error if error else ''}", run.seconds)
     documented = {EXIT_OK: READ, EXIT_DAMAGED: DAMAGED, EXIT_INPUT: REFUSED}
     outcome = documented.get(run.exit_code, INTERNAL) if run.exit_code is not None else INTERNAL
+    if outcome == INTERNAL and not error:
+        error = f"exit code {run.exit_code} and nothing on stderr"
     return CommandResult(outcome, run.exit_code, "" if outcome == READ else error, run.seconds)
 
 
