@@ -281,6 +281,7 @@ class CorpusReport:
     seconds: dict[str, float] = field(default_factory=dict)  # warm-up, clean pass, injected pass, total
     load: dict[str, float] = field(default_factory=dict)  # the machine's 1-min load average at the start and end
     selection: str = ""  # what --only / --limit left out
+    scheduler: str | None = None
 
 
 def select(logs: list[CorpusLog], only: tuple[str, ...], limit: int | None) -> list[CorpusLog]:
@@ -312,6 +313,7 @@ def run_corpus(
     chosen = select(corpus.logs, only, limit)
     results = [LogResult(c) for c in chosen]
     report = CorpusReport([str(r) for r in roots], results, corpus.not_logs, quick, limits.timeout_s, jobs)
+    report.scheduler = scheduler
     if len(chosen) < len(corpus.logs):
         report.selection = f"{len(chosen)} of {len(corpus.logs)} logs (--only {' '.join(only) or '-'}, --limit {limit})"
     # as `spooflens batch` does: the jobs fill the cores, a second thread per analysis would only contend
@@ -364,10 +366,12 @@ class GroupRow:
     group: str
     logs: int = 0
     outcomes: Counter[str] = field(default_factory=Counter)
-    hours: float = 0.0  # of the logs read
     spoofing: int = 0  # SPOOFING verdicts on logs read
-    false_spoofing: int = 0  # of them on clean-sky logs
-    anomalies: int = 0  # one-class incidents on logs read
+    # on the clean-sky logs read (no not-clean tag): their hours, the SPOOFING verdicts (all false), and
+    # their one-class incidents (anomalies noted, not confirmed)
+    hours: float = 0.0
+    false_spoofing: int = 0
+    anomalies: int = 0
     attacks: int = 0  # attacked copies made (a copy that could not be analysed is not caught)
     caught: int = 0
     delays: list[float] = field(default_factory=list)
@@ -381,12 +385,11 @@ class GroupRow:
         self.outcomes[r.outcome] += 1
         summary = r.summary
         if summary is not None:
-            self.hours += hours(summary)
-            found = incidents(summary)
-            self.anomalies += sum(not is_spoofing(i) for i in found)
-            if spoofed(summary):
-                self.spoofing += 1
-                self.false_spoofing += r.log.clean
+            self.spoofing += spoofed(summary)
+            if r.log.clean:
+                self.hours += hours(summary)
+                self.anomalies += sum(not is_spoofing(i) for i in incidents(summary))
+                self.false_spoofing += spoofed(summary)
         for inj in r.injected:
             self.attacks += inj.made
             s = inj.score
@@ -414,10 +417,10 @@ class GroupRow:
             "group": self.group,
             "logs": self.logs,
             **{o: self.outcomes[o] for o in OUTCOMES},
-            "hours_read": self.hours,
             "spoofing_verdicts": self.spoofing,
+            "clean_sky_hours_read": self.hours,
             "false_spoofing_clean_sky": self.false_spoofing,
-            "anomalies": self.anomalies,
+            "anomalies_clean_sky": self.anomalies,
             "anomalies_per_hour": self.anomalies / self.hours if self.hours > 0 else None,
             "attacks": self.attacks,
             "caught": self.caught,
@@ -439,7 +442,7 @@ class GroupRow:
             str(self.logs),
             *(str(self.outcomes[o]) for o in OUTCOMES),
             f"{self.hours:.2f}",
-            f"{self.spoofing} ({self.false_spoofing})",
+            str(self.false_spoofing),
             f"{self.anomalies}{per_hour}",
         ]
         if not injected:
@@ -454,7 +457,7 @@ class GroupRow:
         ]
 
 
-CLEAN_COLUMNS = ("group", "logs", *OUTCOMES, "hours read", "SPOOFING (false)", "anomalies (/h)")
+CLEAN_COLUMNS = ("group", "logs", *OUTCOMES, "clean-sky hours", "false SPOOFING", "anomalies (/h)")
 INJECTED_COLUMNS = ("caught", "median delay s", "onset covered", "to attack end")
 
 
@@ -601,7 +604,12 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
         )
     return {
         "roots": report.roots,
-        "settings": {"quick": report.quick, "timeout_s": report.timeout_s, "jobs": report.jobs},
+        "settings": {
+            "quick": report.quick,
+            "timeout_s": report.timeout_s,
+            "jobs": report.jobs,
+            "scheduler": report.scheduler,
+        },
         "battery": [asdict(k) for k in BATTERY],
         "seconds": report.seconds,
         "load_average": report.load,
@@ -641,9 +649,9 @@ def print_report(report: CorpusReport) -> None:
             t.add_row(*row.cells(not report.quick))
         out.print(t)
     out.print(
-        "[dim]read / damaged / refused / internal error / timeout: how `analyze` ended on the log. SPOOFING "
-        "(false): SPOOFING verdicts on logs read (of them on clean-sky logs: no not-clean tag); anomalies: "
-        "one-class incidents on logs read (per hour of them). caught: attacks caught of the copies `inject` made "
+        "[dim]read / damaged / refused / internal error / timeout: how `analyze` ended on the log. clean-sky "
+        "hours, false SPOOFING, anomalies: on the clean-sky logs read (no not-clean tag): their hours, their "
+        "SPOOFING verdicts, their one-class incidents (per hour). caught: attacks caught of the copies `inject` made "
         "(logs whose clean verdict is NO SPOOFING); delay from the attack start to the alarm; onset covered: "
         "the incident's onset interval holds the attack start; to attack end: the incident lasts as long.[/]"
     )
@@ -699,9 +707,9 @@ def print_report(report: CorpusReport) -> None:
     out.print(f"not logs: {len(report.not_logs)} ({', '.join(sorted({n.why for n in report.not_logs}))})")
     times = ", ".join(f"{k} {v:.0f} s" for k, v in report.seconds.items())
     load = ", ".join(f"{k} {v:.1f}" for k, v in report.load.items())
+    where = f"on the dask cluster at {report.scheduler}" if report.scheduler else f"{report.jobs} job(s)"
     out.print(
-        f"{len(results)} logs, {report.jobs} job(s), time limit {report.timeout_s:g} s per command: {times} "
-        f"(load average at {load})"
+        f"{len(results)} logs, {where}, time limit {report.timeout_s:g} s per command: {times} (load average at {load})"
     )
 
 

@@ -238,7 +238,15 @@ def hours(summary: dict[str, Any]) -> float:
 
 def verdict_extras(summary: dict[str, Any]) -> dict[str, Any]:
     """What a verdict holds beyond the fields this bench reads (e.g. `events` added later): passed on."""
-    known = {"spoofed", "headline", "incidents", "detectors_counted", "detectors_advisory", "detectors_not_run"}
+    known = {
+        "spoofed",
+        "headline",
+        "incidents",
+        "detectors_counted",
+        "detectors_advisory",
+        "detectors_not_run",
+        "findings",
+    }
     out: dict[str, Any] = {}
     for k, seg in enumerate(segments(summary), start=1):
         extra = {key: v for key, v in (seg.get("verdict") or {}).items() if key not in known and v}
