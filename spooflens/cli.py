@@ -334,6 +334,7 @@ def simulate(
         "e2e": "spooflens.bench.e2e_bench:command",
         "batch": "spooflens.bench.batch_bench:command",
         "fuzz": "spooflens.bench.fuzz:command",
+        "corpus": "spooflens.bench.corpus_bench:command",
     },
 )
 def bench() -> None:

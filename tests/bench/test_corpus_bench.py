@@ -1,0 +1,190 @@
+"""`spooflens bench corpus` on a tiny fake corpus: which paths are logs, how each command's end is
+classified, how an attacked copy is scored, and the tables and lists the bench prints."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from conftest import SAMPLE_LOGS
+
+from spooflens.bench.corpus_bench import (
+    BATTERY,
+    attack_start,
+    false_verdicts,
+    grouped,
+    print_report,
+    refusal_reason,
+    refusals,
+    report_json,
+    run_corpus,
+)
+from spooflens.bench.corpus_logs import discover, is_truth_of_another, tags_of
+from spooflens.bench.corpus_runs import DAMAGED, INTERNAL, READ, REFUSED, TIMEOUT, command_result, score
+from spooflens.bench.sandbox import RunResult
+
+HEADER = "path\tformat\tvehicle\tduration_s\tsource_repo\tcommit\tsource_path\tlicence\tnotes\n"
+
+
+def _fake_corpus(root: Path) -> Path:
+    """real/corpus/ with a manifest (a clean drive, a spoofed flight listed as clean, a garbage file tagged
+    SYNTHETIC, the drive's truth), and real/extra/ beside it, described by real/README.md's table."""
+    corpus = root / "corpus" / "logs"
+    corpus.mkdir(parents=True)
+    shutil.copyfile(SAMPLE_LOGS / "ground_ros2.mcap", corpus / "drive.mcap")
+    shutil.copyfile(SAMPLE_LOGS / "spoofed_flight.mcap", corpus / "flight.mcap")
+    (corpus / "garbage.bin").write_bytes(bytes(range(256)) * 8)
+    (corpus / "drive_truth.csv").write_text("t_s,lat_deg,lon_deg\n0,1,2\n")
+    rows = [
+        "logs/drive.mcap\tmcap\tcar\t120\tr\tc\ts\tMIT\ta drive; LOSS-OF-FIX near the end\n",
+        "logs/flight.mcap\tmcap\tfixed-wing\t240\tr\tc\ts\tMIT\ta flight\n",
+        "logs/garbage.bin\tother\tunknown\t\tr\tc\ts\tMIT\tSYNTHETIC: random bytes, NO-GNSS-RAW\n",
+        "logs/drive_truth.csv\tother\tcar\t\tr\tc\ts\tMIT\tground truth for drive.mcap\n",
+    ]
+    (root / "corpus" / "MANIFEST.tsv").write_text(HEADER + "".join(rows))
+    (root / "extra").mkdir()
+    shutil.copyfile(SAMPLE_LOGS / "ground_ros1.mcap", root / "extra" / "car.mcap")
+    (root / "README.md").write_text("| folder | what |\n|---|---|\n| `extra/` | a simulated car, ROS1 MCAP |\n")
+    return root
+
+
+def test_manifest_rows_are_logs_and_the_rest_is_sniffed(tmp_path: Path) -> None:
+    corpus = discover(_fake_corpus(tmp_path / "real"))
+    logs = {c.name: c for c in corpus.logs}
+    assert sorted(logs) == [
+        "corpus/logs/drive.mcap",
+        "corpus/logs/flight.mcap",
+        "corpus/logs/garbage.bin",
+        "extra/car.mcap",
+    ]
+    drive, garbage, car = logs["corpus/logs/drive.mcap"], logs["corpus/logs/garbage.bin"], logs["extra/car.mcap"]
+    assert drive.tags == ("LOSS-OF-FIX",) and drive.clean and drive.vehicle == "car" and drive.reader == "mcap"
+    assert garbage.tags == ("SYNTHETIC",) and not garbage.clean and garbage.reader is None
+    assert not car.listed and car.vehicle == "unknown" and car.notes == "a simulated car, ROS1 MCAP"
+    why = {n.name: n.why for n in corpus.not_logs}
+    assert "ground truth" in why["corpus/logs/drive_truth.csv"] and "README.md" in why
+
+
+def test_tags_are_whole_tokens_and_truth_rows_are_told_apart() -> None:
+    assert tags_of("RECEIVER-RESET/COLD-START; NO-GNSS-RAW, EDITED: x, LEAP-SECONDS") == (
+        "RECEIVER-RESET",
+        "COLD-START",
+        "EDITED",
+        "LEAP-SECONDS",
+    )
+    assert tags_of("ZED-F9P, NAV-PVT") == ()
+    assert is_truth_of_another("NovAtel SPAN ground truth (csv) for x.txt")
+    assert is_truth_of_another("reference trajectory (GGA only) for the drive; use as ground truth")
+    assert not is_truth_of_another("Pixel 4 GnssLogger in a car; truth in x_ground_truth.csv")
+    assert not is_truth_of_another("u-blox NMEA; reference truth for the same drive in y.gga")
+
+
+@pytest.mark.parametrize(
+    ("run", "outcome"),
+    [
+        (RunResult(0, None, 100.0, 1.0, ""), READ),
+        (RunResult(3, None, 100.0, 1.0, "spooflens: x: input damaged"), DAMAGED),
+        (RunResult(2, None, 100.0, 1.0, "spooflens: error: x: unknown format"), REFUSED),
+        (RunResult(1, None, 100.0, 1.0, "spooflens: internal error: KeyError"), INTERNAL),
+        (RunResult(4, None, 100.0, 1.0, ""), INTERNAL),  # --fail-on-spoof is never given: 4 is unexpected
+        (RunResult(None, "signal 11", 100.0, 1.0, ""), INTERNAL),
+        (RunResult(None, "rss", 9000.0, 1.0, ""), INTERNAL),
+        (RunResult(None, "timeout", 100.0, 120.0, ""), TIMEOUT),
+    ],
+)
+def test_each_way_a_command_ends_is_classified(run: RunResult, outcome: str) -> None:
+    result = command_result(run)
+    assert result.outcome == outcome
+    assert (result.error == "") == (outcome == READ)
+
+
+def test_a_refusal_reason_loses_the_path_and_its_details() -> None:
+    log = Path("/r/corpus/a.log")
+    assert refusal_reason("spooflens: error: /r/corpus/a.log [nmea]: no usable NMEA sentence (x): GP", log) == (
+        "no usable NMEA sentence"
+    )
+    assert refusal_reason("spooflens: error: /r/corpus/a.log: unknown format (starts with b'#'); supported", log) == (
+        "unknown format"
+    )
+
+
+def _summary(*incidents: dict, spoofed: bool) -> dict:
+    t0 = 1_000_000_000_000
+    return {"t0_abs_ns": t0, "duration_s": 100.0, "verdict": {"spoofed": spoofed, "incidents": list(incidents)}}
+
+
+def _incident(onset: float, alarm: float, end: float, spoofing: bool = True, **extra: object) -> dict:
+    t0 = 1_000_000_000_000
+    return {
+        "spoofing": spoofing,
+        "confidence": "high" if spoofing else "low",
+        "onset_s": onset,
+        "start_s": alarm,
+        "end_s": end,
+        "start_abs_ns": t0 + int(alarm * 1e9),
+        "end_abs_ns": t0 + int(end * 1e9),
+        "onset_interval_s": [onset - 1.0, onset + 1.0],
+        "evidence": ["gnss_only"],
+        "detectors": ["gnss_consistency"],
+        **extra,
+    }
+
+
+def test_an_attack_is_caught_by_a_spoofing_incident_from_its_start() -> None:
+    truth = {"t0_abs_ns": 1_000_000_000_000, "start_s": 50.0, "end_s": 100.0}
+    early_false = _incident(5.0, 6.0, 8.0)
+    hit = _incident(50.5, 52.0, 100.0, ongoing_at_end=True)
+    s = score(truth, _summary(early_false, hit, spoofed=True), fix_rate_hz=1.0)
+    assert s.caught and s.delay_s == pytest.approx(2.0) and s.onset_covered and s.to_end
+    assert s.end_error_s == pytest.approx(0.0) and s.incident["start_s"] == 52.0
+    late_onset = _incident(60.0, 61.0, 70.0)
+    s = score(truth, _summary(late_onset, spoofed=True), fix_rate_hz=1.0)
+    assert s.caught and s.onset_covered is False and s.to_end is False and s.end_error_s == pytest.approx(-30.0)
+
+
+def test_a_miss_says_why() -> None:
+    truth = {"t0_abs_ns": 1_000_000_000_000, "start_s": 50.0, "end_s": 100.0}
+    assert score(truth, _summary(spoofed=False), 1.0).reason == "no alarm at or after the attack start"
+    anomaly = _incident(50.0, 51.0, 60.0, spoofing=False)
+    missed = score(truth, _summary(anomaly, spoofed=False), 1.0)
+    assert (
+        not missed.caught
+        and missed.reason.startswith("only one-class anomalies")
+        and "gnss_consistency" in missed.reason
+    )
+    before = _incident(5.0, 6.0, 8.0)
+    assert score(truth, _summary(before, spoofed=True), 1.0).reason == "spoofing incident only before the attack"
+
+
+def test_attacks_start_in_the_middle_third_the_same_every_run() -> None:
+    starts = [attack_start(f"log{k}", kind.name, (10.0, 310.0)) for k in range(20) for kind in BATTERY]
+    assert all(110.0 <= s <= 210.0 for s in starts) and len(set(starts)) > 50
+    assert attack_start("a", "ramp 2 m/s", (0.0, 90.0)) == attack_start("a", "ramp 2 m/s", (0.0, 90.0))
+
+
+def test_the_bench_on_a_tiny_corpus(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Both passes through the CLI on the manifest's logs: the drive read and attacked, the flight a
+    SPOOFING verdict on a log listed as clean, the garbage refused; the tables and lists follow."""
+    root = _fake_corpus(tmp_path / "real")
+    report = run_corpus([root], jobs=1, only=("corpus/*",))
+    by_name = {r.log.name: r for r in report.results}
+    drive, flight, garbage = (by_name[f"corpus/logs/{n}"] for n in ("drive.mcap", "flight.mcap", "garbage.bin"))
+    assert (drive.outcome, flight.outcome, garbage.outcome) == (READ, READ, REFUSED)
+    assert [f["log"] for f in false_verdicts(report.results)] == ["corpus/logs/flight.mcap"]
+    assert refusals(report.results) == {"unknown format": ["corpus/logs/garbage.bin"]}
+    assert flight.not_attacked == "clean verdict already SPOOFING: a catch cannot be shown"
+    assert garbage.not_attacked == "clean pass: refused"
+    # one receiver with logged fixes and no raw observations: the fix-level kinds only
+    assert [i.kind for i in drive.injected] == ["ramp 2 m/s", "step 50 m", "capture"]
+    assert set(drive.not_injected) == {"counterfeit satellite", "single antenna"}
+    assert all(i.made and i.score is not None for i in drive.injected)
+    assert any(i.score is not None and i.score.caught for i in drive.injected)
+    by_tag = {row.group: row for row in grouped(report.results, lambda r: list(r.log.tags) or ["(no tag)"])}
+    assert by_tag["LOSS-OF-FIX"].attacks == 3 and by_tag["SYNTHETIC"].outcomes[REFUSED] == 1
+    assert by_tag["all"].logs == 3 and by_tag["all"].false_spoofing == 1
+    json.dumps(report_json(report), default=str)
+    print_report(report)
+    printed = capsys.readouterr().out
+    assert "False SPOOFING verdicts on clean-sky logs: 1" in printed and "1 x unknown format" in printed
