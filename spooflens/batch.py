@@ -73,10 +73,10 @@ def largest_first(jobs: list[LogJob]) -> list[LogJob]:
     """The order the tasks are given to the workers: the largest logs first (an analysis takes about the
     time its log's size says), so the last tasks to finish are short ones and the workers end together
     rather than one waiting on a long log."""
-    return sorted(jobs, key=lambda j: _size(j.path), reverse=True)
+    return sorted(jobs, key=lambda j: log_size(j.path), reverse=True)
 
 
-def _size(path: Path) -> int:
+def log_size(path: Path) -> int:
     """Bytes of a log (a directory: of its files)."""
     if path.is_file():
         return path.stat().st_size

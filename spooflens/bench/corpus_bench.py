@@ -62,7 +62,7 @@ from spooflens.bench.corpus_runs import (
 from spooflens.bench.fuzz import REAL_LOGS
 from spooflens.bench.realworld_bench import ATTACKS
 from spooflens.bench.sandbox import Limits
-from spooflens.console import console, err_console, progress, show_progress
+from spooflens.output.console import console, err_console, progress, show_progress
 
 DEFAULT_TIMEOUT_S = 120.0
 DEFAULT_RSS_CAP_MB = 6144.0
@@ -134,9 +134,9 @@ def default_root() -> Path:
 
 
 def log_bytes(path: Path) -> int:
-    from spooflens.batch import _size
+    from spooflens.batch import log_size
 
-    return _size(path)
+    return log_size(path)
 
 
 def companions_of(log: CorpusLog) -> tuple[str, ...]:

@@ -101,7 +101,7 @@ class SandboxPool:
 
     def start(self) -> Sandbox:
         """A new sandbox, warmed by analysing the sample flight (every kernel loaded before it forks)."""
-        from spooflens.warmup import SAMPLES
+        from spooflens.compile.warmup import SAMPLES
 
         with tempfile.TemporaryDirectory(prefix="spooflens-corpus-warm-") as tmp:
             flight = SAMPLES / "spoofed_flight.mcap"

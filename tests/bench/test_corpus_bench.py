@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from conftest import SAMPLE_LOGS
+from paths import SAMPLE_LOGS
 
 from spooflens.bench.corpus_bench import (
     BATTERY,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from conftest import REAL
+from paths import REAL
 
 from spooflens.bench.corpus_bench import LogResult, run_corpus
 from spooflens.bench.corpus_runs import DAMAGED, READ, REFUSED, spoofed
