@@ -33,8 +33,8 @@ from spooflens.fleet.offsets import (
 )
 from spooflens.output.console import console, progress, show_progress
 from spooflens.output.recording import APP_ID, COLOURS, entity
-from spooflens.pipeline.run import last_fix_s
-from spooflens.pipeline.verdict import Verdict, decide
+from spooflens.pipeline.registry import AnalysisContext
+from spooflens.pipeline.verdict import Verdict
 
 PALETTE = ((230, 60, 50), (60, 120, 230), (40, 180, 90), (200, 160, 40), (150, 80, 200), (20, 180, 200))
 
@@ -47,6 +47,7 @@ class Vehicle:
     verdict: Verdict
     offsets: VehicleOffsets | None
     reason: str
+    context: AnalysisContext  # what its results were made from: its verdict is assessed again with the fleet's
 
 
 def _name(path: Path, taken: set[str]) -> str:
@@ -66,7 +67,7 @@ def run_fleet(
     from spooflens.fleet.detector import NAME, fleet_result
     from spooflens.gnss.solved_fixes import with_solved_fixes
     from spooflens.pipeline.registry import AnalyzeOptions
-    from spooflens.pipeline.run import analyze_table
+    from spooflens.pipeline.run import analyze_table, assess
 
     notes: list[str] = []
     vehicles: list[Vehicle] = []
@@ -78,12 +79,13 @@ def run_fleet(
         except SpooflensError as err:
             notes.append(f"{path}: not read ({err}); left out")
             continue
-        analysis = analyze_table(table, AnalyzeOptions())
+        analysis = analyze_table(table, AnalyzeOptions(), keep_context=True)
+        assert analysis.context is not None  # asked for
         name = _name(path, taken)
-        off, reason = vehicle_offsets(name, table, analysis.results, opts)
+        off, reason = vehicle_offsets(name, table, analysis.results, analysis.verdict, opts)
         if off is None:
             notes.append(f"{name}: {reason}; left out of the homology")
-        vehicles.append(Vehicle(name, table, analysis.results, analysis.verdict, off, reason))
+        vehicles.append(Vehicle(name, table, analysis.results, analysis.verdict, off, reason, analysis.context))
     report("analysing logs", len(logs), len(logs))
     with_offsets = [v.offsets for v in vehicles if v.offsets is not None]
     overlapping, overlap_notes = overlap_groups(with_offsets)
@@ -98,7 +100,7 @@ def run_fleet(
             v.table, v.offsets if v.name in members else None, why, fh if v.name in members else None, opts
         )
         v.results = [res if r.name == NAME else r for r in v.results]
-        v.verdict = decide(v.results, log_end_s=last_fix_s(v.table))
+        v.verdict = assess(v.context, v.results)
     return vehicles, fh, notes
 
 

@@ -22,7 +22,9 @@ from spooflens.detectors.base import DetectorResult, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.fleet.homology import homology_index, null_quantile
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
+from spooflens.navigation.product import INS_SMOOTHED, NAVIGATION
 from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.verdict import Verdict
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -83,9 +85,10 @@ def _offsets(fix_llh: FloatArray, ref_llh: FloatArray) -> FloatArray:
 
 
 def vehicle_offsets(
-    name: str, table: EpochTable, results: list[DetectorResult], opts: FleetOptions
+    name: str, table: EpochTable, results: list[DetectorResult], verdict: Verdict, opts: FleetOptions
 ) -> tuple[VehicleOffsets | None, str]:
-    """The vehicle's offsets and what they are measured against, or (None, why there are none)."""
+    """The vehicle's offsets and what they are measured against, or (None, why there are none); during a
+    confirmed incident the reference is the verdict's track reconstructed with GNSS left out."""
     receivers = table.receivers()
     if not receivers:
         return None, "no GNSS fixes"
@@ -97,7 +100,7 @@ def vehicle_offsets(
         return None, f"no absolute clock ({table.time_reference}): cannot be placed in time with the others"
     fix = fx[["lat_deg", "lon_deg", "height_m"]].to_numpy(float)
     period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    ref, how = _reference(table, rid, t, fix, results, opts, opts.max_gap_factor * period)
+    ref, how = _reference(table, rid, t, fix, results, verdict.reconstructed, opts, opts.max_gap_factor * period)
     if ref is None:
         return None, how
     ok = np.isfinite(ref).all(axis=1)
@@ -113,6 +116,7 @@ def _reference(
     t: FloatArray,
     fix: FloatArray,
     results: list[DetectorResult],
+    reconstructed: tuple[Track, ...],
     opts: FleetOptions,
     max_gap_s: float,
 ) -> tuple[FloatArray | None, str]:
@@ -125,10 +129,10 @@ def _reference(
         if near.mean() >= 0.5:
             lat, lon, h = ecef_to_geodetic(site)
             return np.tile([float(lat), float(lon), float(h)], (len(t), 1)), "surveyed site (RINEX APPROX POSITION)"
-    nav = next((r for r in results if r.name == "navigation" and r.ran), None)
+    nav = next((r for r in results if r.name == NAVIGATION and r.ran), None)
     if nav is not None and nav.tracks:
-        rec = next((tr for tr in nav.tracks if "reconstructed" in tr.name), None)
-        base = next((tr for tr in nav.tracks if tr.name == "ins_smoothed"), nav.tracks[0])
+        rec = reconstructed[0] if reconstructed else None
+        base = next((tr for tr in nav.tracks if tr.name == INS_SMOOTHED), nav.tracks[0])
         ref = _track_at(base, t, max_gap_s)
         how = "INS (smoothed GNSS/INS)"
         if rec is not None:

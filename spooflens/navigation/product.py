@@ -31,6 +31,7 @@ from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, AnalyzeOp
 from spooflens.threads import core_idle, started
 
 NAVIGATION = "navigation"  # the analysis, its result and the solution it shares with the others
+INS_SMOOTHED = "ins_smoothed"  # the smoothed GNSS/INS track it returns
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
 # runs (coasts, reconstructions) make the others again from the last kept (150 MB less per hour of 10 Hz
@@ -140,7 +141,7 @@ def _result(nav: Navigation) -> list[DetectorResult]:
             ],
             tracks=[
                 Track(
-                    "ins_smoothed",
+                    INS_SMOOTHED,
                     sm.track_t,
                     np.degrees(sm.track_llh[:, 0]),
                     np.degrees(sm.track_llh[:, 1]),

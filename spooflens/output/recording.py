@@ -32,6 +32,7 @@ from spooflens.detectors.base import Alarm, DetectorResult, Histogram, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
 from spooflens.inventory import quality_columns
+from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.evidence import ORDER, Evidence, label
 from spooflens.pipeline.verdict import Verdict
 
@@ -422,6 +423,8 @@ def write_recording(
             ev_t += t
             ev_text += text
             ev_level += level
+        for tr in verdict.reconstructed if verdict is not None else ():
+            _track(w, NAVIGATION, tr)  # beside the navigation's own tracks, the INS the verdict coasted
         for line_t, line_text, line_level in verdict_lines:
             ev_t.append(line_t)
             ev_text.append(line_text)

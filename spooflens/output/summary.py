@@ -53,10 +53,12 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
     return out
 
 
-def _departure(table: EpochTable, results: list[DetectorResult], inc: Incident) -> list[dict[str, Any]]:
+def _departure(
+    table: EpochTable, results: list[DetectorResult], verdict: Verdict, inc: Incident
+) -> list[dict[str, Any]]:
     """How far GNSS went from the reconstructed track: peak and at the end, per receiver."""
     out = []
-    for d in gnss_departure(table, results, inc):
+    for d in gnss_departure(table, results, verdict, inc):
         item: dict[str, Any] = {"receiver_id": d.receiver_id, "track": d.track, "peak_m": round(d.peak_m, 2)}
         item |= _time(table, "peak", d.peak_s) | {"end_m": round(d.end_m, 2)} | _time(table, "at_end", d.end_s)
         out.append(item)
@@ -123,7 +125,7 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
     deciding = verdict.deciding_incident
     for inc, d in zip(verdict.incidents, incidents, strict=True):
         if inc is deciding and inc.is_spoofing:
-            d["gnss_departure"] = _departure(table, results, inc)
+            d["gnss_departure"] = _departure(table, results, verdict, inc)
     summary = {
         "spooflens_version": __version__,
         "file": str(table.source),
@@ -144,6 +146,8 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
             "detectors_advisory": list(verdict.detectors_advisory),
             "detectors_not_run": list(verdict.detectors_not_run),
             "findings": [_finding(table, f) for f in verdict.findings],
+            "coasting_checks": list(verdict.coasting_checks),
+            "reconstructed_tracks": [tr.name for tr in verdict.reconstructed],
         },
         "analyses": [_analysis(table, r) for r in results],
     }

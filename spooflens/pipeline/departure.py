@@ -1,7 +1,7 @@
 """How far GNSS went from where the vehicle really was during an incident.
 
-"Really was" is the reconstructed track: the INS solution with the spoofed GNSS left out (any track an
-analysis returns whose name starts with `reconstructed`). The distance is horizontal, between each
+"Really was" is the reconstructed track: the INS solution with the spoofed GNSS left out (the verdict's,
+then any track an analysis returns whose name starts with `reconstructed`). The distance is horizontal, between each
 reported fix inside the incident (onset to end) and the reconstructed position interpolated at the
 fix's time; the peak and the value at the incident's end (the last fix inside it) are what an
 operator asks first ("how far off did the navigation system think it was").
@@ -17,7 +17,7 @@ import numpy as np
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
-from spooflens.pipeline.verdict import Incident
+from spooflens.pipeline.verdict import Incident, Verdict
 
 RECONSTRUCTED = "reconstructed"
 
@@ -32,11 +32,11 @@ class Departure:
     end_s: float
 
 
-def reconstructed_tracks(results: Sequence[DetectorResult]) -> list[Track]:
-    """Every reconstructed track, the INS's first (`navigation`: the IMU with the log's own noise, where a
+def reconstructed_tracks(results: Sequence[DetectorResult], verdict: Verdict) -> list[Track]:
+    """Every reconstructed track, the INS's first (the verdict's: the IMU with the log's own noise, where a
     vessel's dead reckoning from its compass and log, `heading_reference`, carries an unknown current)."""
-    ordered = sorted(results, key=lambda r: r.name != "navigation")
-    return [tr for r in ordered if r.ran for tr in r.tracks if tr.name.startswith(RECONSTRUCTED)]
+    found = [tr for r in results if r.ran for tr in r.tracks if tr.name.startswith(RECONSTRUCTED)]
+    return [*verdict.reconstructed, *found]
 
 
 def _horizontal_gap(table: EpochTable, rid: str, track: Track, start_s: float, end_s: float) -> Departure | None:
@@ -62,10 +62,12 @@ def _horizontal_gap(table: EpochTable, rid: str, track: Track, start_s: float, e
     return Departure(rid, track.name, float(gap[k]), float(t[k]), float(gap[-1]), float(t[-1]))
 
 
-def gnss_departure(table: EpochTable, results: Sequence[DetectorResult], incident: Incident) -> list[Departure]:
+def gnss_departure(
+    table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict, incident: Incident
+) -> list[Departure]:
     """Per receiver of the incident (every receiver when it names none), against the first reconstructed
-    track; empty when no analysis reconstructed a track or no fix falls inside the incident."""
-    tracks = reconstructed_tracks(results)
+    track; empty when no track was reconstructed or no fix falls inside the incident."""
+    tracks = reconstructed_tracks(results, verdict)
     if not tracks or not incident.is_spoofing:
         return []
     receivers = list(incident.receivers) or table.receivers()

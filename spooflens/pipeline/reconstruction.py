@@ -23,13 +23,15 @@ drag), smoothed, so GNSS after a finished attack ties the gap down.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Track
+from spooflens.detectors.base import DetectorResult, Track
+from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.errors import SpooflensError
 from spooflens.estimation.quantiles import chi2_isf
 from spooflens.navigation.loosely_coupled import (
@@ -39,7 +41,7 @@ from spooflens.navigation.loosely_coupled import (
     nis_by_pattern,
     run_prepared,
 )
-from spooflens.navigation.product import Navigation, navigation_of
+from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.evidence import CORROBORATION_S, Evidence
@@ -383,11 +385,12 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
     return Track(name, sm.track_t, np.degrees(sm.track_llh[:, 0]), np.degrees(sm.track_llh[:, 1]), sm.track_llh[:, 2])
 
 
-def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
-    """Confirm, extend and reconstruct every incident that has inertial evidence; the verdict anew."""
-    nav_result = next((r for r in ctx.results if r.name == "navigation" and r.ran), None)
+def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict: Verdict) -> Verdict:
+    """Confirm, extend and reconstruct every incident that has inertial evidence: the verdict anew, with the
+    tracks reconstructed with GNSS left out and each coast's facts (nothing in `results` is changed)."""
+    navigated = any(r.name == NAVIGATION and r.ran for r in results)
     candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
-    if nav_result is None or not candidates:
+    if not navigated or not candidates:
         return verdict
     try:
         nav = navigation_of(ctx)
@@ -455,7 +458,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             )
         else:
             interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
-        onset, onset_interval = _onset_before(ctx, inc, check.departure_s)
+        onset, onset_interval = _onset_before(results, inc, check.departure_s)
         # the departure itself is the inertial evidence: whatever else alarmed while it lasted agrees
         departure_span = (Evidence.INERTIAL, _coast_start(inc), end)
         incidents.append(
@@ -483,16 +486,16 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             # what later coasts start from: the states and covariances after each update (no other matrices)
             base = run_prepared(nav.inputs, nav.options(exclude_windows=windows, record=("P_upd",)), nav.start)
     incidents = _merge_overlapping(incidents)
-    confirmed = [i for i in incidents if i.is_spoofing]
-    for inc in confirmed:
+    tracks = []
+    for inc in (i for i in incidents if i.is_spoofing):
         onset = inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s
         t_to = None if inc.ongoing_at_end else inc.end_s
         velocity_honest = any(
-            r.name == "gnss_consistency" and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
-            for r in ctx.results
+            r.name == GNSS_CONSISTENCY and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
+            for r in results
         )
-        nav_result.tracks.append(_reconstructed_track(nav, onset - opts.margin_s, t_to, velocity_honest))
-    nav_result.extras["coasting_checks"] = [
+        tracks.append(_reconstructed_track(nav, onset - opts.margin_s, t_to, velocity_honest))
+    coasting_checks = tuple(
         {
             "incident_onset_s": inc.onset_s,
             "confirmed": c.confirmed,
@@ -503,8 +506,14 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             "peak_ratio_over_envelope": float(np.nanmax(c.ratio / c.kappa)) if np.isfinite(c.ratio).any() else None,
         }
         for (inc, c), e in zip(checks, envelopes, strict=True)
-    ]
-    return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
+    )
+    return replace(
+        verdict,
+        spoofed=any(i.is_spoofing for i in incidents),
+        incidents=tuple(incidents),
+        reconstructed=tuple(tracks),
+        coasting_checks=coasting_checks,
+    )
 
 
 def _jumps_back(
@@ -597,7 +606,7 @@ def _span(inc: Incident, opts: CoastingOptions) -> tuple[float, float]:
 
 
 def _onset_before(
-    ctx: AnalysisContext, inc: Incident, departure_s: float | None
+    results: Sequence[DetectorResult], inc: Incident, departure_s: float | None
 ) -> tuple[float, tuple[float, float] | None]:
     """The incident's onset: of the counted detectors' onset estimates in it that precede the confirmed
     departure, the latest (an estimate with an interval first). Alarms merged into an incident from a
@@ -606,7 +615,7 @@ def _onset_before(
         return inc.onset_s, inc.onset_interval_s
     found = [
         (a.onset_s, a.onset_interval_s)
-        for r in ctx.results
+        for r in results
         if r.is_detector and r.ran and not r.advisory and r.name in inc.detectors
         for a in r.alarms
         if a.onset_s is not None

@@ -13,7 +13,7 @@ and the first pass stands.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +31,7 @@ from spooflens.schema import FRAMES
 SUSPECT_MARGIN_S = 10.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Analysis:
     table: EpochTable
     options: AnalyzeOptions
@@ -39,6 +39,9 @@ class Analysis:
     verdict: Verdict
     passes: int = 1
     suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
+    # what the results were made from (the navigation solution among them), kept only when asked: to
+    # assess the results again with evidence added later (`spooflens fleet`)
+    context: AnalysisContext | None = None
 
 
 def last_fix_s(table: EpochTable) -> float | None:
@@ -47,15 +50,24 @@ def last_fix_s(table: EpochTable) -> float | None:
     return float(np.nanmax(t)) if len(t) and np.isfinite(t).any() else None
 
 
+def assess(
+    ctx: AnalysisContext, results: Sequence[DetectorResult], on_step: Callable[[str], None] | None = None
+) -> Verdict:
+    """The verdict on `results` (those `ctx` made, with any evidence added since, such as the fleet's): the
+    incidents their alarms make, each inertial one confirmed, ended and reconstructed by coasting the INS
+    of `ctx`. Every front end decides through here."""
+    verdict = decide(list(results), log_end_s=last_fix_s(ctx.table))
+    if on_step and verdict.incidents:
+        on_step("confirmation and reconstruction")
+    return reconstruct(ctx, results, verdict)
+
+
 def _one_pass(
     table: EpochTable, options: AnalyzeOptions, on_step: Callable[[str], None] | None, cache: dict[str, object]
 ) -> tuple[AnalysisContext, Verdict]:
     ctx = AnalysisContext(table, options, cache=dict(cache))
     results = run_with_context(ctx, on_step)
-    verdict = decide(results, log_end_s=last_fix_s(table))
-    if on_step and verdict.incidents:
-        on_step("confirmation and reconstruction")
-    return ctx, reconstruct(ctx, verdict)
+    return ctx, assess(ctx, results, on_step)
 
 
 def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
@@ -77,7 +89,10 @@ def _within_learning(spans: tuple[tuple[float, float], ...], window_s: tuple[flo
 
 
 def analyze_table(
-    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+    table: EpochTable,
+    options: AnalyzeOptions | None = None,
+    on_step: Callable[[str], None] | None = None,
+    keep_context: bool = False,
 ) -> Analysis:
     options = options or AnalyzeOptions()
     problems = plausibility.problems({name: table.frame(name) for name in FRAMES})
@@ -87,14 +102,15 @@ def analyze_table(
             "(pass the table through spooflens.epoch_table.checked to drop and list them)"
         )
     ctx, verdict = _one_pass(table, options, on_step, {})
+    kept = ctx if keep_context else None
     spans = suspected_spans(verdict)
     if not spans or NAVIGATION not in ctx.cache:
-        return Analysis(table, options, ctx.results, verdict)
+        return Analysis(table, options, ctx.results, verdict, context=kept)
     first_nav = navigation_of(ctx)
     if not _within_learning(spans, first_nav.learned.window_s):
         # the noise was learned before anything suspected began: learning it again without those
         # stretches gives the same noise, and the second pass the same results
-        return Analysis(table, options, ctx.results, verdict)
+        return Analysis(table, options, ctx.results, verdict, context=kept)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
@@ -105,10 +121,10 @@ def analyze_table(
     try:
         nav = solve_navigation(table, options, exclude=spans, aligned=aligned)
     except SpooflensError:
-        return Analysis(table, options, first_results, verdict)
-    del first_results
+        return Analysis(table, options, first_results, verdict, context=kept)
+    del first_results, kept
     ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
-    return Analysis(table, options, ctx.results, verdict, 2, spans)
+    return Analysis(table, options, ctx.results, verdict, 2, spans, ctx if keep_context else None)
 
 
 def analyze_segments(

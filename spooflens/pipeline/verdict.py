@@ -1,5 +1,9 @@
 """The incident verdict: was GNSS spoofed, from when to when, and how sure.
 
+`decide` makes it from the detectors' alarms; the reconstruction stage (`spooflens.pipeline.reconstruction`)
+confirms and ends each inertial incident and adds the tracks reconstructed with GNSS left out; the two
+together (`spooflens.pipeline.run.assess`) give the one immutable verdict every output reads.
+
 Alarm intervals of every detector that ran are merged into incidents (overlapping or closer than
 `merge_gap_s`). An incident's onset is the estimate that comes with a credible interval when one took
 part, else the earliest onset estimate inside it; its end is the last alarm end (the reconstruction
@@ -15,9 +19,10 @@ verdict.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from typing import Any
 
-from spooflens.detectors.base import Alarm, DetectorResult, Finding
+from spooflens.detectors.base import Alarm, DetectorResult, Finding, Track
 from spooflens.pipeline.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
 
 ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
@@ -62,14 +67,18 @@ class Incident:
         return self.confidence != "low"
 
 
-@dataclass
+@dataclass(frozen=True)
 class Verdict:
     spoofed: bool
-    incidents: list[Incident] = field(default_factory=list)
+    incidents: tuple[Incident, ...] = ()
     detectors_run: tuple[str, ...] = ()
     detectors_not_run: tuple[str, ...] = ()
     detectors_advisory: tuple[str, ...] = ()  # ran, but their alarms do not count (see DetectorResult.advisory)
-    findings: list[Finding] = field(default_factory=list)
+    findings: tuple[Finding, ...] = ()
+    # the reconstruction stage's: where the vehicle was with GNSS left out over each confirmed incident, and
+    # each inertial incident's coasting check (JSON-able facts)
+    reconstructed: tuple[Track, ...] = ()
+    coasting_checks: tuple[dict[str, Any], ...] = ()
 
     @property
     def deciding_incident(self) -> Incident | None:
@@ -171,5 +180,5 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
             else i
             for i in incidents
         ]
-    findings = [f for r in counted for f in r.findings]
-    return Verdict(any(i.is_spoofing for i in incidents), incidents, ran, not_run, advisory, findings)
+    findings = tuple(f for r in counted for f in r.findings)
+    return Verdict(any(i.is_spoofing for i in incidents), tuple(incidents), ran, not_run, advisory, findings)

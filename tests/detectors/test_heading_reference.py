@@ -19,6 +19,7 @@ from spooflens.geodesy import enu_to_geodetic
 from spooflens.pipeline.departure import gnss_departure, reconstructed_tracks
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.run import analyze_table
+from spooflens.pipeline.verdict import Verdict
 from spooflens.simulation.sensors import (
     TIDE_PERIOD_S,
     CompassModel,
@@ -66,7 +67,7 @@ def test_a_jump_of_the_real_log_is_spoofing_with_the_heading_class(bundg, offset
     # where the vessel was: dead reckoned by its compass and log from the last quiet fix; GNSS went the
     # jump's sqrt(2) x offset (east and north) away from it, give or take the dead reckoning's own
     # error over the half minute it is held and the fixes' scatter
-    (departure,) = gnss_departure(spoofed, analysis.results, first)
+    (departure,) = gnss_departure(spoofed, analysis.results, analysis.verdict, first)
     assert departure.track.startswith("reconstructed (compass")
     assert departure.peak_m == pytest.approx(np.sqrt(2) * offset_m, rel=0.05, abs=5.0)
 
@@ -268,5 +269,10 @@ def test_where_a_log_has_an_imu_its_ins_reconstruction_comes_before_the_dead_rec
         z = np.zeros(2)
         return DetectorResult(name, True, tracks=[Track(f"reconstructed ({track})", z, z, z, z)])
 
-    heading, nav = result("heading_reference", "compass"), result("navigation", "INS")
-    assert [t.name for t in reconstructed_tracks([heading, nav])] == ["reconstructed (INS)", "reconstructed (compass)"]
+    heading = result("heading_reference", "compass")
+    z = np.zeros(2)
+    verdict = Verdict(True, reconstructed=(Track("reconstructed (INS)", z, z, z, z),))
+    assert [t.name for t in reconstructed_tracks([heading], verdict)] == [
+        "reconstructed (INS)",
+        "reconstructed (compass)",
+    ]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from paths import REAL, ROOT
+from paths import REAL, ROOT, SAMPLE_LOGS
 
 from spooflens.cli import main
 from spooflens.fleet import attack_simulation as sim
@@ -131,3 +131,24 @@ def test_single_log_analysis_lists_the_fleet_detector_as_not_run(tmp_path: Path,
     assert main(["inspect", str(ROOT / "sample_logs" / "ground_ros2.mcap")]) == 0
     text = capsys.readouterr().out
     assert "fleet_homology" in text and "spooflens fleet" in text
+
+
+def test_a_vehicles_verdict_after_the_fleet_keeps_what_its_own_analysis_confirmed() -> None:
+    """The fleet adds its evidence and decides each vehicle's verdict again through the analysis' own
+    assessment: the coasting check's confirmed end and the distance GNSS went from the reconstructed
+    track are kept (re-deciding from the alarms alone lost both)."""
+    from spooflens.fleet.command import run_fleet
+    from spooflens.fleet.offsets import FleetOptions
+    from spooflens.pipeline.run import analyze_table
+    from spooflens.service import read_table
+
+    logs = [SAMPLE_LOGS / "spoofed_flight.mcap", SAMPLE_LOGS / "ground.bag"]
+    vehicles, _, _ = run_fleet(logs, FleetOptions())
+    alone = analyze_table(read_table(logs[0], {}, False)).verdict
+    in_fleet = vehicles[0].verdict
+    assert alone.spoofed and in_fleet.spoofed
+    (a,), (f,) = [i for i in alone.incidents if i.is_spoofing], [i for i in in_fleet.incidents if i.is_spoofing]
+    assert f.end_method == a.end_method == "GNSS never agreed again with the coasted INS reference"
+    assert a.offset_peak_m is not None and a.offset_peak_m > 100.0
+    assert f.offset_peak_m == pytest.approx(a.offset_peak_m)
+    assert len(in_fleet.reconstructed) == len(alone.reconstructed) == 1

@@ -276,7 +276,7 @@ def track(table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict
     fig = Figure(figsize=(WIDTH_IN, 6.2), layout="constrained")
     ax = fig.subplots()
     incidents = [i for i in verdict.incidents if i.is_spoofing] or verdict.incidents
-    recon = reconstructed_tracks(results)
+    recon = reconstructed_tracks(results, verdict)
     drawn: list[tuple[FloatArray, FloatArray, str]] = []  # (t, enu) for onset/end markers
     if len(table.truth):
         tr = table.truth
@@ -366,7 +366,7 @@ def _track_enu(tk: Track, origin: tuple[float, float, float]) -> FloatArray:
 
 def departure(table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict) -> Plot | None:
     """Horizontal distance of each receiver's fixes from the reconstructed track, over the whole log."""
-    recon = reconstructed_tracks(results)
+    recon = reconstructed_tracks(results, verdict)
     origin = _origin(table)
     if not recon or origin is None:
         return None

@@ -135,7 +135,7 @@ def verdict_section(analysis: Analysis) -> str:
     else:
         kind, big = "clean", "NO SPOOFING DETECTED"
     deciding = verdict.deciding_incident
-    deps = gnss_departure(table, results, deciding) if deciding is not None and deciding.is_spoofing else []
+    deps = gnss_departure(table, results, verdict, deciding) if deciding is not None and deciding.is_spoofing else []
     lines = [f'<div class="verdict {kind}" id="verdict-banner"><div class="big">{big}</div>']
     lines.append(f"<p>{esc(verdict.headline)}</p>")
     if deciding is not None and deciding.is_spoofing:
@@ -145,7 +145,7 @@ def verdict_section(analysis: Analysis) -> str:
     if verdict.incidents:
         rows = []
         for i, inc in enumerate(verdict.incidents, 1):
-            d = gnss_departure(table, results, inc) if inc is deciding and inc.is_spoofing else []
+            d = gnss_departure(table, results, verdict, inc) if inc is deciding and inc.is_spoofing else []
             rows.append(
                 (
                     i,
