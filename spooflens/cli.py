@@ -215,7 +215,7 @@ def analyze(
     "attack_text",
     required=True,
     metavar="KIND[:param=value,...]",
-    help="e.g. ramp:rate=2,axes=en,start=60  (see README: attack kinds)",
+    help="e.g. ramp:rate=2,axes=en,start=60  (attack kinds: docs/simulation-and-attacks.md)",
 )
 @click.option(
     "-o",
@@ -338,7 +338,7 @@ def simulate(
     },
 )
 def bench() -> None:
-    """Measure speed, memory and detection performance (figures quoted in the README)."""
+    """Measure speed, memory and detection performance (figures in docs/benchmarks.md)."""
 
 
 @cli.command()

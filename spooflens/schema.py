@@ -2,7 +2,7 @@
 
 Readers must hand over frames that meet this schema; `EpochTable.validate` checks it at the reader
 boundary. Column names carry their unit (gnss_lib_py style) so a value never travels without it.
-The README's schema section is generated from this module (`spooflens schema`), so the two cannot
+The schema section of docs/epoch-table.md is generated from this module (`spooflens schema`), so the two cannot
 drift apart.
 """
 
@@ -404,7 +404,7 @@ def schema_problems(frame: str, df: pd.DataFrame) -> list[str]:
 
 
 def schema_markdown() -> str:
-    """The schema as Markdown tables, for the README."""
+    """The schema as Markdown tables, for docs/epoch-table.md."""
     lines: list[str] = []
     for frame, spec in FRAMES.items():
         lines += [f"#### `{frame}`", "", "| column | dtype | unit | meaning |", "|---|---|---|---|"]

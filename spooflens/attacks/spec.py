@@ -74,7 +74,7 @@ class Param:
 
     @property
     def shown(self) -> str:
-        """As the README's parameter column shows it: `name=default`, or the name and what unset means."""
+        """As the docs' parameter column shows it: `name=default`, or the name and what unset means."""
         if self.default is not None:
             return (
                 f"`{self.name}={self.default:g}`"
@@ -316,7 +316,7 @@ def parse_attack(text: str) -> AttackSpec:
 
 
 def attacks_markdown() -> str:
-    """The README's table of attack kinds, from KINDS (`spooflens.attacks.spec`)."""
+    """The table of attack kinds in docs/simulation-and-attacks.md, from KINDS (`spooflens.attacks.spec`)."""
     lines = ["| kind | seed | effect | parameters (defaults) |", "|---|---|---|---|"]
     for kind, spec in KINDS.items():
         shown = ", ".join(p.shown for p in spec.params if p.name not in WINDOW_PARAMS)

@@ -5,7 +5,7 @@ altitude fields are replaced by the spoofed values (and, with `velocities`, its 
 the attack moved the receiver's time, its UnixTimeMillis), in the field positions the file's own
 `# Fix,...` header gives. Lines are found as the reader placed them: by the phone's clock (`fix_clock`).
 Raw measurement lines are left as logged: an attack on the fixes only is what a location-spoofing app
-does; attacks on raw pseudoranges are written to RINEX or CSV copies (see the README).
+does; attacks on raw pseudoranges are written to RINEX or CSV copies (docs/simulation-and-attacks.md).
 """
 
 from __future__ import annotations
