@@ -75,6 +75,9 @@ class AttackKind:
     name: str
     text: str  # `inject --attack` without its start
     needs: str  # a key of NEEDS
+    # the independent references that see this attack: a log whose clean analysis ran none of them can
+    # show the attack only as GNSS-only or receiver evidence, which alone is never a spoofing verdict
+    seen_by: frozenset[str] = frozenset()
 
 
 # what each attack needs of a log, and how to tell from its clean analysis
@@ -86,13 +89,18 @@ NEEDS: dict[str, Callable[[LogFacts], bool]] = {
 }
 # the battery: the fix-level kinds as `bench realworld` runs them, one counterfeit satellite where the
 # log has raw observations, a single-antenna spoofer where two receivers logged fixes
+# the references a spoofer of the fixes cannot move and that compare the fixes with something
+FIX_REFERENCES = frozenset({"inertial", "second_receiver", "known_station", "heading"})
 BATTERY: tuple[AttackKind, ...] = (
-    AttackKind("ramp 2 m/s", ATTACKS["ramp 2 m/s"], "fixes"),
-    AttackKind("step 50 m", ATTACKS["step 50 m"], "fixes"),
-    AttackKind("capture", ATTACKS["capture"], "logged fixes"),
-    AttackKind("counterfeit satellite", "pr_delay:count=1,delay=300,cn0=6", "raw observations"),
-    AttackKind("single antenna", "single_antenna:rate=1", "two receivers with fixes"),
+    AttackKind("ramp 2 m/s", ATTACKS["ramp 2 m/s"], "fixes", FIX_REFERENCES),
+    AttackKind("step 50 m", ATTACKS["step 50 m"], "fixes", FIX_REFERENCES),
+    AttackKind("capture", ATTACKS["capture"], "logged fixes", FIX_REFERENCES),
+    AttackKind(
+        "counterfeit satellite", "pr_delay:count=1,delay=300,cn0=6", "raw observations", frozenset({"raw_measurement"})
+    ),
+    AttackKind("single antenna", "single_antenna:rate=1", "two receivers with fixes", frozenset({"second_receiver"})),
 )
+KINDS = {k.name: k for k in BATTERY}
 
 
 @dataclass
@@ -102,6 +110,8 @@ class Injected:
     kind: str
     record: TaskRecord
     score: Score | None = None  # None when the copy was not made or not analysed
+    # the log carries a reference that sees this attack (`AttackKind.seen_by`): the goal's denominator
+    with_reference: bool = True
 
     @property
     def made(self) -> bool:
@@ -352,10 +362,11 @@ def take_injected(result: LogResult, record: TaskRecord) -> None:
         result.not_injected[record.attack] = f"inject refuses: {refusal_reason(record.inject.error, result.log.path)}"
         return
     scored = None
+    facts = log_facts(result.summary) if result.summary else None
     if record.summary is not None and record.truth is not None:
-        facts = log_facts(result.summary) if result.summary else None
         scored = score(record.truth, record.summary, facts.fix_rate_hz if facts else None)
-    result.injected.append(Injected(record.attack, record, scored))
+    seen = bool(facts and facts.classes_run & KINDS[record.attack].seen_by)
+    result.injected.append(Injected(record.attack, record, scored, seen))
 
 
 # ---- tables ---------------------------------------------------------------------------------------------
@@ -372,8 +383,10 @@ class GroupRow:
     hours: float = 0.0
     false_spoofing: int = 0
     anomalies: int = 0
-    attacks: int = 0  # attacked copies made (a copy that could not be analysed is not caught)
+    attacks: int = 0  # attacked copies made of logs with a reference that sees the attack (`with_reference`)
     caught: int = 0
+    attacks_unseen: int = 0  # ... of logs without one: GNSS-only and receiver evidence is no verdict alone
+    caught_unseen: int = 0
     delays: list[float] = field(default_factory=list)
     onset_known: int = 0
     onset_covered: int = 0
@@ -391,6 +404,10 @@ class GroupRow:
                 self.anomalies += sum(not is_spoofing(i) for i in incidents(summary))
                 self.false_spoofing += spoofed(summary)
         for inj in r.injected:
+            if not inj.with_reference:
+                self.attacks_unseen += inj.made
+                self.caught_unseen += bool(inj.score and inj.score.caught)
+                continue
             self.attacks += inj.made
             s = inj.score
             if s is None:
@@ -425,6 +442,8 @@ class GroupRow:
             "attacks": self.attacks,
             "caught": self.caught,
             "caught_share": share(self.caught, self.attacks),
+            "attacks_without_reference": self.attacks_unseen,
+            "caught_without_reference": self.caught_unseen,
             "median_delay_s": self.median_delay_s,
             "onset_covered": self.onset_covered,
             "onset_known": self.onset_known,
@@ -451,6 +470,7 @@ class GroupRow:
         return [
             *clean,
             of(self.caught, self.attacks),
+            of(self.caught_unseen, self.attacks_unseen),
             "-" if delay is None else f"{delay:.1f}",
             of(self.onset_covered, self.onset_known),
             of(self.to_end, self.end_known),
@@ -458,7 +478,7 @@ class GroupRow:
 
 
 CLEAN_COLUMNS = ("group", "logs", *OUTCOMES, "clean-sky hours", "false SPOOFING", "anomalies (/h)")
-INJECTED_COLUMNS = ("caught", "median delay s", "onset covered", "to attack end")
+INJECTED_COLUMNS = ("caught", "caught (no reference)", "median delay s", "onset covered", "to attack end")
 
 
 def grouped(results: Iterable[LogResult], key: Callable[[LogResult], Iterable[str]]) -> list[GroupRow]:
@@ -514,7 +534,17 @@ def misses(results: Iterable[LogResult]) -> list[dict[str, Any]]:
             else:
                 failed = rec.analysis
                 why = f"attacked copy {failed.outcome}: {failed.error}" if failed else "attacked copy not analysed"
-            out.append({"log": r.log.name, "format": r.log.format, "attack": rec.attack_text, "reason": why})
+            if not inj.with_reference:
+                why = f"no independent reference in this log sees it ({why})"
+            out.append(
+                {
+                    "log": r.log.name,
+                    "format": r.log.format,
+                    "attack": rec.attack_text,
+                    "reason": why,
+                    "with_reference": inj.with_reference,
+                }
+            )
     return out
 
 
@@ -652,7 +682,11 @@ def print_report(report: CorpusReport) -> None:
         "[dim]read / damaged / refused / internal error / timeout: how `analyze` ended on the log. clean-sky "
         "hours, false SPOOFING, anomalies: on the clean-sky logs read (no not-clean tag): their hours, their "
         "SPOOFING verdicts, their one-class incidents (per hour). caught: attacks caught of the copies `inject` made "
-        "(logs whose clean verdict is NO SPOOFING); delay from the attack start to the alarm; onset covered: "
+        "(logs whose clean verdict is NO SPOOFING) whose clean analysis ran a reference that sees the attack (INS, "
+        "second receiver, known station, compass for the fix attacks; raw-measurement checks for a counterfeit "
+        "satellite; a second receiver for a single antenna); caught (no reference): the same on the other logs, "
+        "where GNSS-only and receiver evidence alone can make no spoofing verdict; delay from the attack start "
+        "to the alarm; onset covered: "
         "the incident's onset interval holds the attack start; to attack end: the incident lasts as long.[/]"
     )
     false = false_verdicts(results)
@@ -682,9 +716,12 @@ def print_report(report: CorpusReport) -> None:
         out.print(f"  {len(names)} x {reason}: {shown}")
     if not report.quick:
         missed = misses(results)
-        out.print(f"[bold]Attacks missed: {len(missed)}[/]")
-        for m in missed:
+        seen = [m for m in missed if m["with_reference"]]
+        out.print(f"[bold]Attacks missed on logs with a reference that sees them: {len(seen)}[/]")
+        for m in seen:
             out.print(f"  {m['log']} ({m['format']}), {m['attack']}: {m['reason']}")
+        unseen = len(missed) - len(seen)
+        out.print(f"Attacks missed on logs without such a reference: {unseen} (listed in the JSON's misses)")
         elsewhere = late_or_misplaced(results)
         out.print(f"[bold]Caught, but the onset interval does not hold the attack start: {len(elsewhere)}[/]")
         for c in elsewhere:

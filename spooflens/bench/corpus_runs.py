@@ -266,6 +266,8 @@ class LogFacts:
     fix_span_s: tuple[float, float] | None
     observation_span_s: tuple[float, float] | None
     fix_rate_hz: float | None
+    # the evidence classes of the detectors that ran and count: what an attack could be compared with
+    classes_run: frozenset[str] = frozenset()
 
 
 def _span(streams: list[dict[str, Any]]) -> tuple[float, float] | None:
@@ -289,6 +291,12 @@ def log_facts(summary: dict[str, Any]) -> LogFacts:
         fix_span_s=_span(fixes),
         observation_span_s=_span(obs),
         fix_rate_hz=max(rates) if rates else None,
+        classes_run=frozenset(
+            str(a["evidence"])
+            for seg in parts
+            for a in seg.get("analyses") or []
+            if isinstance(a, dict) and a.get("ran") and a.get("evidence") and not a.get("advisory")
+        ),
     )
 
 
