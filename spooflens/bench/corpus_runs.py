@@ -255,6 +255,11 @@ def verdict_extras(summary: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+# references the log holds as another system recorded them (the autopilot's own filter innovations): `inject`
+# moves the fixes, not what that filter made of the real ones, so they cannot see an injected attack
+RECORDED_REFERENCES = frozenset({"autopilot_ekf"})
+
+
 @dataclass(frozen=True)
 class LogFacts:
     """What the clean analysis says a log has, for choosing the attacks it can take."""
@@ -295,7 +300,11 @@ def log_facts(summary: dict[str, Any]) -> LogFacts:
             str(a["evidence"])
             for seg in parts
             for a in seg.get("analyses") or []
-            if isinstance(a, dict) and a.get("ran") and a.get("evidence") and not a.get("advisory")
+            if isinstance(a, dict)
+            and a.get("ran")
+            and a.get("evidence")
+            and not a.get("advisory")
+            and a.get("name") not in RECORDED_REFERENCES
         ),
     )
 
