@@ -1,23 +1,5 @@
-"""The kernels an analysis calls, compiled ahead of time into one extension module at install.
-
-A first analysis of a log with an IMU spent about a second before its first filter run: importing
-numba and its registries (half a second: scipy.linalg among them, for numba's BLAS) and loading each
-kernel from numba's cache (the nine an IMU log calls: another half second), all of it holding Python's
-lock on the critical path (`spooflens bench e2e`, the first run by part). So `python -m
-spooflens.compile.warmup` (which `pip install -e` runs) also compiles every kernel signature its analyses
-called from Python into one extension module with numba's ahead-of-time compiler (`numba.pycc`), beside
-the sources in `spooflens/__pycache__/`. The module's functions release Python's lock as the kernels do
-(`nogil`), and the module does not import numba: a kernel called with argument types it was built for
-(`type_key`, numba's own typing rules for arrays, scalars and tuples) runs from it; any other call
-imports numba and runs the kernel as before (`spooflens.compile.jit`), so a signature the warm-up did not reach,
-or a changed kernel, costs time, never a wrong answer.
-
-The module is used only while it matches what it was built from (`MANIFEST`): the sha256 of every
-source file that defines kernels, the Python and numpy versions and the machine's CPU (the code is built
-for it). Anything else, a missing or unreadable module included, leaves every call to numba.
-`SPOOFLENS_AOT=0` does so too. The numbers are numba's own, bit for bit: the same compiler, the same
-code (tests/compile/test_aot.py).
-"""
+"""The kernels an analysis calls, compiled ahead of time into one extension module at install, used only
+while it matches what it was built from; any other call goes to numba (docs/compile.md)."""
 
 from __future__ import annotations
 

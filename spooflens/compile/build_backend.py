@@ -1,21 +1,5 @@
-"""The project's build backend: setuptools', plus compiling the numba kernels at `pip install -e`.
-
-pyproject.toml names this module as the backend (`backend-path = ["."]`). Every hook is setuptools'
-own; two are extended:
-- `get_requires_for_build_editable` adds the project's runtime dependencies to the isolated build
-  environment pip makes (numba, numpy and what an analysis imports);
-- `build_editable` first runs `python -m spooflens.compile.warmup` in that environment, from the source tree:
-  numba writes the compiled kernels to the `__pycache__` folders beside the sources, which is where the
-  editable install's numba looks (its cache is keyed by the source's content, the CPU and the numba
-  version, so a cache made by the same numba release on the same machine is used as it is); and the
-  kernels an analysis calls are built there into one extension module (`spooflens.compile.aot`: used while
-  the kernel sources, Python, numpy and the CPU are those it was built with).
-
-A warm-up that fails or runs out of time only says so: the install goes on, and the first analysis
-compiles what it needs. `SPOOFLENS_NO_WARMUP=1` skips it (and the build environment's extra
-packages). A wheel (`pip install .`) is built without it (its sources move to site-packages): run
-`python -m spooflens.compile.warmup` once after installing one.
-"""
+"""The project's build backend: setuptools', plus compiling the numba kernels at `pip install -e`
+(docs/compile.md)."""
 
 from __future__ import annotations
 

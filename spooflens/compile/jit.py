@@ -1,18 +1,5 @@
-"""Numba's `njit`, with numba imported only when a compiled kernel is first called.
-
-Importing numba takes about a quarter of a second, and loading its cached kernels more. A log without
-an IMU (an NMEA, RINEX or u-blox receiver log, raw observations included) runs none of the kernels
-(the navigation filter and the inertial detectors need IMU samples), yet every module that defines
-one is imported when the analyses register. So `njit` here wraps each kernel in a `LazyKernel`; the
-first call of any of them imports numba, makes the real dispatchers of all kernels defined so far and
-puts them in place of the wrappers in the globals of spooflens' and readers' modules. Numba looks up a
-kernel's callees in those globals when it compiles it (at its first call, after this), so compiled code
-calls dispatchers as before; a kernel defined after that is a dispatcher from the start. The dispatchers
-are made from the same functions with the same options, so numba's on-disk cache (keyed by the source
-file and the function) is the one `spooflens.compile.warmup` filled. Before all that, a wrapper asks
-`spooflens.compile.aot` for the kernel compiled ahead of time for its arguments' types: when there is one,
-numba is not imported at all.
-"""
+"""Numba's `njit`, with numba imported only when a compiled kernel is first called (and not at all when
+the ahead-of-time module has the kernel for its arguments' types; docs/compile.md)."""
 
 from __future__ import annotations
 

@@ -1,33 +1,7 @@
-"""Compile every numba kernel into numba's on-disk cache and, ahead of time, into one extension module
-(`spooflens.compile.aot`), and every module of the project to bytecode, before the first analysis needs them.
+"""Compile every numba kernel into numba's cache and ahead of time into one extension module, and the
+project's modules to bytecode, before the first analysis needs them (docs/compile.md).
 
     python -m spooflens.compile.warmup [LOG ...]
-
-Numba compiles a kernel the first time it is called with a new combination of argument types, and
-caches the machine code beside the source (`__pycache__/*.nbi`, `*.nbc`), keyed by the source file's
-content, the CPU and the numba version. Compiling all of spooflens' kernels takes tens of seconds; a
-cached kernel loads in milliseconds. This module analyses logs that between them reach every kernel
-(by default two sample logs when they are there: the spoofed flight, whose analysis runs the filter,
-the smoother, every detector, the second pass and the coasts that confirm an incident, and the car;
-else a simulated spoofed flight; the last once more with seed 000's offline pass in the bounded form a
-long log takes) and
-writes their outputs to a temporary folder, so every kernel is compiled with the argument types a real
-analysis uses.
-
-It first writes the bytecode of the project's own packages (`spooflens`, `readers`). Python writes it on
-first import by itself, except where `PYTHONDONTWRITEBYTECODE` is set (common in containers and CI, and on
-this machine): there every run compiled the sixty-odd modules an analysis imports from source again
-(the sample flight's first run about 5 % slower in paired runs). pip writes the bytecode of what it
-installs into site-packages, but an editable install's sources stay where they are, so it is done here.
-
-Then every kernel signature those analyses called from Python (recorded as numba compiles or loads it)
-is compiled ahead of time into one extension module (`spooflens.compile.aot`), which later analyses use without
-importing numba. A build that fails only says so: numba's cache serves every call then.
-
-`pip install` runs it (`spooflens/compile/build_backend.py`: the project's build backend, setuptools' with
-this step added), so the first `spooflens analyze` after installing finds every kernel compiled. Run it
-by hand after changing a kernel, or on a machine where the install could not (it says so): when any
-kernel source changed since the last warm-up, it empties numba's cache first (`clear_stale_numba_cache`).
 """
 
 from __future__ import annotations
