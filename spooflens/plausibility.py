@@ -1,26 +1,6 @@
 """Physical plausibility of what a log says, checked where every reader hands its frames over.
 
-A value a sensor cannot produce must never reach the navigation filter: a latitude of 1e300 or a
-height of 1e308 turns into a singular matrix three modules later, and a log in the wrong unit (lat/lon
-in radians, height in millimetres, specific force in g, angular rate in deg/s) gives a confident wrong
-verdict. So `spooflens.epoch_table.build_table` runs, on every stream (sorted by time, `stray_stamps`
-left out: a few rows an hour or more from the rest):
-
-1. `imu_unit`, `fix_units`: is the stream in the schema's unit? Gravity measured by an IMU (median |f| near
-   9.8 m/s^2, or 1 in g, 1000 in milli-g), angular rates a vehicle can reach (deg/s read as rad/s puts
-   the 99th percentile above 35 rad/s), positions that move as fast as the reported velocity says
-   (radians read as degrees move 57 times too slowly), heights that do not jump kilometres between
-   consecutive fixes (millimetres). A recognised unit is scaled and listed as repaired; an IMU in no
-   recognisable unit is left out and listed as lost.
-2. `bad_rows`: rows no sensor could have produced (outside physical bounds, exact no-data sentinels
-   such as 999 far from the stream's own values, a coordinate exactly 0), dropped and counted.
-3. `clean_optional`: optional values out of range (an accuracy of 0 or 1e300, a velocity of 1e5 m/s, a
-   satellite inside the Earth, a non-unit quaternion) become NaN ("not known"), counted.
-
-`gyro_turn_ratio` compares streams (an IMU's yaw with the GNSS course; `build_table` also compares the
-IMU's time span with the fixes'). `problems` lists what is still implausible in a finished table (the
-pipeline refuses to analyse such a table with one line rather than fail inside the filter).
-"""
+In depth: docs/formats.md."""
 
 from __future__ import annotations
 

@@ -1,20 +1,6 @@
 """Independent pieces of one analysis on the machine's cores.
 
-The heavy work of an analysis is compiled numba loops that release the GIL (`nogil=True`): the noise
-learning's candidate filter runs, seed 000's windowed ramp pass and its offline two-filter pass, the
-smoother. Where two of them do not depend on each other they run side by side in threads, with results
-identical to running them one after the other (the callers keep the sequential order of decisions);
-work whose result is needed only later is `started` and read from its future.
-
-A stretch where one compiled loop runs alone (the navigation filter's final pass: nothing else can start
-before it ends) leaves a core idle; work the end of the run needs anyway and that holds the GIL (the
-recording library's import, a fifth of a second) is queued for such a stretch (`side_work`) and begun
-there (`core_idle`). Begun earlier it would only take turns with the analysis for the GIL, and a
-compiled call returning would wait for its turn.
-
-`SPOOFLENS_THREADS` sets how many threads (default: the cores, at most 2, since the independent pieces
-come in pairs). `spooflens batch` sets one per task: its workers already fill the cores.
-"""
+In depth: docs/install.md."""
 
 from __future__ import annotations
 

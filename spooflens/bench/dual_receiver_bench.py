@@ -1,19 +1,7 @@
 """Seed 003's numbers and the table the paper promises but does not give: false-alarm and missed-detection
 rates of rules 1-4 and their combinations against the window K.
 
-`spooflens bench dual_receiver` runs:
-1. the SIMULATED pair (`dual_receiver` scenario: a car, two antennas 1.2 m apart, 5 Hz) in `--runs`
-   runs of 300 s, the `single_antenna` attack from 150 s (both receivers report one spoofer's track),
-   each receiver keeping its own tracking noise (`--tracking-noise`, m per axis) under the spoofer;
-2. the REAL GSI pair (two static stations 3.34 km apart, 30 s, 1 h): normal mode real, spoofed mode
-   synthesised per eq. (7g) from 30 min on (receiver 2 logs receiver 1's pseudoranges shifted by the
-   difference of their distances to the spoofer, plus its own noise), `--runs` noise draws.
-For each: sigma_S and sigma_GNSS (Rayleigh ML scales of the spoofed and normal-mode distances) beside the
-paper's 0.12 and 10.06 and its boundary 5; per-epoch false-alarm rate on the normal part and missed-
-detection rate on the spoofed part (windows entirely inside it) of each rule at K = 1, 2, 5, 10, 20
-with our thresholds (1e-5 per epoch, Rice model of the clean part, effective K) and with the paper's
-boundary (sigma_GNSS - sigma_S)/2 (measured sigmas, as the paper would have).
-"""
+In depth: docs/methods/dual-receiver.md."""
 
 from __future__ import annotations
 

@@ -1,22 +1,6 @@
 """End-to-end benchmark: read, analyse, write, as `spooflens analyze` does, each in a fresh process.
 
-`spooflens bench e2e` measures
-- the 1 h aircraft log (200 Hz IMU, 10 Hz GNSS, ROS2 MCAP, `spooflens simulate aircraft --seconds 3600`):
-  wall and CPU time of each stage (reading, each analysis step as the pipeline reports it, the
-  recording, the JSON summary), peak RSS after each stage, and a plain rosbags deserialise loop over
-  the same file in the same run (the ratio says how the reader compares, whatever the machine's load);
-- a voyage (ship scenario, 100 Hz IMU, 1 Hz GNSS) at 1, 4 and 24 h: time per hour (linear?) and peak RSS
-  (bounded?). The logs are simulated and written in blocks (`write_voyage`), so making a 24 h log needs
-  no more memory than its longest block;
-- the first run of `spooflens analyze` on a small sample log: as installed (kernels compiled at install,
-  see "First run" in the README), and with an empty numba cache (what compiling costs).
-
-Every figure is printed beside its goal. Logs are made once into `--workdir` and reused. On a shared
-machine single runs differ by 10 % or more: `--repeat N` analyses the clean hour and makes the first
-run N times each and prints the median (the stage table is the median run's) with the spread.
-`--profile FILE` also writes a cProfile of the 1 h analysis (cumulative time per function, the lead's
-stages by name) and the memory the navigation product holds, array by array.
-"""
+In depth: docs/benchmarks.md."""
 
 from __future__ import annotations
 

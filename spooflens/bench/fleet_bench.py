@@ -1,19 +1,7 @@
 """Seed 004's figures: the homology index against the number of attacked satellites for blocking, spoofing
 and bias injection (Figs. 4-6), against the bias amplitude (Fig. 7), and the observer example (Figs. 10-12).
 
-`spooflens bench fleet` runs, each beside the paper's figure:
-1. the split of real pseudorange errors into a part common to nearby receivers and an independent part,
-   measured on the real GSI pair (post-fit residuals of both stations, and their between-station
-   differences); it sets the simulated receivers' errors;
-2. 30 SIMULATED receivers at random spots in a 500 m city block around GSI station 0759, seeing the GPS
-   satellites of its real navigation file at the instant when most are up (the paper had 30 real
-   receivers in Beijing and 16 satellites; GPS alone in 2005 gives fewer): mean theta against n from
-   `--runs` Monte Carlo runs per n and attack, each run one batched single-point solve of every receiver;
-3. the amplitude sweep, 0 to 8e4 ns; spoofing against its (unstated) bias; receivers that record at
-   different times (how the paper's low absolute values arise);
-4. the same attacks on the real pair's real pseudoranges (2 receivers, 3.34 km apart);
-5. the three-UAV observer example: our gains, their conditions, the printed gains.
-"""
+In depth: docs/methods/fleet.md."""
 
 from __future__ import annotations
 

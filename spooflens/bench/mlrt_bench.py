@@ -1,17 +1,6 @@
 """Seed 000's Table 1 and beyond: detection delays of the KF innovation test, GLRT and MLRT.
 
-`spooflens bench mlrt` runs, each part printed beside the paper's figure:
-1. the paper's scenario (aircraft, INS 160 Hz, GNSS 1 Hz, 15 s, ramp from 10 s on east and north at
-   2/3/5 m/s, and 25 m/s on up), Monte Carlo, filter started from the true state as in the paper, with
-   seed 000's Q, P0 and R: median and spread of the detection delay per method;
-2. the same on attack-free runs: how often each rule alarms (the paper's "l > 0" included);
-3. the smallest ramp rate each method detects in at least half the runs;
-4. equal false-alarm rates: thresholds set so each method raises 1, 10 and 100 false alarms per 1000 h
-   on attack-free data (one hour of the linearised model, re-drawn many times; extreme-value tail), then
-   delays at those thresholds;
-5. real data: the husky bag clean, and with 2 and 5 m/s ramps injected;
-6. runtime of all detectors over one hour of 10 Hz GNSS with 200 Hz IMU.
-"""
+In depth: docs/methods/mlrt.md."""
 
 from __future__ import annotations
 

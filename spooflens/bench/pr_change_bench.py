@@ -1,27 +1,7 @@
 """Seed 002's experiment: spoofing on samples 500-900 of a static station, detected by the Kalman and the
 recurrent predictor of the pseudorange change and compensated.
 
-`spooflens bench pr_change` runs, each printed beside the paper's figures (it gives only the RMS
-improvements, 45 % with the Kalman filter and 65 % with the recurrent network; no threshold, delay or
-false-alarm figure):
-1. a 1 Hz static station simulated at the GSI site 0759 with the GPS satellites of its real navigation
-   file (the paper's 12-satellite receiver data are not public), 1200 epochs, `runs` Monte Carlo runs;
-2. the real GSI pair (30 s, 120 epochs), the attack at the same proportion of the log (epochs 50-90); the
-   gradual rise keeps its 10 epochs (the same 10 m per epoch), which at 30 s spans 300 s.
-
-The attack, on `n_satellites` satellites chosen at random among those tracked through the whole window
-(the paper does not say how many; its Fig. 8 suggests three): the signal is delayed by an offset that
-appears at the first attacked sample and then "increases or decreases in proportion to the pseudorange
-changes" (offset = D + gamma (rho(k) - rho(k0))), as the paper describes; the `gradual` form lets the
-initial D build up over `rise` epochs instead of at once (the paper's alternative). A spoofer delays the
-whole signal, so code, carrier and Doppler move together. D, gamma and the rise are not in the paper:
-D = 100 m, gamma = 1e-4 (a few cm/s of drift), rise 10 epochs, all options.
-
-Measured: the first alarm after the onset (epochs), alarms on epochs away from the attack (per epoch),
-and the pseudorange RMS error over the attacked satellites and samples before and after compensation,
-improvement = 1 - RMS_after / RMS_before (our reading of the paper's metric), for alpha from 0 to 1, for
-both predictors and both ways of removing the receiver clock (cross-satellite median, clock model).
-"""
+In depth: docs/methods/pr-change.md."""
 
 from __future__ import annotations
 

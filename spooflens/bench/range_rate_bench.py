@@ -1,28 +1,6 @@
 """Seed 001's experiments: the rate model and the pseudorange model against a free INS, beside the paper.
 
-`spooflens bench range_rate` runs, each part printed beside the paper's figure:
-1. the paper's scenario (Tables 1-4): start 108 E, 34 N, 400 m, at rest heading east; IMU 100 Hz at grades
-   N1 (10 ug, 0.1 deg/h) and N2 (50 ug, 0.5 deg/h); GNSS 1 Hz, 1750 s; the receiver's raw observations
-   simulated from the GPS satellites of a real broadcast navigation file (the paper used BDS B2 in a
-   hardware simulator); the INS runs free from the true initial state, as the paper's. Thresholds as the
-   paper: a normal fit to the first 200 s of each clean run, P_FA 0.01. Table 5: false alarms of the rate
-   and pseudorange models over 100 trajectories (random paths, random start times in the navigation
-   file's day), counted on the clean runs over 250-1750 s (1500 epochs: the paper's denominator, which it
-   does not explain);
-2. detection of the Table 3 schemes (hover 25-50 s, north velocity pull 0.1 m/s 650-750 s, east position
-   pull 100 m 1500-1550 s as a step and as a 2 m/s ramp) by the per-sample rule and the windowed t-test,
-   spoofed at the signal level (every satellite's code, carrier and Doppler as seen from the fake
-   trajectory);
-3. the free INS's own velocity error at 200 s and at 1750 s (the Schuler argument of SEEDS.md);
-4. this implementation's rule (`spooflens analyze`: INS over a 5 s window from the GNSS/INS filter,
-   chi-square at 1e-5 per epoch) on the main trajectory, clean and spoofed;
-5. real data: the rate test on the GSI stations (static: zero velocity is a perfect INS).
-
-IMU error model (the paper gives only the constant drifts): the `seed001_n1`/`seed001_n2` presets, i.e.
-turn-on biases drawn per axis with the table's values as 1-sigma, navigation-grade white noise and slow
-bias random walks (`spooflens/navigation/imu_models.py`); no initial attitude error (the INS starts from
-the true state, as a simulator run does).
-"""
+In depth: docs/methods/range-rate.md."""
 
 from __future__ import annotations
 

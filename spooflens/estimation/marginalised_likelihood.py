@@ -1,29 +1,6 @@
 """Marginalised likelihood ratio tests (seed 000, after Gustafsson 1996), in two forms.
 
-1. The paper's algorithm exactly (`paper_two_filter`): forward Kalman filter sums V^F, D^F; a backward
-   information filter over the last L samples from zero information; then a backward covariance filter
-   down to the first epoch gives V^B, D^B; l_t(m) = V^F(t)+D^F(t)-V^F(m)-D^F(m)-V^B(m+1)-D^B(m+1).
-   The backward filter starts with NO information on the whole state, so this is the MLR for a jump in
-   the FULL state after epoch m with a flat prior: the segment after m is explained by a state
-   unconnected to the past. Its level (and so the "l > 0, no threshold" rule) depends on the dropped
-   likelihood of the last L samples, the 2 pi terms and the units of the flat prior. Erratum fixed:
-   the printed backward information filter computes G and never uses it; the process-noise step here is
-       Lambda_{i-1} = A^T (Lambda - Lambda B (B^T Lambda B + Qr^-1)^-1 B^T Lambda) A,   Q = B Qr B^T.
-   `full_jump_constants` gives what the paper drops, so that
-       l_t(m) + consts(m) = 2 log p(y | jump after m) - 2 log p(y | no jump)   (flat prior of density 1),
-   which `full_jump_wj` computes independently from the Willsky-Jones signature of a full-state jump
-   (d^T I^-1 d - log det I + n log 2 pi). The two agree to rounding (tests/estimation/test_marginalised_likelihood.py).
-
-2. The ramp MLR the paper intends (`ramp_two_filter_offline`): the augmented state [x; theta; r] where
-   the integrator theta (in the attacked rows; the paper prints C = [H 0], which would leave theta
-   unobservable, an erratum) accumulates the ramp rate r, and ONLY r jumps, with a Gaussian prior
-   N(0, Sigma) (a proper Bayes factor) or a flat prior of density 1 per (m/s)^q (the paper's l > 0 rule).
-   Offline over all m in one forward and one backward pass: for each m the forward estimate N(mu, P)
-   of the augmented state and the backward information (Lambda, alpha) from the data after m give
-       2 log I(P) = -log det(I + P Lambda) + b^T (I + P Lambda)^-1 P b + const,  b = alpha - Lambda mu,
-   and 2 log BF(m) = 2 log I(P + B Sigma B^T) - 2 log I(P). It equals the Willsky-Jones closed form of
-   ramp.py for every m (tested).
-"""
+In depth: docs/methods/mlrt.md."""
 
 from __future__ import annotations
 

@@ -1,17 +1,7 @@
 """A ramp of unknown rate on chosen measurement rows, starting at an unknown epoch: its signature on
 the forward filter's innovations (Willsky and Jones), shared by the GLRT and both MLRT variants.
 
-If a ramp theta * (t_k - t_m) (theta in R^q, on the q attacked rows selected by E) enters the
-measurements after epoch m, the innovations of the (linear) filter become eps_k = eps0_k + Gamma_k theta,
-with, for k > m:
-    mu^-_k = A_k mu_{k-1},  Gamma_k = E (t_k - t_m) - C_k mu^-_k,  mu_k = mu^-_k + K_k Gamma_k,  mu_m = 0.
-Summing d = sum Gamma^T S^-1 eps and I = sum Gamma^T S^-1 Gamma from m+1 to t gives, in closed form,
-    GLR   (theta maximised)             : d^T I^-1 d                              ~ chi2(q) under H0
-    MLR, flat prior of density 1 on theta : d^T I^-1 d - log det I + q log 2 pi       (units-dependent!)
-    2 log Bayes factor, theta ~ N(0, Sigma): d^T (I + Sigma^-1)^-1 d - log det(I Sigma + I_q).
-Candidate onsets live in a sliding window (`window_s`) on a grid (`step_s`); everything for all of
-them and all epochs is computed in one compiled pass.
-"""
+In depth: docs/methods/mlrt.md."""
 
 from __future__ import annotations
 

@@ -1,17 +1,7 @@
 """Seed 004's attack simulation on pseudoranges (section 1.2) and the position offset vectors (POVs) it
 causes, for many receivers and many Monte Carlo runs at once.
 
-All receivers see the same N satellites at one instant (a `Snapshot`). Each run picks satellites and
-every receiver gets the same attack:
-- blocking: n satellites are not received; POV = subset solution - all-satellite solution;
-- spoofing: a random order of the satellites; the first 7 give the "true" position, the next n are
-  added with a bias (counterfeit copies of real satellites); POV = 7 + n solution - 7 solution;
-- bias injection: the first n of a random order get the same transmit-time offset; POV = biased
-  all-satellite solution - all-satellite solution (a common offset on every satellite is a clock
-  change, so n = N gives POV 0).
-POVs are east/north metres in each receiver's local frame. Every solution is the project's single-point
-solver (`spooflens.gnss.single_point.solve`, batched over every run and receiver at once).
-"""
+In depth: docs/methods/fleet.md."""
 
 from __future__ import annotations
 

@@ -1,18 +1,6 @@
 """Seed 004's homology index of position offset vectors (POVs), Algorithm 1.
 
-theta = 1/c_vx + 1/c_vy of the POVs rotated so that their mean points at 45 degrees: large when every
-receiver was moved alike (one attacker, one cause), small when the offsets scatter. Descriptive in the
-paper (no threshold); `null_quantile` gives its distribution for independent isotropic offsets, which
-`spooflens fleet` uses as a threshold.
-
-Choices the paper leaves open:
-- POVs are local east/north metres (the paper's Miller projection scales the axes differently and the
-  rotation then mixes them);
-- the standard deviation is the sample one (ddof = 1; MATLAB's std, which the paper's box plots suggest;
-  ddof = 0 makes theta larger by sqrt(n/(n-1)), 1.7 % at n = 30);
-- "all POVs are 0" means all within `zero_tol_m` (a solver's convergence tolerance, not exact zeros);
-- a spread of zero with a non-zero mean (identical offsets) gives theta = inf.
-"""
+In depth: docs/methods/fleet.md."""
 
 from __future__ import annotations
 

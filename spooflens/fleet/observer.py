@@ -1,34 +1,6 @@
 """Seed 004's distributed secure state observer (eqs. 3-13) with the corrected error dynamics (eq. 26).
 
-Agents x_i(k+1) = A_i x_i + B_i u_i (3) measure y_i^a = C_i^a x_i + a(k) + eps_i (4), attacked by one
-common (homologous) attack a(k), and some also y_i = C_i x_i (5), secure. Each agent splits its state
-by the observability of (A_i, C_i) with an orthonormal Gamma_i = [Gamma_i^obar^T; Gamma_i^o^T] (eqs. 6-9),
-corrects the observable part with its secure output (gain L_i) and the rest with the attacked output
-after a consensus on the attack estimate (gain N_i, weights p_ij):
-
-    a~_i = y_i^a - C_i^a x^_i                                                            (10)
-    a^_i = sum_j p_ij a~_j                                                               (11)
-    x^_i(k+1) = A_i x^_i + B_i u_i + Gamma_i^o L_i (y_i - C_i x^_i)
-                + Gamma_i^obar N_i (y_i^a - C_i^a x^_i - a^_i)                           (12, 13)
-
-Derivation of the error dynamics (e_i = x_i - x^_i): y_i^a - y^_i^a = C_i^a e_i + eps_i - sum_j p_ij
-(C_j^a e_j + eps_j), stacked -(Upsilon kron I_s)(C^a e + eps) with Upsilon = P - I. So
-
-    e^o_i(k+1)  = (A_i^o - L_i C_i^o) e^o_i                                              (19)
-    e^obar(k+1) = (A^obar + N Upsilon_s C^{a,obar}) e^obar + A~ e^o + N Upsilon_s (C^{a,o} e^o + eps)  (26)
-
-The paper's (20) and (25) carry +N_i where the derivation gives -N_i, and Theorem 2 prints
-A^obar + N (I - P kron I_p) C^{a,obar}: wrong sign and I_p for I_s (tested: the simulation of (10)-(13)
-follows (26) to rounding and misses the printed form). The conditions are sufficient, not "iff", and the
-bound varpi eps / (1 - sigma) needs the 2-norm sigma < 1, not only a spectral radius below 1.
-
-Gains: L_i by pole placement on (A_i^o, C_i^o); N = diag(N_i) by minimising the 2-norm of the eq. (26)
-matrix (convex in N: an affine map inside a norm), which makes the paper's bound apply when the minimum
-is below 1, else by a seeded multi-start search for the smallest spectral radius (`design_n`); a
-discrete Lyapunov solution then certifies the corrected
-matrix inequality [[Psi, Psi M], [M^T Psi, Psi]] > 0 (the printed (28) with "< 0" is infeasible: its
-Psi^-1 block is positive definite).
-"""
+In depth: docs/methods/fleet.md."""
 
 from __future__ import annotations
 

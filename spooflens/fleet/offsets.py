@@ -1,14 +1,7 @@
 """Each vehicle's position offset (POV): its reported GNSS position minus an independent reference of its
 own, and the homology of those offsets across a fleet over time (seed 004 applied to logs).
 
-References, in order of preference:
-1. a surveyed site: a static RINEX station whose header position most of its fixes sit at;
-2. its INS: the reconstruction with the spoofed GNSS left out (when its own analysis found an incident),
-   else the smoothed GNSS/INS track (which follows GNSS: offsets near zero unless the INS disagrees);
-3. an authentic-subset solution of raw observations: the satellites the user trusts (`--reference-sats`),
-   or all but those the log's raw-measurement detectors found inconsistent.
-A vehicle with none of these has no offset and is listed, not guessed.
-"""
+In depth: docs/methods/fleet.md."""
 
 from __future__ import annotations
 

@@ -1,16 +1,7 @@
 """Receiver autonomous integrity monitoring with fault detection and exclusion (RAIM FDE) for the
 batched single-point solver.
 
-Per epoch, the weighted sum of squared post-fit residuals T is chi-square with n - m degrees of freedom
-(n satellites, m unknowns) when every pseudorange is honest. The residual scale is learned from the log
-(a receiver's real code errors are metres, not the solver's a-priori 0.3 m): the median over epochs of
-the best leave-one-out T / dof, so one satellite that is wrong throughout (a counterfeit) cannot inflate
-it. An epoch whose T / scale^2 exceeds the chi-square threshold at `p_false_alarm` has a fault; the
-satellite whose removal leaves the smallest T is excluded (linearised leave-one-out on the converged
-solution), the epoch solved again without it, and the test repeated while a fault remains, at most
-`max_exclusions` times and only while one degree of freedom is left to test the rest with. Each row
-gets a fault flag, gnss_lib_py style: 0 clear, 1 fault (excluded), 2 unknown (not tested).
-"""
+In depth: docs/methods/navigation.md."""
 
 from __future__ import annotations
 

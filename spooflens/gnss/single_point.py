@@ -1,15 +1,6 @@
 """Single-point positioning: a receiver's position, velocity and clock from its own pseudoranges.
 
-Iterated weighted least squares, every epoch of a log at once (padded arrays, batched normal
-equations), so an hour of 1 Hz data solves in well under a second. One clock unknown per satellite
-system (GPS, Galileo, ... keep separate time offsets). Satellite positions come from the epoch
-table (`sv_x_m` ..., at transmission, ECEF of that instant); Earth rotation, troposphere and, when
-the broadcast coefficients are given, ionosphere are applied through `spooflens.gnss.geometry`, the
-same model the simulator makes pseudoranges with.
-
-Used to turn raw observations into fixes (logs that carry only observations) and by the
-raw-observation attacks, which must move a fix the way a receiver's own solution would move.
-"""
+In depth: docs/methods/navigation.md."""
 
 from __future__ import annotations
 

@@ -1,14 +1,6 @@
 """Body-frame conventions and initial alignment from the log itself.
 
-Attitude comes from matching velocity changes: over a window after the start, the GNSS-observed
-change of position, minus what the initial velocity and gravity explain, equals C0 times the
-specific-force double integral in the initial body frame (from the preintegration):
-    p(t_i) - p(t_0) - p0 - v0 tau_i - g tau_i^2 / 2  =  C0 dH_i.
-Gravity fixes roll and pitch for ANY mounting (the husky's IMU lies on its side); horizontal
-accelerations fix yaw. p0 and v0 are projected out, which leaves a Wahba problem solved by Kabsch. When the
-window holds too little horizontal acceleration for yaw, the IMU's own orientation yaw is used if the
-log has one, else the course over ground along the levelled body x axis.
-"""
+In depth: docs/methods/navigation.md."""
 
 from __future__ import annotations
 

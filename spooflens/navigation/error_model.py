@@ -1,30 +1,6 @@
 """The 15-state INS error model of seed 000 eq. (2), derived for our ENU mechanization.
 
-State x = [phi (3), dv (3), dp (3), eps (3), nabla (3)]:
-- phi: attitude error, the computed C~ = (I - [phi x]) C (radians, ENU axes);
-- dv = v~ - v (m/s, ENU);
-- dp: position error in local metres, dp = [(R_N+h) cos L dlambda, (R_M+h) dL, dh] (ENU). The paper
-  uses (dL, dlambda, dh); metres keep the state well scaled and make H a plain selection;
-- eps, nabla: gyro and accelerometer biases not yet removed (rad/s, m/s^2, body axes).
-Continuous dynamics (first order; the 1/R^2 terms kept, the e^2 derivatives of R_M, R_N dropped):
-    phi'   = -omega_in x phi + d omega_in - C eps
-    dv'    = f^n x phi + C nabla - (2 omega_ie + omega_en) x dv + v x (2 d omega_ie + d omega_en) + dg
-    dp'_e  = dv_e - v_e dh/(R_N+h) + v_e tanL dp_n/(R_M+h) + (v_u/(R_N+h) - tanL v_n/(R_M+h)) dp_e
-    dp'_n  = dv_n - v_n dh/(R_M+h) + v_u dp_n/(R_M+h)
-    dp'_u  = dv_u
-with d omega_ie = [0, -W sinL, W cosL] dL, dL = dp_n/(R_M+h), and d omega_en from the transport rate;
-dg_u = 2 g/R dh (free-air gradient). Versus the paper's printed blocks: F11, F12, F21, F14 = -C,
-F25 = C agree; F13/F23/F32/F33 differ because our position error is in metres. F is checked against a
-finite-difference Jacobian of the mechanization in tests/navigation/test_error_model.py.
-Measurement: z = INS - GNSS, position (ENU metres) then velocity: H = [0 0 I 0 0; 0 I 0 0 0] (6 x 15;
-the paper prints a 3 x 15 H, an erratum: its text says position AND velocity are measured).
-
-The filter appends nine first-order Gauss-Markov states for the sensors' own slowly wandering errors
-(receiver position ENU, receiver velocity ENU: real receivers' errors are time-correlated, and a filter
-that takes them as white has innovations with lag-1 autocorrelation near 1; and wheel odometry's scale
-and skid errors, vehicle frame), which enter their measurement rows with -I, and three measurement
-rows for wheel odometry (`kernels.measurement_matrix_into`).
-"""
+In depth: docs/methods/navigation.md."""
 
 from __future__ import annotations
 

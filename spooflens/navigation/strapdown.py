@@ -1,27 +1,6 @@
 """Strapdown mechanization in the local-level ENU frame, in two rates (Savage's structure).
 
-High rate, one compiled pass over the whole log (`preintegrate`): every IMU sample holds its rate and
-specific force until the next sample (zero-order hold). The body attitude relative to the first sample,
-Qb(k), is the product of the per-sample rotation quaternions (renormalised at each sample); specific-force
-increments rotated into that first body frame accumulate into G(k) (velocity) and H(k) (its integral),
-so the body-frame velocity and position increments over ANY interval [i, j] follow in O(1):
-    dv_b = Qb(i)^-1 (G(j) - G(i)),   dp_b = Qb(i)^-1 (H(j) - H(i) - G(i) (t_j - t_i)).
-Each sample's increment uses the rotation during the sample (f dt + 1/2 theta x f dt: sculling for a
-constant rate), so the in-block dynamics are exact to the sample level however long a block is.
-
-Low rate, a Python loop over blocks (GNSS epochs and at most `max_block_s` apart): the local-level
-frame's own rotation (Earth rate + transport rate), gravity and Coriolis, evaluated at the block
-midpoint (predicted), then position in latitude/longitude/height:
-    C(t+T) = exp(-[zeta x]) C(t) dC_b,         zeta = omega_in^n T,
-    v(t+T) = v + (I - 1/2 [zeta x]) C dv_b + (g - (2 omega_ie + omega_en) x v_mid) T,
-    dp_n   = v T + (I - 1/3 [zeta x]) C dp_b + 1/2 (g - (2 omega_ie + omega_en) x v_mid) T^2.
-Estimated biases are removed per block to first order, averaging the body rotation within the block
-(exp(-b_g T/2) dC_b exp(-b_g T/2); dv_b - (I + dC_b) b_a T/2 - T/2 b_g x dv_b;
-dp_b - (2I + dC_b) b_a T^2/6 - T/3 b_g x dp_b): that is what lets one preintegration serve the
-closed-loop filter, whose bias estimates change at every GNSS update.
-Discretisation error: third order in the block length for the slow local-level terms; measured by
-tests/navigation/test_strapdown.py against simulated truth.
-"""
+In depth: docs/methods/navigation.md."""
 
 from __future__ import annotations
 

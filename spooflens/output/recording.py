@@ -1,19 +1,6 @@
 """The Rerun recording: trajectories on the map and in local metres, sensor and detector series, events.
 
-The viewer opens on an Overview tab: the map, the incident timeline (one lane per evidence class,
-raised while its counted detectors alarm, and the spoofing incidents below), the key statistic of each
-evidence class with its threshold, and the event log; one tab per detector panel follows.
-
-Everything time-indexed is sent column-wise with `send_columns` (never a per-sample `log`), in blocks
-of `BLOCK_ROWS` rows so a day-long IMU series never exists as one more whole-length copy (the time
-columns, the stacked axes, Rerun's own Arrow copy) beside the table, and the writer waits for Rerun
-to write what was sent every `FLUSH_BYTES` (its file sink is slower than the sending), on two timelines: `time`
-(seconds since the log start, every log has it) and `log_time` (the log's own UTC clock, when it has
-one). Statistics over candidate onsets are sent on a
-timeline of their own, `candidate_onset`. Histograms are static bar charts under `histograms/`, one
-bar-chart view per histogram, each set of bars (data or a fitted distribution's expected counts) an
-entity of its own with its own colour.
-"""
+In depth: docs/outputs.md."""
 
 from __future__ import annotations
 

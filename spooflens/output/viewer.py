@@ -1,21 +1,6 @@
 """`spooflens view OUT.rrd`: open a recording in the Rerun viewer, with its usage analytics off.
 
-Investigators handle sensitive logs, so nothing spooflens starts may report anything to anyone. The
-Rerun viewer (rerun-sdk 0.41) sends anonymous usage events unless its analytics config
-(`$XDG_CONFIG_HOME/rerun/analytics.json`, written by `rerun analytics disable`) says
-`"analytics_enabled": false`; it has no environment variable to turn them off (`CI` set skips them,
-as a side effect of its CI detection). So every viewer spooflens launches gets a private config
-directory of its own, made for that run and removed after it, holding that one setting: the user's
-own Rerun config is neither read nor changed. Writing recordings (`analyze`) starts no analytics at
-all (checked in tests/test_viewer.py).
-
-The web viewer is another matter: it runs in the browser, where that config does not reach, and on
-start it posts usage events to Rerun's telemetry host, asks GitHub for the latest release, fetches an
-examples manifest and a web font. `--web` therefore puts a small loopback proxy in front of Rerun's
-web server that adds a Content-Security-Policy to every page: the browser may load the viewer from
-this machine and read the recording from this machine's data port, and refuses every other
-connection before it is made (tests/test_viewer.py watches the browser's requests).
-"""
+In depth: docs/outputs.md."""
 
 from __future__ import annotations
 

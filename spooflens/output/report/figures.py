@@ -1,17 +1,6 @@
 """The report's figures, drawn with matplotlib and inlined as SVG.
 
-Every figure is built from what the analysis declares, never from a list of detector names: each
-detector that ran gets its statistics (grouped by unit, thresholds dashed, alarms shaded), a series
-`X` with a companion `X_sigma` is drawn inside its +-1 and +-3 sigma bands (the navigation product's
-INS-minus-GNSS innovations), curves over other axes (l_N over candidate onsets, baseline histograms)
-are drawn as they come, the timeline has one strip per evidence class that any analysis declares,
-and receiver quality shows every optional column of the fixes schema the log actually has.
-
-Why SVG from matplotlib: a well-kept library with real axes and ticks, no JavaScript at all (so the
-page cannot make a network request or raise a script error), and text that stays text (searchable,
-selectable, printable). Plotly's offline HTML would add its ~4.5 MB JavaScript bundle to every
-report before the first point is drawn. Series are min/max-decimated for display (`decimate.py`).
-"""
+In depth: docs/outputs.md."""
 
 from __future__ import annotations
 
