@@ -17,6 +17,7 @@ import numpy as np
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
+from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.verdict import Incident
 
 RECONSTRUCTED = "reconstructed"
@@ -35,7 +36,7 @@ class Departure:
 def reconstructed_tracks(results: Sequence[DetectorResult]) -> list[Track]:
     """Every reconstructed track, the INS's first (`navigation`: the IMU with the log's own noise, where a
     vessel's dead reckoning from its compass and log, `heading_reference`, carries an unknown current)."""
-    ordered = sorted(results, key=lambda r: r.name != "navigation")
+    ordered = sorted(results, key=lambda r: r.name != NAVIGATION)
     return [tr for r in ordered if r.ran for tr in r.tracks if tr.name.startswith(RECONSTRUCTED)]
 
 

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.detectors import gnss_consistency
 from spooflens.detectors.base import Track
 from spooflens.errors import SpooflensError
 from spooflens.estimation.quantiles import chi2_isf
@@ -39,7 +40,7 @@ from spooflens.navigation.loosely_coupled import (
     nis_by_pattern,
     run_prepared,
 )
-from spooflens.navigation.product import Navigation, navigation_of
+from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.evidence import CORROBORATION_S, Evidence
@@ -385,7 +386,7 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
 
 def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
     """Confirm, extend and reconstruct every incident that has inertial evidence; the verdict anew."""
-    nav_result = next((r for r in ctx.results if r.name == "navigation" and r.ran), None)
+    nav_result = next((r for r in ctx.results if r.name == NAVIGATION and r.ran), None)
     candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
     if nav_result is None or not candidates:
         return verdict
@@ -488,7 +489,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         onset = inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s
         t_to = None if inc.ongoing_at_end else inc.end_s
         velocity_honest = any(
-            r.name == "gnss_consistency" and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
+            r.name == gnss_consistency.NAME and any(onset <= a.end_s and a.start_s <= inc.end_s for a in r.alarms)
             for r in ctx.results
         )
         nav_result.tracks.append(_reconstructed_track(nav, onset - opts.margin_s, t_to, velocity_honest))
