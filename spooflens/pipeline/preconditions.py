@@ -168,21 +168,27 @@ def _differenced_epochs(ctx: AnalysisContext, carrier: bool) -> dict[str, int]:
     """Per receiver with raw observations: the epochs at which MIN_DIFFERENCED_SATELLITES satellites have
     a measurement differenced against the epoch before (carrier: a carrier phase at both epochs at most
     MAX_CARRIER_INTERVAL_S apart, or a Doppler; else a pseudorange at both, MAX_PSEUDORANGE_INTERVAL_S)."""
+    counts: dict[bool, dict[str, int]] = ctx.cached("differenced_epochs", lambda: _count_differenced(ctx))
+    return counts[carrier]
+
+
+def _count_differenced(ctx: AnalysisContext) -> dict[bool, dict[str, int]]:
     from spooflens.gnss.grid import observation_grid
 
-    out = {}
+    out: dict[bool, dict[str, int]] = {True: {}, False: {}}
     for rid in dict.fromkeys(ctx.table.observations["receiver_id"].astype(str)):
         grid = observation_grid(ctx.table, rid)
-        usable = grid.usable
-        value = grid.carrier_m if carrier else grid.pseudorange_m
-        ok = usable & np.isfinite(value)
         dt = np.diff(grid.t_s)
-        both = np.zeros_like(ok)
-        limit = MAX_CARRIER_INTERVAL_S if carrier else MAX_PSEUDORANGE_INTERVAL_S
-        both[1:] = ok[1:] & ok[:-1] & (dt <= limit)[:, None]
-        if carrier:
-            both |= usable & np.isfinite(grid.rate_mps)
-        out[rid] = int(np.sum(both.sum(axis=1) >= MIN_DIFFERENCED_SATELLITES))
+        for carrier, value, limit in (
+            (True, grid.carrier_m, MAX_CARRIER_INTERVAL_S),
+            (False, grid.pseudorange_m, MAX_PSEUDORANGE_INTERVAL_S),
+        ):
+            ok = grid.usable & np.isfinite(value)
+            both = np.zeros_like(ok)
+            both[1:] = ok[1:] & ok[:-1] & (dt <= limit)[:, None]
+            if carrier:
+                both |= grid.usable & np.isfinite(grid.rate_mps)
+            out[carrier][rid] = int(np.sum(both.sum(axis=1) >= MIN_DIFFERENCED_SATELLITES))
     return out
 
 
