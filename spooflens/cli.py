@@ -124,7 +124,7 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
         missing = spec.missing(table)
         for d in spec.detectors:
             unmet = [] if missing else unmet_preconditions(d.preconditions, ctx)
-            why = ", ".join(missing) or "; ".join(u.text for u in unmet)
+            why = ", ".join(dict.fromkeys(missing)) or "; ".join(u.text for u in unmet)
             stops = bool(missing) or any(u.stops for u in unmet)
             support.add_row(d.name, label(d.evidence) if d.evidence else "(product)", "no" if stops else "yes", why)
     out.print(support)

@@ -273,7 +273,7 @@ _REFERENCE = (
     "zero velocity (evidence: known station)."
 )
 ANALYSIS = AnalysisSpec(
-    "range_rate",
+    NAME,
     "seed 001: each satellite's pseudorange rate (carrier phase, Doppler) against an independent velocity "
     "(the INS over a window, or a known station)",
     ("observations", "satellite_states"),

@@ -44,7 +44,7 @@ class ReceiverGroup:
     def describe(self) -> str:
         if len(self.receivers) == 1:
             return f"receiver {self.receivers[0]}"
-        return f"receivers {', '.join(self.receivers)} are one receiver ({'; '.join(self.why)})"
+        return f"receivers {', '.join(self.receivers)} are one receiver: {'; '.join(dict.fromkeys(self.why))}"
 
 
 def receiver_groups(ctx: AnalysisContext) -> list[ReceiverGroup]:
@@ -84,7 +84,7 @@ def nmea_talkers(table: EpochTable, a: str, b: str) -> str | None:
     (src_a, _, talker_a), (src_b, _, talker_b) = a.rpartition("/"), b.rpartition("/")
     if src_a != src_b or sa.topic != sb.topic or not {talker_a, talker_b} <= NMEA_GNSS_TALKERS:
         return None
-    return f"{b}: NMEA talker {talker_b} of the same stream as {talker_a} ({sa.topic})"
+    return f"NMEA talkers of one stream ({sa.topic})"
 
 
 def resolution_deg(x: np.ndarray) -> float:
@@ -122,8 +122,8 @@ def relayed(fa: pd.DataFrame, fb: pd.DataFrame, a: str, b: str) -> str | None:
         return None
     metres = tol[0] * 111_320.0
     return (
-        f"{b}: the same fixes as {a} at {100 * fraction:.0f}% of {n} common epochs (within the coarser "
-        f"resolution, {metres:.2g} m), {delay:+.2f} s later: one receiver relayed twice"
+        f"{b} repeats {a}'s fixes at {100 * fraction:.0f}% of {n} common epochs (within the coarser resolution, "
+        f"{metres:.2g} m), {delay:+.2f} s later: one receiver relayed twice"
     )
 
 

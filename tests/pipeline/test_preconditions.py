@@ -105,7 +105,10 @@ def test_nmea_talkers_of_one_receiver_are_one_receiver(log: str, receivers: tupl
     table = read_table(real_log(log), {}, show_progress=False)
     (group,) = group_receivers(table)
     assert group.receivers == receivers
-    assert all("NMEA talker" in why for why in group.why)
+    assert (
+        group.describe()
+        == f"receivers {', '.join(receivers)} are one receiver: NMEA talkers of one stream ({log.split('/')[-1]})"
+    )
     unmet = _check(pc.INDEPENDENT_RECEIVERS, table)
     assert unmet is not None and "need two receivers with independent errors" in unmet.requires
 
