@@ -94,7 +94,8 @@ topic_option = click.option(
 def inspect(log: Path, topics: tuple[str, ...]) -> int:
     """List the streams of LOG, what was skipped, and which analyses it supports."""
     from spooflens.inventory import computed, skipped_or_repaired, stream_rows
-    from spooflens.pipeline.registry import analyses
+    from spooflens.pipeline.preconditions import unmet_preconditions
+    from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, analyses
 
     table = read_table(log, parse_topics(topics), show_progress())
     out = console()
@@ -116,13 +117,16 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
         for c in made:
             out.print(f"  {c.stream}: {c.count} ({c.reason})")
     # the names `analyze` reports its results under: each detector, and each analysis product
-    support = Table("analysis", "evidence", "can run", "missing", title="Analyses")
+    # and what each one's model requires of the data (its preconditions), checked as `analyze` checks them
+    support = Table("analysis", "evidence", "can run", "missing, or what its model requires", title="Analyses")
+    ctx = AnalysisContext(table, AnalyzeOptions())
     for spec in analyses():
-        missing = ", ".join(spec.missing(table))
+        missing = spec.missing(table)
         for d in spec.detectors:
-            support.add_row(
-                d.name, label(d.evidence) if d.evidence else "(product)", "no" if missing else "yes", missing
-            )
+            unmet = [] if missing else unmet_preconditions(d.preconditions, ctx)
+            why = ", ".join(dict.fromkeys(missing)) or "; ".join(u.text for u in unmet)
+            stops = bool(missing) or any(u.stops for u in unmet)
+            support.add_row(d.name, label(d.evidence) if d.evidence else "(product)", "no" if stops else "yes", why)
     out.print(support)
     return EXIT_DAMAGED if damage(table) else EXIT_OK
 

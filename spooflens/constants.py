@@ -1,4 +1,5 @@
-"""Physical constants, each written once: WGS84 (NIMA TR8350.2), the speed of light, standard gravity.
+"""Physical constants, each written once: WGS84 (NIMA TR8350.2), the speed of light, standard gravity; and
+the NMEA talkers of GNSS receivers.
 
 The GPS interface specification uses its own values for orbits (IS-GPS-200's GM and Earth rotation
 rate); those stay in `spooflens.gnss.ephemeris` beside the orbit code that must use exactly them.
@@ -18,3 +19,5 @@ WGS84_K_SOMIGLIANA = 0.00193185265241
 WGS84_M_GEO = WGS84_OMEGA_IE**2 * WGS84_A_M**2 * WGS84_B_M / WGS84_GM
 SPEED_OF_LIGHT_MPS = 299792458.0
 STANDARD_GRAVITY = 9.80665  # m/s^2, the g of "specific force in g"
+# NMEA talker ids that name a satellite system (GN: several), not a device: a GNSS receiver's sentences
+NMEA_GNSS_TALKERS = frozenset({"GP", "GL", "GA", "GB", "BD", "GN", "GQ", "QZ", "GI"})

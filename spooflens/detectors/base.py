@@ -11,6 +11,8 @@ from numpy.typing import NDArray
 from spooflens.pipeline.evidence import Evidence
 
 FloatArray = NDArray[np.float64]
+# a Series named X + SIGMA_SUFFIX is X's 1-sigma band (the report draws X inside its 1- and 3-sigma bands)
+SIGMA_SUFFIX = "_sigma"
 
 
 @dataclass(frozen=True)
@@ -94,6 +96,27 @@ class Finding:
     receiver_id: str | None = None
 
 
+@dataclass(frozen=True)
+class Unmet:
+    """A precondition of a detector's model that a log does not meet (`spooflens.pipeline.preconditions`):
+    what the log has and what the model needs, in words a user understands ("IMU at 0.7 Hz" / "strapdown
+    needs >= 20 Hz"), with the measured values. `stops`: the detector does not run; otherwise it runs on
+    what there is and this says what it could not do."""
+
+    name: str
+    found: str
+    requires: str
+    values: dict[str, float | int | str] = field(default_factory=dict)
+    stops: bool = True
+
+    @property
+    def text(self) -> str:
+        return f"{self.found}: {self.requires}"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"name": self.name, "found": self.found, "requires": self.requires, "values": dict(self.values)}
+
+
 @dataclass
 class DetectorResult:
     """What one detector (or, with `evidence` None, an analysis product such as the navigation solution)
@@ -111,14 +134,18 @@ class DetectorResult:
     evidence: Evidence | None = None  # the class of reference this detector compares GNSS with
     findings: list[Finding] = field(default_factory=list)
     histograms: list[Histogram] = field(default_factory=list)
+    precondition: Unmet | None = None  # the precondition that kept it from running
+    limitations: list[Unmet] = field(default_factory=list)  # preconditions that limited what it could do
 
     @property
     def is_detector(self) -> bool:
         return self.evidence is not None
 
     @classmethod
-    def skipped(cls, name: str, reason: str, evidence: Evidence | None = None) -> DetectorResult:
-        return cls(name=name, ran=False, reason=reason, evidence=evidence)
+    def skipped(
+        cls, name: str, reason: str, evidence: Evidence | None = None, precondition: Unmet | None = None
+    ) -> DetectorResult:
+        return cls(name=name, ran=False, reason=reason, evidence=evidence, precondition=precondition)
 
 
 def alarm_intervals(

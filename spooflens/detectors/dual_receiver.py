@@ -1,27 +1,7 @@
-"""Seed 003's dual-receiver detectors: a spoofer with one transmitting antenna makes every receiver in
-its reach compute the same position (eqs. 7a-7h), so the distance between two receivers collapses
-(rule 1, eq. 11; windowed Rayleigh scale, rule 3, eq. 19) and the spread of their pseudorange
-differences over common satellites vanishes (rule 2, eqs. 13-15; windowed, rule 4, eq. 22). With the
-baseline vector known (surveyed sites of static stations) or estimated (a static pair), the baseline
-error |p1 - p2 - b| is the sharper statistic for a long baseline, and it also catches a spoofer that
-moves only one of the receivers.
-
-Choices where the paper is vague, all options of `DualReceiverOptions`:
-- distances are horizontal (east, north): the Rayleigh/Rice model is a two-dimensional one, and the
-  vertical errors are larger; the 3-D distance of eq. (9) is drawn beside;
-- the window is `window_s` long and holds at least `min_window` samples (the paper leaves K open); it
-  ends at the previous sample, as eq. (18) writes it;
-- thresholds come from `p_false_alarm` per epoch under the Rice model of the clean part of the log with
-  an effective window for time-correlated samples (`spooflens.detectors.statistics.rayleigh`); the paper's
-  boundary (sigma_GNSS - sigma_S)/2 is drawn beside, not used;
-- physical floors keep a model that fits imperfectly (heavy-tailed real errors) from calling spoofing:
-  a collapse must at least halve the window scale of the clean part (`max_collapse_ratio`), and a
-  baseline error must exceed `min_baseline_error_m`;
-- receivers at different rates: the denser one is interpolated (linearly, in ECEF) onto the other's
-  epochs, only between samples at most `max_gap_factor` of its median period apart; pseudorange
-  differences use epochs both receivers logged (within `epoch_tolerance_s`) and satellites both
-  tracked, with one mean per satellite system (each system has its own clock difference).
-"""
+"""Seed 003's dual-receiver detectors: under one spoofer antenna the distance between two receivers and
+the spread of their pseudorange differences collapse; with the baseline vector known, the baseline error
+grows. Declared in `ANALYSIS` (docs/detectors.md), with the choices where the paper is vague (all
+options of `DualReceiverOptions`)."""
 
 from __future__ import annotations
 
@@ -34,6 +14,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
+from spooflens.detectors.references import Station, stations
 from spooflens.detectors.statistics.rayleigh import (
     Calibration,
     calibrate,
@@ -43,8 +24,10 @@ from spooflens.detectors.statistics.rayleigh import (
 )
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
+from spooflens.gnss.same_receiver import ReceiverGroup, group_receivers, receiver_groups
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.pipeline.preconditions import INDEPENDENT_RECEIVERS, SURVEYED_SITES, known_stations
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -64,7 +47,6 @@ class DualReceiverOptions:
     max_gap_factor: float = 2.5
     epoch_tolerance_s: float = 0.02  # receivers' epoch tags of one instant differ by their clocks' ms
     min_common_satellites: int = 4
-    site_tolerance_m: float = 100.0  # a RINEX header position is the site when the fixes stay this close
     merge_gap_s: float = 5.0
 
 
@@ -127,45 +109,16 @@ def align_pair(fx_a: pd.DataFrame, fx_b: pd.DataFrame, a: str, b: str, opts: Dua
     return AlignedPair(a, b, t, ecef_a, ecef_b, lat, lon)
 
 
-def surveyed_sites(table: EpochTable) -> dict[str, FloatArray]:
-    """Receiver id -> surveyed antenna position (ECEF) from RINEX headers (APPROX POSITION XYZ)."""
-    if table.format != "rinex":
-        return {}
-    from readers.rinex import obs_files, rinex_approx_position
-    from spooflens.errors import SpooflensError
-
-    try:
-        files = obs_files(table.source)
-    except (SpooflensError, OSError):
-        return {}
-    out = {}
-    for path, rid in files:
-        try:
-            xyz = rinex_approx_position(path)
-        except SpooflensError:
-            continue
-        if xyz is not None:
-            out[rid] = np.asarray(xyz, dtype=float)
-    return out
-
-
-def _near_fraction(ecef: FloatArray, site: FloatArray, tolerance_m: float) -> float:
-    return float(np.mean(np.linalg.norm(ecef - site, axis=1) <= tolerance_m)) if len(ecef) else 0.0
-
-
-def known_baseline(table: EpochTable, pair: AlignedPair, opts: DualReceiverOptions) -> tuple[FloatArray | None, str]:
-    """The baseline vector p_a - p_b in ENU per epoch when it is known: from the surveyed sites of two
-    static stations (RINEX headers), each accepted when most of its receiver's fixes lie within
-    `site_tolerance_m` of it (most, not all: a spoofer moves the fixes, never the survey). Else None."""
-    sites = surveyed_sites(table)
-    if pair.a in sites and pair.b in sites:
-        near = [
-            _near_fraction(e, sites[r], opts.site_tolerance_m)
-            for e, r in ((pair.ecef_a, pair.a), (pair.ecef_b, pair.b))
-        ]
-        if min(near) >= 0.5:
-            b = np.broadcast_to(sites[pair.a] - sites[pair.b], pair.ecef_a.shape)
-            return ecef_to_enu_vectors(pair.lat, pair.lon, b), "surveyed sites (RINEX APPROX POSITION)"
+def known_baseline(stations: dict[str, Station], pair: AlignedPair) -> tuple[FloatArray | None, str]:
+    """The baseline vector p_a - p_b in ENU per epoch when it is known: both receivers are known stations
+    (`spooflens.detectors.references.stations`: `--station`, or RINEX headers that their first minutes of
+    fixes stay at; a spoofer moves the fixes later, never the survey). Else None."""
+    if pair.a in stations and pair.b in stations:
+        sa, sb = stations[pair.a], stations[pair.b]
+        b = np.broadcast_to(sa.ecef_m - sb.ecef_m, pair.ecef_a.shape)
+        headers = all(st.source.startswith("RINEX header") for st in (sa, sb))
+        source = "surveyed sites (RINEX APPROX POSITION)" if headers else f"known stations ({sa.source}; {sb.source})"
+        return ecef_to_enu_vectors(pair.lat, pair.lon, b), source
     return None, ""
 
 
@@ -375,12 +328,24 @@ def _new(name: str) -> DetectorResult:
     return DetectorResult(name, True, evidence=Evidence.SECOND_RECEIVER)
 
 
-def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[DetectorResult]:
-    """The three dual-receiver detectors over every pair (first receiver against each other one)."""
+def detect(
+    table: EpochTable,
+    opts: DualReceiverOptions | None = None,
+    groups: list[ReceiverGroup] | None = None,
+    known: dict[str, Station] | None = None,
+) -> list[DetectorResult]:
+    """The three dual-receiver detectors over every pair of independent receivers (the first against each
+    other one; `groups`: the log's receivers as the receivers they are, `group_receivers` by default;
+    `known`: the known stations, `stations` by default)."""
     opts = opts or DualReceiverOptions()
-    receivers = table.receivers()
+    groups = group_receivers(table) if groups is None else groups
+    known = stations(table, {})[0] if known is None else known
+    receivers = [g.receivers[0] for g in groups]
     collapse, pr, err = _new(COLLAPSE), _new(PR_COLLAPSE), _new(BASELINE_ERROR)
     notes: dict[str, list[str]] = {COLLAPSE: [], PR_COLLAPSE: [], BASELINE_ERROR: []}
+    one = "; ".join(g.describe() for g in groups if len(g.receivers) > 1)
+    for note in notes.values():
+        note += [one] if one else []
     for a, b in itertools.product(receivers[:1], receivers[1:]):
         pair = align_pair(table.fixes_of(a), table.fixes_of(b), a, b, opts)
         if len(pair.t) < 3 * opts.min_window:
@@ -400,7 +365,7 @@ def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[D
             f"(paper's boundary {rule.boundary:.3g} m)"
         )
         _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE])
-        _baseline_error_rule(table, pair, d_enu, opts, err, notes[BASELINE_ERROR])
+        _baseline_error_rule(known, pair, d_enu, opts, err, notes[BASELINE_ERROR])
     out = []
     for res in (collapse, pr, err):
         if not res.series:
@@ -436,16 +401,16 @@ def _pseudorange_rule(
 
 
 def _baseline_error_rule(
-    table: EpochTable,
+    known: dict[str, Station],
     pair: AlignedPair,
     d_enu: FloatArray,
     opts: DualReceiverOptions,
     res: DetectorResult,
     notes: list[str],
 ) -> None:
-    b_enu, source = known_baseline(table, pair, opts)
+    b_enu, source = known_baseline(known, pair)
     if b_enu is None:
-        notes.append(f"{pair.label}: baseline vector unknown (no surveyed sites of static stations)")
+        notes.append(f"{pair.label}: baseline vector unknown (not both known stations)")
         return
     e = np.linalg.norm((d_enu - b_enu)[:, :2], axis=1)
     rule = collapse_rule(pair.t, e, opts, upper=True)
@@ -463,10 +428,23 @@ def _baseline_error_rule(
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return detect(ctx.table, DualReceiverOptions())
+    known = known_stations(ctx)[0]
+    return detect(ctx.table, DualReceiverOptions(), receiver_groups(ctx), known)  # type: ignore[arg-type]
 
 
 _PAPER = "Seed 003 (Dobryakova, Lemieszewski, Ochin: dual-receiver detection of a single-antenna spoofer)"
+_O = DualReceiverOptions()
+_P = probability(_O.p_false_alarm)
+_CHOICES = (
+    "Distances are horizontal (the Rayleigh/Rice model is two-dimensional and vertical errors are larger; "
+    "the 3-D distance of eq. 9 is drawn beside). A receiver at another rate is interpolated (linearly, in "
+    f"ECEF) onto the sparser one's epochs, only between samples at most {_O.max_gap_factor:g} of its median "
+    f"period apart. The window is {_O.window_s:g} s and at least {_O.min_window} samples, ending at the "
+    "previous sample (eq. 18). The threshold comes from the false-alarm rate per epoch under a Rice model of "
+    "the log's clean part with an effective window for time-correlated samples "
+    "(`spooflens.detectors.statistics.rayleigh`); the paper's boundary (sigma_GNSS - sigma_S)/2 is drawn "
+    "beside, not used. Onset: the two-segment maximum-likelihood change of scale over the 3K samples before."
+)
 ANALYSIS = AnalysisSpec(
     "dual_receiver",
     "seed 003: two receivers on one vehicle: baseline collapse, pseudorange-difference collapse, baseline error",
@@ -477,32 +455,47 @@ ANALYSIS = AnalysisSpec(
             COLLAPSE,
             Evidence.SECOND_RECEIVER,
             "windowed Rayleigh scale of the distance between two receivers falling (rules 1 and 3)",
-            f"{_PAPER}: one transmitting antenna gives every receiver the same position, so the baseline "
-            "collapses. Horizontal distance; maximum-likelihood Rayleigh scale of a sliding window (rule 3, "
-            "eq. 19); the threshold from a false-alarm rate of 1e-5 per epoch under a Rice model of the clean "
-            "part of the log with an effective window for correlated samples, and the collapse must at least "
-            "halve the scale. The paper's boundary (sigma_GNSS - sigma_S)/2 is drawn beside.",
-            "1e-5 per epoch (Rice model of the clean part, effective window)",
+            method="One transmitting antenna gives every receiver in its reach the same position (eqs. 7a-7h), so "
+            "the distance between two receivers collapses: the maximum-likelihood Rayleigh scale of a sliding "
+            f"window of distances (rule 3, eq. 19) against its threshold, and at most {_O.max_collapse_ratio:g} "
+            "of the clean part's window scale (a floor that keeps an imperfectly fitting model, heavy-tailed real "
+            f"errors, from calling spoofing). {_CHOICES}",
+            p_false_alarm=f"{_P} per epoch (Rice model of the clean part, effective window)",
+            threshold=f"the window scale's {_P} quantile under the clean part's Rice model, and "
+            f"<= {_O.max_collapse_ratio:g} of its scale",
+            paper=_PAPER,
         ),
         DetectorInfo(
             PR_COLLAPSE,
             Evidence.SECOND_RECEIVER,
             "spread of the two receivers' pseudorange differences over common satellites vanishing (rules 2 and 4)",
-            f"{_PAPER}: under one spoofer antenna the pseudoranges differ by a constant (D1 - D2), so their "
-            "standard deviation over the common satellites (eq. 13, corrected to a variance) falls to the "
-            "receivers' own noise. Windowed Rayleigh scale (rule 4), calibrated like the baseline collapse on "
-            "its own clean part. Needs raw observations of both receivers.",
-            "1e-5 per epoch (Rice model of the clean part, effective window)",
+            method="Under one spoofer antenna the two receivers' pseudoranges differ by a constant (D1 - D2), so "
+            "their standard deviation over the common satellites (eq. 13, corrected to a variance; one mean per "
+            "satellite system, each has its own clock difference) falls to the receivers' own noise: windowed "
+            "Rayleigh scale (rule 4), calibrated like the baseline collapse on its own clean part. Epochs both "
+            f"logged (within {_O.epoch_tolerance_s:g} s, receiver b's pseudoranges carried to a's tag along each "
+            f"satellite's range rate) with {_O.min_common_satellites} or more common satellites; needs raw "
+            f"observations of both. {_CHOICES}",
+            p_false_alarm=f"{_P} per epoch (Rice model of the clean part, effective window)",
+            threshold=f"the window scale's {_P} quantile under the clean part's Rice model, and "
+            f"<= {_O.max_collapse_ratio:g} of its scale",
+            paper=_PAPER,
         ),
         DetectorInfo(
             BASELINE_ERROR,
             Evidence.SECOND_RECEIVER,
-            "|p1 - p2 - b| against the known baseline vector (surveyed static stations)",
-            f"{_PAPER}, with the baseline vector known: the horizontal baseline error is Rayleigh when nothing "
-            "is wrong, and grows to the baseline's length under a single-antenna spoofer (or to the offset of "
-            "a spoofer that moves one receiver). Windowed Rayleigh scale above its 1e-5 per epoch threshold and "
-            "above 5 m.",
-            "1e-5 per epoch (Rayleigh model of the clean part, effective window), and 5 m",
+            "|p1 - p2 - b| against the known baseline vector (two known stations)",
+            method="With the baseline vector known (both receivers known stations) the horizontal baseline error "
+            "is Rayleigh when nothing is wrong, and grows to the baseline's length under a single-antenna spoofer "
+            "(or to the offset of a spoofer that moves one receiver): the sharper statistic for a long baseline. "
+            f"Windowed Rayleigh scale above its threshold and above {_O.min_baseline_error_m:g} m (below, a "
+            f"baseline error is multipath or a receiver's jump). {_CHOICES}",
+            p_false_alarm=f"{_P} per epoch (Rayleigh model of the clean part, effective window)",
+            threshold=f"the window scale's {_P} quantile under the clean part's Rayleigh model, and "
+            f"{_O.min_baseline_error_m:g} m",
+            paper=_PAPER,
+            preconditions=(SURVEYED_SITES,),
         ),
     ),
+    preconditions=(INDEPENDENT_RECEIVERS,),
 )

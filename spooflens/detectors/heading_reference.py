@@ -1,42 +1,6 @@
-"""GNSS against the vessel's compass and speed log: a reference a spoofer of the receiver cannot move.
-
-A ship moves along its heading at its speed through the water, plus the water's current and a little
-leeway. Its gyrocompass or magnetic compass (NMEA HDT/HDG/THS) and its speed log (VHW) measure the
-first two without GNSS; so GNSS velocity minus that is the current, constant over minutes to hours, and
-a spoofer's drag or jump shows as a current that changes at once. With no speed log only the part of
-GNSS motion across the bow is tested: a vessel does not crab sideways beyond its leeway and the
-current.
-
-Per receiver, two GNSS velocities are compared with the reference:
-
-- `track`: the displacement between consecutive fixes, each interval's motion split along and across the
-  heading at its middle, averaged over a trailing `window_s` (a jump moves it for a whole window, a
-  single bad fix only where the window's ends pass it);
-- `velocity`: the receiver's own velocity (Doppler), when it reports one.
-
-Residual r = v_GNSS - STW * u_heading - c - l * u_starboard, with the current c (east, north) and the
-leeway l fitted to this log (least absolute deviations, then Tukey's biweight), refitted once without
-the alarmed part. What opens an alarm is how r changes: against its own median over the two minutes
-ending a window before (`baseline_s`), in east/north where both components are known (so a turn does
-not rotate a current misfit into a change). The current is allowed to change over minutes (tides, a
-river mouth); a spoofer's jump or drag changes r within a window. Each component is a robust z against
-its 1.4826 MAD over the log, floored at 0.2 m/s and at 2 degrees of heading at the log's median speed
-(a compass and a receiver this good do not show less). An open alarm lasts while r stays beyond the
-alarm level against the baseline frozen at the onset (the attack cannot enter it), and the onset
-interval runs from where the change's rise began to the first fix it left its quiet level at. The
-residual against the whole log's fit (`level`) is drawn but opens nothing: when an attack fills most of
-a log, the fitted current is the attacked one and the clean stretch looks off. Choices where nothing
-published fixes a number: the alarm level and duration are those of the autopilot's filter (8 robust
-sigma for 5 s), which a single bad fix or a few seconds of multipath cannot reach; a drift of the
-velocity slower than the two-minute baseline (a pull of tenths of a m/s per minute) is not seen.
-
-An incident lasts while GNSS stays away from the dead reckoning from its last quiet fix (with the speed
-log): a jump is seen by the track only while its window holds it, but the offset it left lasts, until
-GNSS comes back or the dead reckoning's growing error covers it (`_held`).
-
-Headings from a GNSS talker (GP/GN/GA/GB/GL/GQ/GI: a dual-antenna receiver) are not a reference: the
-spoofer moves them with the position.
-"""
+"""GNSS against the vessel's compass and speed log, a reference a spoofer of the receiver cannot move: the
+residual of GNSS velocity over what the heading, the speed through the water and a fitted current
+explain. Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -46,6 +10,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.constants import NMEA_GNSS_TALKERS
 from spooflens.detectors.base import (
     Alarm,
     DetectorResult,
@@ -63,7 +28,6 @@ from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorI
 
 FloatArray = NDArray[np.float64]
 NAME = "heading_reference"
-GNSS_TALKERS = frozenset({"GP", "GN", "GA", "GB", "GL", "GQ", "GI", "BD"})
 MIN_REFERENCED_FIXES = 20
 # a speed log reading outside these times the GNSS speed along the heading (over the fixes not alarmed
 # on) is stuck, fouled or garbage, not off by a calibration error (some per cent) or a current (a good
@@ -114,7 +78,7 @@ class Reference:
 
 def reference(headings: pd.DataFrame) -> Reference | None:
     """The compass stream with the most rows (never a GNSS talker's), and every speed-log sample."""
-    own = headings[~headings["talker"].astype(str).isin(GNSS_TALKERS)]
+    own = headings[~headings["talker"].astype(str).isin(NMEA_GNSS_TALKERS)]
     if own.empty:
         return None
     best = own["heading_id"].value_counts().index[0]
@@ -569,6 +533,7 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     return [run_heading_reference(ctx.table.fixes, ctx.table.frame("headings"))]
 
 
+_O = HeadingReferenceOptions()
 ANALYSIS = AnalysisSpec(
     NAME,
     "GNSS track and velocity against the vessel's compass heading and speed log",
@@ -579,13 +544,36 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.HEADING,
             "GNSS motion the vessel's compass and speed log cannot explain",
-            "GNSS velocity (the track over a 10 s window, and the receiver's own velocity) split along and across "
-            "the compass heading, minus the speed through the water along it, minus a current and leeway fitted "
-            "robustly to the log; its change against its own two-minute median (robust z against its scatter "
-            "in the log, floored at 0.2 m/s and 2 degrees of heading) opens an alarm, which lasts while the "
-            "residual stays off the baseline frozen at the onset, or GNSS off the dead reckoning. A jump or a "
-            "drag of the GNSS position moves the vessel where its heading and log say it did not go.",
-            "8 robust sigma of change for 5 s",
+            method="A ship moves along its heading at its speed through the water, plus the water's current and a "
+            "little leeway, none of which a spoofer of the receiver can move. The compass (NMEA HDT, HDG, THS; a "
+            "GNSS talker's heading, e.g. a dual-antenna GPHDT, is never a reference: the spoofer moves it) and the "
+            "speed log (VHW) give the first two. Per receiver, two GNSS velocities: the track (each fix interval's "
+            f"displacement split along and across the heading at its middle, over a trailing {_O.window_s:g} s "
+            "window) and the receiver's own (Doppler) velocity; the residual is GNSS velocity minus the compass "
+            "and log's, minus a current (east, north) and leeway fitted to the log (least absolute deviations, then "
+            "Tukey's biweight; refitted without the first pass's alarms). With no speed log only the motion across "
+            f"the bow is judged, and so with a log reading under {LOG_SCALE[0]:g} or over {LOG_SCALE[1]:g} times "
+            "the GNSS speed along the heading over the fixes not alarmed on (stuck, fouled). An alarm opens when "
+            f"the residual changes against its own median over the {_O.baseline_s:g} s ending {_O.window_s:g} s "
+            "before (in east/north where both components are known, so a turn does not rotate a current misfit "
+            f"into a change; a current changing over minutes is no alarm) by {_O.z_alarm:g} robust sigma for "
+            f"{_O.min_duration_s:g} s, the sigma 1.4826 MAD over the log, floored at hypot({_O.floor_mps:g} m/s, "
+            f"the log's median speed x sin {_O.heading_floor_deg:g} deg). It lasts while the residual stays beyond "
+            "that against the baseline frozen at the onset, and with the speed log while GNSS stays more than "
+            f"{_O.hold_sigma:g} sigma off the dead reckoning from the last quiet fix (a jump is seen by the track "
+            "only while its window holds it; the offset it left lasts). With the speed log each alarm also returns "
+            "the reconstructed track: where the compass, the log and the fitted current moved the vessel from the "
+            "last quiet fix, GNSS left out. The residual against the whole log's fit is drawn but opens nothing "
+            "(when an attack fills most of a log, the fitted current is the attacked one). A drift slower than the "
+            "baseline (tenths of a m/s per minute) is not seen.",
+            p_false_alarm="rule thresholds (not a calibrated rate)",
+            threshold=f"{_O.z_alarm:g} robust sigma of change for {_O.min_duration_s:g} s",
+            checked="On the real chartplotter log `gpsd_bundg_zeus_9.log` (148 s, SDHDG compass, SDVHW log) the "
+            "statistic stays below 0.46 of its alarm level; the same log with a 30 m or 3 km jump at 70 s, or a "
+            "2 m/s drag from 100 s, is SPOOFING with the heading class; a 3 km jump is held to the log's end, or to "
+            "110 s when GNSS comes back then, a 30 m jump about 35 s (`tests/detectors/test_heading_reference.py`; "
+            "the attacks are injected, not recorded). Sensitivity: about 2.3 m/s of drag at 6 m/s through the "
+            "water, any jump of tens of metres.",
         ),
     ),
 )

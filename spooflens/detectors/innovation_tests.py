@@ -1,17 +1,5 @@
-"""Innovation tests of the GNSS velocity, and of position and velocity together, against the INS.
-
-A spoofer taking a receiver over almost always moves its velocity first (the counterfeit signals'
-Doppler no longer matches the vehicle's motion), and on real captures the velocity innovation is the
-first and strongest sign (seed 000 tests position only). Both tests use the filter whose noise was
-learned from the log, so the yardstick is the log's own clean scatter, never the receiver's reported
-accuracy (which a capture inflates):
-
-- `velocity_innovation`: NIS of the INS-minus-GNSS velocity rows against chi-square(dof) (3, or 2 when
-  the log has east/north only) at P_FA 1e-5 per epoch;
-- `joint_innovation`: NIS of position and velocity rows together against chi-square(dof) at 1e-5.
-
-The position test alone is seed 000's `kf_innovation`.
-"""
+"""Innovation tests of the GNSS velocity, and of position and velocity together, against the INS (beside
+seed 000's position test, `kf_innovation`): declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -23,13 +11,15 @@ from numpy.typing import NDArray
 from spooflens.detectors.base import DetectorResult, Series, alarm_intervals
 from spooflens.estimation.kalman import ForwardResult
 from spooflens.estimation.quantiles import chi2_isf
-from spooflens.navigation.loosely_coupled import NavSolution, nis_by_pattern, quadratic_forms
+from spooflens.navigation.loosely_coupled import FILTER_SETTLE_S, NavSolution, nis_by_pattern, quadratic_forms
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.pipeline.preconditions import INERTIAL_SPAN, NOISE_LEARNING, STRAPDOWN_IMU
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 FloatArray = NDArray[np.float64]
 POSITION, VELOCITY = (0, 1, 2), (3, 4, 5)
+VELOCITY_INNOVATION, JOINT_INNOVATION = "velocity_innovation", "joint_innovation"
 
 
 def threshold(p_false_alarm: float = 1e-5, dof: int = 3) -> float:
@@ -47,7 +37,7 @@ def position_nis(fwd: ForwardResult, rows: tuple[int, ...] = POSITION) -> FloatA
 @dataclass(frozen=True)
 class InnovationTestOptions:
     p_false_alarm: float = 1e-5
-    settle_s: float = 20.0
+    settle_s: float = FILTER_SETTLE_S
     merge_gap_s: float = 5.0
 
 
@@ -57,7 +47,7 @@ def rows_nis(sol: NavSolution, rows: tuple[int, ...]) -> tuple[FloatArray, NDArr
 
 
 def nis_test(
-    name: str, sol: NavSolution, rows: tuple[int, ...], unit_label: str, opts: InnovationTestOptions
+    name: str, sol: NavSolution, rows: tuple[int, ...], unit_label: str, opts: InnovationTestOptions, noise: str = ""
 ) -> DetectorResult:
     nis, dof = rows_nis(sol, rows)
     if not (dof > 0).any():
@@ -71,8 +61,8 @@ def nis_test(
     return DetectorResult(
         name,
         True,
-        f"{unit_label} NIS vs chi2({main_dof}) threshold {thr_main:.1f} (P_FA {opts.p_false_alarm:g} per epoch), "
-        "noise learned from the log",
+        f"{unit_label} NIS vs chi2({main_dof}) threshold {thr_main:.1f} (P_FA {opts.p_false_alarm:g} per epoch)"
+        + (f", {noise}" if noise else ""),
         alarm_intervals(sol.t, np.nan_to_num(nis), alarm, opts.merge_gap_s),
         [
             Series(f"{name.split('_')[0]}_nis", sol.t, nis, f"chi2({main_dof})", thr_main),
@@ -83,14 +73,23 @@ def nis_test(
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    sol = navigation_of(ctx).solution
-    opts = InnovationTestOptions()
+    nav = navigation_of(ctx)
+    sol, opts = nav.solution, InnovationTestOptions()
+    noise = "noise: the prior (too little clean data)" if nav.learned.is_prior else "noise learned from the log"
     return [
-        nis_test("velocity_innovation", sol, VELOCITY, "velocity", opts),
-        nis_test("joint_innovation", sol, POSITION + VELOCITY, "position and velocity", opts),
+        nis_test(VELOCITY_INNOVATION, sol, VELOCITY, "velocity", opts, noise),
+        nis_test(JOINT_INNOVATION, sol, POSITION + VELOCITY, "position and velocity", opts, noise),
     ]
 
 
+_O = InnovationTestOptions()
+_P = probability(_O.p_false_alarm)
+_FILTER = (
+    "The GNSS/INS filter of `navigation`: its noise learned from the log and the receiver's errors as "
+    "Gauss-Markov states, so the yardstick is the log's own clean scatter, never the receiver's reported "
+    f"accuracy (which a capture inflates). No alarm in the first {_O.settle_s:g} s while the filter settles; "
+    f"alarms closer than {_O.merge_gap_s:g} s are one."
+)
 ANALYSIS = AnalysisSpec(
     "innovation_tests",
     "INS-minus-GNSS velocity, and position with velocity, innovation tests with noise learned from the log",
@@ -98,21 +97,28 @@ ANALYSIS = AnalysisSpec(
     _run,
     (
         DetectorInfo(
-            "velocity_innovation",
+            VELOCITY_INNOVATION,
             Evidence.INERTIAL,
             "NIS of the INS-minus-GNSS velocity against chi-square(dof)",
-            "The velocity innovation of the GNSS/INS filter (noise learned from the log, receiver errors as "
-            "Gauss-Markov states) against chi-square(3), or (2) with east/north only, at P_FA 1e-5 per epoch: "
-            "a takeover moves the receiver's Doppler velocity first.",
-            "1e-5 per epoch",
+            method="The normalised innovation squared of the filter's velocity rows, against chi-square with one "
+            "degree of freedom per velocity component the receiver reports (3, or 2 with east/north only). A "
+            "spoofer taking a receiver over almost always moves its velocity first (the counterfeit signals' "
+            "Doppler no longer matches the vehicle's motion): on real captures the velocity innovation is the "
+            f"first and strongest sign, which seed 000 (position only) leaves out. {_FILTER}",
+            p_false_alarm=f"{_P} per epoch",
+            threshold=f"chi-square(3) at {_P}: {threshold(_O.p_false_alarm, 3):.1f} (2 dof: "
+            f"{threshold(_O.p_false_alarm, 2):.1f})",
         ),
         DetectorInfo(
-            "joint_innovation",
+            JOINT_INNOVATION,
             Evidence.INERTIAL,
             "NIS of position and velocity innovations together against chi-square(dof)",
-            "Position and velocity innovations of the same filter together against chi-square(6) at P_FA 1e-5 "
-            "per epoch: catches attacks that move both a little.",
-            "1e-5 per epoch",
+            method="The normalised innovation squared of the position and velocity rows together, against "
+            f"chi-square with one degree of freedom per row measured (6 with a 3-D velocity): an attack that "
+            f"moves both a little. {_FILTER}",
+            p_false_alarm=f"{_P} per epoch",
+            threshold=f"chi-square(6) at {_P}: {threshold(_O.p_false_alarm, 6):.1f}",
         ),
     ),
+    preconditions=(STRAPDOWN_IMU, INERTIAL_SPAN, NOISE_LEARNING),
 )

@@ -1,25 +1,5 @@
-"""The satellites' own navigation messages, as a receiver decoded them from the signals in the log.
-
-A counterfeit signal carries a navigation message the spoofer wrote (open SDR spoofers broadcast orbits
-from a RINEX file of another day, re-dated or not). When the receiver passes the messages on (u-blox
-RXM-SFRBX; `GpsEphemerides.received_s`), three checks need nothing but the messages and the receiver's
-clock, per satellite:
-
-- **Message time** (`message_offset_s`): the time a subframe says it ends (its HOW) against the
-  receiver's GPS time when it came; a real satellite's message is on time to within the output latency
-  (about a second). Beyond `max_offset_s` the signal's clock is not GPS time.
-- **Ephemeris age**: a real satellite broadcasts an ephemeris whose toe lies within its fit interval of
-  now (two hours for the standard four-hour fit); one more than `max_age_s` from the time it was
-  received is another day's orbit.
-- **Orbit jump**: a satellite's new ephemeris and the one it broadcast before agree where both apply
-  (at the new toe, to a few metres in position and clock: each upload is a fit to one orbit); a
-  counterfeit message for the same satellite disagrees by kilometres. The jump is flagged from the new
-  record's reception until the satellite's message agrees with the last trusted one again, or the log
-  ends.
-
-The class is raw-measurement consistency: the references are the satellite's own earlier broadcast and
-the receiver's clock (kept by every other satellite), which a spoofer of some satellites does not move.
-"""
+"""The satellites' own navigation messages as a receiver decoded them from the signals in the log: their
+time, their age and orbit jumps. Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -169,6 +149,7 @@ def run_navigation_message(ctx: AnalysisContext, opts: NavigationMessageOptions 
     return result
 
 
+_O = NavigationMessageOptions()
 ANALYSIS = AnalysisSpec(
     NAME,
     "the satellites' navigation messages as decoded from the log's signals: time, age and orbit jumps",
@@ -179,10 +160,19 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.RAW_MEASUREMENT,
             "navigation messages a spoofer wrote: off the receiver's clock, another day's orbit, or an orbit jump",
-            "Per satellite: a subframe's own time more than 30 s from the receiver's GPS time when it came; an "
-            "ephemeris whose toe is more than 4 h from its reception; a new ephemeris that disagrees with the "
-            "satellite's previous one by more than 100 m in position or clock at the new toe.",
-            "rule thresholds far outside what real broadcasts do",
+            method="A counterfeit signal carries a navigation message the spoofer wrote (open SDR spoofers broadcast "
+            "orbits from a RINEX file of another day, re-dated or not). Where the receiver passes the messages on "
+            "(u-blox RXM-SFRBX, GnssLogger Nav: GPS LNAV and Galileo I/NAV; never the orbits of an RTCM3 stream, "
+            "which a base station received), three checks per satellite need nothing but the messages and the "
+            f"receiver's clock: a subframe's own time (its HOW) more than {_O.max_offset_s:g} s from the "
+            "receiver's GPS time when it came (a real one is on time to the output latency, about a second); an "
+            f"ephemeris whose toe is more than {_O.max_age_s / 3600:g} h from its reception (another day's orbit); "
+            "a new ephemeris disagreeing with the satellite's previous one by more than "
+            f"{_O.max_jump_m:g} m in position or clock at the new toe (each upload is a fit to one orbit), flagged "
+            "until the satellite's message agrees with the trusted one again. Its references are the satellite's "
+            "own earlier broadcast and the receiver's clock, kept by every other satellite.",
+            p_false_alarm="rule thresholds far outside what real broadcasts do",
+            threshold=f"{_O.max_offset_s:g} s; {_O.max_age_s / 3600:g} h; {_O.max_jump_m:g} m",
         ),
     ),
 )

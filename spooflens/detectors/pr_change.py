@@ -1,19 +1,7 @@
 """Seed 002 on a log: each satellite's pseudorange change at a receiver of known position, predicted by a
-constant-acceleration Kalman filter (`pr_change_kf`) and by a recurrent network (`pr_change_rnn`).
-
-The statistics are in `spooflens.detectors.statistics.pseudorange_change`. Which position: a known station
-(`--station`, or the RINEX header of a receiver that stayed put; evidence KNOWN_STATION)
-for every receiver that has one;
-otherwise, with an IMU, the INS propagated alone over a window from the GNSS/INS solution for the
-navigation receiver (a trajectory the spoofed fixes of the last `window_s` seconds have not touched;
-evidence INERTIAL, since the reference is then the inertial sensors).
-
-Thresholds: chi-square(1) of each satellite's normalised residual at `p_false_alarm` per satellite and
-epoch (1e-6: about 1e-5 per epoch with ten satellites), widened to F(1, n) for a noise scale read off n
-samples per satellite. The recurrent network trains on the epochs the Kalman detector left clean.
-Each alarm names the satellites whose residual crossed the threshold, with the spoofing offset the
-compensation estimates for them (alpha = `alpha`).
-"""
+constant-acceleration Kalman filter (`pr_change_kf`) and by a recurrent network (`pr_change_rnn`). The
+statistics are in `spooflens.detectors.statistics.pseudorange_change`; what the detectors do is declared
+in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -41,7 +29,13 @@ from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.grid import ObservationGrid, observation_grid
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.pipeline.preconditions import (
+    INDEPENDENT_REFERENCE,
+    PSEUDORANGE_ARCS,
+    STRAPDOWN_IMU,
+    unmet_preconditions,
+)
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 FloatArray = NDArray[np.float64]
 KF, RNN = "pr_change_kf", "pr_change_rnn"
@@ -204,7 +198,7 @@ def references(ctx: AnalysisContext, window_s: float) -> tuple[list[tuple[Observ
             grid = observation_grid(table, rid)
             out.append((grid, station_reference(grid, st)))
         return out, ""
-    if len(table.imu) >= 50:
+    if len(table.imu) and not unmet_preconditions((STRAPDOWN_IMU,), ctx):
         try:
             nav = navigation_of(ctx)
         except SpooflensError as err:
@@ -232,6 +226,21 @@ def run(ctx: AnalysisContext, opts: PrChangeOptions | None = None) -> list[Detec
 
 
 _PAPER = "Seed 002 (Mosavi et al. 2014, DGPS pseudorange-change residuals)"
+_O = PrChangeOptions()
+_P = probability(_O.p_false_alarm)
+_Z = (
+    "Per satellite, z = the change of its pseudorange between epochs minus the change of the modelled range "
+    "from the known position (eqs. 4-5), the receiver clock removed by the cross-satellite median, elevations "
+    f"below {_O.mask_deg:g} deg left out. Reference: a known station (`--station`, or the RINEX header of a "
+    "receiver that stayed put; evidence: known station) for every receiver that has one; otherwise, with an IMU "
+    f"fit for strapdown, the INS propagated alone over {_O.window_s:g} s from the GNSS/INS solution (evidence: "
+    "inertial). The carrier must confirm a code change (a spoofer delays the whole signal, code multipath moves "
+    "the code alone): where the carrier was tracked, it must have moved at least half as far the same way, "
+    "unless code and carrier disagree by more than multipath reaches (30 m). The residual v against the "
+    "prediction, v^2/S against chi-square(1) per satellite and epoch, widened to F(1, n) for a noise scale read "
+    "off n samples per satellite. Each alarm names the satellites whose residual crossed the threshold, with "
+    f"the spoofing offset the compensation (eq. 9, alpha {_O.alpha:g}) estimates for them."
+)
 ANALYSIS = AnalysisSpec(
     "pr_change",
     "seed 002: each satellite's pseudorange change against a receiver of known position (a station, or "
@@ -244,20 +253,23 @@ ANALYSIS = AnalysisSpec(
             Evidence.KNOWN_STATION,
             "pseudorange change minus range change from the known position, against a constant-acceleration "
             "Kalman prediction",
-            f"{_PAPER}: z = change of pseudorange minus change of the modelled range from the known position "
-            "(eqs. 4-5), receiver clock removed by the cross-satellite median, residual of a constant-"
-            "acceleration Kalman filter (eqs. 6-8) normalised by its predicted variance, chi-square(1) at 1e-6 "
-            "per satellite and epoch (F-widened for the estimated noise scale); the carrier must confirm a "
-            "code change. Reference: a known station, or the INS over 5 s (then inertial evidence).",
-            "1e-6 per satellite and epoch",
+            method=f"{_Z} Predictor: a constant-acceleration Kalman filter per satellite arc (eqs. 6-8); an alarmed "
+            "satellite coasts a few epochs before its filter restarts at the new level.",
+            p_false_alarm=f"{_P} per satellite and epoch (about 1e-5 per epoch with ten satellites)",
+            threshold=f"v^2/S > 1 x F(1, n) at {_P}",
+            paper=_PAPER,
         ),
         DetectorInfo(
             RNN,
             Evidence.KNOWN_STATION,
             "the same residual against an echo-state network's prediction, trained on the log's clean epochs",
-            f"{_PAPER}: the recurrent predictor the paper leaves unspecified: a seeded 64-unit echo-state "
-            "network with a ridge readout, trained on the epochs the Kalman detector left clean; same threshold.",
-            "1e-6 per satellite and epoch",
+            method=f"{_Z} Predictor: the recurrent network the paper leaves unspecified, a seeded echo-state "
+            f"network ({_O.esn.units} units, ridge readout) trained on the epochs the Kalman detector left clean "
+            f"({_O.clean_margin} epochs either side of its alarms kept out); same threshold.",
+            p_false_alarm=f"{_P} per satellite and epoch",
+            threshold=f"v^2/S > 1 x F(1, n) at {_P}",
+            paper=_PAPER,
         ),
     ),
+    preconditions=(INDEPENDENT_REFERENCE, PSEUDORANGE_ARCS),
 )

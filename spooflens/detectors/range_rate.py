@@ -1,32 +1,6 @@
-"""Seed 001 on a log: pseudorange-rate consistency of each satellite with an independent velocity.
-
-The statistics are in `spooflens.detectors.statistics.pseudorange_rate`; the reference in `references`. Which reference:
-the INS over a window (`window_s` seconds of free inertial propagation from the GNSS/INS state, evidence
-INERTIAL) for the receiver the navigation solution uses, when the log has an IMU; otherwise every
-receiver with a known station (zero velocity, evidence KNOWN_STATION).
-
-Two detectors, both on dv = v_signals - v_reference (east, north, up) from the per-epoch least squares:
-- `range_rate`: per sample, per component as the paper's rule. Each component over its scale (the
-  least-squares geometry times the robust rate-residual scale, plus the reference's own error and a
-  heading term that grows with the velocity change over the free run, both fitted to the log by a capped
-  likelihood), the largest against a Student-t tail at `p_false_alarm` per epoch. Why t, not normal:
-  the reference is the aided filter's state propagated for a few seconds, and that state lags whenever
-  the dynamics change (turn entries, manoeuvre blends), so its errors are heavier-tailed than Gaussian
-  (clean simulated flights reach 4-5 sigma over a few thousand epochs); nu = 8 (or fewer when the scales
-  rest on few effective samples) puts the threshold at 11.3 sigma for 1e-5 per epoch. The paper's own
-  thresholds (a normal fit to the first 200 s of clean data at P_FA 0.01) suit a benchmark with a clean
-  twin of the log, not a forensic log whose first 200 s may be attacked: `spooflens bench range_rate`
-  applies them.
-- `range_rate_ttest`: the windowed t-test of eqs. 21-26 per component, K from the noncentral t for a
-  bias `bias_mps` at P_D `p_detect` (the paper's step 4, inequality corrected), threshold
-  t_{1-alpha/2}(K-1) with alpha = `p_false_alarm`. The t-test assumes independent samples; when the
-  statistic's lag-1 autocorrelation exceeds `max_whiteness` (a drifting INS reference makes it smooth)
-  its alarms are advisory.
-
-Alarms name the satellites: those whose code and carrier jumped together (a change of the signal's
-delay), else those a residual test on the rates sets apart, else all satellites used (they agree with
-each other on a wrong velocity).
-"""
+"""Seed 001 on a log: each satellite's pseudorange rate against an independent velocity (the INS over a
+window, or a known station). The statistics are in `spooflens.detectors.statistics.pseudorange_rate`,
+the references in `references`; what the detectors do is declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -54,7 +28,13 @@ from spooflens.estimation.quantiles import t_isf
 from spooflens.gnss.grid import ObservationGrid, observation_grid
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.pipeline.preconditions import (
+    CARRIER_CONTINUITY,
+    INDEPENDENT_REFERENCE,
+    STRAPDOWN_IMU,
+    unmet_preconditions,
+)
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 FloatArray = NDArray[np.float64]
 ENU = ("east", "north", "up")
@@ -251,7 +231,7 @@ def run(ctx: AnalysisContext, opts: RangeRateOptions | None = None) -> list[Dete
     opts = opts or RangeRateOptions()
     table = ctx.table
     with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
-    if len(table.imu) >= 50:
+    if len(table.imu) and not unmet_preconditions((STRAPDOWN_IMU,), ctx):  # the INS first, then a station
         try:
             nav = navigation_of(ctx)
         except SpooflensError as err:
@@ -265,10 +245,7 @@ def run(ctx: AnalysisContext, opts: RangeRateOptions | None = None) -> list[Dete
             (rid, lambda g: ins_reference(ctx, g, opts.window_s))
         ]
     else:
-        found, why = stations(table, ctx.options.extra)
-        if not found:
-            reason = "; ".join(f"{r}: {w}" for r, w in why.items())
-            return _skipped(f"needs an independent velocity: an IMU, or a known station ({reason})")
+        found, _ = stations(table, ctx.options.extra)  # there is one: the precondition independent_reference
         chosen = [(rid, partial(station_reference, station=st)) for rid, st in found.items()]
     computed = [receiver_statistics(ctx, rid, ref, opts) for rid, ref in chosen]
     computed = [c for c in computed if np.isfinite(c.statistic).any()]
@@ -278,8 +255,25 @@ def run(ctx: AnalysisContext, opts: RangeRateOptions | None = None) -> list[Dete
 
 
 _PAPER = "Seed 001 (Chang et al. 2022, INS-aided pseudorange-rate consistency)"
+_O = RangeRateOptions()
+_P = probability(_O.p_false_alarm)
+_REFERENCE = (
+    "Measured rate: the carrier-phase difference over the epoch interval (eq. 8), cycle slips screened (the "
+    "change of code minus carrier separates a slip, the carrier alone, from a change of the signal's delay, "
+    "code and carrier together; with Doppler, a carrier change off the Doppler trapezoid), the Doppler "
+    "trapezoid where the carrier slipped, instantaneous Doppler or logged rates in logs without carrier; "
+    f"intervals over {_O.rate.max_interval_s:g} s not used, elevations below {_O.rate.elevation_mask_deg:g} deg "
+    "left out. Predicted: the rate a receiver at the reference would see from the broadcast orbit and clock "
+    "(eq. 17, frame and direction errata fixed: SEEDS.md). Per epoch, weighted least squares of measured minus "
+    "predicted gives dv = v_signals - v_reference (E, N, U) and a clock drift per satellite system. Reference: "
+    f"with an IMU fit for strapdown, the INS restarted from the GNSS/INS state {_O.window_s:g} s before each "
+    "epoch and propagated alone (evidence: inertial; an attack is seen against a clean reference for its first "
+    f"{_O.window_s:g} s, alarms of later restarts name no satellites; restarts wait until the filter settled "
+    "and the alignment ended, so an attack in the first minute is left to the others); else a known station, "
+    "zero velocity (evidence: known station)."
+)
 ANALYSIS = AnalysisSpec(
-    "range_rate",
+    NAME,
     "seed 001: each satellite's pseudorange rate (carrier phase, Doppler) against an independent velocity "
     "(the INS over a window, or a known station)",
     ("observations", "satellite_states"),
@@ -289,22 +283,38 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.INERTIAL,
             "velocity the signals imply minus the reference velocity (E, N, U), per epoch",
-            f"{_PAPER}: measured rate from carrier-phase differences (cycle slips screened; Doppler where "
-            "the carrier slipped) minus the rate predicted from the reference velocity and the broadcast orbit "
-            "and clock (eq. 17, frame and direction errata fixed); receiver clock drift and dv estimated per "
-            "epoch by least squares. Per-sample chi-square(3) at P_FA 1e-5 per epoch, scales from the log's "
-            "quietest quarter. Reference: the INS propagated alone for 5 s (inertial), or a known station "
-            "(known station).",
-            "1e-5 per epoch",
+            method=f"{_REFERENCE} The paper's per-sample rule, on each component of dv over its scale: the "
+            "least-squares geometry times the robust scale of the rate residuals (the quietest quarter, refined), "
+            "plus the reference's own error and a heading term growing with the velocity change over the free run, "
+            "both fitted to the log by a likelihood whose terms are capped at 4 sigma (a minority of attacked "
+            "epochs does not move them). The largest normalised component against a Student-t tail: the reference "
+            "is the aided filter's state propagated for a few seconds, which lags whenever the dynamics change, "
+            "so its errors are heavier-tailed than Gaussian; nu = min("
+            f"{_O.tail_dof:g}, n_eff - 1), n_eff the effective number of samples the scales rest on, at "
+            f"{_P} / 6 (two-sided, three components). The paper's own thresholds (a normal fit to "
+            "the first 200 s of clean data at P_FA 0.01) suit a benchmark with a clean twin of the log, not a "
+            "forensic log whose first 200 s may be attacked: `spooflens bench range_rate` applies them. Alarms "
+            "name the satellites whose code and carrier jumped together, else those a residual test on the rates "
+            "sets apart, else all used (they agree on a wrong velocity).",
+            p_false_alarm=f"{_P} per epoch",
+            threshold=f"largest |z| against t(nu) at {_P}/6, nu <= {_O.tail_dof:g}: "
+            f"{float(t_isf(_O.p_false_alarm / 6.0, _O.tail_dof)):.1f} sigma at nu = {_O.tail_dof:g}",
+            paper=_PAPER,
         ),
         DetectorInfo(
             TTEST,
             Evidence.INERTIAL,
             "windowed t-test of each velocity-error component (eqs. 21-26)",
-            f"{_PAPER}: one-sample t-test over the last K epochs, K from the noncentral t for a 0.1 m/s bias "
-            "at P_D 0.9 (step 4 corrected); threshold t_(1-alpha/2)(K-1) at alpha 1e-5 per epoch. Advisory "
-            "when the statistic is autocorrelated (lag-1 > 0.5).",
-            "1e-5 per epoch (independent samples)",
+            method=f"{_REFERENCE} The paper's windowed one-sample t-test of each component of dv over the last K "
+            f"epochs, K from the noncentral t so that a {_O.bias_mps:g} m/s bias is seen with probability "
+            f"{_O.p_detect:g} (the paper's step 4 with its inequality corrected), at most {_O.k_max} epochs; "
+            f"threshold t_(1-alpha/2)(K-1) at alpha {_P} / 3 (three components). The t-test assumes "
+            f"independent samples: when the statistic's lag-1 autocorrelation exceeds {_O.max_whiteness:g} (a "
+            "drifting INS reference makes it smooth) its alarms are advisory.",
+            p_false_alarm=f"{_P} per epoch (independent samples)",
+            threshold=f"|T| >= t_(1-alpha/2)(K-1), alpha {_P}/3",
+            paper=_PAPER,
         ),
     ),
+    preconditions=(INDEPENDENT_REFERENCE, CARRIER_CONTINUITY),
 )

@@ -1,30 +1,6 @@
-"""Receiver self-report as evidence: what the receiver logs about itself, against its own baseline in
-the log and the documented normal ranges.
-
-A receiver under a takeover says so in many small ways before and while its fixes move: it loses
-satellites several at once and re-acquires them, its DOP and reported accuracies inflate, its noise and
-jamming indicators rise, its AGC moves (a strong signal at the antenna), its C/N0 drops during the
-takeover and then sits above its old level (a spoofer is louder than the sky), its own spoofing or
-jamming state goes up. None of these is proof (a bridge, a tunnel, a turn away from the sky do some of
-them too), so this class alone never makes a spoofing verdict; with the GNSS-only or an independent
-class it does (`spooflens.pipeline.evidence.confidence`).
-
-Per receiver and indicator the baseline is the log's own median and a robust scale (1.4826 MAD, with a
-floor per indicator so a constant indicator is not infinitely sensitive), learned from the whole log
-or, when the receiver's indicators worsen together at one time and stay so (`reference_epochs`: a
-takeover lasting to the end can fill half the log), from the part before that time. Each epoch gets a directional
-robust z-score per indicator (positive = the suspicious direction). The detector alarms on:
-
-- a joint change: at least `min_indicators` indicators beyond `z_alarm` within `window_s` of each other
-  (indicators of one event change within seconds of each other, not at the same epoch), lasting
-  `min_duration_s`;
-- the receiver's own flags: its decoded spoofing flag, or a jamming state of warning/critical
-  (mitigated/detected) for `min_duration_s`;
-- documented normal ranges, so a log attacked from its first fix still shows it: a mean C/N0 above
-  `max_plausible_cn0_dbhz` (the sky gives 30-50 dB-Hz to a small antenna).
-
-Losses of fix (gaps longer than `gap_factor` median periods) count as an indicator too.
-"""
+"""Receiver self-report as evidence: what the receiver logs about itself (accuracies, satellites, DOP,
+noise, AGC, C/N0, its own spoofing and jamming state) against its own baseline in the log and the
+documented normal ranges. Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -291,6 +267,7 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     return [run_receiver_evidence(ctx.table.fixes)]
 
 
+_O = ReceiverEvidenceOptions()
 ANALYSIS = AnalysisSpec(
     NAME,
     "receiver self-report: indicators against the log's own baseline, the receiver's flags, documented ranges",
@@ -301,13 +278,26 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.RECEIVER,
             "the receiver's own indicators changing together, its spoofing/jamming state, implausible C/N0",
-            "Each indicator the receiver logs (reported accuracies, satellites used, DOP, noise, jamming "
-            "indicator, AGC, mean C/N0, losses of fix) against its own median and robust scale in this log "
-            "(learned before the indicators worsen together, when a takeover fills most of the log); "
-            "an alarm needs two indicators beyond 6 robust sigma within 5 s of each other for 1 s, the "
-            "receiver's own spoofing flag or jamming state, or a mean C/N0 above 50 dB-Hz. Evidence alone is "
-            "never a spoofing verdict.",
-            "two independent indicators beyond 6 robust sigma at once",
+            method="A receiver under a takeover says so in many small ways: it loses satellites several at once "
+            "and re-acquires them, its DOP and reported accuracies inflate, its noise and jamming indicators rise, "
+            "its AGC moves, its C/N0 drops and then sits above its old level, its own spoofing or jamming state "
+            "goes up. None is proof (a bridge, a tunnel, a turn away from the sky do some of them too), so this "
+            "class alone never makes a spoofing verdict. Per receiver, every indicator it logs ("
+            + ", ".join(ind.label for ind in INDICATORS)
+            + ", and losses of fix: gaps beyond "
+            f"{_O.gap_factor:g} median periods) gets a directional robust z against its median and 1.4826 MAD in "
+            "this log (floored per indicator, so a constant one is not infinitely sensitive). The baseline is the "
+            "whole log, or, when the accuracies, satellites used, DOP, noise and jamming indicator worsen "
+            "together at one time and stay worse (a takeover lasting to the end can fill most of the log, and "
+            "then the whole log's median is the attack's state), the part before it. An alarm needs "
+            f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s of each "
+            f"other for {_O.min_duration_s:g} s, the receiver's own spoofing flag (as decoded by the log's "
+            "message definition), its jamming state at warning or worse, or a mean C/N0 above "
+            f"{_O.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives a small antenna, so a log "
+            "attacked from its first fix still shows it).",
+            p_false_alarm="rule thresholds (not a calibrated rate)",
+            threshold=f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s; "
+            f"the receiver's flags; mean C/N0 > {_O.max_plausible_cn0_dbhz:g} dB-Hz",
         ),
     ),
 )

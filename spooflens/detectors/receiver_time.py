@@ -1,31 +1,5 @@
-"""The receiver's time against the log's own clock: a reference the spoofer of the receiver cannot move.
-
-A receiver's time comes from the signals it tracks; the log's clock does not (an autopilot's boot clock, a
-phone's elapsed-realtime clock, the logging host's time). Their difference (`time_offset_s`, filled by
-the readers that have both: PX4 `time_utc_usec`, ArduPilot `GWk`/`GMS`, GnssLogger `Fix` times, NMEA
-with logger times, ROS `sensor_msgs/TimeReference`) stays constant but for the logger's crystal drift
-(tens of ppm: a few ms a minute) and the latency of each message (ms to tens of ms). A spoofer that does
-not copy GNSS time to within a fraction of a second moves it at once and keeps it moved: a signal
-generator started from a navigation file (gps-sdr-sim run from a file made earlier), a recording of the
-sky replayed later, a spoofer set to a time of its own. A spoofer synchronised to GNSS time (or a
-meaconer's microseconds of delay) is not seen here.
-
-Per receiver: the offset's change d against its own median over the minute ending 5 s before
-(`baseline_s`, `guard_s`), against max(8 robust sigma, 0.25 s), the sigma from fix-to-fix differences of
-the offset (a step moves one of them, however long the attack lasts). An alarm opens when 3 fixes in a
-row over at least a second are beyond that, and lasts while the offset stays beyond it against the
-baseline frozen where it opened (the attack cannot enter it). The onset interval runs from the last fix
-on the old time to the first on the new one. Two steps are not spoofing and are reported as findings,
-never alarms: UTC moving back by exactly 1 or 2 s within the receiver's first 15 minutes in the log,
-held to its end (a receiver that started with an old firmware's default leap seconds learns the
-broadcast ones within 12.5 minutes; there have been 18 since 1980, the last in 2017, so a default is
-never ahead), and a step of the logger's clock rather than the receiver's (between the two fixes the
-receiver's time advanced by a fix period, the logger's did not: a host clock set by NTP; only where the
-log's clock is a host's, never against a monotonic boot clock). Choices where nothing published fixes a
-number: the level (8 sigma, 0.25 s) is far above the latencies of real loggers (ArduPilot 5 Hz GPS rows:
-20 ms robust sigma; a phone's fixes: 1 ms), and the duration rule is the one every other change detector
-here uses.
-"""
+"""The receiver's time against the log's own clock, a reference the spoofer of the receiver cannot move:
+steps of their difference. Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -230,6 +204,7 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     return [run_receiver_time(ctx.table.fixes, clock=clock, monotonic=meta.get("time_offset.monotonic") == "yes")]
 
 
+_O = ReceiverTimeOptions()
 ANALYSIS = AnalysisSpec(
     NAME,
     "the receiver's time against the log's own clock",
@@ -240,11 +215,34 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.LOG_CLOCK,
             "steps of the receiver's time against the log's own clock",
-            "A spoofer that does not copy GNSS time to a fraction of a second (a generator run from a "
-            "navigation file, a replayed recording) moves the receiver's time against the autopilot's, the "
-            "phone's or the logging host's clock. Change against the trailing minute, 8 robust sigma and at "
-            "least 0.25 s, for 3 fixes and 1 s; leap-second updates and logger clock steps are findings.",
-            "none seen on real logs (the level is 8 robust sigma and at least 0.25 s)",
+            method="A receiver's time comes from the signals it tracks; the log's clock (the autopilot's boot clock, "
+            "the phone's elapsed-realtime clock, the logging host's time) does not. Their difference "
+            "(`time_offset_s`: PX4 time_utc_usec, ArduPilot GWk/GMS, GnssLogger Fix, NMEA with logger times, ROS "
+            "sensor_msgs/TimeReference, tlog GPS_RAW_INT) stays constant but for the logger's crystal drift and each "
+            "message's latency. A spoofer that does not copy GNSS time to a fraction of a second moves it at once "
+            "and keeps it moved: a signal generator run from a navigation file made earlier (gps-sdr-sim's usual "
+            "use), a recording of the sky replayed later, a spoofer on a clock of its own. Per receiver the "
+            f"offset's change against its median over the {_O.baseline_s:g} s ending {_O.guard_s:g} s before, "
+            f"against max({_O.z_alarm:g} robust sigma, {_O.min_step_s:g} s), the sigma from fix-to-fix differences "
+            f"(a step moves one of them, however long the attack lasts); {_O.min_fixes} fixes over at least "
+            f"{_O.min_duration_s:g} s open an alarm, which lasts while the offset stays off the baseline frozen "
+            "where it opened; the onset interval runs from the last fix on the old time to the first on the new "
+            "one, and the return to the old time is no second step. Two steps are findings, not alarms: UTC "
+            f"moving back by exactly 1 to {_O.max_leap_s} s in the receiver's first {_O.leap_window_s / 60:g} "
+            "minutes, held to the log's end (a receiver that started with an old firmware's default leap seconds "
+            "learns the broadcast ones within 12.5 min; no default is ahead of today's 18), and a step of the "
+            "logger's clock (the receiver's time advanced by a fix period between two fixes, the logger's did "
+            "not: a host clock set by NTP; only where the log's clock is a host's, never against a monotonic boot "
+            "clock). A spoofer synchronised to GNSS time, or a meaconer's microseconds of delay, is not seen.",
+            p_false_alarm="rule thresholds: none seen on real logs",
+            threshold=f"max({_O.z_alarm:g} robust sigma, {_O.min_step_s:g} s) for {_O.min_fixes} fixes and "
+            f"{_O.min_duration_s:g} s",
+            checked="Real clean logs: the ArduPilot flight `flightdata_center_0003.bin` (5 Hz GPS rows, robust "
+            "sigma 20 ms), the Pixel 6 GnssLogger fixes (1 ms) and its NMEA (16 ms) raise nothing; the ArduPilot "
+            "flight with `inject --attack capture:start=20,drag=step,offset=300,clock=3600.5` is SPOOFING, high "
+            "(GNSS-only and log clock), from 24.0 s to the end; the Pixel 6 log with "
+            "`capture:start=200,clock=-30.5` alarms from the first fix after the takeover (204 s, interval "
+            "198-204 s) (`tests/detectors/test_receiver_time.py`).",
         ),
     ),
 )

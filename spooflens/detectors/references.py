@@ -1,23 +1,17 @@
 """What the raw-observation detectors compare a receiver's signals with: where the receiver was, known
 independently of its GNSS.
 
-Two references, each with its evidence class:
-
 - a **known station** (`Evidence.KNOWN_STATION`): a position given with `--station`, or a RINEX header's
-  APPROX POSITION for a receiver that stayed put. A header position is only used when the receiver's
-  own fixes say it is static (over 30 s spans, 90% of them move less than 0.5 m/s: an attack's jumps
-  are a small minority) and its first fixes lie within 100 m of the header (a moving receiver's header is
-  only where it started; a rough header would bias the differences the detectors use). The station is
-  Earth-fixed: zero velocity, the same position at every epoch.
-- the **INS over a window** (`Evidence.INERTIAL`): the GNSS/INS solution (`navigation_of(ctx)`) is
-  corrected by the receiver's own fixes, which a spoofer moves, so it cannot serve as the reference
-  as it is. At each observation epoch k the INS is restarted from the filter's state at least
-  `window_s` earlier and propagated by the IMU alone (`spooflens.navigation.strapdown`) to epochs k-1 and
-  k. An attack that starts at t_a leaves every reference with k <= t_a + window_s untouched (it restarts
-  from a state before the attack); later references restart from states the spoofed fixes have already
-  pulled, so the comparison sees what changed within the last window, not a steady spoof. Position and
-  velocity at k-1 and k come from the same run, so differences over one epoch carry only the free
-  INS's drift over that epoch. The antenna lever arm is not known and not applied.
+  APPROX POSITION for a receiver that stayed put. A station that starts to move during the log is evidence,
+  not a reason to stop looking, so whether it stayed put is judged on the fixes of its first
+  `STATIC_WINDOW_S` (over 30 s spans, 90% of them slower than 0.5 m/s), and the header must lie within
+  100 m of its first fixes (a moving receiver's header is only where it started; a rough one would bias
+  the differences). Zero velocity, the same position at every epoch.
+- the **INS over a window** (`Evidence.INERTIAL`): the GNSS/INS solution is corrected by the receiver's
+  own (possibly spoofed) fixes, so at each observation epoch k the INS is restarted from the filter's
+  state at least `window_s` earlier and propagated by the IMU alone to epochs k-1 and k. An attack is
+  then seen against a clean reference for its first `window_s`; later restarts have seen the spoofed
+  fixes. The antenna lever arm is not known and not applied.
 """
 
 from __future__ import annotations
@@ -32,12 +26,14 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
 from spooflens.geodesy import ecef_to_geodetic, enu_rotation, geodetic_to_ecef, geodetic_to_enu
 from spooflens.gnss.grid import ObservationGrid
+from spooflens.navigation.loosely_coupled import FILTER_SETTLE_S
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext
 
 FloatArray = NDArray[np.float64]
 APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"  # readers.rinex.APPROX_POSITION_KEY
+STATIC_WINDOW_S = 300.0  # whether a station stayed put is judged on its first minutes (module notes)
 STATION_OPTION = "station"  # AnalyzeOptions.extra key: list of (receiver id or None, lat deg, lon deg, h m)
 STATIC_SPAN_S = 30.0
 STATIC_SPEED_MPS = 0.5
@@ -98,8 +94,11 @@ def parse_station(text: str) -> tuple[str | None, float, float, float]:
 
 
 def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
-    """Whether the receiver's fixes stay put (see the module notes), with the measured figure."""
+    """Whether the receiver's fixes of its first STATIC_WINDOW_S stay put (see the module notes), with the
+    measured figure."""
     fx = table.fixes_of(receiver_id)
+    t = fx["t_s"].to_numpy(float)
+    fx = fx[t <= t[0] + STATIC_WINDOW_S] if len(t) else fx
     if len(fx) < 3:
         return False, f"{len(fx)} fixes"
     t = fx["t_s"].to_numpy(float)
@@ -115,7 +114,32 @@ def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
         k = np.flatnonzero(ok)
         speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
     moving = float(np.mean(speed > STATIC_SPEED_MPS))
-    return moving <= 1.0 - STATIC_FRACTION, f"{100 * moving:.0f}% of 30 s spans faster than {STATIC_SPEED_MPS} m/s"
+    return moving <= 1.0 - STATIC_FRACTION, (
+        f"{100 * moving:.0f}% of 30 s spans of its first {STATIC_WINDOW_S / 60:g} min faster than "
+        f"{STATIC_SPEED_MPS} m/s"
+    )
+
+
+def surveyed_station(table: EpochTable, receiver_id: str) -> tuple[Station | None, str]:
+    """The receiver's RINEX header position as a known station when it is one (module notes), else why not."""
+    text = table.metadata.get(f"{APPROX_POSITION_KEY}.{receiver_id}")
+    if not text:
+        return None, "no station position (give one with --station LAT,LON,H)"
+    xyz = np.array([float(v) for v in text.split()])
+    if not 6.2e6 < np.linalg.norm(xyz) < 6.5e6:
+        return None, f"RINEX header position {text} is not on the Earth's surface"
+    static, figure = _is_static(table, receiver_id)
+    if not static:
+        return None, f"the receiver moves ({figure}): its RINEX header position is not a station"
+    fx = table.fixes_of(receiver_id).iloc[:10]
+    first = geodetic_to_ecef(fx["lat_deg"], fx["lon_deg"], fx["height_m"])
+    gap = float(np.linalg.norm(np.median(first, axis=0) - xyz))
+    if gap > HEADER_AGREEMENT_M:
+        return None, (
+            f"its first fixes lie {gap:.0f} m from the RINEX header position (more than "
+            f"{HEADER_AGREEMENT_M:.0f} m: a rough header, or an attack from the start of the log): not used"
+        )
+    return Station(receiver_id, xyz, f"RINEX header APPROX POSITION (static receiver, {figure})"), ""
 
 
 def stations(table: EpochTable, extra: dict[str, object]) -> tuple[dict[str, Station], dict[str, str]]:
@@ -134,28 +158,11 @@ def stations(table: EpochTable, extra: dict[str, object]) -> tuple[dict[str, Sta
     for rid in receivers:
         if rid in found:
             continue
-        text = table.metadata.get(f"{APPROX_POSITION_KEY}.{rid}")
-        if not text:
-            why[rid] = "no station position (give one with --station LAT,LON,H)"
-            continue
-        xyz = np.array([float(v) for v in text.split()])
-        if not 6.2e6 < np.linalg.norm(xyz) < 6.5e6:
-            why[rid] = f"RINEX header position {text} is not on the Earth's surface"
-            continue
-        static, figure = _is_static(table, rid)
-        if not static:
-            why[rid] = f"the receiver moves ({figure}): its RINEX header position is not a station"
-            continue
-        fx = table.fixes_of(rid).iloc[:10]
-        first = geodetic_to_ecef(fx["lat_deg"], fx["lon_deg"], fx["height_m"])
-        gap = float(np.linalg.norm(np.median(first, axis=0) - xyz))
-        if gap > HEADER_AGREEMENT_M:
-            why[rid] = (
-                f"its first fixes lie {gap:.0f} m from the RINEX header position (more than "
-                f"{HEADER_AGREEMENT_M:.0f} m: a rough header, or an attack from the start of the log): not used"
-            )
-            continue
-        found[rid] = Station(rid, xyz, f"RINEX header APPROX POSITION (static receiver, {figure})")
+        station, reason = surveyed_station(table, rid)
+        if station is None:
+            why[rid] = reason
+        else:
+            found[rid] = station
     return found, why
 
 
@@ -174,7 +181,11 @@ def station_reference(grid: ObservationGrid, station: Station) -> Reference:
 
 
 def ins_reference(
-    ctx: AnalysisContext, grid: ObservationGrid, window_s: float, settle_s: float = 20.0, block_s: float = 1.0
+    ctx: AnalysisContext,
+    grid: ObservationGrid,
+    window_s: float,
+    settle_s: float = FILTER_SETTLE_S,
+    block_s: float = 1.0,
 ) -> Reference:
     """The free INS restarted at least `window_s` before each epoch (module notes); computed once per
     analysis and receiver (both raw-observation detectors use it)."""

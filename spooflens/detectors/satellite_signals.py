@@ -1,34 +1,6 @@
-"""Per-satellite evidence: a counterfeit satellite among real ones.
-
-A spoofer that fakes one or a few satellites (or a receiver that locked onto one counterfeit signal)
-leaves marks on those satellites alone, which means over all satellites hide. Each receiver's sky is
-read from what it reports per satellite (u-blox NAV-SAT: C/N0, elevation, used, health; the
-`satellites` frame), else from its raw observations (C/N0, and elevation from the broadcast orbits and
-the receiver's position). Three signatures, each for the satellite alone:
-
-- **Tracked below the horizon** (`satellite_horizon`): a signal from a satellite whose orbit puts it
-  more than `horizon_margin_deg` below the receiver's geometric horizon (the dip of the horizon at the
-  receiver's height counted) cannot have come from that satellite; neither can a real satellite's
-  signal be tracked at a position the spoofer invented on another part of the Earth. Needs
-  `min_epochs` consecutive epochs. The class is raw-measurement consistency when the elevation comes
-  from the broadcast orbits, the receiver's self-report when it is the receiver's own.
-- **C/N0 step** (`satellite_signals`): a satellite whose C/N0, relative to the median of the epoch's
-  satellites (which removes what moves all of them: the antenna's gain, attenuation, AGC), rises by
-  `step_db` within `hold_s` against both the last `hold_s` and its whole history before, and ends
-  above the median by `above_median_db`: a stronger signal took its tracking loop. A satellite
-  climbing into view rises slowly (the short window refuses it); one coming out from behind an
-  obstacle returns to its history (the long window refuses it).
-- **One C/N0 for all** (`satellite_signals`): `min_satellites` or more satellites whose C/N0 spread
-  (standard deviation, 5-s median) stays within `uniform_cn0_db` for `hold_s`: the channels of one
-  transmitter, not a sky of satellites at different elevations (the real logs at hand never go below
-  2.5 dB).
-- **Refused by the receiver** (`satellite_signals`): a healthy satellite with a known orbit, at least
-  `refused_min_elevation_deg` high and at least as strong as the median satellite the receiver uses,
-  that the receiver leaves out of its solution at `refused_fraction` of such epochs over at least
-  `refused_min_s`, while it uses `min_used` other satellites of the same system: the receiver's own
-  integrity monitor found it inconsistent. And a satellite the receiver uses with a pseudorange residual
-  beyond `residual_m` for `min_epochs` epochs.
-"""
+"""Per-satellite evidence: a counterfeit satellite among real ones (below the horizon, a C/N0 step of one
+satellite, one C/N0 for all, a strong satellite the receiver refuses). Declared in `ANALYSIS`
+(docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -405,8 +377,15 @@ def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | N
     return [horizon, signals]
 
 
+_O = SatelliteSignalOptions()
+_SKY = (
+    "Each receiver's sky is read from what it reports per satellite (u-blox NAV-SAT, NMEA GSV, PX4 "
+    "satellite_info, GnssLogger Status: C/N0, elevation, used, health; the `satellites` frame), else from its raw "
+    "observations (C/N0, and elevation from the broadcast orbits and the receiver's fixes). A spoofer that fakes "
+    "one or a few satellites leaves marks on those satellites alone, which means over all satellites hide."
+)
 ANALYSIS = AnalysisSpec(
-    "satellite_signals",
+    SIGNALS,
     "per-satellite evidence: a counterfeit satellite among real ones (horizon, C/N0 step, refused by the receiver)",
     ("satellite_view",),
     run_satellite_signals,
@@ -415,21 +394,36 @@ ANALYSIS = AnalysisSpec(
             HORIZON,
             Evidence.RAW_MEASUREMENT,
             "satellites tracked below the receiver's horizon",
-            "A satellite tracked more than 3 deg below the geometric horizon (its dip at the receiver's height "
-            "counted) for 3 consecutive epochs. Elevation from the broadcast orbits and the receiver's fixes "
-            "(raw-measurement class), or from the receiver's own satellite report (receiver class).",
-            "geometric: no false alarm from a real satellite's signal",
+            method=f"{_SKY} A satellite tracked more than {_O.horizon_margin_deg:g} deg below the geometric horizon "
+            f"(its dip at the receiver's height counted) for {_O.min_epochs} consecutive epochs: no real "
+            "satellite's signal comes through the Earth, nor is the real sky seen from a position the spoofer "
+            'invented elsewhere. Names the satellite ("G31 tracked 25 deg below the horizon at 46 dB-Hz for '
+            '79 s"). Evidence: raw-measurement consistency with elevations from the broadcast orbits, receiver '
+            "self-report with the receiver's own.",
+            p_false_alarm="geometric: no false alarm from a real satellite's signal",
+            threshold=f"{_O.horizon_margin_deg:g} deg below the horizon for {_O.min_epochs} epochs",
         ),
         DetectorInfo(
             SIGNALS,
             Evidence.RECEIVER,
-            "one satellite's C/N0 stepping above the others, or a strong healthy satellite the receiver refuses",
-            "C/N0 relative to the epoch's median satellite rising 10 dB within 10 s against both the last 10 s "
-            "and the satellite's whole history, and ending 3 dB above the median; 6 or more satellites within "
-            "1.5 dB of one C/N0 (standard deviation, 5-s median) for 10 s; a healthy satellite at least "
-            "15 deg high and as strong as the median used satellite left out of the receiver's solution at 80% "
-            "of such epochs over 30 s; a used satellite with a 100 m pseudorange residual for 3 epochs.",
-            "rule thresholds (not a calibrated rate)",
+            "one satellite's C/N0 stepping above the others, one C/N0 for all, or a strong satellite refused",
+            method=f"{_SKY} Three signatures, each of satellites alone. A C/N0 step: one satellite's C/N0 relative "
+            "to the epoch's median satellite (which removes what moves them all: antenna gain, attenuation, AGC) "
+            f"rising {_O.step_db:g} dB within {_O.hold_s:g} s against both its last {_O.hold_s:g} s and its whole "
+            f"history (once it has {_O.min_history_s:g} s of it), and ending {_O.above_median_db:g} dB above the "
+            "median, while no other satellite falls and fewer than half rise (a turned antenna or a manoeuvre "
+            "moves several, some down; a rising satellite climbs slowly; one leaving an obstruction returns to its "
+            f"history). One C/N0 for all: {_O.min_satellites} or more satellites within {_O.uniform_cn0_db:g} dB "
+            f"(standard deviation, 5-s median) for {_O.hold_s:g} s, the channels of one transmitter (the real logs "
+            "at hand never go below 2.5 dB). Refused by the receiver: a healthy satellite with a known orbit at "
+            f"least {_O.refused_min_elevation_deg:g} deg high and as strong as the median used one that the "
+            f"receiver leaves out of its solution at {100 * _O.refused_fraction:.0f}% of such epochs over "
+            f"{_O.refused_min_s:g} s while it uses {_O.min_used} others of the same system (its own integrity "
+            f"monitor refused it); a used satellite with a {_O.residual_m:g} m residual for {_O.min_epochs} epochs.",
+            p_false_alarm="rule thresholds (not a calibrated rate)",
+            threshold=f"a {_O.step_db:g} dB step of one satellite; {_O.min_satellites} satellites within "
+            f"{_O.uniform_cn0_db:g} dB for {_O.hold_s:g} s; refused at {100 * _O.refused_fraction:.0f}% over "
+            f"{_O.refused_min_s:g} s",
         ),
     ),
 )

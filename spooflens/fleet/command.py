@@ -161,6 +161,8 @@ def fleet_summary(vehicles: list[Vehicle], fh: FleetHomology | None, notes: list
 
 def write_fleet_recording(path: Path, vehicles: list[Vehicle], fh: FleetHomology | None) -> None:
     """Every vehicle's reported track and reference on the map, each offset and the index over UTC time."""
+    from spooflens.fleet.detector import NAME
+
     rec = rr.RecordingStream(APP_ID, recording_id="spooflens:fleet")
     blueprint = rrb.Blueprint(
         rrb.Horizontal(
@@ -190,7 +192,7 @@ def write_fleet_recording(path: Path, vehicles: list[Vehicle], fh: FleetHomology
             )
             rec.log(entity("offsets", v.name), rr.SeriesLines(names=[f"{v.name} east", f"{v.name} north"]), static=True)
             rec.send_columns(entity("offsets", v.name), indexes=idx, columns=rr.Scalars.columns(scalars=o.pov))
-            for f in next((r.findings for r in v.results if r.name == "fleet_homology"), []):
+            for f in next((r.findings for r in v.results if r.name == NAME), []):
                 ev_t.append(float(v.table.unix_ns(f.start_s)) / 1e9)  # type: ignore[arg-type]
                 ev_text.append(f"{v.name}: {f.text}")
             ev_t.append(o.span[0])

@@ -1,9 +1,6 @@
-"""Seed 004's fleet evidence on one vehicle: its offset from its own independent reference is part of a
-set of offsets, across vehicles in the same area and time, that are more alike (homology index,
-Algorithm 1) than independent errors make them by chance: a common attacker.
-
-It needs other vehicles' logs, so a single-log `analyze` lists it as not run; `spooflens fleet` runs it
-on every vehicle and puts its alarms and finding into that vehicle's verdict.
+"""Seed 004's fleet evidence on one vehicle: its offset from its own reference is one of a set, across
+vehicles in the same area and time, more alike than chance (a common attacker). Declared in `ANALYSIS`
+(docs/detectors.md); `spooflens fleet` runs it.
 """
 
 from __future__ import annotations
@@ -15,7 +12,7 @@ from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, ala
 from spooflens.epoch_table import EpochTable
 from spooflens.fleet.offsets import FleetHomology, FleetOptions, VehicleOffsets
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
+from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 NAME = "fleet_homology"
 NEEDS_FLEET = "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
@@ -82,6 +79,8 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     return [DetectorResult.skipped(NAME, "needs " + NEEDS_FLEET, Evidence.FLEET)]
 
 
+_O = FleetOptions()
+_P = probability(_O.p_false_alarm)
 ANALYSIS = AnalysisSpec(
     "fleet",
     "seed 004: homology of the position offsets of several vehicles (spooflens fleet)",
@@ -92,14 +91,18 @@ ANALYSIS = AnalysisSpec(
             NAME,
             Evidence.FLEET,
             "offsets from each vehicle's own reference more alike across vehicles than chance (a common attacker)",
-            "Seed 004 (homology of position offsets and a distributed secure state observer): each vehicle's "
-            "offset is its reported position minus its own independent reference (surveyed site, INS "
-            "reconstruction, or authentic-subset solution); the homology index (Algorithm 1: 1/c_vx + 1/c_vy "
-            "after rotating the mean offset to 45 degrees) of the offsets above 10 m is compared with its "
-            "distribution for independent isotropic offsets (scale-free, so it depends only on the number of "
-            "vehicles) at 1e-2 per epoch: the chance that displaced vehicles look alike; being displaced by more "
-            "than 10 m from an independent reference is the rare part without an attacker.",
-            "1e-2 per epoch that unrelated offsets look alike; offsets above 10 m from independent references",
+            method="Each vehicle's offset is its reported position minus its own independent reference (a surveyed "
+            "site, the INS reconstruction, or an authentic-subset solution); the homology index (Algorithm 1: "
+            "1/c_vx + 1/c_vy after rotating the mean offset to 45 degrees) of the offsets above "
+            f"{_O.min_offset_m:g} m is compared with its distribution for independent isotropic offsets "
+            f"(scale-free, so it depends only on the number of vehicles) at {_P} per epoch: the "
+            "chance that displaced vehicles look alike; being displaced by more than "
+            f"{_O.min_offset_m:g} m from an independent reference is the rare part without an attacker. One log is "
+            "never a fleet: `analyze` lists it as not run, `spooflens fleet LOG1 LOG2 ...` runs it.",
+            p_false_alarm=f"{_P} per epoch that unrelated offsets look alike; offsets above "
+            f"{_O.min_offset_m:g} m from independent references",
+            threshold=f"the homology index's {1 - _O.p_false_alarm:g} quantile for independent offsets",
+            paper="Seed 004 (homology of position offsets and a distributed secure state observer)",
         ),
     ),
 )

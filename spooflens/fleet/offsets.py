@@ -15,7 +15,7 @@ from spooflens.detectors.base import DetectorResult, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.fleet.homology import homology_index, null_quantile
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
-from spooflens.navigation.product import INS_SMOOTHED, NAVIGATION
+from spooflens.navigation.product import NAVIGATION, SMOOTHED_TRACK
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.verdict import Verdict
 
@@ -30,7 +30,6 @@ class FleetOptions:
     p_false_alarm: float = 1e-2
     min_offset_m: float = 10.0  # smaller offsets are what nearby receivers share without an attacker
     max_gap_factor: float = 2.5
-    site_tolerance_m: float = 100.0
     reference_sats: tuple[str, ...] = ()
     merge_gap_s: float = 5.0
 
@@ -113,19 +112,17 @@ def _reference(
     opts: FleetOptions,
     max_gap_s: float,
 ) -> tuple[FloatArray | None, str]:
-    from spooflens.detectors.dual_receiver import surveyed_sites
+    from spooflens.detectors.references import surveyed_station
     from spooflens.geodesy import ecef_to_geodetic
 
-    site = surveyed_sites(table).get(rid)
-    if site is not None:
-        near = np.linalg.norm(_ecef(*fix.T) - site, axis=1) <= opts.site_tolerance_m
-        if near.mean() >= 0.5:
-            lat, lon, h = ecef_to_geodetic(site)
-            return np.tile([float(lat), float(lon), float(h)], (len(t), 1)), "surveyed site (RINEX APPROX POSITION)"
+    station, _ = surveyed_station(table, rid)  # judged on its first minutes: a spoofer moves the fixes later
+    if station is not None:
+        lat, lon, h = ecef_to_geodetic(station.ecef_m)
+        return np.tile([float(lat), float(lon), float(h)], (len(t), 1)), "surveyed site (RINEX APPROX POSITION)"
     nav = next((r for r in results if r.name == NAVIGATION and r.ran), None)
     if nav is not None and nav.tracks:
         rec = reconstructed[0] if reconstructed else None
-        base = next((tr for tr in nav.tracks if tr.name == INS_SMOOTHED), nav.tracks[0])
+        base = next((tr for tr in nav.tracks if tr.name == SMOOTHED_TRACK), nav.tracks[0])
         ref = _track_at(base, t, max_gap_s)
         how = "INS (smoothed GNSS/INS)"
         if rec is not None:

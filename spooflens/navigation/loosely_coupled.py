@@ -33,6 +33,8 @@ from spooflens.navigation.strapdown import NavState, Preintegrated, preintegrate
 FloatArray = NDArray[np.float64]
 DEFAULT_SIGMA_POS = (3.7, 3.7, 6.0)  # seed 000's R when a log reports no accuracy
 DEFAULT_SIGMA_VEL = 0.1
+# the filter's first seconds, while its covariance converges from the initial state: no test alarms in them
+FILTER_SETTLE_S = 20.0
 GM_FLOOR = 1e-4  # a Gauss-Markov state switched off keeps this much variance (smoother stays invertible)
 
 

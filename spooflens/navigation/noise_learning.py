@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from spooflens.navigation.alignment import Alignment
 from spooflens.navigation.imu_models import ImuGrade
 from spooflens.navigation.loosely_coupled import (
+    FILTER_SETTLE_S,
     FilterInputs,
     FilterOptions,
     GnssNoise,
@@ -52,7 +53,7 @@ FloatArray = NDArray[np.float64]
 class LearnOptions:
     max_epochs: int = 1500
     min_window_s: float = 300.0
-    settle_s: float = 20.0
+    settle_s: float = FILTER_SETTLE_S
     trim_window_s: float = 20.0
     trim_fraction: float = 0.15  # the worst windows of the first pass are left out of the likelihood
     sweeps: int = 2
@@ -75,9 +76,14 @@ class LearnedNoise:
     window_s: tuple[float, float]
     excluded_s: tuple[tuple[float, float], ...]
 
+    @property
+    def is_prior(self) -> bool:
+        """Nothing was learned: too little clean data, the prior stands."""
+        return self.noise.source.startswith("prior")
+
     def describe(self) -> str:
         n = self.noise
-        if n.source.startswith("prior"):
+        if self.is_prior:
             return (
                 f"too little clean data to learn the noise from: prior used (position white "
                 f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m from the fixes' scatter + Gauss-Markov "

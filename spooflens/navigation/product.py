@@ -10,13 +10,14 @@ from functools import partial
 
 import numpy as np
 
-from spooflens.detectors.base import DetectorResult, Series, Track
+from spooflens.detectors.base import SIGMA_SUFFIX, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.estimation.statespace import LinearGaussianModel
 from spooflens.navigation.alignment import Alignment, heading_from_course
 from spooflens.navigation.imu_models import ImuGrade, grade
 from spooflens.navigation.loosely_coupled import (
     ANALYSIS_NEEDS,
+    FILTER_SETTLE_S,
     FilterInputs,
     FilterOptions,
     NavSolution,
@@ -27,11 +28,12 @@ from spooflens.navigation.loosely_coupled import (
 from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, learn_noise
 from spooflens.navigation.smoother import SmoothedSolution, check_smoothable, smooth
 from spooflens.navigation.strapdown import NavState
+from spooflens.pipeline.preconditions import NOISE_LEARNING, STRAPDOWN_IMU
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later
 from spooflens.threads import core_idle, started
 
 NAVIGATION = "navigation"  # the analysis, its result and the solution it shares with the others
-INS_SMOOTHED = "ins_smoothed"  # the smoothed GNSS/INS track it returns
+SMOOTHED_TRACK = "ins_smoothed"  # the track its result draws: the smoothed GNSS/INS solution
 ENU = ("east", "north", "up")
 # the navigation solution keeps the updated covariance of every tenth epoch: the smoother and continued
 # runs (coasts, reconstructions) make the others again from the last kept (150 MB less per hour of 10 Hz
@@ -122,7 +124,7 @@ def _run(ctx: AnalysisContext) -> Later:
 
 def _result(nav: Navigation) -> list[DetectorResult]:
     sol, sm = nav.solution, nav.smoothed
-    settled = sol.t > sol.t[0] + 20.0
+    settled = sol.t > sol.t[0] + FILTER_SETTLE_S
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
     return [
         DetectorResult(
@@ -135,13 +137,13 @@ def _result(nav: Navigation) -> list[DetectorResult]:
                 Series("nis", sol.t, sol.nis, "chi2(dof)"),
                 # INS minus GNSS with the filter's own 1-sigma: a spoofed channel walks out of its band
                 Series("innovation_position", sol.t, sol.nu[:, :3], "m", components=ENU),
-                Series("innovation_position_sigma", sol.t, sigma[:, :3], "m", components=ENU),
+                Series("innovation_position" + SIGMA_SUFFIX, sol.t, sigma[:, :3], "m", components=ENU),
                 Series("innovation_velocity", sol.t, sol.nu[:, 3:6], "m/s", components=ENU),
-                Series("innovation_velocity_sigma", sol.t, sigma[:, 3:6], "m/s", components=ENU),
+                Series("innovation_velocity" + SIGMA_SUFFIX, sol.t, sigma[:, 3:6], "m/s", components=ENU),
             ],
             tracks=[
                 Track(
-                    INS_SMOOTHED,
+                    SMOOTHED_TRACK,
                     sm.track_t,
                     np.degrees(sm.track_llh[:, 0]),
                     np.degrees(sm.track_llh[:, 1]),
@@ -166,5 +168,20 @@ ANALYSIS = AnalysisSpec(
     "GNSS/INS filter and smoother: the inertial reference the inertial detectors compare GNSS with",
     ("fixes", "imu"),
     _run,
-    (DetectorInfo(NAVIGATION, None, "the GNSS/INS solution, its innovations and the smoothed track"),),
+    (
+        DetectorInfo(
+            NAVIGATION,
+            None,
+            "the GNSS/INS solution, its innovations and the smoothed track (not a detector)",
+            method="Strapdown INS (local-level ENU, Earth and transport rate) in a closed-loop loosely coupled "
+            "Kalman filter with seed 000's 15-state error model and nine first-order Gauss-Markov states for the "
+            "receiver's position and velocity errors and the odometry's; wheel odometry (forward speed, no "
+            "lateral or vertical speed) when the log has it. Alignment from the log's attitude when it agrees "
+            "with gravity, else by matching the GNSS position change with the double-integrated specific force. "
+            "The sensors' noise is learned from the log by maximum likelihood of the filter's own innovations "
+            "(`spooflens/navigation/noise_learning.py`), never from the receiver's reported accuracy; the "
+            "smoothed track is drawn, and every inertial detector compares GNSS with this solution.",
+        ),
+    ),
+    preconditions=(STRAPDOWN_IMU, NOISE_LEARNING),
 )

@@ -111,6 +111,10 @@ def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
         out["series"] = [
             {"name": s.name, "unit": s.unit, "threshold": s.threshold, "epochs": len(s.t)} for s in r.series
         ]
+    if r.precondition is not None:  # what kept it from running, structured (`reason` says it in words)
+        out["precondition"] = r.precondition.as_dict()
+    if r.limitations:
+        out["limitations"] = [u.as_dict() for u in r.limitations]
     if r.extras:
         out["facts"] = r.extras
     if r.findings:

@@ -1,10 +1,12 @@
 """Which analyses a log supports, and running them.
 
-An analysis is one module that declares `ANALYSIS` (an `AnalysisSpec`): the streams it needs, the
-detectors it produces with their evidence class, and its run function. `ANALYSIS_MODULES` lists
-them in the order they run; adding a detector is one module plus one line there, and the verdict,
-recording, report and CLI pick it up from the declaration. `run_analyses` runs every analysis whose
-inputs are present and says, for each detector it could not run, exactly what was missing.
+An analysis is one module that declares `ANALYSIS` (an `AnalysisSpec`): the streams it needs, what its
+model requires of the data (named checks in `spooflens.pipeline.preconditions`), the detectors it
+produces (each a `DetectorInfo`: evidence class, method, threshold, false-alarm rate) and its run
+function. `ANALYSIS_MODULES` lists them in the order they run; adding a detector is one module plus
+one line there, and the verdict, recording, report, CLI and docs/detectors.md pick it up from the
+declaration (docs/architecture.md). `run_analyses` runs every analysis whose inputs are present and
+whose preconditions hold, and says, for each detector it could not run, what was missing or unmet.
 
 Work several analyses share (the GNSS/INS navigation solution) is computed once, on first use,
 through the `AnalysisContext`. An analysis whose results wait on work begun in the background (the
@@ -14,16 +16,18 @@ navigation's smoothed track) returns `Later`: the analyses after it run meanwhil
 from __future__ import annotations
 
 import importlib
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from spooflens.detectors.base import DetectorResult
+from spooflens.detectors.base import DetectorResult, Unmet
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
 from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.preconditions import unmet_preconditions
 
 MIN_FIXES = 3
 MIN_IMU_SAMPLES = 50
@@ -126,19 +130,42 @@ def _has_fleet(table: EpochTable) -> str | None:
     return "logs of other vehicles over the same time and area (run `spooflens fleet LOG1 LOG2 ...`)"
 
 
-REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
-    "fixes": _has_fixes,
-    "imu": _has_imu,
-    "fix_velocity": _has_fix_velocity,
-    "observations": _has_observations,
-    "satellite_states": _has_satellite_states,
-    "satellite_view": _has_satellite_view,
-    "received_ephemerides": _has_received_ephemerides,
-    "two_receivers": _has_two_receivers,
-    "fleet": _has_fleet,
-    "autopilot_ekf": _has_autopilot_ekf,
-    "headings": _has_headings,
-    "time_offset": _has_time_offset,
+@dataclass(frozen=True)
+class Requirement:
+    """A stream an analysis needs: what it is, in words (docs/detectors.md), and the check that says
+    what the log lacks (None when present)."""
+
+    what: str
+    missing: Callable[[EpochTable], str | None]
+
+
+REQUIREMENTS: dict[str, Requirement] = {
+    "fixes": Requirement(f"GNSS fixes ({MIN_FIXES} or more)", _has_fixes),
+    "imu": Requirement(f"IMU samples ({MIN_IMU_SAMPLES} or more)", _has_imu),
+    "fix_velocity": Requirement("GNSS velocity", _has_fix_velocity),
+    "observations": Requirement("raw GNSS observations (pseudoranges)", _has_observations),
+    "satellite_states": Requirement(
+        "raw observations with satellite positions (a navigation file or logged ephemerides)", _has_satellite_states
+    ),
+    "satellite_view": Requirement(
+        "per-satellite reports (NAV-SAT, GSV, PX4 satellite_info, GnssLogger Status) or raw observations with "
+        "C/N0 or satellite positions",
+        _has_satellite_view,
+    ),
+    "received_ephemerides": Requirement(
+        "navigation messages decoded from the signals (u-blox RXM-SFRBX, GnssLogger Nav)", _has_received_ephemerides
+    ),
+    "two_receivers": Requirement("two GNSS receivers", _has_two_receivers),
+    "fleet": Requirement("other vehicles' logs (`spooflens fleet`)", _has_fleet),
+    "autopilot_ekf": Requirement(
+        f"the autopilot's GNSS innovations or test ratios ({MIN_AUTOPILOT_ROWS} rows or more: ArduPilot XKF3/XKF4, "
+        "NKF3/NKF4; PX4 estimator_innovations + estimator_innovation_test_ratios; tlog EKF_STATUS_REPORT)",
+        _has_autopilot_ekf,
+    ),
+    "headings": Requirement("a compass heading (NMEA HDT, HDG, THS or VHW)", _has_headings),
+    "time_offset": Requirement(
+        f"the receiver's time beside the log's own clock ({MIN_TIMED_FIXES} fixes or more)", _has_time_offset
+    ),
 }
 
 
@@ -168,15 +195,30 @@ class AnalysisContext:
         return self.cache[key]
 
 
+def probability(p: float) -> str:
+    """A false-alarm rate as declarations write it: 1e-5, 0.01 (not 1e-05)."""
+    return f"{p:g}" if p >= 1e-3 else re.sub(r"e-0*", "e-", f"{p:.0e}")
+
+
 @dataclass(frozen=True)
 class DetectorInfo:
-    """One detector an analysis produces: its name, evidence class and what it tests."""
+    """One detector an analysis produces, as declared: the one source of its method text, threshold,
+    false-alarm rate and evidence class for the report's method notes and docs/detectors.md.
+
+    `needs` and `preconditions` are filled from the analysis (`AnalysisSpec`); a detector may declare
+    preconditions of its own (checked before it runs, beside its analysis's)."""
 
     name: str
     evidence: Evidence | None  # None: an analysis product (not counted in the verdict)
-    summary: str
-    method: str = ""  # a paragraph for the report's method notes (seed paper, false-alarm rate)
+    summary: str  # what it tests, one line
+    method: str = ""  # how, in a paragraph: what it compares, the statistic, the choices made
     p_false_alarm: str = ""  # the stated false-alarm rate, e.g. "1e-5 per epoch"
+    threshold: str = ""  # the decision rule's level, e.g. "chi-square(3) at 1e-5: 25.9"
+    paper: str = ""  # the seed paper it implements, when it does
+    checked: str = ""  # what it does on real and simulated logs, with the command or test that shows it
+    preconditions: tuple[str, ...] = ()  # names in spooflens.pipeline.preconditions.PRECONDITIONS
+    needs: tuple[str, ...] = ()  # names in REQUIREMENTS (from the analysis)
+    analysis: str = ""  # the analysis that produces it (from the analysis)
 
 
 @dataclass(frozen=True)
@@ -195,9 +237,31 @@ class AnalysisSpec:
     needs: tuple[str, ...]
     run: Callable[[AnalysisContext], list[DetectorResult] | Later]
     detectors: tuple[DetectorInfo, ...] = ()
+    # what the model of every detector here requires of the data, checked before it runs (names in
+    # spooflens.pipeline.preconditions.PRECONDITIONS)
+    preconditions: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = [n for n in self.needs if n not in REQUIREMENTS]
+        if unknown:
+            raise ValueError(f"analysis {self.name!r} needs {unknown}, which REQUIREMENTS does not know")
+        declared = tuple(
+            replace(
+                d,
+                needs=self.needs,
+                analysis=self.name,
+                preconditions=tuple(dict.fromkeys(self.preconditions + d.preconditions)),
+            )
+            for d in self.detectors
+        )
+        object.__setattr__(self, "detectors", declared)  # frozen: the declaration completed once, here
 
     def missing(self, table: EpochTable) -> list[str]:
-        return [m for need in self.needs if (m := REQUIREMENTS[need](table)) is not None]
+        return [m for need in self.needs if (m := REQUIREMENTS[need].missing(table)) is not None]
+
+    def unmet(self, ctx: AnalysisContext) -> list[Unmet]:
+        """The analysis's preconditions this log does not meet (those that stop it first)."""
+        return unmet_preconditions(self.preconditions, ctx)
 
 
 def analyses() -> list[AnalysisSpec]:
@@ -216,18 +280,32 @@ def detector_infos() -> dict[str, DetectorInfo]:
     return {d.name: d for spec in analyses() for d in spec.detectors}
 
 
-def _declared(spec: AnalysisSpec, result: DetectorResult) -> DetectorResult:
-    """A result carries its evidence class from the declaration unless it set one itself."""
+def _declared(spec: AnalysisSpec, result: DetectorResult, ctx: AnalysisContext, limits: list[Unmet]) -> DetectorResult:
+    """A result as declared: its evidence class from the declaration unless it set one itself; not run when
+    a precondition of its own detector stops it; carrying what its analysis's preconditions limited."""
     info = next((d for d in spec.detectors if d.name == result.name), None)
-    if result.evidence is None and info is not None and info.evidence is not None:
-        return replace(result, evidence=info.evidence)
+    if info is None:
+        return result
+    own = [u for u in unmet_preconditions(info.preconditions[len(spec.preconditions) :], ctx) if u.stops]
+    if own and result.ran:
+        return _skipped(info.name, own, result.evidence or info.evidence)
+    if result.evidence is None and info.evidence is not None:
+        result = replace(result, evidence=info.evidence)
+    if limits and result.ran:
+        result = replace(result, limitations=[*result.limitations, *limits])
+        result.reason += "".join(f"; LIMITED: {u.text}" for u in limits)
     return result
 
 
-def _not_run(spec: AnalysisSpec, reason: str) -> list[DetectorResult]:
+def _skipped(name: str, unmet: list[Unmet], evidence: Evidence | None) -> DetectorResult:
+    return DetectorResult.skipped(name, "; ".join(u.text for u in unmet), evidence, unmet[0])
+
+
+def _not_run(spec: AnalysisSpec, reason: str, unmet: list[Unmet] | None = None) -> list[DetectorResult]:
+    precondition = unmet[0] if unmet else None
     if not spec.detectors:
-        return [DetectorResult.skipped(spec.name, reason)]
-    return [DetectorResult.skipped(d.name, reason, d.evidence) for d in spec.detectors]
+        return [DetectorResult.skipped(spec.name, reason, None, precondition)]
+    return [DetectorResult.skipped(d.name, reason, d.evidence, precondition) for d in spec.detectors]
 
 
 def run_analyses(
@@ -238,12 +316,18 @@ def run_analyses(
 
 
 def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
-    later: list[tuple[int, AnalysisSpec, Later]] = []  # where each one's results go in ctx.results
+    later: list[tuple[int, AnalysisSpec, Later, list[Unmet]]] = []  # where each one's results go in ctx.results
     for spec in analyses():
         missing = spec.missing(ctx.table)
         if missing:
             ctx.results.extend(_not_run(spec, "needs " + ", ".join(dict.fromkeys(missing))))
             continue
+        unmet = spec.unmet(ctx)
+        stops = [u for u in unmet if u.stops]
+        if stops:
+            ctx.results.extend(_not_run(spec, "; ".join(u.text for u in stops), stops))
+            continue
+        limits = [u for u in unmet if not u.stops]
         if on_step:
             on_step(spec.name)
         try:
@@ -252,19 +336,19 @@ def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None
             ctx.results.extend(_not_run(spec, str(err)))
             continue
         if isinstance(out, Later):
-            later.append((len(ctx.results), spec, out))
+            later.append((len(ctx.results), spec, out, limits))
         else:
-            ctx.results.extend(_declared(spec, r) for r in out)
+            ctx.results.extend(_declared(spec, r, ctx, limits) for r in out)
     if on_step and later:  # the time waited for them is theirs, not the last analysis's
-        on_step("finishing " + ", ".join(spec.name for _, spec, _ in later))
-    finished = [(at, _finished(spec, pending)) for at, spec, pending in later]
+        on_step("finishing " + ", ".join(spec.name for _, spec, _, _ in later))
+    finished = [(at, _finished(spec, pending, ctx, limits)) for at, spec, pending, limits in later]
     for at, results in reversed(finished):  # the last first: the earlier places stay where they were
         ctx.results[at:at] = results
     return ctx.results
 
 
-def _finished(spec: AnalysisSpec, pending: Later) -> list[DetectorResult]:
+def _finished(spec: AnalysisSpec, pending: Later, ctx: AnalysisContext, limits: list[Unmet]) -> list[DetectorResult]:
     try:
-        return [_declared(spec, r) for r in pending.finish()]
+        return [_declared(spec, r, ctx, limits) for r in pending.finish()]
     except SpooflensError as err:
         return _not_run(spec, str(err))

@@ -20,7 +20,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Curve, DetectorResult, Series, Track
+from spooflens.detectors.base import SIGMA_SUFFIX, Curve, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
 from spooflens.inventory import quality_columns
@@ -33,7 +33,6 @@ from spooflens.pipeline.verdict import Incident, Verdict
 FloatArray = NDArray[np.float64]
 WIDTH_IN = 10.0
 BAND_POINTS = 400
-SIGMA_SUFFIX = "_sigma"
 COLOURS = {"reported": "#e63c32", "reconstructed": "#28b45a", "truth": "#3c78e6", "other": "#9a8a50"}
 INCIDENT_COLOURS = ("#d9480f", "#7048e8", "#c2255c", "#1098ad", "#5c940d", "#e67700")
 ANOMALY_COLOUR = "#fab005"

@@ -300,6 +300,10 @@ def provenance_section(analysis: Analysis, identity: InputIdentity) -> str:
 
 
 def methods_section(results: Sequence[DetectorResult], infos: dict[str, DetectorInfo]) -> str:
+    """Per detector that ran, its declaration (`spooflens.docs.declaration`: the text of docs/detectors.md)
+    and what it assumed on this log; the detectors that did not run, and why."""
+    from spooflens.docs import declaration
+
     out = []
     for r in results:
         if not r.ran:
@@ -312,23 +316,25 @@ def methods_section(results: Sequence[DetectorResult], infos: dict[str, Detector
         out.append(head + "</h3>")
         parts = []
         if info is not None:
-            parts.append(esc(info.summary[:1].upper() + info.summary[1:]) + ".")
-            if info.method:
-                parts.append(esc(info.method))
-            if info.p_false_alarm:
-                parts.append(f"Stated false-alarm rate: {esc(info.p_false_alarm)}.")
+            parts.append(f"<p>{esc(info.summary[:1].upper() + info.summary[1:])}.</p>")
+            shown = ("Paper", "Method", "Threshold", "Stated false-alarm rate", "Its model requires")
+            parts += [f"<p><b>{esc(k)}</b>: {esc(v)}</p>" for k, v in declaration(info) if k in shown]
         if r.advisory:
-            parts.append("<b>Advisory on this log</b>: its alarms are drawn but do not count in the verdict.")
+            parts.append("<p><b>Advisory on this log</b>: its alarms are drawn but do not count in the verdict.</p>")
         if r.reason:
-            parts.append(f"On this log: {esc(r.reason)}.")
-        out.append(f"<p>{' '.join(parts)}</p>")
+            parts.append(f"<p><b>On this log</b>: {esc(r.reason)}.</p>")
+        out += parts
         if r.extras:
             facts = ", ".join(f"{k} = {_fact(v)}" for k, v in r.extras.items())
             out.append(f'<p class="small muted">Facts: {esc(facts)}</p>')
     not_run = [r for r in results if not r.ran]
     if not_run:
         out.append("<h3>Did not run</h3><ul>")
-        out += [f"<li><b>{esc(r.name)}</b>: {esc(r.reason)}</li>" for r in not_run]
+        for r in not_run:
+            why = esc(r.reason)
+            if r.precondition is not None:
+                why = f"its model requires what this log does not have ({esc(r.precondition.name)}): {why}"
+            out.append(f"<li><b>{esc(r.name)}</b>: {why}</li>")
         out.append("</ul>")
     return "\n".join(out)
 

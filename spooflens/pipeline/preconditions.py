@@ -1,0 +1,342 @@
+"""What each detector's model requires of the data: named checks, run before the detector.
+
+A stream being present (`registry.REQUIREMENTS`) is not enough. Strapdown needs the IMU at tens of Hz
+without long gaps, the dual-receiver tests two receivers with independent errors, a known-station
+method a receiver that stayed put. An analysis declares the checks its model needs
+(`AnalysisSpec.preconditions`, or a detector's own in its `DetectorInfo`); each returns `Unmet`, saying
+in words what the log has and what the model needs, or None. Most stop the detector; a limiting one
+(noise learning on a short log) lets it run and says what it could not do. docs/detectors.md lists them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spooflens.detectors.base import Unmet
+from spooflens.errors import SpooflensError
+
+if TYPE_CHECKING:
+    from spooflens.pipeline.registry import AnalysisContext
+
+# Strapdown integrates each IMU sample over the interval to the next: below tens of Hz a vehicle's
+# rotation between samples is not captured, and across a gap it is lost (a turn at 30 deg/s for 0.5 s
+# is 15 degrees of heading the INS never sees)
+MIN_STRAPDOWN_HZ = 20.0
+MAX_IMU_GAP_S = 0.5
+# Epoch differences of raw observations (pseudorange changes, carrier-phase rates): the noise scales and
+# predictions are learned from them, per receiver; with a handful of epochs a threshold is a guess
+MIN_DIFFERENCED_EPOCHS = 20
+MIN_DIFFERENCED_SATELLITES = 5  # a velocity, a clock drift per system and one redundant rate
+MAX_CARRIER_INTERVAL_S = 60.0  # as RateOptions.max_interval_s: carrier differences over longer gaps are not used
+MAX_PSEUDORANGE_INTERVAL_S = 120.0  # as pseudorange_changes(max_gap_s): a longer gap starts a new arc
+
+
+@dataclass(frozen=True)
+class Precondition:
+    """A named check of what a model requires of the data. `requires` says it in words (docs); `check`
+    returns what the log lacks, or None. `stops`: when unmet the detector does not run; otherwise it runs
+    on what there is and its result says what could not be done."""
+
+    requires: str
+    check: Callable[[AnalysisContext], Unmet | None]
+    stops: bool = True
+
+
+def unmet_preconditions(names: Sequence[str], ctx: AnalysisContext) -> list[Unmet]:
+    """The named preconditions this log does not meet, in the order given (each checked once per
+    analysis: several analyses share them)."""
+    out = []
+    for name in names:
+        found: Unmet | None = ctx.cached(f"precondition/{name}", partial(_checked, name, ctx))
+        if found is not None:
+            out.append(found)
+    return out
+
+
+def _checked(name: str, ctx: AnalysisContext) -> Unmet | None:
+    precondition = PRECONDITIONS[name]
+    try:
+        return precondition.check(ctx)
+    except SpooflensError as err:  # what the check could not read is what the log lacks
+        return Unmet(name, str(err), precondition.requires, stops=precondition.stops)
+
+
+# --- the INS ---------------------------------------------------------------------------------------
+
+
+def navigation_streams(ctx: AnalysisContext) -> tuple[str, str]:
+    """(IMU, receiver) the GNSS/INS navigation runs on (its own choice of streams)."""
+    from spooflens.navigation.loosely_coupled import select_streams
+
+    imu_id, receiver_id, _ = select_streams(ctx.table, ctx.options.imu_id, ctx.options.receiver_id)
+    return imu_id, receiver_id
+
+
+def imu_rate_and_gap(t: np.ndarray) -> tuple[float, float, float]:
+    """(rate from the median sample interval, Hz; longest gap, s; where it began, s)."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    if not len(dt) or not np.median(dt) > 0:
+        return 0.0, float("inf"), float(t[0]) if len(t) else 0.0
+    k = int(np.argmax(dt))
+    return float(1.0 / np.median(dt)), float(dt[k]), float(t[k])
+
+
+def strapdown_imu(ctx: AnalysisContext) -> Unmet | None:
+    imu_id, _ = navigation_streams(ctx)
+    t = ctx.table.imu_of(imu_id)["t_s"].to_numpy(dtype=float)
+    rate, gap, at = imu_rate_and_gap(t)
+    values: dict[str, float | int | str] = {"imu": imu_id, "rate_hz": round(rate, 3), "longest_gap_s": round(gap, 3)}
+    if rate < MIN_STRAPDOWN_HZ:
+        return Unmet(
+            STRAPDOWN_IMU, f"IMU {imu_id} at {rate:.2g} Hz", f"strapdown needs >= {MIN_STRAPDOWN_HZ:g} Hz", values
+        )
+    if gap > MAX_IMU_GAP_S:
+        return Unmet(
+            STRAPDOWN_IMU,
+            f"IMU {imu_id} stops for {gap:.2f} s at {at:.1f} s",
+            f"strapdown needs no gap over {MAX_IMU_GAP_S:g} s (the rotation in it is lost)",
+            values,
+        )
+    return None
+
+
+def _fixes_with_imu(ctx: AnalysisContext) -> np.ndarray:
+    """Times of the navigation receiver's fixes inside its IMU's span."""
+    imu_id, receiver_id = navigation_streams(ctx)
+    ti = ctx.table.imu_of(imu_id)["t_s"].to_numpy(dtype=float)
+    tf = ctx.table.fixes_of(receiver_id)["t_s"].to_numpy(dtype=float)
+    return tf[(tf >= ti[0]) & (tf <= ti[-1])] if len(ti) else tf[:0]
+
+
+def inertial_span(ctx: AnalysisContext) -> Unmet | None:
+    from spooflens.navigation.loosely_coupled import FILTER_SETTLE_S
+
+    tf = _fixes_with_imu(ctx)
+    span = float(tf[-1] - tf[0]) if len(tf) >= 2 else 0.0
+    if span > FILTER_SETTLE_S:
+        return None
+    return Unmet(
+        INERTIAL_SPAN,
+        f"GNSS with the IMU for {span:.1f} s",
+        f"the inertial tests do not alarm in the {FILTER_SETTLE_S:g} s the filter settles in, so they need more",
+        {"span_s": round(span, 3)},
+    )
+
+
+def noise_learning(ctx: AnalysisContext) -> Unmet | None:
+    """What the noise learning (`spooflens.navigation.noise_learning`) cannot learn from this log's length:
+    anything, below its minimum of scored data (the prior stands); the receiver's slow wander, below the
+    window it reads."""
+    from spooflens.navigation.noise_learning import LearnOptions
+
+    o = LearnOptions()
+    tf = _fixes_with_imu(ctx)
+    span = float(tf[-1] - tf[0]) if len(tf) >= 2 else 0.0
+    scored = tf[tf >= (tf[0] if len(tf) else 0.0) + o.settle_s]
+    scored_s = float(scored[-1] - scored[0]) if len(scored) >= 2 else 0.0
+    values: dict[str, float | int | str] = {"span_s": round(span, 3), "scored_epochs": len(scored)}
+    if len(scored) < o.min_scored_epochs or scored_s < o.min_scored_s:
+        return Unmet(
+            NOISE_LEARNING,
+            f"GNSS with the IMU for {span:.0f} s ({len(scored)} epochs after the filter's {o.settle_s:g} s settling)",
+            f"noise learning needs {o.min_scored_s:g} s and {o.min_scored_epochs} epochs after it: nothing was "
+            "learned, the prior stands (the IMU preset, and the fixes' own scatter as their white noise)",
+            values,
+            stops=False,
+        )
+    if span < o.min_window_s:
+        return Unmet(
+            NOISE_LEARNING,
+            f"GNSS with the IMU for {span:.0f} s",
+            f"noise learning reads {o.min_window_s:g} s: from less, the receiver's slow wander (its Gauss-Markov "
+            "errors) and their time constants are poorly determined",
+            values,
+            stops=False,
+        )
+    return None
+
+
+# --- raw observations --------------------------------------------------------------------------------
+
+
+def _differenced_epochs(ctx: AnalysisContext, carrier: bool) -> dict[str, int]:
+    """Per receiver with raw observations: the epochs at which MIN_DIFFERENCED_SATELLITES satellites have
+    a measurement differenced against the epoch before (carrier: a carrier phase at both epochs at most
+    MAX_CARRIER_INTERVAL_S apart, or a Doppler; else a pseudorange at both, MAX_PSEUDORANGE_INTERVAL_S)."""
+    counts: dict[bool, dict[str, int]] = ctx.cached("differenced_epochs", lambda: _count_differenced(ctx))
+    return counts[carrier]
+
+
+def _count_differenced(ctx: AnalysisContext) -> dict[bool, dict[str, int]]:
+    from spooflens.gnss.grid import observation_grid
+
+    out: dict[bool, dict[str, int]] = {True: {}, False: {}}
+    for rid in dict.fromkeys(ctx.table.observations["receiver_id"].astype(str)):
+        grid = observation_grid(ctx.table, rid)
+        dt = np.diff(grid.t_s)
+        for carrier, value, limit in (
+            (True, grid.carrier_m, MAX_CARRIER_INTERVAL_S),
+            (False, grid.pseudorange_m, MAX_PSEUDORANGE_INTERVAL_S),
+        ):
+            ok = grid.usable & np.isfinite(value)
+            both = np.zeros_like(ok)
+            both[1:] = ok[1:] & ok[:-1] & (dt <= limit)[:, None]
+            if carrier:
+                both |= grid.usable & np.isfinite(grid.rate_mps)
+            out[carrier][rid] = int(np.sum(both.sum(axis=1) >= MIN_DIFFERENCED_SATELLITES))
+    return out
+
+
+def _arcs(ctx: AnalysisContext, carrier: bool) -> Unmet | None:
+    counts = _differenced_epochs(ctx, carrier)
+    if any(n >= MIN_DIFFERENCED_EPOCHS for n in counts.values()):
+        return None
+    if carrier:
+        what = "carrier-phase rates (or Doppler)"
+        why = f"the rate tests learn their noise scales from them: {MIN_DIFFERENCED_EPOCHS} epochs needed"
+    else:
+        what = "pseudorange changes"
+        why = f"the change predictors learn their noise from them: {MIN_DIFFERENCED_EPOCHS} epochs needed"
+    at = ", ".join(f"{n} ({rid})" for rid, n in counts.items())
+    return Unmet(
+        CARRIER_CONTINUITY if carrier else PSEUDORANGE_ARCS,
+        f"{what} of {MIN_DIFFERENCED_SATELLITES} or more satellites at {at} epochs",
+        why,
+        {f"epochs/{rid}": n for rid, n in counts.items()},
+    )
+
+
+def carrier_continuity(ctx: AnalysisContext) -> Unmet | None:
+    return _arcs(ctx, carrier=True)
+
+
+def pseudorange_arcs(ctx: AnalysisContext) -> Unmet | None:
+    return _arcs(ctx, carrier=False)
+
+
+# --- references a spoofer of the receiver cannot move ------------------------------------------------
+
+
+def known_stations(ctx: AnalysisContext) -> tuple[dict[str, object], dict[str, str]]:
+    """`spooflens.detectors.references.stations` of this analysis (computed once)."""
+    from spooflens.detectors.references import stations
+
+    found: tuple[dict[str, object], dict[str, str]] = ctx.cached(
+        "known_stations", lambda: stations(ctx.table, ctx.options.extra)
+    )
+    return found
+
+
+def independent_reference(ctx: AnalysisContext) -> Unmet | None:
+    """An IMU strapdown can use, or a known static station."""
+    ins = strapdown_imu(ctx) if len(ctx.table.imu) else None
+    if len(ctx.table.imu) and ins is None:
+        return None
+    found, why = known_stations(ctx)
+    if found:
+        return None
+    no_station = "; ".join(f"{rid}: {w}" for rid, w in why.items()) or "no receiver with observations"
+    imu = ins.text if ins is not None else "no IMU"
+    return Unmet(
+        INDEPENDENT_REFERENCE,
+        f"{imu}; no known station ({no_station})",
+        "these tests need where the receiver was, known without its GNSS",
+        dict(ins.values) if ins is not None else {},
+    )
+
+
+def independent_receivers(ctx: AnalysisContext) -> Unmet | None:
+    from spooflens.gnss.same_receiver import receiver_groups
+
+    groups = receiver_groups(ctx)
+    if len(groups) >= 2:
+        return None
+    described = "; ".join(g.describe() for g in groups)
+    return Unmet(
+        INDEPENDENT_RECEIVERS,
+        described,
+        "the dual-receiver tests need two receivers with independent errors",
+        {"receivers": len(ctx.table.receivers()), "independent": len(groups)},
+    )
+
+
+def surveyed_sites(ctx: AnalysisContext) -> Unmet | None:
+    """Two independent receivers, each a known station (the baseline vector is then known)."""
+    from spooflens.gnss.same_receiver import receiver_groups
+
+    found, why = known_stations(ctx)
+    sited = [g.receivers[0] for g in receiver_groups(ctx) if g.receivers[0] in found]
+    if len(sited) >= 2:
+        return None
+    reasons = "; ".join(f"{rid}: {w}" for rid, w in why.items()) or "no receiver with observations"
+    return Unmet(
+        SURVEYED_SITES,
+        f"{len(sited)} independent receiver(s) at a known station ({reasons})",
+        "the baseline error needs two, so the baseline vector is known",
+        {"sited": len(sited)},
+    )
+
+
+STRAPDOWN_IMU = "strapdown_imu"
+INERTIAL_SPAN = "inertial_span"
+NOISE_LEARNING = "noise_learning"
+CARRIER_CONTINUITY = "carrier_continuity"
+PSEUDORANGE_ARCS = "pseudorange_arcs"
+INDEPENDENT_REFERENCE = "independent_reference"
+INDEPENDENT_RECEIVERS = "independent_receivers"
+SURVEYED_SITES = "surveyed_sites"
+
+PRECONDITIONS: dict[str, Precondition] = {
+    STRAPDOWN_IMU: Precondition(
+        f"the IMU the navigation uses at >= {MIN_STRAPDOWN_HZ:g} Hz (median sample interval) with no gap over "
+        f"{MAX_IMU_GAP_S:g} s: strapdown integrates each sample over the interval to the next",
+        strapdown_imu,
+    ),
+    INERTIAL_SPAN: Precondition(
+        "GNSS fixes inside the IMU's span for longer than the 20 s the filter settles in (the inertial tests "
+        "do not alarm before)",
+        inertial_span,
+    ),
+    NOISE_LEARNING: Precondition(
+        "GNSS with the IMU long enough to learn the sensors' noise from the log: 30 s and 50 epochs after the "
+        "filter settles to learn anything (else the prior stands), 300 s to learn the receiver's slow wander. "
+        "Limits, does not stop: the result says what could not be learned",
+        noise_learning,
+        stops=False,
+    ),
+    CARRIER_CONTINUITY: Precondition(
+        f"a receiver with rates of {MIN_DIFFERENCED_SATELLITES} or more satellites at {MIN_DIFFERENCED_EPOCHS} "
+        f"or more epochs: a carrier phase continued from the epoch before (at most {MAX_CARRIER_INTERVAL_S:g} s "
+        "earlier), or a Doppler; the scales are learned from them",
+        carrier_continuity,
+    ),
+    PSEUDORANGE_ARCS: Precondition(
+        f"a receiver with pseudorange changes of {MIN_DIFFERENCED_SATELLITES} or more satellites at "
+        f"{MIN_DIFFERENCED_EPOCHS} or more epochs (the same satellite at the epoch before, at most "
+        f"{MAX_PSEUDORANGE_INTERVAL_S:g} s earlier): the noise scale and the Kalman prediction are learned "
+        "from them",
+        pseudorange_arcs,
+    ),
+    INDEPENDENT_REFERENCE: Precondition(
+        "where the receiver was, known without its GNSS: an IMU that meets strapdown_imu, or a known static "
+        "station (`--station`, or a RINEX header position that the receiver's fixes of its first 5 minutes stay "
+        "at and start within 100 m of)",
+        independent_reference,
+    ),
+    INDEPENDENT_RECEIVERS: Precondition(
+        "two receivers with independent errors: not NMEA talkers of one receiver (GP, GL, GN... of one "
+        "stream), nor one receiver relayed twice (the same fixes, after rounding to the coarser resolution, "
+        "at 90% of common epochs at a constant delay, zero included)",
+        independent_receivers,
+    ),
+    SURVEYED_SITES: Precondition(
+        "two independent receivers each at a known static station (RINEX header positions, checked as for "
+        "independent_reference): the baseline vector is then known",
+        surveyed_sites,
+    ),
+}
