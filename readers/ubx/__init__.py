@@ -9,9 +9,13 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   iTOW, NAV-DOP (hdop, vdop), NAV-SAT (`cn0_mean_dbhz`) and NAV-STATUS (`spoofing_state` raw,
   `spoofing_flag` decoded); MON-RF (block 0) or MON-HW (`jamming_state`, `agc`, `noise_per_ms`,
   `jamming_indicator`) and SEC-SIG (jamming/spoofing state per signal) join the epoch they follow in
-  the stream (they carry no time). A capture with no NAV-PVT takes its fixes from the receiver's own
-  NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`); with NAV-PVT that NMEA is the
-  same solution again and is counted, not used.
+  the stream (they carry no time). NAV-PVAT (sensor fusion) and LOG-BATCH (fixes batched in the
+  receiver's memory) have NAV-PVT's layout and are read as it. An epoch without NAV-PVT is assembled from
+  the messages before it (`legacy.py`: NAV-POSLLH or NAV-POSECEF/NAV-SOL position, NAV-VELNED or
+  NAV-VELECEF/NAV-SOL velocity, NAV-SOL or NAV-STATUS fix type). A capture with no UBX fix takes its
+  fixes from the receiver's own NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`);
+  with UBX fixes that NMEA is the same solution again and is counted, not used.
+- `satellites` from NAV-SVINFO (u-blox's single satellite numbering) when there is no NAV-SAT.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
   RINEX-style. GPS, Galileo and BeiDou satellite states from the broadcast ephemerides in the capture's
@@ -22,9 +26,13 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
-Time: GPS time from NAV iTOW and the week of RXM-RAWX, NAV-TIMEGPS or a NAV-PVT with a valid date
-(`time_reference` "gps"), else `relative` (seconds of the GPS week). MON-VER (and a gpsd header's
-device line) go into `table.metadata`, with the meaning applied to each receiver enum.
+Time: GPS time from NAV iTOW in the week of the first message in the file that states one (NAV-PVT
+with a valid date, NAV-TIMEGPS, NAV-TIMEUTC, NAV-SOL with its week set, RXM-RAWX, TIM-TP; else the
+NMEA dates in the stream): a week learned partway dates the epochs before it too, one recording
+(`time_reference` "gps"). Without any, `relative` (seconds of the GPS week), said so in the metadata
+and the skipped list. A capture with nothing to analyse is refused by what it holds (`refusal.py`:
+time only, no fix, configuration and status). MON-VER (and a gpsd header's device line) go into
+`table.metadata`, with the meaning applied to each receiver enum; empty messages are a host's polls.
 """
 
 from __future__ import annotations
