@@ -34,6 +34,7 @@ READER_MODULES: tuple[str, ...] = (
     "readers.nmea",
     "readers.ardupilot",
     "readers.tlog",
+    "readers.gnss_tables",
     "readers.gnsslogger",
     "readers.csv_log",
 )
