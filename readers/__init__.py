@@ -32,6 +32,7 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rinex",
     "readers.ubx",
     "readers.nmea",
+    "readers.n2k",
     "readers.ardupilot",
     "readers.tlog",
     "readers.gnss_tables",
