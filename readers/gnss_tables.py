@@ -215,7 +215,7 @@ def _sv_ids(df: pd.DataFrame) -> NDArray[np.str_]:
         system = np.array([GNSS_NAMES.get(n, UBX_GNSS.get(n, "")) for n in names])
     else:
         system = np.full(len(df), "G")  # a table with bare PRNs: GPS, as the spooflens CSV reads them
-    return android_sv_ids(system, svid)
+    return np.asarray(android_sv_ids(system, svid), dtype="<U3")  # strings even when there is no row
 
 
 def _l1(df: pd.DataFrame) -> NDArray[np.bool_]:
