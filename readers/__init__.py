@@ -32,8 +32,10 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rinex",
     "readers.ubx",
     "readers.nmea",
+    "readers.n2k",
     "readers.ardupilot",
     "readers.tlog",
+    "readers.gnss_tables",
     "readers.gnsslogger",
     "readers.csv_log",
 )
@@ -108,7 +110,13 @@ def sniff_format(path: Path) -> str:
         return name
     if path.is_dir():
         _refuse_a_folder_of_separate_logs(path, None)
-    what = "directory holds no log this tool reads" if path.is_dir() else f"unknown format (starts with {head[:12]!r})"
+    if path.is_dir():
+        what = "directory holds no log this tool reads"
+    else:
+        from readers.protocols import identify
+
+        protocol = identify(path, head)
+        what = f"{protocol}: not supported" if protocol else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")
 
 

@@ -60,13 +60,15 @@ FloatArray = NDArray[np.float64]
 _FIX = {2: FixType.FIX_2D, 3: FixType.FIX_3D, 4: FixType.DGNSS, 5: FixType.RTK_FLOAT, 6: FixType.RTK_FIXED}
 BLENDED_INSTANCE = 2  # GPS_MAX_RECEIVERS: the blended solution is logged as this instance
 UBX_MAX_AGE_S = 5.0
+UBX3_MAX_AGE_US = 100_000  # UBX3 is written with its fix, a few ms before it
 ATT_MAX_GAP_S = 0.5
 Q_ENU_NED = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])
 # the fields each message must have to be read at all (a damaged FMT text can rename any of them)
-GPS_FIELDS = ("TimeUS", "Status", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ", "HDop", "NSats")
+GPS_FIELDS = ("TimeUS", "Status", "Lat", "Lng", "Alt", "Spd", "GCrs", "HDop", "NSats")  # VZ since 2014
 IMU_FIELDS = ("TimeUS", "AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ")
 ATT_FIELDS = ("TimeUS", "Roll", "Pitch", "Yaw")
 UBX1_FIELDS = ("TimeUS", "noisePerMS", "jamInd", "agcCnt")
+UBX3_FIELDS = ("TimeUS", "hAcc", "vAcc", "sAcc")  # u-blox NAV-POSLLH/VELNED accuracies, before GPA (2016)
 GRXH_FIELDS = ("TimeUS", "week", "rcvTime")
 GRXS_FIELDS = ("TimeUS", "gnss", "sv", "freq", "prMes", "cpMes", "doMes", "cno", "trk")
 # u-blox gnssId -> RINEX system letter
@@ -135,7 +137,30 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
             direction="backward",
             tolerance=int(UBX_MAX_AGE_S * 1e6),
         )
+    if not gpa_parts:
+        gps = _join_ubx3(log, gps)
     return gps.sort_values(["inst", "TimeUS"], kind="stable").reset_index(drop=True)
+
+
+def _join_ubx3(log: DataFlash, gps: pd.DataFrame) -> pd.DataFrame:
+    """Before GPA (2016), u-blox receivers' accuracies came as UBX3 (hAcc, vAcc, sAcc), logged with each
+    fix: joined as GPA's HAcc/VAcc/SAcc to the fix of the same instance logged at or just after it."""
+    ubx3 = log.columns("UBX3", UBX3_FIELDS)
+    if ubx3 is None:
+        return gps
+    u = pd.DataFrame(
+        {
+            "TimeUS": ubx3["TimeUS"].astype(np.int64),
+            "inst": _instance(ubx3, "Instance"),
+            "gpa_HAcc": ubx3["hAcc"].astype(float),
+            "gpa_VAcc": ubx3["vAcc"].astype(float),
+            "gpa_SAcc": ubx3["sAcc"].astype(float),
+        }
+    ).sort_values("TimeUS")
+    gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
+    return pd.merge_asof(
+        gps.sort_values("TimeUS"), u, on="TimeUS", by="inst", direction="backward", tolerance=UBX3_MAX_AGE_US
+    )
 
 
 WEEK_MS = 604_800_000
@@ -205,7 +230,7 @@ def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: d
         "height_m": height,
         "vel_e_mps": spd * np.sin(crs),
         "vel_n_mps": spd * np.cos(crs),
-        "vel_u_mps": -gps["VZ"].to_numpy(float),
+        "vel_u_mps": -gps["VZ"].to_numpy(float) if "VZ" in gps else np.full(n, np.nan),
         "sats_used": gps["NSats"].to_numpy(float),
         "hdop": np.where(hdop >= 99.99, np.nan, hdop),
         "fix_type": fix_type,
@@ -355,7 +380,8 @@ _EKF_FIELDS = {
 
 def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
     frames, streams = [], []
-    for filt, innov, ratio in (("EKF3", "XKF3", "XKF4"), ("EKF2", "NKF3", "NKF4")):
+    # EKF1 is ArduPilot's first EKF (AP_NavEKF, 2014-2017): its innovations EKF3, test ratios EKF4
+    for filt, innov, ratio in (("EKF3", "XKF3", "XKF4"), ("EKF2", "NKF3", "NKF4"), ("EKF1", "EKF3", "EKF4")):
         parts = []
         for name in (innov, ratio):
             cols = log.columns(name, ("TimeUS",))
@@ -365,6 +391,9 @@ def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[Stre
             for src, (dst, scale) in _EKF_FIELDS.items():
                 if src in cols:
                     df[dst] = cols[src].astype(float) * scale
+            per_axis = [cols[k].astype(float) for k in ("SMX", "SMY", "SMZ") if k in cols]
+            if per_axis and "SM" not in cols:  # EKF1 logged one magnetometer ratio per axis
+                df["mag_test_ratio"] = np.max(per_axis, axis=0)
             parts.append(df.drop_duplicates(["TimeUS", "core"]))
         if not parts:
             continue
@@ -442,6 +471,8 @@ def _raw_observations(
 
 
 def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
+    for key, note in log.notes.items():
+        meta[f"dataflash.{key}"] = note
     messages = log.strings("MSG", "Message")
     fws = log.strings("VER", "FWS")
     vehicle = next((m for m in messages if m.startswith("Ardu") or (" V" in m[:20] and m.startswith("Ardu"))), "")
@@ -466,6 +497,8 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     meta: dict[str, str] = {}
     gps = gps_rows(log, skipped)
     reference, offset_ns, how = gps_clock(gps)
+    if gps is not None and reference == "boot" and set(gps["msg"]) & log.on_receiver_clock:
+        reference, how = "relative", "the GPS messages' time of week (this revision logs no boot time and no week)"
     meta["clock"] = how
     frames: dict[str, pd.DataFrame] = {}
     streams: list[StreamInfo] = []

@@ -325,6 +325,8 @@ def _is_csv(path: Path, head: bytes) -> bool:
     if path.suffix.lower() == ".csv":
         return True
     header = next((ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")), "")
+    if header.lstrip().startswith(("$", "!")):  # an NMEA sentence, not a header row
+        return False
     return any(_canonical(name) in _LOG_COLUMNS for name in header.split(","))
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pymavlink.DFReader import FORMAT_TO_STRUCT, DFReader_binary
 
+from readers.dataflash_eras import is_gps_message, with_todays_names
 from spooflens.epoch_table import Skipped
 from spooflens.errors import ReaderError
 
@@ -40,6 +41,8 @@ class DataFlash:
     skipped: list[Skipped] = field(default_factory=list)
     _cache: dict[str, Columns | None] = field(default_factory=dict)
     _incomplete: set[str] = field(default_factory=set)
+    notes: dict[str, str] = field(default_factory=dict)  # how a revision's fields were read, for the metadata
+    on_receiver_clock: set[str] = field(default_factory=set)  # GPS messages timed by their own time of week
 
     def names(self) -> set[str]:
         return {n for n, t in self.reader.name_to_id.items() if self.reader.counts[t] > 0}
@@ -75,6 +78,8 @@ class DataFlash:
             if name not in self._incomplete:
                 self._incomplete.add(name)
                 reason = f"message format lacks field(s) {', '.join(missing)} (damaged FMT)"
+                if missing == ["TimeUS"]:
+                    reason = "this revision's message carries no time, and nothing in the log places it"
                 self.skipped.append(Skipped(name, reason, self.count(name), "lost"))
             return None
         return cols
@@ -117,17 +122,51 @@ class DataFlash:
             ofs = ofs[whole]
         buf = np.frombuffer(self.data, dtype=np.uint8)
         rows = buf[ofs[:, None] + 3 + np.arange(dt.itemsize)].view(dt).ravel()
-        if "TimeUS" in (dt.names or ()):
-            keep = self.plausible(name, rows["TimeUS"].astype(np.int64))
-            rows, ofs = rows[keep], ofs[keep]
-        out: Columns = {"_ofs": ofs}  # where each row sits in the file
+        logged: Columns = {}
         for col in dt.names or ():
             values = rows[col]
             if col in scale:
                 # dividing by 100 or 1e7 rounds like pymavlink (and like the autopilot's own tools)
                 values = values.astype(np.float64) / round(1.0 / scale[col])
+            logged[col] = values
+        cols, timed = with_todays_names(logged)
+        if not timed and len(ofs):
+            board = self.board_time_before(ofs, exclude=name)
+            if board is not None:
+                cols["TimeUS"] = board
+                self.notes[f"{name}.TimeUS"] = (
+                    "no boot time in this revision's message: the boot time of the message logged before each"
+                )
+            elif "GMS" in cols:  # nothing in the log has a boot clock: the receiver's time of week is the clock
+                cols["TimeUS"] = cols["GMS"].astype(np.int64) * 1000
+                self.on_receiver_clock.add(name)
+                self.notes[f"{name}.TimeUS"] = "no boot clock in this revision's log: the receiver's time of week"
+        out: Columns = {"_ofs": ofs}  # where each row sits in the file
+        keep = self.plausible(name, cols["TimeUS"].astype(np.int64)) if "TimeUS" in cols else None
+        for col, values in cols.items():
             out[col] = values
+        if keep is not None and not keep.all():
+            out = {k: v[keep] for k, v in out.items()}
         return out
+
+    def board_time_before(self, ofs: NDArray[np.int64], exclude: str) -> NDArray[np.int64] | None:
+        """Boot time (us) of the timed message written last before each offset in `ofs`: the clock of
+        messages that carry none (a 2013 GPS message), within the logging loop's period. The timed type
+        logged most often is the reference (the IMU in every revision)."""
+        timed = [
+            n
+            for n in self.names()
+            if n != exclude and {"TimeUS", "TimeMS"} & set(self.reader.formats[self.reader.name_to_id[n]].columns)
+        ]
+        for ref in sorted(timed, key=self.count, reverse=True):
+            cols = self.columns(ref)
+            if cols is None or "TimeUS" not in cols or not len(cols["TimeUS"]) or is_gps_message(cols):
+                continue
+            order = np.argsort(cols["_ofs"], kind="stable")
+            k = np.searchsorted(cols["_ofs"][order], ofs) - 1
+            t = cols["TimeUS"][order].astype(np.int64)
+            return np.where(k >= 0, t[np.clip(k, 0, None)], t[0])
+        return None
 
     def strings(self, name: str, column: str) -> list[str]:
         cols = self.columns(name)

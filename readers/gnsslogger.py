@@ -557,6 +557,25 @@ def _orientation_quaternion(yaw_deg: FloatArray, roll_deg: FloatArray, pitch_deg
     return np.asarray(matrix_to_quat(R), dtype=float)
 
 
+def _truth_beside(
+    path: Path, reference: str, frames: dict[str, pd.DataFrame], streams: list[StreamInfo], skipped: list[Skipped]
+) -> None:
+    """A dataset's ground-truth table shipped beside the log (GSDC's `ground_truth.csv`) as its truth."""
+    from readers.gnss_tables import ground_truth_beside, read_ground_truth
+
+    companion = ground_truth_beside(path)
+    if companion is None:
+        return
+    try:
+        truth = read_ground_truth(companion, reference)
+    except ReaderError as err:
+        skipped.append(Skipped(companion.name, f"ground truth not used: {err.problem}", 1))
+        return
+    if len(truth):
+        frames["truth"] = truth
+        streams.append(StreamInfo("truth", "truth", companion.name, "ground truth", len(truth)))
+
+
 def read_gnsslogger(
     path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None
 ) -> EpochTable:
@@ -630,6 +649,7 @@ def read_gnsslogger(
         )
     if not frames:
         raise ReaderError(path, "no Raw, Fix or sensor record could be read from this GnssLogger log")
+    _truth_beside(path, reference, frames, streams, skipped)
     meta["receiver"] = "phone: the GPS-provider fixes and the Raw measurements of one phone"
     table = build_table(path, "gnsslogger", reference, frames, streams, skipped, metadata=meta)
     if nav is not None:

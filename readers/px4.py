@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from readers.svinfo_numbering import SVINFO_IDS, svinfo_sv_id
 from spooflens.epoch_table import Skipped, StreamInfo, log_clock, time_offset_s
 from spooflens.navigation.rotations import quat_from_rotvec, quat_multiply, quat_to_rotvec
 from spooflens.schema import FixType, SpoofingFlag
@@ -607,29 +608,9 @@ def interpolate_attitude(t: np.ndarray, t_att: np.ndarray, q_att: FloatArray, ma
 # --- satellite_info: C/N0 per fix, and every satellite ---------------------------------------------
 
 
-# u-blox NAV-SVINFO numbering, which PX4's u-blox driver writes into satellite_info.svid:
-# (first, last, RINEX system letter, number of the first)
-_SVINFO_RANGES = (
-    (1, 32, "G", 1),
-    (33, 64, "C", 5),
-    (65, 96, "R", 1),
-    (120, 158, "S", 20),
-    (159, 163, "C", 1),
-    (193, 202, "J", 1),
-    (211, 246, "E", 1),
-)
-
-
-def _svinfo_sv_id(svid: int) -> str | None:
-    """RINEX-style id of a satellite_info `svid`; None for 0, 255 (GLONASS slot unknown) and numbers
-    no range assigns."""
-    for first, last, system, number in _SVINFO_RANGES:
-        if first <= svid <= last:
-            return f"{system}{svid - first + number:02d}"
-    return None
-
-
-_SVINFO_IDS = np.array([_svinfo_sv_id(v) or "" for v in range(256)], dtype=object)
+# u-blox NAV-SVINFO numbering, which PX4's u-blox driver writes into satellite_info.svid
+_svinfo_sv_id = svinfo_sv_id
+_SVINFO_IDS = SVINFO_IDS
 
 
 def satellites_frame(

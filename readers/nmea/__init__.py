@@ -97,9 +97,21 @@ def decode_log(path: Path, progress: Progress | None = None) -> tuple[list[Decod
         if progress:
             progress(i + 1, len(files))
     if not any(p.decoded for p in decoded):
-        reasons = "; ".join(str(s) for s in skipped[:6]) or "no sentences"
-        raise ReaderError(path, f"no usable NMEA sentence (position, heading, satellites): {reasons}", "nmea")
+        raise ReaderError(
+            path, f"no usable NMEA sentence (position, heading, satellites): {_what_it_holds(decoded, skipped)}", "nmea"
+        )
     return decoded, skipped
+
+
+AIS_KINDS = ("VDM", "VDO")
+
+
+def _what_it_holds(decoded: list[DecodedFile], skipped: list[Skipped]) -> str:
+    """Why a log has nothing to use: AIS traffic only (other vessels' reports), else what was skipped."""
+    kinds = [s.kind for f in decoded for s in f.scan.sentences]
+    if kinds and all(k in AIS_KINDS for k in kinds):
+        return f"AIS messages only ({len(kinds)} VDM/VDO: other vessels' reports, no own position or heading)"
+    return "; ".join(str(s) for s in skipped[:6]) or "no sentences"
 
 
 def read_nmea(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
@@ -130,7 +142,8 @@ def looks_like_nmea(head: bytes) -> bool:
     result = scan(Path("<head>"), text)
     data_lines = sum(1 for ln in lines if ln.strip() and not ln.startswith(b"#"))
     good = len(result.sentences)  # verified, or unverified in a head where no sentence has a checksum
-    return good >= 1 and good * 2 >= data_lines
+    # half the lines, or a damaged log's many sentences among broken ones (gpsd's gp-320fw cold boot)
+    return good >= 1 and (good * 2 >= data_lines or (good >= 8 and good * 4 >= data_lines))
 
 
 def _is_nmea(path: Path, head: bytes) -> bool:

@@ -472,6 +472,8 @@ def _headings(
     rows: list[tuple[int, str, float, str, float]] = []
     no_value: Counter[str] = Counter()
     untimed: Counter[str] = Counter()
+    magnetic: Counter[str] = Counter()
+    outside: Counter[str] = Counter()
     for f in files:
         line_t = times_by_file[id(f)]
         for d in f.decoded:
@@ -482,15 +484,26 @@ def _headings(
                 no_value[hid] += 1
                 continue
             t = line_t.get(d.sentence.line)
-            if t is None:
+            if t is None and not line_t:  # a file with no time at all: its headings in file order
+                t = d.sentence.line * NS
                 untimed[hid] += 1
+            elif t is None:
+                outside[hid] += 1
                 continue
+            magnetic[hid] += d.magnetic_only
             rows.append((t, hid, d.heading_deg % 360.0, d.talker, d.water_speed_mps))
     for hid, n in no_value.items():
-        reason = "headings without a value (invalid, magnetic without variation, or a speed log without heading)"
+        reason = "headings without a value (invalid, or a speed log without heading)"
         skipped.append(Skipped(hid, reason, n))
     for hid, n in untimed.items():
-        skipped.append(Skipped(hid, "headings in a file with no time at all (no epoch, no logger time)", n))
+        why = "headings of a file with no time at all (no epoch, no logger time): placed by line number, 1 s a line"
+        skipped.append(Skipped(hid, why, n, "repaired"))
+    for hid, n in outside.items():
+        skipped.append(Skipped(hid, "headings where the file has no time to give them", n))
+    for hid, n in magnetic.items():
+        if n:
+            why = "magnetic headings without a variation (HDM, HDG), taken as true: off by the local variation"
+            skipped.append(Skipped(hid, why, n, "repaired"))
     if not rows:
         return None, []
     frame = pd.DataFrame(rows, columns=["t_ns", "heading_id", "heading_deg", "talker", "water_speed_mps"])

@@ -36,7 +36,8 @@ _TIME = rb"(\d{9,19}(?:\.\d*)?)"
 _NUMERIC_PREFIX = re.compile(rb"^" + _TIME + rb"[ \t;,]+(?:[A-Za-z];)?")
 _ISO_PREFIX = re.compile(rb"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(?:\.\d+)?)(?:Z|[+-]00:?00)?[ \t;,]+")
 _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
-_ADDRESS = re.compile(rb"^[$!]([A-Z][A-Z0-9]{3,5}),")
+# a talker is two letters, or a bus address's two digits (canboat's n2kd writes `$04HDM`)
+_ADDRESS = re.compile(rb"^[$!]([A-Z0-9][A-Z0-9]{3,5}),")
 _HEX = b"0123456789ABCDEFabcdef"
 _HEX_VALUE = np.full(256, -256, dtype=np.int64)  # byte -> its hex digit value (negative: not one)
 for _i, _c in enumerate(b"0123456789ABCDEF"):
@@ -106,6 +107,8 @@ class _Candidate:
 def _unwrap(line: bytes) -> tuple[int, str, int | None, bool]:
     """Logger wrapping at the start of a line -> (offset of the sentence, source, logger ns, tag ok)."""
     pos, source, host, tag_ok = 0, "", None, True
+    if line[:2] == b"$$":  # a logger that doubles the start character (`$$GNGSA,...`)
+        return 1, source, host, tag_ok
     if line[:1] in (b"$", b"!"):
         return pos, source, host, tag_ok
     for _ in range(4):  # prefixes may be stacked: a time, then a TAG block

@@ -3,7 +3,8 @@
 Read: GGA and GNS (position, MSL altitude and geoid separation, quality, satellites, HDOP), RMC
 (position, speed, course, date), GLL (position), VTG (speed, course), GSA (satellites used, DOPs),
 GSV (per-satellite elevation, azimuth, C/N0), GST (position error sigmas), ZDA (date), and the
-headings HDT and THS (true) and HDG (magnetic; made true with the deviation and variation it carries).
+headings HDT and THS (true) and HDG (magnetic; made true with the deviation and variation it carries);
+HDM and an HDG without variation are magnetic headings taken as true, said so where they are assembled.
 Every other sentence type is counted and skipped.
 """
 
@@ -24,7 +25,7 @@ from spooflens.schema import FixType
 KNOT_MPS = 1852.0 / 3600.0
 POSITION_KINDS = ("GGA", "GNS", "RMC", "GLL")
 TIMED_KINDS = ("GGA", "GNS", "RMC", "GLL", "GST", "ZDA")
-HEADING_KINDS = ("HDT", "THS", "HDG", "VHW")
+HEADING_KINDS = ("HDT", "THS", "HDG", "HDM", "VHW")
 EPOCH_KINDS = ("VTG", "GSA", "GSV")  # no time of their own: they belong to their receiver's current epoch
 WANTED = frozenset(POSITION_KINDS + TIMED_KINDS + HEADING_KINDS + EPOCH_KINDS)
 
@@ -97,6 +98,7 @@ class Decoded:
     std_alt_m: float = math.nan
     heading_deg: float = math.nan
     water_speed_mps: float = math.nan  # VHW: the vessel's log, speed through the water
+    magnetic_only: bool = False  # HDM, or HDG without variation: a magnetic heading, taken as true
     satellites: list[tuple[int, float, float, float, int]] = field(default_factory=list)  # svid, el, az, C/N0, sig
 
     @property
@@ -231,10 +233,18 @@ def _hdg(d: Decoded, msg: Any) -> None:
     """Magnetic sensor heading + deviation + variation (east positive) = true heading; NaN without variation."""
     heading, deviation, variation = _num(msg, "headingM"), _num(msg, "deviation"), _num(msg, "variation")
     sign = {"E": 1.0, "W": -1.0}
-    if not math.isfinite(variation) or _str(msg, "variationEW") not in sign:
-        return
     dev = deviation * sign.get(_str(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
+    if not math.isfinite(variation) or _str(msg, "variationEW") not in sign:
+        d.heading_deg = heading + dev
+        d.magnetic_only = True
+        return
     d.heading_deg = heading + dev + variation * sign[_str(msg, "variationEW")]
+
+
+def _hdm(d: Decoded, msg: Any) -> None:
+    """A magnetic heading (an autopilot's, a fluxgate's), no deviation or variation to make it true."""
+    d.heading_deg = _num(msg, "headingM")
+    d.magnetic_only = True
 
 
 def _vhw(d: Decoded, msg: Any) -> None:
@@ -257,6 +267,7 @@ _DECODERS = {
     "HDT": _hdt,
     "THS": _ths,
     "HDG": _hdg,
+    "HDM": _hdm,
     "VHW": _vhw,
 }
 

@@ -63,7 +63,8 @@ from readers.rinex.observation import (
     rinex_approx_position,
     scan_obs,
 )
-from readers.rinex.text import GPS_EPOCH, SUPPORTED_VERSIONS, TextLines, parse_fixed
+from readers.rinex.packaging import is_compact, packing_of
+from readers.rinex.text import GPS_EPOCH, SUPPORTED_VERSIONS, TextLines, first_line, parse_fixed
 
 __all__ = [
     "APPROX_POSITION_KEY",
@@ -97,14 +98,18 @@ def _is_rinex(path: Path, head: bytes) -> bool:
     if path.is_dir():
         # a directory with CSV files is a CSV log, even when RINEX files lie beside them
         return not any(path.glob("*.csv")) and any(p.is_file() and is_rinex_obs(p) for p in sorted(path.iterdir()))
-    first = head.split(b"\n", 1)[0].decode("latin-1")
+    if packing_of(head) is not None or is_compact(head):  # shipped packed: the RINEX line is inside
+        first = first_line(path)
+    else:
+        first = head.split(b"\n", 1)[0].decode("latin-1")
     return "RINEX VERSION / TYPE" in first
 
 
 FORMATS = (
     ReaderFormat(
         "rinex",
-        "RINEX observation file (2.10, 2.11, 3.02-3.05) or a directory of them, navigation file beside",
+        "RINEX observation file (2.10, 2.11, 3.02-3.05; plain, gzip, bzip2, .Z, zip or Hatanaka .crx) or a "
+        "directory of them, navigation file beside",
         read_rinex,
         _is_rinex,
         rewrite="spooflens.writers.rinex_rewrite:rewrite_rinex_log",

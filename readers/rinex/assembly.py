@@ -12,6 +12,8 @@ import pandas as pd
 from readers.orbits import state_columns
 from readers.rinex.navigation import NavFile, find_nav_files, read_rinex_nav_file
 from readers.rinex.observation import ObsScan, extract_l1, is_rinex_obs, scan_obs
+from readers.rinex.packaging import archive_folder
+from readers.rinex.text import header_lines
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, GpsEphemerides
@@ -30,13 +32,9 @@ def obs_files(path: Path) -> list[tuple[Path, str]]:
     markers = []
     for f in files:
         marker = ""
-        with f.open("rb") as fh:
-            for raw in fh:
-                line = raw.decode("latin-1")
-                if line[60:80].strip() == "MARKER NAME":
-                    marker = line[:60].strip()
-                if "END OF HEADER" in line:
-                    break
+        for line in header_lines(f):
+            if line[60:80].strip() == "MARKER NAME":
+                marker = line[:60].strip()
         markers.append(marker or f.stem)
     dup = {m for m in markers if markers.count(m) > 1}
     return [(f, f"{m}_{f.name}" if m in dup else m) for f, m in zip(files, markers, strict=True)]
@@ -173,7 +171,18 @@ def _assemble(path: Path, parts: list[_FileResult], skipped: list[Skipped]) -> E
 def read_rinex(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     """Read a RINEX observation file, or a directory of them (one receiver each), into an EpochTable."""
     path = Path(path)
-    files = obs_files(path)
+    with archive_folder(path) as folder:  # a zip of several files: read from a folder of its members
+        if folder is None:
+            return _read_rinex(path, path, topics, progress)
+        try:
+            return _read_rinex(path, folder, topics, progress)
+        except ReaderError as err:  # name the archive (and the member), not the temporary folder
+            member = "" if err.path == folder else f"{err.path.name}: "
+            raise ReaderError(path, f"{member}{err.problem}".replace("directory", "zip archive"), err.stream) from err
+
+
+def _read_rinex(path: Path, inner: Path, topics: Mapping[str, str] | None, progress: Progress | None) -> EpochTable:
+    files = obs_files(inner)
     skipped: list[Skipped] = []
     if topics and set(topics) - {"nav"}:
         other = {k: v for k, v in topics.items() if k != "nav"}

@@ -247,15 +247,18 @@ def read_rinex_nav(path: Path | str) -> GpsEphemerides:
 def _nav_siblings(obs: Path) -> list[Path]:
     """Navigation files named after an observation file (RINEX 2 short names, RINEX 3 long names)."""
     names: list[str] = []
-    suffix = obs.suffix
-    if len(suffix) >= 2 and suffix[-1] in "oO":
-        names += [obs.stem + suffix[:-1] + ch for ch in "nNpP"]
-    m = re.match(r"(.*_)[A-Z]O(\.rnx.*)$", obs.name, flags=re.IGNORECASE)
+    # shipped packed: `07590920.05o.gz`, Hatanaka `.05d.Z`, RINEX 3 `_MO.crx.gz`; the nav file packed or not
+    base = re.sub(r"\.(gz|z|bz2|zip)$", "", obs.name, flags=re.IGNORECASE)
+    stem, _, suffix = base.rpartition(".") if "." in base else (base, "", "")
+    if len(suffix) >= 2 and suffix[-1] in "oOdD":
+        names += [f"{stem}.{suffix[:-1]}{ch}" for ch in "nNpP"]
+    m = re.match(r"(.*_)[A-Z]O\.[rc]nx$", base, flags=re.IGNORECASE)
     if m:
-        names += [f"{m.group(1)}{kind}{m.group(2)}" for kind in ("GN", "MN")]
-    if suffix.lower() == ".obs":
-        names += [obs.stem + ".nav"]
-    return [obs.with_name(n) for n in dict.fromkeys(names) if obs.with_name(n).is_file()]
+        names += [f"{m.group(1)}{kind}.rnx" for kind in ("GN", "MN")]
+    if suffix.lower() == "obs":
+        names += [stem + ".nav"]
+    packed = [n + ext for n in names for ext in ("", ".gz", ".Z", ".zip", ".bz2")]
+    return [obs.with_name(n) for n in dict.fromkeys(packed) if obs.with_name(n).is_file()]
 
 
 def find_nav_files(obs: Path, topics: Mapping[str, str] | None = None) -> list[Path]:

@@ -27,6 +27,7 @@ from readers.rinex.text import (
     decimal_parts,
     end_of_header,
     first_line,
+    header_lines,
     parse_fixed,
     parse_int,
     sv_ids,
@@ -145,22 +146,15 @@ def read_obs_header(text: TextLines) -> ObsHeader:
 def rinex_approx_position(path: Path | str) -> tuple[float, float, float] | None:
     """The header's APPROX POSITION XYZ (ECEF, m), the surveyed site for a static station; None if absent."""
     path = Path(path)
-    try:
-        f = path.open("rb")
-    except OSError as err:
-        raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
-    with f:
-        for raw in f:
-            line = raw.decode("latin-1").rstrip("\r\n")
-            label = line[60:80].strip()
-            if label == "APPROX POSITION XYZ":
-                try:
-                    x, y, z = (float(v) for v in line[:42].split()[:3])
-                except ValueError:
-                    return None
-                return None if x == y == z == 0.0 else (x, y, z)
-            if label == "END OF HEADER":
-                break
+    if not path.is_file():
+        raise ReaderError(path, "cannot read: no such file")
+    for line in header_lines(path):
+        if line[60:80].strip() == "APPROX POSITION XYZ":
+            try:
+                x, y, z = (float(v) for v in line[:42].split()[:3])
+            except ValueError:
+                return None
+            return None if x == y == z == 0.0 else (x, y, z)
     return None
 
 
@@ -476,7 +470,12 @@ def scan_obs(path: Path) -> ObsScan:
     """Read and lay out one observation file (header, epochs, satellite rows)."""
     text = TextLines.load(path)
     header = read_obs_header(text)
-    return _scan_v2(text, header) if header.version < 3 else _scan_v3(text, header)
+    scan = _scan_v2(text, header) if header.version < 3 else _scan_v3(text, header)
+    scan.skipped.extend(Skipped(path.name, loss, 1, "lost") for loss in text.losses)
+    if text.packing:
+        how = " inside ".join(reversed(text.packing))
+        scan.skipped.append(Skipped(path.name, f"read as shipped: {how}, unpacked in memory", 1, "unpacked"))
+    return scan
 
 
 # ---------------------------------------------------------------------------------------------------

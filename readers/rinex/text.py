@@ -41,15 +41,17 @@ class TextLines:
     starts: IntArray
     lens: IntArray
     terminated: bool
+    losses: tuple[str, ...] = ()  # what unpacking a packed file lost (a gzip stream cut short...)
+    packing: tuple[str, ...] = ()  # how the file was shipped: ("gzip", "Compact RINEX (Hatanaka)")
 
     @classmethod
     def load(cls, path: Path) -> TextLines:
-        try:
-            data = path.read_bytes()
-        except OSError as err:
-            raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
+        from readers.rinex.packaging import unpack
+
+        unpacked = unpack(path)
+        data = unpacked.data
         if not data:
-            raise ReaderError(path, "file is empty (0 bytes)")
+            raise ReaderError(path, "file is empty (0 bytes)" if not unpacked.packing else "packed file holds no text")
         buf = np.frombuffer(data, dtype=np.uint8)
         nl = np.flatnonzero(buf == 10)
         starts = np.concatenate(([0], nl + 1)).astype(np.int64)
@@ -58,7 +60,8 @@ class TextLines:
         if terminated:
             starts, ends = starts[:-1], ends[:-1]
         cr = (ends > starts) & (buf[np.maximum(ends - 1, 0)] == 13)
-        return cls(path, data, buf, starts, ends - starts - cr.astype(np.int64), terminated)
+        lens = ends - starts - cr.astype(np.int64)
+        return cls(path, data, buf, starts, lens, terminated, tuple(unpacked.losses), tuple(unpacked.packing))
 
     def __len__(self) -> int:
         return len(self.starts)
@@ -202,11 +205,23 @@ def sv_ids(tok: NDArray[np.uint8]) -> tuple[NDArray[np.str_], NDArray[np.uint8],
 
 
 def first_line(path: Path) -> str:
-    try:
-        with path.open("rb") as f:
-            return f.readline(256).decode("latin-1")
-    except OSError:
-        return ""
+    """The RINEX VERSION / TYPE line of a file, plain or packed (gzip, zip, .Z, Compact RINEX)."""
+    from readers.rinex.packaging import head_text
+
+    return head_text(path, 4096).split(b"\n", 1)[0][:256].decode("latin-1")
+
+
+def header_lines(path: Path) -> list[str]:
+    """The header lines of a RINEX file, plain or packed, up to END OF HEADER (or the first 64 KiB)."""
+    from readers.rinex.packaging import head_text
+
+    lines = []
+    for raw in head_text(path).split(b"\n"):
+        line = raw.decode("latin-1").rstrip("\r")
+        lines.append(line)
+        if "END OF HEADER" in line:
+            break
+    return lines
 
 
 def end_of_header(text: TextLines) -> int:

@@ -9,9 +9,13 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   iTOW, NAV-DOP (hdop, vdop), NAV-SAT (`cn0_mean_dbhz`) and NAV-STATUS (`spoofing_state` raw,
   `spoofing_flag` decoded); MON-RF (block 0) or MON-HW (`jamming_state`, `agc`, `noise_per_ms`,
   `jamming_indicator`) and SEC-SIG (jamming/spoofing state per signal) join the epoch they follow in
-  the stream (they carry no time). A capture with no NAV-PVT takes its fixes from the receiver's own
-  NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`); with NAV-PVT that NMEA is the
-  same solution again and is counted, not used.
+  the stream (they carry no time). NAV-PVAT (sensor fusion) and LOG-BATCH (fixes batched in the
+  receiver's memory) have NAV-PVT's layout and are read as it. An epoch without NAV-PVT is assembled from
+  the messages before it (`legacy.py`: NAV-POSLLH or NAV-POSECEF/NAV-SOL position, NAV-VELNED or
+  NAV-VELECEF/NAV-SOL velocity, NAV-SOL or NAV-STATUS fix type). A capture with no UBX fix takes its
+  fixes from the receiver's own NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`);
+  with UBX fixes that NMEA is the same solution again and is counted, not used.
+- `satellites` from NAV-SVINFO (u-blox's single satellite numbering) when there is no NAV-SAT.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
   RINEX-style. GPS, Galileo and BeiDou satellite states from the broadcast ephemerides in the capture's
@@ -22,9 +26,13 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
-Time: GPS time from NAV iTOW and the week of RXM-RAWX, NAV-TIMEGPS or a NAV-PVT with a valid date
-(`time_reference` "gps"), else `relative` (seconds of the GPS week). MON-VER (and a gpsd header's
-device line) go into `table.metadata`, with the meaning applied to each receiver enum.
+Time: GPS time from NAV iTOW in the week of the first message in the file that states one (NAV-PVT
+with a valid date, NAV-TIMEGPS, NAV-TIMEUTC, NAV-SOL with its week set, RXM-RAWX, TIM-TP; else the
+NMEA dates in the stream): a week learned partway dates the epochs before it too, one recording
+(`time_reference` "gps"). Without any, `relative` (seconds of the GPS week), said so in the metadata
+and the skipped list. A capture with nothing to analyse is refused by what it holds (`refusal.py`:
+time only, no fix, configuration and status). MON-VER (and a gpsd header's device line) go into
+`table.metadata`, with the meaning applied to each receiver enum; empty messages are a host's polls.
 """
 
 from __future__ import annotations
@@ -44,11 +52,14 @@ from pyubx2.ubxtypes_core import UBX_MSGIDS
 from readers import ReaderFormat
 from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
+from readers.nmea.assembly import Assembled
 from readers.orbits import ORBIT_SYSTEMS
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
 from readers.rtcm_ephemeris import RTCM_EPHEMERIS, rtcm_ephemerides
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
+from readers.ubx.legacy import legacy_fix
+from readers.ubx.refusal import refusal
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -56,6 +67,7 @@ from spooflens.epoch_table import (
     build_table,
     gps_ns_of_unix_ns,
     gps_seconds_of_unix_ns,
+    unix_ns_of_gps_ns,
 )
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import GpsEphemerides
@@ -73,6 +85,9 @@ class _Epoch:
     itow_ms: int
     values: dict[str, float] = field(default_factory=dict)
     has_pvt: bool = False
+    pvt_seen: bool = False  # a NAV-PVT came for this epoch, fix or not: its verdict is the receiver's
+    parts: dict[str, float] = field(default_factory=dict)  # a fix in parts (legacy messages), merged
+    parts_from: set[str] = field(default_factory=set)  # which legacy messages gave them
 
 
 @dataclass
@@ -91,6 +106,13 @@ class _State:
     bad: Counter[str] = field(default_factory=Counter)
     first_error: str = ""
     no_fix: int = 0
+    time_only: int = 0  # NAV-PVT fixType 5: a timing receiver's time-only fix
+    not_fixes: Counter[str] = field(default_factory=Counter)  # legacy epochs that are no fix, by reason
+    polls: Counter[str] = field(default_factory=Counter)  # empty messages: a host's poll requests
+    unused_as_repeat: Counter[str] = field(default_factory=Counter)  # legacy messages beside NAV-PVT
+    svinfo: list[m.NavSat] = field(default_factory=list)  # NAV-SVINFO, used when there is no NAV-SAT
+    leap_s: float | None = None  # GPS - UTC as NAV-TIMEGPS reports it
+    anchor_of: str = ""  # the message that dated the capture first
 
     def epoch(self, itow: int) -> _Epoch:
         if itow not in self.epochs:
@@ -112,16 +134,32 @@ def _name(frame: UbxFrame) -> str:
     return str(name) if name else f"UBX 0x{frame.msg_class:02x} 0x{frame.msg_id:02x}"
 
 
+def _anchor(state: _State, gps_s: float | None, name: str) -> None:
+    """A GPS time the capture states (with its week): dates the whole capture from the first one."""
+    if gps_s is None or not math.isfinite(gps_s) or gps_s < WEEK_S:
+        return
+    if not state.gps_refs:
+        state.anchor_of = name
+    state.gps_refs.append(gps_s)
+
+
 def _handle(state: _State, frame: UbxFrame) -> None:
     name = _name(frame)
+    if not frame.payload:  # every output of a receiver has a payload; an empty one is a host's poll
+        state.polls[name] += 1
+        return
     if name not in m.MSG.values():
         state.unused[name] += 1
         return
-    state.used[name] += 1
+    if name not in m.LEGACY_FIX:
+        state.used[name] += 1
     if name == "RXM-RAWX":
         raw = m.rawx(frame)
         state.rawx.append(raw)
-        state.gps_refs.append(raw.gps_s)
+        _anchor(state, raw.gps_s, name)
+        return
+    if name == "NAV-SVINFO":
+        state.svinfo.append(m.nav_svinfo(frame))
         return
     if name == "RXM-SFRBX":
         state.sfrbx.append((frame.payload, state.gps_refs[-1] if state.gps_refs else None))
@@ -136,25 +174,57 @@ def _handle(state: _State, frame: UbxFrame) -> None:
         state.navsat.append(sat)
         return
     msg = m.parse(frame)
-    if name == "NAV-PVT":
+    if name in m.PVT_LIKE:
         epoch = state.epoch(int(msg.iTOW))
+        epoch.pvt_seen = True
         values = m.pvt_values(msg)
         utc = m.pvt_utc_ns(msg)
         if utc is not None:
-            state.gps_refs.append(float(gps_seconds_of_unix_ns(utc)))
+            _anchor(state, float(gps_seconds_of_unix_ns(utc)), name)
         if values is None:
             state.no_fix += 1
-        else:
+            state.time_only += int(getattr(msg, "fixType", 0) == 5)
+        elif not epoch.has_pvt:  # NAV-PVAT beside NAV-PVT is the same solution
             epoch.values.update(values)
             epoch.has_pvt = True
+    elif name in m.LEGACY_FIX:
+        epoch = state.epoch(int(msg.iTOW))
+        epoch.parts_from.add(name)
+        if name == "NAV-POSLLH":
+            epoch.parts.update(m.posllh_values(msg))
+        elif name == "NAV-VELNED":
+            epoch.parts.update(m.velned_values(msg))
+        else:
+            epoch.parts.update(m.ecef_values(msg))
+        if name == "NAV-SOL":
+            epoch.parts.update(m.fix_status(msg))
+            _anchor(state, m.sol_gps_s(msg), name)
     elif name == "NAV-DOP":
         state.epoch(int(msg.iTOW)).values.update({"hdop": float(msg.hDOP), "vdop": float(msg.vDOP)})
     elif name == "NAV-STATUS":
-        state.epoch(int(msg.iTOW)).values.update(m.status_values(msg))
+        epoch = state.epoch(int(msg.iTOW))
+        epoch.values.update(m.status_values(msg))
+        status = m.fix_status(msg)
+        epoch.parts.update({k: v for k, v in status.items() if k not in epoch.parts})  # NAV-SOL's first
     elif name == "NAV-TIMEGPS":
         state.epoch(int(msg.iTOW))
         if int(getattr(msg, "weekValid", 0)) and int(getattr(msg, "towValid", 0)):
-            state.gps_refs.append(int(msg.week) * WEEK_S + int(msg.iTOW) / 1000 + int(msg.fTOW) * 1e-9)
+            _anchor(state, int(msg.week) * WEEK_S + int(msg.iTOW) / 1000 + int(msg.fTOW) * 1e-9, name)
+        if int(getattr(msg, "leapSValid", 0)):
+            state.leap_s = float(msg.leapS)
+    elif name == "NAV-TIMEUTC":
+        state.epoch(int(msg.iTOW))
+        utc = m.timeutc_utc_ns(msg)
+        if utc is not None:
+            _anchor(state, float(gps_seconds_of_unix_ns(utc)), name)
+    elif name == "TIM-TP":
+        pulse = m.tim_tp_week_tow(msg)
+        if pulse is not None:
+            week, tow, on_utc = pulse
+            gps_s = week * WEEK_S + tow
+            if on_utc:  # a week and time of week counted on UTC from the GPS epoch
+                gps_s = float(gps_seconds_of_unix_ns(round((m.GPS_EPOCH_UNIX_S + gps_s) * NS)))
+            _anchor(state, gps_s, name)
     elif name == "MON-RF":
         state.untimed(m.mon_rf_values(frame, msg))
     elif name == "MON-HW":
@@ -194,17 +264,47 @@ def _first(values: dict[str, float], *names: str) -> float:
     return next((values[n] for n in names if math.isfinite(values.get(n, math.nan))), math.nan)
 
 
-def _fixes(state: _State, ref_s: float | None) -> pd.DataFrame | None:
-    rows = [e for e in state.epochs.values() if e.has_pvt]
-    if not rows:
+def _fix_epochs(state: _State) -> list[tuple[int, dict[str, float]]]:
+    """(iTOW, values) of every epoch with a fix: NAV-PVT's (or PVAT's, LOG-BATCH's), else the one its
+    legacy messages assemble; counts which legacy messages were used, and which repeated NAV-PVT."""
+    out = []
+    for e in state.epochs.values():
+        if e.pvt_seen:
+            for name in e.parts_from:
+                state.unused_as_repeat[name] += 1
+            if e.has_pvt:
+                out.append((e.itow_ms, e.values))
+            continue
+        if not e.parts_from:
+            continue
+        fix, why = legacy_fix(e.parts)
+        if fix is None:
+            state.not_fixes[why] += 1
+            continue
+        for name in e.parts_from:
+            state.used[name] += 1
+        out.append((e.itow_ms, {**e.values, **fix}))
+    return out
+
+
+def _fixes(state: _State, epochs: list[tuple[int, dict[str, float]]], ref_s: float | None) -> pd.DataFrame | None:
+    if not epochs:
         return None
-    itow = np.array([e.itow_ms for e in rows], dtype=np.float64)
+    rows = [v for _, v in epochs]
+    itow = np.array([i for i, _ in epochs], dtype=np.float64)
     t_s = _gps_of_itow(itow, ref_s) if ref_s is not None else itow / 1000.0
     cols: dict[str, Any] = {"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER}
+    reports = {s.itow_ms: s for s in (state.navsat or state.svinfo)}
+    for e_itow, v in epochs:  # from the epoch's satellite report what the fix message did not say
+        report = reports.get(e_itow)
+        if report is not None:
+            v.setdefault("cn0_mean_dbhz", report.cn0_mean)
+            if not math.isfinite(v.get("sats_used", math.nan)):
+                v["sats_used"] = float(np.nansum(report.rows["used"]))
     for c in _FIX_COLUMNS:
-        cols[c] = np.array([e.values.get(c, math.nan) for e in rows])
-    cols["fix_type"] = np.array([e.values["fix_type"] for e in rows]).astype(np.int8)
-    sec_spoof = np.array([e.values.get("sec_spoofing_state", math.nan) for e in rows])
+        cols[c] = np.array([e.get(c, math.nan) for e in rows])
+    cols["fix_type"] = np.array([e["fix_type"] for e in rows]).astype(np.int8)
+    sec_spoof = np.array([e.get("sec_spoofing_state", math.nan) for e in rows])
     cols["spoofing_state"] = np.where(np.isfinite(cols["spoofing_state"]), cols["spoofing_state"], sec_spoof)
     cols["spoofing_flag"] = np.array([int(m.spoofing_flag(s)) for s in cols["spoofing_state"]], dtype=np.int8)
     for out, names in {
@@ -213,18 +313,21 @@ def _fixes(state: _State, ref_s: float | None) -> pd.DataFrame | None:
         "agc": ("agc", "hw_agc"),
         "jamming_indicator": ("jamming_indicator", "hw_jamming_indicator"),
     }.items():
-        cols[out] = np.array([_first(e.values, *names) for e in rows])
+        cols[out] = np.array([_first(e, *names) for e in rows])
     return pd.DataFrame(cols)
 
 
-def _observations(state: _State) -> tuple[pd.DataFrame | None, int]:
+def _observations(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | None, int]:
     parts = []
     no_pr = 0
     for epoch in state.rawx:
         rows = m.rawx_rows(epoch)
         keep = np.isfinite(rows["pseudorange_m"])
         no_pr += int((~keep).sum())
-        parts.append(pd.DataFrame({k: v[keep] for k, v in rows.items()}).assign(t_ns=round(epoch.gps_s * NS)))
+        t_s = epoch.gps_s
+        if t_s < WEEK_S:  # week 0: a receiver that does not know its week yet; the capture's own date
+            t_s = float(_gps_of_itow(np.array([t_s * 1000.0]), ref_s)[0]) if ref_s is not None else t_s
+        parts.append(pd.DataFrame({k: v[keep] for k, v in rows.items()}).assign(t_ns=round(t_s * NS)))
     if not parts:
         return None, 0
     df = pd.concat(parts, ignore_index=True)
@@ -233,12 +336,14 @@ def _observations(state: _State) -> tuple[pd.DataFrame | None, int]:
 
 
 def _satellites(state: _State, ref_s: float | None) -> pd.DataFrame | None:
-    """NAV-SAT: what the receiver says about every satellite it tracks, one row per satellite and epoch."""
-    if not state.navsat:
+    """NAV-SAT (else NAV-SVINFO): what the receiver says about every satellite it tracks, one row per
+    satellite and epoch."""
+    reports = state.navsat or state.svinfo
+    if not reports:
         return None
-    itow = np.concatenate([np.full(len(s.rows["sv_id"]), s.itow_ms, dtype=np.float64) for s in state.navsat])
+    itow = np.concatenate([np.full(len(s.rows["sv_id"]), s.itow_ms, dtype=np.float64) for s in reports])
     t_s = _gps_of_itow(itow, ref_s) if ref_s is not None else itow / 1000.0
-    cols: dict[str, Any] = {k: np.concatenate([s.rows[k] for s in state.navsat]) for k in state.navsat[0].rows}
+    cols: dict[str, Any] = {k: np.concatenate([s.rows[k] for s in reports]) for k in reports[0].rows}
     return pd.DataFrame({"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER, **cols})
 
 
@@ -335,48 +440,58 @@ def _imu(state: _State, ref_s: float | None, skipped: list[Skipped]) -> pd.DataF
     return frame
 
 
-def _nmea_part(
-    frames: Frames, path: Path, reference: str, use_fixes: bool, skipped: list[Skipped]
-) -> tuple[pd.DataFrame | None, pd.DataFrame | None, list[StreamInfo]]:
-    """The receiver's NMEA output in the stream, read by the NMEA reader: fixes if used, headings."""
+def _nmea_assembled(frames: Frames, path: Path, use_fixes: bool, skipped: list[Skipped]) -> Assembled | None:
+    """The receiver's NMEA output in the stream, assembled by the NMEA reader on its own clock."""
     from readers.nmea import decode_scan
     from readers.nmea.assembly import assemble
     from readers.nmea.lines import scan_sentences
 
     if not frames.nmea:
-        return None, None, []
+        return None
     blob = b"\n".join(line.text for line in frames.nmea) + b"\n"
     part = decode_scan(scan_sentences(path, blob), "")
     out = assemble([part], [] if not use_fixes else skipped)
     if use_fixes:
         skipped.extend(s for s in part.skipped if s.reason != "sentence type spooflens does not use")
     else:
-        skipped.append(
-            Skipped(
-                "NMEA",
-                "NMEA sentences in the stream: the same receiver's solution again (NAV-PVT used)",
-                len(part.decoded),
-            )
-        )
+        why = "NMEA sentences in the stream: the same receiver's solution again (the UBX fixes used)"
+        skipped.append(Skipped("NMEA", why, len(part.decoded)))
+    return out
 
-    def retimed(df: pd.DataFrame | None) -> pd.DataFrame | None:
-        if df is None or not len(df):
-            return None
-        if reference == "gps" and out.time_reference == "unix":
-            df = df.assign(t_ns=gps_ns_of_unix_ns(df["t_ns"].to_numpy(dtype=np.int64)))
+
+DAY_NS = 86_400 * NS
+
+
+def _first_unix_ns(out: Assembled | None) -> int | None:
+    """The earliest time of the NMEA output when it is dated (UTC ns), else None."""
+    if out is None or out.time_reference != "unix":
+        return None
+    firsts = [int(df["t_ns"].min()) for df in (out.fixes, out.headings) if df is not None and len(df)]
+    return min(firsts) if firsts else None
+
+
+def _nmea_on_clock(
+    df: pd.DataFrame | None, out: Assembled, reference: str, anchor_ns: int | None, leap_s: float
+) -> pd.DataFrame | None:
+    """NMEA rows moved onto the capture's clock. Dated NMEA (UTC) goes onto GPS time; undated NMEA (UTC
+    seconds of its first day) onto the day of `anchor_ns` (the capture's first UBX time: GPS ns, or GPS
+    seconds of the week when nothing is dated), the whole day nearest to it."""
+    if df is None or not len(df):
+        return None
+    t = df["t_ns"].to_numpy(dtype=np.int64)
+    if out.time_reference == "unix":
+        return df.assign(t_ns=gps_ns_of_unix_ns(t)) if reference == "gps" else df
+    if anchor_ns is None:
         return df
-
-    streams = [s for s in out.streams if s.role == "heading" or use_fixes]
-    fixes = retimed(out.fixes) if use_fixes else None
-    if fixes is not None:
-        ids = dict.fromkeys(fixes["receiver_id"].astype(str))
-        rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
-        fixes = fixes.assign(receiver_id=fixes["receiver_id"].map(rename))
-        streams = [
-            StreamInfo(s.role, rename.get(s.stream_id, s.stream_id), "NMEA in the UBX stream", s.msgtype, s.count)
-            for s in streams
-        ]
-    return fixes, retimed(out.headings), streams
+    if reference == "gps":
+        utc_anchor = int(unix_ns_of_gps_ns(anchor_ns))
+        day0 = utc_anchor - utc_anchor % DAY_NS
+        t = t + day0
+        t = t + round((utc_anchor - int(t.min())) / DAY_NS) * DAY_NS
+        return df.assign(t_ns=gps_ns_of_unix_ns(t))
+    t = t + round(leap_s * NS)  # GPS seconds of the week: UTC time of day + GPS - UTC, on the week's day
+    t = t + (anchor_ns - anchor_ns % DAY_NS)
+    return df.assign(t_ns=t + round((anchor_ns - int(t.min())) / DAY_NS) * DAY_NS)
 
 
 def _header_metadata(comments: list[str]) -> dict[str, str]:
@@ -436,17 +551,42 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             skipped.append(Skipped(f"RTCM3 {num}", "RTCM3 corrections fed to the receiver (not used)", n))
     for name, n in sorted(state.unused.items()):
         skipped.append(Skipped(name, "UBX message type spooflens does not use", n))
+    for name, n in sorted(state.polls.items()):
+        skipped.append(Skipped(name, "poll requests the host sent to the receiver (no data)", n))
     for name, n in state.bad.items():
         skipped.append(Skipped(name, f"UBX messages pyubx2 cannot decode ({state.first_error})", n, "lost"))
     if state.no_fix:
-        skipped.append(
-            Skipped(RECEIVER, "NAV-PVT without a fix (fixType 0/5, gnssFixOK 0 or invalid position)", state.no_fix)
-        )
+        why = "NAV-PVT without a fix (fixType 0/5, gnssFixOK 0 or invalid position)"
+        skipped.append(Skipped(RECEIVER, why, state.no_fix))
 
+    fix_epochs = _fix_epochs(state)
+    for why, n in sorted(state.not_fixes.items()):
+        skipped.append(Skipped(RECEIVER, f"epochs whose position messages are no fix: {why}", n))
+    for name, n in sorted(state.unused_as_repeat.items()):
+        skipped.append(Skipped(name, "the epoch's NAV-PVT says it all (its solution, or that there is none)", n))
+    if state.navsat and state.svinfo:
+        why = "satellite reports beside NAV-SAT's (NAV-SAT used)"
+        skipped.append(Skipped("NAV-SVINFO", why, len(state.svinfo)))
+    nmea = _nmea_assembled(frames, path, not fix_epochs, skipped)
+    metadata: dict[str, str] = {}
     ref_s = state.gps_refs[0] if state.gps_refs else None
+    nmea_utc = _first_unix_ns(nmea)
+    if ref_s is None and nmea_utc is not None:  # the receiver's NMEA dates give the week
+        ref_s = float(gps_seconds_of_unix_ns(nmea_utc))
+        state.anchor_of = "the NMEA dates (RMC/ZDA) in the stream"
     reference = "gps" if ref_s is not None else "relative"
-    fixes = _fixes(state, ref_s)
-    obs, no_pr = _observations(state)
+    if ref_s is not None:
+        metadata["clock"] = f"GPS time: iTOW in the week of {state.anchor_of}, the capture's first dated message"
+    else:
+        epochs = len(state.epochs) + len(state.rawx)
+        why = (
+            "no date anywhere in the capture (no week in NAV-PVT, NAV-TIMEGPS, NAV-TIMEUTC, NAV-SOL, RXM-RAWX, "
+            "TIM-TP, nor an NMEA date): relative time, seconds of the GPS week"
+        )
+        metadata["clock"] = why
+        skipped.append(Skipped("<ubx>", why, max(epochs, 1), "undated"))
+    fixes = _fixes(state, fix_epochs, ref_s)
+    obs, no_pr = _observations(state, ref_s)
     nav_info, ephemerides = None, None
     if obs is not None:
         obs, nav_info, ephemerides = _with_satellite_states(
@@ -462,18 +602,36 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             skipped.append(Skipped(f"RTCM3 {num}", why, frames.rtcm[num]))
     imu = _imu(state, ref_s, skipped)
     satellites = _satellites(state, ref_s)
-    nmea_fixes, headings, nmea_streams = _nmea_part(frames, path, reference, fixes is None, skipped)
-    if fixes is None and nmea_fixes is not None:
-        if reference == "relative":
-            reference = "unix"  # the NMEA dates are the only clock
-        fixes = nmea_fixes
+    headings, nmea_fixes, nmea_streams = None, None, []
+    if nmea is not None:
+        first_ubx = _first_ubx_ns(fixes, obs, satellites)
+        anchor_ns = round(ref_s * NS) if ref_s is not None else first_ubx
+        leap = state.leap_s if state.leap_s is not None else 18.0
+        headings = _nmea_on_clock(nmea.headings, nmea, reference, anchor_ns, leap)
+        nmea_streams = [s for s in nmea.streams if s.role == "heading"]
+        if fixes is None:
+            nmea_fixes = _nmea_on_clock(nmea.fixes, nmea, reference, anchor_ns, leap)
+        placed = headings is not None or nmea_fixes is not None
+        if nmea.time_reference == "relative" and anchor_ns is not None and placed:
+            metadata["clock.nmea"] = "undated NMEA put on the UBX clock's day" + (
+                "" if reference == "gps" else f" with GPS - UTC = {leap:g} s"
+            )
+        if reference == "relative" and nmea.time_reference == "unix":
+            reference = "unix"  # nothing in UBX to put them on: the NMEA dates are the clock
+    if fixes is None and nmea_fixes is not None and nmea is not None:
+        ids = dict.fromkeys(nmea_fixes["receiver_id"].astype(str))
+        rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
+        fixes = nmea_fixes.assign(receiver_id=nmea_fixes["receiver_id"].map(rename))
+        nmea_streams = [
+            StreamInfo(s.role, rename.get(s.stream_id, s.stream_id), "NMEA in the UBX stream", s.msgtype, s.count)
+            for s in nmea.streams
+            if s.role in ("fix", "heading")
+        ]
     streams: list[StreamInfo] = []
-    if fixes is not None and state.used["NAV-PVT"]:
-        kinds = " ".join(
-            k for k in ("NAV-PVT", "NAV-DOP", "NAV-SAT", "NAV-STATUS", "MON-RF", "MON-HW", "SEC-SIG") if state.used[k]
-        )
+    if fixes is not None and fixes is not nmea_fixes:
+        kinds = " ".join(k for k in (*m.PVT_LIKE, *m.LEGACY_FIX, "NAV-DOP", "NAV-STATUS", *_UNTIMED) if state.used[k])
         streams.append(StreamInfo("fix", RECEIVER, "UBX", f"UBX {kinds}", len(fixes)))
-    streams += [s for s in nmea_streams if s.role == "heading" or fixes is nmea_fixes]
+    streams += nmea_streams
     if obs is not None:
         streams.append(StreamInfo("observations", RECEIVER, "UBX", "UBX RXM-RAWX", len(state.rawx)))
         if no_pr:
@@ -483,11 +641,12 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     if imu is not None:
         streams.append(StreamInfo("imu", "ubx_esf", "UBX", "UBX ESF-RAW/ESF-MEAS", len(imu), body_frame="FRD"))
     if satellites is not None:
-        streams.append(StreamInfo("satellites", RECEIVER, "UBX", "UBX NAV-SAT", len(state.navsat)))
-    if fixes is None and obs is None and imu is None:
-        reasons = "; ".join(str(s) for s in skipped[:6]) or "no UBX navigation message"
-        raise ReaderError(path, f"no fix, raw observation or IMU sample in the capture: {reasons}", "ubx")
-    metadata = {**_header_metadata(frames.comments), **state.metadata}
+        kind = "NAV-SAT" if state.navsat else "NAV-SVINFO"
+        n_reports = len(state.navsat or state.svinfo)
+        streams.append(StreamInfo("satellites", RECEIVER, "UBX", f"UBX {kind}", n_reports))
+    if fixes is None and obs is None and imu is None and satellites is None and headings is None:
+        raise ReaderError(path, refusal(state, frames, nmea), "ubx")
+    metadata = {**_header_metadata(frames.comments), **state.metadata, **metadata}
     metadata |= {
         "enum.spoofing_state": m.SPOOF_MEANING,
         "enum.jamming_state": m.JAM_MEANING,
@@ -506,6 +665,14 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     )
     table.ephemerides = ephemerides
     return table
+
+
+_UNTIMED = ("MON-RF", "MON-HW", "SEC-SIG")
+
+
+def _first_ubx_ns(*frames: pd.DataFrame | None) -> int | None:
+    firsts = [int(df["t_ns"].min()) for df in frames if df is not None and len(df)]
+    return min(firsts) if firsts else None
 
 
 def looks_like_ubx(head: bytes) -> bool:

@@ -33,7 +33,22 @@ MSG = {  # (class, id) -> name, for the messages spooflens reads
     (0x27, 0x09): "SEC-SIG",
     (0x10, 0x03): "ESF-RAW",
     (0x10, 0x02): "ESF-MEAS",
+    # receivers before NAV-PVT (u-blox 5-7, timing firmware) and the messages that carry their fixes
+    (0x01, 0x02): "NAV-POSLLH",
+    (0x01, 0x01): "NAV-POSECEF",
+    (0x01, 0x06): "NAV-SOL",
+    (0x01, 0x12): "NAV-VELNED",
+    (0x01, 0x11): "NAV-VELECEF",
+    (0x01, 0x30): "NAV-SVINFO",
+    (0x01, 0x21): "NAV-TIMEUTC",
+    (0x0D, 0x01): "TIM-TP",
+    # NAV-PVT's layout again: sensor fusion's PVAT, and fixes the receiver batched in its memory
+    (0x01, 0x17): "NAV-PVAT",
+    (0x21, 0x14): "LOG-BATCH",
 }
+PVT_LIKE = ("NAV-PVT", "NAV-PVAT", "LOG-BATCH")  # a whole fix in one message, NAV-PVT's field names
+LEGACY_FIX = ("NAV-POSLLH", "NAV-POSECEF", "NAV-SOL", "NAV-VELNED", "NAV-VELECEF")  # a fix in parts
+TIME_ONLY = ("NAV-TIMEUTC", "NAV-TIMEGPS", "TIM-TP", "NAV-CLOCK", "TIM-SVIN", "TIM-TM2", "NAV-TIMELS")
 ParseErrors = (UBXMessageError, UBXParseError, UBXTypeError, ValueError, TypeError, IndexError, KeyError)
 
 SPOOF_MEANING = (
@@ -66,7 +81,8 @@ def _get(msg: Any, name: str, default: float = math.nan) -> float:
 def pvt_values(msg: Any) -> dict[str, float] | None:
     """A NAV-PVT fix in schema names, or None when the receiver says it is no fix."""
     fix_type = int(_get(msg, "fixType", 0))
-    if fix_type in (0, 5) or not int(_get(msg, "gnssFixOk", 0)) or int(_get(msg, "invalidLlh", 0)):
+    fix_ok = _get(msg, "gnssFixOk", _get(msg, "gnssFixOK", 0))  # NAV-PVAT and LOG-BATCH spell it gnssFixOK
+    if fix_type in (0, 5) or not int(fix_ok) or int(_get(msg, "invalidLlh", 0)):
         return None
     if fix_type == 1:
         kind = FixType.UNKNOWN
@@ -99,18 +115,96 @@ def pvt_values(msg: Any) -> dict[str, float] | None:
 
 
 def pvt_utc_ns(msg: Any) -> int | None:
-    """UTC of a NAV-PVT (ns since 1970) when the receiver says date and time are valid."""
+    """UTC of a NAV-PVT (or NAV-PVAT, LOG-BATCH) in ns since 1970, when the receiver says date and time
+    are valid."""
     if not (int(_get(msg, "validDate", 0)) and int(_get(msg, "validTime", 0))):
         return None
+    return _utc_ns(msg, "second" if hasattr(msg, "second") else "sec", _get(msg, "nano", _get(msg, "fracSec", 0)))
+
+
+def _utc_ns(msg: Any, seconds: str, nano: float) -> int | None:
     import datetime as dt
 
     try:
         stamp = dt.datetime(
-            int(msg.year), int(msg.month), int(msg.day), int(msg.hour), int(msg.min), int(msg.second), tzinfo=dt.UTC
+            int(msg.year),
+            int(msg.month),
+            int(msg.day),
+            int(msg.hour),
+            int(msg.min),
+            int(getattr(msg, seconds)),
+            tzinfo=dt.UTC,
         )
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, AttributeError, OverflowError):
         return None
-    return int(stamp.timestamp()) * 1_000_000_000 + int(_get(msg, "nano", 0))
+    if stamp.year < 1999:  # a receiver before its first fix counts from its firmware's epoch, not a date
+        return None
+    return int(stamp.timestamp()) * 1_000_000_000 + (int(nano) if math.isfinite(nano) else 0)
+
+
+GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06 in UNIX seconds
+
+
+def timeutc_utc_ns(msg: Any) -> int | None:
+    """UTC of a NAV-TIMEUTC when the receiver says it is valid (validUTC)."""
+    if not int(_get(msg, "validUTC", 0)):
+        return None
+    return _utc_ns(msg, "sec", _get(msg, "nano", 0))
+
+
+def sol_gps_s(msg: Any) -> float | None:
+    """GPS time of a NAV-SOL whose week and time of week the receiver has set (wknSet, towSet)."""
+    week = int(_get(msg, "week", 0))
+    if not (int(_get(msg, "wknSet", 0)) and int(_get(msg, "towSet", 0))) or week <= 0:
+        return None
+    return week * 604_800 + _get(msg, "iTOW") / 1000 + _get(msg, "fTOW", 0) * 1e-9
+
+
+def tim_tp_week_tow(msg: Any) -> tuple[int, float, bool] | None:
+    """(week, time of week s, on UTC) of a TIM-TP's next time pulse; None before the receiver knows its
+    week. timeBase 1: the pulse is aligned to UTC, its week and time of week counted on UTC."""
+    week = int(_get(msg, "week", 0))
+    if week <= 0:
+        return None
+    return week, _get(msg, "towMS") / 1000, bool(int(_get(msg, "timeBase", 0)))
+
+
+def posllh_values(msg: Any) -> dict[str, float]:
+    return {
+        "lat_deg": _get(msg, "lat"),
+        "lon_deg": _get(msg, "lon"),
+        "height_m": _get(msg, "height") / 1000,
+        "h_acc_m": _get(msg, "hAcc") / 1000,
+        "v_acc_m": _get(msg, "vAcc") / 1000,
+    }
+
+
+def velned_values(msg: Any) -> dict[str, float]:
+    return {
+        "vel_e_mps": _get(msg, "velE") / 100,
+        "vel_n_mps": _get(msg, "velN") / 100,
+        "vel_u_mps": -_get(msg, "velD") / 100,
+        "vel_acc_mps": _get(msg, "sAcc") / 100,
+    }
+
+
+def ecef_values(msg: Any) -> dict[str, float]:
+    """NAV-POSECEF, NAV-VELECEF or NAV-SOL: whichever of ECEF position (cm) and velocity (cm/s) it has."""
+    out = {f"ecef_{a}_m": _get(msg, f"ecef{a.upper()}") / 100 for a in "xyz"}
+    out |= {f"ecef_v{a}_mps": _get(msg, f"ecefV{a.upper()}") / 100 for a in "xyz"}
+    if hasattr(msg, "sAcc"):
+        out["vel_acc_mps"] = _get(msg, "sAcc") / 100
+    return {k: v for k, v in out.items() if math.isfinite(v)}
+
+
+def fix_status(msg: Any) -> dict[str, float]:
+    """NAV-SOL's or NAV-STATUS's fix: gpsFix (0 none, 1 dead reckoning, 2 2-D, 3 3-D, 4 GNSS + dead
+    reckoning, 5 time only), whether it is valid (gpsFixOk) and differential (diffSoln)."""
+    ok = _get(msg, "gpsfixOK", _get(msg, "gpsFixOk"))
+    out = {"gps_fix": _get(msg, "gpsFix"), "fix_ok": ok, "diff_soln": _get(msg, "diffSoln")}
+    if hasattr(msg, "numSV"):
+        out["sats_used"] = _get(msg, "numSV")
+    return out
 
 
 NAV_SAT_SV = np.dtype(
@@ -203,14 +297,63 @@ def mon_hw_values(msg: Any) -> dict[str, float]:
 
 
 def mon_ver(msg: Any) -> dict[str, str]:
+    """MON-VER's versions; {} for a message pyubx2 leaves without them (a poll the host sent, which has no
+    payload, or a reply it cannot lay out)."""
+
     def text(v: Any) -> str:
         return (v.decode("latin-1") if isinstance(v, bytes) else str(v)).strip("\x00 ")
 
     ext = [text(getattr(msg, name)) for name in sorted(vars(msg)) if name.startswith("extension")]
-    out = {"receiver.sw_version": text(getattr(msg, "swVersion", "")), "receiver.hw_version": text(msg.hwVersion)}
-    if ext:
+    versions = {
+        "receiver.sw_version": getattr(msg, "swVersion", None),
+        "receiver.hw_version": getattr(msg, "hwVersion", None),
+    }
+    out = {k: text(v) for k, v in versions.items() if v is not None and text(v)}
+    if ext and out:
         out["receiver.extensions"] = "; ".join(e for e in ext if e)
     return out
+
+
+SVINFO_SV = np.dtype(
+    [
+        ("chn", "u1"),
+        ("svid", "u1"),
+        ("flags", "u1"),
+        ("quality", "u1"),
+        ("cno", "u1"),
+        ("elev", "i1"),
+        ("azim", "<i2"),
+        ("prRes", "<i4"),
+    ]
+)
+
+
+def nav_svinfo(frame: UbxFrame) -> NavSat:
+    """NAV-SVINFO (NAV-SAT's predecessor) decoded at once: per channel its satellite in u-blox's single
+    numbering, C/N0, elevation and azimuth (when the receiver has an orbit: flags bit 2), residual (cm),
+    used (bit 0) and health (bit 4 unhealthy; healthy when it has an ephemeris, bit 3)."""
+    from readers.svinfo_numbering import SVINFO_IDS
+
+    p = frame.payload
+    if len(p) < 8 or len(p) != 8 + 12 * p[4]:
+        raise ValueError(f"NAV-SVINFO with {p[4] if len(p) > 4 else 0} channels in {len(p)} bytes")
+    itow = int.from_bytes(p[:4], "little")
+    sv = np.frombuffer(p[8:], SVINFO_SV)
+    ids = SVINFO_IDS[sv["svid"]].astype(str)
+    sv, ids = sv[ids != ""], ids[ids != ""]
+    flags = sv["flags"].astype(np.int64)
+    used = (flags & 1).astype(float)
+    orbit = (flags >> 2) & 1 == 1
+    rows = {
+        "sv_id": ids,
+        "cn0_dbhz": np.where(sv["cno"] > 0, sv["cno"].astype(float), np.nan),
+        "elevation_deg": np.where(orbit, sv["elev"].astype(float), np.nan),
+        "azimuth_deg": np.where(orbit, sv["azim"].astype(float), np.nan),
+        "used": used,
+        "residual_m": np.where(used == 1, sv["prRes"] * 0.01, np.nan),
+        "healthy": np.select([(flags >> 4) & 1 == 1, (flags >> 3) & 1 == 1], [0.0, 1.0], np.nan),
+    }
+    return NavSat(itow, rows)
 
 
 # --- RXM-RAWX, vectorised ------------------------------------------------------------------------

@@ -13,6 +13,8 @@ it: a truth file, a RINEX navigation file) with one to three mutations applied t
 - structure: the schema text or protobuf descriptor of an MCAP rewritten, a ULog format declaring
   huge arrays, ULog message sizes overwritten, ROS1 bag record lengths overwritten, a ROS2 sqlite3 bag
   with messages deleted or its serialization format changed;
+- packed files (gzip, zip: RINEX as archives ship it): any of the above inside the packing, the
+  file packed again, so the damage reaches the reader behind the unpacking;
 - and the extension swapped for another format's.
 """
 
@@ -23,6 +25,8 @@ import re
 import shutil
 import sqlite3
 import struct
+import zipfile
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -498,8 +502,44 @@ def _target_files(log: Path) -> list[Path]:
     return sorted(p for p in log.iterdir() if p.is_file())
 
 
+def packed_content(rng: random.Random, data: Data) -> str:
+    """A file shipped packed (gzip, one-member zip: compressed RINEX) mutated inside its packing, so the
+    damage reaches the reader behind the unpacking, not only the compressed stream."""
+    import gzip
+    import io
+    import zipfile
+
+    raw = bytes(data)
+    if raw[:2] == b"\x1f\x8b":
+        inner = bytearray(gzip.decompress(raw))
+        what = _mutate_bytes(rng, inner)
+        data[:] = gzip.compress(bytes(inner), compresslevel=1)
+        return f"inside gzip: {what}"
+    with zipfile.ZipFile(io.BytesIO(raw)) as z:
+        name = rng.choice(z.namelist())
+        inner = bytearray(z.read(name))
+    what = _mutate_bytes(rng, inner)
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr(name, bytes(inner))
+    data[:] = out.getvalue()
+    return f"inside zip member {name}: {what}"
+
+
+def _mutate_bytes(rng: random.Random, data: Data) -> str:
+    op = rng.choice(TEXT_MUTATIONS + BYTE_MUTATIONS[:4]) if _is_text(bytes(data)) else rng.choice(BYTE_MUTATIONS)
+    return op(rng, data)
+
+
 def _mutate_file(rng: random.Random, path: Path) -> str:
     data = bytearray(path.read_bytes())
+    if (data[:2] == b"\x1f\x8b" or data[:4] == b"PK\x03\x04") and rng.random() < 0.6:
+        try:
+            what = packed_content(rng, data)
+        except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error) as err:
+            what = f"packed content not reached ({type(err).__name__}); bytes flipped: {flip_bytes(rng, data)}"
+        path.write_bytes(bytes(data))
+        return what
     if _is_text(bytes(data)):
         op = rng.choice(TEXT_MUTATIONS + BYTE_MUTATIONS[:4])
     elif data.startswith(b"\x89MCAP") and rng.random() < 0.35:

@@ -1,0 +1,94 @@
+"""Every refusal tells the truth: other receivers' protocols named, NMEA of every shape recognised,
+headings without a fix read as headings, AIS traffic said to be AIS."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import real_log
+
+from readers import read_log, sniff_format
+from spooflens.cli import main
+from spooflens.errors import UnsupportedFormatError
+
+GPSD = "corpus/gpsd"
+
+
+@pytest.mark.parametrize(
+    ("log", "protocol"),
+    [
+        (f"{GPSD}/bu303-moving.log", "SiRF binary"),
+        (f"{GPSD}/ublox-sirf1.log", "SiRF binary"),
+        (f"{GPSD}/trimble-lassen_iq.log", "Trimble TSIP"),
+        (f"{GPSD}/trimble-res720.log", "Trimble TSIP"),  # after a preamble of gpsd JSON reports
+        (f"{GPSD}/garmin18x-bin.log", "Garmin binary"),
+        (f"{GPSD}/oncore-m12.log", "Motorola Oncore binary"),
+        (f"{GPSD}/greis-binary.log", "Javad GREIS"),
+        (f"{GPSD}/skytraq-bin.log", "SkyTraq binary"),
+        (f"{GPSD}/superstar2.log", "NovAtel SuperStar II binary"),
+        ("corpus/rtklib/ss2_20080517.log", "NovAtel SuperStar II binary"),
+        ("corpus/rtklib/cres_20080526.bin", "Hemisphere/Crescent binary ($BIN)"),
+        (f"{GPSD}/zodiac.log", "Rockwell Zodiac binary"),
+        (f"{GPSD}/navcom.log", "NavCom binary"),
+        (f"{GPSD}/geostar-geos1m-binary.log", "GeoStar binary"),
+        (f"{GPSD}/italk-binary.log", "Fastrax iTalk binary"),
+        (f"{GPSD}/quectel-l76k-binary.log", "CASIC binary"),
+        (f"{GPSD}/rtcm3.2.log", "RTCM 3"),
+        (f"{GPSD}/rtcm2.log", "RTCM 2"),
+        (f"{GPSD}/ntrip_sourcetable.log", "an NTRIP source table"),
+        (f"{GPSD}/passthrough.log", "gpsd JSON reports"),
+        ("corpus/pynmeagps/quectel_nmea_response.log", "proprietary NMEA-style sentences only ($PQTMVER"),
+    ],
+)
+def test_other_protocols_are_refused_by_name(log: str, protocol: str, capsys: pytest.CaptureFixture[str]) -> None:
+    path = real_log(log)
+    with pytest.raises(
+        UnsupportedFormatError,
+        match=rf"{path.name}: {protocol.replace('(', '.').replace(')', '.').replace('$', '.')}.*not supported",
+    ):
+        sniff_format(path)
+    assert main(["inspect", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and "unknown format" not in err
+
+
+def test_random_bytes_stay_unknown(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(np.random.default_rng(3).integers(0, 256, 20_000, dtype=np.uint8).tobytes())
+    with pytest.raises(UnsupportedFormatError, match="unknown format"):
+        sniff_format(junk)
+
+
+def test_a_damaged_nmea_log_with_a_comment_header_is_nmea() -> None:
+    """gpsd's GPS-320FW cold boot: `#` header, then as many broken checksums as good ones (was: a CSV)."""
+    path = real_log(f"{GPSD}/gp-320fw-2019-04-07-coldboot.log")
+    assert sniff_format(path) == "nmea"
+    t = read_log(path)
+    assert len(t.fixes) and any("bad checksum" in s.reason for s in t.skipped)
+
+
+@pytest.mark.parametrize(
+    ("log", "streams"),
+    [(f"{GPSD}/pypilot.log", {"APHDM"}), ("corpus/signalk/n2kd-183-merrimac.log", {"24HDG", "04HDM"})],
+)
+def test_instruments_with_a_heading_and_no_fix_are_read_as_headings(log: str, streams: set[str]) -> None:
+    """An autopilot's $APHDM, an N2K gateway's $04HDM/$24HDG (numeric talkers): headings, said to be
+    magnetic taken as true where there is no variation, in file order where the log has no time."""
+    t = read_log(real_log(log))
+    assert set(t.headings["heading_id"]) == streams and not len(t.fixes)
+    reasons = " ".join(s.reason for s in t.skipped if s.action == "repaired")
+    assert "taken as true" in reasons and "placed by line number" in reasons
+    assert main(["inspect", str(real_log(log))]) == 0
+
+
+def test_doubled_dollar_sentences() -> None:
+    """ST Teseo LIV4F logged as `$$GNGSA,...`: the sentences are read (was: unknown format)."""
+    t = read_log(real_log(f"{GPSD}/st-teseo-liv4f.log"))
+    assert len(t.fixes) >= 10
+
+
+def test_ais_traffic_is_said_to_be_ais(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(real_log(f"{GPSD}/ais-18-27.log"))]) == 2
+    assert "AIS messages only" in capsys.readouterr().err
