@@ -269,7 +269,7 @@ def attitude_quaternion(roll_deg: FloatArray, pitch_deg: FloatArray, yaw_deg: Fl
     return quat_multiply(np.broadcast_to(Q_ENU_NED, q_ned_frd.shape), q_ned_frd)
 
 
-def _attitude_at(att: Columns | None, t_us: NDArray[np.int64]) -> FloatArray:
+def attitude_at(att: Columns | None, t_us: NDArray[np.int64]) -> FloatArray:
     """ATT attitude at the IMU stamps (normalised linear interpolation), NaN far from any ATT row."""
     out = np.full((len(t_us), 4), np.nan)
     if att is None or not len(att["TimeUS"]):
@@ -329,7 +329,7 @@ def _imu(
     for iid in ids:
         c = parts[iid]
         t_us = c["TimeUS"].astype(np.int64)
-        q = _attitude_at(att, t_us)
+        q = attitude_at(att, t_us)
         frames.append(
             pd.DataFrame(
                 {

@@ -37,8 +37,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
+from readers.android_gnss import ADR_CYCLE_SLIP, ADR_RESET, ADR_VALID, L1_BAND_HZ, SYSTEM, android_sv_ids
 from readers.csv_text import read_rows
-from readers.gnsslogger import ADR_CYCLE_SLIP, ADR_RESET, ADR_VALID, L1_BAND_HZ, SYSTEM, android_sv_ids
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns
 from spooflens.errors import ReaderError
 from spooflens.geodesy import ecef_to_geodetic

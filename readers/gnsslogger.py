@@ -59,6 +59,14 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
+from readers.android_gnss import (
+    ADR_CYCLE_SLIP,
+    ADR_RESET,
+    ADR_VALID,
+    L1_BAND_HZ,
+    android_sv_ids,
+    android_systems,
+)
 from readers.inav import InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
@@ -90,7 +98,6 @@ BDS_GPS_NS = 14 * 1_000_000_000
 GLO_UTC_NS = 3 * 3600 * 1_000_000_000
 MAX_TIME_UNCERTAINTY_NS = 500.0
 PR_RANGE_M = (1.0e7, 5.0e7)
-L1_BAND_HZ = (1559.0e6, 1610.0e6)
 RECORDS = (
     "Raw",
     "Fix",
@@ -110,9 +117,6 @@ USED = {"Raw", "Fix", "Accel", "Gyro", "UncalAccel", "UncalGyro", "OrientationDe
 # GnssMeasurement.State bits
 TOW_DECODED, MSEC_AMBIGUOUS, GLO_TOD_DECODED, TOW_KNOWN, GLO_TOD_KNOWN = 8, 16, 128, 16384, 32768
 # AccumulatedDeltaRangeState bits
-ADR_VALID, ADR_RESET, ADR_CYCLE_SLIP = 1, 2, 4
-# GnssStatus constellation types -> RINEX letter
-SYSTEM = {1: "G", 2: "S", 3: "R", 4: "J", 5: "C", 6: "E", 7: "I"}
 DEFAULT_L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "J": 1575.42e6, "E": 1575.42e6, "C": 1561.098e6}
 
 # Column names that changed between versions: canonical name -> names in the file
@@ -272,23 +276,6 @@ def _int64(s: pd.Series | None, n: int) -> tuple[IntArray, NDArray[np.bool_]]:
     present = whole.copy()
     present[idx[ok_float]] = True
     return out, present
-
-
-def android_systems(constellation: FloatArray) -> NDArray[np.str_]:
-    """RINEX system letter of each Android ConstellationType ("" for unknown or missing)."""
-    return np.array([SYSTEM.get(int(c), "") if np.isfinite(c) else "" for c in constellation])
-
-
-def android_sv_ids(system: NDArray[np.str_], svid: FloatArray) -> NDArray[np.str_]:
-    """RINEX-style ids of Android (constellation, svid) pairs: SBAS 120-158 -> S20-S58, QZSS 193-200 ->
-    J01-J08; "" where there is none (no constellation; a GLONASS satellite known only by its frequency
-    channel, svid 93-106)."""
-    prn = np.where(system == "S", svid - 100, np.where(system == "J", svid - 192, svid))
-    ok = (system != "") & np.isfinite(prn) & (prn >= 1) & (prn <= 99) & ~((system == "R") & (prn > 24))
-    return np.array([f"{s}{int(p):02d}" if good else "" for s, p, good in zip(system, prn, ok, strict=True)])
-
-
-L1_BAND_HZ = (1559e6, 1611e6)  # GPS/Galileo/QZSS/SBAS L1, BeiDou B1I, GLONASS L1OF
 
 
 def status_satellites(status: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFrame | None:

@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 
 from readers import ReaderFormat
-from readers.ardupilot import _attitude_at
+from readers.ardupilot import attitude_at
 from spooflens.constants import STANDARD_GRAVITY
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
@@ -251,7 +251,7 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     for kind in imu_kinds:
         rows = msgs[kind]
         t_ns = np.array([stamp_ns(t, f) for t, _, f in rows], dtype=np.int64)
-        q = _attitude_at(att_cols, (t_ns - offset_ns) // 1000)
+        q = attitude_at(att_cols, (t_ns - offset_ns) // 1000)
         df = pd.DataFrame(
             {
                 "t_ns": t_ns,

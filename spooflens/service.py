@@ -73,7 +73,7 @@ def analyse_log(
     A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
     files.
     """
-    from spooflens.detectors.references import STATION_OPTION, parse_station
+    from spooflens.gnss.stations import STATION_OPTION, parse_station
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_segments
 

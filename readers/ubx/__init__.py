@@ -618,7 +618,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             )
         if reference == "relative" and nmea.time_reference == "unix":
             reference = "unix"  # nothing in UBX to put them on: the NMEA dates are the clock
-    if fixes is None and nmea_fixes is not None and nmea is not None:
+    fixes_from_nmea = fixes is None and nmea_fixes is not None and nmea is not None
+    if fixes_from_nmea and nmea_fixes is not None and nmea is not None:
         ids = dict.fromkeys(nmea_fixes["receiver_id"].astype(str))
         rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
         fixes = nmea_fixes.assign(receiver_id=nmea_fixes["receiver_id"].map(rename))
@@ -628,7 +629,7 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             if s.role in ("fix", "heading")
         ]
     streams: list[StreamInfo] = []
-    if fixes is not None and fixes is not nmea_fixes:
+    if fixes is not None and not fixes_from_nmea:
         kinds = " ".join(k for k in (*m.PVT_LIKE, *m.LEGACY_FIX, "NAV-DOP", "NAV-STATUS", *_UNTIMED) if state.used[k])
         streams.append(StreamInfo("fix", RECEIVER, "UBX", f"UBX {kinds}", len(fixes)))
     streams += nmea_streams

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from rich.table import Table
 from scipy import stats
 
-from spooflens.detectors.references import Station, station_reference
+from spooflens.detectors.references import station_reference
 from spooflens.detectors.statistics.pseudorange_change import (
     EsnOptions,
     KalmanOptions,
@@ -32,6 +32,7 @@ from spooflens.detectors.statistics.pseudorange_change import (
 from spooflens.detectors.statistics.scales import robust_scale, threshold
 from spooflens.epoch_table import EpochTable
 from spooflens.gnss.grid import ObservationGrid, observation_grid
+from spooflens.gnss.stations import Station
 from spooflens.output.console import console, progress, show_progress
 from spooflens.simulation.observations import ObservationNoise, simulate_observations
 
@@ -181,8 +182,8 @@ def simulated_station(opts: BenchOptions, report=None) -> list[dict[str, Any]]:
 def real_pair(opts: BenchOptions, tries: int = 10) -> list[dict[str, Any]]:
     """The GSI stations, clean (false alarms of the product rule) and attacked at epochs 50-90."""
     from readers import read_log
-    from spooflens.detectors.references import stations
     from spooflens.gnss.solved_fixes import with_solved_fixes
+    from spooflens.gnss.stations import stations
 
     table = with_solved_fixes(read_log(GSI))
     found, _ = stations(table, {})

@@ -463,8 +463,9 @@ def real_stations() -> dict[str, Any]:
     thresholds from the first 200 s (only 7 epochs at 30 s), over the rest of the hour."""
     from readers import read_log
     from spooflens.detectors.range_rate import run as run_seed001
-    from spooflens.detectors.references import station_reference, stations
+    from spooflens.detectors.references import station_reference
     from spooflens.gnss.solved_fixes import with_solved_fixes
+    from spooflens.gnss.stations import stations
     from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 
     table = with_solved_fixes(read_log(GSI))

@@ -14,7 +14,6 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
-from spooflens.detectors.references import Station, stations
 from spooflens.detectors.statistics.rayleigh import (
     Calibration,
     calibrate,
@@ -25,6 +24,7 @@ from spooflens.detectors.statistics.rayleigh import (
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
 from spooflens.gnss.same_receiver import ReceiverGroup, group_receivers, receiver_groups
+from spooflens.gnss.stations import Station, stations
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.preconditions import INDEPENDENT_RECEIVERS, SURVEYED_SITES, known_stations
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
-from spooflens.detectors.references import Reference, ins_reference, station_reference, stations
+from spooflens.detectors.references import Reference, ins_reference, station_reference
 from spooflens.detectors.statistics.pseudorange_change import (
     EsnOptions,
     KalmanOptions,
@@ -27,6 +27,7 @@ from spooflens.detectors.statistics.scales import threshold
 from spooflens.errors import SpooflensError
 from spooflens.gnss.ephemeris import Klobuchar
 from spooflens.gnss.grid import ObservationGrid, observation_grid
+from spooflens.gnss.stations import stations
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.preconditions import (

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
-from spooflens.detectors.references import Reference, ins_reference, station_reference, stations
+from spooflens.detectors.references import Reference, ins_reference, station_reference
 from spooflens.detectors.statistics.pseudorange_rate import (
     RateOptions,
     fit_velocity_error,
@@ -26,6 +26,7 @@ from spooflens.detectors.statistics.scales import lag1_autocorrelation, threshol
 from spooflens.errors import SpooflensError
 from spooflens.estimation.quantiles import t_isf
 from spooflens.gnss.grid import ObservationGrid, observation_grid
+from spooflens.gnss.stations import stations
 from spooflens.navigation.product import navigation_of
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.preconditions import (

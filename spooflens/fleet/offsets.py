@@ -112,8 +112,8 @@ def _reference(
     opts: FleetOptions,
     max_gap_s: float,
 ) -> tuple[FloatArray | None, str]:
-    from spooflens.detectors.references import surveyed_station
     from spooflens.geodesy import ecef_to_geodetic
+    from spooflens.gnss.stations import surveyed_station
 
     station, _ = surveyed_station(table, rid)  # judged on its first minutes: a spoofer moves the fixes later
     if station is not None:

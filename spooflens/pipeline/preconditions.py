@@ -224,7 +224,7 @@ def pseudorange_arcs(ctx: AnalysisContext) -> Unmet | None:
 
 def known_stations(ctx: AnalysisContext) -> tuple[dict[str, object], dict[str, str]]:
     """`spooflens.detectors.references.stations` of this analysis (computed once)."""
-    from spooflens.detectors.references import stations
+    from spooflens.gnss.stations import stations
 
     found: tuple[dict[str, object], dict[str, str]] = ctx.cached(
         "known_stations", lambda: stations(ctx.table, ctx.options.extra)

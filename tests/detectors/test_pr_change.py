@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from spooflens.detectors import pr_change
-from spooflens.detectors.references import STATION_OPTION, Station, station_reference
+from spooflens.detectors.references import station_reference
 from spooflens.detectors.statistics.pseudorange_change import (
     MS_M,
     Prediction,
@@ -25,6 +25,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import ecef_to_geodetic
 from spooflens.gnss.ephemeris import synthetic_constellation
 from spooflens.gnss.grid import observation_grid
+from spooflens.gnss.stations import STATION_OPTION, Station
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
 from spooflens.simulation.observations import ObservationNoise, simulate_observations

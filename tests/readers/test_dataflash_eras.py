@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import real_log
+from paths import real_log
 from pymavlink.DFReader import FORMAT_TO_STRUCT, DFReader_binary
 
 from readers import read_log

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from conftest import real_log
+from paths import real_log
 
 from spooflens.bench.fuzz import HANDLED, SeedLog, real_seeds, run_fuzz
 from spooflens.bench.sandbox import Limits

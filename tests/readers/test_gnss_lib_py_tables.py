@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import real_log
+from paths import real_log
 
 from readers import is_companion, read_log, sniff_format
 from spooflens.cli import main
 from spooflens.errors import ReaderError
 from spooflens.geodesy import geodetic_to_enu
-from spooflens.navigation.single_point import with_solved_fixes
+from spooflens.gnss.solved_fixes import with_solved_fixes
 
 LIB = "corpus/gnss_lib_py"
 

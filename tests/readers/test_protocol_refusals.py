@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import real_log
+from paths import real_log
 
 from readers import read_log, sniff_format
 from spooflens.cli import main

@@ -251,3 +251,11 @@ def test_inspect_and_analyze_real_captures(tmp_path: Path, capsys: pytest.Captur
     assert main(["analyze", str(_need(F9R)), "-o", str(tmp_path / "f9r.rrd"), "--json", str(summary), "--quiet"]) == 0
     assert json.loads(summary.read_text())["verdict"]["spoofed"] is False
     assert RAWX_MEAS.itemsize == 32
+
+
+def test_a_capture_whose_fixes_come_from_its_nmea_lists_one_fix_stream_the_nmeas() -> None:
+    """The ZED-F9P capture carries RXM-RAWX and no UBX position message: its fixes are its NMEA's, and the
+    streams say so once (no second, empty UBX fix stream counting the same fixes)."""
+    table = read_log(_need(F9P))
+    fix_streams = [s for s in table.streams if s.role == "fix"]
+    assert [(s.topic, s.count) for s in fix_streams] == [("NMEA in the UBX stream", len(table.fixes))]

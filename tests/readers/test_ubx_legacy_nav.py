@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import real_log
+from paths import real_log
 from pyubx2 import UBXReader
 
 from readers import read_log

@@ -1,7 +1,7 @@
 """Run `spooflens inspect` (or `analyze`) on every file under ../shared/real and tabulate the outcome.
 
 Not a test: a helper for the readers' coverage of real logs. Usage:
-    PYTHONPATH=. python tests/readers/corpus_survey.py [--command inspect|analyze] [--jobs 2] OUT.tsv
+    python tests/support/corpus_survey.py [--command inspect|analyze] [--jobs 2] OUT.tsv
 Each row: path, MANIFEST format, exit code, the first line of the error (or the first line of output).
 """
 
@@ -15,7 +15,8 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-REAL = Path(__file__).resolve().parents[2].parent / "shared" / "real"
+from paths import REAL
+
 SKIP_NAMES = ("LICENSE", "COPYING", "README", "SOURCE", "MANIFEST", "REUSE")
 
 
