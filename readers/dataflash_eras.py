@@ -27,6 +27,15 @@ WEEK_NAMES = ("GWk", "Week")
 WEEK_MS_NAMES = ("GMS", "TimeMS", "Time")
 
 
+LOGGED_NAMES = {"GWk": WEEK_NAMES, "GMS": WEEK_MS_NAMES}  # today's name -> the names it had
+
+
+def logged_name(fields: list[str], name: str) -> str:
+    """What a message type whose FMT lists `fields` calls the field that is `name` today (a writer patching
+    a 2014 GPS message writes its `Week`, not a `GWk` it does not have)."""
+    return next((f for f in LOGGED_NAMES.get(name, (name,)) if f in fields), name)
+
+
 def is_gps_message(cols: Columns) -> bool:
     """A receiver's fix message of any revision: position, fix status and a GPS week or time."""
     return {"Lat", "Lng", "Status"} <= cols.keys() and any(w in cols for w in (*WEEK_NAMES, "Time"))

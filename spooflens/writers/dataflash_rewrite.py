@@ -20,6 +20,7 @@ import pandas as pd
 
 from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows
 from readers.dataflash import open_dataflash
+from readers.dataflash_eras import logged_name
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.writers.clock_shift import clock_shifts
@@ -37,9 +38,10 @@ _PACK = {
 
 
 def _field_writer(log, name: str, column: str):  # type: ignore[no-untyped-def]
-    """(byte offset inside the message, struct code, scale) of one column of one message type."""
+    """(byte offset inside the message, struct code, scale) of one column (today's name) of one message type."""
     fmt = log.reader.formats[log.reader.name_to_id[name]]
     dt, _ = log.dtype(name)
+    column = logged_name(list(fmt.columns), column)
     letter = fmt.format[fmt.columns.index(column)]
     if letter not in _PACK:
         raise WriterError(f"{log.path}: {name}.{column} has format letter {letter!r}; cannot write it back")
