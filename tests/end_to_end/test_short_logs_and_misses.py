@@ -118,9 +118,8 @@ def _tracking_noise(table: EpochTable, from_s: float, sigma_m: float, seed: int)
 
 def _moved(table: EpochTable, fixes: pd.DataFrame, rows: np.ndarray, enu: np.ndarray) -> EpochTable:
     fixes = fixes.copy()
-    lat, lon, _ = add_enu_offset(
-        *(fixes[c].to_numpy(dtype=float)[rows] for c in ("lat_deg", "lon_deg", "height_m")), enu
-    )
+    lat, lon, h = (fixes[c].to_numpy(dtype=float)[rows] for c in ("lat_deg", "lon_deg", "height_m"))
+    lat, lon, _ = add_enu_offset(lat, lon, h, enu)
     fixes.loc[rows, "lat_deg"], fixes.loc[rows, "lon_deg"] = lat, lon
     out = replace(table)
     out.fixes = fixes
