@@ -41,6 +41,12 @@ BASELINE_ERROR = "baseline_error"
 class DualReceiverOptions:
     window_s: float = 10.0
     min_window: int = 5
+    # the window grows (doubling, up to `max_window_s`) until it holds this many effectively independent
+    # samples: receivers' errors wander for minutes, so 10 s of them are one sample, whose lower 1e-5
+    # quantile is a hundredth of the clean scale, and a real collapse (to the receivers' own tracking noise
+    # under the spoofer, a tenth of a consumer receiver's scatter) stayed above it
+    min_effective_window: float = 3.0
+    max_window_s: float = 120.0
     p_false_alarm: float = 1e-5  # per epoch, each detector
     max_collapse_ratio: float = 0.5  # a collapse at least halves the clean part's window scale
     min_baseline_error_m: float = 5.0  # below it a baseline error is multipath or a receiver's jump
@@ -174,9 +180,12 @@ def pseudorange_differences(
     return t[enough], sd[enough], n[enough].astype(np.int64)
 
 
+def _period(t: FloatArray) -> float:
+    return max(float(np.median(np.diff(t))) if len(t) > 1 else 1.0, 1e-9)
+
+
 def window_samples(t: FloatArray, opts: DualReceiverOptions) -> int:
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    return max(opts.min_window, round(opts.window_s / max(period, 1e-9)))
+    return max(opts.min_window, round(opts.window_s / _period(t)))
 
 
 @dataclass(frozen=True)
@@ -221,17 +230,30 @@ def _episodes(
     return tuple(out)
 
 
+def _beyond_floor(cal: Calibration, scale: FloatArray, opts: DualReceiverOptions, upper: bool) -> BoolArray:
+    """The physical floors: a baseline error above `min_baseline_error_m`, a collapse to at most
+    `max_collapse_ratio` of the clean part's scale."""
+    if upper:
+        return np.nan_to_num(scale) > opts.min_baseline_error_m
+    clean_scale = float(np.sqrt(cal.nu**2 / 2.0 + cal.sigma**2))
+    return np.nan_to_num(scale, nan=np.inf) <= opts.max_collapse_ratio * clean_scale
+
+
 def collapse_rule(t: FloatArray, x: FloatArray, opts: DualReceiverOptions, upper: bool = False) -> RuleResult:
     """Rule 3/4 (window of K) and rule 1/2 (K = 1) on a statistic; `upper` for the baseline error (alarm when
     the scale grows; Rayleigh)."""
     k = window_samples(t, opts)
     cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+    alarm &= _beyond_floor(cal, scale, opts, upper)
+    # the short window stays: a collapse to almost nothing shows in it at once; the long one sees a collapse
+    # to the receivers' tracking noise that the short one's threshold is far below
+    longest = max(k, round(opts.max_window_s / _period(t)))
+    short_alarm = alarm
+    while not upper and cal.k_eff < opts.min_effective_window and k < longest:
+        k = min(2 * k, longest)
+        cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+        alarm = (alarm & _beyond_floor(cal, scale, opts, upper)) | short_alarm
     per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-    clean_scale = float(np.sqrt(cal.nu**2 / 2.0 + cal.sigma**2))
-    if upper:
-        alarm &= np.nan_to_num(scale) > opts.min_baseline_error_m
-    else:
-        alarm &= np.nan_to_num(scale, nan=np.inf) <= opts.max_collapse_ratio * clean_scale
     episodes = _episodes(t, x, scale, alarm, k, upper, opts.merge_gap_s)
     flagged = np.zeros(len(t), dtype=bool)
     for ep in episodes:

@@ -49,6 +49,9 @@ from spooflens.threads import in_parallel, thread_count
 FloatArray = NDArray[np.float64]
 
 
+PRIOR = "prior"  # how the source of a noise that was not learned begins
+
+
 @dataclass(frozen=True)
 class LearnOptions:
     max_epochs: int = 1500
@@ -79,16 +82,33 @@ class LearnedNoise:
     @property
     def is_prior(self) -> bool:
         """Nothing was learned: too little clean data, the prior stands."""
-        return self.noise.source.startswith("prior")
+        return self.noise.source.startswith(PRIOR)
+
+    @property
+    def learned(self) -> bool:
+        """False when the log left too little clean data and the prior stands."""
+        return not self.is_prior
 
     def describe(self) -> str:
         n = self.noise
-        if self.is_prior:
-            return (
-                f"too little clean data to learn the noise from: prior used (position white "
-                f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m from the fixes' scatter + Gauss-Markov "
-                f"{n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, IMU preset {self.grade.name})"
+        if not self.learned:
+            text = (
+                f"noise NOT learned: {n.source.removeprefix(PRIOR).strip(' ()')}; prior used: position white "
+                f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m (h/v, from the fixes' scatter) + Gauss-Markov "
+                f"{n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, tau {n.tau_pos_s:.0f} s (defaults)"
             )
+            if n.has_velocity:
+                text += (
+                    f"; velocity white {n.white_vel_mps[0]:.2g}/{n.white_vel_mps[1]:.2g} m/s (from the scatter) + "
+                    f"Gauss-Markov {n.gm_vel_mps[0]:.2g}/{n.gm_vel_mps[1]:.2g} m/s, tau {n.tau_vel_s:.0f} s (defaults)"
+                )
+            if self.odometry is not None:
+                o = self.odometry
+                text += (
+                    f"; odometry white {'/'.join(f'{x:.2g}' for x in o.sigma_mps)} m/s + Gauss-Markov "
+                    f"{'/'.join(f'{x:.2g}' for x in o.gm_mps)} m/s (defaults)"
+                )
+            return text + f"; IMU noise the preset {self.grade.name} as it is"
         text = (
             f"noise learned from the log ({self.evaluations} filter runs on {self.window_s[0]:.0f}-"
             f"{self.window_s[1]:.0f} s): position white {n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m "
@@ -365,8 +385,14 @@ def learn_noise(
         mount = estimate_mount(sub, odometry_id) if odometry_id is not None else None
         if mount is not None and odometry_id is not None:
             odometry = OdometryAiding(mount, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "prior")
+        span = float(scored_t[-1] - scored_t[0]) if len(scored_t) else 0.0
+        why = (
+            f"{PRIOR} (too little clean data to learn from: {len(scored_t)} clean fixes over {span:.0f} s after "
+            f"the filter's first {opts.settle_s:.0f} s, at least {opts.min_scored_epochs} over "
+            f"{opts.min_scored_s:.0f} s needed)"
+        )
         return LearnedNoise(
-            replace(noise, source="prior (too little clean data to learn from)"),
+            replace(noise, source=why),
             odometry,
             grade,
             1.0,

@@ -156,6 +156,8 @@ def _result(nav: Navigation) -> list[DetectorResult]:
                 "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
                 "imu_grade": sol.grade.name,
                 "imu_noise_scale": nav.learned.imu_scale,
+                # False: the log was too short (or suspected almost throughout) to learn its noise from
+                "noise_learned": nav.learned.learned,
                 "epochs": len(sol.t),
                 "noise_filter_runs": nav.learned.evaluations,
             },

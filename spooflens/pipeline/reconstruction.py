@@ -46,10 +46,15 @@ from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.evidence import CORROBORATION_S, Evidence
 from spooflens.pipeline.registry import AnalysisContext
-from spooflens.pipeline.verdict import Incident, Verdict
+from spooflens.pipeline.verdict import Incident, Verdict, incident_of
 
 FloatArray = NDArray[np.float64]
 GNSS_ROWS = (0, 1, 2, 3, 4, 5)
+# said of a check judged without this log's own clean departures (a log too short for a clean coast)
+NO_CLEAN_COASTS = (
+    "no clean stretch of this log was long enough to measure its own departures from a coasted reference "
+    "(a short log): judged against the filter's own uncertainty and the physical floors alone"
+)
 # The check compares horizontal position and velocity: receivers' heights wander by tens of metres
 # (an SBAS solution converging), and the vertical channel of a coasting INS diverges.
 HORIZONTAL_ROWS = (0, 1, 3, 4)
@@ -83,6 +88,8 @@ class CoastingOptions:
     young_s: float = 10.0
     # a coasting check first coasts this long past its deadline (then on to the end only when needed)
     first_look_s: float = 30.0
+    # coasts tried from later bursts of alarms inside one incident, when its first coast confirms nothing
+    max_later_coasts: int = 4
 
 
 @dataclass(frozen=True)
@@ -214,15 +221,21 @@ class Placebo:
         margin_s: float,
         trim: float = 0.1,
         min_runs: int = 4,
+        later: Sequence[tuple[float, float]] = (),
     ) -> Envelope:
         """The largest clean departure per horizon over the coasts (and the part of each) before this
-        incident, away from the incidents already confirmed; with fewer than `min_runs` of those, the
-        coasts anywhere away from them, leaving out the largest `trim` (a later attack the loop has not
-        reached yet). Beyond the longest clean horizon the last value holds."""
+        incident, away from the incidents already confirmed and from the `later` ones not judged yet;
+        with fewer than `min_runs` of those, the coasts anywhere away from them, leaving out the largest
+        `trim`. Beyond the longest clean horizon the last value holds.
+
+        A later incident may be the attack: a coast that runs into it measures the attack, not the log's
+        clean behaviour (a simulated meaconer 300 m off made the envelope 800 times the model's, and the
+        attack then stayed "within" it). An earlier incident that was not confirmed was judged the log's
+        own behaviour (a receiver glitch), so coasts through it count."""
         if not len(self.starts):
             return Envelope(np.array([]), np.array([]), 0)
         usable = self._clean(own, margin_s)
-        for span in confirmed:
+        for span in (*confirmed, *later):
             usable = np.minimum(usable, self._clean(span, margin_s))
         # the stretch before the incident is the baseline a later attack or its end cannot spoil
         earlier = np.minimum(usable, np.clip(own[0] - self.starts, 0.0, None))
@@ -231,7 +244,8 @@ class Placebo:
         runs = np.flatnonzero(usable > 0)
         if not len(runs):
             return Envelope(np.array([]), np.array([]), 0)
-        valid = self.grid[None, :] <= usable[:, None]
+        # a coast that starts inside a suspected stretch has no clean part, not even its first epoch
+        valid = (self.grid[None, :] <= usable[:, None]) & (usable[:, None] > 0)
         peaks = np.where(valid, self.curves, -np.inf).max(axis=1)
         drop = runs[np.argsort(peaks[runs])[::-1][: int(trim * len(runs))]]
         valid[drop] = False
@@ -396,7 +410,7 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
         nav = navigation_of(ctx)
     except SpooflensError:
         return verdict
-    t_last = float(nav.solution.t[-1])
+    t_first, t_last = float(nav.solution.t[0]), float(nav.solution.t[-1])
     opts = CoastingOptions()
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
@@ -417,31 +431,37 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
             incidents.append(inc)
             continue
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
-        envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
-        envelopes.append(envelope)
+        unjudged = [_span(i, opts) for i in ordered[n + 1 :]]
+        envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim, later=unjudged)
         # a departure from where the next inertial incident's coast begins is that incident's, not this one's
         later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
-        reach = _coast_start(inc) + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
-        deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
-        check = coasting_check(nav, _coast_start(inc), envelope, deadline, opts, base)
-        checks.append((inc, check))
-        young = _coast_start(inc) < float(nav.solution.t[0]) + opts.converge_s
+        check, young = _judge(nav, inc, envelope, later, opts, base)
         if not check.confirmed or young:
-            why = (
-                f"inertial alarm not confirmed: the INS reference had run only "
-                f"{_coast_start(inc) - float(nav.solution.t[0]):.0f} s and was still converging"
-                if young
-                else "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty "
-                "and this log's own clean departures (a receiver glitch, not a sustained departure)"
+            # alarms of an unrelated glitch before the attack merge into its incident and start its coast
+            # too early (a consumer INS coasted for a minute cannot see a 300 m jump); coast again from
+            # each later burst of inertial alarms, the first confirmed departure splitting the incident
+            split = next(
+                (
+                    (before, after, later_check)
+                    for before, after in later_onsets(results, inc)[: opts.max_later_coasts]
+                    for later_check, later_young in (_judge(nav, after, envelope, later, opts, base),)
+                    if later_check.confirmed and not later_young
+                ),
+                None,
             )
-            incidents.append(
-                replace(
-                    inc,
-                    end_method=why,
-                    offset_peak_m=float(np.nanmax(check.offset_m)) if len(check.offset_m) else None,
-                ).with_spans(tuple(sp for sp in inc.spans if sp[0] != Evidence.INERTIAL))
-            )
-            continue
+            if split is None:
+                checks.append((inc, check))
+                envelopes.append(envelope)
+                incidents.append(_not_confirmed(inc, check, young, t_first, envelope))
+                continue
+            before, inc, later_check = split
+            checks += [(before, check), (inc, later_check)]
+            envelopes += [envelope, envelope]
+            incidents.append(_not_confirmed(before, check, young, t_first, envelope))
+            check = later_check
+        else:
+            checks.append((inc, check))
+            envelopes.append(envelope)
         current_check = check
         # the coasting comparison says when GNSS agreed again; alarms after that are the closed-loop
         # filter's recovery from the spoofed track, not more attack
@@ -458,6 +478,8 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
             )
         else:
             interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
+        if not envelope.runs:
+            method += f"; {NO_CLEAN_COASTS}"
         onset, onset_interval = _onset_before(results, inc, check.departure_s)
         # the departure itself is the inertial evidence: whatever else alarmed while it lasted agrees
         departure_span = (Evidence.INERTIAL, _coast_start(inc), end)
@@ -599,6 +621,68 @@ def _merge_overlapping(incidents: list[Incident]) -> list[Incident]:
 
 def _coast_start(inc: Incident) -> float:
     return min(inc.onset_s, inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s, inc.start_s)
+
+
+def _judge(
+    nav: Navigation,
+    inc: Incident,
+    envelope: Envelope,
+    later: list[float],
+    opts: CoastingOptions,
+    base: NavSolution | None,
+) -> tuple[CoastingCheck, bool]:
+    """The coasting check of `inc` from its coast start, and whether the reference was still converging
+    there; `later`: where the next inertial incidents' coasts begin (a departure from there is theirs)."""
+    start = _coast_start(inc)
+    reach = start + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
+    deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
+    check = coasting_check(nav, start, envelope, deadline, opts, base)
+    return check, start < float(nav.solution.t[0]) + opts.converge_s
+
+
+def _not_confirmed(inc: Incident, check: CoastingCheck, young: bool, t_first: float, envelope: Envelope) -> Incident:
+    """`inc` with its inertial evidence dropped: the coast did not confirm it."""
+    if young:
+        why = (
+            f"inertial alarm not confirmed: the INS reference had run only {_coast_start(inc) - t_first:.0f} s "
+            "and was still converging"
+        )
+    else:
+        why = (
+            "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty and this "
+            "log's own clean departures (a receiver glitch, not a sustained departure)"
+        )
+    if not envelope.runs:
+        why += f"; {NO_CLEAN_COASTS}"
+    return replace(
+        inc,
+        end_method=why,
+        offset_peak_m=float(np.nanmax(check.offset_m)) if len(check.offset_m) else None,
+    ).with_spans(tuple(sp for sp in inc.spans if sp[0] != Evidence.INERTIAL))
+
+
+def later_onsets(results: Sequence[DetectorResult], inc: Incident) -> list[tuple[Incident, Incident]]:
+    """Each way to split `inc` where a burst of alarms begins more than `CORROBORATION_S` after the alarm
+    before it and holds inertial evidence: (the alarms before, the alarms from there on) as incidents, in
+    time order. The incident's alarms are recovered from `results` (an incident holds every counted alarm
+    that starts inside it)."""
+    alarms = sorted(
+        (
+            (a, r)
+            for r in results
+            if r.is_detector and r.ran and not r.advisory and r.name in inc.detectors
+            for a in r.alarms
+            if inc.start_s <= a.start_s <= inc.end_s
+        ),
+        key=lambda x: x[0].start_s,
+    )
+    starts = np.array([a.start_s for a, _ in alarms])
+    out = []
+    for k in np.flatnonzero(np.diff(starts) > CORROBORATION_S) + 1:
+        before, after = alarms[:k], alarms[k:]
+        if any(r.evidence == Evidence.INERTIAL for _, r in after):
+            out.append((incident_of(before), incident_of(after)))
+    return out
 
 
 def _span(inc: Incident, opts: CoastingOptions) -> tuple[float, float]:

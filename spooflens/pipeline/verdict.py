@@ -182,3 +182,8 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
         ]
     findings = tuple(f for r in counted for f in r.findings)
     return Verdict(any(i.is_spoofing for i in incidents), tuple(incidents), ran, not_run, advisory, findings)
+
+
+def incident_of(alarms: list[tuple[Alarm, DetectorResult]]) -> Incident:
+    """The incident these alarms (with the results they came from) make, as `decide` makes each one."""
+    return _incident(alarms)

@@ -196,6 +196,24 @@ class Calibration:
     calibrated: bool  # False: the clean part was too short; fitted on every sample instead
 
 
+def _wider_side(x: FloatArray, use: BoolArray, ratio: float = 0.5, min_side: int = 30) -> BoolArray | None:
+    """The samples on the larger-scale side of the one change point of x's Rayleigh scale (two-segment
+    maximum likelihood), when the other side's scale is below `ratio` of it and both sides hold at least
+    `min_side` samples; else None (no collapse to start from)."""
+    idx = np.flatnonzero(use & np.isfinite(x))
+    if len(idx) < 2 * min_side:
+        return None
+    cp = scale_changepoint(x[idx], 0, len(idx))
+    if min(cp, len(idx) - cp) < min_side:
+        return None
+    s1, s2 = rayleigh_scale(x[idx[:cp]]), rayleigh_scale(x[idx[cp:]])
+    if min(s1, s2) >= ratio * max(s1, s2):
+        return None
+    out = np.zeros(len(x), dtype=bool)
+    out[idx[:cp] if s1 > s2 else idx[cp:]] = True
+    return out
+
+
 def flagged_samples(alarm: BoolArray, k: int, include_current: bool) -> BoolArray:
     """The samples that make up the alarmed windows."""
     n = len(alarm)
@@ -238,6 +256,12 @@ def calibrate(
             # an attack makes this statistic large: start from the quietest quarter (Rayleigh quantile),
             # which holds while up to three quarters of the log are attacked
             nu, sigma = 0.0, float(np.percentile(x[use], 25) / np.sqrt(-2.0 * np.log(0.75)))
+        elif it == 1 and (wider := _wider_side(x, use)) is not None:
+            # a collapse lasting a good part of the log (an attack from its middle to its end) pulls a fit
+            # on every sample down with it, and then its windows never fall below the threshold: start
+            # from the side of the scale's change point with the larger scale
+            use = use & wider
+            nu, sigma = (0.0, rayleigh_scale(x[use])) if rayleigh_only else rice_fit(x[use])
         elif rayleigh_only:
             nu, sigma = 0.0, rayleigh_scale(x[use])
         else:
