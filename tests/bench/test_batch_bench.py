@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
 from spooflens.bench.batch_bench import _spin, core_scaling
 
 
@@ -14,6 +12,6 @@ def test_the_loop_is_timed_on_a_clock_two_processes_share() -> None:
 
 def test_two_processes_at_once_do_at_most_twice_the_work_of_one() -> None:
     ratio = core_scaling(5_000)
-    # one core gives about 1 (the two take turns), two free cores about 2; never much more than 2
-    low = 0.5 if (os.cpu_count() or 1) < 2 else 0.8
-    assert low < ratio < 2.4
+    # two free cores give about 2, one core or a loaded machine less (the machine's own state, which
+    # `bench batch` reports and a test cannot assume); never much more than 2: each does its own share
+    assert 0.0 < ratio < 2.4
