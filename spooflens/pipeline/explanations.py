@@ -61,8 +61,9 @@ class ExplanationOptions:
     window_after_s: float = 2.0
     # degradation: a fall of the C/N0, and one more sign
     min_cn0_drop_db: float = 3.0
-    # or a sky weak all along: indoors, under a canopy, a poor antenna (an open sky gives 30-50 dB-Hz to a
-    # small antenna, a phone's 25-45); no spoofer is weaker than the sky it overpowers
+    # or a sky weak all along, before the alarm and during it (indoors, under a canopy, a poor antenna: an
+    # open sky gives 30-50 dB-Hz to a small antenna, a phone's 25-45): at the tracking floor a receiver
+    # loses satellites and its fix without any further fall; no spoofer is weaker than the sky it overpowers
     weak_sky_dbhz: float = 25.0
     dop_ratio: float = 1.5
     dop_min_rise: float = 0.3
@@ -126,6 +127,7 @@ class _Scene:
     receivers: dict[str, Receiver] = field(default_factory=dict)
     # the incident being weighed, from its first alarm to its end: interference is read over all of it
     span: tuple[float, float] = (0.0, 0.0)
+    satellites: tuple[str, ...] = ()  # every satellite its detectors named
 
     def rx(self, rid: str) -> Receiver:
         if rid not in self.receivers:
@@ -160,7 +162,7 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     if rise >= opts.spoofer_cn0_rise_db:
         marks.append(f"{what} rose {_db(rise)} above its level {w.base_where}: a stronger signal than the sky's")
     equal = w.equal_cn0(opts.equal_cn0_db, opts.equal_min_satellites, opts.equal_min_epochs)
-    if equal is not None and not equal[1] < w.sky_level() - opts.equal_below_level_db:
+    if equal is not None and not equal[1] < w.cn0_level_before() - opts.equal_below_level_db:
         marks.append(
             f"{opts.equal_min_satellites} or more satellites at one C/N0 (spread {equal[0]:.1f} dB): one transmitter"
         )
@@ -191,9 +193,9 @@ def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[str], f
     level = w.cn0_level_now()
     if drop >= opts.min_cn0_drop_db:
         signs.append(f"{what} fell {_db(-drop)} below its level {w.base_where}")
-    elif level < opts.weak_sky_dbhz:
-        signs.append(f"a weak sky: C/N0 {level:.1f} dB-Hz (an open sky gives 30-50)")
-        drop = max(np.nan_to_num(drop), opts.min_cn0_drop_db)  # weak all along: as weakened as can be told
+    elif level < opts.weak_sky_dbhz and not w.cn0_level_before() >= opts.weak_sky_dbhz:
+        signs.append(f"a weak sky all along: C/N0 {level:.1f} dB-Hz (an open sky gives 30-50)")
+        drop = opts.min_cn0_drop_db  # at the tracking floor no further fall is needed to lose satellites
     geometry = _ratio_sign(w, "hdop", "HDOP", opts.dop_ratio, opts.dop_min_rise) or _ratio_sign(
         w, "h_acc_m", "reported accuracy", opts.accuracy_ratio, opts.accuracy_min_rise_m, " m"
     )
@@ -303,7 +305,7 @@ def _short_signs(signs: list[str]) -> list[str]:
     for s in signs:
         if "C/N0 fell" in s:
             out.append("C/N0 " + s.split("fell ")[1].split(" below")[0])
-        elif s.startswith("a weak sky"):
+        elif s.startswith("a weak sky all along"):
             out.append(s.split(" (")[0])
         elif "(x" in s:
             out.append(s.split(" ")[0] + " x" + s.split("(x")[1].rstrip(")"))
@@ -499,6 +501,10 @@ def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Read
     """One satellite's range a reflection's length off, its C/N0 not raised: NLOS or multipath."""
     rid = alarm.receiver_id or ""
     sv = alarm.satellites[0]
+    others = [x for x in scene.satellites if x != sv]
+    if others:  # reflections delay satellites each by its own path; several off together is a bias
+        why = f"{sv} is not alone: the incident also names {'+'.join(others)}"
+        return _kept("reflection", Kind.DEGRADATION, why, rid)
     sizes = [
         f.range_error_m
         for f in result.findings
@@ -639,6 +645,7 @@ def explain(
     interval counts as explained when every alarm behind it is)."""
     scene = scene or _Scene(table, results, opts or ExplanationOptions())
     scene.span = (incident.start_s, incident.end_s)
+    scene.satellites = incident.satellites
     held: dict[tuple[str, str | None], list[tuple[Reading, str]]] = {}
     refused: dict[str, str] = {}
     covered: dict[Span, bool] = {}

@@ -222,11 +222,15 @@ class Window:
             return _finite_median(sky.ravel())
         return _finite_median(self.rx.col("cn0_mean_dbhz")[self.now])
 
-    def sky_level(self) -> float:
-        """The baseline's median satellite C/N0 (NaN unknown)."""
-        if self.sky_base is None:
+    def cn0_level_before(self) -> float:
+        """The baseline's median satellite C/N0, else the median of its fixes' mean C/N0 (NaN unknown or
+        without a baseline)."""
+        if self.base is None or self.sky_base is None:
             return float("nan")
-        return _finite_median(self.rx.sky.cn0[self.sky_base].ravel())
+        sky = self.rx.sky.cn0[self.sky_base]
+        if np.isfinite(sky).any():
+            return _finite_median(sky.ravel())
+        return _finite_median(self.rx.col("cn0_mean_dbhz")[self.base])
 
     def spoofing_flag_raised(self) -> bool:
         return bool((self.rx.spoofing_flag[self.now] == SpoofingFlag.INDICATED).any())

@@ -64,7 +64,7 @@ def test_a_weak_sky_all_along_is_degradation() -> None:
     (inc,) = a.verdict.incidents
     assert inc.confidence_of_alarms == "high" and not a.verdict.spoofed
     assert {"degradation", "relayed duplicate"} <= causes(a.verdict)
-    assert any("a weak sky" in f for e in inc.explanations for f in e.facts)
+    assert any("a weak sky all along" in f for e in inc.explanations for f in e.facts)
 
 
 def test_the_first_fixes_of_a_cold_start_are_convergence() -> None:
@@ -103,6 +103,9 @@ def test_one_satellite_a_reflection_long_at_a_station_is_nlos_and_kilometres_are
     weighed = explain(a.table, results, inc)
     assert not weighed.explanations and not weighed.explained_spans
     assert any("98,000 m off, more than a reflection" in r for r in weighed.ruled_out)
+    # nor when the incident names a second satellite off at the same time: a bias on a subset, no reflection
+    weighed = explain(a.table, a.results, replace(inc, satellites=("G07", "G16")))
+    assert not weighed.explanations and any("G16 is not alone" in r for r in weighed.ruled_out)
 
 
 @pytest.fixture(scope="module")
