@@ -224,6 +224,8 @@ def incident_kind(inc: dict) -> str:
     kind = inc.get("kind", "spoofing" if inc["confidence"] != "low" else "unknown")
     if kind == "spoofing":
         return "incident"
+    if kind == "unknown" and inc.get("confidence_of_alarms", "low") != "low":
+        return "anomaly (one evidence class left once the others were explained: not spoofing)"
     if kind == "unknown":
         return "anomaly (no second class at the same time: not spoofing)"
     return f"{KIND_LABELS[Kind(kind)]} (not spoofing)"

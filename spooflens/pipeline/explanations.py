@@ -176,45 +176,60 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     return marks
 
 
-def _ratio_sign(w: Window, column: str, label: str, ratio: float, min_rise: float, unit: str = "") -> str | None:
+@dataclass(frozen=True)
+class Sign:
+    """One sign of a weakened sky: a few words for the one-line text, and the measurement it rests on."""
+
+    short: str  # "C/N0 -8.1 dB"
+    fact: str  # "each satellite's C/N0 fell -8.1 dB below its level before"
+
+
+def _ratio_sign(w: Window, column: str, label: str, ratio: float, min_rise: float, unit: str = "") -> Sign | None:
     base, worst = w.level(column), w.worst(column, +1)
     if not (np.isfinite(base) and np.isfinite(worst)) or base <= 0:
         return None
     if worst >= ratio * base and worst - base >= min_rise:
-        return f"{label} {base:.2f}{unit} -> {worst:.2f}{unit} (x{worst / base:.1f})"
+        return Sign(
+            f"{label} x{worst / base:.1f}", f"{label} {base:.2f}{unit} -> {worst:.2f}{unit} (x{worst / base:.1f})"
+        )
     return None
 
 
-def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[str], float]:
+def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[Sign], float]:
     """The signs of a weakened or blocked sky, and the C/N0 drop (NaN when the receiver logs none; the
     least that counts when the sky was weak all along)."""
     signs = []
     drop, _, what = w.cn0_change_db()
     level = w.cn0_level_now()
     if drop >= opts.min_cn0_drop_db:
-        signs.append(f"{what} fell {_db(-drop)} below its level {w.base_where}")
+        signs.append(Sign(f"C/N0 {_db(-drop)}", f"{what} fell {_db(-drop)} below its level {w.base_where}"))
     elif level < opts.weak_sky_dbhz and not w.cn0_level_before() >= opts.weak_sky_dbhz:
-        signs.append(f"a weak sky all along: C/N0 {level:.1f} dB-Hz (an open sky gives 30-50)")
+        short = f"a weak sky all along: C/N0 {level:.1f} dB-Hz"
+        signs.append(Sign(short, f"{short} (an open sky gives 30-50)"))
         drop = opts.min_cn0_drop_db  # at the tracking floor no further fall is needed to lose satellites
-    geometry = _ratio_sign(w, "hdop", "HDOP", opts.dop_ratio, opts.dop_min_rise) or _ratio_sign(
-        w, "h_acc_m", "reported accuracy", opts.accuracy_ratio, opts.accuracy_min_rise_m, " m"
+    geometry = (
+        _ratio_sign(w, "hdop", "HDOP", opts.dop_ratio, opts.dop_min_rise)
+        or _ratio_sign(w, "h_acc_m", "reported accuracy", opts.accuracy_ratio, opts.accuracy_min_rise_m, " m")
+        or _ratio_sign(w, "vdop", "VDOP", opts.dop_ratio, opts.dop_min_rise)
     )
-    if geometry is None:
-        geometry = _ratio_sign(w, "vdop", "VDOP", opts.dop_ratio, opts.dop_min_rise)
     if geometry:
         signs.append(geometry)
     used, fewest = w.level("sats_used"), w.worst("sats_used", -1)
     lost = used - fewest if np.isfinite(used) and np.isfinite(fewest) else 0.0
     if lost >= max(opts.min_satellites_lost, opts.satellites_lost_fraction * used):
-        signs.append(f"satellites used {used:.0f} -> {fewest:.0f}")
+        text = f"satellites used {used:.0f} -> {fewest:.0f}"
+        signs.append(Sign(text, text))
     gap = w.longest_gap_s()
     if gap >= max(opts.fix_lost_min_s, opts.fix_lost_periods * w.rx.period_s):
-        signs.append(f"fix lost for {gap:.1f} s")
+        text = f"fix lost for {gap:.1f} s"
+        signs.append(Sign(text, text))
     return signs, drop
 
 
-def _robust_rise(w: Window, column: str, floor: float, relative: float, direction: int) -> tuple[float, float] | None:
-    """(baseline, worst) of an indicator that moved 6 robust sigma in `direction` (+1 up, -1 down), else None."""
+def _robust_rise(
+    w: Window, column: str, floor: float, relative: float, direction: int, z: float
+) -> tuple[float, float] | None:
+    """(baseline, worst) of an indicator that moved `z` robust sigma in `direction` (+1 up, -1 down), else None."""
     x = w.rx.col(column)
     if w.base is None:
         return None
@@ -225,10 +240,10 @@ def _robust_rise(w: Window, column: str, floor: float, relative: float, directio
     med = float(np.median(base))
     scale = max(1.4826 * float(np.median(np.abs(base - med))), floor, relative * abs(med))
     worst = w.worst(column, direction)
-    return (med, worst) if (worst - med) * direction >= 6.0 * scale else None
+    return (med, worst) if (worst - med) * direction >= z * scale else None
 
 
-def receiver_interference_signs(w: Window) -> list[str]:
+def receiver_interference_signs(w: Window, z: float) -> list[str]:
     """What the receiver itself says drowned its signals: its jamming state at warning or worse, a jump of
     its jamming indicator or noise, its gain turned down."""
     signs = []
@@ -242,7 +257,7 @@ def receiver_interference_signs(w: Window) -> list[str]:
         # gain going up is less power at the antenna (a covered antenna, the cold), no interference
         ("agc", "AGC", 10.0, 0.03, -1),
     ):
-        moved = _robust_rise(w, column, floor, relative, direction)
+        moved = _robust_rise(w, column, floor, relative, direction, z)
         if moved is not None:
             signs.append(f"{label} {moved[0]:.0f} -> {moved[1]:.0f}")
     return signs
@@ -263,7 +278,7 @@ def interference_signs(scene: _Scene, rid: str) -> list[str]:
         ]
         if near:
             signs.append(f"{r.name} alarmed from {near[0].start_s:.1f} s")
-    return signs + receiver_interference_signs(w)
+    return signs + receiver_interference_signs(w, scene.opts.interference_z)
 
 
 def _kept(cause: str, kind: Kind, why: str, rid: str) -> Reading:
@@ -273,45 +288,26 @@ def _kept(cause: str, kind: Kind, why: str, rid: str) -> Reading:
 def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], fix_alarm: bool) -> Reading:
     opts, rid = scene.opts, w.rx.receiver_id
     signs, drop = degradation_signs(w, opts)
+    facts = [sg.fact for sg in signs]
     if marks:
         return _kept("degradation", Kind.DEGRADATION, "; ".join(marks), rid)
     if interference_signs(scene, rid):
         return _kept("degradation", Kind.DEGRADATION, "the receiver's interference indicators moved too", rid)
-    logs_cn0 = np.isfinite(drop)
-    if logs_cn0 and drop < opts.min_cn0_drop_db:
-        also = f"; only {'; '.join(signs)}" if signs else ""
+    if np.isfinite(drop) and drop < opts.min_cn0_drop_db:
+        also = f"; only {'; '.join(facts)}" if facts else ""
         return _kept("degradation", Kind.DEGRADATION, f"the C/N0 did not fall ({_db(-drop)}){also}", rid)
     if len(signs) < 2:
-        return _kept(
-            "degradation", Kind.DEGRADATION, f"one sign of a weakened sky alone ({'; '.join(signs) or 'none'})", rid
-        )
+        why = f"one sign of a weakened sky alone ({facts[0]})" if facts else "no sign of a weakened sky"
+        return _kept("degradation", Kind.DEGRADATION, why, rid)
     jump = w.largest_jump_m()
     if jump > opts.max_reflection_m:
-        return _kept(
-            "degradation",
-            Kind.DEGRADATION,
-            f"the fix jumped {jump:,.0f} m, more than multipath or NLOS moves it ({opts.max_reflection_m:g} m)",
-            rid,
-        )
+        why = f"the fix jumped {jump:,.0f} m, more than multipath or NLOS moves it ({opts.max_reflection_m:g} m)"
+        return _kept("degradation", Kind.DEGRADATION, why, rid)
     moved = " while the fix jumped" if fix_alarm else ""
-    text = f"{_join(_short_signs(signs))}{moved}: degradation (multipath, obstruction), not spoofing"
-    facts = (*signs, f"largest jump of the fix beyond its velocity {jump:.1f} m") if fix_alarm else tuple(signs)
-    return Reading("degradation", Kind.DEGRADATION, True, text, facts, rid)
-
-
-def _short_signs(signs: list[str]) -> list[str]:
-    """'each satellite's C/N0 fell -8.1 dB below its level before' -> 'C/N0 -8.1 dB', and so on."""
-    out = []
-    for s in signs:
-        if "C/N0 fell" in s:
-            out.append("C/N0 " + s.split("fell ")[1].split(" below")[0])
-        elif s.startswith("a weak sky all along"):
-            out.append(s.split(" (")[0])
-        elif "(x" in s:
-            out.append(s.split(" ")[0] + " x" + s.split("(x")[1].rstrip(")"))
-        else:
-            out.append(s)
-    return out
+    text = f"{_join([sg.short for sg in signs])}{moved}: degradation (multipath, obstruction), not spoofing"
+    if fix_alarm:
+        facts.append(f"largest jump of the fix beyond its velocity {jump:.1f} m")
+    return Reading("degradation", Kind.DEGRADATION, True, text, tuple(facts), rid)
 
 
 def _join(parts: list[str]) -> str:
@@ -326,8 +322,9 @@ def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) 
     if marks:
         return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
     effects, _ = degradation_signs(w, scene.opts)
-    text = f"{_join(signs)}{' with ' + _join(_short_signs(effects)) if effects else ''}: interference, not spoofing"
-    return Reading("interference", Kind.JAMMING, True, text, (*signs, *effects), rid)
+    with_effects = " with " + _join([sg.short for sg in effects]) if effects else ""
+    text = f"{_join(signs)}{with_effects}: interference, not spoofing"
+    return Reading("interference", Kind.JAMMING, True, text, (*signs, *(sg.fact for sg in effects)), rid)
 
 
 def _fix_starts(rx: Receiver, opts: ExplanationOptions) -> list[float]:
@@ -678,7 +675,7 @@ def explain(
     for rid in incident.receivers or tuple(table.receivers()):
         named = (lambda x, r=rid: f"{r}: {x}") if len(table.receivers()) > 1 else (lambda x: x)
         w = scene.incident_window(rid)
-        interference += [named(x) for x in receiver_interference_signs(w)]
+        interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
         if w.fixes:
             marks += [named(x) for x in spoofer_marks(w, scene.opts)]
     spans = tuple(sorted(k for k, ok in covered.items() if ok))

@@ -134,6 +134,8 @@ def _kind_cell(inc: Incident) -> str:
     kind = _kind_of(inc)
     if kind == Kind.SPOOFING:
         return "spoofing"
+    if kind == Kind.UNKNOWN and inc.confidence_of_alarms != "low":
+        return "anomaly (one evidence class left once the others were explained: not spoofing)"
     if kind == Kind.UNKNOWN:
         return "anomaly (no second class at the same time: not spoofing)"
     return f"{KIND_LABELS[kind]} (not spoofing)"
