@@ -202,7 +202,7 @@ def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[Sign], 
     drop, _, what = w.cn0_change_db()
     level = w.cn0_level_now()
     if drop >= opts.min_cn0_drop_db:
-        signs.append(Sign(f"C/N0 {_db(-drop)}", f"{what} fell {_db(-drop)} below its level {w.base_where}"))
+        signs.append(Sign(f"C/N0 {_db(-drop)}", f"{what} fell {drop:.1f} dB below its level {w.base_where}"))
     elif level < opts.weak_sky_dbhz and not w.cn0_level_before() >= opts.weak_sky_dbhz:
         short = f"a weak sky all along: C/N0 {level:.1f} dB-Hz"
         signs.append(Sign(short, f"{short} (an open sky gives 30-50)"))
