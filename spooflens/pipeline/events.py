@@ -112,7 +112,12 @@ def _alarm_names(incident: Incident, results: Sequence[DetectorResult], attribut
     return tuple(sorted(found))
 
 
-def _event(incident: Incident, index: int, decided: _Decided, results: Sequence[DetectorResult]) -> Event:
+def _event(
+    incident: Incident, index: int, decided: _Decided, results: Sequence[DetectorResult], after_s: float | None = None
+) -> Event:
+    """The incident as an event; `after_s`: where its spoofing evidence began, after interference of its own."""
+    if after_s is not None:
+        incident = replace(incident, start_s=max(incident.start_s, after_s))
     end = "the end of the log" if incident.ongoing_at_end else f"{incident.end_s:.2f} s"
     # a spoofing event names every class that made it, another kind the cause that decided it
     what = "; ".join(decided.evidence_for) if decided.kind == Kind.SPOOFING else next(iter(decided.evidence_for), "")
@@ -198,11 +203,10 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
         decided = _decide(inc, weighed, results)
         inc = replace(inc, kind=decided.kind)
         incidents.append(inc)
-        if decided.kind == Kind.SPOOFING:
-            lead = _lead_in(inc, k, results)
-            if lead is not None:
-                events.append(lead)
-        events.append(_event(inc, k, decided, results))
+        lead = _lead_in(inc, k, results) if decided.kind == Kind.SPOOFING else None
+        if lead is not None:
+            events.append(lead)
+        events.append(_event(inc, k, decided, results, lead.end_s if lead is not None else None))
     events.sort(key=lambda e: (e.start_s, e.kind != Kind.JAMMING))
     # the tracks reconstructed for incidents no longer called spoofing go with them
     reconstructed = verdict.reconstructed

@@ -27,7 +27,15 @@ from enum import StrEnum
 from typing import Any
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Track
-from spooflens.pipeline.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
+from spooflens.pipeline.evidence import (
+    CORROBORATION_S,
+    NOT_SPOOFING,
+    ORDER,
+    Evidence,
+    Span,
+    confidence,
+    corroborated,
+)
 
 ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
 
@@ -263,9 +271,11 @@ def _joint_interval(items: list[Alarm], interval: tuple[float, float] | None) ->
 def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     items = [a for a, _ in group]
     spans = tuple(sorted({(r.evidence, a.start_s, a.end_s) for a, r in group if r.evidence is not None}))
+    # the attack's onset is estimated from spoofing evidence: interference that led into it has its own event
+    timed = [a for a, r in group if r.evidence not in NOT_SPOOFING] or items
     # an onset with a credible interval beats point estimates
     estimates: list[tuple[float, tuple[float, float] | None]] = [
-        (a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None
+        (a.onset_s, a.onset_interval_s) for a in timed if a.onset_s is not None
     ]
     with_interval = [e for e in estimates if e[1] is not None]
     onset: float
@@ -273,8 +283,8 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     if with_interval or estimates:
         onset, interval = min(with_interval or estimates, key=lambda e: e[0])
     else:
-        onset, interval = min(a.start_s for a in items), None
-    interval = _joint_interval(items, interval)
+        onset, interval = min(a.start_s for a in timed), None
+    interval = _joint_interval(timed, interval)
     return Incident(
         min(a.start_s for a in items),
         max(a.end_s for a in items),

@@ -97,6 +97,8 @@ def test_interference_that_opens_a_spoofing_incident_is_an_event_of_its_own() ->
     jam, spoof = verdict.events
     assert jam.kind == Kind.JAMMING and (jam.start_s, jam.end_s) == (120.0, 140.0)
     assert spoof.kind == Kind.SPOOFING and jam.followed_by == 1
+    # the takeover's onset and first alarm are its own evidence's, not the interference's
+    assert spoof.start_s == 140.0 and spoof.onset_s == 139.0 and incident.onset_s == 139.0
 
 
 @cache
