@@ -143,6 +143,11 @@ quiet_option = click.option("--quiet", is_flag=True, help="Print only the one-li
 fail_on_spoof_option = click.option(
     "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
 )
+fail_on_jam_option = click.option(
+    "--fail-on-jam",
+    is_flag=True,
+    help="Exit with code 5 when the verdict names jamming / interference (4 for spoofing wins).",
+)
 imu_grade_option = click.option(
     "--imu-grade",
     type=click.Choice(sorted(PRESETS)),
@@ -179,6 +184,7 @@ imu_grade_option = click.option(
 @imu_grade_option
 @quiet_option
 @fail_on_spoof_option
+@fail_on_jam_option
 def analyze(
     log: Path,
     output: Path | None,
@@ -189,6 +195,7 @@ def analyze(
     imu_grade: str | None,
     quiet: bool,
     fail_on_spoof: bool,
+    fail_on_jam: bool,
 ) -> int:
     """Analyse LOG for GNSS spoofing; write a Rerun recording and optionally a JSON summary and HTML report."""
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
@@ -209,7 +216,7 @@ def analyze(
         else:
             html = segment_path(html_path, k, n) if html_path else None
             print_analysis(summary, segment_path(output, k, n), json_path, html)
-    return finish(log, analyses, fail_on_spoof)
+    return finish(log, analyses, fail_on_spoof, fail_on_jam)
 
 
 @cli.command()

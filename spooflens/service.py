@@ -3,7 +3,8 @@ benches): reading a log into its epoch table, analysing it, writing its outputs 
 
 Exit codes: 0 done; 1 internal error (a bug: rerun with --debug); 2 bad input or usage (nothing
 analysed, nothing written); 3 the input was damaged and only what could be read was analysed (outputs
-written); 4 the verdict is spoofing and --fail-on-spoof was given.
+written); 4 the verdict is spoofing and --fail-on-spoof was given; 5 the verdict names jamming /
+interference (and no spoofing, or no --fail-on-spoof) and --fail-on-jam was given. 4 and 5 win over 3.
 """
 
 from __future__ import annotations
@@ -22,12 +23,13 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError
 from spooflens.output.console import console, progress, show_progress
 from spooflens.output.early_recording import EarlyRecording
+from spooflens.pipeline.verdict import KIND_LABELS, Kind
 from spooflens.threads import side_work
 
 if TYPE_CHECKING:
     from spooflens.pipeline.run import Analysis
 
-EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED = 0, 1, 2, 3, 4
+EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED, EXIT_JAMMED = 0, 1, 2, 3, 4, 5
 
 
 def parse_topics(values: tuple[str, ...]) -> dict[str, str]:
@@ -127,13 +129,16 @@ def require_gnss(log: Path, table: EpochTable) -> None:
     raise NoGnssError(log, f"{found}; nothing written")
 
 
-def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool) -> int:
-    """The exit code of an analysis that ran: 4 spoofed (with --fail-on-spoof), 3 damaged input, else 0."""
+def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool, fail_on_jam: bool = False) -> int:
+    """The exit code of an analysis that ran: 4 spoofed (with --fail-on-spoof), 5 jamming or interference
+    (with --fail-on-jam), 3 damaged input, else 0."""
     damaged = list(dict.fromkeys(d for a in analyses for d in damage(a.table)))
     if damaged:
         click.echo(f"spooflens: {log}: input damaged, analysed what could be read: {'; '.join(damaged)}", err=True)
     if fail_on_spoof and any(a.verdict.spoofed for a in analyses):
         return EXIT_SPOOFED
+    if fail_on_jam and any(a.verdict.events_of(Kind.JAMMING) for a in analyses):
+        return EXIT_JAMMED
     return EXIT_DAMAGED if damaged else EXIT_OK
 
 
@@ -213,6 +218,19 @@ def write_outputs(
     return summaries
 
 
+def incident_kind(inc: dict) -> str:
+    """How the console names an incident of the JSON summary: a spoofing incident, an event of another
+    kind, or an anomaly of one evidence class."""
+    kind = inc.get("kind", "spoofing" if inc["confidence"] != "low" else "unknown")
+    if kind == "spoofing":
+        return "incident"
+    if kind == "unknown" and inc.get("confidence_of_alarms", "low") != "low":
+        return "anomaly (one evidence class left once the others were explained: not spoofing)"
+    if kind == "unknown":
+        return "anomaly (no second class at the same time: not spoofing)"
+    return f"{KIND_LABELS[Kind(kind)]} (not spoofing)"
+
+
 def stream_names(table: EpochTable) -> str:
     return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
 
@@ -223,17 +241,29 @@ def print_analysis(summary: dict, output: Path | None, json_path: Path | None, h
     out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
     for inc in v["incidents"]:
         when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
-        kind = "incident" if inc["confidence"] != "low" else "anomaly (no second class at the same time: not spoofing)"
         apart = [e for e in inc["evidence"] if e not in inc.get("corroborating_evidence", inc["evidence"])]
         also = f"; at other times {', '.join(apart)}" if apart else ""
         end = "end of log" if inc.get("ongoing_at_end") else f"{inc['end_s']:.2f} s"
         sats = f", satellites {'+'.join(inc['satellites'])}" if inc.get("satellites") else ""
+        before = inc.get("confidence_of_alarms", inc["confidence"])
+        alarms_said = f" (the alarms alone: {before})" if before != inc["confidence"] else ""
         out.print(
-            f"  {kind}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
+            f"  {incident_kind(inc)}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
             f"evidence {', '.join(inc.get('corroborating_evidence') or inc['evidence']) or 'none confirmed'}{also} "
             f"({', '.join(inc['detectors'])}){sats}, "
-            f"confidence {inc['confidence']}"
+            f"confidence {inc['confidence']}{alarms_said}"
         )
+        for e in inc.get("explanations", []):
+            weighed = "weighed, not enough" if inc["spoofing"] else "explained"
+            out.print(f"      {weighed}: {e['text']}")
+    events = v.get("events", [])
+    for e in events:
+        if e.get("sequence") and e["sequence"]["followed_by"] is not None:
+            then = events[e["sequence"]["followed_by"]]
+            out.print(
+                f"  attack sequence: {e['kind_label']} from {e['start_s']:.2f} s to {e['end_s']:.2f} s, then "
+                f"{then['kind_label']} from {then['onset_s']:.2f} s"
+            )
     for f in v.get("findings", []):
         out.print(f"  finding: {f['text']}")
     t = Table("analysis", "evidence", "ran", "alarms", "note")

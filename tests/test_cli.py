@@ -73,3 +73,45 @@ def test_simulate_writes_a_log_its_truth_and_raw_observations(tmp_path: Path) ->
 def test_simulate_names_the_scenarios_it_knows(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["simulate", "submarine", "-o", "x.mcap"]) == 2
     assert "ground_raw" in capsys.readouterr().err
+
+
+def test_fail_on_jam_exits_5_when_the_receiver_reports_jamming(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from px4_support import v1_12_log
+
+    # PX4 v1.12: from 20 s the receiver's jamming state at warning, its noise and jamming indicator up, its
+    # gain down, satellites lost; no spoofing state in that release, no fix moved
+    log = tmp_path / "jammed.ulg"
+    v1_12_log(log)
+    args = ["analyze", str(log), "-o", str(tmp_path / "j.rrd"), "--json", str(tmp_path / "j.json"), "--quiet"]
+    assert main(args) == 0
+    assert main([*args, "--fail-on-spoof"]) == 0
+    assert main([*args, "--fail-on-jam"]) == 5
+    headline = capsys.readouterr().out.splitlines()[-1]
+    assert headline.startswith("NO SPOOFING DETECTED") and "JAMMING / INTERFERENCE from" in headline
+    summary = json.loads((tmp_path / "j.json").read_text())
+    (event,) = summary["verdict"]["events"]
+    assert event["kind"] == "jamming" and any("jamming state" in x for x in event["evidence_for"])
+
+
+def test_spoofing_wins_over_jamming_and_both_over_damage() -> None:
+    from pipeline_support import circling_table
+
+    from spooflens.pipeline.registry import AnalyzeOptions
+    from spooflens.pipeline.run import Analysis
+    from spooflens.pipeline.verdict import Event, Kind, Verdict
+    from spooflens.service import EXIT_JAMMED, EXIT_OK, EXIT_SPOOFED, finish
+
+    jam = Event(Kind.JAMMING, 10.0, 20.0, 10.0, "medium", 0, "jamming")
+    spoof = Event(Kind.SPOOFING, 30.0, 40.0, 30.0, "high", 1, "spoofing")
+
+    def analysis(spoofed: bool, *events: Event) -> Analysis:
+        verdict = Verdict(spoofed, detectors_run=("x",), events=events)
+        return Analysis(circling_table(seconds=20.0), AnalyzeOptions(), [], verdict)
+
+    log = Path("x.mcap")
+    assert finish(log, [analysis(True, jam, spoof)], True, True) == EXIT_SPOOFED == 4
+    assert finish(log, [analysis(True, jam, spoof)], False, True) == EXIT_JAMMED == 5
+    assert finish(log, [analysis(False, jam)], True, False) == EXIT_OK
+    assert finish(log, [analysis(False)], True, True) == EXIT_OK

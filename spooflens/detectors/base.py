@@ -94,6 +94,9 @@ class Finding:
     end_s: float
     satellites: tuple[str, ...] = ()
     receiver_id: str | None = None
+    # how far the named satellites' ranges were off (the largest, m), where the detector measures it: a
+    # reflection makes tens of metres, no multipath makes kilometres (`spooflens.pipeline.explanations`)
+    range_error_m: float | None = None
 
 
 @dataclass(frozen=True)

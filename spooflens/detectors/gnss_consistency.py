@@ -72,13 +72,13 @@ def _second_difference(t: FloatArray, p: FloatArray) -> FloatArray:
     return a
 
 
-def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: float) -> list[Alarm]:
+def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: float, rid: str) -> list[Alarm]:
     """Onset = the last epoch before each alarm where the statistic was at its no-attack level."""
     out = []
     for a in alarms:
         before = np.flatnonzero((t < a.start_s) & (stat <= quiet_level))
         onset = float(t[before[-1]]) if len(before) else float(t[0])
-        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset))
+        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=rid))
     return out
 
 
@@ -126,7 +126,7 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
             dof > 0, chi2_isf(opts.p_false_alarm, np.maximum(dof, 1)), np.inf
         )
         alarms = alarm_intervals(t, np.nan_to_num(stat), alarm, merge_gap_s=opts.window_s)
-        result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0)
+        result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0, rid=str(rid))
         result.series.append(Series(f"{rid}/statistic", t, stat, "chi2(3)", threshold))
         result.series.append(Series(f"{rid}/normalised_residual", t, z, "sigma", None, ("east", "north", "up")))
     if not modes:

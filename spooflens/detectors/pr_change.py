@@ -131,6 +131,7 @@ def _findings(run: ReceiverRun, pred: Prediction, alarms: list[Alarm], offset: F
                 a.end_s,
                 a.satellites,
                 run.receiver_id,
+                float(np.nanmax(np.abs(offset[last, cols]))) if np.isfinite(offset[last, cols]).any() else None,
             )
         )
     return out

@@ -80,6 +80,7 @@ def check_receiver(
                     float(t[faulty_epochs].max()),
                     (name,),
                     rid,
+                    size if np.isfinite(size) else None,
                 )
             )
         if not size >= opts.min_inconsistency_m:

@@ -301,6 +301,7 @@ def refused(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm], l
                     float(t[b]),
                     (sv,),
                     view.receiver_id,
+                    worst,
                 )
             )
     return alarms, findings

@@ -21,7 +21,7 @@ from spooflens.geodesy import geodetic_to_enu
 from spooflens.inventory import quality_columns
 from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.evidence import ORDER, Evidence, label
-from spooflens.pipeline.verdict import Verdict
+from spooflens.pipeline.verdict import KIND_LABELS, Kind, Verdict
 
 APP_ID = "spooflens"
 COLOURS = {"reported": (230, 60, 50), "reconstructed": (40, 180, 90), "truth": (60, 120, 230)}
@@ -304,7 +304,43 @@ def overview_lanes(
     if verdict is not None:
         spans = [(inc.onset_s, inc.end_s) for inc in verdict.incidents if inc.is_spoofing]
         lanes.append(("spoofing incidents", *steps(spans, -1.0)))
+        for k, kind in enumerate(OTHER_KINDS):
+            spans = [(min(e.onset_s, e.start_s), e.end_s) for e in verdict.events_of(kind)]
+            if spans:
+                lanes.append((f"events: {kind.value}", *steps(spans, -2.0 - k)))
     return lanes
+
+
+# the lanes below the spoofing incidents, one per other kind of event, each at a height of its own
+OTHER_KINDS = (Kind.JAMMING, Kind.DEGRADATION, Kind.RECEIVER_FAULT, Kind.UNKNOWN)
+
+
+def interference_marks(
+    table: EpochTable, verdict: Verdict
+) -> list[tuple[str, NDArray[np.float64], NDArray[np.float64]]]:
+    """(receiver, t, level) per receiver with satellite C/N0 and a jamming / interference event: a step from
+    just below its weakest satellite's C/N0 to just above its strongest while the interference lasted,
+    drawn beside each satellite's C/N0."""
+    events = verdict.events_of(Kind.JAMMING)
+    sats = table.satellites if len(table.satellites) else table.observations
+    if not events or not len(sats):
+        return []
+    out = []
+    for rid, rows in sats.groupby(sats["receiver_id"].astype(str), sort=True):
+        cn0 = rows["cn0_dbhz"].to_numpy(dtype=float)
+        mine = [e for e in events if not e.receivers or rid in e.receivers]
+        if not np.isfinite(cn0).any() or not mine:
+            continue
+        low, high = float(np.nanmin(cn0)) - 2.0, float(np.nanmax(cn0)) + 2.0
+        t, v = [0.0], [low]
+        for e in sorted(mine, key=lambda e: e.start_s):
+            a = min(e.onset_s, e.start_s)
+            t += [a, a, e.end_s, e.end_s]
+            v += [low, high, high, low]
+        t.append(max(table.duration_s, t[-1]))
+        v.append(low)
+        out.append((str(rid), np.asarray(t, dtype=float), np.asarray(v, dtype=float)))
+    return out
 
 
 def _fix_series(w: RecordingWriter, rid: str, fx: pd.DataFrame) -> None:
@@ -401,6 +437,8 @@ def write_recording(
             w.scalars(entity("overview", lane), lane_t, lane_level, [lane])
         if begun is None:
             write_streams(w, table)
+        for rid, mark_t, mark_level in interference_marks(table, verdict) if verdict is not None else ():
+            w.scalars(entity("gnss", rid, "cn0_dbhz", "interference"), mark_t, mark_level, ["interference"])
         ev_t: list[float] = [0.0] * len(table.skipped)
         ev_text = [f"reader: {s}" for s in table.skipped]
         ev_level = ["INFO"] * len(table.skipped)
@@ -412,6 +450,10 @@ def write_recording(
             ev_level += level
         for tr in verdict.reconstructed if verdict is not None else ():
             _track(w, NAVIGATION, tr)  # beside the navigation's own tracks, the INS the verdict coasted
+        for e in verdict.events if verdict is not None else ():
+            ev_t.append(min(e.onset_s, e.start_s))
+            ev_text.append(f"EVENT {KIND_LABELS[e.kind]}: {e.text}")
+            ev_level.append("WARN" if e.kind in (Kind.SPOOFING, Kind.JAMMING) else "INFO")
         for line_t, line_text, line_level in verdict_lines:
             ev_t.append(line_t)
             ev_text.append(line_text)

@@ -16,7 +16,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.inventory import computed, skipped_or_repaired
 from spooflens.pipeline.departure import gnss_departure
 from spooflens.pipeline.evidence import label
-from spooflens.pipeline.verdict import Incident, Verdict
+from spooflens.pipeline.verdict import KIND_LABELS, Event, Explanation, Incident, Kind, Verdict
 
 
 def json_safe(x: Any) -> Any:
@@ -65,15 +65,41 @@ def _departure(
     return out
 
 
+def _explanation(e: Explanation) -> dict[str, Any]:
+    return {
+        "kind": str(e.kind),
+        "cause": e.cause,
+        "text": e.text,
+        "evidence": list(e.facts),
+        "detectors": list(e.detectors),
+        "receiver_id": e.receiver_id,
+    }
+
+
+def _kind(inc: Incident) -> Kind:
+    if inc.kind is not None:
+        return inc.kind
+    return Kind.SPOOFING if inc.is_spoofing else Kind.UNKNOWN  # a verdict made without the event stage
+
+
 def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
+    kind = _kind(inc)
+    # the explanation that decided the kind (for a spoofing incident: the first weighed, which did not suffice)
+    main = next((e for e in inc.explanations if e.kind == kind), inc.explanations[0] if inc.explanations else None)
     d: dict[str, Any] = {
+        "kind": str(kind),
         "detectors": list(inc.detectors),
         "confidence": inc.confidence,
+        "confidence_of_alarms": inc.confidence_of_alarms,
         "spoofing": inc.is_spoofing,
         "evidence": [str(e) for e in inc.evidence],
         "evidence_labels": [label(e) for e in inc.evidence],
-        # the classes that alarmed at the same time: what the confidence counts
+        # the classes that alarmed at the same time, and of them the ones no natural cause accounts for: what
+        # the confidence counts
         "corroborating_evidence": [str(e) for e in inc.corroborating],
+        "unexplained_evidence": [str(e) for e in inc.unexplained],
+        "explanation": _explanation(main) if main is not None else None,
+        "explanations": [_explanation(e) for e in inc.explanations],
         "receivers": list(inc.receivers),
         "satellites": list(inc.satellites),
         "ongoing_at_end": inc.ongoing_at_end,
@@ -90,8 +116,45 @@ def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
     return d
 
 
+def _event(table: EpochTable, e: Event, sequences: dict[int, int]) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "kind": str(e.kind),
+        "kind_label": KIND_LABELS[e.kind],
+        "text": e.text,
+        "confidence": e.confidence,
+        "incident": e.incident,
+        "evidence_for": list(e.evidence_for),
+        "evidence_against": list(e.evidence_against),
+        "ongoing_at_end": e.ongoing_at_end,
+        "receivers": list(e.receivers),
+        "satellites": list(e.satellites),
+        "systems": list(e.systems),
+        "bands": list(e.bands),
+    }
+    for key, t in (("onset", e.onset_s), ("start", e.start_s), ("end", e.end_s)):
+        d |= _time(table, key, t)
+    d["onset_interval_s"] = list(e.onset_interval_s) if e.onset_interval_s else None
+    d["end_interval_s"] = list(e.end_interval_s) if e.end_interval_s else None
+    # one attack sequence: a jamming event and the takeover that followed it (indices into `events`)
+    d["sequence"] = (
+        {"id": sequences[id(e)], "follows": e.follows, "followed_by": e.followed_by} if id(e) in sequences else None
+    )
+    return d
+
+
+def _events(table: EpochTable, events: tuple[Event, ...]) -> list[dict[str, Any]]:
+    sequences: dict[int, int] = {}
+    for e in events:
+        if e.followed_by is not None:
+            n = len({*sequences.values()}) + 1
+            sequences[id(e)] = sequences[id(events[e.followed_by])] = n
+    return [_event(table, e, sequences) for e in events]
+
+
 def _finding(table: EpochTable, f: Finding) -> dict[str, Any]:
     out: dict[str, Any] = {"text": f.text, "satellites": list(f.satellites), "receiver_id": f.receiver_id}
+    if f.range_error_m is not None:
+        out["range_error_m"] = f.range_error_m
     for key, t in (("start", f.start_s), ("end", f.end_s)):
         out |= _time(table, key, t)
     return out
@@ -146,6 +209,7 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
             "spoofed": verdict.spoofed,
             "headline": verdict.headline,
             "incidents": incidents,
+            "events": _events(table, verdict.events),
             "detectors_counted": list(verdict.detectors_run),
             "detectors_advisory": list(verdict.detectors_advisory),
             "detectors_not_run": list(verdict.detectors_not_run),

@@ -1,7 +1,8 @@
 """The whole analysis of one log, as every front end runs it (CLI analyze, report, batch, fleet):
 
     epoch table -> analyses (navigation, detectors) -> verdict -> confirmation and reconstruction of each
-    incident (`spooflens.pipeline.reconstruction`).
+    incident (`spooflens.pipeline.reconstruction`) -> natural explanations and the kind of every event
+    (`spooflens.pipeline.events`).
 
 The sensors' noise is learned from the log (`spooflens.navigation.noise_learning`). An attack inside
 the learning window would teach the filter that the attack is noise, so when the first pass finds
@@ -23,6 +24,7 @@ from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
 from spooflens.navigation.product import NAVIGATION, navigation_of, solve_navigation
+from spooflens.pipeline.events import classify
 from spooflens.pipeline.reconstruction import reconstruct
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.pipeline.verdict import Verdict, decide
@@ -55,11 +57,15 @@ def assess(
 ) -> Verdict:
     """The verdict on `results` (those `ctx` made, with any evidence added since, such as the fleet's): the
     incidents their alarms make, each inertial one confirmed, ended and reconstructed by coasting the INS
-    of `ctx`. Every front end decides through here."""
+    of `ctx`, then each weighed against its natural explanations and given its kind. Every front end
+    decides through here."""
     verdict = decide(list(results), log_end_s=last_fix_s(ctx.table))
     if on_step and verdict.incidents:
         on_step("confirmation and reconstruction")
-    return reconstruct(ctx, results, verdict)
+    verdict = reconstruct(ctx, results, verdict)
+    if on_step and verdict.incidents:
+        on_step("natural explanations")
+    return classify(ctx.table, results, verdict)
 
 
 def _one_pass(

@@ -1,8 +1,10 @@
 """The incident verdict: was GNSS spoofed, from when to when, and how sure.
 
 `decide` makes it from the detectors' alarms; the reconstruction stage (`spooflens.pipeline.reconstruction`)
-confirms and ends each inertial incident and adds the tracks reconstructed with GNSS left out; the two
-together (`spooflens.pipeline.run.assess`) give the one immutable verdict every output reads.
+confirms and ends each inertial incident and adds the tracks reconstructed with GNSS left out; the event
+stage (`spooflens.pipeline.events`) weighs the natural explanations of each incident's evidence
+(`spooflens.pipeline.explanations`) and gives every incident and anomaly its kind. The three together
+(`spooflens.pipeline.run.assess`) give the one immutable verdict every output reads.
 
 Alarm intervals of every detector that ran are merged into incidents (overlapping or closer than
 `merge_gap_s`). An incident's onset is the estimate that comes with a credible interval when one took
@@ -14,18 +16,59 @@ Confidence counts the distinct evidence classes whose detectors alarmed in the i
 time (`spooflens.pipeline.evidence.corroborated`, `confidence`): several tests on one filter's innovations are
 one class, and classes whose alarms lie minutes apart inside one long incident do not corroborate each
 other. A low-confidence incident (one GNSS-internal class alone) is an anomaly, never a spoofing
-verdict.
+verdict. Alarms a natural cause accounts for (`explained_spans`) stay in the incident but count for
+nothing: the confidence is that of the evidence no natural explanation covers.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from typing import Any
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Track
-from spooflens.pipeline.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
+from spooflens.pipeline.evidence import (
+    CORROBORATION_S,
+    NOT_SPOOFING,
+    ORDER,
+    Evidence,
+    Span,
+    confidence,
+    corroborated,
+)
 
 ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
+
+
+class Kind(StrEnum):
+    """What an event was (`spooflens.pipeline.events` decides it)."""
+
+    SPOOFING = "spoofing"
+    JAMMING = "jamming"  # radio-frequency interference
+    DEGRADATION = "degradation"  # multipath, NLOS, obstruction
+    RECEIVER_FAULT = "receiver_fault"  # reset, mode switch, convergence, week rollover, leap seconds, logger clock
+    UNKNOWN = "unknown"
+
+
+KIND_LABELS: dict[Kind, str] = {
+    Kind.SPOOFING: "spoofing",
+    Kind.JAMMING: "jamming / interference",
+    Kind.DEGRADATION: "signal degradation",
+    Kind.RECEIVER_FAULT: "receiver fault",
+    Kind.UNKNOWN: "unknown",
+}
+
+
+@dataclass(frozen=True)
+class Explanation:
+    """A natural cause that accounts for some of an incident's alarms (`spooflens.pipeline.explanations`)."""
+
+    cause: str  # e.g. "degradation", "cold_start", "week_rollover" (the signature that matched)
+    kind: Kind  # the kind of event the cause is
+    text: str  # one line, e.g. "C/N0 -8 dB and HDOP x2 while the fix jumped: degradation, not spoofing"
+    facts: tuple[str, ...]  # the measurements it rests on
+    detectors: tuple[str, ...]  # the detectors whose alarms in the incident it accounts for
+    receiver_id: str | None = None
 
 
 @dataclass(frozen=True)
@@ -45,26 +88,79 @@ class Incident:
     offset_peak_m: float | None = None  # largest horizontal distance GNSS - independent reference
     offset_end_m: float | None = None  # the same at the incident's end
     spans: tuple[Span, ...] = ()  # each class's alarm intervals: what corroborates what
+    # the event stage's: the natural causes weighed, the alarm intervals they account for, the event's kind
+    explanations: tuple[Explanation, ...] = ()
+    explained_spans: tuple[Span, ...] = ()
+    kind: Kind | None = None
 
     def with_spans(self, spans: tuple[Span, ...]) -> Incident:
-        """This incident with these evidence intervals: its classes and confidence follow from them."""
+        """This incident with these evidence intervals: its classes and confidence follow from them (alarm
+        intervals a natural cause accounts for count for nothing)."""
         classes = {c for c, _, _ in spans}
+        counted = tuple(sp for sp in spans if sp not in set(self.explained_spans))
         return replace(
             self,
             spans=spans,
             evidence=tuple(c for c in ORDER if c in classes),
-            confidence=confidence(corroborated(spans)) if spans else "low",
+            confidence=confidence(corroborated(counted)) if counted else "low",
         )
+
+    def explained_by(self, explanations: tuple[Explanation, ...], spans: tuple[Span, ...]) -> Incident:
+        """This incident with the natural causes weighed and the alarm intervals they account for."""
+        return replace(self, explanations=explanations, explained_spans=spans).with_spans(self.spans)
 
     @property
     def corroborating(self) -> tuple[Evidence, ...]:
-        """The classes that agree in time, the ones the confidence counts."""
+        """The classes that agree in time (natural explanations or not)."""
         found = corroborated(self.spans)
         return tuple(c for c in ORDER if c in found)
 
     @property
+    def unexplained(self) -> tuple[Evidence, ...]:
+        """The classes that agree in time once the alarms a natural cause accounts for are left out: the
+        ones the confidence counts."""
+        explained = set(self.explained_spans)
+        found = corroborated(sp for sp in self.spans if sp not in explained)
+        return tuple(c for c in ORDER if c in found)
+
+    @property
+    def confidence_of_alarms(self) -> str:
+        """The confidence the alarms alone would give, before any natural explanation."""
+        return confidence(corroborated(self.spans)) if self.spans else "low"
+
+    @property
     def is_spoofing(self) -> bool:
         return self.confidence != "low"
+
+
+@dataclass(frozen=True)
+class Event:
+    """One incident or anomaly as what it was: its kind, what decided it and what argued against the other
+    kinds (`spooflens.pipeline.events`). A spoofing incident that interference led into is two events, the
+    jamming one `followed_by` the spoofing one."""
+
+    kind: Kind
+    start_s: float
+    end_s: float
+    onset_s: float
+    confidence: str  # how sure the kind is: "high" | "medium" | "low"
+    incident: int  # index of the incident in Verdict.incidents it comes from
+    text: str  # one line
+    evidence_for: tuple[str, ...] = ()
+    evidence_against: tuple[str, ...] = ()
+    onset_interval_s: tuple[float, float] | None = None
+    end_interval_s: tuple[float, float] | None = None
+    ongoing_at_end: bool = False
+    receivers: tuple[str, ...] = ()
+    satellites: tuple[str, ...] = ()
+    systems: tuple[str, ...] = ()
+    bands: tuple[str, ...] = ()
+    follows: int | None = None  # index in Verdict.events of the event this one followed in one attack sequence
+    followed_by: int | None = None
+
+
+def _interval_text(start_s: float, end_s: float, ongoing: bool) -> str:
+    return f"from {start_s:.2f} s to " + ("the end of the log" if ongoing else f"{end_s:.2f} s")
 
 
 @dataclass(frozen=True)
@@ -79,6 +175,8 @@ class Verdict:
     # each inertial incident's coasting check (JSON-able facts)
     reconstructed: tuple[Track, ...] = ()
     coasting_checks: tuple[dict[str, Any], ...] = ()
+    # the event stage's: every incident and anomaly as an event of its kind (`spooflens.pipeline.events`)
+    events: tuple[Event, ...] = ()
 
     @property
     def deciding_incident(self) -> Incident | None:
@@ -86,22 +184,57 @@ class Verdict:
         spoofing = [i for i in self.incidents if i.is_spoofing]
         return spoofing[0] if spoofing else (self.incidents[0] if self.incidents else None)
 
+    def events_of(self, kind: Kind) -> list[Event]:
+        return [e for e in self.events if e.kind == kind]
+
     @property
     def headline(self) -> str:
+        """One line; it always begins with `NO VERDICT`, `NO SPOOFING DETECTED` or `SPOOFING DETECTED` (scripts
+        grep them), then names the other kinds of event."""
         if not self.detectors_run:
             return "NO VERDICT: no detector could run on this log"
         if not self.spoofed:
             advisory = f" ({len(self.detectors_advisory)} more advisory only)" if self.detectors_advisory else ""
-            anomalies = sum(not i.is_spoofing for i in self.incidents)
-            noted = f"; {anomalies} anomaly(ies) of one evidence class noted, not confirmed" if anomalies else ""
-            return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{noted}"
+            return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{self._other_kinds()}"
         spoofing = [i for i in self.incidents if i.is_spoofing]
         first = spoofing[0]
         end = "the end of the log" if first.ongoing_at_end else f"{first.end_s:.2f} s"
+        led_in = [
+            self.events[e.follows]
+            for e in self.events_of(Kind.SPOOFING)
+            if e.follows is not None and self.incidents[e.incident] is first
+        ]
+        after = (
+            f"; after JAMMING / INTERFERENCE {_interval_text(led_in[0].start_s, led_in[0].end_s, False)}"
+            if led_in
+            else ""
+        )
         return (
             f"SPOOFING DETECTED: {len(spoofing)} incident(s); first from {first.onset_s:.2f} s "
-            f"(alarm {first.start_s:.2f} s) to {end}, confidence {first.confidence}"
+            f"(alarm {first.start_s:.2f} s) to {end}, confidence {first.confidence}{after}"
         )
+
+    def _other_kinds(self) -> str:
+        """What a verdict without spoofing noted: interference, degradation, receiver faults, anomalies."""
+        if not self.events:  # a verdict made without the event stage (`decide` alone)
+            anomalies = sum(not i.is_spoofing for i in self.incidents)
+            return f"; {anomalies} anomaly(ies) of one evidence class noted, not confirmed" if anomalies else ""
+        parts = []
+        for kind, words in (
+            (Kind.JAMMING, "JAMMING / INTERFERENCE"),
+            (Kind.DEGRADATION, "signal degradation"),
+            (Kind.RECEIVER_FAULT, "receiver fault"),
+        ):
+            events = self.events_of(kind)
+            if events:
+                more = f" (and {len(events) - 1} more)" if len(events) > 1 else ""
+                parts.append(
+                    f"{words} {_interval_text(events[0].start_s, events[0].end_s, events[0].ongoing_at_end)}{more}"
+                )
+        unknown = len(self.events_of(Kind.UNKNOWN))
+        if unknown:
+            parts.append(f"{unknown} anomaly(ies) of one evidence class noted, not confirmed")
+        return "".join(f"; {p}" for p in parts)
 
 
 def _group(alarms: list[tuple[Alarm, DetectorResult]], merge_gap_s: float) -> list[list[tuple[Alarm, DetectorResult]]]:
@@ -138,9 +271,11 @@ def _joint_interval(items: list[Alarm], interval: tuple[float, float] | None) ->
 def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     items = [a for a, _ in group]
     spans = tuple(sorted({(r.evidence, a.start_s, a.end_s) for a, r in group if r.evidence is not None}))
+    # the attack's onset is estimated from spoofing evidence: interference that led into it has its own event
+    timed = [a for a, r in group if r.evidence not in NOT_SPOOFING] or items
     # an onset with a credible interval beats point estimates
     estimates: list[tuple[float, tuple[float, float] | None]] = [
-        (a.onset_s, a.onset_interval_s) for a in items if a.onset_s is not None
+        (a.onset_s, a.onset_interval_s) for a in timed if a.onset_s is not None
     ]
     with_interval = [e for e in estimates if e[1] is not None]
     onset: float
@@ -148,8 +283,8 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     if with_interval or estimates:
         onset, interval = min(with_interval or estimates, key=lambda e: e[0])
     else:
-        onset, interval = min(a.start_s for a in items), None
-    interval = _joint_interval(items, interval)
+        onset, interval = min(a.start_s for a in timed), None
+    interval = _joint_interval(timed, interval)
     return Incident(
         min(a.start_s for a in items),
         max(a.end_s for a in items),

@@ -150,6 +150,27 @@ def test_raim_excludes_and_names_a_counterfeit_satellite_on_the_real_pair() -> N
     # other satellites left out now and then (a weaker geometry without G07) are never named
     raim = next(r for r in analysis.results if r.name == "raim")
     assert {s for a in raim.alarms for s in a.satellites} == {"G07"}
+    # 100 km is no reflection: nothing natural explains it
+    assert any(f.range_error_m and f.range_error_m > 9e4 for f in raim.findings)
+    assert not any(e.cause == "reflection" for i in analysis.verdict.incidents for e in i.explanations)
+
+
+def test_one_satellite_a_reflection_long_at_a_station_is_nlos_but_a_second_receiver_still_counts() -> None:
+    # the real GSI pair with G07 at station 0759 delayed 100 m from the start, its C/N0 as recorded
+    # (modelled NLOS: a building's reflection at a static receiver, which RAIM excludes)
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+
+    attack = "pr_delay:delay=100,svs=G07,start=0,receiver=0759"
+    spoofed, _ = apply_attack(read_log(GSI), parse_attack(attack))
+    verdict = analyze_table(with_solved_fixes(spoofed)).verdict
+    raim_alone, later = verdict.incidents
+    # RAIM alone (an independent class, medium until now): the reflection explains it
+    assert raim_alone.detectors == ("raim",) and raim_alone.confidence_of_alarms == "medium"
+    assert not raim_alone.is_spoofing and [e.cause for e in raim_alone.explanations] == ["reflection"]
+    assert raim_alone.explanations[0].text.startswith("G07 alone 101 m off")
+    # later the moved fix also breaks the surveyed baseline: a second receiver's evidence, which no
+    # reflection accounts for, keeps that incident spoofing
+    assert later.is_spoofing and later.unexplained == (Evidence.SECOND_RECEIVER,)
 
 
 def test_an_injected_ramp_on_the_real_husky_bag_is_an_incident_that_ends_with_the_attack(husky_bag: Path) -> None:

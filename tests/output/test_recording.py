@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from pipeline_support import circling_table
 from rerun.chunk import RrdReader
@@ -148,3 +149,40 @@ def test_a_recording_begun_for_an_analysis_that_failed_leaves_the_earlier_file_a
     other.begin(table)
     assert other.take(out, circling_table(ramp_mps=0.0)) is None
     assert out.read_bytes() == b"an earlier recording" and not (tmp_path / "a.rrd.part").exists()
+
+
+def test_the_overview_has_a_lane_per_kind_of_event_and_the_sky_shows_the_interference(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from spooflens.detectors.base import Alarm, DetectorResult
+    from spooflens.output.recording import overview_lanes
+    from spooflens.pipeline.events import classify
+    from spooflens.pipeline.evidence import Evidence
+
+    table = circling_table()
+    sats = pd.DataFrame(
+        {
+            "t_s": np.repeat(table.fixes["t_s"].to_numpy(), 6),
+            "receiver_id": "/gps/fix",
+            "sv_id": np.tile([f"G{k:02d}" for k in range(1, 7)], len(table.fixes)),
+            "cn0_dbhz": 40.0,
+        }
+    )
+    table = replace(table, satellites=sats)
+    jam = DetectorResult(
+        "interference", True, alarms=[Alarm(100.0, 130.0, 9.0, 101.0, 99.0)], evidence=Evidence.INTERFERENCE
+    )
+    odd = DetectorResult(
+        "gnss_consistency", True, alarms=[Alarm(200.0, 205.0, 40.0, 201.0, 199.0)], evidence=Evidence.GNSS_ONLY
+    )
+    verdict = classify(table, [jam, odd], decide([jam, odd]))
+    lanes = {name: level for name, _, level in overview_lanes([jam, odd], verdict, table.duration_s)}
+    assert {"events: jamming", "events: unknown", "spoofing incidents"} <= set(lanes)
+    assert lanes["events: jamming"].max() > lanes["events: jamming"].min()
+    out = tmp_path / "k.rrd"
+    write_recording(out, table, [jam, odd], [], verdict)
+    rows = _rows(out)
+    assert rows["/gnss/gps/fix/cn0_dbhz/interference"] > 0 and rows["/gnss/gps/fix/cn0_dbhz/G01"] == 300
+    assert rows["/overview/events__jamming"] > 0

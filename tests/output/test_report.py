@@ -174,8 +174,19 @@ def test_report_names_every_evidence_class_and_method(spoofed: Run) -> None:
     text = spoofed.html.read_text()
     timeline = re.search(r'id="plot-timeline".*?</figure>', text, re.S)
     assert timeline is not None
-    for label in {a["evidence_label"] for a in spoofed.summary["analyses"] if a["evidence_label"]}:
+    # a strip per class whose analyses ran, and the lane of the event kinds above them
+    ran = {a["evidence_label"] for a in spoofed.summary["analyses"] if a["evidence_label"] and a["ran"]}
+    for label in ran | {"events by kind", "spoofing"}:
         assert label in timeline.group(0)
+    # the analyses that did not run: one folded list at the end of the page, after every figure
+    not_run = [a for a in spoofed.summary["analyses"] if not a["ran"]]
+    folded = text[text.index('<details id="not-run">') :]
+    assert text.rindex('<figure class="plot"') < text.index('<details id="not-run">')
+    assert f"{len(not_run)} analyses did not run" in folded
+    for a in not_run:
+        assert f"<b>{a['name']}</b>" in folded
+    verdict = text[text.index('<section id="verdict">') : text.index('<section id="timeline">')]
+    assert "did not run</td>" not in verdict and "listed at the end of the page" in verdict
     methods = text[text.index('<section id="methods">') :]
     for a in spoofed.summary["analyses"]:
         if a["ran"]:

@@ -143,6 +143,6 @@ def test_the_toy_detector_does_not_run_where_its_precondition_fails_and_says_why
     assert not entry["ran"] and entry["reason"] == "6 fixes: the toy reads its fix period off 10 or more"
     assert entry["precondition"]["name"] == TEN_FIXES
     assert (
-        f"<li><b>{TOY_DETECTOR_NAME}</b>: its model requires what this log does not have ({TEN_FIXES}): 6 fixes: "
-        "the toy reads its fix period off 10 or more</li>"
+        f"<li><b>{TOY_DETECTOR_NAME}</b> (GNSS-only consistency): its model requires what this log does not have "
+        f"({TEN_FIXES}): 6 fixes: the toy reads its fix period off 10 or more</li>"
     ) in render_report(analysis)

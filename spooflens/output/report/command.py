@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from spooflens.cli import fail_on_spoof_option, imu_grade_option, quiet_option, topic_option
+from spooflens.cli import fail_on_jam_option, fail_on_spoof_option, imu_grade_option, quiet_option, topic_option
 from spooflens.service import analyse_log, finish
 
 
@@ -25,6 +25,7 @@ from spooflens.service import analyse_log, finish
 @imu_grade_option
 @quiet_option
 @fail_on_spoof_option
+@fail_on_jam_option
 def report(
     log: Path,
     output: Path | None,
@@ -33,6 +34,7 @@ def report(
     imu_grade: str | None,
     quiet: bool,
     fail_on_spoof: bool,
+    fail_on_jam: bool,
 ) -> int:
     """Analyse LOG and write the operator report: one self-contained HTML page (opens offline anywhere)."""
     from spooflens.output.report import write_report
@@ -57,4 +59,4 @@ def report(
             click.echo(f"{prefix}report: {path} ({size / 1e6:.2f} MB); open it in any browser, no network needed")
     if json_path:
         json_path.write_text(json.dumps(segments_summary(summaries), indent=2))
-    return finish(log, analyses, fail_on_spoof)
+    return finish(log, analyses, fail_on_spoof, fail_on_jam)

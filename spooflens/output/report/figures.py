@@ -28,7 +28,7 @@ from spooflens.output.report.decimate import minmax, stride
 from spooflens.pipeline.departure import reconstructed_tracks
 from spooflens.pipeline.evidence import ORDER, Evidence, label
 from spooflens.pipeline.registry import DetectorInfo
-from spooflens.pipeline.verdict import Incident, Verdict
+from spooflens.pipeline.verdict import KIND_LABELS, Incident, Kind, Verdict
 
 FloatArray = NDArray[np.float64]
 WIDTH_IN = 10.0
@@ -42,6 +42,14 @@ MAX_LABELLED = 12
 # one colour per evidence class, in ORDER; a class added later is drawn dark grey until it gets one
 _CLASS_PALETTE = ("#0ca678", "#e67700", "#7048e8", "#2b8a3e", "#1c7ed6", "#0b7285", "#c2255c", "#5f3dc4")
 CLASS_COLOURS = dict(zip(ORDER, _CLASS_PALETTE, strict=False))
+KIND_COLOURS = {
+    Kind.SPOOFING: "#c92a2a",
+    Kind.JAMMING: "#d9480f",
+    Kind.DEGRADATION: "#1971c2",
+    Kind.RECEIVER_FAULT: "#6741d9",
+    Kind.UNKNOWN: ANOMALY_COLOUR,
+}
+INTERFERENCE_COLOUR = KIND_COLOURS[Kind.JAMMING]
 STYLE: Any = {
     "svg.fonttype": "none",  # text stays text: small, searchable, selectable
     "font.size": 8.5,
@@ -178,30 +186,52 @@ def evidence_classes(results: Sequence[DetectorResult], infos: dict[str, Detecto
     return [c for c in ORDER if c in declared]
 
 
+def _event_lane(ax: Axes, verdict: Verdict, end: float) -> None:
+    """One row per kind of event the verdict found: each event a bar from its onset to its end."""
+    kinds = [k for k in Kind if verdict.events_of(k)]
+    for y, kind in enumerate(kinds):
+        colour = KIND_COLOURS[kind]
+        bars = [
+            (min(e.onset_s, e.start_s), max(e.end_s - min(e.onset_s, e.start_s), end / 800))
+            for e in verdict.events_of(kind)
+        ]
+        ax.broken_barh(bars, (-y - 0.32, 0.64), facecolors=colour, edgecolors=colour)
+    for e in verdict.events:
+        if e.followed_by is not None:  # one attack sequence: jamming, then the takeover
+            then = verdict.events[e.followed_by]
+            y0, y1 = -kinds.index(e.kind), -kinds.index(then.kind)
+            ax.annotate("", (min(then.onset_s, then.start_s), y1), (e.end_s, y0), arrowprops={"arrowstyle": "->"})
+    names = [KIND_LABELS[k] for k in kinds] or ["(no event)"]
+    ax.set_yticks([-k for k in range(len(names))], names)
+    ax.yaxis.tick_right()
+    ax.set_ylim(-len(names) + 0.4, 0.6)
+    ax.set_ylabel("events by kind", rotation=0, ha="right", va="center", fontweight="bold")
+    ax.grid(axis="y", visible=False)
+    ax.spines["left"].set_visible(False)
+
+
 def timeline(
     table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict, infos: dict[str, DetectorInfo]
 ) -> Plot:
-    classes = evidence_classes(results, infos)
-    lanes: dict[Evidence, list[DetectorResult]] = {c: [r for r in results if r.evidence == c] for c in classes}
-    heights = [max(1, len(lanes[c])) for c in classes]
-    fig = Figure(figsize=(WIDTH_IN, 0.9 + 0.42 * sum(heights) + 0.25 * len(classes)), layout="constrained")
-    axes = fig.subplots(len(classes), 1, sharex=True, squeeze=False, gridspec_kw={"height_ratios": heights})[:, 0]
+    classes = [c for c in evidence_classes(results, infos) if any(r.ran and r.evidence == c for r in results)]
+    lanes: dict[Evidence, list[DetectorResult]] = {
+        c: [r for r in results if r.evidence == c and r.ran] for c in classes
+    }
+    kinds = max(1, sum(1 for k in Kind if verdict.events_of(k)))
+    heights = [kinds] + [max(1, len(lanes[c])) for c in classes]
+    rows = len(heights)
+    fig = Figure(figsize=(WIDTH_IN, 0.9 + 0.42 * sum(heights) + 0.25 * rows), layout="constrained")
+    axes = fig.subplots(rows, 1, sharex=True, squeeze=False, gridspec_kw={"height_ratios": heights})[:, 0]
     end = max(table.duration_s, 1e-3)
-    for ax, c in zip(axes, classes, strict=True):
+    _event_lane(axes[0], verdict, end)
+    for ax, c in zip(axes[1:], classes, strict=True):
         detectors = lanes[c]
         colour = CLASS_COLOURS.get(c, "#495057")
         _shade_incidents(ax, verdict.incidents, label_them=True)
         names = []
-        for k, r in enumerate(detectors or [None]):
+        for k, r in enumerate(detectors):
             y = -k
-            if r is None:
-                names.append("(no detector registered)")
-                ax.text(0.01 * end, y, "no detector of this class is registered", va="center", color="#868e96")
-                continue
             names.append(r.name + (" (advisory)" if r.advisory else ""))
-            if not r.ran:
-                ax.text(0.01 * end, y, f"not run: {r.reason}"[:140], va="center", color="#868e96", fontsize=7.5)
-                continue
             bars = [(a.start_s, max(a.end_s - a.start_s, end / 800)) for a in r.alarms]
             face = "#ced4da" if r.advisory else colour
             ax.broken_barh(bars, (y - 0.32, 0.64), facecolors=face, edgecolors=face, hatch="//" if r.advisory else None)
@@ -219,17 +249,25 @@ def timeline(
     axes[-1].set_xlabel(_time_label(table))
     if len(verdict.incidents) <= MAX_LABELLED:
         for i, inc in enumerate(verdict.incidents):
-            tag = f"incident {i + 1} ({inc.confidence})" if inc.is_spoofing else f"anomaly {i + 1} (not spoofing)"
+            kind = inc.kind if inc.kind is not None else Kind.SPOOFING if inc.is_spoofing else Kind.UNKNOWN
+            what = {Kind.SPOOFING: f"incident {i + 1} ({inc.confidence})", Kind.UNKNOWN: f"anomaly {i + 1}"}.get(
+                kind, f"{i + 1}: {KIND_LABELS[kind]}"
+            )
+            tag = what if kind == Kind.SPOOFING else f"{what} (not spoofing)"
             axes[0].annotate(tag, (inc.onset_s, 1.0), xycoords=("data", "axes fraction"), va="bottom", fontsize=7.5)
     else:
         tag = f"{len(verdict.incidents)} incidents and anomalies shaded: the verdict's table numbers them"
         axes[0].annotate(tag, (0.0, 1.0), xycoords="axes fraction", va="bottom", fontsize=7.5)
     caption = (
-        "One strip per evidence class: each detector's alarms as bars (advisory rules hatched grey, not counted), "
-        "receiver findings as diamonds. Incidents are shaded across all strips from their estimated onset "
+        "Top: one lane per kind of event (spoofing, jamming / interference, degradation, receiver fault, "
+        "unexplained anomaly), an arrow where a takeover followed interference. Below, one strip per evidence "
+        "class whose analyses ran: each detector's alarms as bars (advisory rules hatched grey, not counted), "
+        "receiver findings as diamonds. Incidents are shaded across the strips from their estimated onset "
         "(dashed) to their end."
     )
-    return Plot("timeline", "Timeline of alarms by evidence class", caption, _svg(fig, "timeline"), "timeline")
+    return Plot(
+        "timeline", "Timeline of events and of alarms by evidence class", caption, _svg(fig, "timeline"), "timeline"
+    )
 
 
 def _time_label(table: EpochTable) -> str:
@@ -495,6 +533,16 @@ def _baseline(ax: Axes, t: FloatArray, v: FloatArray, incidents: Sequence[Incide
     ax.axhline(mid, color="#2b8a3e", ls="--", lw=0.9, label="baseline (median, 95% band outside incidents)")
 
 
+def _shade_interference(ax: Axes, verdict: Verdict, rid: str) -> bool:
+    """The jamming / interference events of this receiver (or of every receiver), hatched; whether any."""
+    events = [e for e in verdict.events_of(Kind.JAMMING) if not e.receivers or rid in e.receivers]
+    for e in events:
+        ax.axvspan(
+            min(e.onset_s, e.start_s), e.end_s, facecolor="none", edgecolor=INTERFERENCE_COLOUR, hatch="///", lw=0
+        )
+    return bool(events)
+
+
 def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
     plots = []
     obs = table.observations
@@ -510,6 +558,7 @@ def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
         fig, axes = _figure(rows, 1.35)
         t = fx["t_s"].to_numpy(dtype=float)
         i = 0
+        jammed = False
         for name, text in cols:
             ax = axes[i]
             v = fx[name].to_numpy(dtype=float)
@@ -517,6 +566,7 @@ def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
             ax.plot(td, vd, color="#1c7ed6", drawstyle="steps-post")
             _baseline(ax, t, v, verdict.incidents)
             _shade_incidents(ax, verdict.incidents)
+            jammed = _shade_interference(ax, verdict, rid)
             ax.set_ylabel(text, rotation=0, ha="right", va="center")
             i += 1
         if has_raw:
@@ -527,6 +577,7 @@ def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
             ax.plot(*minmax(te, n), color="#1c7ed6", drawstyle="steps-post")
             _baseline(ax, te, n, verdict.incidents)
             _shade_incidents(ax, verdict.incidents)
+            jammed = _shade_interference(ax, verdict, rid)
             ax.set_ylabel("satellites tracked (raw)", rotation=0, ha="right", va="center")
             i += 1
             if np.isfinite(cn0).any():
@@ -537,13 +588,15 @@ def receiver_quality(table: EpochTable, verdict: Verdict) -> list[Plot]:
                 ax.plot(td, sd[:, 0], color="#1c7ed6", label="mean")
                 _baseline(ax, te, stats[:, 0], verdict.incidents)
                 _shade_incidents(ax, verdict.incidents)
+                jammed = _shade_interference(ax, verdict, rid)
                 ax.set_ylabel("C/N0 of tracked satellites (dB-Hz)", rotation=0, ha="right", va="center")
         axes[0].legend(loc="upper left") if axes[0].get_legend_handles_labels()[0] else None
         axes[-1].set_xlabel(_time_label(table))
         key = f"receiver:{rid}"
         caption = (
             "Everything this receiver says about itself that the log holds, against the log's own baseline "
-            "(green: median and 95% band outside the incidents); incidents shaded."
+            "(green: median and 95% band outside the incidents); incidents shaded"
+            + ("; jamming / interference hatched orange." if jammed else ".")
         )
         plots.append(Plot(key, f"Receiver quality: {rid}", caption, _svg(fig, key), "receiver"))
     return plots

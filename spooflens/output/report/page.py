@@ -27,7 +27,7 @@ from spooflens.pipeline.departure import Departure, gnss_departure
 from spooflens.pipeline.evidence import EVIDENCE, label
 from spooflens.pipeline.registry import DetectorInfo
 from spooflens.pipeline.run import Analysis
-from spooflens.pipeline.verdict import Incident, Verdict
+from spooflens.pipeline.verdict import KIND_LABELS, Incident, Kind, Verdict
 
 CSS = """
 body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;color:#212529;margin:0;
@@ -38,7 +38,7 @@ h3{font-size:14.5px;margin:18px 0 4px}
 nav{font-size:13px;color:#495057;margin-bottom:8px}nav a{margin-right:12px;color:#1864ab}
 .verdict{border-radius:6px;padding:12px 16px;margin:10px 0;color:#fff}
 .verdict .big{font-size:24px;font-weight:700;letter-spacing:.02em}
-.spoofed{background:#c92a2a}.clean{background:#2b8a3e}.none{background:#868e96}
+.spoofed{background:#c92a2a}.jammed{background:#d9480f}.clean{background:#2b8a3e}.none{background:#868e96}
 .verdict p{margin:6px 0 0}
 table{border-collapse:collapse;font-size:12.5px;margin:6px 0;width:100%}
 th,td{border:1px solid #dee2e6;padding:3px 6px;text-align:left;vertical-align:top}
@@ -126,14 +126,60 @@ def _incident_sentence(table: EpochTable, inc: Incident, n: int, deps: Sequence[
     )
 
 
+def _kind_of(inc: Incident) -> Kind:
+    return inc.kind if inc.kind is not None else Kind.SPOOFING if inc.is_spoofing else Kind.UNKNOWN
+
+
+def _kind_cell(inc: Incident) -> str:
+    kind = _kind_of(inc)
+    if kind == Kind.SPOOFING:
+        return "spoofing"
+    if kind == Kind.UNKNOWN and inc.confidence_of_alarms != "low":
+        return "anomaly (one evidence class left once the others were explained: not spoofing)"
+    if kind == Kind.UNKNOWN:
+        return "anomaly (no second class at the same time: not spoofing)"
+    return f"{KIND_LABELS[kind]} (not spoofing)"
+
+
+def _explanation_cell(inc: Incident) -> str:
+    """The natural causes weighed: for a spoofing incident those that held but did not reach its evidence."""
+    texts = [e.text for e in inc.explanations]
+    if not texts:
+        return "-"
+    if inc.is_spoofing:
+        return f"weighed, not enough ({', '.join(label(c) for c in inc.unexplained)} unexplained): " + "; ".join(texts)
+    return "; ".join(texts)
+
+
+def _banner(verdict: Verdict) -> tuple[str, str]:
+    """(css class, big words): the kind of event first."""
+    if not verdict.detectors_run:
+        return "none", "NO VERDICT"
+    if verdict.spoofed:
+        return "spoofed", "SPOOFING DETECTED"
+    if verdict.events_of(Kind.JAMMING):
+        return "jammed", "JAMMING / INTERFERENCE"
+    return "clean", "NO SPOOFING DETECTED"
+
+
+def _kind_sentences(verdict: Verdict) -> list[str]:
+    """One sentence per kind of event other than spoofing and unexplained anomalies: its first event."""
+    out = []
+    for kind in (Kind.JAMMING, Kind.DEGRADATION, Kind.RECEIVER_FAULT):
+        events = verdict.events_of(kind)
+        if events:
+            more = f" ({len(events) - 1} more in the table below)" if len(events) > 1 else ""
+            first = events[0]
+            why = f": {first.evidence_for[0]}" if first.evidence_for else ""
+            end = "the end of the log" if first.ongoing_at_end else f"{first.end_s:.2f} s"
+            name = KIND_LABELS[kind]
+            out.append(f"{name[:1].upper()}{name[1:]} from {first.start_s:.2f} s to {end}{why}{more}.")
+    return out
+
+
 def verdict_section(analysis: Analysis) -> str:
     table, verdict, results = analysis.table, analysis.verdict, analysis.results
-    if not verdict.detectors_run:
-        kind, big = "none", "NO VERDICT"
-    elif verdict.spoofed:
-        kind, big = "spoofed", "SPOOFING DETECTED"
-    else:
-        kind, big = "clean", "NO SPOOFING DETECTED"
+    kind, big = _banner(verdict)
     deciding = verdict.deciding_incident
     deps = gnss_departure(table, results, verdict, deciding) if deciding is not None and deciding.is_spoofing else []
     lines = [f'<div class="verdict {kind}" id="verdict-banner"><div class="big">{big}</div>']
@@ -141,6 +187,9 @@ def verdict_section(analysis: Analysis) -> str:
     if deciding is not None and deciding.is_spoofing:
         n = verdict.incidents.index(deciding) + 1
         lines.append(f"<p>{esc(_incident_sentence(table, deciding, n, deps))}</p>")
+        if deciding.explanations:
+            lines.append(f"<p>Natural causes weighed: {esc(_explanation_cell(deciding))}.</p>")
+    lines += [f"<p>{esc(text)}</p>" for text in _kind_sentences(verdict)]
     lines.append("</div>")
     if verdict.incidents:
         rows = []
@@ -149,14 +198,20 @@ def verdict_section(analysis: Analysis) -> str:
             rows.append(
                 (
                     i,
-                    "spoofing" if inc.is_spoofing else "anomaly (no second class at the same time: not spoofing)",
+                    _kind_cell(inc),
                     _when(table, inc.onset_s)
                     + (f", interval {_interval(inc.onset_interval_s)}" if inc.onset_interval_s else ""),
                     f"{inc.start_s:.2f} s",
                     _end(table, inc),
                     ", ".join(inc.detectors),
                     _evidence_text(inc),
-                    inc.confidence,
+                    inc.confidence
+                    + (
+                        f" (alarms alone: {inc.confidence_of_alarms})"
+                        if inc.confidence_of_alarms != inc.confidence
+                        else ""
+                    ),
+                    _explanation_cell(inc),
                     ", ".join(inc.receivers) or "-",
                     ", ".join(inc.satellites) or "-",
                     _departures(d) or "-",
@@ -179,7 +234,8 @@ INCIDENT_COLUMNS = (
     "end",
     "detectors",
     "evidence",
-    "confidence",
+    "confidence of spoofing",
+    "natural explanation",
     "receivers",
     "satellites",
     "GNSS off the reconstructed track",
@@ -194,22 +250,28 @@ def incidents_table(rows: Sequence[Sequence[object]], spoofing: Sequence[bool]) 
         return _table(INCIDENT_COLUMNS, rows)
     shown = [r for r, s in zip(rows, spoofing, strict=True) if s]
     folded = [r for r, s in zip(rows, spoofing, strict=True) if not s]
-    summary = f"{len(folded)} anomalies (one evidence class each, not spoofing): show them"
+    summary = f"{len(folded)} anomalies and natural events (not spoofing): show them"
     parts = [_table(INCIDENT_COLUMNS, shown)] if shown else []
     return "".join([*parts, f"<details><summary>{esc(summary)}</summary>{_table(INCIDENT_COLUMNS, folded)}</details>"])
 
 
 def _detector_status(results: Sequence[DetectorResult], verdict: Verdict) -> str:
+    """The detectors that ran; those that did not are listed, folded, at the end of the page."""
     rows = []
     for r in results:
-        if not r.is_detector:
+        if not r.is_detector or not r.ran:
             continue
-        status = "counted" if r.name in verdict.detectors_run else "advisory" if r.advisory else "did not run"
-        alarms = len(r.alarms) if r.ran else "-"
-        rows.append((r.name, label(r.evidence) if r.evidence else "", status, alarms, r.reason))
-    if not rows:
+        status = "counted" if r.name in verdict.detectors_run else "advisory"
+        rows.append((r.name, label(r.evidence) if r.evidence else "", status, len(r.alarms), r.reason))
+    not_run = sum(not r.ran for r in results)
+    if not rows and not not_run:
         return ""
-    return "<h3>Detectors</h3>" + _table(("detector", "evidence", "status", "alarms", "note"), rows, numeric=(3,))
+    table = _table(("detector", "evidence", "status", "alarms", "note"), rows, numeric=(3,)) if rows else ""
+    later = (
+        f'<p class="muted small">{not_run} analyses did not run on this log: '
+        '<a href="#not-run">listed at the end of the page</a>.</p>'
+    )
+    return "<h3>Detectors</h3>" + table + (later if not_run else "")
 
 
 def _plots(plots: Sequence[Plot]) -> str:
@@ -329,13 +391,15 @@ def methods_section(results: Sequence[DetectorResult], infos: dict[str, Detector
             out.append(f'<p class="small muted">Facts: {esc(facts)}</p>')
     not_run = [r for r in results if not r.ran]
     if not_run:
-        out.append("<h3>Did not run</h3><ul>")
+        what = f"{len(not_run)} analyses did not run on this log (what each lacks)"
+        out.append(f'<details id="not-run"><summary>{what}</summary><ul>')
         for r in not_run:
             why = esc(r.reason)
             if r.precondition is not None:
                 why = f"its model requires what this log does not have ({esc(r.precondition.name)}): {why}"
-            out.append(f"<li><b>{esc(r.name)}</b>: {why}</li>")
-        out.append("</ul>")
+            kind = f" ({esc(label(r.evidence))})" if r.evidence else ""
+            out.append(f"<li><b>{esc(r.name)}</b>{kind}: {why}</li>")
+        out.append("</ul></details>")
     return "\n".join(out)
 
 

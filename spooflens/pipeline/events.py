@@ -1,0 +1,222 @@
+"""The kind of every event, the third step of the verdict (`spooflens.pipeline.run.assess`).
+
+For each incident the natural explanations of its alarms are weighed (`spooflens.pipeline.explanations`);
+the alarms they account for stay in the incident and count for nothing, so SPOOFING needs evidence no
+natural cause covers, while evidence a cause does not reach (an inertial departure confirmed by coasting,
+a second receiver, the log's clock) keeps its weight whatever the sky did. Then each incident is:
+
+- spoofing: still of medium or high confidence;
+- jamming: interference evidence (the interference detector's class, the receiver's jamming state,
+  jamming indicator, noise or AGC) and no spoofing;
+- degradation or receiver fault: every evidence interval accounted for by natural causes, the kind of
+  the first of them that names one;
+- unknown: an anomaly nothing explains (one evidence class, never spoofing).
+
+Interference alarms in a spoofing incident that begin before its first spoofing evidence are an event of
+their own, and a jamming event whose end lies within `SEQUENCE_S` of a spoofing event's onset is linked
+to it (`follows` / `followed_by`): jamming to break the receiver's lock, then the takeover.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from spooflens.detectors.base import DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.pipeline.evidence import EVIDENCE, Evidence, label
+from spooflens.pipeline.explanations import Weighed, explain, incident_alarms, scene_of
+from spooflens.pipeline.verdict import Event, Incident, Kind, Verdict
+
+# a takeover within this long of the end of the interference is one attack with it (jam, then spoof):
+# receivers re-acquire within seconds to a minute of losing lock (hot start), the window a spoofer uses
+SEQUENCE_S = 60.0
+
+
+@dataclass(frozen=True)
+class _Decided:
+    kind: Kind
+    confidence: str
+    evidence_for: tuple[str, ...]
+    evidence_against: tuple[str, ...]
+
+
+def _classes_text(classes: Sequence[Evidence]) -> str:
+    return ", ".join(label(c) for c in classes) or "none"
+
+
+def _detectors_of(incident: Incident, results: Sequence[DetectorResult], cls: Evidence) -> list[str]:
+    return sorted({r.name for a, r in incident_alarms(results, incident) if r.evidence == cls})
+
+
+def _spoofing(incident: Incident, weighed: Weighed, results: Sequence[DetectorResult]) -> _Decided:
+    support = tuple(
+        f"{label(c)} ({', '.join(_detectors_of(incident, results, c)) or 'coasting check'})"
+        for c in incident.unexplained
+    )
+    reached = _classes_text([c for c in incident.unexplained if EVIDENCE[c].independent] or incident.unexplained)
+    against = tuple(f"{e.text}; it does not account for {reached}" for e in weighed.explanations) + tuple(
+        f"ruled out {r}" for r in weighed.ruled_out
+    )
+    return _Decided(Kind.SPOOFING, incident.confidence, support, against)
+
+
+def _not_spoofing(incident: Incident) -> str:
+    if incident.confidence_of_alarms == "low":
+        return f"not spoofing: one evidence class only ({_classes_text(incident.corroborating)})"
+    explained = [c for c in incident.corroborating if c not in incident.unexplained]
+    return (
+        f"not spoofing: the alarms alone gave {incident.confidence_of_alarms} confidence "
+        f"({_classes_text(incident.corroborating)}), natural causes account for {_classes_text(explained)}"
+    )
+
+
+def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResult]) -> _Decided:
+    if incident.is_spoofing:
+        return _spoofing(incident, weighed, results)
+    jamming = [e for e in weighed.explanations if e.kind == Kind.JAMMING]
+    detector = Evidence.INTERFERENCE in incident.evidence
+    ruled_out = tuple(f"ruled out {r}" for r in weighed.ruled_out)
+    marks = tuple(f"also a spoofer's mark: {m}" for m in weighed.spoofer_marks)
+    if jamming or detector or weighed.interference:
+        # the receiver's own signs count for the kind even where a spoofer's mark keeps them from explaining
+        # any alarm away: a receiver jammed and flagging spoofing is jammed, and its flag is listed
+        receiver_signs = tuple(x for x in weighed.interference if x not in {f for e in jamming for f in e.facts})
+        support = (*(e.text for e in jamming), *receiver_signs)
+        if detector:
+            names = ", ".join(_detectors_of(incident, results, Evidence.INTERFERENCE))
+            support = (f"{label(Evidence.INTERFERENCE)} ({names})", *support)
+        sources = int(detector) + int(bool(weighed.interference))
+        confidence = "high" if sources >= 2 else "medium"
+        return _Decided(Kind.JAMMING, confidence, support, (_not_spoofing(incident), *marks, *ruled_out))
+    counted = [sp for sp in incident.spans if sp[0] != Evidence.INTERFERENCE]
+    all_explained = bool(counted) and all(sp in set(incident.explained_spans) for sp in counted)
+    named = [e for e in weighed.explanations if e.kind not in (Kind.UNKNOWN, Kind.JAMMING)]
+    if all_explained and named:
+        kind = named[0].kind
+        mine = [e for e in named if e.kind == kind]
+        most = max(len(e.facts) for e in mine)
+        confidence = "high" if most >= 3 else "medium" if most == 2 else "low"
+        others = tuple(e.text for e in weighed.explanations if e.kind != kind)
+        return _Decided(kind, confidence, tuple(e.text for e in mine), (_not_spoofing(incident), *others, *ruled_out))
+    support = tuple(e.text for e in weighed.explanations)
+    classes = incident.unexplained or incident.evidence
+    detectors = sorted({n for c in classes for n in _detectors_of(incident, results, c)})
+    alone = f"{_classes_text(classes)} ({', '.join(detectors)})"
+    return _Decided(Kind.UNKNOWN, "low", (alone, *support), (_not_spoofing(incident), *ruled_out))
+
+
+def _alarm_names(incident: Incident, results: Sequence[DetectorResult], attribute: str) -> tuple[str, ...]:
+    # `systems` and `bands` are named by the detectors that know them (the interference detector)
+    found = {x for a, _ in incident_alarms(results, incident) for x in getattr(a, attribute, ())}
+    return tuple(sorted(found))
+
+
+def _event(
+    incident: Incident, index: int, decided: _Decided, results: Sequence[DetectorResult], after_s: float | None = None
+) -> Event:
+    """The incident as an event; `after_s`: where its spoofing evidence began, after interference of its own."""
+    if after_s is not None:
+        incident = replace(incident, start_s=max(incident.start_s, after_s))
+    end = "the end of the log" if incident.ongoing_at_end else f"{incident.end_s:.2f} s"
+    # a spoofing event names every class that made it, another kind the cause that decided it
+    what = "; ".join(decided.evidence_for) if decided.kind == Kind.SPOOFING else next(iter(decided.evidence_for), "")
+    text = (
+        f"{decided.kind.value} from {min(incident.onset_s, incident.start_s):.2f} s (alarm {incident.start_s:.2f} s) "
+        f"to {end}, confidence {decided.confidence}" + (f": {what}" if what else "")
+    )
+    return Event(
+        decided.kind,
+        incident.start_s,
+        incident.end_s,
+        incident.onset_s,
+        decided.confidence,
+        index,
+        text,
+        decided.evidence_for,
+        decided.evidence_against,
+        incident.onset_interval_s,
+        incident.end_interval_s,
+        incident.ongoing_at_end,
+        incident.receivers,
+        incident.satellites,
+        _alarm_names(incident, results, "systems"),
+        _alarm_names(incident, results, "bands"),
+    )
+
+
+def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) -> Event | None:
+    """The interference that began a spoofing incident before its first spoofing evidence, as an event."""
+    jam = [sp for sp in incident.spans if sp[0] == Evidence.INTERFERENCE]
+    other = [sp[1] for sp in incident.spans if sp[0] != Evidence.INTERFERENCE]
+    lead = [sp for sp in jam if other and sp[1] < min(other)]
+    if not lead:
+        return None
+    start, end = min(sp[1] for sp in lead), min(max(sp[2] for sp in lead), min(other))
+    names = ", ".join(_detectors_of(incident, results, Evidence.INTERFERENCE))
+    text = (
+        f"jamming from {start:.2f} s to {end:.2f} s, before the spoofing evidence: "
+        f"{label(Evidence.INTERFERENCE)} ({names})"
+    )
+    return Event(
+        Kind.JAMMING,
+        start,
+        end,
+        start,
+        "medium",
+        index,
+        text,
+        (f"{label(Evidence.INTERFERENCE)} ({names})",),
+        ("interference corroborates no spoofing by itself",),
+        receivers=incident.receivers,
+        satellites=incident.satellites,
+        systems=_alarm_names(incident, results, "systems"),
+        bands=_alarm_names(incident, results, "bands"),
+    )
+
+
+def link_sequences(events: list[Event], within_s: float = SEQUENCE_S) -> list[Event]:
+    """Each jamming event linked to the first spoofing event whose onset follows its end within `within_s`."""
+    out = list(events)
+    for j, jam in enumerate(out):
+        if jam.kind != Kind.JAMMING or jam.followed_by is not None:
+            continue
+        for s, spoof in enumerate(out):
+            starts = min(spoof.onset_s, spoof.start_s)
+            if spoof.kind == Kind.SPOOFING and spoof.follows is None and jam.start_s <= starts <= jam.end_s + within_s:
+                out[j] = replace(jam, followed_by=s)
+                out[s] = replace(spoof, follows=j)
+                break
+    return out
+
+
+def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict) -> Verdict:
+    """The verdict with every incident's natural explanations weighed and every incident and anomaly an
+    event of its kind."""
+    scene = scene_of(table, results)
+    spoofing_before = [i for i in verdict.incidents if i.is_spoofing]
+    incidents: list[Incident] = []
+    events: list[Event] = []
+    for k, inc in enumerate(verdict.incidents):
+        weighed = explain(table, results, inc, scene=scene)
+        inc = inc.explained_by(weighed.explanations, weighed.explained_spans)
+        decided = _decide(inc, weighed, results)
+        inc = replace(inc, kind=decided.kind)
+        incidents.append(inc)
+        lead = _lead_in(inc, k, results) if decided.kind == Kind.SPOOFING else None
+        if lead is not None:
+            events.append(lead)
+        events.append(_event(inc, k, decided, results, lead.end_s if lead is not None else None))
+    events.sort(key=lambda e: (e.start_s, e.kind != Kind.JAMMING))
+    # the tracks reconstructed for incidents no longer called spoofing go with them
+    reconstructed = verdict.reconstructed
+    if len(reconstructed) == len(spoofing_before):
+        still = {id(v) for v, inc in zip(verdict.incidents, incidents, strict=True) if inc.is_spoofing}
+        reconstructed = tuple(tr for tr, v in zip(reconstructed, spoofing_before, strict=True) if id(v) in still)
+    return replace(
+        verdict,
+        spoofed=any(i.is_spoofing for i in incidents),
+        incidents=tuple(incidents),
+        events=tuple(link_sequences(events)),
+        reconstructed=reconstructed,
+    )

@@ -1,0 +1,642 @@
+"""Natural explanations of an incident's evidence: what, besides a spoofer, makes these alarms.
+
+Each signature is a stated test on the log's own data at an alarm's time (`spooflens.pipeline.indicators`:
+the receiver's indicators against their level just before, its sky, its time, the other receivers) that
+names a natural cause and the alarm it accounts for:
+
+- degradation (multipath, NLOS, obstruction, foliage): the C/N0 falls and one more of DOP or reported
+  accuracy up, satellites lost, the fix lost, while the fix moves no more than a reflection moves it;
+- interference: the receiver's jamming state, jamming indicator, noise or AGC moved (the interference
+  detector's class, when it ran);
+- convergence: the receiver's first minutes after its first fix (or after the fix was lost for 10 s),
+  its DOP, satellites, fix type or accuracy still settling;
+- mode switch: the fix type changed (SBAS, DGNSS, RTK float/fixed) where the fix moved, by metres;
+- time faults: the receiver's time moved against the log's clock by whole GPS week epochs (1024 weeks:
+  a week rollover) or by a whole number of leap seconds;
+- one satellite's range a reflection's length off (NLOS), its C/N0 not raised;
+- a satellite the receiver never used in its fix from the log's start cannot have moved it.
+
+Before any of the receiver's own indicators is read as a natural cause, the marks a spoofer leaves and
+nature does not are looked for (`spoofer_marks`): C/N0 raised above its level or above what the sky
+gives, the satellites at one C/N0 at their usual level, the receiver's own spoofing flag, its time moved
+against the log's clock. Where one is found no natural explanation of the GNSS-internal alarms holds.
+No signature here accounts for an inertial, heading or fleet alarm: their references do not see the
+sky. The tests' numbers and the real logs that show each are in docs/verdict.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.pipeline.evidence import Evidence, Span
+from spooflens.pipeline.indicators import Receiver, Window, running_median
+from spooflens.pipeline.verdict import Explanation, Incident, Kind
+from spooflens.schema import FixType
+
+WEEK_S = 604_800.0
+ROLLOVER_S = 1024 * WEEK_S
+RECEIVER_EVIDENCE = "receiver_evidence"
+GNSS_CONSISTENCY = "gnss_consistency"
+# the alarms a receiver's indicators can account for: the fix against itself, the receiver's indicators
+INDICATOR_DETECTORS = frozenset({GNSS_CONSISTENCY, RECEIVER_EVIDENCE})
+FIX_NAMES = {
+    FixType.FIX_2D: "2D",
+    FixType.FIX_3D: "3D",
+    FixType.SBAS: "SBAS",
+    FixType.DGNSS: "DGNSS",
+    FixType.RTK_FLOAT: "RTK float",
+    FixType.RTK_FIXED: "RTK fixed",
+}
+
+
+@dataclass(frozen=True)
+class ExplanationOptions:
+    window_before_s: float = 10.0  # a cause precedes the alarm it makes: an alarm's window opens this long before
+    window_after_s: float = 2.0
+    # degradation: a fall of the C/N0, and one more sign
+    min_cn0_drop_db: float = 3.0
+    # or a sky weak all along, before the alarm and during it (indoors, under a canopy, a poor antenna: an
+    # open sky gives 30-50 dB-Hz to a small antenna, a phone's 25-45): at the tracking floor a receiver
+    # loses satellites and its fix without any further fall; no spoofer is weaker than the sky it overpowers
+    weak_sky_dbhz: float = 25.0
+    dop_ratio: float = 1.5
+    dop_min_rise: float = 0.3
+    accuracy_ratio: float = 1.5
+    accuracy_min_rise_m: float = 1.0
+    min_satellites_lost: int = 2
+    satellites_lost_fraction: float = 0.2
+    fix_lost_periods: float = 3.0
+    fix_lost_min_s: float = 2.0
+    # NLOS in urban canyons delays a signal by tens of metres, rarely more than 100-200 m
+    max_reflection_m: float = 200.0
+    # a spoofer's marks
+    spoofer_cn0_rise_db: float = 3.0
+    max_sky_cn0_dbhz: float = 50.0
+    equal_cn0_db: float = 2.0
+    equal_min_satellites: int = 6
+    equal_min_epochs: int = 3
+    equal_below_level_db: float = 3.0  # equal C/N0 at the tracking floor (everything drowned) is no transmitter
+    time_moved_s: float = 0.25
+    # interference: robust rise of an indicator against its baseline (receiver_evidence's floors)
+    interference_z: float = 6.0
+    # convergence
+    converge_within_s: float = 180.0  # the first minutes after the first fix
+    settle_after_s: float = 120.0  # the settled level: the fixes after this long (else the later half)
+    restart_gap_s: float = 10.0
+    unsettled_s: float = 10.0  # the first fixes (at most `first_fixes` within this) differ from the settled level
+    first_fixes: int = 3
+    # mode switch
+    mode_switch_within_s: float = 3.0
+    max_mode_switch_jump_m: float = 30.0
+    # time faults
+    rollover_tolerance_s: float = 60.0
+    max_leap_s: int = 18  # GPS - UTC since 2017
+    leap_tolerance_s: float = 0.02
+    # a satellite never used
+    never_used_fraction: float = 0.05
+    never_used_min_epochs: int = 30
+    never_used_from_start_s: float = 30.0
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One signature read on one alarm: whether it holds, and the one line and facts saying why."""
+
+    cause: str
+    kind: Kind
+    held: bool
+    text: str
+    facts: tuple[str, ...] = ()
+    receiver_id: str | None = None
+
+
+@dataclass
+class _Scene:
+    table: EpochTable
+    results: Sequence[DetectorResult]
+    opts: ExplanationOptions
+    receivers: dict[str, Receiver] = field(default_factory=dict)
+    # the incident being weighed, from its first alarm to its end: interference is read over all of it
+    span: tuple[float, float] = (0.0, 0.0)
+    satellites: tuple[str, ...] = ()  # every satellite its detectors named
+
+    def rx(self, rid: str) -> Receiver:
+        if rid not in self.receivers:
+            self.receivers[rid] = Receiver.of(self.table, rid)
+        return self.receivers[rid]
+
+    def receivers_of(self, alarm: Alarm) -> list[str]:
+        return [alarm.receiver_id] if alarm.receiver_id else self.table.receivers()
+
+    def incident_window(self, rid: str) -> Window:
+        """The incident itself, no lead: interference that ended before it explains none of its alarms."""
+        return Window.of(self.rx(rid), self.span[0], self.span[1] + self.opts.window_after_s)
+
+    def window(self, alarm: Alarm, rid: str) -> Window:
+        start = min(alarm.start_s, alarm.onset_s if alarm.onset_s is not None else alarm.start_s)
+        return Window.of(self.rx(rid), start, alarm.end_s + self.opts.window_after_s, self.opts.window_before_s)
+
+
+def _db(x: float) -> str:
+    return f"{x:+.1f} dB"
+
+
+def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
+    """What a spoofer's signal does to the receiver's indicators and nature does not."""
+    marks = []
+    if w.spoofing_flag_raised():
+        marks.append("the receiver's own spoofing flag was raised")
+    strongest = w.worst("cn0_mean_dbhz", +1)
+    if strongest > opts.max_sky_cn0_dbhz:
+        marks.append(f"mean C/N0 up to {strongest:.1f} dB-Hz, more than the sky gives ({opts.max_sky_cn0_dbhz:g})")
+    _, rise, what = w.cn0_change_db()
+    if rise >= opts.spoofer_cn0_rise_db:
+        marks.append(f"{what} rose {_db(rise)} above its level {w.base_where}: a stronger signal than the sky's")
+    equal = w.equal_cn0(opts.equal_cn0_db, opts.equal_min_satellites, opts.equal_min_epochs)
+    if equal is not None and not equal[1] < w.cn0_level_before() - opts.equal_below_level_db:
+        marks.append(
+            f"{opts.equal_min_satellites} or more satellites at one C/N0 (spread {equal[0]:.1f} dB): one transmitter"
+        )
+    offset = w.rx.col("time_offset_s")
+    if w.base is not None and np.isfinite(offset[w.now]).any():
+        moved = w.worst("time_offset_s", +1) - w.level("time_offset_s")
+        moved_back = w.worst("time_offset_s", -1) - w.level("time_offset_s")
+        step = moved if abs(moved) >= abs(moved_back) else moved_back
+        if abs(step) >= opts.time_moved_s:
+            marks.append(f"the receiver's time moved {step:+.3f} s against the log's clock")
+    return marks
+
+
+@dataclass(frozen=True)
+class Sign:
+    """One sign of a weakened sky: a few words for the one-line text, and the measurement it rests on."""
+
+    short: str  # "C/N0 -8.1 dB"
+    fact: str  # "each satellite's C/N0 fell -8.1 dB below its level before"
+
+
+def _ratio_sign(w: Window, column: str, label: str, ratio: float, min_rise: float, unit: str = "") -> Sign | None:
+    base, worst = w.level(column), w.worst(column, +1)
+    if not (np.isfinite(base) and np.isfinite(worst)) or base <= 0:
+        return None
+    if worst >= ratio * base and worst - base >= min_rise:
+        return Sign(
+            f"{label} x{worst / base:.1f}", f"{label} {base:.2f}{unit} -> {worst:.2f}{unit} (x{worst / base:.1f})"
+        )
+    return None
+
+
+def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[Sign], float]:
+    """The signs of a weakened or blocked sky, and the C/N0 drop (NaN when the receiver logs none; the
+    least that counts when the sky was weak all along)."""
+    signs = []
+    drop, _, what = w.cn0_change_db()
+    level = w.cn0_level_now()
+    if drop >= opts.min_cn0_drop_db:
+        signs.append(Sign(f"C/N0 {_db(-drop)}", f"{what} fell {drop:.1f} dB below its level {w.base_where}"))
+    elif level < opts.weak_sky_dbhz and not w.cn0_level_before() >= opts.weak_sky_dbhz:
+        short = f"a weak sky all along: C/N0 {level:.1f} dB-Hz"
+        signs.append(Sign(short, f"{short} (an open sky gives 30-50)"))
+        drop = opts.min_cn0_drop_db  # at the tracking floor no further fall is needed to lose satellites
+    geometry = (
+        _ratio_sign(w, "hdop", "HDOP", opts.dop_ratio, opts.dop_min_rise)
+        or _ratio_sign(w, "h_acc_m", "reported accuracy", opts.accuracy_ratio, opts.accuracy_min_rise_m, " m")
+        or _ratio_sign(w, "vdop", "VDOP", opts.dop_ratio, opts.dop_min_rise)
+    )
+    if geometry:
+        signs.append(geometry)
+    used, fewest = w.level("sats_used"), w.worst("sats_used", -1)
+    lost = used - fewest if np.isfinite(used) and np.isfinite(fewest) else 0.0
+    if lost >= max(opts.min_satellites_lost, opts.satellites_lost_fraction * used):
+        text = f"satellites used {used:.0f} -> {fewest:.0f}"
+        signs.append(Sign(text, text))
+    gap = w.longest_gap_s()
+    if gap >= max(opts.fix_lost_min_s, opts.fix_lost_periods * w.rx.period_s):
+        text = f"fix lost for {gap:.1f} s"
+        signs.append(Sign(text, text))
+    return signs, drop
+
+
+def _robust_rise(
+    w: Window, column: str, floor: float, relative: float, direction: int, z: float
+) -> tuple[float, float] | None:
+    """(baseline, worst) of an indicator that moved `z` robust sigma in `direction` (+1 up, -1 down), else None."""
+    x = w.rx.col(column)
+    if w.base is None:
+        return None
+    base = x[w.base]
+    base = base[np.isfinite(base)]
+    if len(base) < 3 or not np.isfinite(x[w.now]).any():
+        return None
+    med = float(np.median(base))
+    scale = max(1.4826 * float(np.median(np.abs(base - med))), floor, relative * abs(med))
+    worst = w.worst(column, direction)
+    return (med, worst) if (worst - med) * direction >= z * scale else None
+
+
+def receiver_interference_signs(w: Window, z: float) -> list[str]:
+    """What the receiver itself says drowned its signals: its jamming state at warning or worse, a jump of
+    its jamming indicator or noise, its gain turned down."""
+    signs = []
+    state = w.rx.col("jamming_state")[w.now]
+    if (np.nan_to_num(state) >= 2).any():
+        signs.append(f"the receiver's own jamming state at warning or worse ({int(np.nanmax(state))})")
+    for column, label, floor, relative, direction in (
+        ("jamming_indicator", "jamming indicator", 3.0, 0.1, +1),
+        ("noise_per_ms", "noise level", 2.0, 0.03, +1),
+        # a strong signal in the band makes the receiver turn its gain down (u-blox agcCnt, PX4 AGC); the
+        # gain going up is less power at the antenna (a covered antenna, the cold), no interference
+        ("agc", "AGC", 10.0, 0.03, -1),
+    ):
+        moved = _robust_rise(w, column, floor, relative, direction, z)
+        if moved is not None:
+            signs.append(f"{label} {moved[0]:.0f} -> {moved[1]:.0f}")
+    return signs
+
+
+def interference_signs(scene: _Scene, rid: str) -> list[str]:
+    """What says something drowned the signals at the receiver's antenna over the incident: the interference
+    detector's alarms, and the receiver's own signs."""
+    w = scene.incident_window(rid)
+    signs = []
+    for r in scene.results:
+        if r.evidence != Evidence.INTERFERENCE or not r.ran or r.advisory:
+            continue
+        near = [
+            a
+            for a in r.alarms
+            if a.start_s <= w.end_s and a.end_s >= w.start_s and a.receiver_id in (None, w.rx.receiver_id)
+        ]
+        if near:
+            signs.append(f"{r.name} alarmed from {near[0].start_s:.1f} s")
+    return signs + receiver_interference_signs(w, scene.opts.interference_z)
+
+
+def _kept(cause: str, kind: Kind, why: str, rid: str) -> Reading:
+    return Reading(cause, kind, False, why, receiver_id=rid)
+
+
+def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], fix_alarm: bool) -> Reading:
+    opts, rid = scene.opts, w.rx.receiver_id
+    signs, drop = degradation_signs(w, opts)
+    facts = [sg.fact for sg in signs]
+    if marks:
+        return _kept("degradation", Kind.DEGRADATION, "; ".join(marks), rid)
+    if interference_signs(scene, rid):
+        return _kept("degradation", Kind.DEGRADATION, "the receiver's interference indicators moved too", rid)
+    if np.isfinite(drop) and drop < opts.min_cn0_drop_db:
+        also = f"; only {'; '.join(facts)}" if facts else ""
+        return _kept("degradation", Kind.DEGRADATION, f"the C/N0 did not fall ({_db(-drop)}){also}", rid)
+    if len(signs) < 2:
+        why = f"one sign of a weakened sky alone ({facts[0]})" if facts else "no sign of a weakened sky"
+        return _kept("degradation", Kind.DEGRADATION, why, rid)
+    jump = w.largest_jump_m()
+    if jump > opts.max_reflection_m:
+        why = f"the fix jumped {jump:,.0f} m, more than multipath or NLOS moves it ({opts.max_reflection_m:g} m)"
+        return _kept("degradation", Kind.DEGRADATION, why, rid)
+    moved = " while the fix jumped" if fix_alarm else ""
+    text = f"{_join([sg.short for sg in signs])}{moved}: degradation (multipath, obstruction), not spoofing"
+    if fix_alarm:
+        facts.append(f"largest jump of the fix beyond its velocity {jump:.1f} m")
+    return Reading("degradation", Kind.DEGRADATION, True, text, tuple(facts), rid)
+
+
+def _join(parts: list[str]) -> str:
+    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+
+
+def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
+    rid = w.rx.receiver_id
+    signs = interference_signs(scene, rid)
+    if not signs:
+        return _kept("interference", Kind.JAMMING, "", rid)
+    if marks:
+        return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
+    effects, _ = degradation_signs(w, scene.opts)
+    with_effects = " with " + _join([sg.short for sg in effects]) if effects else ""
+    text = f"{_join(signs)}{with_effects}: interference, not spoofing"
+    return Reading("interference", Kind.JAMMING, True, text, (*signs, *(sg.fact for sg in effects)), rid)
+
+
+def _fix_starts(rx: Receiver, opts: ExplanationOptions) -> list[float]:
+    """The receiver's first valid fix and every first fix after it was lost for `restart_gap_s` or longer."""
+    valid = (rx.fix_type >= FixType.FIX_2D) & np.isfinite(rx.col("lat_deg"))
+    tv = rx.t[valid]
+    if not len(tv):
+        return []
+    gap = np.diff(tv) >= max(opts.restart_gap_s, 5.0 * rx.period_s)
+    return [float(tv[0]), *tv[1:][gap].tolist()]
+
+
+def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
+    opts, rx = scene.opts, w.rx
+    rid = rx.receiver_id
+    every_start = _fix_starts(rx, opts)
+    starts = [s for s in every_start if s <= alarm.start_s]
+    if not starts or min(alarm.start_s, alarm.onset_s or alarm.start_s) > starts[-1] + opts.converge_within_s:
+        return _kept("convergence", Kind.RECEIVER_FAULT, "", rid)
+    s0 = starts[-1]
+    later = [s for s in every_start if s > s0]
+    stop = later[0] if later else float(rx.t[-1]) + 1.0
+    span = (rx.t >= s0) & (rx.t < stop)
+    settled = span & (rx.t >= s0 + opts.settle_after_s)
+    if settled.sum() < 10:
+        idx = np.flatnonzero(span)
+        settled = np.zeros(len(rx.t), bool)
+        settled[idx[len(idx) // 2 :]] = True
+    first = np.zeros(len(rx.t), bool)
+    first[np.flatnonzero(span & (rx.t <= s0 + opts.unsettled_s))[: opts.first_fixes]] = True
+    unsettled: list[str] = []
+    final = float("nan")
+    for column, label, ratio, rise, direction in (
+        ("hdop", "HDOP", 1.5, 0.5, +1),
+        ("h_acc_m", "reported accuracy (m)", 2.0, 2.0, +1),
+        ("sats_used", "satellites used", 0.0, 2.0, -1),
+    ):
+        x = rx.col(column)
+        level = float(np.nanmedian(x[settled])) if np.isfinite(x[settled]).any() else float("nan")
+        if not np.isfinite(level) or not np.isfinite(x[first]).any():
+            continue
+        start = float(np.nanmax(x[first]) if direction > 0 else np.nanmin(x[first]))
+        off = (start >= ratio * level and start - level >= rise) if direction > 0 else (level - start >= rise)
+        if off:
+            digits = 0 if column == "sats_used" else 1
+            unsettled.append(f"{label} {start:.{digits}f} -> {level:.{digits}f}")
+            run = running_median(x)
+            far = (run > max(ratio, 1.25) * level + 0.2) if direction > 0 else (run < level - 1.0)
+            out_of_level = np.flatnonzero(span & far & (rx.t <= s0 + opts.converge_within_s))
+            if len(out_of_level):
+                final = max(np.nan_to_num(final, nan=s0), float(rx.t[out_of_level[-1]]))
+    kinds = rx.fix_type[span & (rx.fix_type >= FixType.FIX_2D)]
+    settled_kind = int(np.median(rx.fix_type[settled])) if settled.any() else None
+    if settled_kind is not None and len(kinds) and int(kinds[0]) < settled_kind:
+        unsettled.append(
+            f"{FIX_NAMES.get(FixType(int(kinds[0])), 'fix')} -> {FIX_NAMES.get(FixType(settled_kind), 'fix')}"
+        )
+        better = np.flatnonzero(span & (rx.fix_type < settled_kind) & (rx.t <= s0 + opts.converge_within_s))
+        if len(better):
+            final = max(np.nan_to_num(final, nan=s0), float(rx.t[better[-1]]))
+    after_loss = s0 > every_start[0]
+    how = f"its fix back at {s0:.1f} s" if after_loss else f"its first fix at {s0:.1f} s"
+    if not unsettled:
+        return _kept("convergence", Kind.RECEIVER_FAULT, f"the receiver was already settled at {how}", rid)
+    if marks:
+        return _kept("convergence", Kind.RECEIVER_FAULT, "; ".join(marks), rid)
+    settled_by = final if np.isfinite(final) else s0
+    if alarm.start_s > settled_by + opts.unsettled_s:
+        return _kept(
+            "convergence",
+            Kind.RECEIVER_FAULT,
+            f"the alarm came at {alarm.start_s:.1f} s, after the receiver had settled ({settled_by:.1f} s)",
+            rid,
+        )
+    facts = (how, *unsettled, f"settled by {settled_by:.1f} s")
+    what = "converging after a cold start" if not after_loss else "re-converging after the fix was lost"
+    text = f"{_join(unsettled)} from {how} until {settled_by:.1f} s: {what}, not spoofing"
+    return Reading("convergence", Kind.RECEIVER_FAULT, True, text, facts, rid)
+
+
+def read_mode_switch(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
+    opts, rx = scene.opts, w.rx
+    rid = rx.receiver_id
+    ft = rx.fix_type
+    real = (ft[1:] >= FixType.FIX_2D) & (ft[:-1] >= FixType.FIX_2D) & (ft[1:] != ft[:-1])
+    k = np.flatnonzero(real) + 1
+    at = alarm.onset_s if alarm.onset_s is not None else alarm.start_s
+    near = k[(rx.t[k] >= at - opts.mode_switch_within_s) & (rx.t[k] <= alarm.start_s + opts.mode_switch_within_s)]
+    if not len(near):
+        return _kept("mode switch", Kind.RECEIVER_FAULT, "", rid)
+    if marks:
+        return _kept("mode switch", Kind.RECEIVER_FAULT, "; ".join(marks), rid)
+    i = int(near[0])
+    jump = Window.of(rx, float(rx.t[i - 1]), float(rx.t[i])).largest_jump_m()
+    names = (FIX_NAMES.get(FixType(int(ft[i - 1])), "fix"), FIX_NAMES.get(FixType(int(ft[i])), "fix"))
+    if jump > opts.max_mode_switch_jump_m:
+        why = f"the fix jumped {jump:,.0f} m at the switch, more than a mode switch moves it"
+        return _kept("mode switch", Kind.RECEIVER_FAULT, why, rid)
+    text = (
+        f"the fix switched from {names[0]} to {names[1]} at {rx.t[i]:.1f} s, moving {jump:.1f} m: "
+        "a receiver mode switch, not spoofing"
+    )
+    facts = (f"fix type {names[0]} -> {names[1]} at {rx.t[i]:.1f} s", f"jump at the switch {jump:.1f} m")
+    return Reading("mode switch", Kind.RECEIVER_FAULT, True, text, facts, rid)
+
+
+def read_time_fault(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
+    opts, rx = scene.opts, scene.rx(rid)
+    x = rx.col("time_offset_s")
+    onset = alarm.onset_s if alarm.onset_s is not None else alarm.start_s
+    before = (rx.t >= onset - 60.0) & (rx.t < onset) & np.isfinite(x)
+    during = (rx.t >= onset) & (rx.t <= alarm.end_s) & np.isfinite(x)
+    if before.sum() < 3 or during.sum() < 1:
+        return _kept("time fault", Kind.RECEIVER_FAULT, "", rid)
+    step = float(np.median(x[during]) - np.median(x[before]))
+    dx = np.diff(x[before])
+    jitter = 1.4826 * float(np.median(np.abs(dx - np.median(dx)))) if len(dx) else 0.0
+    weeks = round(step / ROLLOVER_S)
+    if weeks != 0 and abs(step - weeks * ROLLOVER_S) <= opts.rollover_tolerance_s:
+        text = (
+            f"the receiver's date moved {weeks * 1024:+d} weeks ({step:+,.0f} s) against the log's clock: "
+            "a GPS week rollover (10-bit week number), not spoofing"
+        )
+        return Reading("week rollover", Kind.RECEIVER_FAULT, True, text, (f"time step {step:+.3f} s",), rid)
+    n = round(step)
+    if 1 <= abs(n) <= opts.max_leap_s and abs(step - n) <= max(opts.leap_tolerance_s, 3.0 * jitter):
+        text = (
+            f"the receiver's UTC moved by exactly {n:+d} s against the log's clock: leap seconds applied or "
+            "defaulted (GPS - UTC is 18 s since 2017), not spoofing"
+        )
+        return Reading("leap seconds", Kind.RECEIVER_FAULT, True, text, (f"time step {step:+.3f} s",), rid)
+    return _kept(
+        "time fault", Kind.RECEIVER_FAULT, f"a step of {step:+.3f} s is no whole leap second or week epoch", rid
+    )
+
+
+def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Reading:
+    """One satellite's range a reflection's length off, its C/N0 not raised: NLOS or multipath."""
+    rid = alarm.receiver_id or ""
+    sv = alarm.satellites[0]
+    others = [x for x in scene.satellites if x != sv]
+    if others:  # reflections delay satellites each by its own path; several off together is a bias
+        why = f"{sv} is not alone: the incident also names {'+'.join(others)}"
+        return _kept("reflection", Kind.DEGRADATION, why, rid)
+    sizes = [
+        f.range_error_m
+        for f in result.findings
+        if f.satellites == (sv,)
+        and f.range_error_m is not None
+        and f.start_s <= alarm.end_s
+        and f.end_s >= alarm.start_s
+    ]
+    if not sizes:
+        return _kept("reflection", Kind.DEGRADATION, "", rid)
+    size = max(sizes)
+    if size > scene.opts.max_reflection_m:
+        why = f"{sv} was {size:,.0f} m off, more than a reflection ({scene.opts.max_reflection_m:g} m)"
+        return _kept("reflection", Kind.DEGRADATION, why, rid)
+    cn0 = "C/N0 not logged"
+    if alarm.receiver_id:
+        rx = scene.rx(alarm.receiver_id)
+        if sv in rx.sky.sv and len(rx.sky.t):
+            j = rx.sky.sv.index(sv)
+            t, x = rx.sky.t, rx.sky.cn0[:, j]
+            before = x[(t < alarm.start_s - 2.0) & (t >= alarm.start_s - 60.0)]
+            during = x[(t >= alarm.start_s) & (t <= alarm.end_s)]
+            if np.isfinite(before).any() and np.isfinite(during).any():
+                rise = float(np.nanmax(during) - np.nanmedian(before))
+                if rise >= scene.opts.spoofer_cn0_rise_db:
+                    return _kept(
+                        "reflection", Kind.DEGRADATION, f"{sv}'s C/N0 rose {_db(rise)}: no reflection does that", rid
+                    )
+                cn0 = f"its C/N0 {_db(rise)} against its level before"
+    text = (
+        f"{sv} alone {size:.0f} m off while the other satellites agree ({cn0}): a reflected signal "
+        "(NLOS, multipath), not spoofing"
+    )
+    return Reading("reflection", Kind.DEGRADATION, True, text, (f"{sv} range error {size:.1f} m", cn0), rid)
+
+
+def read_never_used(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
+    opts, sky = scene.opts, scene.rx(rid).sky
+    facts = []
+    for sv in alarm.satellites:
+        if sv not in sky.sv:
+            return _kept("satellite never used", Kind.UNKNOWN, "", rid)
+        j = sky.sv.index(sv)
+        tracked = np.isfinite(sky.cn0[:, j])
+        used = sky.used[:, j][tracked]
+        known = np.isfinite(used)
+        first = float(sky.t[tracked][0]) if tracked.any() else float("inf")
+        if (
+            tracked.sum() < opts.never_used_min_epochs
+            or known.mean() < 0.5
+            or first > float(sky.t[0]) + opts.never_used_from_start_s
+        ):
+            return _kept("satellite never used", Kind.UNKNOWN, "", rid)
+        fraction = float(np.mean(used[known] == 1))
+        if fraction > opts.never_used_fraction:
+            return _kept(
+                "satellite never used",
+                Kind.UNKNOWN,
+                f"the receiver used {sv} at {100 * fraction:.0f}% of its epochs",
+                rid,
+            )
+        facts.append(
+            f"{sv} tracked at {int(tracked.sum())} epochs from {first:.1f} s, used in the fix at {100 * fraction:.0f}%"
+        )
+    names = "+".join(alarm.satellites)
+    text = (
+        f"the receiver never used {names} in its fix, from the log's start: a satellite left out of the fix "
+        "cannot have moved it"
+    )
+    return Reading("satellite never used", Kind.UNKNOWN, True, text, tuple(facts), rid)
+
+
+def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Reading]:
+    """Every signature that applies to this alarm's class, in the order they are preferred."""
+    ev = result.evidence
+    out: list[Reading] = []
+    if ev == Evidence.LOG_CLOCK:
+        return [read_time_fault(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
+    if ev in (Evidence.RAW_MEASUREMENT, Evidence.KNOWN_STATION, Evidence.RECEIVER) and len(alarm.satellites) == 1:
+        out.append(read_reflection(scene, alarm, result))
+    if ev == Evidence.RECEIVER and alarm.satellites and result.name != RECEIVER_EVIDENCE:
+        out += [read_never_used(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
+    if result.name in INDICATOR_DETECTORS:
+        for rid in scene.receivers_of(alarm):
+            w = scene.window(alarm, rid)
+            if w.fixes == 0:
+                continue
+            marks = spoofer_marks(w, scene.opts)
+            out += [
+                read_convergence(scene, alarm, w, marks),
+                read_mode_switch(scene, alarm, w, marks),
+                read_interference(scene, alarm, w, marks),
+                read_degradation(scene, alarm, w, marks, result.name == GNSS_CONSISTENCY),
+            ]
+    return out
+
+
+def incident_alarms(results: Sequence[DetectorResult], incident: Incident) -> list[tuple[Alarm, DetectorResult]]:
+    """The counted alarms that make an incident (each is one of its evidence intervals)."""
+    spans = set(incident.spans)
+    return [
+        (a, r)
+        for r in results
+        if r.is_detector and r.ran and not r.advisory and r.name in incident.detectors
+        for a in r.alarms
+        if (r.evidence, a.start_s, a.end_s) in spans
+    ]
+
+
+@dataclass(frozen=True)
+class Weighed:
+    """The natural causes weighed for one incident."""
+
+    explanations: tuple[Explanation, ...]
+    explained_spans: tuple[Span, ...]
+    ruled_out: tuple[str, ...]  # causes looked at and refused, with why
+    # over the whole incident, per receiver: what the receiver says drowned its signals, and a spoofer's marks
+    interference: tuple[str, ...] = ()
+    spoofer_marks: tuple[str, ...] = ()
+
+
+def explain(
+    table: EpochTable,
+    results: Sequence[DetectorResult],
+    incident: Incident,
+    opts: ExplanationOptions | None = None,
+    scene: _Scene | None = None,
+) -> Weighed:
+    """The natural explanations of an incident's alarms, and the evidence intervals they account for (an
+    interval counts as explained when every alarm behind it is)."""
+    scene = scene or _Scene(table, results, opts or ExplanationOptions())
+    scene.span = (incident.start_s, incident.end_s)
+    scene.satellites = incident.satellites
+    held: dict[tuple[str, str | None], list[tuple[Reading, str]]] = {}
+    refused: dict[str, str] = {}
+    covered: dict[Span, bool] = {}
+    for alarm, result in incident_alarms(results, incident):
+        assert result.evidence is not None
+        key = (result.evidence, alarm.start_s, alarm.end_s)
+        readings = read_alarm(scene, alarm, result)
+        good = next((rd for rd in readings if rd.held), None)
+        covered[key] = covered.get(key, True) and good is not None
+        if good is not None:
+            held.setdefault((good.cause, good.receiver_id), []).append((good, result.name))
+        for rd in readings:
+            if not rd.held and rd.text and rd.cause not in refused:
+                refused[rd.cause] = f"{rd.cause}: {rd.text}"
+    explanations = tuple(
+        Explanation(
+            cause,
+            items[0][0].kind,
+            items[0][0].text if len(items) == 1 else f"{items[0][0].text} (and {len(items) - 1} more alarm(s) alike)",
+            max((rd.facts for rd, _ in items), key=len),
+            tuple(sorted({name for _, name in items})),
+            rid,
+        )
+        for (cause, rid), items in held.items()
+    )
+    held_causes = {e.cause for e in explanations}
+    ruled_out = tuple(text for cause, text in refused.items() if cause not in held_causes)
+    interference: list[str] = []
+    marks: list[str] = []
+    for rid in incident.receivers or tuple(table.receivers()):
+        named = (lambda x, r=rid: f"{r}: {x}") if len(table.receivers()) > 1 else (lambda x: x)
+        w = scene.incident_window(rid)
+        interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
+        if w.fixes:
+            marks += [named(x) for x in spoofer_marks(w, scene.opts)]
+    spans = tuple(sorted(k for k, ok in covered.items() if ok))
+    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks))
+
+
+def scene_of(table: EpochTable, results: Sequence[DetectorResult], opts: ExplanationOptions | None = None) -> _Scene:
+    """What `explain` reads, shared by the incidents of one log (each receiver's arrays are made once)."""
+    return _Scene(table, results, opts or ExplanationOptions())

@@ -1,0 +1,140 @@
+"""The kind of every event: built from detector results made here (the interference detector's among them)
+on a synthetic vehicle and on a real log's degraded sky."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import pytest
+from paths import real_log
+from pipeline_support import circling_table
+
+from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.epoch_table import EpochTable
+from spooflens.output.summary import build_summary
+from spooflens.pipeline.events import SEQUENCE_S, classify
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.verdict import Kind, Verdict, decide
+from spooflens.service import read_table
+
+
+@dataclass(frozen=True)
+class BandAlarm(Alarm):
+    """An alarm that names the systems and bands it hit, as the interference detector's do."""
+
+    systems: tuple[str, ...] = ()
+    bands: tuple[str, ...] = ()
+
+
+def result(name: str, evidence: Evidence, *alarms: Alarm) -> DetectorResult:
+    return DetectorResult(name, True, alarms=list(alarms), evidence=evidence)
+
+
+@cache
+def circling() -> EpochTable:
+    return circling_table()
+
+
+def verdict_of(table: EpochTable, results: list[DetectorResult]) -> Verdict:
+    return classify(table, results, decide(results, log_end_s=float(table.fixes["t_s"].max())))
+
+
+def jamming(start: float, end: float) -> DetectorResult:
+    return result(
+        "interference",
+        Evidence.INTERFERENCE,
+        BandAlarm(start, end, 20.0, start + 1, start, receiver_id="/gps/fix", systems=("GPS",), bands=("L1",)),
+    )
+
+
+def takeover(start: float) -> list[DetectorResult]:
+    return [
+        result(
+            "gnss_consistency",
+            Evidence.GNSS_ONLY,
+            Alarm(start, start + 60, 50.0, start + 1, start - 1, receiver_id="/gps/fix"),
+        ),
+        result("kf_innovation", Evidence.INERTIAL, Alarm(start + 1, start + 60, 90.0, start + 2, start - 1)),
+    ]
+
+
+def test_interference_alone_is_jamming_and_no_spoofing() -> None:
+    verdict = verdict_of(circling(), [jamming(100.0, 130.0)])
+    assert not verdict.spoofed
+    (event,) = verdict.events
+    assert event.kind == Kind.JAMMING and event.systems == ("GPS",) and event.bands == ("L1",)
+    assert verdict.headline.startswith("NO SPOOFING DETECTED")
+    assert "JAMMING / INTERFERENCE from 100.00 s to 130.00 s" in verdict.headline
+
+
+def test_a_takeover_after_jamming_is_one_attack_sequence() -> None:
+    verdict = verdict_of(circling(), [jamming(100.0, 130.0), *takeover(140.0)])
+    assert verdict.spoofed
+    jam, spoof = verdict.events
+    assert (jam.kind, spoof.kind) == (Kind.JAMMING, Kind.SPOOFING)
+    assert jam.followed_by == 1 and spoof.follows == 0
+    assert verdict.headline.startswith("SPOOFING DETECTED")
+    assert verdict.headline.endswith("after JAMMING / INTERFERENCE from 100.00 s to 130.00 s")
+    summary = build_summary(circling(), [jamming(100.0, 130.0), *takeover(140.0)], verdict)
+    events = summary["verdict"]["events"]
+    assert events[0]["sequence"] == {"id": 1, "follows": None, "followed_by": 1}
+    assert events[1]["sequence"] == {"id": 1, "follows": 0, "followed_by": None}
+    assert events[0]["bands"] == ["L1"] and events[0]["systems"] == ["GPS"]
+
+
+def test_jamming_long_before_a_takeover_is_not_linked_to_it() -> None:
+    verdict = verdict_of(circling(), [jamming(20.0, 40.0), *takeover(40.0 + SEQUENCE_S + 20.0)])
+    jam, spoof = verdict.events
+    assert jam.followed_by is None and spoof.follows is None
+
+
+def test_interference_that_opens_a_spoofing_incident_is_an_event_of_its_own() -> None:
+    # the interference runs into the takeover's first alarm: one incident, two events
+    verdict = verdict_of(circling(), [jamming(120.0, 142.0), *takeover(140.0)])
+    (incident,) = verdict.incidents
+    assert incident.is_spoofing
+    jam, spoof = verdict.events
+    assert jam.kind == Kind.JAMMING and (jam.start_s, jam.end_s) == (120.0, 140.0)
+    assert spoof.kind == Kind.SPOOFING and jam.followed_by == 1
+    # the takeover's onset and first alarm are its own evidence's, not the interference's
+    assert spoof.start_s == 140.0 and spoof.onset_s == 139.0 and incident.onset_s == 139.0
+
+
+@cache
+def navisys() -> EpochTable:
+    return read_table(real_log("corpus/gpsd/navisys-gr8013.log"), {}, False)
+
+
+def test_degradation_explains_the_gnss_internal_classes_not_an_inertial_departure() -> None:
+    # the real receiver's sky fell at 17 s (C/N0 12 dB down, satellites lost): it explains the GNSS-only and
+    # receiver alarms there, not an inertial departure confirmed at the same time
+    gnss = result("gnss_consistency", Evidence.GNSS_ONLY, Alarm(21.0, 34.0, 40.0, 22.0, 17.0, receiver_id="ubx"))
+    receiver = result("receiver_evidence", Evidence.RECEIVER, Alarm(21.0, 34.0, 9.0, 22.0, 20.0, receiver_id="ubx"))
+    alone = verdict_of(navisys(), [gnss, receiver])
+    assert not alone.spoofed and alone.incidents[0].kind == Kind.DEGRADATION
+    inertial = result("kf_innovation", Evidence.INERTIAL, Alarm(22.0, 34.0, 300.0, 23.0, 21.0))
+    verdict = verdict_of(navisys(), [gnss, receiver, inertial])
+    (incident,) = verdict.incidents
+    assert verdict.spoofed and incident.kind == Kind.SPOOFING and incident.confidence == "medium"
+    assert incident.unexplained == (Evidence.INERTIAL,)
+    (event,) = verdict.events
+    assert event.evidence_for == ("inertial reference (kf_innovation)",)
+    assert any("does not account for inertial reference" in a for a in event.evidence_against)
+
+
+def test_an_anomaly_nothing_explains_is_unknown() -> None:
+    gnss = result(
+        "gnss_consistency", Evidence.GNSS_ONLY, Alarm(150.0, 155.0, 40.0, 151.0, 149.0, receiver_id="/gps/fix")
+    )
+    verdict = verdict_of(circling(), [gnss])
+    (event,) = verdict.events
+    assert event.kind == Kind.UNKNOWN and event.confidence == "low"
+    assert verdict.headline.endswith("1 anomaly(ies) of one evidence class noted, not confirmed")
+
+
+@pytest.mark.parametrize("kind", list(Kind))
+def test_every_kind_has_a_label(kind: Kind) -> None:
+    from spooflens.pipeline.verdict import KIND_LABELS
+
+    assert KIND_LABELS[kind]

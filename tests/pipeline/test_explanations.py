@@ -1,0 +1,179 @@
+"""Natural explanations of an incident's evidence, each on a real log that shows it (or, where no readable
+real log does, on a real log with the fault modelled, said so in the test's name)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cache
+
+import numpy as np
+import pytest
+from paths import real_log
+
+from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.detectors.receiver_time import run_receiver_time
+from spooflens.epoch_table import EpochTable
+from spooflens.pipeline.events import classify
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.explanations import ROLLOVER_S, explain
+from spooflens.pipeline.run import Analysis, analyze_table
+from spooflens.pipeline.verdict import Kind, Verdict, decide
+from spooflens.service import read_table
+
+
+@cache
+def analysed(relative: str) -> Analysis:
+    return analyze_table(read_table(real_log(relative), {}, False))
+
+
+@cache
+def table_of(relative: str) -> EpochTable:
+    return read_table(real_log(relative), {}, False)
+
+
+def causes(verdict: Verdict) -> set[str]:
+    return {e.cause for inc in verdict.incidents for e in inc.explanations}
+
+
+def test_a_weakened_sky_is_degradation_not_spoofing() -> None:
+    # a receiver by a window: C/N0 12 dB down, HDOP and reported accuracy up, satellites lost, the fix moving
+    # by metres; GNSS-only and receiver self-report agreed (medium until this stage)
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    (inc,) = a.verdict.incidents
+    assert inc.confidence_of_alarms == "medium" and not a.verdict.spoofed
+    assert inc.kind == Kind.DEGRADATION and inc.confidence == "low"
+    (e,) = inc.explanations
+    assert e.cause == "degradation" and set(e.detectors) == {"gnss_consistency", "receiver_evidence"}
+    assert any("C/N0 fell" in f for f in e.facts) and any("satellites used 10 -> 6" in f for f in e.facts)
+    assert "while the fix jumped: degradation (multipath, obstruction), not spoofing" in e.text
+    assert "NO SPOOFING DETECTED" in a.verdict.headline and "signal degradation" in a.verdict.headline
+
+
+def test_a_sky_drowned_until_the_fix_is_lost_is_degradation() -> None:
+    # every satellite 26 dB down, 29 -> 12 used, the fix lost for 5 s, then back
+    a = analysed("corpus/gpsd/unicore-um621.log")
+    (inc,) = a.verdict.incidents
+    assert not a.verdict.spoofed and inc.kind == Kind.DEGRADATION
+    assert any("fix lost" in f for e in inc.explanations for f in e.facts)
+
+
+def test_a_weak_sky_all_along_is_degradation() -> None:
+    # a phone modem indoors: C/N0 about 20 dB-Hz from the start, its fix wandering by tens of metres (its GP
+    # and GN talkers are one receiver: the dual-receiver tests' precondition keeps them from running)
+    a = analysed("corpus/gpsd/quectel-eg25-g.log")
+    (inc,) = a.verdict.incidents
+    assert inc.confidence_of_alarms == "medium" and not a.verdict.spoofed
+    assert "degradation" in causes(a.verdict)
+    assert any("a weak sky all along" in f for e in inc.explanations for f in e.facts)
+
+
+def test_the_first_fixes_of_a_cold_start_are_convergence() -> None:
+    # a SiRF receiver's first fix: 2D, HDOP 21, satellites being acquired
+    a = analysed("corpus/gpsd/haicom-305N.log")
+    (inc,) = a.verdict.incidents
+    assert not a.verdict.spoofed and inc.kind == Kind.RECEIVER_FAULT
+    (e,) = inc.explanations
+    assert e.cause == "convergence" and "converging after a cold start" in e.text
+    assert "HDOP 21.1" in e.text and "2D -> 3D" in e.text
+
+
+def test_one_receivers_talkers_are_no_second_receiver() -> None:
+    # SiRFstarV NMEA: GP, GL and GN sentences of one receiver give the same numbers; baseline_collapse read
+    # them as two antennas fed by one spoofer. Relayed duplicates are weighed before the dual-receiver
+    # tests run (their precondition), so no alarm of a second receiver is left to explain
+    a = analysed("corpus/gpsd/sirfstarv-nmea.log")
+    assert not a.verdict.spoofed
+    collapse = next(r for r in a.results if r.name == "baseline_collapse")
+    assert not collapse.ran and collapse.precondition is not None
+    assert "one receiver" in collapse.reason
+
+
+@pytest.fixture(scope="module")
+def mtv() -> Analysis:
+    # a u-blox ZED-F9K in a car, 29 min: RTK fixed, float, DGNSS in turn; R10 never in its fix
+    return analysed("corpus/gps-measurement-tools/MTV.Local1.ublox-F9K.20200206-181434.nmea")
+
+
+def test_a_satellite_the_receiver_never_used_corroborates_no_jump_of_its_fix(mtv: Analysis) -> None:
+    assert not mtv.verdict.spoofed
+    before = [i for i in mtv.verdict.incidents if i.confidence_of_alarms != "low"]
+    assert len(before) >= 6  # GNSS-only + receiver self-report at the same time: six SPOOFING incidents before
+    never = [e for i in mtv.verdict.incidents for e in i.explanations if e.cause == "satellite never used"]
+    assert never and all("R10" in e.text for e in never)
+
+
+def test_a_switch_of_the_fix_mode_where_the_fix_moved_is_a_receiver_mode_switch(mtv: Analysis) -> None:
+    switched = [i for i in mtv.verdict.incidents if any(e.cause == "mode switch" for e in i.explanations)]
+    assert switched
+    e = next(e for i in switched for e in i.explanations if e.cause == "mode switch")
+    assert e.kind == Kind.RECEIVER_FAULT and "RTK" in e.text
+    # a GNSS-only alarm where nothing switched is not one
+    quiet = Alarm(200.0, 210.0, 50.0, 205.0, onset_s=199.0, receiver_id="GN")
+    result = DetectorResult("gnss_consistency", True, alarms=[quiet], evidence=Evidence.GNSS_ONLY)
+    (inc,) = decide([result]).incidents
+    assert "mode switch" not in {e.cause for e in explain(mtv.table, [result], inc).explanations}
+
+
+def _time_stepped(step_s: float, from_s: float = 25.0) -> tuple[EpochTable, list[DetectorResult], Verdict]:
+    """The real ArduPilot flight with its receiver's time moved `step_s` against the autopilot's clock
+    from `from_s` on (modelled: no readable real log has a rollover against a log clock)."""
+    table = table_of("ardupilot_dataflash/flightdata_center_0003.bin")
+    fixes = table.fixes.copy()
+    later = fixes["t_s"] >= from_s
+    fixes.loc[later, "time_offset_s"] += step_s
+    table = replace(table, fixes=fixes)
+    results = [run_receiver_time(table.fixes, monotonic=True)]
+    return table, results, decide(results)
+
+
+@pytest.mark.parametrize(
+    ("step_s", "cause"),
+    [(-ROLLOVER_S, "week rollover"), (-ROLLOVER_S + 3600.0, None), (18.0, "leap seconds"), (-3.0, "leap seconds")],
+)
+def test_a_time_step_of_whole_week_epochs_or_leap_seconds_is_a_receiver_fault(step_s: float, cause: str | None) -> None:
+    table, results, verdict = _time_stepped(step_s)
+    (inc,) = verdict.incidents
+    assert inc.confidence == "medium"  # the log's clock alone: an independent class
+    weighed = explain(table, results, inc)
+    assert {e.cause for e in weighed.explanations} == ({cause} if cause else set())
+
+
+def test_a_spoofers_clock_is_no_time_fault() -> None:
+    table, results, verdict = _time_stepped(7.3)
+    after = classify(table, results, verdict)
+    assert after.spoofed and after.incidents[0].kind == Kind.SPOOFING
+    assert any("no whole leap second" in a for a in after.events[0].evidence_against)
+
+
+def test_a_stronger_signal_is_no_degradation() -> None:
+    # the navisys window's fall of the sky modelled the other way: every satellite 6 dB louder during it
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    sats = a.table.satellites.copy()
+    during = sats["t_s"].between(15.0, 40.0)
+    sats.loc[during, "cn0_dbhz"] = sats.loc[during, "cn0_dbhz"] + 16.0
+    table = replace(a.table, satellites=sats)
+    verdict = classify(table, a.results, decide(a.results))
+    assert verdict.spoofed and verdict.incidents[0].kind == Kind.SPOOFING
+    against = verdict.events[0].evidence_against
+    assert any("rose" in x and "a stronger signal than the sky's" in x for x in against)
+
+
+def test_the_receivers_own_jamming_state_makes_the_event_jamming() -> None:
+    # the navisys window with the receiver's jamming state modelled at 'critical' while its sky fell
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    fixes = a.table.fixes.copy()
+    fixes.loc[fixes["t_s"].between(16.0, 34.0), "jamming_state"] = 3.0
+    table = replace(a.table, fixes=fixes)
+    verdict = classify(table, a.results, decide(a.results))
+    assert not verdict.spoofed and verdict.incidents[0].kind == Kind.JAMMING
+    assert verdict.headline.startswith("NO SPOOFING DETECTED") and "JAMMING / INTERFERENCE from" in verdict.headline
+    assert any("jamming state" in x for x in verdict.events[0].evidence_for)
+
+
+def test_the_receivers_indicators_are_arrays_of_their_own_epochs() -> None:
+    # a guard for the indicators module: a window with no fix gives no level and no sign
+    from spooflens.pipeline.indicators import Receiver, Window
+
+    rx = Receiver.of(table_of("corpus/gpsd/navisys-gr8013.log"), "ubx")
+    w = Window.of(rx, 1000.0, 1010.0)
+    assert w.fixes == 0 and np.isnan(w.worst("hdop", +1))
