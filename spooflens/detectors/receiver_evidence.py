@@ -4,8 +4,8 @@ the log and the documented normal ranges.
 A receiver under a takeover says so in many small ways before and while its fixes move: it loses
 satellites several at once and re-acquires them, its DOP and reported accuracies inflate, its noise and
 jamming indicators rise, its AGC moves (a strong signal at the antenna), its C/N0 drops during the
-takeover and then sits above its old level (a spoofer is louder than the sky), its own spoofing or
-jamming state goes up. None of these is proof (a bridge, a tunnel, a turn away from the sky do some of
+takeover and then sits above its old level (a spoofer is louder than the sky), its own spoofing state
+goes up. None of these is proof (a bridge, a tunnel, a turn away from the sky do some of
 them too), so this class alone never makes a spoofing verdict; with the GNSS-only or an independent
 class it does (`spooflens.pipeline.evidence.confidence`).
 
@@ -17,9 +17,10 @@ robust z-score per indicator (positive = the suspicious direction). The detector
 
 - a joint change: at least `min_indicators` indicators beyond `z_alarm` within `window_s` of each other
   (indicators of one event change within seconds of each other, not at the same epoch), lasting
-  `min_duration_s`;
-- the receiver's own flags: its decoded spoofing flag, or a jamming state of warning/critical
-  (mitigated/detected) for `min_duration_s`;
+  `min_duration_s`, one of them not a sign of interference (noise or jamming indicator up, AGC or C/N0
+  down: a jammer's signature, which `spooflens.detectors.interference` reads, as it reads the
+  receiver's jamming state);
+- the receiver's own flag: its decoded spoofing flag;
 - documented normal ranges, so a log attacked from its first fix still shows it: a mean C/N0 above
   `max_plausible_cn0_dbhz` (the sky gives 30-50 dB-Hz to a small antenna).
 
@@ -34,7 +35,16 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.detectors.base import (
+    Alarm,
+    DetectorResult,
+    Finding,
+    Series,
+    alarm_intervals,
+    center_scale,
+    robust_z,
+    trailing_max,
+)
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.schema import SpoofingFlag
@@ -64,6 +74,8 @@ INDICATORS: tuple[Indicator, ...] = (
     Indicator("agc", "AGC", 0, 10.0, 0.03),
     Indicator("cn0_mean_dbhz", "mean C/N0", 0, 1.0),
 )
+# the way each moves under interference (a jammer): a change only that way is no spoofing evidence
+INTERFERENCE_DIRECTION = {"noise_per_ms": +1, "jamming_indicator": +1, "agc": -1, "cn0_mean_dbhz": -1}
 
 
 @dataclass(frozen=True)
@@ -79,28 +91,6 @@ class ReceiverEvidenceOptions:
     min_reference_s: float = 20.0  # the baseline is learned from at least this long a stretch ...
     min_reference_fraction: float = 0.1  # ... and this fraction of the log
     min_changed_s: float = 10.0  # a change of state to learn around lasts this long at least
-
-
-def _center_scale(x: FloatArray, floor: float, relative_floor: float) -> tuple[float, float]:
-    """Median and robust scale (1.4826 MAD, floored) of the finite values of x."""
-    x = x[np.isfinite(x)]
-    med = float(np.median(x))
-    return med, max(1.4826 * float(np.median(np.abs(x - med))), floor, relative_floor * abs(med))
-
-
-def robust_z(
-    x: FloatArray, direction: int, floor: float, relative_floor: float, reference: NDArray[np.bool_] | None = None
-) -> FloatArray:
-    """Directional robust z-score of a series against its median over the `reference` epochs (all by
-    default; NaN where x is NaN)."""
-    ok = np.isfinite(x) & (True if reference is None else reference)
-    if ok.sum() < 5:
-        ok = np.isfinite(x)
-        if ok.sum() < 5:
-            return np.full(len(x), np.nan)
-    med, scale = _center_scale(x[ok], floor, relative_floor)
-    z = (x - med) / scale
-    return np.abs(z) if direction == 0 else direction * z
 
 
 def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> tuple[NDArray[np.bool_], float]:
@@ -136,7 +126,7 @@ def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOpti
     shifts = np.full((len(columns), len(k)), -np.inf)
     for i, (ind, x) in enumerate(columns):
         ok = np.isfinite(x)
-        _, scale = _center_scale(x, ind.floor, ind.relative_floor)
+        _, scale = center_scale(x, ind.floor, ind.relative_floor)
         total, count = np.cumsum(np.where(ok, x, 0.0)), np.cumsum(ok)
         nb, na = count[k - 1], count[-1] - count[k - 1]
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -151,19 +141,11 @@ def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOpti
     for ind, x in columns:
         before, after = x[:split], x[split:]
         if np.isfinite(before).sum() >= 5 and np.isfinite(after).sum() >= 5:
-            med, scale = _center_scale(before, ind.floor, ind.relative_floor)
+            med, scale = center_scale(before, ind.floor, ind.relative_floor)
             robust.append(ind.direction * (float(np.nanmedian(after)) - med) / scale)
     if len(robust) < 2 or sorted(robust)[-2] <= opts.z_alarm:
         return everything, float("nan")
     return np.arange(n) < split, float(t[split])
-
-
-def _windowed_max(t: FloatArray, z: FloatArray, window_s: float) -> FloatArray:
-    """max of z over the trailing [t - window_s, t] (NaN-aware), for indicators that change seconds apart.
-    Trailing, so a joint change is raised when its second indicator moves, never before the first did."""
-    index = pd.to_timedelta(t, unit="s")
-    rolled = pd.Series(z, index=index).rolling(pd.Timedelta(seconds=window_s), closed="both", min_periods=1)
-    return rolled.max().to_numpy(dtype=float)
 
 
 def _fix_gaps(t: FloatArray, factor: float) -> FloatArray:
@@ -189,6 +171,7 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     if len(t) < 10:
         return None
     z_cols: dict[str, FloatArray] = {}
+    not_interference: dict[str, FloatArray] = {}  # each indicator's z the way interference does not move it
     labels: dict[str, str] = {}
     reference, reference_end = reference_epochs(t, fx, opts)
     for ind in INDICATORS:
@@ -198,33 +181,42 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         z_cols[ind.column] = np.clip(
             robust_z(x, ind.direction, ind.floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
         )
+        jam_way = INTERFERENCE_DIRECTION.get(ind.column, 0)
+        if not jam_way:
+            not_interference[ind.column] = np.nan_to_num(z_cols[ind.column], nan=0.0)
+        elif ind.direction == 0:  # a move either way counts: the one a jammer does not make is spoofing-like
+            other_way = robust_z(x, -jam_way, ind.floor, ind.relative_floor, reference)
+            not_interference[ind.column] = np.clip(np.nan_to_num(other_way, nan=0.0), 0.0, opts.z_clip)
+        else:  # it counts only the way a jammer moves it
+            not_interference[ind.column] = np.zeros(len(t))
         labels[ind.column] = ind.label
     gaps = _fix_gaps(t, opts.gap_factor)
     if gaps.any():
         z_cols["fix_gap"] = np.clip(gaps, 0, opts.z_clip)
+        not_interference["fix_gap"] = z_cols["fix_gap"]
         labels["fix_gap"] = "fix lost (gap)"
     flags = fx["spoofing_flag"].to_numpy()
     spoof_flag = flags == SpoofingFlag.INDICATED
-    jam_state = fx["jamming_state"].to_numpy(dtype=float) >= 2
     cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
     too_strong = np.nan_to_num(cn0) > opts.max_plausible_cn0_dbhz
-    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any():
+    if not z_cols and not spoof_flag.any() and not too_strong.any():
         return None
     names = list(z_cols)
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
-    Zw = np.stack([_windowed_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
+    Zw = np.stack([trailing_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
     beyond = np.nan_to_num(Zw, nan=0.0) > opts.z_alarm
     count = beyond.sum(axis=1).astype(float)
-    joint = count >= opts.min_indicators
+    other = np.stack([trailing_max(t, not_interference[n], opts.window_s) for n in names], axis=1) if names else Z
+    joint = (count >= opts.min_indicators) & ((other > opts.z_alarm).sum(axis=1) >= 1)
     # the score: the second largest windowed z (the weaker of the two strongest agreeing indicators)
     score = np.sort(np.nan_to_num(Zw, nan=0.0), axis=1)[:, -2] if Z.shape[1] >= 2 else np.zeros(len(t))
-    raised = joint | spoof_flag | jam_state | too_strong
+    raised = joint | spoof_flag | too_strong
     alarms = [
         a
         for a in alarm_intervals(t, np.maximum(score, count), raised, opts.merge_gap_s)
         if a.end_s - a.start_s >= opts.min_duration_s or spoof_flag[(t >= a.start_s) & (t <= a.end_s)].sum() >= 2
     ]
-    quiet = (count == 0) & ~spoof_flag & ~jam_state
+    quiet = (count == 0) & ~spoof_flag
     result = DetectorResult(
         NAME,
         True,
@@ -253,8 +245,6 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
             what.append("indicators out of their baseline: " + ", ".join(moved))
         if spoof_flag[inside].any():
             what.append("the receiver's own spoofing flag raised")
-        if jam_state[inside].any():
-            what.append("the receiver's jamming state at warning or worse")
         if too_strong[inside].any():
             what.append(f"mean C/N0 above {opts.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives)")
         result.findings.append(
@@ -300,13 +290,14 @@ ANALYSIS = AnalysisSpec(
         DetectorInfo(
             NAME,
             Evidence.RECEIVER,
-            "the receiver's own indicators changing together, its spoofing/jamming state, implausible C/N0",
+            "the receiver's own indicators changing together, its spoofing state, implausible C/N0",
             "Each indicator the receiver logs (reported accuracies, satellites used, DOP, noise, jamming "
             "indicator, AGC, mean C/N0, losses of fix) against its own median and robust scale in this log "
             "(learned before the indicators worsen together, when a takeover fills most of the log); "
-            "an alarm needs two indicators beyond 6 robust sigma within 5 s of each other for 1 s, the "
-            "receiver's own spoofing flag or jamming state, or a mean C/N0 above 50 dB-Hz. Evidence alone is "
-            "never a spoofing verdict.",
+            "an alarm needs two indicators beyond 6 robust sigma within 5 s of each other for 1 s, one of "
+            "them not the way a jammer moves it (noise or jamming indicator up, AGC or C/N0 down: the "
+            "interference detector's), the receiver's own spoofing flag, or a mean C/N0 above 50 dB-Hz. "
+            "Evidence alone is never a spoofing verdict.",
             "two independent indicators beyond 6 robust sigma at once",
         ),
     ),

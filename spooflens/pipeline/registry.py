@@ -34,6 +34,7 @@ MIN_TIMED_FIXES = 20
 ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
+    "spooflens.detectors.interference",
     "spooflens.detectors.autopilot_ekf",
     "spooflens.detectors.heading_reference",
     "spooflens.detectors.receiver_time",
@@ -87,6 +88,15 @@ def _has_satellite_view(table: EpochTable) -> str | None:
     return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions"
 
 
+def _has_signal_levels(table: EpochTable) -> str | None:
+    if _has_fixes(table) is None or len(table.satellites):
+        return None
+    obs = table.observations
+    if len(obs) and np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any():
+        return None
+    return "GNSS fixes, satellite reports or raw observations with C/N0"
+
+
 def _has_received_ephemerides(table: EpochTable) -> str | None:
     eph = table.ephemerides
     if eph is not None and np.isfinite(eph.received_s).any():
@@ -133,6 +143,7 @@ REQUIREMENTS: dict[str, Callable[[EpochTable], str | None]] = {
     "observations": _has_observations,
     "satellite_states": _has_satellite_states,
     "satellite_view": _has_satellite_view,
+    "signal_levels": _has_signal_levels,
     "received_ephemerides": _has_received_ephemerides,
     "two_receivers": _has_two_receivers,
     "fleet": _has_fleet,

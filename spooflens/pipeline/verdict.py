@@ -6,11 +6,12 @@ part, else the earliest onset estimate inside it; its end is the last alarm end 
 stage, `spooflens.pipeline.reconstruction`, refines it). Detectors marked advisory (an uncalibrated rule, a test
 whose model does not fit the log) are reported but do not make incidents.
 
-Confidence counts the distinct evidence classes whose detectors alarmed in the incident at the same
-time (`spooflens.pipeline.evidence.corroborated`, `confidence`): several tests on one filter's innovations are
-one class, and classes whose alarms lie minutes apart inside one long incident do not corroborate each
-other. A low-confidence incident (one GNSS-internal class alone) is an anomaly, never a spoofing
-verdict.
+Alarms of classes that are no spoofing evidence (interference) make incidents of their own, never merged
+with spoofing alarms. Confidence counts the distinct evidence classes whose detectors alarmed in the
+incident at the same time (`spooflens.pipeline.evidence.corroborated`, `confidence`): several tests on
+one filter's innovations are one class, and classes whose alarms lie minutes apart inside one long
+incident do not corroborate each other. A low-confidence incident (one GNSS-internal class alone) is an
+anomaly, never a spoofing verdict.
 """
 
 from __future__ import annotations
@@ -18,7 +19,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
-from spooflens.pipeline.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
+from spooflens.pipeline.evidence import (
+    CORROBORATION_S,
+    NOT_SPOOFING,
+    ORDER,
+    Evidence,
+    Span,
+    confidence,
+    corroborated,
+)
 
 ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
 
@@ -162,8 +171,13 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
     not_run = tuple(r.name for r in detectors if not r.ran)
     counted = [r for r in detectors if r.ran and not r.advisory]
-    alarms = [(a, r) for r in counted for a in r.alarms]
-    incidents = [_incident(g) for g in _group(alarms, merge_gap_s)]
+    # what only disturbed the signals (interference) is its own incident: merged with spoofing alarms it
+    # would move their incident's onset and end to the jamming's
+    alarms = [(a, r) for r in counted for a in r.alarms if r.evidence not in NOT_SPOOFING]
+    other = [(a, r) for r in counted for a in r.alarms if r.evidence in NOT_SPOOFING]
+    incidents = sorted(
+        (_incident(g) for part in (alarms, other) for g in _group(part, merge_gap_s)), key=lambda i: i.start_s
+    )
     if log_end_s is not None:
         incidents = [
             replace(i, ongoing_at_end=True, end_method="last alarm, at the end of the log")
