@@ -228,13 +228,20 @@ def analyze(
 def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -> int:
     """Write a spoofed copy of LOG with an attack injected, plus its ground truth."""
     from spooflens.attacks import apply_attack, parse_attack, sidecar_path
-    from spooflens.writers.rewrite import rewrite_log
+    from spooflens.attacks.spec import JAMMING_KINDS
+    from spooflens.writers.rewrite import rewrite_log, unwritten_changes
 
     spec = parse_attack(attack_text)
     check_writable(output, "--output", may_be_folder=True)
     table = read_table(log, parse_topics(topics), show_progress(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
-    note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))
+    # interference makes the receiver's velocity noisier, and a capture after it moves it with the drag
+    jamming = spec.kind in JAMMING_KINDS
+    note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)) or jamming)
+    if jamming:
+        missing = unwritten_changes(table, spoofed, read_table(output, parse_topics(topics), False, solve_fixes=False))
+        if missing:
+            note += f"; not in the copy (the format or its writer has no place for them): {', '.join(missing)}"
     truth.write(sidecar_path(output))
     click.echo(
         f"{output}: {spec} on {', '.join(truth.receivers)}"

@@ -60,9 +60,13 @@ def _hit(sv: NDArray[Any], systems: str | None) -> BoolArray:
     return np.array([s[:1] in letters for s in ids], dtype=bool)
 
 
-def _tracking(t: FloatArray, sv: NDArray[Any], cn0: FloatArray, threshold: float) -> BoolArray:
-    """Per row: still tracked, with hysteresis: lost below `threshold`, back at `threshold` + 3 dB."""
-    state = np.where(cn0 < threshold, 1.0, np.where(cn0 >= threshold + REACQUIRE_DB, 0.0, np.nan))
+def _tracking(t: FloatArray, sv: NDArray[Any], cn0: FloatArray, power: FloatArray, threshold: float) -> BoolArray:
+    """Per row: still tracked, with hysteresis: lost below `threshold` while the jammer is on, back at
+    `threshold` + 3 dB or when it is off (a satellite the receiver tracked below the threshold without
+    the jammer keeps being tracked then)."""
+    state = np.where(
+        power <= 0.0, 0.0, np.where(cn0 < threshold, 1.0, np.where(cn0 >= threshold + REACQUIRE_DB, 0.0, np.nan))
+    )
     frame = pd.DataFrame({"t": t, "sv": np.asarray(sv, dtype=str), "lost": state})
     order = frame.sort_values(["sv", "t"], kind="stable").index
     filled = frame.loc[order].groupby("sv")["lost"].ffill().fillna(0.0)
@@ -92,7 +96,8 @@ def _jam_signals(
     if lost_override is not None:
         tracked = ~(np.isin(sv, list(lost_override)) & (power >= 0.5))
     else:
-        tracked = _tracking(rows["t_s"].to_numpy(float), sv, np.where(hit, jammed, np.inf), p["fix_lost_below"])
+        t = rows["t_s"].to_numpy(float)
+        tracked = _tracking(t, sv, np.where(hit, jammed, np.inf), power * hit, p["fix_lost_below"])
     tracked &= np.isfinite(cn0)
     return np.where(tracked, jammed, np.nan), tracked
 

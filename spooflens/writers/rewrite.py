@@ -283,6 +283,55 @@ def rewrite_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
     return note
 
 
+# what an attack may change beyond the fixes' positions: (frame, column, how the note names it)
+CARRIED: tuple[tuple[str, str, str], ...] = (
+    ("fixes", "h_acc_m", "reported accuracies"),
+    ("fixes", "sats_used", "satellites used"),
+    ("fixes", "hdop", "DOP"),
+    ("fixes", "cn0_mean_dbhz", "mean C/N0"),
+    ("fixes", "agc", "AGC"),
+    ("fixes", "noise_per_ms", "noise level"),
+    ("fixes", "jamming_indicator", "jamming indicator"),
+    ("fixes", "jamming_state", "jamming state"),
+    ("satellites", "cn0_dbhz", "each satellite's C/N0"),
+    ("observations", "cn0_dbhz", "the raw measurements' C/N0"),
+    ("observations", "pseudorange_m", "the raw pseudoranges"),
+)
+
+
+def _changed(before: pd.DataFrame, after: pd.DataFrame, column: str) -> bool:
+    """Whether `column` differs between two versions of one frame, rows matched by receiver, time (ms)
+    and satellite; rows present in one only count as a change of the rows."""
+    if not len(before) or not len(after) or column not in before or column not in after:
+        return False
+    keys = ["receiver_id", "_ms"] + (["sv_id"] if "sv_id" in before else [])
+
+    def keyed(df: pd.DataFrame) -> pd.DataFrame:
+        out = df.assign(_ms=np.round(df["t_s"].to_numpy(float) * 1000).astype(np.int64))
+        return out[[*keys, column]].drop_duplicates(keys)
+
+    both = keyed(before).merge(keyed(after), on=keys, suffixes=("", "_new"))
+    a, b = both[column].to_numpy(float), both[f"{column}_new"].to_numpy(float)
+    return bool(np.any(np.abs(np.nan_to_num(a, nan=-1e9) - np.nan_to_num(b, nan=-1e9)) > 1e-3))
+
+
+def unwritten_changes(table: EpochTable, attacked: EpochTable, copy: EpochTable) -> list[str]:
+    """What the attack changed that its copy, read back, does not carry (the format has no place for it,
+    or its writer does not edit it): named for `inject`'s note."""
+    out = [
+        label
+        for frame, column, label in CARRIED
+        if _changed(table.frame(frame), attacked.frame(frame), column)
+        and not _changed(table.frame(frame), copy.frame(frame), column)
+    ]
+    if len(attacked.fixes) < len(table.fixes) and len(copy.fixes) >= len(table.fixes):
+        out.append("the lost fixes")
+    lost = len(attacked.observations) < len(table.observations)
+    if lost and len(copy.observations) >= len(table.observations):
+        out.append("the lost satellites' measurements")
+    return out
+
+
 def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """Formats spooflens writes whole (CSV, ULog): the spoofed table written anew."""
     from spooflens.writers import write_log
