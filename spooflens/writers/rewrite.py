@@ -299,20 +299,28 @@ CARRIED: tuple[tuple[str, str, str], ...] = (
 )
 
 
-def _changed(before: pd.DataFrame, after: pd.DataFrame, column: str) -> bool:
-    """Whether `column` differs between two versions of one frame, rows matched by receiver, time (ms)
-    and satellite; rows present in one only count as a change of the rows."""
-    if not len(before) or not len(after) or column not in before or column not in after:
+def _keyed(df: pd.DataFrame, column: str) -> pd.DataFrame:
+    """One value of `column` per receiver, time (ms) and satellite."""
+    keys = ["receiver_id", "_ms"] + (["sv_id"] if "sv_id" in df else [])
+    out = df.assign(_ms=np.round(df["t_s"].to_numpy(float) * 1000).astype(np.int64))
+    return out[[*keys, column]].drop_duplicates(keys).set_index(keys)[column]
+
+
+def _carried(before: pd.DataFrame, attacked: pd.DataFrame, copy: pd.DataFrame, column: str) -> bool | None:
+    """Whether the copy carries the attack's change of `column`: at most of the rows the attack moved, the
+    copy has a value and it moved too. None when the attack moved nothing there."""
+    if not len(before) or not len(attacked) or column not in before:
+        return None
+    old = _keyed(before, column)
+    new = _keyed(attacked, column).reindex(old.index)
+    moved = new.notna() & old.notna() & ((new - old).abs() > 1e-3)
+    if not moved.any():
+        return None
+    if not len(copy):
         return False
-    keys = ["receiver_id", "_ms"] + (["sv_id"] if "sv_id" in before else [])
-
-    def keyed(df: pd.DataFrame) -> pd.DataFrame:
-        out = df.assign(_ms=np.round(df["t_s"].to_numpy(float) * 1000).astype(np.int64))
-        return out[[*keys, column]].drop_duplicates(keys)
-
-    both = keyed(before).merge(keyed(after), on=keys, suffixes=("", "_new"))
-    a, b = both[column].to_numpy(float), both[f"{column}_new"].to_numpy(float)
-    return bool(np.any(np.abs(np.nan_to_num(a, nan=-1e9) - np.nan_to_num(b, nan=-1e9)) > 1e-3))
+    got = _keyed(copy, column).reindex(old.index[moved.to_numpy()])
+    followed = got.notna() & ((got - old[moved]).abs() > 1e-3)
+    return bool(followed.mean() >= 0.5)
 
 
 def unwritten_changes(table: EpochTable, attacked: EpochTable, copy: EpochTable) -> list[str]:
@@ -321,8 +329,7 @@ def unwritten_changes(table: EpochTable, attacked: EpochTable, copy: EpochTable)
     out = [
         label
         for frame, column, label in CARRIED
-        if _changed(table.frame(frame), attacked.frame(frame), column)
-        and not _changed(table.frame(frame), copy.frame(frame), column)
+        if _carried(table.frame(frame), attacked.frame(frame), copy.frame(frame), column) is False
     ]
     if len(attacked.fixes) < len(table.fixes) and len(copy.fixes) >= len(table.fixes):
         out.append("the lost fixes")
