@@ -8,8 +8,8 @@ its reference, a lost satellite counting as fallen without bound: a jammer lower
 same amount in dB (C/(N0 + J) for every C) and loses the weakest; a wall or a tunnel loses some or all.
 Where the level reaches `min_drop_db` the reference is frozen, and the loss runs while the level against
 it stays at `hold_db` or more (short recoveries of up to `merge_gap_s` bridged). The onset lies between
-the last quiet epoch (level below `quiet_db`) and the first of the loss, the end between its last epoch
-and the next quiet one.
+where the level left its floor (back from the last quiet epoch, level below `quiet_db`, while it keeps
+falling) and the first epoch of the loss, the end between its last epoch and the next quiet one.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import trailing_median
+from spooflens.detectors.base import rise_start, trailing_median
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -177,8 +177,10 @@ def _event(
 ) -> LossEvent:
     t, cn0 = sky.t, sky.cn0
     quiet = np.nan_to_num(level, nan=np.inf) < opts.quiet_db
-    before = np.flatnonzero(quiet[:start_i])
-    onset_lo = float(t[before[-1]]) if len(before) else float(t[0])
+    # the onset: where the level left its floor, back from the last quiet epoch while it keeps falling
+    score = np.nan_to_num(level, nan=0.0, posinf=1e6)
+    floor, _ = rise_start(t, score, float(t[start_i]), opts.quiet_db)
+    onset_lo = float(t[floor])
     after = np.flatnonzero(quiet[end_i + 1 :])
     ongoing = not len(after)
     end_hi = float(t[-1]) if ongoing else float(t[end_i + 1 + after[0]])
