@@ -277,7 +277,10 @@ def plan(
     k = seed
     for v in vehicles:
         for a in attacks or tuple(ATTACKS):
-            if (a in RAW_ATTACKS) != (v in RAW_CONSTELLATIONS):
+            if a in JAM_ATTACKS:  # jamming: every vehicle but car_raw's twins analysed otherwise
+                if v in RAW_CONSTELLATIONS and v != "car_raw":
+                    continue
+            elif (a in RAW_ATTACKS) != (v in RAW_CONSTELLATIONS):
                 continue
             for _ in range(runs):
                 out.append(Run(v, a, k))

@@ -167,7 +167,8 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
     `log_end_s` (the last GNSS fix) was still going on when the log ended: its end is the log's, not the
     attack's (the reconstruction stage says the same for the incidents it confirms)."""
     detectors = [r for r in results if r.is_detector]
-    ran = tuple(r.name for r in detectors if r.ran and not r.advisory)
+    # the detectors a spoofing verdict rests on: one that can only say what disturbed the signals is none
+    ran = tuple(r.name for r in detectors if r.ran and not r.advisory and r.evidence not in NOT_SPOOFING)
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
     not_run = tuple(r.name for r in detectors if not r.ran)
     counted = [r for r in detectors if r.ran and not r.advisory]

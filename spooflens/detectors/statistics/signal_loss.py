@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import rise_start, trailing_median
+from spooflens.detectors.base import trailing_median
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -179,7 +179,10 @@ def _event(
     quiet = np.nan_to_num(level, nan=np.inf) < opts.quiet_db
     # the onset: where the level left its floor, back from the last quiet epoch while it keeps falling
     score = np.nan_to_num(level, nan=0.0, posinf=1e6)
-    floor, _ = rise_start(t, score, float(t[start_i]), opts.quiet_db)
+    before = np.flatnonzero(quiet[:start_i])
+    floor = int(before[-1]) if len(before) else 0
+    while floor > 0 and score[floor - 1] < score[floor]:  # strictly: a flat floor is no rise
+        floor -= 1
     onset_lo = float(t[floor])
     after = np.flatnonzero(quiet[end_i + 1 :])
     ongoing = not len(after)

@@ -24,7 +24,7 @@ from spooflens.inventory import computed, skipped_or_repaired, stream_rows
 from spooflens.output.report.figures import MAX_LABELLED, Plot
 from spooflens.output.report.provenance import InputIdentity
 from spooflens.pipeline.departure import Departure, gnss_departure
-from spooflens.pipeline.evidence import EVIDENCE, label
+from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, label
 from spooflens.pipeline.registry import DetectorInfo
 from spooflens.pipeline.run import Analysis
 from spooflens.pipeline.verdict import Incident, Verdict
@@ -204,7 +204,15 @@ def _detector_status(results: Sequence[DetectorResult], verdict: Verdict) -> str
     for r in results:
         if not r.is_detector:
             continue
-        status = "counted" if r.name in verdict.detectors_run else "advisory" if r.advisory else "did not run"
+        status = (
+            "counted"
+            if r.name in verdict.detectors_run
+            else "advisory"
+            if r.advisory
+            else "reported (no spoofing evidence)"
+            if r.ran and r.evidence in NOT_SPOOFING
+            else "did not run"
+        )
         alarms = len(r.alarms) if r.ran else "-"
         rows.append((r.name, label(r.evidence) if r.evidence else "", status, alarms, r.reason))
     if not rows:
