@@ -127,7 +127,7 @@ def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTr
     start = spec.start_s
     end = min(spec.end_s if spec.end_s is not None else table.duration_s, table.duration_s)
     frames = (table.fixes, table.observations, table.satellites)
-    receivers = list(dict.fromkeys(str(r) for f in frames for r in f["receiver_id"].astype(str)))
+    receivers = list(dict.fromkeys(str(r) for f in frames for r in f["receiver_id"].dropna().unique()))
     if not receivers:
         raise AttackError(f"{table.source}: no GNSS fixes, satellites or observations to jam")
     targets = [p["receiver"]] if "receiver" in p else receivers

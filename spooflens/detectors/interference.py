@@ -116,8 +116,7 @@ def _receivers(table: EpochTable) -> list[_Receiver]:
     mean C/N0 of its fixes."""
     out = []
     sats, obs, fixes = table.satellites, table.observations, table.fixes
-    ids = list(dict.fromkeys([*fixes["receiver_id"].astype(str), *sats["receiver_id"].astype(str)]))
-    ids += [r for r in dict.fromkeys(obs["receiver_id"].astype(str)) if r not in ids]
+    ids = list(dict.fromkeys(str(r) for frame in (fixes, sats, obs) for r in frame["receiver_id"].dropna().unique()))
     for rid in ids:
         fx = fixes[fixes["receiver_id"].astype(str) == rid].reset_index(drop=True)
         sky, source = None, "none"

@@ -97,12 +97,15 @@ class LossEvent:
         return self.expected & ~self.lost
 
 
-def _reference(t: FloatArray, cn0: FloatArray, excluded: BoolArray, opts: LossOptions) -> FloatArray:
+def _windows(t: FloatArray, opts: LossOptions) -> tuple[float, float]:
+    """The reference window's span and gap for this sky's epoch period."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    return max(opts.span_s, opts.span_epochs * dt), max(opts.gap_s, 1.01 * dt)
+
+
+def _reference(t: FloatArray, cn0: FloatArray, excluded: BoolArray, span: float, gap: float) -> FloatArray:
     """Each satellite's trailing reference C/N0 per epoch, NaN where it was not expected (tracked at no
     more than half the reference window's epochs); `excluded` epochs (earlier losses) left out."""
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    span = max(opts.span_s, opts.span_epochs * dt)
-    gap = max(opts.gap_s, 1.01 * dt)
     kept = ~excluded[:, None]
     reference = trailing_median(t, np.where(kept, cn0, np.nan), span, gap)
     tracked = np.where(kept, np.isfinite(cn0).astype(float), np.nan)
@@ -152,16 +155,19 @@ def signal_losses(sky: SkyMatrix, opts: LossOptions | None = None) -> tuple[list
         return events, np.full(len(t), np.nan)
     excluded = np.zeros(len(t), dtype=bool)  # the references leave out earlier losses
     running = np.full(len(t), np.nan)
+    span, gap = _windows(t, opts)
     begin = 0
     while begin < len(t) and len(events) < opts.max_events:
-        reference = _reference(t, cn0, excluded, opts)
-        level = _level(reference, cn0, opts.min_expected)
-        running[begin:] = level[begin:]
-        above = np.flatnonzero(np.nan_to_num(level[begin:], nan=0.0) >= opts.min_drop_db)
+        # the references from `begin` on look back span + gap at most: computed from there only
+        lo = int(np.searchsorted(t, t[begin] - span - gap - 1.0))
+        reference = _reference(t[lo:], cn0[lo:], excluded[lo:], span, gap)
+        level = _level(reference, cn0[lo:], opts.min_expected)
+        running[begin:] = level[begin - lo :]
+        above = np.flatnonzero(np.nan_to_num(level[begin - lo :], nan=0.0) >= opts.min_drop_db)
         if not len(above):
             break
         k = begin + int(above[0])
-        frozen = reference[k]
+        frozen = reference[k - lo]
         level0 = _level(frozen, cn0, opts.min_expected)
         first, last = _extent(t, level0, k, opts)
         core = np.flatnonzero(np.nan_to_num(level0[first : last + 1], nan=0.0) >= opts.min_drop_db) + first
