@@ -5,8 +5,9 @@ satellite's C/N0 falls by the same 10 log10(1 + J/N0) dB whatever its strength; 
 the tracking threshold (`fix_lost_below`) is lost and comes back 3 dB above it; with fewer than four
 the fix is lost. The front end sees the extra power: its AGC turns the gain down, its noise and jamming
 indicators rise, and the receiver's jamming monitor (where the log has one that is on) says warning, and
-critical when the fix is gone. The code tracking noise grows as 1/sqrt(C/N0): reported accuracies, DOP and
-the fixes' real scatter (and raw pseudoranges) grow with it. The jammer's power rises over `ramp` s from
+critical when the fix is gone. The code tracking noise grows as 1/sqrt(C/N0): the raw pseudoranges get it,
+the fixes its thermal part through the geometry left, smoothed by the receiver's filter; the accuracies a
+receiver reports grow faster (`acc`), and its DOP with the satellites lost. The jammer's power rises over `ramp` s from
 `start` and fades over `ramp` s before `end`.
 
 `jam_spoof` is the attack real spoofers mount: jam the receiver off the sky, then let it re-acquire on the
@@ -38,6 +39,9 @@ REACQUIRE_DB = 3.0  # a lost satellite is re-acquired this far above the trackin
 MIN_SATELLITES = 4  # fewer tracked: no fix
 SKY_SPREAD_DB = 5.0  # spread of the satellites' C/N0 around their mean, for a log with the mean alone
 FIX_SMOOTHING_S = 5.0  # a receiver's solution filters its extra noise over a few seconds
+CODE_NOISE_M = 0.5  # thermal code noise of a pseudorange at the satellite's own C/N0
+DOPPLER_NOISE_MPS = 0.03  # ... and of its range rate
+SMOOTHED_EPOCHS = 10.0  # the carrier-aided filter averages the code noise over about this many epochs
 NOISE_RISE = 0.5  # noise indicator at full power: this much above its level
 JAMMING_INDICATOR_RISE = 150.0  # jamming indicator (0-255) at full power: this much above its level
 WARNING_DB = 6.0  # the receiver's monitor says warning from this drop on
@@ -215,7 +219,7 @@ def _noisier_ranges(obs: pd.DataFrame, rows: NDArray[np.int64], drop_db: FloatAr
     """Code and Doppler noise grow as 1/sqrt(C/N0): added to the pseudoranges and rates of the jammed rows
     (0.5 m and 0.03 m/s at the satellite's own level), the Doppler kept as the rate's (-rate / wavelength)."""
     extra = np.sqrt(np.maximum(10.0 ** (drop_db / 10.0) - 1.0, 0.0))
-    for col, sigma in (("pseudorange_m", 0.5), ("pseudorange_rate_mps", 0.03)):
+    for col, sigma in (("pseudorange_m", CODE_NOISE_M), ("pseudorange_rate_mps", DOPPLER_NOISE_MPS)):
         x = obs[col].to_numpy(float)[rows]
         obs.iloc[rows, obs.columns.get_loc(col)] = x + rng.normal(0.0, 1.0, len(rows)) * sigma * extra
     rate = obs["pseudorange_rate_mps"].to_numpy(float)[rows]
@@ -269,15 +273,17 @@ def _jam_fixes(
         fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) * geometry
     for c in ("h_acc_m", "v_acc_m", "vel_acc_mps"):
         fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) * inflation
-    # the real scatter grows as the reported accuracy does
-    quiet = t < start
-    h0 = _level(fx["h_acc_m"].to_numpy(float), quiet, 2.0)
-    v0 = _level(fx["v_acc_m"].to_numpy(float), quiet, 2.0 * h0)
-    s0 = _level(fx["vel_acc_mps"].to_numpy(float), quiet, 0.1)
-    extra = np.sqrt(np.maximum(inflation**2 - 1.0, 0.0))[:, None]
+    # the real scatter: only the thermal part of the code and Doppler noise grows (through the geometry the
+    # satellites left give), smoothed by the receiver's carrier-aided filter; a receiver's reported accuracy
+    # grows faster than its real error does
+    thermal = np.sqrt(np.maximum(10.0 ** (drop / 10.0) - 1.0, 0.0))
+    hdop = np.where(np.isfinite(fx["hdop"].to_numpy(float)), fx["hdop"].to_numpy(float), 1.0) * geometry
+    vdop = np.where(np.isfinite(fx["vdop"].to_numpy(float)), fx["vdop"].to_numpy(float), 1.5) * geometry
+    code = CODE_NOISE_M * thermal / np.sqrt(SMOOTHED_EPOCHS)
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    dp = _smoothed_noise(len(t), dt, rng) * [h0 / np.sqrt(2.0), h0 / np.sqrt(2.0), v0] * extra
-    dv = rng.normal(0.0, 1.0, (len(t), 3)) * s0 / np.sqrt(3.0) * extra
+    sigma = np.c_[hdop * code / np.sqrt(2.0), hdop * code / np.sqrt(2.0), vdop * code]
+    dp = _smoothed_noise(len(t), dt, rng) * sigma
+    dv = rng.normal(0.0, 1.0, (len(t), 3)) * (DOPPLER_NOISE_MPS * thermal * hdop)[:, None] / np.sqrt(2.0)
     lat, lon, h = (fx[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m"))
     new_lat, new_lon, new_h = add_enu_offset(lat, lon, h, dp)
     fixes.iloc[rows, cols.get_loc("lat_deg")] = new_lat
@@ -301,13 +307,6 @@ def _jam_fixes(
         said = np.where(drop >= WARNING_DB, np.where(lost, 3.0, 2.0), state)
         fixes.iloc[rows, cols.get_loc("jamming_state")] = np.where(np.isfinite(state), np.maximum(state, said), state)
     return lost, np.where(lost[:, None], 0.0, dp)
-
-
-def _level(x: FloatArray, quiet: BoolArray, default: float) -> float:
-    ok = np.isfinite(x) & quiet
-    if not ok.any():
-        ok = np.isfinite(x)
-    return float(np.median(x[ok])) if ok.any() else default
 
 
 def apply_jam_spoof(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:

@@ -295,8 +295,8 @@ KINDS[Kind.JAM] = KindSpec(
     "interference",
     "a jammer: every satellite's C/N0 falls by `cn0` dB (rising over `ramp` s), the weakest below "
     "`fix_lost_below` dB-Hz are lost and with fewer than 4 the fix; AGC down to `agc`, noise and jamming "
-    "indicator up, reported accuracies and DOP inflated and the fixes noisier by as much, the receiver's "
-    "jamming state (where it logs one) warning, critical without a fix",
+    "indicator up, reported accuracies and DOP inflated and the fixes noisier by the thermal code noise, the "
+    "receiver's jamming state (where it logs one) warning, critical without a fix",
     (*_JAMMER, *_WINDOW),
 )
 KINDS[Kind.JAM_SPOOF] = KindSpec(

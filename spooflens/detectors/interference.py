@@ -95,6 +95,8 @@ class InterferenceOptions:
     window_s: float = 5.0
     merge_gap_s: float = 10.0
     gap_factor: float = 4.0  # a gap of this many fix periods is a lost fix
+    louder_after_db: float = 3.0  # the satellites came back this much stronger than before the loss, or ...
+    alike_after_db: float = 1.5  # ... within this spread of each other (satellite_signals' one-C/N0 limit)
 
 
 @dataclass(frozen=True)
@@ -453,8 +455,17 @@ def _event_facts(
         peak = loss.peak_level_db
         event["peak_level_db"] = round(peak, 2) if np.isfinite(peak) else "all expected satellites lost"
         event["cn0_after_vs_before_db"] = round(loss.after_db, 2) if np.isfinite(loss.after_db) else None
-        if np.isfinite(loss.after_db) and loss.after_db >= 3.0:
-            event["after"] = "the satellites came back stronger than before (a louder source, as a spoofer's)"
+        event["cn0_spread_db"] = {
+            "before": round(loss.spread_before_db, 2) if np.isfinite(loss.spread_before_db) else None,
+            "after": round(loss.spread_after_db, 2) if np.isfinite(loss.spread_after_db) else None,
+        }
+        came_back = []
+        if np.isfinite(loss.after_db) and loss.after_db >= opts.louder_after_db:
+            came_back.append(f"{loss.after_db:.0f} dB stronger than before (a louder source)")
+        if loss.spread_after_db < opts.alike_after_db <= loss.spread_before_db:
+            came_back.append(f"all alike within {loss.spread_after_db:.1f} dB (one source for all)")
+        if came_back:
+            event["after"] = "the satellites came back " + " and ".join(came_back) + ": as a spoofer's signals do"
     else:
         event |= {"signature": "no C/N0 loss", "uniform": None, "why": "no C/N0 loss measured with it"}
     if state is not None and state >= 2:

@@ -107,6 +107,8 @@ def test_jam_then_capture_both_phases_are_seen() -> None:
     assert len(jam) == 1 and not jam[0].is_spoofing
     assert jam[0].onset_interval_s is not None and jam[0].onset_interval_s[0] - 1 <= 150.0 <= jam[0].onset_interval_s[1]
     assert 185.0 <= jam[0].end_s <= 191.0
+    facts = next(r.extras for r in analysis.results if r.name == "interference")
+    assert "stronger than before" in facts["events"][0]["after"]  # type: ignore[index]
     takeover = truth.phases[1]["start_s"]
     spoofing = [i for i in analysis.verdict.incidents if i.is_spoofing]
     assert spoofing and spoofing[-1].ongoing_at_end and spoofing[-1].end_s >= takeover

@@ -87,6 +87,8 @@ class LossEvent:
     lost: BoolArray  # (S,) expected, and tracked at fewer than half of the loss's epochs
     elevation_deg: FloatArray  # (S,) mean elevation over the reference and the loss, NaN unknown
     after_db: float  # median C/N0 change against the reference `after_s` after the loss (NaN: none)
+    spread_before_db: float  # standard deviation of the satellites' reference C/N0 (the sky's spread)
+    spread_after_db: float  # ... of their median C/N0 `after_s` after the loss (NaN: none): near 0, one source
 
     @property
     def expected(self) -> BoolArray:
@@ -205,6 +207,9 @@ def _event(
         later = (t > end_hi) & (t <= end_hi + opts.after_s)
         change = cn0[later] - reference if later.any() else np.full((0, len(reference)), np.nan)
         after_db = float(np.nanmedian(change)) if np.isfinite(change).any() else float("nan")
+        back = np.nanmedian(cn0[later], axis=0) if later.any() else np.full(len(reference), np.nan)
+        spread_after = float(np.nanstd(back)) if np.isfinite(back).sum() >= 4 else float("nan")
+        spread_before = float(np.nanstd(reference)) if expected.sum() >= 4 else float("nan")
     core = level[start_i : end_i + 1]
     return LossEvent(
         float(t[start_i]),
@@ -218,4 +223,6 @@ def _event(
         lost,
         elevation,
         after_db,
+        spread_before,
+        spread_after,
     )
