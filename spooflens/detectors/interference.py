@@ -192,7 +192,7 @@ def _rf_changes(
     for ind in indicators:
         x = fx[ind.column].to_numpy(float)
         ok = np.isfinite(x)
-        if (ok & before).sum() < 3 or (ok & during).sum() < 2 or (np.nanstd(x) == 0.0 and ind.column != "agc"):
+        if (ok & before).sum() < 3 or (ok & during).sum() < 2:
             continue
         base = x[ok & quiet] if (ok & quiet).sum() >= 5 else x[ok]
         _, scale = center_scale(base, ind.floor, ind.relative_floor)
