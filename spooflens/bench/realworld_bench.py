@@ -165,7 +165,9 @@ def jam_scores(analysis: Any, truth: Any, table: Any) -> dict[str, Any]:
         }
     spoofing = [i for i in analysis.verdict.incidents if i.is_spoofing]
     if truth.kind == "jam":
-        out["jam_called_spoofing"] = any(i.start_s <= end + 5.0 and i.end_s >= start - 1.0 for i in spoofing)
+        called = [i for i in spoofing if i.start_s <= end + 5.0 and i.end_s >= start - 1.0]
+        out["jam_called_spoofing"] = bool(called)
+        out["jam_spoofing_evidence"] = sorted({str(e) for i in called for e in i.corroborating})
         return out
     capture = truth.phases[1]
     takeover = float(capture["start_s"])
@@ -382,6 +384,8 @@ def _jam_summary(rs: list[dict[str, Any]]) -> dict[str, Any]:
     }
     if any("jam_called_spoofing" in r for r in rs):
         out["called_spoofing"] = mean("jam_called_spoofing", rs)
+        classes = [" + ".join(r["jam_spoofing_evidence"]) for r in rs if r.get("jam_called_spoofing")]
+        out["called_spoofing_by"] = {c: classes.count(c) for c in sorted(set(classes))}
     if any("capture_detected" in r for r in rs):
         out["capture_detected"] = mean("capture_detected", rs)
         out["capture_delay_median_s"] = pct("capture_delay_s", rs, 50)
@@ -429,6 +433,9 @@ def _print_jamming(jamming: dict[str, dict[str, Any]], vehicles: tuple[str, ...]
     for kind, k in jamming.items():
         for vehicle, seed in k["missed"]:
             console().print(f"  {kind} missed: {vehicle}, seed {seed}")
+        if k.get("called_spoofing_by"):
+            by = ", ".join(f"{n} by {classes}" for classes, n in k["called_spoofing_by"].items())
+            console().print(f"  {kind} drew a spoofing verdict: {by} (the evidence classes that agreed)")
 
 
 @click.command("realworld")

@@ -8,8 +8,9 @@ its reference, a lost satellite counting as fallen without bound: a jammer lower
 same amount in dB (C/(N0 + J) for every C) and loses the weakest; a wall or a tunnel loses some or all.
 Where the level reaches `min_drop_db` the reference is frozen, and the loss runs while the level against
 it stays at `hold_db` or more (short recoveries of up to `merge_gap_s` bridged). The onset lies between
-where the level left its floor (back from the last quiet epoch, level below `quiet_db`, while it keeps
-falling) and the first epoch of the loss, the end between its last epoch and the next quiet one.
+where the level left its floor (the last epoch at or under the median level of the minute before the last
+quiet epoch, level below `quiet_db`) and the first epoch of the loss, the end between its last epoch and
+the next quiet one.
 """
 
 from __future__ import annotations
@@ -185,13 +186,15 @@ def _event(
 ) -> LossEvent:
     t, cn0 = sky.t, sky.cn0
     quiet = np.nan_to_num(level, nan=np.inf) < opts.quiet_db
-    # the onset: where the level left its floor, back from the last quiet epoch while it keeps falling
+    # the onset: where the level left its floor, the last epoch before the loss at or under the median
+    # level of the minute before its last quiet epoch (noise puts half the floor's epochs there)
     score = np.nan_to_num(level, nan=0.0, posinf=1e6)
     before = np.flatnonzero(quiet[:start_i])
-    floor = int(before[-1]) if len(before) else 0
-    while floor > 0 and score[floor - 1] < score[floor]:  # strictly: a flat floor is no rise
-        floor -= 1
-    onset_lo = float(t[floor])
+    last_quiet = int(before[-1]) if len(before) else 0
+    window = (t >= t[last_quiet] - opts.span_s) & (np.arange(len(t)) <= last_quiet)
+    floor_level = float(np.median(score[window]))
+    at_floor = np.flatnonzero(score[: last_quiet + 1] <= floor_level)
+    onset_lo = float(t[at_floor[-1]]) if len(at_floor) else float(t[0])
     after = np.flatnonzero(quiet[end_i + 1 :])
     ongoing = not len(after)
     end_hi = float(t[-1]) if ongoing else float(t[end_i + 1 + after[0]])
