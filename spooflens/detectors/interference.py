@@ -601,7 +601,7 @@ ANALYSIS = AnalysisSpec(
             "comes with the AGC down or the noise or jamming indicator up by 4 robust sigma (or with none of "
             "them logged), when any loss does, when two of them move 6 robust sigma together without a loss, "
             "or when the receiver reports jamming. Never spoofing evidence.",
-            "0 events in the clean real logs and simulated hours of docs/interference.md",
+            "0 events in 7.2 h of 95 real logs and 30 h of simulated ones (< 10 per 100 h at 95 %)",
         ),
     ),
 )
