@@ -239,13 +239,20 @@ def analyze(
 def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -> int:
     """Write a spoofed copy of LOG with an attack injected, plus its ground truth."""
     from spooflens.attacks import apply_attack, parse_attack, sidecar_path
-    from spooflens.writers.rewrite import rewrite_log
+    from spooflens.attacks.spec import JAMMING_KINDS
+    from spooflens.writers.rewrite import rewrite_log, unwritten_changes
 
     spec = parse_attack(attack_text)
     check_writable(output, "--output", may_be_folder=True)
     table = read_table(log, parse_topics(topics), show_progress(), solve_fixes=False)
     spoofed, truth = apply_attack(table, spec)
-    note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)))
+    # interference makes the receiver's velocity noisier, and a capture after it moves it with the drag
+    jamming = spec.kind in JAMMING_KINDS
+    note = rewrite_log(log, output, table, spoofed, velocities=bool(spec.params.get("vel", 0)) or jamming)
+    if jamming:
+        missing = unwritten_changes(table, spoofed, read_table(output, parse_topics(topics), False, solve_fixes=False))
+        if missing:
+            note += f"; not in the copy (the format or its writer has no place for them): {', '.join(missing)}"
     truth.write(sidecar_path(output))
     click.echo(
         f"{output}: {spec} on {', '.join(truth.receivers)}"
@@ -279,6 +286,20 @@ def inject(log: Path, attack_text: str, output: Path, topics: tuple[str, ...]) -
     help="'synthetic' (GPS-like Walker 24/6/1), 'synthetic_gps_galileo' (and Galileo's 24/3/1), or a RINEX "
     "navigation file whose satellites to use.",
 )
+@click.option(
+    "--sky",
+    is_flag=True,
+    help="The receiver reports its sky (per-satellite C/N0 by elevation, elevation, azimuth, used) and logs "
+    "the indicators real receivers do (AGC, noise, jamming indicator, accuracies).",
+)
+@click.option(
+    "--jam",
+    "jam_text",
+    default=None,
+    metavar="START,END,DEPTH",
+    help="A jammer from START to END s whose full power lowers every satellite's C/N0 by DEPTH dB (spooflens "
+    "inject's `jam` attack on the simulated receiver, with --sky); its truth goes to OUTPUT.attack.json.",
+)
 def simulate(
     scenario: str,
     output: Path,
@@ -289,12 +310,15 @@ def simulate(
     gnss_hz: float | None,
     raw: bool,
     constellation: str,
+    sky: bool,
+    jam_text: str | None,
 ) -> int:
     """Write a simulated log (scenarios: seed000, aircraft, ship, ground, ground_raw, dual_receiver) and its
     truth (OUTPUT.truth.csv)."""
     from dataclasses import replace
 
     from spooflens.simulation.observations import ObservationNoise
+    from spooflens.simulation.sensors import ReceiverModel
     from spooflens.simulation.simulate import SCENARIOS, write_with_truth
     from spooflens.simulation.simulate import simulate as run_simulation
 
@@ -320,13 +344,43 @@ def simulate(
         click.echo(
             "note: RINEX holds only the observations (and a navigation file); IMU and fixes are not written", err=True
         )
+    jam = parse_jam(jam_text) if jam_text is not None else None
+    if (sky or jam is not None) and sc.observations is None:
+        sc = replace(sc, receiver=sc.receiver or ReceiverModel(), satellite_reports=True)
     table = run_simulation(sc, seed=seed, duration_s=seconds).table
+    jammed, clean = "", table
+    if jam is not None:
+        from spooflens.attacks import apply_attack, parse_attack, sidecar_path
+
+        start, end, depth = jam
+        table, attack = apply_attack(table, parse_attack(f"jam:start={start},end={end},cn0={depth},seed={seed}"))
+        attack.write(sidecar_path(output))
+        jammed = f"; jammed from {start:g} s to {end:g} s, {depth:g} dB (attack truth in {sidecar_path(output)})"
     truth_path = write_with_truth(table, output, fmt)
+    if jam is not None and fmt != "rinex":
+        from spooflens.writers.rewrite import unwritten_changes
+
+        missing = unwritten_changes(clean, table, read_table(output, {}, False, solve_fixes=False))
+        if missing:
+            click.echo(f"note: {fmt} has no place for the jamming's {', '.join(missing)}", err=True)
     click.echo(
         f"{output}: {fmt}, scenario {scenario}, seed {seed}, {table.duration_s:.0f} s, {len(table.imu)} IMU samples, "
-        f"{len(table.fixes)} fixes, {len(table.observations)} observations; truth in {truth_path}"
+        f"{len(table.fixes)} fixes, {len(table.observations)} observations, {len(table.satellites)} satellite "
+        f"reports; truth in {truth_path}{jammed}"
     )
     return EXIT_OK
+
+
+def parse_jam(text: str) -> tuple[float, float, float]:
+    """`--jam START,END,DEPTH` as numbers, END after START and DEPTH positive."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        start, end, depth = (float(p) for p in parts)
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: expected START,END,DEPTH, e.g. 120,180,15", param_hint="--jam") from None
+    if not (0 <= start < end) or depth <= 0:
+        raise click.BadParameter(f"{text!r}: needs 0 <= START < END and DEPTH > 0 dB", param_hint="--jam")
+    return start, end, depth
 
 
 @cli.group(

@@ -708,5 +708,6 @@ FORMATS = (
         "u-blox UBX capture (NAV-PVT, NAV-SAT, NAV-STATUS, RXM-RAWX, MON-RF, SEC-SIG, ESF; mixed NMEA/RTCM3 skipped)",
         read_ubx,
         _is_ubx,
+        rewrite="spooflens.writers.ubx_rewrite:rewrite_ubx",
     ),
 )

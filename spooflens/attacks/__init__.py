@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from spooflens.attacks.capture import apply_capture
 from spooflens.attacks.fix_attacks import apply_fix_attack
+from spooflens.attacks.jamming import apply_jam, apply_jam_spoof
 from spooflens.attacks.observation_attacks import apply_observation_attack
 from spooflens.attacks.spec import (
     KINDS,
@@ -30,6 +31,14 @@ def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Attac
     A ramp or step given `systems` acts on those systems' pseudoranges alone (a GPS-only spoofer before
     a multi-constellation receiver).
     """
+    if spec.kind == Kind.JAM:
+        _check_start(table, spec, "fixes" if len(table.fixes) else "observations")
+        return apply_jam(table, spec)
+    if spec.kind == Kind.JAM_SPOOF:
+        if not len(table.fixes):
+            raise AttackError(f"{table.source}: jam_spoof needs the receivers' fixes; this log has only pseudoranges")
+        _check_start(table, spec, "fixes")
+        return apply_jam_spoof(table, spec)
     if "systems" in spec.params and not len(table.observations):
         raise AttackError(f"{table.source}: systems= acts on raw pseudoranges and this log has none")
     on_observations = (
@@ -59,6 +68,15 @@ def apply_attack(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Attac
     if spec.kind == Kind.CAPTURE:
         return apply_capture(table, spec)
     return apply_fix_attack(table, spec)
+
+
+def _check_start(table: EpochTable, spec: AttackSpec, frame: str) -> None:
+    rows = getattr(table, frame)
+    if len(rows) and spec.start_s > float(rows["t_s"].max()):
+        raise AttackError(
+            f"{table.source}: start={spec.start_s:g} s is after the end of the log's {frame} "
+            f"({float(rows['t_s'].max()):.1f} s); nothing to attack"
+        )
 
 
 __all__ = ["KINDS", "AttackError", "AttackSpec", "AttackTruth", "Kind", "apply_attack", "parse_attack", "sidecar_path"]

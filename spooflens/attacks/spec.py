@@ -28,8 +28,12 @@ class Kind(Enum):
     BLOCKING = "blocking"
     SPOOFED_SUBSET = "spoofed_subset"
     CAPTURE = "capture"
+    JAM = "jam"
+    JAM_SPOOF = "jam_spoof"
 
 
+# Kinds that drown the signals (interference) rather than counterfeit them, wholly or in a phase
+JAMMING_KINDS = frozenset({Kind.JAM, Kind.JAM_SPOOF})
 # Kinds that act on raw pseudoranges; the fixes follow through the receiver's single-point solution.
 OBSERVATION_KINDS = frozenset({Kind.PR_DELAY, Kind.MEACONING, Kind.BLOCKING, Kind.SPOOFED_SUBSET})
 
@@ -265,6 +269,56 @@ KINDS: dict[Kind, KindSpec] = {
 }
 
 
+_JAMMER: tuple[Param, ...] = (
+    Param("cn0", "float", 15.0, "dB the C/N0 of every satellite falls at the jammer's full power"),
+    Param("ramp", "float", 2.0, "s the jammer takes to reach full power (and to fade before `end`)"),
+    Param("agc", "float", 0.6, "AGC at full power as a fraction of its level before (the front end turns down)"),
+    Param(
+        "lost",
+        "count",
+        None,
+        "satellites lost at full power, the weakest first",
+        "those the drop takes below `fix_lost_below`",
+    ),
+    Param(
+        "fix_lost_below",
+        "float",
+        20.0,
+        "tracking threshold, dB-Hz: a satellite below it is lost (re-acquired 3 dB above it); with fewer "
+        "than 4 tracked the receiver loses its fix",
+    ),
+    Param("acc", "float", None, "reported accuracy inflation at full power", "10^(cn0/20), as code noise grows"),
+    Param("systems", "text", None, "systems whose signals are hit, e.g. GE", "every system"),
+    Param("seed", "count", 0, "random seed of the added noise"),
+)
+KINDS[Kind.JAM] = KindSpec(
+    "interference",
+    "a jammer: every satellite's C/N0 falls by `cn0` dB (rising over `ramp` s), the weakest below "
+    "`fix_lost_below` dB-Hz are lost and with fewer than 4 the fix; AGC down to `agc`, noise and jamming "
+    "indicator up, reported accuracies and DOP inflated and the fixes noisier by the thermal code noise, the "
+    "receiver's jamming state (where it logs one) warning, critical without a fix",
+    (*_JAMMER, *_WINDOW),
+)
+KINDS[Kind.JAM_SPOOF] = KindSpec(
+    "interference, real captures",
+    "jamming for `jam` s (as `jam`), then a spoofer captures the receiver as it re-acquires (as `capture`, "
+    "its signals `louder` dB above the sky's and alike on every satellite); one truth file with both phases",
+    (
+        Param("jam", "float", 30.0, "s of jamming before the spoofer takes over"),
+        *_JAMMER,
+        Param("drag", "text", "ramp", "how the position is dragged: ramp, step or pull"),
+        Param("rate", "float", 3.0, "m/s per axis of the ramp"),
+        Param("offset", "float", 200.0, "m per axis of a step or pull"),
+        _axes("en"),
+        Param("reacquire", "float", 4.0, "s of the takeover transient (capture's `lost`)"),
+        Param("jump", "float", 3.0, "m/s of the velocity transient"),
+        Param("louder", "float", 4.0, "dB the spoofed signals are stronger than the real ones (capture's `cn0`)"),
+        Param("clock", "float", 0.0, "s the spoofer's time differs from GNSS time"),
+        *_WINDOW,
+    ),
+)
+
+
 @dataclass(frozen=True)
 class AttackSpec:
     kind: Kind
@@ -304,8 +358,10 @@ def parse_attack(text: str) -> AttackSpec:
                 f"{kind.value}: bad parameter {item!r}; parameters are {sorted(p.name for p in spec.params)}"
             )
         params[param.name] = param.parse(kind, value)
-    if kind == Kind.CAPTURE and params["drag"] not in ("ramp", "step", "pull"):
-        raise AttackError(f"capture: drag={params['drag']!r}; use ramp, step or pull")
+    if kind in (Kind.CAPTURE, Kind.JAM_SPOOF) and params["drag"] not in ("ramp", "step", "pull"):
+        raise AttackError(f"{kind.value}: drag={params['drag']!r}; use ramp, step or pull")
+    if kind in JAMMING_KINDS:
+        _check_jammer(kind, params)
     if "svs" in params:
         params.pop("count", None)  # named satellites replace a random choice of them
     if params.get("start", 0.0) < 0:
@@ -313,6 +369,22 @@ def parse_attack(text: str) -> AttackSpec:
     if "end" in params and params["end"] <= params.get("start", 0.0):
         raise AttackError(f"{kind.value}: end={params['end']} is not after start={params.get('start', 0.0)}")
     return AttackSpec(kind, params)
+
+
+def _check_jammer(kind: Kind, params: dict[str, Any]) -> None:
+    if params["cn0"] <= 0:
+        raise AttackError(f"{kind.value}: cn0={params['cn0']} must be a positive drop in dB")
+    if not 0.0 < params["agc"] <= 1.0:
+        raise AttackError(f"{kind.value}: agc={params['agc']} must be a fraction in (0, 1]")
+    if params["ramp"] < 0:
+        raise AttackError(f"{kind.value}: ramp={params['ramp']} must be >= 0 s")
+    if "acc" in params and params["acc"] < 1.0:
+        raise AttackError(f"{kind.value}: acc={params['acc']} must be >= 1 (an inflation)")
+    if kind == Kind.JAM_SPOOF:
+        if params["jam"] <= 0:
+            raise AttackError(f"jam_spoof: jam={params['jam']} must be > 0 s")
+        if "end" in params and params["end"] <= params.get("start", 0.0) + params["jam"]:
+            raise AttackError(f"jam_spoof: end={params['end']} leaves no spoofing after {params['jam']} s of jamming")
 
 
 def attacks_markdown() -> str:
@@ -339,6 +411,8 @@ class AttackTruth:
     offsets: dict[str, list[list[float]]] = field(default_factory=dict)  # receiver -> [t_s, de, dn, du]
     satellites: list[str] = field(default_factory=list)  # raw-observation attacks: the satellites attacked
     authentic: list[str] = field(default_factory=list)  # spoofed_subset: the satellites left authentic
+    # an attack of several phases (jam_spoof: jamming, then a capture): each {"kind", "start_s", "end_s", ...}
+    phases: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=1)

@@ -56,6 +56,7 @@ from spooflens.bench.corpus_runs import (
     log_facts,
     run_task,
     score,
+    segments,
     spoofed,
     verdict_extras,
 )
@@ -521,6 +522,51 @@ def false_verdicts(results: Iterable[LogResult], clean_sky: bool = True) -> list
     return out
 
 
+def interference(results: Iterable[LogResult]) -> dict[str, Any]:
+    """The interference detector on the clean pass: on how many logs (and hours) it ran, every log where it
+    alarmed with what the receiver's own jamming monitor said, the losses it judged no interference, and
+    what each receiver's monitor reported over the log (not logged / unknown or off / ok / interference)."""
+    ran: list[str] = []
+    hours = 0.0
+    alarms: list[dict[str, Any]] = []
+    rejected: list[dict[str, Any]] = []
+    monitors: dict[str, list[str]] = {}
+    for r in results:
+        if r.summary is None:
+            continue
+        for k, seg in enumerate(segments(r.summary), start=1):
+            found = [a for a in seg.get("analyses") or [] if a.get("name") == "interference" and a.get("ran")]
+            if not found:
+                continue
+            a = found[0]
+            ran.append(r.log.name)
+            hours += float(seg.get("duration_s") or 0.0) / 3600.0
+            facts = a.get("facts") or {}
+            said = {rid: f["jamming_monitor"] for rid, f in (facts.get("receivers") or {}).items()}
+            for m in said.values():
+                monitors.setdefault(m["reported"], []).append(r.log.name)
+            if a.get("alarms"):
+                alarms.append(
+                    {
+                        "log": r.log.name,
+                        "segment": k,
+                        "clean_sky": r.log.clean,
+                        "tags": list(r.log.tags),
+                        "findings": [f.get("text") for f in a.get("findings") or []],
+                        "receiver_said": said,
+                    }
+                )
+            for e in facts.get("rejected") or []:
+                rejected.append({"log": r.log.name, "segment": k, **e})
+    return {
+        "logs": len(set(ran)),
+        "hours": hours,
+        "alarms": alarms,
+        "rejected_losses": rejected,
+        "jamming_monitor": {k: sorted(set(v)) for k, v in monitors.items()},
+    }
+
+
 def misses(results: Iterable[LogResult]) -> list[dict[str, Any]]:
     """Every attacked copy whose attack was not caught: the log, the attack, the reason."""
     out = []
@@ -647,6 +693,7 @@ def report_json(report: CorpusReport) -> dict[str, Any]:
         "tables": {name: [row.to_json() for row in grouped(report.results, key)] for name, key in GROUPINGS.items()},
         "false_spoofing_clean_sky": false_verdicts(report.results),
         "spoofing_not_clean_sky": false_verdicts(report.results, clean_sky=False),
+        "interference": interference(report.results),
         "internal_errors_and_timeouts": failures(report.results),
         "refusals": refusals(report.results),
         "misses": misses(report.results),
@@ -706,6 +753,21 @@ def print_report(report: CorpusReport) -> None:
         out.print(f"SPOOFING verdicts on logs that are not clean sky (not counted): {len(other)}")
         for f in other:
             out.print(f"  {f['log']} ({', '.join(f['tags'])}): {f['headline']}")
+    jam = interference(results)
+    out.print(
+        f"[bold]Interference alarms on the clean pass: {len(jam['alarms'])}[/] (the detector ran on "
+        f"{jam['logs']} logs, {jam['hours']:.2f} h; {len(jam['rejected_losses'])} signal losses judged no "
+        "interference)"
+    )
+    for a in jam["alarms"]:
+        said = "; ".join(f"{rid}: monitor {m['reported']}" for rid, m in a["receiver_said"].items())
+        out.print(f"  {a['log']}{' (not clean sky)' if not a['clean_sky'] else ''}: {said}")
+        for text in a["findings"]:
+            out.print(f"    {text}")
+    for e in jam["rejected_losses"]:
+        out.print(f"  no interference: {e['log']} {e['start_s']:.0f}-{e['end_s']:.0f} s: {e['because']}")
+    for reported, names in jam["jamming_monitor"].items():
+        out.print(f"  receivers' jamming monitor {reported}: {len(names)} log(s)")
     broken = failures(results)
     out.print(f"[bold]Internal errors and timeouts: {len(broken)}[/]")
     for b in broken:

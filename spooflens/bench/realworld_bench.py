@@ -11,6 +11,12 @@ analyses it.
 Measured: the detection rate, the delay from the first spoofed fix to the first alarm of the incident
 that made the verdict, whether the onset interval covers the true onset, whether the incident runs to
 the end of the log; and on clean logs the false spoofing incidents per 100 hours.
+Jamming (`jam` for a minute, `jam_spoof`: jamming then a capture) is scored by the interference detector's
+alarms: detected, onset and end delays, how much of the jammed interval its alarms cover, whether its
+onset interval holds the jammer's start; and how often jamming alone drew a spoofing verdict; for
+`jam_spoof` also the capture, by the spoofing detectors' first alarm after the takeover. On clean logs the
+interference events per 100 hours. Vehicles `*_sky` have receivers that report their sky (per-satellite
+C/N0); the others log the mean C/N0 and the front end's indicators only.
 Every figure is from simulation (there is no real spoofed log to measure on here) and says so.
 """
 
@@ -39,7 +45,11 @@ VEHICLES: dict[str, tuple[str, float]] = {
     "car_raw": ("ground_raw", 300.0),
     "car_raw_gps": ("ground_raw", 300.0),
     "car_raw_gps_orbits": ("ground_raw", 300.0),
+    "multirotor_sky": ("multirotor", 600.0),
+    "car_sky": ("ground", 300.0),
 }
+# receivers that report their sky (`spooflens.simulation.sky`): per-satellite C/N0 for the interference detector
+SKY_VEHICLES = frozenset({"multirotor_sky", "car_sky"})
 # a ship's voyage record: GNSS fixes, its compass and its speed log (`realistic_compass`), no IMU; the
 # heading reference is the only independent evidence there
 VOYAGE_RECORDS = frozenset({"ship_nmea"})
@@ -61,7 +71,12 @@ ATTACKS: dict[str, str] = {
     "step 50 m": "step:offset=50",
     "velocity pull 0.5 m/s": "velocity_pull:dv=0.5,axes=en",
     "GPS-only ramp 2 m/s": "ramp:rate=2,vel=1,systems=G",
+    "jam 15 dB": "jam:cn0=15",
+    "jam 8 dB": "jam:cn0=8",
+    "jam then capture": "jam_spoof:jam=30",
 }
+JAM_ATTACKS = frozenset({"jam 15 dB", "jam 8 dB", "jam then capture"})
+JAM_S = 60.0  # how long a `jam` lasts (a jam_spoof's capture goes on to the log's end)
 RAW_ATTACKS = frozenset({"GPS-only ramp 2 m/s"})  # act on pseudoranges: only for RAW_CONSTELLATIONS vehicles
 GOAL_CAPTURE_DETECTED = 0.99
 GOAL_CAPTURE_DELAY_S = 2.0
@@ -77,6 +92,12 @@ class Run:
 
 def _table(run: Run) -> tuple[Any, float | None]:
     """The simulated (and attacked) log of a run, and the attack's first spoofed fix time."""
+    table, first, _ = _attacked(run)
+    return table, first
+
+
+def _attacked(run: Run) -> tuple[Any, float | None, Any]:
+    """The simulated (and attacked) log of a run, the attack's first spoofed fix time and its truth."""
     from spooflens.attacks import apply_attack, parse_attack
     from spooflens.schema import empty_frame
     from spooflens.simulation.sensors import realistic_compass, realistic_receiver
@@ -89,17 +110,20 @@ def _table(run: Run) -> tuple[Any, float | None]:
         sc = replace(sc, compass=realistic_compass(rng))
     if run.vehicle in RAW_CONSTELLATIONS:
         sc = replace(sc, constellation=RAW_CONSTELLATIONS[run.vehicle])
+    if run.vehicle in SKY_VEHICLES:
+        sc = replace(sc, satellite_reports=True)
     table = simulate(sc, seed=run.seed, duration_s=seconds).table
     if run.vehicle in VOYAGE_RECORDS:
         table = replace(table, imu=empty_frame("imu"), streams=[s for s in table.streams if s.role != "imu"])
     if run.attack is None:
-        return _orbits_seen(run, table), None
+        return _orbits_seen(run, table), None, None
     start = float(rng.uniform(seconds / 3, 2 * seconds / 3))
     text = ATTACKS[run.attack]
-    spoofed, _ = apply_attack(table, parse_attack(f"{text}{',' if ':' in text else ':'}start={start:.1f}"))
+    window = f"start={start:.1f}" + (f",end={start + JAM_S:.1f}" if text.startswith("jam:") else "")
+    spoofed, truth = apply_attack(table, parse_attack(f"{text}{',' if ':' in text else ':'}{window}"))
     t = spoofed.fixes["t_s"].to_numpy()
     first = float(t[t >= start][0]) if (t >= start).any() else start
-    return _orbits_seen(run, spoofed), first
+    return _orbits_seen(run, spoofed), first, truth
 
 
 def _orbits_seen(run: Run, table: Any) -> Any:
@@ -115,10 +139,56 @@ def _orbits_seen(run: Run, table: Any) -> Any:
     return replace(table, observations=obs)
 
 
+def _interference_alarms(analysis: Any) -> list[Any]:
+    return [a for r in analysis.results if r.name == "interference" and r.ran for a in r.alarms]
+
+
+def jam_scores(analysis: Any, truth: Any, table: Any) -> dict[str, Any]:
+    """How the interference detector saw the jamming phase (truth.phases[0]) and, for jam_spoof, how the
+    spoofing detectors saw the capture after it."""
+    jam = truth.phases[0]
+    start, end = float(jam["start_s"]), float(jam["end_s"])
+    alarms = [a for a in _interference_alarms(analysis) if a.end_s >= start - 1.0 and a.start_s <= end + 5.0]
+    t = table.fixes["t_s"].to_numpy(float)
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    out: dict[str, Any] = {"jam_detected": bool(alarms)}
+    if alarms:
+        first, last = alarms[0], max(alarms, key=lambda a: a.end_s)
+        covered = sum(max(0.0, min(a.end_s, end) - max(a.start_s, start)) for a in alarms)
+        lo, hi = first.onset_interval_s or (first.start_s, first.start_s)
+        out |= {
+            "jam_delay_s": max(first.start_s - start, 0.0),
+            "jam_end_error_s": last.end_s - end,
+            "jam_coverage": covered / max(end - start, 1e-9),
+            "jam_onset_covered": lo - period - 1e-6 <= start <= hi + period + 1e-6,
+            "jam_onset_interval_width_s": hi - lo,
+        }
+    spoofing = [i for i in analysis.verdict.incidents if i.is_spoofing]
+    if truth.kind == "jam":
+        called = [i for i in spoofing if i.start_s <= end + 5.0 and i.end_s >= start - 1.0]
+        out["jam_called_spoofing"] = bool(called)
+        out["jam_spoofing_evidence"] = sorted({str(e) for i in called for e in i.corroborating})
+        return out
+    capture = truth.phases[1]
+    takeover = float(capture["start_s"])
+    # the capture's own alarms: spoofing-class detectors alarming from the takeover on
+    after = [
+        a.start_s
+        for r in analysis.results
+        if r.is_detector and r.ran and not r.advisory and r.evidence is not None and r.name != "interference"
+        for a in r.alarms
+        if a.start_s >= takeover - 1.0 and a.start_s <= takeover + 30.0
+    ]
+    out["capture_detected"] = bool(after) and any(i.end_s >= takeover for i in spoofing)
+    if out["capture_detected"]:
+        out["capture_delay_s"] = max(min(after) - takeover, 0.0)
+    return out
+
+
 def one_run(run: Run) -> dict[str, Any]:
     from spooflens.pipeline.run import analyze_table
 
-    table, first = _table(run)
+    table, first, truth = _attacked(run)
     t0 = time.perf_counter()
     analysis = analyze_table(table)
     wall = time.perf_counter() - t0
@@ -131,9 +201,15 @@ def one_run(run: Run) -> dict[str, Any]:
         "hours": duration / 3600.0,
         "wall_s": wall,
         "false_incidents": 0,
+        "interference_alarms": len(_interference_alarms(analysis)),
     }
     if first is None:
         out["false_incidents"] = len(spoofing)
+        return out
+    if run.attack in JAM_ATTACKS:
+        out |= jam_scores(analysis, truth, table)
+        jam_start = float(truth.phases[0]["start_s"])
+        out["false_incidents"] = sum(1 for i in spoofing if i.end_s < jam_start - 5.0)
         return out
     # the incident that catches the attack: the first spoofing incident that reaches past its start
     hit = next((i for i in spoofing if i.end_s >= first - 1.0), None)
@@ -203,7 +279,10 @@ def plan(
     k = seed
     for v in vehicles:
         for a in attacks or tuple(ATTACKS):
-            if (a in RAW_ATTACKS) != (v in RAW_CONSTELLATIONS):
+            if a in JAM_ATTACKS:  # jamming: every vehicle but car_raw's twins analysed otherwise
+                if v in RAW_CONSTELLATIONS and v != "car_raw":
+                    continue
+            elif (a in RAW_ATTACKS) != (v in RAW_CONSTELLATIONS):
                 continue
             for _ in range(runs):
                 out.append(Run(v, a, k))
@@ -239,9 +318,13 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     attacked = [r for r in results if r["attack"] is not None]
     clean = [r for r in results if r["attack"] is None]
     per_kind: dict[str, dict[str, Any]] = {}
+    jamming: dict[str, dict[str, Any]] = {}
     for kind in ATTACKS:
         rs = [r for r in attacked if r["attack"] == kind]
         if not rs:
+            continue
+        if kind in JAM_ATTACKS:
+            jamming[kind] = _jam_summary(rs)
             continue
         hit = [r for r in rs if r.get("detected")]
         delays = [r["delay_s"] for r in hit]
@@ -259,15 +342,100 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
         }
     hours = float(sum(r["hours"] for r in clean))
     false = int(sum(r["false_incidents"] for r in clean))
+    interference = int(sum(r.get("interference_alarms", 0) for r in clean))
+    sky_hours = float(sum(r["hours"] for r in clean if r["vehicle"] in SKY_VEHICLES))
+    sky_events = int(sum(r.get("interference_alarms", 0) for r in clean if r["vehicle"] in SKY_VEHICLES))
     return {
         "per_attack": per_kind,
+        "jamming": jamming,
         "clean_hours": hours,
         "false_incidents": false,
         "false_per_100h": 100.0 * false / hours if hours else None,
+        "false_interference": interference,
+        "false_interference_per_100h": 100.0 * interference / hours if hours else None,
+        "clean_sky_report_hours": sky_hours,
+        "false_interference_with_sky_reports": sky_events,
         "false_before_attacks": int(sum(r["false_incidents"] for r in attacked)),
         "runs": results,
         "simulated": True,
     }
+
+
+def _jam_summary(rs: list[dict[str, Any]]) -> dict[str, Any]:
+    def mean(key: str, among: list[dict[str, Any]]) -> float | None:
+        values = [float(r[key]) for r in among if key in r]
+        return float(np.mean(values)) if values else None
+
+    def pct(key: str, among: list[dict[str, Any]], q: float) -> float | None:
+        values = [float(r[key]) for r in among if key in r]
+        return float(np.percentile(values, q)) if values else None
+
+    hit = [r for r in rs if r.get("jam_detected")]
+    out: dict[str, Any] = {
+        "runs": len(rs),
+        "detected": len(hit) / len(rs),
+        "onset_delay_median_s": pct("jam_delay_s", hit, 50),
+        "onset_delay_p90_s": pct("jam_delay_s", hit, 90),
+        "end_error_median_s": pct("jam_end_error_s", hit, 50),
+        "interval_coverage_mean": mean("jam_coverage", hit),
+        "onset_interval_covers_start": mean("jam_onset_covered", hit),
+        "onset_interval_width_median_s": pct("jam_onset_interval_width_s", hit, 50),
+        "missed": [(r["vehicle"], r["seed"]) for r in rs if not r.get("jam_detected")],
+    }
+    if any("jam_called_spoofing" in r for r in rs):
+        out["called_spoofing"] = mean("jam_called_spoofing", rs)
+        classes = [" + ".join(r["jam_spoofing_evidence"]) for r in rs if r.get("jam_called_spoofing")]
+        out["called_spoofing_by"] = {c: classes.count(c) for c in sorted(set(classes))}
+    if any("capture_detected" in r for r in rs):
+        out["capture_detected"] = mean("capture_detected", rs)
+        out["capture_delay_median_s"] = pct("capture_delay_s", rs, 50)
+        out["both_phases"] = float(np.mean([bool(r.get("jam_detected") and r.get("capture_detected")) for r in rs]))
+    return out
+
+
+def _print_jamming(jamming: dict[str, dict[str, Any]], vehicles: tuple[str, ...]) -> None:
+    def pct(x: float | None) -> str:
+        return "-" if x is None else f"{100 * x:.0f}%"
+
+    def sec(x: float | None) -> str:
+        return "-" if x is None else f"{x:.1f}"
+
+    t = Table(
+        "attack",
+        "runs",
+        "jamming detected",
+        "median onset delay (s)",
+        "90% onset delay (s)",
+        "median end error (s)",
+        "jammed interval covered",
+        "onset interval holds the start",
+        "called spoofing",
+        "capture detected",
+        "median capture delay (s)",
+        title=f"Jamming ({', '.join(vehicles or VEHICLES)}): the interference detector; jam_spoof's capture by "
+        "the spoofing detectors. Simulation only",
+    )
+    for kind, k in jamming.items():
+        t.add_row(
+            kind,
+            str(k["runs"]),
+            pct(k["detected"]),
+            sec(k["onset_delay_median_s"]),
+            sec(k["onset_delay_p90_s"]),
+            sec(k["end_error_median_s"]),
+            pct(k["interval_coverage_mean"]),
+            pct(k["onset_interval_covers_start"]),
+            pct(k.get("called_spoofing")),
+            pct(k.get("capture_detected")),
+            sec(k.get("capture_delay_median_s")),
+        )
+    console().print(t)
+    for kind, k in jamming.items():
+        for vehicle, seed in k["missed"]:
+            console().print(f"  {kind} missed: {vehicle}, seed {seed}")
+        if k.get("called_spoofing_by"):
+            by = ", ".join(f"{n} by {classes}" for classes, n in k["called_spoofing_by"].items())
+            console().print(f"  {kind} drew a spoofing verdict: {by} (the evidence classes that agreed)")
 
 
 @click.command("realworld")
@@ -282,7 +450,8 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     type=click.Choice(list(VEHICLES)),
     help="Only these vehicles (repeatable; default all). ship_nmea: a voyage record, compass and log, no IMU; "
     "car_raw, car_raw_gps: raw GPS + Galileo, or GPS, observations before a GPS-only spoofer; "
-    "car_raw_gps_orbits: car_raw's logs analysed with GPS orbits alone.",
+    "car_raw_gps_orbits: car_raw's logs analysed with GPS orbits alone; multirotor_sky, car_sky: receivers "
+    "that report their sky (per-satellite C/N0), for the jamming cases.",
 )
 @click.option(
     "--attack",
@@ -373,7 +542,10 @@ def command(
             sec(k["onset_interval_width_median_s"]),
             pct(k["to_end"]),
         )
-    console().print(t)
+    if out["per_attack"]:
+        console().print(t)
+    if out["jamming"]:
+        _print_jamming(out["jamming"], vehicles)
     cap = out["per_attack"].get("capture")
     if cap:
         console().print(
@@ -393,6 +565,12 @@ def command(
         f"clean logs: {out['false_incidents']} false spoofing incident(s) in {out['clean_hours']:.1f} h = "
         f"{'-' if fp is None else f'{fp:.1f}'} per 100 h (goal <= {GOAL_FALSE_PER_100H:g}); "
         f"before the attack in attacked logs: {out['false_before_attacks']}. Simulation only."
+    )
+    fi = out["false_interference_per_100h"]
+    console().print(
+        f"clean logs: {out['false_interference']} interference event(s) in {out['clean_hours']:.1f} h = "
+        f"{'-' if fi is None else f'{fi:.1f}'} per 100 h ({out['false_interference_with_sky_reports']} in the "
+        f"{out['clean_sky_report_hours']:.1f} h whose receivers report their sky). Simulation only."
     )
     if json_path:
         json_path.write_text(json.dumps(out, indent=1, default=str))

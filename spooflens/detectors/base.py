@@ -27,6 +27,9 @@ class Alarm:
     onset_interval_s: tuple[float, float] | None = None  # credible/confidence interval for the onset
     receiver_id: str | None = None  # the receiver the alarm is about (None: not receiver-specific)
     satellites: tuple[str, ...] = ()  # satellites found inconsistent, for raw-measurement detectors
+    systems: tuple[str, ...] = ()  # GNSS hit (e.g. "GPS", "Galileo"), for detectors that say which
+    bands: tuple[str, ...] = ()  # signal bands hit (e.g. "L1", "E1")
+    end_interval_s: tuple[float, float] | None = None  # between the last alarmed epoch and the first quiet one
 
 
 @dataclass(frozen=True)
@@ -198,6 +201,37 @@ def rise_start(t: FloatArray, score: FloatArray, start_s: float, quiet_level: fl
     while k > 0 and score[k - 1] <= score[k]:
         k -= 1
     return k, last_quiet
+
+
+def center_scale(x: FloatArray, floor: float, relative_floor: float) -> tuple[float, float]:
+    """Median and robust scale (1.4826 MAD, at least `floor` and `relative_floor` times |median|) of the
+    finite values of x."""
+    x = x[np.isfinite(x)]
+    med = float(np.median(x))
+    return med, max(1.4826 * float(np.median(np.abs(x - med))), floor, relative_floor * abs(med))
+
+
+def robust_z(
+    x: FloatArray, direction: int, floor: float, relative_floor: float, reference: NDArray[np.bool_] | None = None
+) -> FloatArray:
+    """Directional robust z-score of a series against its median over the `reference` epochs (all by
+    default; NaN where x is NaN): +1 a rise counts, -1 a drop, 0 any change."""
+    ok = np.isfinite(x) & (True if reference is None else reference)
+    if ok.sum() < 5:
+        ok = np.isfinite(x)
+        if ok.sum() < 5:
+            return np.full(len(x), np.nan)
+    med, scale = center_scale(x[ok], floor, relative_floor)
+    z = (x - med) / scale
+    return np.abs(z) if direction == 0 else direction * z
+
+
+def trailing_max(t: FloatArray, z: FloatArray, window_s: float) -> FloatArray:
+    """max of z over the trailing [t - window_s, t] (NaN-aware), for indicators of one event that change
+    seconds apart: raised when the later one moves, never before the first did."""
+    index = pd.to_timedelta(t, unit="s")
+    rolled = pd.Series(z, index=index).rolling(pd.Timedelta(seconds=window_s), closed="both", min_periods=1)
+    return rolled.max().to_numpy(dtype=float)
 
 
 def trailing_median(t: FloatArray, x: FloatArray, span_s: float, gap_s: float) -> FloatArray:

@@ -1,5 +1,6 @@
 """Receiver self-report as evidence: what the receiver logs about itself (accuracies, satellites, DOP,
-noise, AGC, C/N0, its own spoofing and jamming state) against its own baseline in the log and the
+noise, AGC, C/N0, its own spoofing state; what only a jammer does is
+`spooflens.detectors.interference`'s) against its own baseline in the log and the
 documented normal ranges. Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
@@ -10,7 +11,16 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
+from spooflens.detectors.base import (
+    Alarm,
+    DetectorResult,
+    Finding,
+    Series,
+    alarm_intervals,
+    center_scale,
+    robust_z,
+    trailing_max,
+)
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.schema import SpoofingFlag
@@ -40,6 +50,8 @@ INDICATORS: tuple[Indicator, ...] = (
     Indicator("agc", "AGC", 0, 10.0, 0.03),
     Indicator("cn0_mean_dbhz", "mean C/N0", 0, 1.0),
 )
+# the way each moves under interference (a jammer): a change only that way is no spoofing evidence
+INTERFERENCE_DIRECTION = {"noise_per_ms": +1, "jamming_indicator": +1, "agc": -1, "cn0_mean_dbhz": -1}
 
 
 @dataclass(frozen=True)
@@ -55,28 +67,6 @@ class ReceiverEvidenceOptions:
     min_reference_s: float = 20.0  # the baseline is learned from at least this long a stretch ...
     min_reference_fraction: float = 0.1  # ... and this fraction of the log
     min_changed_s: float = 10.0  # a change of state to learn around lasts this long at least
-
-
-def _center_scale(x: FloatArray, floor: float, relative_floor: float) -> tuple[float, float]:
-    """Median and robust scale (1.4826 MAD, floored) of the finite values of x."""
-    x = x[np.isfinite(x)]
-    med = float(np.median(x))
-    return med, max(1.4826 * float(np.median(np.abs(x - med))), floor, relative_floor * abs(med))
-
-
-def robust_z(
-    x: FloatArray, direction: int, floor: float, relative_floor: float, reference: NDArray[np.bool_] | None = None
-) -> FloatArray:
-    """Directional robust z-score of a series against its median over the `reference` epochs (all by
-    default; NaN where x is NaN)."""
-    ok = np.isfinite(x) & (True if reference is None else reference)
-    if ok.sum() < 5:
-        ok = np.isfinite(x)
-        if ok.sum() < 5:
-            return np.full(len(x), np.nan)
-    med, scale = _center_scale(x[ok], floor, relative_floor)
-    z = (x - med) / scale
-    return np.abs(z) if direction == 0 else direction * z
 
 
 def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> tuple[NDArray[np.bool_], float]:
@@ -112,7 +102,7 @@ def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOpti
     shifts = np.full((len(columns), len(k)), -np.inf)
     for i, (ind, x) in enumerate(columns):
         ok = np.isfinite(x)
-        _, scale = _center_scale(x, ind.floor, ind.relative_floor)
+        _, scale = center_scale(x, ind.floor, ind.relative_floor)
         total, count = np.cumsum(np.where(ok, x, 0.0)), np.cumsum(ok)
         nb, na = count[k - 1], count[-1] - count[k - 1]
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -127,19 +117,11 @@ def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOpti
     for ind, x in columns:
         before, after = x[:split], x[split:]
         if np.isfinite(before).sum() >= 5 and np.isfinite(after).sum() >= 5:
-            med, scale = _center_scale(before, ind.floor, ind.relative_floor)
+            med, scale = center_scale(before, ind.floor, ind.relative_floor)
             robust.append(ind.direction * (float(np.nanmedian(after)) - med) / scale)
     if len(robust) < 2 or sorted(robust)[-2] <= opts.z_alarm:
         return everything, float("nan")
     return np.arange(n) < split, float(t[split])
-
-
-def _windowed_max(t: FloatArray, z: FloatArray, window_s: float) -> FloatArray:
-    """max of z over the trailing [t - window_s, t] (NaN-aware), for indicators that change seconds apart.
-    Trailing, so a joint change is raised when its second indicator moves, never before the first did."""
-    index = pd.to_timedelta(t, unit="s")
-    rolled = pd.Series(z, index=index).rolling(pd.Timedelta(seconds=window_s), closed="both", min_periods=1)
-    return rolled.max().to_numpy(dtype=float)
 
 
 def _fix_gaps(t: FloatArray, factor: float) -> FloatArray:
@@ -165,6 +147,7 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     if len(t) < 10:
         return None
     z_cols: dict[str, FloatArray] = {}
+    not_interference: dict[str, FloatArray] = {}  # each indicator's z the way interference does not move it
     labels: dict[str, str] = {}
     reference, reference_end = reference_epochs(t, fx, opts)
     for ind in INDICATORS:
@@ -174,33 +157,42 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         z_cols[ind.column] = np.clip(
             robust_z(x, ind.direction, ind.floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
         )
+        jam_way = INTERFERENCE_DIRECTION.get(ind.column, 0)
+        if not jam_way:
+            not_interference[ind.column] = np.nan_to_num(z_cols[ind.column], nan=0.0)
+        elif ind.direction == 0:  # a move either way counts: the one a jammer does not make is spoofing-like
+            other_way = robust_z(x, -jam_way, ind.floor, ind.relative_floor, reference)
+            not_interference[ind.column] = np.clip(np.nan_to_num(other_way, nan=0.0), 0.0, opts.z_clip)
+        else:  # it counts only the way a jammer moves it
+            not_interference[ind.column] = np.zeros(len(t))
         labels[ind.column] = ind.label
     gaps = _fix_gaps(t, opts.gap_factor)
     if gaps.any():
         z_cols["fix_gap"] = np.clip(gaps, 0, opts.z_clip)
+        not_interference["fix_gap"] = z_cols["fix_gap"]
         labels["fix_gap"] = "fix lost (gap)"
     flags = fx["spoofing_flag"].to_numpy()
     spoof_flag = flags == SpoofingFlag.INDICATED
-    jam_state = fx["jamming_state"].to_numpy(dtype=float) >= 2
     cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
     too_strong = np.nan_to_num(cn0) > opts.max_plausible_cn0_dbhz
-    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any():
+    if not z_cols and not spoof_flag.any() and not too_strong.any():
         return None
     names = list(z_cols)
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
-    Zw = np.stack([_windowed_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
+    Zw = np.stack([trailing_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
     beyond = np.nan_to_num(Zw, nan=0.0) > opts.z_alarm
     count = beyond.sum(axis=1).astype(float)
-    joint = count >= opts.min_indicators
+    other = np.stack([trailing_max(t, not_interference[n], opts.window_s) for n in names], axis=1) if names else Z
+    joint = (count >= opts.min_indicators) & ((other > opts.z_alarm).sum(axis=1) >= 1)
     # the score: the second largest windowed z (the weaker of the two strongest agreeing indicators)
     score = np.sort(np.nan_to_num(Zw, nan=0.0), axis=1)[:, -2] if Z.shape[1] >= 2 else np.zeros(len(t))
-    raised = joint | spoof_flag | jam_state | too_strong
+    raised = joint | spoof_flag | too_strong
     alarms = [
         a
         for a in alarm_intervals(t, np.maximum(score, count), raised, opts.merge_gap_s)
         if a.end_s - a.start_s >= opts.min_duration_s or spoof_flag[(t >= a.start_s) & (t <= a.end_s)].sum() >= 2
     ]
-    quiet = (count == 0) & ~spoof_flag & ~jam_state
+    quiet = (count == 0) & ~spoof_flag
     result = DetectorResult(
         NAME,
         True,
@@ -229,8 +221,6 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
             what.append("indicators out of their baseline: " + ", ".join(moved))
         if spoof_flag[inside].any():
             what.append("the receiver's own spoofing flag raised")
-        if jam_state[inside].any():
-            what.append("the receiver's jamming state at warning or worse")
         if too_strong[inside].any():
             what.append(f"mean C/N0 above {opts.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives)")
         result.findings.append(
@@ -277,11 +267,11 @@ ANALYSIS = AnalysisSpec(
         DetectorInfo(
             NAME,
             Evidence.RECEIVER,
-            "the receiver's own indicators changing together, its spoofing/jamming state, implausible C/N0",
+            "the receiver's own indicators changing together, its spoofing state, implausible C/N0",
             method="A receiver under a takeover says so in many small ways: it loses satellites several at once "
             "and re-acquires them, its DOP and reported accuracies inflate, its noise and jamming indicators rise, "
-            "its AGC moves, its C/N0 drops and then sits above its old level, its own spoofing or jamming state "
-            "goes up. None is proof (a bridge, a tunnel, a turn away from the sky do some of them too), so this "
+            "its AGC moves, its C/N0 drops and then sits above its old level, its own spoofing state goes up. None "
+            "is proof (a bridge, a tunnel, a turn away from the sky do some of them too), so this "
             "class alone never makes a spoofing verdict. Per receiver, every indicator it logs ("
             + ", ".join(ind.label for ind in INDICATORS)
             + ", and losses of fix: gaps beyond "
@@ -291,13 +281,15 @@ ANALYSIS = AnalysisSpec(
             "together at one time and stay worse (a takeover lasting to the end can fill most of the log, and "
             "then the whole log's median is the attack's state), the part before it. An alarm needs "
             f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s of each "
-            f"other for {_O.min_duration_s:g} s, the receiver's own spoofing flag (as decoded by the log's "
-            "message definition), its jamming state at warning or worse, or a mean C/N0 above "
+            f"other for {_O.min_duration_s:g} s, one of them not the way a jammer moves it (noise or jamming "
+            "indicator up, AGC or C/N0 down: the interference detector reads those), the receiver's own "
+            "spoofing flag (as decoded by the log's "
+            "message definition), or a mean C/N0 above "
             f"{_O.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives a small antenna, so a log "
             "attacked from its first fix still shows it).",
             p_false_alarm="rule thresholds (not a calibrated rate)",
             threshold=f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s; "
-            f"the receiver's flags; mean C/N0 > {_O.max_plausible_cn0_dbhz:g} dB-Hz",
+            f"the receiver's spoofing flag; mean C/N0 > {_O.max_plausible_cn0_dbhz:g} dB-Hz",
         ),
     ),
 )

@@ -13,12 +13,12 @@ from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, ala
 from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import ecef_to_enu_vectors, ecef_to_geodetic
 from spooflens.gnss.fault_exclusion import RaimOptions, solve_with_fde
+from spooflens.gnss.signals import SYSTEM_NAMES
 from spooflens.gnss.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 NAME = "system_agreement"
-SYSTEM_NAMES = {"G": "GPS", "E": "Galileo", "R": "GLONASS", "C": "BeiDou", "J": "QZSS"}
 FloatArray = NDArray[np.float64]
 _Q25_ABS_NORMAL = halfnorm_ppf(0.25)
 QUIET_LEVEL = 4.6  # chi-square(2)'s 90th percentile

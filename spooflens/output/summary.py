@@ -50,6 +50,12 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
         out["receiver_id"] = a.receiver_id
     if a.satellites:
         out["satellites"] = list(a.satellites)
+    if a.systems:
+        out["systems"] = list(a.systems)
+    if a.bands:
+        out["bands"] = list(a.bands)
+    if a.end_interval_s is not None:
+        out["end_interval_s"] = list(a.end_interval_s)
     return out
 
 

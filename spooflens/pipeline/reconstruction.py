@@ -44,7 +44,7 @@ from spooflens.navigation.loosely_coupled import (
 from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
-from spooflens.pipeline.evidence import CORROBORATION_S, Evidence
+from spooflens.pipeline.evidence import CORROBORATION_S, NOT_SPOOFING, Evidence
 from spooflens.pipeline.registry import AnalysisContext
 from spooflens.pipeline.verdict import Incident, Verdict, incident_of
 
@@ -421,7 +421,8 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
     ordered = sorted(verdict.incidents, key=lambda i: i.start_s)
     for n, inc in enumerate(ordered):
         current = incidents[-1] if incidents and incidents[-1].is_spoofing else None
-        if current is not None and inc.start_s <= current.end_s:
+        interference_only = bool(inc.evidence) and all(e in NOT_SPOOFING for e in inc.evidence)
+        if current is not None and inc.start_s <= current.end_s and not interference_only:
             # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
             # start there; its alarms belong to the incident, and inside the stretch where the reference
             # could no longer tell, they are how the receiver's return to the real sky shows

@@ -38,6 +38,7 @@ MIN_TIMED_FIXES = 20
 ANALYSIS_MODULES: tuple[str, ...] = (
     "spooflens.detectors.gnss_consistency",
     "spooflens.detectors.receiver_evidence",
+    "spooflens.detectors.interference",
     "spooflens.detectors.autopilot_ekf",
     "spooflens.detectors.heading_reference",
     "spooflens.detectors.receiver_time",
@@ -89,6 +90,15 @@ def _has_satellite_view(table: EpochTable) -> str | None:
     if len(obs) and (np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any() or _has_satellite_states(table) is None):
         return None
     return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions"
+
+
+def _has_signal_levels(table: EpochTable) -> str | None:
+    if _has_fixes(table) is None or len(table.satellites):
+        return None
+    obs = table.observations
+    if len(obs) and np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any():
+        return None
+    return "GNSS fixes, satellite reports or raw observations with C/N0"
 
 
 def _has_received_ephemerides(table: EpochTable) -> str | None:
@@ -151,6 +161,11 @@ REQUIREMENTS: dict[str, Requirement] = {
         "per-satellite reports (NAV-SAT, GSV, PX4 satellite_info, GnssLogger Status) or raw observations with "
         "C/N0 or satellite positions",
         _has_satellite_view,
+    ),
+    "signal_levels": Requirement(
+        "signal levels: GNSS fixes (their mean C/N0, AGC, noise, jamming indicator or state), per-satellite "
+        "reports or raw observations with C/N0",
+        _has_signal_levels,
     ),
     "received_ephemerides": Requirement(
         "navigation messages decoded from the signals (u-blox RXM-SFRBX, GnssLogger Nav)", _has_received_ephemerides

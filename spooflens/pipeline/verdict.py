@@ -7,16 +7,17 @@ stage (`spooflens.pipeline.events`) weighs the natural explanations of each inci
 (`spooflens.pipeline.run.assess`) give the one immutable verdict every output reads.
 
 Alarm intervals of every detector that ran are merged into incidents (overlapping or closer than
-`merge_gap_s`). An incident's onset is the estimate that comes with a credible interval when one took
-part, else the earliest onset estimate inside it; its end is the last alarm end (the reconstruction
-stage, `spooflens.pipeline.reconstruction`, refines it). Detectors marked advisory (an uncalibrated rule, a test
+`merge_gap_s`). An incident's onset is the estimate that comes with a credible interval when one took part,
+else the earliest onset estimate inside it; its end is the last alarm end (the reconstruction stage,
+`spooflens.pipeline.reconstruction`, refines it). Detectors marked advisory (an uncalibrated rule, a test
 whose model does not fit the log) are reported but do not make incidents.
 
-Confidence counts the distinct evidence classes whose detectors alarmed in the incident at the same
-time (`spooflens.pipeline.evidence.corroborated`, `confidence`): several tests on one filter's innovations are
-one class, and classes whose alarms lie minutes apart inside one long incident do not corroborate each
-other. A low-confidence incident (one GNSS-internal class alone) is an anomaly, never a spoofing
-verdict. Alarms a natural cause accounts for (`explained_spans`) stay in the incident but count for
+Alarms of classes that are no spoofing evidence (interference) make incidents of their own, never merged with
+spoofing alarms. Confidence counts the distinct evidence classes whose detectors alarmed in the incident at
+the same time (`spooflens.pipeline.evidence.corroborated`, `confidence`): several tests on one filter's
+innovations are one class, and classes whose alarms lie minutes apart inside one long incident do not
+corroborate each other. A low-confidence incident (one GNSS-internal class alone) is an anomaly, never a
+spoofing verdict. Alarms a natural cause accounts for (`explained_spans`) stay in the incident but count for
 nothing: the confidence is that of the evidence no natural explanation covers.
 """
 
@@ -192,7 +193,7 @@ class Verdict:
         """One line; it always begins with `NO VERDICT`, `NO SPOOFING DETECTED` or `SPOOFING DETECTED` (scripts
         grep them), then names the other kinds of event."""
         if not self.detectors_run:
-            return "NO VERDICT: no detector could run on this log"
+            return f"NO VERDICT: no spoofing detector could run on this log{self._other_kinds()}"
         if not self.spoofed:
             advisory = f" ({len(self.detectors_advisory)} more advisory only)" if self.detectors_advisory else ""
             return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{self._other_kinds()}"
@@ -302,12 +303,18 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
     `log_end_s` (the last GNSS fix) was still going on when the log ended: its end is the log's, not the
     attack's (the reconstruction stage says the same for the incidents it confirms)."""
     detectors = [r for r in results if r.is_detector]
-    ran = tuple(r.name for r in detectors if r.ran and not r.advisory)
+    # the detectors a spoofing verdict rests on: one that can only say what disturbed the signals is none
+    ran = tuple(r.name for r in detectors if r.ran and not r.advisory and r.evidence not in NOT_SPOOFING)
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
     not_run = tuple(r.name for r in detectors if not r.ran)
     counted = [r for r in detectors if r.ran and not r.advisory]
-    alarms = [(a, r) for r in counted for a in r.alarms]
-    incidents = [_incident(g) for g in _group(alarms, merge_gap_s)]
+    # what only disturbed the signals (interference) is its own incident: merged with spoofing alarms it
+    # would move their incident's onset and end to the jamming's
+    alarms = [(a, r) for r in counted for a in r.alarms if r.evidence not in NOT_SPOOFING]
+    other = [(a, r) for r in counted for a in r.alarms if r.evidence in NOT_SPOOFING]
+    incidents = sorted(
+        (_incident(g) for part in (alarms, other) for g in _group(part, merge_gap_s)), key=lambda i: i.start_s
+    )
     if log_end_s is not None:
         incidents = [
             replace(i, ongoing_at_end=True, end_method="last alarm, at the end of the log")

@@ -144,7 +144,7 @@ def realistic_receiver(rng: np.random.Generator) -> ReceiverModel:
     )
 
 
-def _gauss_markov(n: int, dt: float, sigma: FloatArray, tau: float, rng: np.random.Generator) -> FloatArray:
+def gauss_markov(n: int, dt: float, sigma: FloatArray, tau: float, rng: np.random.Generator) -> FloatArray:
     """(n, k) first-order Gauss-Markov series of standard deviations `sigma`, started stationary."""
     a = np.exp(-dt / tau)
     s = np.sqrt(1.0 - a * a)
@@ -159,16 +159,14 @@ def receiver_fix_errors(
     """(position error ENU (n, 3), velocity error (n, 3), reported columns) of one receiver."""
     wh, wv = model.white_m
     gh, gv = model.gm_m
-    pos = rng.normal(0.0, 1.0, (n, 3)) * [wh, wh, wv] + _gauss_markov(
-        n, dt, np.array([gh, gh, gv]), model.gm_tau_s, rng
-    )
-    vel = rng.normal(0.0, model.vel_white_mps, (n, 3)) + _gauss_markov(
+    pos = rng.normal(0.0, 1.0, (n, 3)) * [wh, wh, wv] + gauss_markov(n, dt, np.array([gh, gh, gv]), model.gm_tau_s, rng)
+    vel = rng.normal(0.0, model.vel_white_mps, (n, 3)) + gauss_markov(
         n, dt, np.full(3, model.vel_gm_mps), model.vel_tau_s, rng
     )
     h_sigma = float(np.hypot(wh, gh))
     v_sigma = float(np.hypot(wv, gv))
     vel_sigma = float(np.hypot(model.vel_white_mps, model.vel_gm_mps))
-    slow = _gauss_markov(n, dt, np.ones(6), 60.0, rng)  # indicators wander a little, slowly
+    slow = gauss_markov(n, dt, np.ones(6), 60.0, rng)  # indicators wander a little, slowly
     sats = np.clip(np.round(model.sats + 1.5 * slow[:, 0]), 4, 32)
     hdop = np.clip(model.hdop * (1.0 + 0.1 * slow[:, 1]) * (model.sats / sats), 0.5, None)
     reported = {

@@ -34,6 +34,7 @@ from spooflens.simulation.sensors import (
     noisy_imu,
     receiver_fix_errors,
 )
+from spooflens.simulation.sky import sky_reports
 from spooflens.simulation.trajectories import PROFILES, Profile, Truth, generate
 
 # 2026-03-01T12:00:00Z: a fixed start so simulated logs are byte-for-byte reproducible
@@ -63,6 +64,9 @@ class Scenario:
     receiver: ReceiverModel | None = None
     # a vessel's compass and speed log (and the water it moves through): the `headings` frame
     compass: CompassModel | None = None
+    # the receiver (a `receiver` model) reports its sky: per-satellite C/N0, elevation, azimuth, used (the
+    # `satellites` frame, `spooflens.simulation.sky`), its satellites used and mean C/N0 following it
+    satellite_reports: bool = False
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -150,6 +154,10 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
         receivers.append(("/gps2/fix", np.asarray(sc.second_receiver_lever_m)))
     fix_frames = []
     obs_frames = []
+    sky_frames = []
+    # the sky has a generator of its own: the rest of the log is the same with or without it
+    sky_rng = np.random.default_rng((seed, 0x5C))
+    sky_eph = _sky_constellation(sky_rng) if sc.receiver is not None and sc.satellite_reports else None
     for rid, lever in receivers:
         if eph is not None and sc.observations is not None:
             obs, fixes = _raw_receiver(rid, truth, lever, g_idx, t_ns, eph, sc.observations, rng)
@@ -163,6 +171,16 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
         )
         if sc.receiver is not None:
             dpos, dvel, reported = receiver_fix_errors(len(g_idx), step / sc.imu_hz, sc.receiver, rng)
+            if sky_eph is not None:
+                rx = truth.ecef(lever)[g_idx]
+                t_gps = gps_seconds_of_unix_ns(t_ns[g_idx])
+                sky = sky_reports(rid, truth.t[g_idx], t_gps, rx, sky_eph, sc.receiver.cn0_dbhz, sky_rng)
+                per_epoch = sky.groupby("t_s").agg(used=("used", "sum"), cn0=("cn0_dbhz", "mean"))
+                per_epoch = per_epoch.reindex(truth.t[g_idx])
+                reported["sats_used"] = per_epoch["used"].fillna(0.0).to_numpy(float)
+                reported["cn0_mean_dbhz"] = per_epoch["cn0"].to_numpy(float)
+                sky.insert(0, "t_ns", t0_unix_ns + np.round(sky.pop("t_s").to_numpy() * 1e9).astype(np.int64))
+                sky_frames.append(sky)
         else:
             dpos, dvel = gnss_errors(len(g_idx), step / sc.imu_hz, sc.gnss, rng)
             sig = np.asarray(sc.gnss.sigma_enu_m)
@@ -222,6 +240,12 @@ def simulate(spec: str | Scenario, seed: int = 0, duration_s: float | None = Non
     frames = {"imu": pd.DataFrame(imu_cols), "fixes": pd.concat(fix_frames, ignore_index=True), "truth": truth_frame}
     if obs_frames:
         frames["observations"] = pd.concat(obs_frames, ignore_index=True)
+    if sky_frames:
+        frames["satellites"] = pd.concat(sky_frames, ignore_index=True)
+        streams += [
+            StreamInfo("satellites", rid, f"{rid}/satellites", "simulated sky report", len(g_idx), frame_id="gnss")
+            for rid, _ in receivers
+        ]
     if sc.compass is not None:
         heading, log = compass_readings(truth.t[g_idx], truth.v_enu[g_idx, :2], sc.compass, rng)
         hid = f"{sc.compass.talker}{'HDT' if sc.compass.talker == 'HE' else 'HDG'}"
@@ -256,6 +280,14 @@ def write_with_truth(table: EpochTable, path: Path, fmt: str) -> Path:
     truth_path = Path(str(path).rstrip("/") + ".truth.csv")
     table.truth.to_csv(truth_path, index=False, float_format="%.10f")
     return truth_path
+
+
+def _sky_constellation(rng: np.random.Generator) -> GpsEphemerides:
+    """GPS and Galileo's nominal constellations at the fixed start, for a receiver's sky report."""
+    start_gps = float(gps_seconds_of_unix_ns(T0_UNIX_NS))
+    return GpsEphemerides.combined(
+        [synthetic_constellation(start_gps, rng=rng), galileo_constellation(start_gps, rng=rng)]
+    )
 
 
 def _constellation(sc: Scenario, rng: np.random.Generator) -> tuple[GpsEphemerides, int]:

@@ -283,6 +283,62 @@ def rewrite_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
     return note
 
 
+# what an attack may change beyond the fixes' positions: (frame, column, how the note names it)
+CARRIED: tuple[tuple[str, str, str], ...] = (
+    ("fixes", "h_acc_m", "reported accuracies"),
+    ("fixes", "sats_used", "satellites used"),
+    ("fixes", "hdop", "DOP"),
+    ("fixes", "cn0_mean_dbhz", "mean C/N0"),
+    ("fixes", "agc", "AGC"),
+    ("fixes", "noise_per_ms", "noise level"),
+    ("fixes", "jamming_indicator", "jamming indicator"),
+    ("fixes", "jamming_state", "jamming state"),
+    ("satellites", "cn0_dbhz", "each satellite's C/N0"),
+    ("observations", "cn0_dbhz", "the raw measurements' C/N0"),
+    ("observations", "pseudorange_m", "the raw pseudoranges"),
+)
+
+
+def _keyed(df: pd.DataFrame, column: str) -> pd.DataFrame:
+    """One value of `column` per receiver, time (ms) and satellite."""
+    keys = ["receiver_id", "_ms"] + (["sv_id"] if "sv_id" in df else [])
+    out = df.assign(_ms=np.round(df["t_s"].to_numpy(float) * 1000).astype(np.int64))
+    return out[[*keys, column]].drop_duplicates(keys).set_index(keys)[column]
+
+
+def _carried(before: pd.DataFrame, attacked: pd.DataFrame, copy: pd.DataFrame, column: str) -> bool | None:
+    """Whether the copy carries the attack's change of `column`: at most of the rows the attack moved, the
+    copy has a value and it moved too. None when the attack moved nothing there."""
+    if not len(before) or not len(attacked) or column not in before:
+        return None
+    old = _keyed(before, column)
+    new = _keyed(attacked, column).reindex(old.index)
+    moved = new.notna() & old.notna() & ((new - old).abs() > 1e-3)
+    if not moved.any():
+        return None
+    if not len(copy):
+        return False
+    got = _keyed(copy, column).reindex(old.index[moved.to_numpy()])
+    followed = got.notna() & ((got - old[moved]).abs() > 1e-3)
+    return bool(followed.mean() >= 0.5)
+
+
+def unwritten_changes(table: EpochTable, attacked: EpochTable, copy: EpochTable) -> list[str]:
+    """What the attack changed that its copy, read back, does not carry (the format has no place for it,
+    or its writer does not edit it): named for `inject`'s note."""
+    out = [
+        label
+        for frame, column, label in CARRIED
+        if _carried(table.frame(frame), attacked.frame(frame), copy.frame(frame), column) is False
+    ]
+    if len(attacked.fixes) < len(table.fixes) and len(copy.fixes) >= len(table.fixes):
+        out.append("the lost fixes")
+    lost = len(attacked.observations) < len(table.observations)
+    if lost and len(copy.observations) >= len(table.observations):
+        out.append("the lost satellites' measurements")
+    return out
+
+
 def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """Formats spooflens writes whole (CSV, ULog): the spoofed table written anew."""
     from spooflens.writers import write_log

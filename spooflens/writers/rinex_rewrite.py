@@ -1,15 +1,17 @@
 """Spoofed copies of RINEX observation logs, written as RINEX with every untouched byte kept.
 
-`spooflens inject` changes the observations frame (pseudoranges moved, satellites blocked); this
-module carries those changes back into the source files. A spoofer delays the whole signal, so a
-pseudorange change of `d` metres moves every code observable of that satellite and epoch (C*, P*)
-by `d`, every phase observable (L*) by `d / wavelength` cycles at its own carrier, and a change of
-pseudorange rate `r` moves every Doppler observable (D*) by `-r / wavelength`. Signal strengths are
-left alone. A phase or Doppler whose carrier is unknown (GLONASS without its frequency channel) is
-not edited. A removed row takes the satellite out of that epoch: its data lines go and the epoch
-header's count and satellite list are rewritten (continuation lines included, RINEX 2). An epoch
-left without satellites is dropped. Fields keep their exact width (F14.3 + LLI + SSI); everything
-else is copied byte for byte, the header gaining one COMMENT line before END OF HEADER.
+`spooflens inject` changes the observations frame (pseudoranges moved, satellites blocked, C/N0
+lowered); this module carries those changes back into the source files. A spoofer delays the whole
+signal, so a pseudorange change of `d` metres moves every code observable of that satellite and epoch
+(C*, P*) by `d`, every phase observable (L*) by `d / wavelength` cycles at its own carrier, and a change
+of pseudorange rate `r` moves every Doppler observable (D*) by `-r / wavelength`. A change of C/N0 (an
+interference attack drowning the signals) moves every signal strength (S*) of the satellite by as many
+dB, its signal strength indicator (SSI, C/N0 / 6 clipped to 1-9) with it. A phase or Doppler whose
+carrier is unknown (GLONASS without its frequency channel) is not edited. A removed row takes the
+satellite out of that epoch: its data lines go and the epoch header's count and satellite list are
+rewritten (continuation lines included, RINEX 2). An epoch left without satellites is dropped. Fields
+keep their exact width (F14.3 + LLI + SSI); everything else is copied byte for byte, the header gaining
+one COMMENT line before END OF HEADER.
 
 Rows are matched by (receiver_id, t_s, sv_id) to the lines the reader took them from, through the
 same scan (`readers.rinex.scan_obs`), so the two cannot disagree about an epoch's time.
@@ -26,6 +28,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers.rinex import ObsScan, carrier_frequency_hz, find_nav_files, obs_files, parse_fixed, scan_obs
+from readers.rinex.text import TextLines
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import ReaderError, WriterError
 from spooflens.gnss.ephemeris import C_MPS
@@ -42,6 +45,7 @@ class _Plan:
     rows: IntArray
     delta_range_m: FloatArray
     delta_rate_mps: FloatArray
+    delta_cn0_db: FloatArray
     removed: IntArray
     added: int
 
@@ -50,7 +54,7 @@ def _keyed(df: pd.DataFrame) -> pd.DataFrame:
     """Observation rows keyed by integer ns since the table start (exact, unlike float seconds)."""
     ns = np.round(df["t_s"].to_numpy(dtype=float) * 1e9).astype(np.int64)
     out = pd.DataFrame({"ns": ns, "sv_id": df["sv_id"].to_numpy(dtype=object)})
-    for c in ("pseudorange_m", "pseudorange_rate_mps", "doppler_hz", "carrier_freq_hz"):
+    for c in ("pseudorange_m", "pseudorange_rate_mps", "doppler_hz", "carrier_freq_hz", "cn0_dbhz"):
         out[c] = df[c].to_numpy(dtype=float) if c in df.columns else np.nan
     return out.drop_duplicates(["ns", "sv_id"])
 
@@ -95,11 +99,14 @@ def _plan(scan: ObsScan, table: EpochTable, spoofed: pd.DataFrame, receiver_id: 
     both = old.merge(new, on=["ns", "sv_id"], how="outer", suffixes=("_old", "_new"), indicator=True)
     kept = both[both["_merge"] == "both"]
     d_range, d_rate = _deltas(kept)
-    changed = (d_range != 0.0) | (d_rate != 0.0)
+    d_cn0 = (kept["cn0_dbhz_new"] - kept["cn0_dbhz_old"]).to_numpy(dtype=float)
+    d_cn0 = np.where(np.isfinite(d_cn0), d_cn0, 0.0)
+    changed = (d_range != 0.0) | (d_rate != 0.0) | (d_cn0 != 0.0)
     return _Plan(
         _scan_rows(scan, table.t0_ns, receiver_id, kept[changed]),
         d_range[changed],
         d_rate[changed],
+        d_cn0[changed],
         _scan_rows(scan, table.t0_ns, receiver_id, both[both["_merge"] == "left_only"]),
         int((both["_merge"] == "right_only").sum()),
     )
@@ -136,6 +143,8 @@ def _shift_fields(scan: ObsScan, buf: NDArray[np.uint8], plan: _Plan) -> None:
                     sign = 1.0 if kind == "L" else -1.0
                     src = plan.delta_range_m[sel] if kind == "L" else plan.delta_rate_mps[sel]
                     delta = sign * src * freq / C_MPS
+                elif kind == "S":
+                    delta = plan.delta_cn0_db[sel]
                 else:
                     continue
                 line, col = scan.field_at(rows, m)
@@ -150,6 +159,20 @@ def _shift_fields(scan: ObsScan, buf: NDArray[np.uint8], plan: _Plan) -> None:
                 chars = np.frombuffer(new.astype("S14").tobytes(), dtype=np.uint8).reshape(-1, 14)
                 pos = (text.starts[line[ok]] + col[ok])[:, None] + span
                 buf[pos] = chars
+                if kind == "S":
+                    _signal_strength_indicator(text, buf, line[ok], col[ok], values[ok] + delta[ok])
+
+
+def _signal_strength_indicator(
+    text: TextLines, buf: NDArray[np.uint8], line: IntArray, col: IntArray, cn0: FloatArray
+) -> None:
+    """The SSI digit after a signal strength field, where the file has one, from its new value (RINEX:
+    1 minimum ... 9 maximum; C/N0 / 6 as receivers map dB-Hz)."""
+    at = text.starts[line] + col + 15
+    inside = col + 16 <= text.lens[line]
+    digit = np.clip(np.floor(cn0 / 6.0), 1, 9).astype(np.uint8) + ord("0")
+    has = inside & (buf[np.where(inside, at, 0)] >= ord("1")) & (buf[np.where(inside, at, 0)] <= ord("9"))
+    buf[at[has]] = digit[has]
 
 
 def _epoch_blocks(scan: ObsScan, removed: IntArray) -> tuple[dict[int, list[bytes]], set[int]]:

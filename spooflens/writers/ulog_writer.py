@@ -1,4 +1,5 @@
-"""Write an EpochTable as a PX4 ULog: sensor_combined, vehicle_attitude and one sensor_gps per receiver.
+"""Write an EpochTable as a PX4 ULog: sensor_combined, vehicle_attitude, one sensor_gps per receiver and its
+satellite_info (per-satellite C/N0, elevation, azimuth, used) where the table has its satellites.
 
 The layout follows the ULog specification (file header, 'B' flag bits, 'I' info, 'F' formats,
 'A' add-logged, 'D' data) and PX4's habits: fields ordered by size as the uORB structs are, a trailing
@@ -125,6 +126,29 @@ SENSOR_GPS_V1_14: Fields = [
     ("uint8_t", "satellites_used"),
     ("uint8_t", "selected_rtcm_instance"),
 ]
+
+
+SATELLITE_SLOTS = 40
+# PX4's SatelliteInfo: up to 40 satellites, `svid` in u-blox's NAV-SVINFO numbering (as PX4's u-blox
+# driver writes it), `snr` the C/N0 in dB-Hz (0: not tracked), `elevation` in degrees as an int8 cast to
+# uint8, `azimuth` 0-255 for 0-360 deg
+SATELLITE_INFO: Fields = [
+    ("uint64_t", "timestamp"),
+    ("uint8_t", "count"),
+    *((f"uint8_t[{SATELLITE_SLOTS}]", name) for name in ("svid", "used", "elevation", "azimuth", "snr", "prn")),
+]
+# u-blox NAV-SVINFO numbers by system: (system letter, first satellite number, its svid, last number)
+_SVINFO = (("G", 1, 1, 32), ("S", 20, 120, 58), ("E", 1, 211, 36), ("C", 1, 159, 5), ("C", 6, 34, 36))
+_SVINFO_MORE = (("R", 1, 65, 32), ("J", 1, 193, 10))
+
+
+def svinfo_number(sv_id: str) -> int:
+    """u-blox NAV-SVINFO number of a RINEX-style satellite id (0: none, e.g. a GLONASS slot above 32)."""
+    system, number = sv_id[:1], int(sv_id[1:]) if sv_id[1:].isdigit() else 0
+    for letter, first, svid, last in (*_SVINFO, *_SVINFO_MORE):
+        if letter == system and first <= number <= last:
+            return svid + number - first
+    return 0
 
 
 def _dtype(fields: Fields) -> np.dtype:
@@ -281,4 +305,31 @@ def write_ulog(table: EpochTable, path: Path, boot_offset_s: float = 10.0) -> No
         device_id = int(table.metadata.get(f"px4.device_id.{rid}", "0"))
         g = log.topic("sensor_gps", SENSOR_GPS_V1_14 if legacy else SENSOR_GPS, len(fx), multi_id=k)
         _gps_rows(g, fx, t_us, utc_us, legacy, device_id)
+        sky = table.satellites[table.satellites["receiver_id"].astype(str) == rid] if len(table.satellites) else None
+        if sky is not None and len(sky):
+            _satellite_info(log, sky, table, boot_us, k)
     log.write(path)
+
+
+def _satellite_info(log: ULogFile, sky: pd.DataFrame, table: EpochTable, boot_us: int, multi_id: int) -> None:
+    """One satellite_info message per epoch of the receiver's sky (the first 40 satellites of each)."""
+    svid = np.array([svinfo_number(s) for s in sky["sv_id"].astype(str)], dtype=np.int64)
+    sky = sky.assign(_svid=svid)[svid > 0]
+    epochs = np.unique(sky["t_s"].to_numpy(float))
+    r = log.topic("satellite_info", SATELLITE_INFO, len(epochs), multi_id=multi_id)
+    r["timestamp"] = (table.absolute_ns(epochs) // 1000 - boot_us).astype(np.int64)
+    epoch = np.searchsorted(epochs, sky["t_s"].to_numpy(float))
+    slot = sky.groupby(epoch).cumcount().to_numpy()
+    keep = slot < SATELLITE_SLOTS
+    e, k = epoch[keep], slot[keep]
+    r["count"] = np.minimum(np.bincount(epoch, minlength=len(epochs)), SATELLITE_SLOTS)
+    cn0 = sky["cn0_dbhz"].to_numpy(float)[keep]
+    el = sky["elevation_deg"].to_numpy(float)[keep]
+    az = sky["azimuth_deg"].to_numpy(float)[keep]
+    used = sky["used"].to_numpy(float)[keep]
+    r["svid"][e, k] = sky["_svid"].to_numpy()[keep]
+    r["prn"][e, k] = sky["_svid"].to_numpy()[keep]
+    r["snr"][e, k] = np.clip(np.round(np.nan_to_num(cn0, nan=0.0)), 0, 255)
+    r["elevation"][e, k] = np.where(np.isfinite(el), np.round(el), -91).astype(np.int64) % 256
+    r["azimuth"][e, k] = np.clip(np.round(np.nan_to_num(az) * 255.0 / 360.0), 0, 255)
+    r["used"][e, k] = np.nan_to_num(used, nan=0.0) > 0

@@ -15,6 +15,7 @@ from spooflens.bench.corpus_bench import (
     attack_start,
     false_verdicts,
     grouped,
+    interference,
     print_report,
     refusal_reason,
     refusals,
@@ -188,3 +189,28 @@ def test_the_bench_on_a_tiny_corpus(tmp_path: Path, capsys: pytest.CaptureFixtur
     print_report(report)
     printed = capsys.readouterr().out
     assert "False SPOOFING verdicts on clean-sky logs: 1" in printed and "1 x unknown format" in printed
+    assert "Interference alarms on the clean pass: 0" in printed  # no C/N0 or RF indicator in these logs
+    assert report_json(report)["interference"]["logs"] == 0
+
+
+def test_interference_on_the_clean_pass_lists_alarms_with_what_the_receiver_said() -> None:
+    from typing import Any, cast
+
+    from spooflens.bench.corpus_bench import LogResult
+
+    class Clean:
+        def __init__(self, name: str, facts: dict[str, Any], alarms: list[Any]) -> None:
+            self.log = type("Log", (), {"name": name, "clean": True, "tags": ()})()
+            analysis = {"name": "interference", "ran": True, "alarms": alarms, "facts": facts}
+            text = "ubx: C/N0 of all 9 GPS L1 satellites fell by 15 dB together"
+            analysis["findings"] = [{"text": text}] * len(alarms)
+            self.summary = {"duration_s": 1800.0, "analyses": [analysis]}
+
+    monitor = {"ubx": {"jamming_monitor": {"reported": "interference reported"}}}
+    quiet = {"receivers": {"GP": {"jamming_monitor": {"reported": "not logged"}}}, "rejected": [{"start_s": 5.0}]}
+    results = cast(list[LogResult], [Clean("a.ubx", {"receivers": monitor}, [{}]), Clean("b.nmea", quiet, [])])
+    found = interference(results)
+    assert found["logs"] == 2 and found["hours"] == 1.0 and len(found["rejected_losses"]) == 1
+    assert [a["log"] for a in found["alarms"]] == ["a.ubx"]
+    assert found["alarms"][0]["receiver_said"]["ubx"]["reported"] == "interference reported"
+    assert found["jamming_monitor"] == {"interference reported": ["a.ubx"], "not logged": ["b.nmea"]}

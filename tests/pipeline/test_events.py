@@ -59,12 +59,23 @@ def takeover(start: float) -> list[DetectorResult]:
     ]
 
 
+def quiet(name: str, evidence: Evidence) -> DetectorResult:
+    return result(name, evidence)
+
+
 def test_interference_alone_is_jamming_and_no_spoofing() -> None:
-    verdict = verdict_of(circling(), [jamming(100.0, 130.0)])
+    verdict = verdict_of(circling(), [jamming(100.0, 130.0), quiet("gnss_consistency", Evidence.GNSS_ONLY)])
     assert not verdict.spoofed
     (event,) = verdict.events
     assert event.kind == Kind.JAMMING and event.systems == ("GPS",) and event.bands == ("L1",)
-    assert verdict.headline.startswith("NO SPOOFING DETECTED")
+    assert verdict.headline.startswith("NO SPOOFING DETECTED by 1 detector(s)")
+    assert "JAMMING / INTERFERENCE from 100.00 s to 130.00 s" in verdict.headline
+
+
+def test_interference_is_no_spoofing_detector_yet_its_event_is_named() -> None:
+    # the interference detector alone says what disturbed the signals, not whether they were spoofed
+    verdict = verdict_of(circling(), [jamming(100.0, 130.0)])
+    assert verdict.headline.startswith("NO VERDICT: no spoofing detector could run")
     assert "JAMMING / INTERFERENCE from 100.00 s to 130.00 s" in verdict.headline
 
 
@@ -89,16 +100,16 @@ def test_jamming_long_before_a_takeover_is_not_linked_to_it() -> None:
     assert jam.followed_by is None and spoof.follows is None
 
 
-def test_interference_that_opens_a_spoofing_incident_is_an_event_of_its_own() -> None:
-    # the interference runs into the takeover's first alarm: one incident, two events
+def test_interference_that_runs_into_a_takeover_stays_an_incident_of_its_own() -> None:
+    # the jammer is still on at the takeover's first alarm (jam then spoof): two incidents, one sequence
     verdict = verdict_of(circling(), [jamming(120.0, 142.0), *takeover(140.0)])
-    (incident,) = verdict.incidents
-    assert incident.is_spoofing
+    jam_incident, spoof_incident = verdict.incidents
+    assert not jam_incident.is_spoofing and spoof_incident.is_spoofing
     jam, spoof = verdict.events
-    assert jam.kind == Kind.JAMMING and (jam.start_s, jam.end_s) == (120.0, 140.0)
-    assert spoof.kind == Kind.SPOOFING and jam.followed_by == 1
+    assert jam.kind == Kind.JAMMING and (jam.start_s, jam.end_s) == (120.0, 142.0)
+    assert spoof.kind == Kind.SPOOFING and jam.followed_by == 1 and spoof.follows == 0
     # the takeover's onset and first alarm are its own evidence's, not the interference's
-    assert spoof.start_s == 140.0 and spoof.onset_s == 139.0 and incident.onset_s == 139.0
+    assert spoof.start_s == 140.0 and spoof.onset_s == 139.0 and spoof_incident.onset_s == 139.0
 
 
 @cache

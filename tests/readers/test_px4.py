@@ -326,8 +326,10 @@ def test_writer_keeps_the_legacy_definition_for_legacy_codes(logs: Path) -> None
     )
     cols = [*INDICATORS, "spoofing_flag"]
     pd.testing.assert_frame_equal(back.fixes[cols], table.fixes[cols])
-    # the per-satellite C/N0 behind the mean is not in the table, so no satellite_info is written
-    assert back.fixes["cn0_mean_dbhz"].isna().all()
+    # the receiver's satellite_info goes with it: every satellite as read, and the mean C/N0 from it
+    pd.testing.assert_frame_equal(back.satellites, table.satellites)
+    pd.testing.assert_series_equal(back.fixes["cn0_mean_dbhz"], table.fixes["cn0_mean_dbhz"])
+    assert back.fixes["cn0_mean_dbhz"].notna().any()
 
 
 def test_writer_current_definition_from_a_table_without_px4_metadata(logs: Path) -> None:

@@ -24,7 +24,7 @@ from spooflens.inventory import computed, skipped_or_repaired, stream_rows
 from spooflens.output.report.figures import MAX_LABELLED, Plot
 from spooflens.output.report.provenance import InputIdentity
 from spooflens.pipeline.departure import Departure, gnss_departure
-from spooflens.pipeline.evidence import EVIDENCE, label
+from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, label
 from spooflens.pipeline.registry import DetectorInfo
 from spooflens.pipeline.run import Analysis
 from spooflens.pipeline.verdict import KIND_LABELS, Incident, Kind, Verdict
@@ -261,7 +261,13 @@ def _detector_status(results: Sequence[DetectorResult], verdict: Verdict) -> str
     for r in results:
         if not r.is_detector or not r.ran:
             continue
-        status = "counted" if r.name in verdict.detectors_run else "advisory"
+        status = (
+            "counted"
+            if r.name in verdict.detectors_run
+            else "reported (no spoofing evidence)"
+            if r.evidence in NOT_SPOOFING
+            else "advisory"
+        )
         rows.append((r.name, label(r.evidence) if r.evidence else "", status, len(r.alarms), r.reason))
     not_run = sum(not r.ran for r in results)
     if not rows and not not_run:

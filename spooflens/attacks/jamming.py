@@ -1,0 +1,399 @@
+"""A jammer as real receivers log it (`jam`), and jamming followed by a spoofer's capture (`jam_spoof`).
+
+Noise-like interference adds power J to the noise N0 every satellite's signal competes with, so every
+satellite's C/N0 falls by the same 10 log10(1 + J/N0) dB whatever its strength; a satellite pushed below
+the tracking threshold (`fix_lost_below`) is lost and comes back 3 dB above it; with fewer than four
+the fix is lost. The front end sees the extra power: its AGC turns the gain down, its noise and jamming
+indicators rise, and the receiver's jamming monitor (where the log has one that is on) says warning, and
+critical when the fix is gone. The code tracking noise grows as 1/sqrt(C/N0): the raw pseudoranges get it,
+the fixes its thermal part through the geometry left, smoothed by the receiver's filter; the accuracies a
+receiver reports grow faster (`acc`), and its DOP with the satellites lost. The jammer's power rises over `ramp` s from
+`start` and fades over `ramp` s before `end`.
+
+`jam_spoof` is the attack real spoofers mount: jam the receiver off the sky, then let it re-acquire on the
+counterfeit signals (`spooflens.attacks.capture`), which are louder than the sky and alike on every
+satellite (one antenna sends them all). Its truth file lists both phases.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+from scipy.special import ndtr
+
+from spooflens.attacks.capture import apply_capture
+from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, Kind
+from spooflens.epoch_table import EpochTable
+from spooflens.geodesy import add_enu_offset
+from spooflens.gnss.ephemeris import C_MPS
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+REACQUIRE_DB = 3.0  # a lost satellite is re-acquired this far above the tracking threshold
+MIN_SATELLITES = 4  # fewer tracked: no fix
+SKY_SPREAD_DB = 5.0  # spread of the satellites' C/N0 around their mean, for a log with the mean alone
+FIX_SMOOTHING_S = 5.0  # a receiver's solution filters its extra noise over a few seconds
+CODE_NOISE_M = 0.5  # thermal code noise of a pseudorange at the satellite's own C/N0
+DOPPLER_NOISE_MPS = 0.03  # ... and of its range rate
+SMOOTHED_EPOCHS = 10.0  # the carrier-aided filter averages the code noise over about this many epochs
+NOISE_RISE = 0.5  # noise indicator at full power: this much above its level
+JAMMING_INDICATOR_RISE = 150.0  # jamming indicator (0-255) at full power: this much above its level
+WARNING_DB = 6.0  # the receiver's monitor says warning from this drop on
+
+
+def jammer_power(t: FloatArray, start: float, end: float, ramp: float) -> FloatArray:
+    """The jammer's power as a fraction of its full power (0 outside [start, end])."""
+    if ramp <= 0:
+        return ((t >= start) & (t <= end)).astype(float)
+    up = np.clip((t - start) / ramp, 0.0, 1.0)
+    down = np.clip((end - t) / ramp, 0.0, 1.0)
+    return np.where((t >= start) & (t <= end), np.minimum(up, down), 0.0)
+
+
+def _hit(sv: NDArray[Any], systems: str | None) -> BoolArray:
+    ids = np.asarray(sv, dtype=str)
+    if not systems:
+        return np.ones(len(ids), dtype=bool)
+    letters = systems.upper().replace("+", "")
+    return np.array([s[:1] in letters for s in ids], dtype=bool)
+
+
+def _tracking(t: FloatArray, sv: NDArray[Any], cn0: FloatArray, power: FloatArray, threshold: float) -> BoolArray:
+    """Per row: still tracked, with hysteresis: lost below `threshold` while the jammer is on, back at
+    `threshold` + 3 dB or when it is off (a satellite the receiver tracked below the threshold without
+    the jammer keeps being tracked then)."""
+    state = np.where(
+        power <= 0.0, 0.0, np.where(cn0 < threshold, 1.0, np.where(cn0 >= threshold + REACQUIRE_DB, 0.0, np.nan))
+    )
+    frame = pd.DataFrame({"t": t, "sv": np.asarray(sv, dtype=str), "lost": state})
+    order = frame.sort_values(["sv", "t"], kind="stable").index
+    filled = frame.loc[order].groupby("sv")["lost"].ffill().fillna(0.0)
+    lost = np.zeros(len(t), dtype=bool)
+    lost[order.to_numpy()] = filled.to_numpy() > 0.5
+    return ~lost
+
+
+def _weakest(rows: pd.DataFrame, hit: BoolArray, start: float, count: int) -> set[str]:
+    """The `count` weakest hit satellites by their C/N0 over the 30 s before `start`."""
+    t = rows["t_s"].to_numpy(float)
+    before = hit & (t >= start - 30.0) & (t < start)
+    if not before.any():
+        before = hit
+    med = rows[before].groupby(rows["sv_id"].astype(str)[before])["cn0_dbhz"].median().sort_values()
+    return set(med.index[:count])
+
+
+def _jam_signals(
+    rows: pd.DataFrame, p: dict[str, Any], power: FloatArray, lost_override: set[str] | None
+) -> tuple[FloatArray, BoolArray]:
+    """Per-satellite rows (a sky view or raw observations) jammed: their new C/N0 and which are tracked."""
+    sv = rows["sv_id"].astype(str).to_numpy()
+    hit = _hit(sv, p.get("systems"))
+    cn0 = rows["cn0_dbhz"].to_numpy(float)
+    jammed = cn0 - p["cn0"] * power * hit
+    if lost_override is not None:
+        tracked = ~(np.isin(sv, list(lost_override)) & (power >= 0.5))
+    else:
+        t = rows["t_s"].to_numpy(float)
+        tracked = _tracking(t, sv, np.where(hit, jammed, np.inf), power * hit, p["fix_lost_below"])
+    tracked &= np.isfinite(cn0)
+    return np.where(tracked, jammed, np.nan), tracked
+
+
+def _sky_counts(rows: pd.DataFrame, tracked: BoolArray) -> pd.DataFrame:
+    """Per epoch of a sky: satellites tracked before and after the jamming, and their mean C/N0 after."""
+    before = np.isfinite(rows["cn0_dbhz"].to_numpy(float))
+    return (
+        pd.DataFrame({"t_s": rows["t_s"].to_numpy(float), "before": before, "after": tracked, "cn0": rows["_cn0"]})
+        .groupby("t_s")
+        .agg(before=("before", "sum"), after=("after", "sum"), cn0=("cn0", "mean"))
+    )
+
+
+def _smoothed_noise(n: int, dt: float, rng: np.random.Generator) -> FloatArray:
+    """(n, 3) unit-variance noise filtered over FIX_SMOOTHING_S: a receiver's solution is not white."""
+    a = np.exp(-dt / FIX_SMOOTHING_S)
+    s = np.sqrt(1.0 - a * a)
+    white = rng.normal(0.0, 1.0, (n, 3))
+    x, _ = lfilter([s], [1.0, -a], white, axis=0, zi=((1.0 - s) * white[0])[None, :])
+    return np.asarray(x)
+
+
+def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
+    """The jammed copy of `table` and the attack's truth."""
+    p = spec.params
+    start = spec.start_s
+    end = min(spec.end_s if spec.end_s is not None else table.duration_s, table.duration_s)
+    frames = (table.fixes, table.observations, table.satellites)
+    receivers = list(dict.fromkeys(str(r) for f in frames for r in f["receiver_id"].dropna().unique()))
+    if not receivers:
+        raise AttackError(f"{table.source}: no GNSS fixes, satellites or observations to jam")
+    targets = [p["receiver"]] if "receiver" in p else receivers
+    unknown = [r for r in targets if r not in receivers]
+    if unknown:
+        raise AttackError(f"{table.source}: no receiver {unknown[0]!r}; receivers are {receivers}")
+    acc = float(p["acc"]) if "acc" in p else 10.0 ** (p["cn0"] / 20.0)
+    rng = np.random.default_rng(int(p["seed"]))
+    truth = AttackTruth(
+        spec.kind.value, dict(p), start, end, list(targets), KINDS[spec.kind].seed, str(table.source), table.t0_ns
+    )
+    sats, obs, fixes = table.satellites.copy(), table.observations.copy(), table.fixes.copy()
+    keep_obs = np.ones(len(obs), dtype=bool)
+    keep_fix = np.ones(len(fixes), dtype=bool)
+    lost_all: set[str] = set()
+    fix_lost: list[list[float]] = []
+    for rid in targets:
+        sky_rows = np.flatnonzero(sats["receiver_id"].astype(str).to_numpy() == rid) if len(sats) else np.zeros(0, int)
+        obs_rows = np.flatnonzero(obs["receiver_id"].astype(str).to_numpy() == rid) if len(obs) else np.zeros(0, int)
+        counts = None
+        for frame, rows, is_obs in ((sats, sky_rows, False), (obs, obs_rows, True)):
+            if not len(rows):
+                continue
+            sub = frame.iloc[rows]
+            t = sub["t_s"].to_numpy(float)
+            power = jammer_power(t, start, end, p["ramp"])
+            override = (
+                _weakest(sub, _hit(sub["sv_id"].astype(str).to_numpy(), p.get("systems")), start, int(p["lost"]))
+                if "lost" in p
+                else None
+            )
+            cn0, tracked = _jam_signals(sub, p, power, override)
+            lost_all |= set(
+                sub["sv_id"].astype(str).to_numpy()[~tracked & np.isfinite(sub["cn0_dbhz"].to_numpy(float))]
+            )
+            frame.iloc[rows, frame.columns.get_loc("cn0_dbhz")] = cn0
+            if is_obs:
+                keep_obs[rows[~tracked]] = False
+                _noisier_ranges(
+                    frame, rows, p["cn0"] * power * _hit(sub["sv_id"].astype(str).to_numpy(), p.get("systems")), rng
+                )
+            elif "used" in frame:
+                used = sub["used"].to_numpy(float)
+                frame.iloc[rows, frame.columns.get_loc("used")] = np.where(tracked | ~np.isfinite(used), used, 0.0)
+            if counts is None or not is_obs:
+                counts = _sky_counts(sub.assign(_cn0=cn0), tracked)
+        f_rows = np.flatnonzero(fixes["receiver_id"].astype(str).to_numpy() == rid) if len(fixes) else np.zeros(0, int)
+        if len(f_rows):
+            agc_in_db = table.metadata.get("units.agc", "").startswith("dB")
+            lost_mask, offsets = _jam_fixes(fixes, f_rows, counts, p, start, end, acc, agc_in_db, rng)
+            keep_fix[f_rows[lost_mask]] = False
+            t = fixes["t_s"].to_numpy(float)[f_rows]
+            truth.offsets[rid] = np.c_[t, offsets][~lost_mask].round(4).tolist()
+            fix_lost += _runs(t, lost_mask)
+    jammed = copy.copy(table)
+    jammed.satellites = pd.DataFrame(sats).reset_index(drop=True)
+    jammed.observations = pd.DataFrame(obs[keep_obs]).reset_index(drop=True)
+    jammed.fixes = pd.DataFrame(fixes[keep_fix]).reset_index(drop=True)
+    jammed.validate()
+    truth.satellites = sorted(lost_all)
+    truth.phases = [
+        {
+            "kind": "jam",
+            "start_s": start,
+            "end_s": end,
+            "cn0_drop_db": p["cn0"],
+            "satellites_lost": sorted(lost_all),
+            "fix_lost_s": fix_lost,
+        }
+    ]
+    return jammed, truth
+
+
+def _runs(t: FloatArray, flag: BoolArray) -> list[list[float]]:
+    if not flag.any():
+        return []
+    edges = np.diff(np.r_[0, flag.astype(np.int8), 0])
+    return [
+        [float(t[a]), float(t[b - 1])]
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
+    ]
+
+
+def _noisier_ranges(obs: pd.DataFrame, rows: NDArray[np.int64], drop_db: FloatArray, rng: np.random.Generator) -> None:
+    """Code and Doppler noise grow as 1/sqrt(C/N0): added to the pseudoranges and rates of the jammed rows
+    (0.5 m and 0.03 m/s at the satellite's own level), the Doppler kept as the rate's (-rate / wavelength)."""
+    extra = np.sqrt(np.maximum(10.0 ** (drop_db / 10.0) - 1.0, 0.0))
+    for col, sigma in (("pseudorange_m", CODE_NOISE_M), ("pseudorange_rate_mps", DOPPLER_NOISE_MPS)):
+        x = obs[col].to_numpy(float)[rows]
+        obs.iloc[rows, obs.columns.get_loc(col)] = x + rng.normal(0.0, 1.0, len(rows)) * sigma * extra
+    rate = obs["pseudorange_rate_mps"].to_numpy(float)[rows]
+    freq = obs["carrier_freq_hz"].to_numpy(float)[rows]
+    doppler = obs["doppler_hz"].to_numpy(float)[rows]
+    with_doppler = np.isfinite(doppler) & np.isfinite(freq) & np.isfinite(rate)
+    obs.iloc[rows, obs.columns.get_loc("doppler_hz")] = np.where(with_doppler, -rate * freq / C_MPS, doppler)
+
+
+def _jam_fixes(
+    fixes: pd.DataFrame,
+    rows: NDArray[np.int64],
+    counts: pd.DataFrame | None,
+    p: dict[str, Any],
+    start: float,
+    end: float,
+    acc: float,
+    agc_in_db: bool,
+    rng: np.random.Generator,
+) -> tuple[BoolArray, FloatArray]:
+    """The receiver's fixes jammed in place; returns which are lost and the position offsets added."""
+    fx = fixes.iloc[rows]
+    t = fx["t_s"].to_numpy(float)
+    power = jammer_power(t, start, end, p["ramp"])
+    drop = p["cn0"] * power
+    cols = fixes.columns
+    cn0_mean = fx["cn0_mean_dbhz"].to_numpy(float)
+    if counts is not None and len(counts):
+        k = np.clip(np.searchsorted(counts.index.to_numpy(float), t), 0, len(counts) - 1)
+        before, after = counts["before"].to_numpy(float)[k], counts["after"].to_numpy(float)[k]
+        fraction = np.where(before > 0, after / np.maximum(before, 1.0), 1.0)
+        tracked = after
+        sky_mean = counts["cn0"].to_numpy(float)[k]
+        new_mean = np.where(np.isfinite(cn0_mean), np.where(np.isfinite(sky_mean), sky_mean, cn0_mean - drop), np.nan)
+    else:  # the satellites' C/N0 spread around the logged mean (40 dB-Hz when none is logged)
+        mean = np.where(np.isfinite(cn0_mean), cn0_mean, 40.0)
+        fraction = 1.0 - ndtr((p["fix_lost_below"] + drop - mean) / SKY_SPREAD_DB)
+        if "lost" in p:
+            n0 = np.nan_to_num(fx["sats_used"].to_numpy(float), nan=10.0)
+            fraction = np.where(power >= 0.5, np.clip(1.0 - p["lost"] / np.maximum(n0, 1.0), 0.0, 1.0), 1.0)
+        tracked = np.nan_to_num(fx["sats_used"].to_numpy(float), nan=10.0) * fraction
+        new_mean = cn0_mean - drop
+    lost = (power > 0) & (np.floor(tracked + 1e-9) < MIN_SATELLITES)
+    sats = fx["sats_used"].to_numpy(float)
+    new_sats = np.where(np.isfinite(sats), np.round(sats * fraction), sats)
+    geometry = np.sqrt(np.where(np.isfinite(sats) & (new_sats > 0), sats / np.maximum(new_sats, 1.0), 1.0))
+    inflation = (1.0 + (acc - 1.0) * power) * geometry
+    fixes.iloc[rows, cols.get_loc("sats_used")] = new_sats
+    fixes.iloc[rows, cols.get_loc("cn0_mean_dbhz")] = new_mean
+    for c in ("hdop", "vdop"):
+        fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) * geometry
+    for c in ("h_acc_m", "v_acc_m", "vel_acc_mps"):
+        fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) * inflation
+    # the real scatter: only the thermal part of the code and Doppler noise grows (through the geometry the
+    # satellites left give), smoothed by the receiver's carrier-aided filter; a receiver's reported accuracy
+    # grows faster than its real error does
+    thermal = np.sqrt(np.maximum(10.0 ** (drop / 10.0) - 1.0, 0.0))
+    hdop = np.where(np.isfinite(fx["hdop"].to_numpy(float)), fx["hdop"].to_numpy(float), 1.0) * geometry
+    vdop = np.where(np.isfinite(fx["vdop"].to_numpy(float)), fx["vdop"].to_numpy(float), 1.5) * geometry
+    code = CODE_NOISE_M * thermal / np.sqrt(SMOOTHED_EPOCHS)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    sigma = np.c_[hdop * code / np.sqrt(2.0), hdop * code / np.sqrt(2.0), vdop * code]
+    dp = _smoothed_noise(len(t), dt, rng) * sigma
+    dv = rng.normal(0.0, 1.0, (len(t), 3)) * (DOPPLER_NOISE_MPS * thermal * hdop)[:, None] / np.sqrt(2.0)
+    lat, lon, h = (fx[c].to_numpy(float) for c in ("lat_deg", "lon_deg", "height_m"))
+    new_lat, new_lon, new_h = add_enu_offset(lat, lon, h, dp)
+    fixes.iloc[rows, cols.get_loc("lat_deg")] = new_lat
+    fixes.iloc[rows, cols.get_loc("lon_deg")] = new_lon
+    fixes.iloc[rows, cols.get_loc("height_m")] = new_h
+    for i, c in enumerate(("vel_e_mps", "vel_n_mps", "vel_u_mps")):
+        fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) + dv[:, i]
+    agc = fx["agc"].to_numpy(float)
+    if agc_in_db:  # the gain itself (Android AgcDb): turned down by the power the jammer adds
+        fixes.iloc[rows, cols.get_loc("agc")] = agc - drop
+    else:
+        fixes.iloc[rows, cols.get_loc("agc")] = np.round(agc * (1.0 - (1.0 - p["agc"]) * power))
+    noise = fx["noise_per_ms"].to_numpy(float)
+    fixes.iloc[rows, cols.get_loc("noise_per_ms")] = np.round(noise * (1.0 + NOISE_RISE * power))
+    jam = fx["jamming_indicator"].to_numpy(float)
+    fixes.iloc[rows, cols.get_loc("jamming_indicator")] = np.clip(
+        np.round(jam + JAMMING_INDICATOR_RISE * power), 0, 255
+    )
+    state = fx["jamming_state"].to_numpy(float)
+    if np.nan_to_num(state, nan=0.0).max() >= 1:  # a monitor that is on says what it sees; one off stays off
+        said = np.where(drop >= WARNING_DB, np.where(lost, 3.0, 2.0), state)
+        fixes.iloc[rows, cols.get_loc("jamming_state")] = np.where(np.isfinite(state), np.maximum(state, said), state)
+    return lost, np.where(lost[:, None], 0.0, dp)
+
+
+def apply_jam_spoof(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
+    """Jamming for `jam` s from `start`, then a capture from where the jamming ends to `end`."""
+    p = spec.params
+    start = spec.start_s
+    end = min(spec.end_s if spec.end_s is not None else table.duration_s, table.duration_s)
+    takeover = start + float(p["jam"])
+    if takeover >= end:
+        raise AttackError(
+            f"jam_spoof: {p['jam']:g} s of jamming from {start:g} s leave no time to spoof before {end:.1f} s"
+        )
+    jam_keys = ("cn0", "ramp", "agc", "lost", "fix_lost_below", "acc", "systems", "seed", "receiver")
+    jam_params = {k: p[k] for k in jam_keys if k in p} | {"start": start, "end": takeover}
+    jammed, jam_truth = apply_jam(table, AttackSpec(Kind.JAM, jam_params))
+    capture_params = (
+        {
+            "drag": p["drag"],
+            "rate": p["rate"],
+            "offset": p["offset"],
+            "axes": p["axes"],
+            "lost": p["reacquire"],
+            "jump": p["jump"],
+            "acc": 4.0,
+            "cn0": p["louder"],
+            "clock": p["clock"],
+            "seed": p["seed"],
+            "start": takeover,
+        }
+        | ({"end": p["end"]} if "end" in p else {})
+        | ({"receiver": p["receiver"]} if "receiver" in p else {})
+    )
+    spoofed, capture_truth = apply_capture(jammed, AttackSpec(Kind.CAPTURE, capture_params))
+    captured = takeover + float(p["reacquire"])
+    spoofed = _louder_and_alike(spoofed, capture_truth.receivers, start, (captured, end), float(p["louder"]), p)
+    truth = replace(
+        capture_truth,
+        kind=spec.kind.value,
+        params=dict(p),
+        start_s=start,
+        end_s=end,
+        seed_paper=KINDS[spec.kind].seed,
+        satellites=jam_truth.satellites,
+        phases=[
+            jam_truth.phases[0],
+            {"kind": "capture", "start_s": takeover, "end_s": end, "captured_s": takeover + float(p["reacquire"])},
+        ],
+    )
+    # the receivers' offsets: the jamming's noise, then the capture's drag
+    for rid, rows in capture_truth.offsets.items():
+        jam_rows = {r[0]: r[1:] for r in jam_truth.offsets.get(rid, [])}
+        truth.offsets[rid] = [
+            [r[0], *(np.add(r[1:], jam_rows.get(r[0], [0.0, 0.0, 0.0])).round(4).tolist())] for r in rows
+        ]
+    return spoofed, truth
+
+
+def _louder_and_alike(
+    table: EpochTable,
+    receivers: list[str],
+    sky_until: float,
+    captured: tuple[float, float],
+    louder: float,
+    p: dict[str, Any],
+) -> EpochTable:
+    """While captured, every satellite arrives from the spoofer's one antenna: `louder` dB above the median
+    of the sky before the attack (`sky_until`), within about 1 dB of each other (the capture itself moves
+    only the fixes)."""
+    rng = np.random.default_rng(int(p["seed"]) + 1)
+    out = copy.copy(table)
+    for name in ("satellites", "observations"):
+        frame = getattr(table, name).copy()
+        if not len(frame):
+            continue
+        ids = frame["receiver_id"].astype(str).to_numpy()
+        t = frame["t_s"].to_numpy(float)
+        cn0 = frame["cn0_dbhz"].to_numpy(float)
+        new = cn0.copy()
+        for rid in receivers:
+            mine = ids == rid
+            sky = mine & (t < sky_until) & np.isfinite(cn0)
+            if not sky.any():
+                continue
+            level = float(np.median(cn0[sky])) + louder
+            on = mine & (t >= captured[0]) & (t <= captured[1]) & np.isfinite(cn0)
+            new[on] = level + rng.normal(0.0, 0.7, int(on.sum()))
+        frame["cn0_dbhz"] = new
+        setattr(out, name, frame)
+    out.validate()
+    return out

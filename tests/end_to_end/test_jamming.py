@@ -1,0 +1,122 @@
+"""Jamming injected into real logs of every format that carries C/N0 or the front end's indicators, and into
+simulated ones, is caught by the interference detector with its interval after the copy is read back;
+jam_spoof gives both phases."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from paths import HUSKY_BAG, real_log
+
+from readers import read_log
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.cli import main
+from spooflens.detectors.base import Alarm
+from spooflens.detectors.interference import run_interference
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.run import analyze_table
+from spooflens.simulation.sensors import ReceiverModel
+from spooflens.simulation.simulate import SCENARIOS, simulate
+from spooflens.writers.ubx_rewrite import rewrite_ubx
+
+
+def caught(path: Path, start: float, end: float, slack: float = 2.0) -> Alarm:
+    """The one interference alarm of the log, its onset interval at the jammer's start and its end at the end."""
+    r = run_interference(read_log(path))
+    assert r.ran and len(r.alarms) == 1, (r.reason, [f.text for f in r.findings])
+    a = r.alarms[0]
+    assert a.onset_interval_s is not None and a.end_interval_s is not None
+    assert a.onset_interval_s[0] - slack <= start <= a.onset_interval_s[1] + slack
+    assert a.end_interval_s[0] - slack <= end <= a.end_interval_s[1] + slack
+    return a
+
+
+def inject(src: Path, attack: str, dst: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    assert main(["inject", str(src), "--attack", attack, "-o", str(dst)]) == 0
+    return capsys.readouterr().out
+
+
+def test_a_real_ublox_capture(tmp_path: Path) -> None:
+    src = real_log("ubx_receivers/gpsd_ublox-zed-f9r.log")
+    table = read_log(src)
+    assert not run_interference(table).alarms
+    jammed, _ = apply_attack(table, parse_attack("jam:start=12,end=22"))
+    note = rewrite_ubx(src, tmp_path / "f9r.log", table, jammed, True)
+    assert "NAV-SAT" in note and "monitor" in note
+    back = read_log(tmp_path / "f9r.log")
+    for column in ("agc", "noise_per_ms", "jamming_indicator", "jamming_state", "sats_used"):
+        np.testing.assert_array_equal(back.fixes[column].to_numpy(float), jammed.fixes[column].to_numpy(float))
+    a = caught(tmp_path / "f9r.log", 12.0, 22.0)
+    assert {"GPS", "Galileo", "GLONASS", "BeiDou"} <= set(a.systems)
+    text = run_interference(back).findings[0].text
+    assert "AGC down 40 %" in text and "the receiver reported jamming (warning)" in text
+
+
+def test_a_real_nmea_log_with_gsv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = inject(real_log("nmea_boats/gpsd_bundg_zeus_9.log"), "jam:start=60,end=120", tmp_path / "b.log", capsys)
+    assert "self-reports" in out and "not in the copy" not in out
+    a = caught(tmp_path / "b.log", 60.0, 120.0)
+    assert a.systems == ("GLONASS", "GPS") and a.bands == ("G1", "L1")
+
+
+def test_a_real_rinex_file_with_signal_strengths(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = real_log("android_gnsslogger/gnss_lib_py/pixel6.23o")
+    inject(src, "jam:start=100,end=300,cn0=10", tmp_path / "p.23o", capsys)
+    caught(tmp_path / "p.23o", 100.0, 300.0, slack=18.0)  # the phone's epochs are 18 s apart
+
+
+def test_a_real_gnsslogger_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = real_log("android_gnsslogger/gps-measurement-tools/pseudoranges_log_2016_08_22_14_45_50.txt")
+    out = inject(src, "jam:start=60,end=150,cn0=10", tmp_path / "g.txt", capsys)
+    assert "Raw/Status/Agc lines with their C/N0 or AGC moved" in out and "code noise" in out
+    caught(tmp_path / "g.txt", 60.0, 150.0)
+    # a pseudorange moved without its C/N0 is an attack on the pseudoranges: still refused for this format
+    delay = ["inject", str(src), "--attack", "pr_delay:delay=300,count=1,start=30", "-o", str(tmp_path / "d.txt")]
+    assert main(delay) == 2
+    assert "cannot be written back into a GnssLogger log" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("fmt", "name"), [("ulog", "sim.ulg"), ("csv", "sim_csv")])
+def test_simulated_jamming_in_px4_ulog_and_csv(fmt: str, name: str, tmp_path: Path) -> None:
+    out = tmp_path / name
+    code = main(["simulate", "multirotor", "-o", str(out), "--format", fmt, "--seconds", "240", "--jam", "100,160,15"])
+    assert code == 0
+    truth = json.loads(Path(str(out) + ".attack.json").read_text())
+    assert truth["kind"] == "jam" and truth["phases"][0]["start_s"] == 100.0
+    a = caught(out, 100.0, 160.0)
+    assert a.systems == ("GPS", "Galileo")
+
+
+def test_a_format_without_a_place_for_it_says_what_was_not_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = inject(HUSKY_BAG, "jam:start=100,end=160", tmp_path / "h.bag", capsys)
+    assert "not in the copy (the format or its writer has no place for them): reported accuracies" in out
+
+
+def test_jam_then_capture_both_phases_are_seen() -> None:
+    sc = replace(SCENARIOS["multirotor"], receiver=ReceiverModel(), satellite_reports=True)
+    table = simulate(sc, seed=11, duration_s=360.0).table
+    spoofed, truth = apply_attack(table, parse_attack("jam_spoof:start=150,jam=40"))
+    analysis = analyze_table(spoofed)
+    jam = [i for i in analysis.verdict.incidents if i.evidence == (Evidence.INTERFERENCE,)]
+    assert len(jam) == 1 and not jam[0].is_spoofing
+    assert jam[0].onset_interval_s is not None and jam[0].onset_interval_s[0] - 1 <= 150.0 <= jam[0].onset_interval_s[1]
+    assert 185.0 <= jam[0].end_s <= 191.0
+    facts = next(r.extras for r in analysis.results if r.name == "interference")
+    assert "stronger than before" in facts["events"][0]["after"]  # type: ignore[index]
+    takeover = truth.phases[1]["start_s"]
+    spoofing = [i for i in analysis.verdict.incidents if i.is_spoofing]
+    assert spoofing and spoofing[-1].ongoing_at_end and spoofing[-1].end_s >= takeover
+    new_alarms = [
+        a.start_s
+        for r in analysis.results
+        if r.is_detector and r.ran and r.evidence not in (None, Evidence.INTERFERENCE)
+        for a in r.alarms
+        if takeover - 1.0 <= a.start_s <= takeover + 30.0
+    ]
+    assert new_alarms  # the capture itself draws the spoofing detectors' alarms
