@@ -143,6 +143,17 @@ def _interference_alarms(analysis: Any) -> list[Any]:
     return [a for r in analysis.results if r.name == "interference" and r.ran for a in r.alarms]
 
 
+# the kind named over an attack: the most serious kind of any event that overlaps it
+KIND_ORDER = ("spoofing", "jamming", "degradation", "receiver_fault", "unknown")
+
+
+def called_kind(analysis: Any, start: float, end: float, late_s: float = 5.0) -> str:
+    """What the verdict called the stretch [start, end]: the first of KIND_ORDER among the events overlapping
+    it (an alarm up to `late_s` after it still counts), or 'nothing'."""
+    kinds = {str(e.kind) for e in analysis.verdict.events if e.start_s <= end + late_s and e.end_s >= start - 1.0}
+    return next((k for k in KIND_ORDER if k in kinds), "nothing")
+
+
 def jam_scores(analysis: Any, truth: Any, table: Any) -> dict[str, Any]:
     """How the interference detector saw the jamming phase (truth.phases[0]) and, for jam_spoof, how the
     spoofing detectors saw the capture after it."""
@@ -151,7 +162,9 @@ def jam_scores(analysis: Any, truth: Any, table: Any) -> dict[str, Any]:
     alarms = [a for a in _interference_alarms(analysis) if a.end_s >= start - 1.0 and a.start_s <= end + 5.0]
     t = table.fixes["t_s"].to_numpy(float)
     period = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
-    out: dict[str, Any] = {"jam_detected": bool(alarms)}
+    # jam then capture: the jamming phase alone, before the takeover's own alarms
+    late_s = 5.0 if truth.kind == "jam" else -1.0
+    out: dict[str, Any] = {"jam_detected": bool(alarms), "called": called_kind(analysis, start, end, late_s)}
     if alarms:
         first, last = alarms[0], max(alarms, key=lambda a: a.end_s)
         covered = sum(max(0.0, min(a.end_s, end) - max(a.start_s, start)) for a in alarms)
@@ -171,6 +184,7 @@ def jam_scores(analysis: Any, truth: Any, table: Any) -> dict[str, Any]:
         return out
     capture = truth.phases[1]
     takeover = float(capture["start_s"])
+    out["called_capture"] = called_kind(analysis, takeover, float(capture["end_s"]))
     # the capture's own alarms: spoofing-class detectors alarming from the takeover on
     after = [
         a.start_s
@@ -215,6 +229,7 @@ def one_run(run: Run) -> dict[str, Any]:
     hit = next((i for i in spoofing if i.end_s >= first - 1.0), None)
     out["false_incidents"] = sum(1 for i in spoofing if i.end_s < first - 5.0)
     out["detected"] = hit is not None
+    out["called"] = called_kind(analysis, first, duration)
     if hit is not None:
         out["delay_s"] = max(hit.start_s - first, 0.0)
         out["onset_error_s"] = hit.onset_s - first
@@ -348,6 +363,7 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         "per_attack": per_kind,
         "jamming": jamming,
+        "kinds_called": kinds_called(attacked),
         "clean_hours": hours,
         "false_incidents": false,
         "false_per_100h": 100.0 * false / hours if hours else None,
@@ -359,6 +375,33 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
         "runs": results,
         "simulated": True,
     }
+
+
+def kinds_called(attacked: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per attack (and per phase of jam then capture), the share of runs whose verdict named each kind over
+    it: the confusion table of the event kinds."""
+    out: dict[str, dict[str, float]] = {}
+    for kind in ATTACKS:
+        two_phases = any("called_capture" in r for r in attacked if r["attack"] == kind)
+        first = f"{kind}: the jamming" if two_phases else kind
+        for key, row in (("called", first), ("called_capture", f"{kind}: the capture")):
+            rs = [r[key] for r in attacked if r["attack"] == kind and key in r]
+            if rs:
+                out[row] = {k: rs.count(k) / len(rs) for k in (*KIND_ORDER, "nothing")} | {"runs": float(len(rs))}
+    return out
+
+
+def _print_kinds(kinds: dict[str, dict[str, float]]) -> None:
+    t = Table(
+        "attack",
+        "runs",
+        *KIND_ORDER,
+        "nothing",
+        title="The kind of event the verdict named over each attack (the confusion table; simulation only)",
+    )
+    for row, shares in kinds.items():
+        t.add_row(row, f"{shares['runs']:.0f}", *(f"{100 * shares[k]:.0f}%" for k in (*KIND_ORDER, "nothing")))
+    console().print(t)
 
 
 def _jam_summary(rs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -546,6 +589,8 @@ def command(
         console().print(t)
     if out["jamming"]:
         _print_jamming(out["jamming"], vehicles)
+    if out["kinds_called"]:
+        _print_kinds(out["kinds_called"])
     cap = out["per_attack"].get("capture")
     if cap:
         console().print(
