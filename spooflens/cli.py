@@ -35,6 +35,7 @@ from spooflens.service import (
     check_writable,
     damage,
     finish,
+    load_baseline_option,
     parse_topics,
     print_analysis,
     read_table,
@@ -62,6 +63,7 @@ DIRECTORY_FORMATS = ("csv", "rinex", "ros2bag-sqlite3", "ros2bag-mcap")
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
 COMMANDS: dict[str, str] = {
+    "baseline": "spooflens.baseline.command:command",
     "report": "spooflens.output.report.command:report",
     "view": "spooflens.output.viewer:view",
     "fleet": "spooflens.fleet.command:command",
@@ -139,6 +141,15 @@ quiet_option = click.option("--quiet", is_flag=True, help="Print only the one-li
 fail_on_spoof_option = click.option(
     "--fail-on-spoof", is_flag=True, help="Exit with code 4 when the verdict is spoofing (for scripts and pipelines)."
 )
+baseline_option = click.option(
+    "--baseline",
+    "baseline_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="VEHICLE.baseline.json",
+    help="The vehicle's baseline (`spooflens baseline`): detectors judge the log against its clean logs, so an "
+    "attack filling the whole log still shows. A baseline of another receiver model is refused.",
+)
 imu_grade_option = click.option(
     "--imu-grade",
     type=click.Choice(sorted(PRESETS)),
@@ -173,6 +184,7 @@ imu_grade_option = click.option(
 @topic_option
 @station_option
 @imu_grade_option
+@baseline_option
 @quiet_option
 @fail_on_spoof_option
 def analyze(
@@ -183,6 +195,7 @@ def analyze(
     topics: tuple[str, ...],
     station_texts: tuple[str, ...],
     imu_grade: str | None,
+    baseline_path: Path | None,
     quiet: bool,
     fail_on_spoof: bool,
 ) -> int:
@@ -190,9 +203,10 @@ def analyze(
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     for hint, path in (("--output", output), ("--json", json_path), ("--html", html_path)):
         check_writable(path, hint)
+    baseline = load_baseline_option(baseline_path)
     recording = EarlyRecording(output)
     try:
-        analyses = analyse_log(log, topics, imu_grade, quiet, station_texts, recording)
+        analyses = analyse_log(log, topics, imu_grade, quiet, station_texts, recording, baseline)
         summaries = write_outputs(analyses, output, json_path, html_path, recording)
     finally:
         recording.abandon()  # begun for an analysis that failed (a taken one is written and in place)

@@ -33,10 +33,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.format import Baseline, RicePair
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
 from spooflens.detectors.statistics.rayleigh import (
     Calibration,
     calibrate,
+    fixed_calibration,
     paper_boundary,
     rayleigh_scale,
     scale_changepoint,
@@ -268,12 +270,20 @@ def _episodes(
     return tuple(out)
 
 
-def collapse_rule(t: FloatArray, x: FloatArray, opts: DualReceiverOptions, upper: bool = False) -> RuleResult:
+def collapse_rule(
+    t: FloatArray, x: FloatArray, opts: DualReceiverOptions, upper: bool = False, prior: RicePair | None = None
+) -> RuleResult:
     """Rule 3/4 (window of K) and rule 1/2 (K = 1) on a statistic; `upper` for the baseline error (alarm when
-    the scale grows; Rayleigh)."""
+    the scale grows; Rayleigh). `prior`: the statistic's null model from the vehicle's clean logs (a
+    baseline), used in place of the one fitted on this log."""
     k = window_samples(t, opts)
-    cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-    per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+    if prior is not None:
+        nu, sigma, ratio = prior.nu.centre, prior.sigma.centre, prior.k_eff_ratio.centre
+        cal, scale, alarm = fixed_calibration(x, k, opts.p_false_alarm, nu, sigma, ratio * k, upper)
+        per_epoch, _, _ = fixed_calibration(x, 1, opts.p_false_alarm, nu, sigma, 1.0, upper)
+    else:
+        cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+        per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
     clean_scale = float(np.sqrt(cal.nu**2 / 2.0 + cal.sigma**2))
     if upper:
         alarm &= np.nan_to_num(scale) > opts.min_baseline_error_m
@@ -375,8 +385,13 @@ def _new(name: str) -> DetectorResult:
     return DetectorResult(name, True, evidence=Evidence.SECOND_RECEIVER)
 
 
-def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[DetectorResult]:
-    """The three dual-receiver detectors over every pair (first receiver against each other one)."""
+def detect(
+    table: EpochTable, opts: DualReceiverOptions | None = None, baseline: Baseline | None = None
+) -> list[DetectorResult]:
+    """The three dual-receiver detectors over every pair (first receiver against each other one); with a
+    baseline, the collapse rules judge against the null models of the vehicle's clean logs."""
+    from spooflens.baseline.use import note
+
     opts = opts or DualReceiverOptions()
     receivers = table.receivers()
     collapse, pr, err = _new(COLLAPSE), _new(PR_COLLAPSE), _new(BASELINE_ERROR)
@@ -388,7 +403,14 @@ def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[D
             continue
         d_enu = pair.baseline_enu()
         dist = np.linalg.norm(d_enu[:, :2], axis=1)
-        rule = collapse_rule(pair.t, dist, opts)
+        known = baseline.pairs.get(f"{a}|{b}") if baseline is not None else None
+        rule = collapse_rule(pair.t, dist, opts, prior=known.baseline_distance if known else None)
+        if known is not None:
+            note(
+                collapse,
+                f"{pair.label}: the clean logs' distance model (Rice nu {rule.cal.nu:.3g} m, sigma "
+                f"{rule.cal.sigma:.3g} m, K_eff/K {known.baseline_distance.k_eff_ratio.centre:.2g})",
+            )
         collapse.series += _rule_series(pair.label, rule, "baseline_distance", "rule 1")
         collapse.series.append(Series(f"{pair.label}/baseline_distance_3d", pair.t, np.linalg.norm(d_enu, axis=1), "m"))
         collapse.alarms += _alarms(rule, (a, b))
@@ -399,7 +421,8 @@ def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[D
             f"(K_eff {rule.cal.k_eff:.1f}), scale threshold {rule.cal.threshold:.3g} m "
             f"(paper's boundary {rule.boundary:.3g} m)"
         )
-        _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE])
+        pr_prior = known.pseudorange_difference_sd if known is not None else None
+        _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE], pr_prior)
         _baseline_error_rule(table, pair, d_enu, opts, err, notes[BASELINE_ERROR])
     out = []
     for res in (collapse, pr, err):
@@ -414,7 +437,12 @@ def detect(table: EpochTable, opts: DualReceiverOptions | None = None) -> list[D
 
 
 def _pseudorange_rule(
-    table: EpochTable, pair: AlignedPair, opts: DualReceiverOptions, res: DetectorResult, notes: list[str]
+    table: EpochTable,
+    pair: AlignedPair,
+    opts: DualReceiverOptions,
+    res: DetectorResult,
+    notes: list[str],
+    prior: RicePair | None = None,
 ) -> None:
     t, sd, n = pseudorange_differences(table.observations, table.fixes_of(pair.b), pair.a, pair.b, opts)
     if len(t) < 3 * opts.min_window:
@@ -423,7 +451,15 @@ def _pseudorange_rule(
             f">= {opts.min_common_satellites} common satellites (needs raw observations of both)"
         )
         return
-    rule = collapse_rule(t, sd, opts)
+    rule = collapse_rule(t, sd, opts, prior=prior)
+    if prior is not None:
+        from spooflens.baseline.use import note
+
+        note(
+            res,
+            f"{pair.label}: the clean logs' model of the spread (Rice nu {rule.cal.nu:.3g} m, "
+            f"sigma {rule.cal.sigma:.3g} m)",
+        )
     res.series += _rule_series(pair.label, rule, "difference_sd", "rule 2")
     res.series.append(Series(f"{pair.label}/common_satellites", t, n.astype(float), "satellites"))
     res.alarms += _alarms(rule, (pair.a, pair.b))
@@ -463,7 +499,8 @@ def _baseline_error_rule(
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return detect(ctx.table, DualReceiverOptions())
+    loaded = ctx.options.baseline
+    return detect(ctx.table, DualReceiverOptions(), loaded.content if loaded is not None else None)
 
 
 _PAPER = "Seed 003 (Dobryakova, Lemieszewski, Ochin: dual-receiver detection of a single-antenna spoofer)"

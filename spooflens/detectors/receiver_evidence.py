@@ -24,6 +24,14 @@ robust z-score per indicator (positive = the suspicious direction). The detector
   `max_plausible_cn0_dbhz` (the sky gives 30-50 dB-Hz to a small antenna).
 
 Losses of fix (gaps longer than `gap_factor` median periods) count as an indicator too.
+
+With a vehicle's baseline (`analyze --baseline`) two things change: each indicator's robust scale is at
+least its typical scale inside the vehicle's clean logs, and a level test runs beside the others: each
+indicator's median over the trailing `level_window_s` against the level the clean logs agree on, in
+units of how far a clean log's level naturally lies from it (`spooflens.baseline.use.level_scale`),
+in the direction an attack moves it; an alarm needs indicators of two families (geometry, RF, signal:
+`spooflens.baseline.indicators`) beyond `z_level` for `min_level_s`. A log attacked from its first fix
+to its last shows there, where against its own median it cannot.
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.format import Baseline
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, alarm_intervals
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
@@ -64,6 +73,7 @@ INDICATORS: tuple[Indicator, ...] = (
     Indicator("agc", "AGC", 0, 10.0, 0.03),
     Indicator("cn0_mean_dbhz", "mean C/N0", 0, 1.0),
 )
+LABELS = {ind.column: ind.label for ind in INDICATORS}
 
 
 @dataclass(frozen=True)
@@ -79,6 +89,12 @@ class ReceiverEvidenceOptions:
     min_reference_s: float = 20.0  # the baseline is learned from at least this long a stretch ...
     min_reference_fraction: float = 0.1  # ... and this fraction of the log
     min_changed_s: float = 10.0  # a change of state to learn around lasts this long at least
+    # the level test against a baseline
+    level_window_s: float = 60.0
+    min_level_values: int = 10
+    z_level: float = 5.0
+    min_families: int = 2
+    min_level_s: float = 30.0
 
 
 def _center_scale(x: FloatArray, floor: float, relative_floor: float) -> tuple[float, float]:
@@ -184,7 +200,106 @@ def _onsets(t: FloatArray, quiet: NDArray[np.bool_], alarms: list[Alarm], rid: s
     return out
 
 
-def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> DetectorResult | None:
+@dataclass
+class LevelTest:
+    alarms: list[Alarm]
+    series: list[Series]
+    findings: list[Finding]
+    reason: str
+
+
+def level_test(
+    rid: str, t: FloatArray, fx: pd.DataFrame, baseline: Baseline, opts: ReceiverEvidenceOptions
+) -> LevelTest | None:
+    """Each indicator's level (median over the trailing `level_window_s`) against the vehicle's baseline
+    (see the module docstring); None when the baseline has no level of this receiver's indicators."""
+    from spooflens.baseline.indicators import INDICATORS as SPREADS
+    from spooflens.baseline.use import level_scale
+
+    index = pd.to_timedelta(t, unit="s")
+    window = pd.Timedelta(seconds=opts.level_window_s)
+    zs: dict[str, FloatArray] = {}
+    used, left = [], []
+    for ind in INDICATORS:
+        q, spec = baseline.indicator(rid, ind.column), SPREADS.get(ind.column)
+        if q is None or spec is None:
+            continue
+        if q.agree is False:
+            left.append(ind.label)
+            continue
+        x = pd.Series(fx[ind.column].to_numpy(dtype=float), index=index)
+        if x.notna().sum() < opts.min_level_values:
+            continue
+        rolled = x.rolling(window, min_periods=opts.min_level_values)
+        med, count = rolled.median().to_numpy(dtype=float), rolled.count().to_numpy(dtype=float)
+        scale = np.sqrt(level_scale(q, spec) ** 2 + (1.2533 * (q.within or 0.0)) ** 2 / np.maximum(count, 1.0))
+        z = (med - q.centre) / scale
+        zs[ind.column] = np.abs(z) if spec.direction == 0 else spec.direction * z
+        used.append(f"{ind.label} {q.centre:.4g} +- {level_scale(q, spec):.2g}")
+    if not zs:
+        return None
+    families = sorted({SPREADS[c].family for c in zs})
+    by_family = np.stack(
+        [
+            np.nanmax(
+                np.stack([np.nan_to_num(z, nan=-np.inf) for c, z in zs.items() if SPREADS[c].family == f]), axis=0
+            )
+            for f in families
+        ],
+        axis=1,
+    )
+    beyond = by_family > opts.z_level
+    raised = beyond.sum(axis=1) >= opts.min_families
+    score = (
+        np.sort(np.where(np.isfinite(by_family), by_family, 0.0), axis=1)[:, -opts.min_families]
+        if len(families) >= opts.min_families
+        else np.zeros(len(t))
+    )
+    alarms = [
+        Alarm(
+            a.start_s,
+            a.end_s,
+            a.peak_statistic,
+            a.peak_s,
+            max(a.start_s - opts.level_window_s, float(t[0])),
+            (max(a.start_s - opts.level_window_s, float(t[0])), a.start_s),
+            rid,
+        )
+        for a in alarm_intervals(t, score, raised, opts.merge_gap_s)
+        if a.end_s - a.start_s >= opts.min_level_s
+    ]
+    findings = []
+    for a in alarms:
+        inside = (t >= a.start_s) & (t <= a.end_s)
+        moved = []
+        for c, z in zs.items():
+            if np.nan_to_num(z[inside], nan=-np.inf).max() > opts.z_level:
+                q = baseline.indicator(rid, c)
+                assert q is not None
+                level = float(np.nanmedian(fx[c].to_numpy(dtype=float)[inside]))
+                moved.append(f"{LABELS[c]} {level:.4g} (baseline {q.centre:.4g})")
+        findings.append(
+            Finding(
+                f"{rid}: indicator levels off the vehicle's baseline: {', '.join(moved)} "
+                f"({a.start_s:.1f}-{a.end_s:.1f} s)",
+                a.start_s,
+                a.end_s,
+                receiver_id=rid,
+            )
+        )
+    reason = f"levels against the baseline ({', '.join(used)})"
+    if left:
+        reason += f"; not against it where its logs disagree ({', '.join(left)})"
+    series = [Series(f"{rid}/level_score", t, score, "level z", opts.z_level)]
+    series.append(
+        Series(f"{rid}/level_z", t, np.stack(list(zs.values()), axis=1), "level z", None, tuple(LABELS[c] for c in zs))
+    )
+    return LevelTest(alarms, series, findings, reason)
+
+
+def check_receiver(
+    rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions, baseline: Baseline | None = None
+) -> DetectorResult | None:
     t = fx["t_s"].to_numpy(dtype=float)
     if len(t) < 10:
         return None
@@ -195,8 +310,10 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         x = fx[ind.column].to_numpy(dtype=float)
         if np.isfinite(x).sum() < 10 or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
             continue
+        q = baseline.indicator(rid, ind.column) if baseline is not None else None
+        floor = max(ind.floor, q.within or 0.0) if q is not None and q.agree is not False else ind.floor
         z_cols[ind.column] = np.clip(
-            robust_z(x, ind.direction, ind.floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
+            robust_z(x, ind.direction, floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
         )
         labels[ind.column] = ind.label
     gaps = _fix_gaps(t, opts.gap_factor)
@@ -208,7 +325,8 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     jam_state = fx["jamming_state"].to_numpy(dtype=float) >= 2
     cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
     too_strong = np.nan_to_num(cn0) > opts.max_plausible_cn0_dbhz
-    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any():
+    levels = level_test(rid, t, fx, baseline, opts) if baseline is not None else None
+    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any() and levels is None:
         return None
     names = list(z_cols)
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
@@ -245,7 +363,13 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     )
     if names:
         result.series.append(Series(f"{rid}/robust_z", t, Z, "robust z", None, tuple(labels[n] for n in names)))
-    for a in result.alarms:
+    per_epoch = list(result.alarms)
+    if levels is not None:
+        result.alarms = sorted([*result.alarms, *levels.alarms], key=lambda a: a.start_s)
+        result.series += levels.series
+        result.findings += levels.findings
+        result.reason += f"; {levels.reason}"
+    for a in per_epoch:
         inside = (t >= a.start_s) & (t <= a.end_s)
         moved = [labels[n] for i, n in enumerate(names) if beyond[inside, i].any()]
         what = []
@@ -263,12 +387,14 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     return result
 
 
-def run_receiver_evidence(fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | None = None) -> DetectorResult:
+def run_receiver_evidence(
+    fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | None = None, baseline: Baseline | None = None
+) -> DetectorResult:
     opts = opts or ReceiverEvidenceOptions()
     merged = DetectorResult(NAME, True, evidence=Evidence.RECEIVER)
     notes = []
     for rid, fx in fixes.groupby("receiver_id", sort=False):
-        r = check_receiver(str(rid), fx.reset_index(drop=True), opts)
+        r = check_receiver(str(rid), fx.reset_index(drop=True), opts, baseline)
         if r is None:
             continue
         merged.alarms += r.alarms
@@ -288,7 +414,17 @@ def run_receiver_evidence(fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | N
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return [run_receiver_evidence(ctx.table.fixes)]
+    loaded = ctx.options.baseline
+    result = run_receiver_evidence(ctx.table.fixes, baseline=loaded.content if loaded is not None else None)
+    if loaded is not None and result.ran:
+        from spooflens.baseline.use import note
+
+        note(
+            result,
+            "indicator scales at least their typical scale in the clean logs; indicator levels "
+            "against the clean logs' (level test)",
+        )
+    return [result]
 
 
 ANALYSIS = AnalysisSpec(

@@ -75,7 +75,12 @@ def solve_navigation(
     options (a second pass), which depend on neither the noise nor `exclude`."""
     preset = imu_preset(options)
     inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
-    learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude)
+    prior = None
+    if options.baseline is not None:
+        from spooflens.baseline.use import noise_prior
+
+        prior = noise_prior(options.baseline, inputs.receiver_id, inputs.imu_id, preset.name)
+    learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude, prior=prior)
     opts = FilterOptions(
         grade=learned.grade,
         noise=learned.noise,
@@ -123,6 +128,17 @@ def _result(nav: Navigation) -> list[DetectorResult]:
     sol, sm = nav.solution, nav.smoothed
     settled = sol.t > sol.t[0] + 20.0
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
+    extras: dict[str, object] = {
+        "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
+        "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
+        "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
+        "imu_grade": sol.grade.name,
+        "imu_noise_scale": nav.learned.imu_scale,
+        "epochs": len(sol.t),
+        "noise_filter_runs": nav.learned.evaluations,
+    }
+    if nav.learned.prior:
+        extras["from_baseline"] = f"GNSS and IMU noise {nav.learned.baseline_note()}"
     return [
         DetectorResult(
             NAVIGATION,
@@ -147,15 +163,7 @@ def _result(nav: Navigation) -> list[DetectorResult]:
                     sm.track_llh[:, 2],
                 )
             ],
-            extras={
-                "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
-                "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
-                "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
-                "imu_grade": sol.grade.name,
-                "imu_noise_scale": nav.learned.imu_scale,
-                "epochs": len(sol.t),
-                "noise_filter_runs": nav.learned.evaluations,
-            },
+            extras=extras,
         )
     ]
 

@@ -22,6 +22,7 @@ from spooflens import plausibility
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
+from spooflens.navigation.noise_learning import LearnedNoise
 from spooflens.navigation.product import NAVIGATION, navigation_of, solve_navigation
 from spooflens.pipeline.reconstruction import reconstruct
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
@@ -39,6 +40,7 @@ class Analysis:
     verdict: Verdict
     passes: int = 1
     suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
+    learned_noise: LearnedNoise | None = None  # the navigation's, when it ran (what a baseline records)
 
 
 def last_fix_s(table: EpochTable) -> float | None:
@@ -89,12 +91,12 @@ def analyze_table(
     ctx, verdict = _one_pass(table, options, on_step, {})
     spans = suspected_spans(verdict)
     if not spans or NAVIGATION not in ctx.cache:
-        return Analysis(table, options, ctx.results, verdict)
+        return Analysis(table, options, ctx.results, verdict, learned_noise=_learned(ctx))
     first_nav = navigation_of(ctx)
     if not _within_learning(spans, first_nav.learned.window_s):
         # the noise was learned before anything suspected began: learning it again without those
         # stretches gives the same noise, and the second pass the same results
-        return Analysis(table, options, ctx.results, verdict)
+        return Analysis(table, options, ctx.results, verdict, learned_noise=first_nav.learned)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
@@ -108,7 +110,12 @@ def analyze_table(
         return Analysis(table, options, first_results, verdict)
     del first_results
     ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
-    return Analysis(table, options, ctx.results, verdict, 2, spans)
+    return Analysis(table, options, ctx.results, verdict, 2, spans, nav.learned)
+
+
+def _learned(ctx: AnalysisContext) -> LearnedNoise | None:
+    nav = ctx.cache.get(NAVIGATION)
+    return nav.learned if nav is not None else None
 
 
 def analyze_segments(

@@ -96,7 +96,7 @@ def test_a_fast_flight_far_from_its_first_fix_keeps_its_sensitivity() -> None:
             "vel_u_mps": 0.0,
         }
     )
-    _, _, z, _ = check_receiver(fixes, ConsistencyOptions())
+    _, _, z, _, _ = check_receiver(fixes, ConsistencyOptions())
     assert np.nanmax(np.abs(z[t > 500.0])) < 6.0
     assert not run_gnss_consistency(fixes).alarms
     jumped = fixes.assign(height_m=fixes["height_m"] + 4.0 * (t >= 550.0))
