@@ -349,6 +349,7 @@ def simulate(
         "batch": "spooflens.bench.batch_bench:command",
         "fuzz": "spooflens.bench.fuzz:command",
         "corpus": "spooflens.bench.corpus_bench:command",
+        "baseline": "spooflens.bench.baseline_bench:command",
     },
 )
 def bench() -> None:

@@ -41,7 +41,7 @@ def learn_from_logs(
             seen[digest] = log.name
             table = read_table(log, topics, False)
             require_gnss(log, table)
-            analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
+            analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade), clean_coasts=True)
             for k, analysis in enumerate(analyses):
                 name = log.name.rstrip("/") + (f" (recording {k + 1} of {len(analyses)})" if len(analyses) > 1 else "")
                 try:
@@ -98,6 +98,8 @@ def print_baseline(b: Baseline, path: Path) -> None:
     if b.navigation is not None:
         n = b.navigation
         _rows(t, f"noise ({n.receiver_id}, {n.imu_id}, {n.imu_grade})", n.parameters)
+        if n.coast_envelope_peak is not None:
+            _rows(t, "INS coasts", {"envelope peak": n.coast_envelope_peak})
     for key, pair in b.pairs.items():
         d = pair.baseline_distance
         _rows(t, f"{key} distance", {"nu": d.nu, "sigma": d.sigma, "K_eff/K": d.k_eff_ratio})

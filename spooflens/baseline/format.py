@@ -141,7 +141,7 @@ class ReceiverBaseline:
 
 @dataclass(frozen=True)
 class NavigationBaseline:
-    """The GNSS error model and IMU noise the navigation learned from each log (spooflens.navigation.noise_learning)."""
+    """The GNSS error model and IMU noise the navigation learned from each log, and its INS coasts."""
 
     receiver_id: str = field(metadata=doc("the receiver the navigation used"))
     imu_id: str = field(metadata=doc("the IMU the navigation used"))
@@ -153,12 +153,22 @@ class NavigationBaseline:
             "the same for velocity (m/s, s), `imu` the IMU noise scale (x the preset's variance)"
         )
     )
+    coast_envelope: tuple[float, ...] = field(
+        default=(),
+        metadata=doc(
+            "per second of coasting from 0 s: the largest ratio of GNSS's departure from an INS coast to its "
+            "chi-square threshold in the clean logs (spooflens.pipeline.reconstruction's envelope; the "
+            "largest over the logs)"
+        ),
+    )
+    coast_envelope_peak: Quantity | None = field(
+        default=None, metadata=doc("each log's largest envelope ratio (its agreement across logs)")
+    )
 
 
 @dataclass(frozen=True)
 class RicePair:
-    """The null model `calibrate` fits to a statistic on a log's clean part "
-    "(spooflens.detectors.statistics.rayleigh)."""
+    """The null model `calibrate` fits to a statistic on a log's clean part (its Rice fit)."""
 
     nu: Quantity = field(metadata=doc("Rice location (m; 0: Rayleigh)"))
     sigma: Quantity = field(metadata=doc("Rice scale (m)"))
@@ -226,7 +236,8 @@ class Baseline:
         default=None, metadata=doc("the navigation's learned noise; null when the logs have no IMU")
     )
     pairs: dict[str, PairBaseline] = field(
-        default_factory=dict, metadata=doc("per receiver pair `A|B` (first receiver, other receiver)")
+        default_factory=dict,
+        metadata=doc("per receiver pair, keyed by the first receiver's id, a vertical bar and the other's"),
     )
 
     # what any detector asks of a baseline -------------------------------------------------------
@@ -414,3 +425,7 @@ def _object_names(tp: Any) -> str:
             return f"`{t.__name__}`"
         stack.extend(typing.get_args(t))
     return "object"
+
+
+if __name__ == "__main__":  # `python -m spooflens.baseline.format`: the schema section of docs/baseline.md
+    print(schema_markdown(), end="")

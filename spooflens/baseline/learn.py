@@ -162,7 +162,17 @@ def _navigation(ms: Sequence[LogMeasurement]) -> NavigationBaseline | None:
         q = scale_quantity([m.noise.get(name) if m else None for m in same], unit, ratio_agrees(limit))
         if q is not None:
             parameters[name] = q
-    return NavigationBaseline(rid, imu, grade, parameters)
+    curves = [m.coast_envelope for m in same if m is not None and m.coast_envelope is not None]
+    envelope: tuple[float, ...] = ()
+    peak = None
+    if curves:
+        length = min(len(c) for c in curves)
+        envelope = tuple(float(x) for x in np.max([c[:length] for c in curves], axis=0))
+        peaks = [
+            float(np.max(m.coast_envelope)) if m is not None and m.coast_envelope is not None else None for m in same
+        ]
+        peak = scale_quantity(peaks, "", ratio_agrees(DISAGREE_RATIO))
+    return NavigationBaseline(rid, imu, grade, parameters, envelope, peak)
 
 
 def _rice(fits: Sequence[RiceFit | None]) -> RicePair | None:

@@ -89,6 +89,7 @@ class LogMeasurement:
     navigated: tuple[str, str, str] | None = None  # (receiver id, IMU id, IMU preset)
     pairs: dict[str, dict[str, RiceFit]] = field(default_factory=dict)  # "A|B" -> detector -> fit
     consistency: dict[str, tuple[str, FloatArray]] = field(default_factory=dict)  # rid -> (mode, scale ENU)
+    coast_envelope: FloatArray | None = None  # per second of horizon from 0 s (the navigation's receiver)
 
 
 def level(x: FloatArray) -> Level | None:
@@ -220,6 +221,9 @@ def measure(analysis: Analysis, name: str, sha256: str) -> LogMeasurement:
     if learned is not None and not learned.noise.source.startswith("prior"):
         m.noise = _noise_parameters(learned)
         m.navigated = (learned.receiver_id, learned.imu_id, learned.grade.name.split(" x")[0])
+        env = analysis.clean_envelope
+        if env is not None and env.runs:
+            m.coast_envelope = env.at(np.arange(0.0, float(env.horizon_s[-1]) + 1.0))
     labels = {f"{receivers[0]}-{b}": pair_key(receivers[0], b) for b in receivers[1:]}
     for r in analysis.results:
         if r.name not in (COLLAPSE, PR_COLLAPSE) or not r.ran:

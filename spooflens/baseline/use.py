@@ -7,6 +7,12 @@ times the largest the vehicle's clean logs showed (twice as noisy as its noisies
 IMU's variance scale its square), and a level (an indicator's typical value, the distance between two
 receivers) comes from the clean logs instead of the log. A clean log of the vehicle learns what it
 learned before, inside the allowance: a baseline makes no clean log noisier than it was.
+
+A cap needs evidence of what is normal: at least `MIN_LOGS_TO_CAP` clean logs that agree on the
+quantity (`learn`: within a factor of three). One log cannot tell a vehicle's normal from one day's
+conditions (two clean logs of one phone differ fourteenfold in `gnss_consistency`'s scale, a car's
+drive against a walk), so with one log, or logs that disagree, the quantity is recorded and the log
+learns it freely.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from numpy.typing import NDArray
 
 from spooflens.baseline.format import Baseline, Quantity
 from spooflens.baseline.indicators import IndicatorSpread
+from spooflens.baseline.learn import TWO_LOG_RANGE
 from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
@@ -37,23 +44,43 @@ def note(result: DetectorResult, text: str) -> None:
     result.extras["from_baseline"] = f"{before}; {text}" if before else text
 
 
+MIN_LOGS_TO_CAP = 2
+
+
+def usable(q: Quantity | None) -> bool:
+    """Whether a scale is known well enough to cap a log's: enough clean logs, and they agree on it."""
+    return q is not None and q.n_logs >= MIN_LOGS_TO_CAP and q.agree is True
+
+
 def cap(q: Quantity | None, allowance: float = ALLOWANCE) -> float:
-    """The largest value a log may learn for this scale (inf without a baseline value)."""
-    return float(max(q.values) * allowance) if q is not None and q.values else float("inf")
+    """The largest value a log may learn for this scale (inf when the baseline cannot tell: `usable`)."""
+    return float(max(q.values) * allowance) if q is not None and usable(q) else float("inf")
 
 
 def level_scale(q: Quantity, spec: IndicatorSpread) -> float:
     """How far a clean log's level of an indicator may naturally lie from the baseline's centre (one
-    sigma): with three logs or more, the upper 95% confidence bound of their standard deviation, times
-    sqrt(1 + 1/n) for a new log; with fewer, the indicator's prior spread (`indicators.INDICATORS`);
-    never below its resolution."""
-    v = np.asarray(q.values, dtype=float)
+    sigma, on the indicator's comparison scale: `IndicatorSpread.scale`): with three logs or more, the
+    upper 95% confidence bound of their standard deviation, times sqrt(1 + 1/n) for a new log; with fewer,
+    the indicator's prior spread (`indicators.INDICATORS`); never below its resolution."""
+    v = spec.scale(np.asarray(q.values, dtype=float))
     n = len(v)
+    floor = spec.resolution_on_scale(q.centre)
     if n >= 3:
         sd = float(np.std(v, ddof=1)) * np.sqrt((n - 1) / float(chi2_isf(UPPER_CONFIDENCE, n - 1)))
-        return max(sd * np.sqrt(1.0 + 1.0 / n), spec.resolution(q.centre))
-    spread = (q.between or 0.0) * np.sqrt(1.0 + 1.0 / n) if n == 2 else 0.0
-    return max(spread, spec.prior(q.centre), spec.resolution(q.centre))
+        return float(max(sd * np.sqrt(1.0 + 1.0 / n), floor))
+    spread = float(abs(v[1] - v[0]) / TWO_LOG_RANGE * np.sqrt(1.5)) if n == 2 else 0.0
+    return float(max(spread, spec.prior_on_scale(q.centre), floor))
+
+
+def level_z(q: Quantity, spec: IndicatorSpread, level: FloatArray, count: FloatArray) -> FloatArray:
+    """An indicator's level (median over `count` values) against the baseline: (level - centre) over
+    `level_scale` and the level's own sampling error, in the direction an attack moves it (either way
+    for direction 0)."""
+    centre = float(np.median(spec.scale(np.asarray(q.values, dtype=float))))
+    within = (q.within or 0.0) / (abs(q.centre) + spec.resolution_abs) if spec.log else (q.within or 0.0)
+    scale = np.sqrt(level_scale(q, spec) ** 2 + (1.2533 * within) ** 2 / np.maximum(count, 1.0))
+    z = (spec.scale(level) - centre) / scale
+    return np.asarray(np.abs(z) if spec.direction == 0 else spec.direction * z, dtype=float)
 
 
 def consistency_caps(baseline: Baseline, table: EpochTable) -> dict[str, tuple[str, FloatArray]]:
@@ -64,7 +91,8 @@ def consistency_caps(baseline: Baseline, table: EpochTable) -> dict[str, tuple[s
         if rx is None or rx.consistency_mode is None or not rx.consistency_scale:
             continue
         caps = np.array([cap(rx.consistency_scale.get(a)) for a in ("east", "north", "up")])
-        out[rid] = (rx.consistency_mode, caps)
+        if np.isfinite(caps).any():
+            out[rid] = (rx.consistency_mode, caps)
     return out
 
 
@@ -79,6 +107,17 @@ def noise_prior(loaded: LoadedBaseline, receiver_id: str, imu_id: str, preset: s
     params = {k: q for k, q in nav.parameters.items() if k != "imu" or nav.imu_grade == preset}
     start = {k: q.centre for k, q in params.items()}
     # a variance scale (the IMU's) gets the square of a standard deviation's allowance; time constants none
-    upper = {k: cap(q, ALLOWANCE**2 if k == "imu" else ALLOWANCE) for k, q in params.items() if not k.startswith("tau")}
+    upper = {
+        k: cap(q, ALLOWANCE**2 if k == "imu" else ALLOWANCE)
+        for k, q in params.items()
+        if not k.startswith("tau") and usable(q)
+    }
     n = max((q.n_logs for q in params.values()), default=0)
-    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''})")
+    free = [k for k in params if not k.startswith("tau") and k not in upper]
+    limits = (
+        f"capped at {ALLOWANCE:g} x its noisiest clean log"
+        + (f" but {', '.join(free)} (one log, or its logs disagree)" if free else "")
+        if upper
+        else "nothing capped (one log, or its logs disagree)"
+    )
+    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''}; {limits})")

@@ -26,12 +26,15 @@ robust z-score per indicator (positive = the suspicious direction). The detector
 Losses of fix (gaps longer than `gap_factor` median periods) count as an indicator too.
 
 With a vehicle's baseline (`analyze --baseline`) two things change: each indicator's robust scale is at
-least its typical scale inside the vehicle's clean logs, and a level test runs beside the others: each
-indicator's median over the trailing `level_window_s` against the level the clean logs agree on, in
-units of how far a clean log's level naturally lies from it (`spooflens.baseline.use.level_scale`),
-in the direction an attack moves it; an alarm needs indicators of two families (geometry, RF, signal:
+least its typical scale inside the vehicle's clean logs, and a level test runs beside the others
+(`receiver_levels`, evidence: vehicle baseline): each indicator's median over the trailing
+`level_window_s` against the level the clean logs agree on, in units of how far a clean log's level
+naturally lies from it (`spooflens.baseline.use.level_scale`), in the direction an attack moves it; an
+alarm needs indicators of two families (geometry, RF power, jamming, signal:
 `spooflens.baseline.indicators`) beyond `z_level` for `min_level_s`. A log attacked from its first fix
-to its last shows there, where against its own median it cannot.
+to its last shows there, where against its own median it cannot. A whole log off its vehicle's levels
+lasts as long as the log and would corroborate any glitch anywhere in it, so that class corroborates
+only an independent reference (`spooflens.pipeline.evidence`).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from spooflens.schema import SpoofingFlag
 
 FloatArray = NDArray[np.float64]
 NAME = "receiver_evidence"
+LEVELS = "receiver_levels"  # the level test, with a vehicle baseline only
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,7 @@ class ReceiverEvidenceOptions:
     # the level test against a baseline
     level_window_s: float = 60.0
     min_level_values: int = 10
-    z_level: float = 5.0
+    z_level: float = 3.0
     min_families: int = 2
     min_level_s: float = 30.0
 
@@ -214,7 +218,7 @@ def level_test(
     """Each indicator's level (median over the trailing `level_window_s`) against the vehicle's baseline
     (see the module docstring); None when the baseline has no level of this receiver's indicators."""
     from spooflens.baseline.indicators import INDICATORS as SPREADS
-    from spooflens.baseline.use import level_scale
+    from spooflens.baseline.use import level_scale, level_z
 
     index = pd.to_timedelta(t, unit="s")
     window = pd.Timedelta(seconds=opts.level_window_s)
@@ -232,10 +236,9 @@ def level_test(
             continue
         rolled = x.rolling(window, min_periods=opts.min_level_values)
         med, count = rolled.median().to_numpy(dtype=float), rolled.count().to_numpy(dtype=float)
-        scale = np.sqrt(level_scale(q, spec) ** 2 + (1.2533 * (q.within or 0.0)) ** 2 / np.maximum(count, 1.0))
-        z = (med - q.centre) / scale
-        zs[ind.column] = np.abs(z) if spec.direction == 0 else spec.direction * z
-        used.append(f"{ind.label} {q.centre:.4g} +- {level_scale(q, spec):.2g}")
+        zs[ind.column] = level_z(q, spec, med, count)
+        spread = level_scale(q, spec)
+        used.append(f"{ind.label} {q.centre:.4g} " + (f"x/ {np.exp(spread):.3g}" if spec.log else f"+- {spread:.2g}"))
     if not zs:
         return None
     families = sorted({SPREADS[c].family for c in zs})
@@ -325,8 +328,7 @@ def check_receiver(
     jam_state = fx["jamming_state"].to_numpy(dtype=float) >= 2
     cn0 = fx["cn0_mean_dbhz"].to_numpy(dtype=float)
     too_strong = np.nan_to_num(cn0) > opts.max_plausible_cn0_dbhz
-    levels = level_test(rid, t, fx, baseline, opts) if baseline is not None else None
-    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any() and levels is None:
+    if not z_cols and not spoof_flag.any() and not jam_state.any() and not too_strong.any():
         return None
     names = list(z_cols)
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
@@ -363,13 +365,7 @@ def check_receiver(
     )
     if names:
         result.series.append(Series(f"{rid}/robust_z", t, Z, "robust z", None, tuple(labels[n] for n in names)))
-    per_epoch = list(result.alarms)
-    if levels is not None:
-        result.alarms = sorted([*result.alarms, *levels.alarms], key=lambda a: a.start_s)
-        result.series += levels.series
-        result.findings += levels.findings
-        result.reason += f"; {levels.reason}"
-    for a in per_epoch:
+    for a in result.alarms:
         inside = (t >= a.start_s) & (t <= a.end_s)
         moved = [labels[n] for i, n in enumerate(names) if beyond[inside, i].any()]
         what = []
@@ -413,18 +409,44 @@ def run_receiver_evidence(
     return merged
 
 
+def run_receiver_levels(
+    fixes: pd.DataFrame, baseline: Baseline, opts: ReceiverEvidenceOptions | None = None
+) -> DetectorResult:
+    """The level test of every receiver the baseline knows (`LEVELS`, evidence: vehicle baseline)."""
+    opts = opts or ReceiverEvidenceOptions()
+    result = DetectorResult(LEVELS, True, evidence=Evidence.VEHICLE_BASELINE)
+    notes = []
+    for rid, fx in fixes.groupby("receiver_id", sort=False):
+        fx = fx.reset_index(drop=True)
+        levels = level_test(str(rid), fx["t_s"].to_numpy(dtype=float), fx, baseline, opts)
+        if levels is None:
+            continue
+        result.alarms += levels.alarms
+        result.series += levels.series
+        result.findings += levels.findings
+        notes.append(f"{rid}: {levels.reason}")
+    if not notes:
+        return DetectorResult.skipped(
+            LEVELS, "the baseline has no indicator level of this log's receivers", Evidence.VEHICLE_BASELINE
+        )
+    result.reason = "; ".join(notes)
+    result.alarms.sort(key=lambda a: a.start_s)
+    return result
+
+
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     loaded = ctx.options.baseline
-    result = run_receiver_evidence(ctx.table.fixes, baseline=loaded.content if loaded is not None else None)
-    if loaded is not None and result.ran:
-        from spooflens.baseline.use import note
+    if loaded is None:
+        return [run_receiver_evidence(ctx.table.fixes)]
+    from spooflens.baseline.use import note
 
-        note(
-            result,
-            "indicator scales at least their typical scale in the clean logs; indicator levels "
-            "against the clean logs' (level test)",
-        )
-    return [result]
+    result = run_receiver_evidence(ctx.table.fixes, baseline=loaded.content)
+    if result.ran:
+        note(result, "each indicator's scale at least its typical scale in the clean logs")
+    levels = run_receiver_levels(ctx.table.fixes, loaded.content)
+    if levels.ran:
+        note(levels, "the indicators' levels in the clean logs and how far they vary between them")
+    return [result, levels]
 
 
 ANALYSIS = AnalysisSpec(

@@ -211,7 +211,8 @@ def run_receiver_time(
             from spooflens.baseline.use import cap, note
 
             scale_cap = cap(known.offset_scale_s)
-            note(result, f"{rid}: jitter scale at most {scale_cap * 1e3:.1f} ms (the clean logs' allowance)")
+            if np.isfinite(scale_cap):
+                note(result, f"{rid}: jitter scale at most {scale_cap * 1e3:.1f} ms (the clean logs' allowance)")
             drift = _drift_finding(str(rid), t[ok], x[ok], known, opts)
             if drift is not None:
                 result.findings.append(drift)

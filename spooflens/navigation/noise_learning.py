@@ -98,7 +98,7 @@ class LearnedNoise:
 
     def baseline_note(self) -> str:
         """What came from the baseline, and where the log pushed against it."""
-        text = f"started from and capped by {self.prior}"
+        text = f"started from the {self.prior}"
         if self.at_upper:
             text += f"; held at the allowance: {', '.join(self.at_upper)} (the log asked for more noise)"
         return text

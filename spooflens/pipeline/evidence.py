@@ -28,6 +28,7 @@ class Evidence(StrEnum):
     FLEET = "fleet"
     HEADING = "heading"
     INTERFERENCE = "interference"
+    VEHICLE_BASELINE = "vehicle_baseline"
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,13 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
         "receiver self-report",
         "the receiver's flags and indicators (spoofing/jamming state, noise, AGC, C/N0, satellites, "
         "reported accuracy) against their own baseline in the log and their documented normal ranges",
+        False,
+    ),
+    # a log off its vehicle's clean levels (`analyze --baseline`): a different day, place or installation
+    # does that too, and over a whole log it would corroborate any glitch in it (see CORROBORATES_ONLY_...)
+    Evidence.VEHICLE_BASELINE: EvidenceInfo(
+        "vehicle baseline",
+        "the receiver's indicator levels against those of the vehicle's clean logs",
         False,
     ),
     Evidence.RAW_MEASUREMENT: EvidenceInfo(
@@ -77,6 +85,9 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
 
 # classes that say what disturbed the signals, not that GNSS was moved: they make no spoofing incident
 NOT_SPOOFING: frozenset[Evidence] = frozenset({Evidence.INTERFERENCE})
+# classes that count only beside an independent reference: a level off the vehicle's baseline lasts as long
+# as the log, so it would make any GNSS-internal glitch anywhere in the log look corroborated
+CORROBORATES_ONLY_INDEPENDENT: frozenset[Evidence] = frozenset({Evidence.VEHICLE_BASELINE})
 
 # The order evidence is listed in (report timeline strips, console): self-report first, strongest last.
 ORDER: tuple[Evidence, ...] = tuple(EVIDENCE)
@@ -92,10 +103,13 @@ def confidence(classes: set[Evidence]) -> str:
     high: an independent reference and at least one more class agree, or three classes agree;
     medium: one independent reference alone, or two GNSS-internal classes agree;
     low: a single GNSS-internal class (reported as an anomaly, never called spoofing).
-    Classes that are not spoofing evidence (`NOT_SPOOFING`) count for nothing here.
+    Classes that are not spoofing evidence (`NOT_SPOOFING`) count for nothing here, and those that count
+    only beside an independent reference (`CORROBORATES_ONLY_INDEPENDENT`) nothing without one.
     """
     classes = {c for c in classes if c not in NOT_SPOOFING}
     independent = {c for c in classes if EVIDENCE[c].independent}
+    if not independent:
+        classes -= CORROBORATES_ONLY_INDEPENDENT
     if (independent and len(classes) >= 2) or len(classes) >= 3:
         return "high"
     if independent or len(classes) == 2:

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from spooflens.detectors.base import Track
+from spooflens.detectors.base import DetectorResult, Track
 from spooflens.errors import SpooflensError
 from spooflens.estimation.quantiles import chi2_isf
 from spooflens.navigation.loosely_coupled import (
@@ -272,6 +272,26 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
     return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
 
 
+def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Envelope:
+    """How far GNSS departs from INS coasts started all over a log, the stretches `left_out` (its
+    incidents) avoided: what a vehicle's clean log says about its INS and receiver (a baseline's)."""
+    opts = CoastingOptions()
+    end = float(nav.solution.t[-1]) + 1e9  # no incident of its own: every coast is before it
+    return placebo_coasts(nav, opts).envelope((end, end), left_out, opts.margin_s, opts.placebo_trim)
+
+
+def capped(envelope: Envelope, limit: FloatArray | None) -> Envelope:
+    """The envelope at most `limit` per second of horizon (a baseline's allowance: a log attacked
+    throughout has no clean coasts of its own to tell its envelope)."""
+    if limit is None or not len(limit):
+        return envelope
+    grid = np.arange(len(limit), dtype=float)
+    if not envelope.runs:
+        return Envelope(grid, np.maximum(limit, 1.0), 0)
+    allowed = np.interp(envelope.horizon_s, grid, limit)
+    return Envelope(envelope.horizon_s, np.maximum(np.minimum(envelope.kappa, allowed), 1.0), envelope.runs)
+
+
 def coasting_check(
     nav: Navigation,
     onset_s: float,
@@ -398,6 +418,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
     placebo = placebo_coasts(nav, opts)
+    limit = _baseline_limit(ctx, nav, nav_result)
     envelopes = []
     base: NavSolution | None = None  # the filter with the incidents confirmed so far left out
     current_check: CoastingCheck | None = None  # the coast that confirmed the last incident
@@ -415,6 +436,7 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
             continue
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
         envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim)
+        envelope = capped(envelope, limit)
         envelopes.append(envelope)
         # a departure from where the next inertial incident's coast begins is that incident's, not this one's
         later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
@@ -505,6 +527,24 @@ def reconstruct(ctx: AnalysisContext, verdict: Verdict) -> Verdict:
         for (inc, c), e in zip(checks, envelopes, strict=True)
     ]
     return replace(verdict, spoofed=any(i.is_spoofing for i in incidents), incidents=incidents)
+
+
+def _baseline_limit(ctx: AnalysisContext, nav: Navigation, nav_result: DetectorResult) -> FloatArray | None:
+    """The largest clean envelope a vehicle's baseline allows (per second of horizon), when it has one for
+    this IMU and receiver."""
+    loaded = ctx.options.baseline
+    known = loaded.content.navigation if loaded is not None else None
+    if known is None or not known.coast_envelope:
+        return None
+    if (known.receiver_id, known.imu_id) != (nav.inputs.receiver_id, nav.inputs.imu_id):
+        return None
+    from spooflens.baseline.use import ALLOWANCE, note, usable
+
+    if not usable(known.coast_envelope_peak):
+        return None
+    limit = ALLOWANCE * np.asarray(known.coast_envelope, dtype=float)
+    note(nav_result, f"clean coasts' envelope at most {ALLOWANCE:g} x the clean logs' (peak {limit.max():.3g})")
+    return limit
 
 
 def _jumps_back(

@@ -23,8 +23,8 @@ from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
 from spooflens.navigation.noise_learning import LearnedNoise
-from spooflens.navigation.product import NAVIGATION, navigation_of, solve_navigation
-from spooflens.pipeline.reconstruction import reconstruct
+from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of, solve_navigation
+from spooflens.pipeline.reconstruction import Envelope, clean_envelope, reconstruct
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.pipeline.verdict import Verdict, decide
 from spooflens.schema import FRAMES
@@ -41,6 +41,8 @@ class Analysis:
     passes: int = 1
     suspected_s: tuple[tuple[float, float], ...] = ()  # left out of the noise learning of the last pass
     learned_noise: LearnedNoise | None = None  # the navigation's, when it ran (what a baseline records)
+    # how far GNSS departs from INS coasts started all over this log (`clean_coasts`: a baseline's)
+    clean_envelope: Envelope | None = None
 
 
 def last_fix_s(table: EpochTable) -> float | None:
@@ -79,8 +81,13 @@ def _within_learning(spans: tuple[tuple[float, float], ...], window_s: tuple[flo
 
 
 def analyze_table(
-    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+    table: EpochTable,
+    options: AnalyzeOptions | None = None,
+    on_step: Callable[[str], None] | None = None,
+    clean_coasts: bool = False,
 ) -> Analysis:
+    """The whole analysis of one recording. `clean_coasts`: also measure how far GNSS departs from INS
+    coasts started all over the log, its incidents left out (what a vehicle's baseline records)."""
     options = options or AnalyzeOptions()
     problems = plausibility.problems({name: table.frame(name) for name in FRAMES})
     if problems:  # a table built by hand: the readers drop and list such rows (spooflens.epoch_table.checked)
@@ -91,12 +98,13 @@ def analyze_table(
     ctx, verdict = _one_pass(table, options, on_step, {})
     spans = suspected_spans(verdict)
     if not spans or NAVIGATION not in ctx.cache:
-        return Analysis(table, options, ctx.results, verdict, learned_noise=_learned(ctx))
+        nav = ctx.cache.get(NAVIGATION)
+        return _done(Analysis(table, options, ctx.results, verdict), nav, clean_coasts)
     first_nav = navigation_of(ctx)
     if not _within_learning(spans, first_nav.learned.window_s):
         # the noise was learned before anything suspected began: learning it again without those
         # stretches gives the same noise, and the second pass the same results
-        return Analysis(table, options, ctx.results, verdict, learned_noise=first_nav.learned)
+        return _done(Analysis(table, options, ctx.results, verdict), first_nav, clean_coasts)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
@@ -110,19 +118,29 @@ def analyze_table(
         return Analysis(table, options, first_results, verdict)
     del first_results
     ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
-    return Analysis(table, options, ctx.results, verdict, 2, spans, nav.learned)
+    return _done(Analysis(table, options, ctx.results, verdict, 2, spans), nav, clean_coasts)
 
 
-def _learned(ctx: AnalysisContext) -> LearnedNoise | None:
-    nav = ctx.cache.get(NAVIGATION)
-    return nav.learned if nav is not None else None
+def _done(analysis: Analysis, nav: Navigation | None, clean_coasts: bool) -> Analysis:
+    """The analysis with what it keeps of its navigation: the noise it learned and, when asked, the clean
+    coasts' envelope (the solution itself, a gigabyte per hour of 10 Hz GNSS, is let go)."""
+    if nav is None:
+        return analysis
+    analysis.learned_noise = nav.learned
+    if clean_coasts:
+        spans = [(min(i.onset_s, i.start_s), i.end_s) for i in analysis.verdict.incidents]
+        analysis.clean_envelope = clean_envelope(nav, spans)
+    return analysis
 
 
 def analyze_segments(
-    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+    table: EpochTable,
+    options: AnalyzeOptions | None = None,
+    on_step: Callable[[str], None] | None = None,
+    clean_coasts: bool = False,
 ) -> list[Analysis]:
     """One analysis per recording: a log that joins several (its clock jumped back) is never analysed
     as one interleaved stream."""
     if len(table.segments) < 2:
-        return [analyze_table(table, options, on_step)]
-    return [analyze_table(table.segment(k), options, on_step) for k in range(len(table.segments))]
+        return [analyze_table(table, options, on_step, clean_coasts)]
+    return [analyze_table(table.segment(k), options, on_step, clean_coasts) for k in range(len(table.segments))]
