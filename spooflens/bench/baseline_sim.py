@@ -44,6 +44,9 @@ ATTACKS: dict[str, str] = {
     "single antenna": "single_antenna:start=0,rate=0.2",
 }
 TWO_RECEIVER_ATTACKS = frozenset({"single antenna"})
+# vehicles whose receivers' errors are seed 003's white noise, not `realistic_receiver`'s: two independent
+# realistic receivers would wander apart by metres over minutes, which a real pair under one sky does not
+SHARED_SKY = frozenset({"car_two_receivers"})
 PX4_NOISE_FACTOR = 2.0  # issue 42: real PX4 logs attacked throughout, against the same drone's clean flights
 PX4_JAMMING_FACTOR = 0.1
 HOLD_WANDER_M = (1.0, 2.0)  # horizontal, vertical Gauss-Markov wander of a held position
@@ -96,8 +99,14 @@ def simulate_log(spec: LogSpec) -> tuple[EpochTable, float | None]:
 
     scenario, seconds = VEHICLES[spec.vehicle]
     rng = np.random.default_rng(spec.log_seed)
-    model = log_conditions(vehicle_receiver(spec.vehicle_seed), rng)
-    sc = replace(SCENARIOS[scenario], receiver=model)
+    sc = SCENARIOS[scenario]
+    if spec.vehicle in SHARED_SKY:
+        # two receivers of one vehicle share most of their errors (one sky, one atmosphere); seed 003's
+        # pair keeps its white noise, of another size each day
+        e, n, u = (x * float(rng.uniform(0.8, 1.25)) for x in sc.gnss.sigma_enu_m)
+        sc = replace(sc, gnss=replace(sc.gnss, sigma_enu_m=(e, n, u)))
+    else:
+        sc = replace(sc, receiver=log_conditions(vehicle_receiver(spec.vehicle_seed), rng))
     table = simulate(sc, seed=spec.log_seed, duration_s=seconds).table
     if spec.attack is None:
         return table, None

@@ -141,3 +141,19 @@ def test_a_log_that_may_have_been_spoofed_is_no_yardstick(tmp_path: Path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no clean log to learn a baseline from (spoofed_flight.mcap: a spoofing incident" in err[0]
     assert not out.exists()
+
+
+def test_a_batch_worker_reads_the_baseline_and_records_it(f9p_baseline: Path, tmp_path: Path) -> None:
+    import hashlib
+
+    from spooflens.batch import analyse_one
+
+    log = real_log(F9P_OTHER)
+    record = analyse_one(str(log), "digest", str(tmp_path / "out"), None, str(f9p_baseline))
+    assert record["status"] == "done", record
+    assert record["baseline_sha256"] == hashlib.sha256(f9p_baseline.read_bytes()).hexdigest()
+    summary = json.loads((tmp_path / "out" / f"{log.name}.json").read_text())
+    assert summary["baseline"]["file"] == "f9p.baseline.json"
+    moved = _edited(f9p_baseline, tmp_path, lambda d: d.update(receivers={"GPS[0]": d["receivers"]["ubx"]}))
+    failed = analyse_one(str(log), "digest", str(tmp_path / "out2"), None, str(moved))
+    assert failed["status"] == "failed" and "none in common" in failed["error"]
