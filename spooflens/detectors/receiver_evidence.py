@@ -33,8 +33,9 @@ naturally lies from it (`spooflens.baseline.use.level_scale`), in the direction 
 alarm needs indicators of two families (geometry, RF power, jamming, signal:
 `spooflens.baseline.indicators`) beyond `z_level` for `min_level_s`. A log attacked from its first fix
 to its last shows there, where against its own median it cannot. A whole log off its vehicle's levels
-lasts as long as the log and would corroborate any glitch anywhere in it, so that class corroborates
-only an independent reference (`spooflens.pipeline.evidence`).
+lasts as long as the log and would join every event in it into one incident and seem to corroborate any
+glitch anywhere in it, so that class's alarms make anomalies of their own (`APART` in
+`spooflens.pipeline.evidence`).
 """
 
 from __future__ import annotations

@@ -378,9 +378,7 @@ def learn_noise(
     t_end = max(float(tf[k_end]), t0 + opts.min_window_s)
     window = (t0, min(t_end, float(tf[-1])))
     sub = inputs.between(-np.inf, window[1])
-    noise = initial_noise(sub, exclude)
-    if prior is not None:
-        noise = _from_prior(noise, prior)
+    noise = initial_noise(sub, exclude)  # the first run and what it leaves out are the same with a prior
     has_vel = noise.has_velocity
     base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False, compare=False)
     objective = _Objective(sub, start, base)
@@ -395,7 +393,10 @@ def learn_noise(
             odometry = OdometryAiding(mount, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "prior")
         imu = min(prior.start.get("imu", 1.0), prior.upper.get("imu", np.inf)) if prior is not None else 1.0
         return LearnedNoise(
-            replace(noise, source="prior (too little clean data to learn from)"),
+            replace(
+                _from_prior(noise, prior) if prior is not None else noise,
+                source="prior (too little clean data to learn from)",
+            ),
             odometry,
             scaled_grade(grade, imu) if prior is not None else grade,
             imu,
@@ -409,22 +410,7 @@ def learn_noise(
         )
 
     objective.inputs, objective.score_mask = _up_to_last_scored(sub, first.t, objective.score_mask)
-    params: dict[str, float] = {
-        "imu": 1.0 if prior is None else min(prior.start.get("imu", 1.0), prior.upper.get("imu", np.inf)),
-        "w_h": noise.white_pos_m[0],
-        "w_v": noise.white_pos_m[1],
-        "b_h": noise.gm_pos_m[0],
-        "b_v": noise.gm_pos_m[1],
-        "tau_p": noise.tau_pos_s,
-    }
-    if has_vel:
-        params |= {
-            "wv_h": noise.white_vel_mps[0],
-            "wv_v": noise.white_vel_mps[1],
-            "bv_h": noise.gm_vel_mps[0],
-            "bv_v": noise.gm_vel_mps[1],
-            "tau_v": noise.tau_vel_s,
-        }
+    params = _parameters(noise, 1.0, has_vel)
 
     def options(p: dict[str, float]) -> FilterOptions:
         n = GnssNoise(
@@ -454,14 +440,14 @@ def learn_noise(
         )
 
     upper = prior.upper if prior is not None else None
-    if prior is None:
-        # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid
-        grid = [{**params, "b_h": b, "b_v": 2.0 * b} for b in opts.wander_grid_m]
-        values = objective.many([options(g) for g in grid])
-        params = grid[int(np.argmin(values))]
-        best, params = _search(objective, options, params, list(params), opts, min(values))
-    else:  # the vehicle's clean logs say where the wander lies
-        best, params = _search(objective, options, params, list(params), opts, upper=upper)
+    # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid (and,
+    # with a baseline, of the values its clean logs learned), every candidate under the baseline's caps
+    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper) for b in opts.wander_grid_m]
+    if prior is not None:
+        grid.append(_capped(_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper))
+    values = objective.many([options(g) for g in grid])
+    params = grid[int(np.argmin(values))]
+    best, params = _search(objective, options, params, list(params), opts, min(values), upper)
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)
         if R_vb is not None:
@@ -486,6 +472,31 @@ def learn_noise(
             f"{k} {params[k]:.3g}" for k in sorted(upper or {}) if k in params and params[k] >= 0.999 * (upper or {})[k]
         ),
     )
+
+
+def _parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, float]:
+    """The search's parameters of a noise model."""
+    params = {
+        "imu": imu,
+        "w_h": noise.white_pos_m[0],
+        "w_v": noise.white_pos_m[1],
+        "b_h": noise.gm_pos_m[0],
+        "b_v": noise.gm_pos_m[1],
+        "tau_p": noise.tau_pos_s,
+    }
+    if has_vel:
+        params |= {
+            "wv_h": noise.white_vel_mps[0],
+            "wv_v": noise.white_vel_mps[1],
+            "bv_h": noise.gm_vel_mps[0],
+            "bv_v": noise.gm_vel_mps[1],
+            "tau_v": noise.tau_vel_s,
+        }
+    return params
+
+
+def _capped(params: dict[str, float], upper: dict[str, float] | None) -> dict[str, float]:
+    return {k: min(v, (upper or {}).get(k, v)) for k, v in params.items()}
 
 
 def _from_prior(noise: GnssNoise, prior: NoisePrior) -> GnssNoise:

@@ -24,6 +24,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
 from spooflens.navigation.noise_learning import LearnedNoise
 from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of, solve_navigation
+from spooflens.pipeline.evidence import APART
 from spooflens.pipeline.reconstruction import Envelope, clean_envelope, reconstruct
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.pipeline.verdict import Verdict, decide
@@ -63,8 +64,14 @@ def _one_pass(
 
 
 def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
-    """Every incident and anomaly of a verdict, widened by `margin_s`, merged."""
-    spans = sorted((min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s) for i in verdict.incidents)
+    """Every incident and anomaly of a verdict, widened by `margin_s`, merged; not those of the classes
+    kept apart (a log off its vehicle's baseline: the baseline already caps what the noise learning may
+    take from it, and a whole log left out would leave nothing to learn from)."""
+    spans = sorted(
+        (min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s)
+        for i in verdict.incidents
+        if not set(i.evidence) <= APART or not i.evidence
+    )
     merged: list[tuple[float, float]] = []
     for a, b in spans:
         if merged and a <= merged[-1][1]:

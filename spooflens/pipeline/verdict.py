@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
-from spooflens.pipeline.evidence import CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
+from spooflens.pipeline.evidence import APART, CORROBORATION_S, ORDER, Evidence, Span, confidence, corroborated
 
 ONGOING_WITHIN_S = 1.0  # an incident whose last alarm is this close to the last fix is ongoing at the end
 
@@ -162,8 +162,12 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
     not_run = tuple(r.name for r in detectors if not r.ran)
     counted = [r for r in detectors if r.ran and not r.advisory]
-    alarms = [(a, r) for r in counted for a in r.alarms]
-    incidents = [_incident(g) for g in _group(alarms, merge_gap_s)]
+    alarms = [(a, r) for r in counted for a in r.alarms if r.evidence not in APART]
+    apart = [(a, r) for r in counted for a in r.alarms if r.evidence in APART]
+    groups = _group(alarms, merge_gap_s) + [
+        g for c in APART for g in _group([x for x in apart if x[1].evidence == c], merge_gap_s)
+    ]
+    incidents = sorted((_incident(g) for g in groups), key=lambda i: i.start_s)
     if log_end_s is not None:
         incidents = [
             replace(i, ongoing_at_end=True, end_method="last alarm, at the end of the log")

@@ -5,6 +5,7 @@ analysed or written."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -39,7 +40,7 @@ def f9p_baseline(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_a_baseline_of_two_clean_logs(f9p_baseline: Path, capsys: pytest.CaptureFixture[str]) -> None:
     b = load_baseline(f9p_baseline)
     assert [log.name for log in b.logs] == ["ublox-zed-f9p-sfrbx.log", "ublox-zed-f9p-rtk.log"]
-    assert b.receivers["ubx"].model == "ZED-F9P" and set(b.receivers["ubx"].firmware) == {"HPG 1.12", "HPG 1.32"}
+    assert b.receivers["ubx"].model == "u-blox ZED-F9P" and set(b.receivers["ubx"].firmware) == {"HPG 1.12", "HPG 1.32"}
     hacc = b.indicator("ubx", "h_acc_m")
     assert hacc is not None and hacc.n_logs == 2 and hacc.agree is False  # 5.2 m against an RTK fix's 0.3 m
 
@@ -53,7 +54,7 @@ def test_the_baseline_command_says_what_it_learned_and_where_the_logs_disagree(
         == 0
     )
     text = capsys.readouterr().out
-    assert "learned from ublox-zed-f9p-sfrbx.log" in text and "receiver ubx: ZED-F9P" in text
+    assert "learned from ublox-zed-f9p-sfrbx.log" in text and "receiver ubx: u-blox ZED-F9P" in text
     assert "the logs disagree on" in text and "ubx.h_acc_m" in text
 
 
@@ -80,10 +81,10 @@ def test_analyze_with_a_baseline_says_what_came_from_it(
     assert "baseline" not in json.loads(summary.read_text())
 
 
-def _edited(source: Path, tmp_path: Path, change) -> Path:
+def _edited(source: Path, tmp_path: Path, change: Callable[[dict], object], name: str = "edited") -> Path:
     data = json.loads(source.read_text())
     change(data)
-    out = tmp_path / "edited.baseline.json"
+    out = tmp_path / f"{name}.baseline.json"
     out.write_text(json.dumps(data))
     return out
 
@@ -100,7 +101,7 @@ def test_bad_baselines_are_refused_before_anything_is_analysed(
 ) -> None:
     log = str(real_log(F9P_OTHER))
     out = ["-o", str(tmp_path / "out.rrd"), "--json", str(tmp_path / "out.json")]
-    other_version = _edited(f9p_baseline, tmp_path, lambda d: d.update(version=2))
+    other_version = _edited(f9p_baseline, tmp_path, lambda d: d.update(version=2), "v2")
     _refused(["analyze", log, *out, "--baseline", str(other_version)], tmp_path, capsys, "baseline version 2")
     malformed = tmp_path / "malformed.baseline.json"
     malformed.write_text('{"format": "spooflens-baseline", ')
@@ -109,14 +110,14 @@ def test_bad_baselines_are_refused_before_anything_is_analysed(
     summary.write_text(json.dumps({"verdict": {"spoofed": False}}))
     _refused(["analyze", log, *out, "--baseline", str(summary)], tmp_path, capsys, "not a spooflens baseline")
     _refused(["analyze", log, *out, "--baseline", str(tmp_path / "none.json")], tmp_path, capsys, "no such baseline")
-    model = _edited(f9p_baseline, tmp_path, lambda d: d["receivers"]["ubx"].update(model="NEO-M8N"))
+    model = _edited(f9p_baseline, tmp_path, lambda d: d["receivers"]["ubx"].update(model="NEO-M8N"), "m8n")
     _refused(
         ["analyze", log, *out, "--baseline", str(model)],
         tmp_path,
         capsys,
         "receiver ubx of the baseline is a NEO-M8N, of ublox-zed-f9p-hp.log a ZED-F9P",
     )
-    moved = _edited(f9p_baseline, tmp_path, lambda d: d.update(receivers={"GPS[0]": d["receivers"]["ubx"]}))
+    moved = _edited(f9p_baseline, tmp_path, lambda d: d.update(receivers={"GPS[0]": d["receivers"]["ubx"]}), "gps0")
     _refused(["analyze", log, *out, "--baseline", str(moved)], tmp_path, capsys, "none in common")
     _refused(
         ["report", log, "-o", str(tmp_path / "out.html"), "--baseline", str(other_version)],

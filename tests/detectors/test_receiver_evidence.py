@@ -78,11 +78,23 @@ def test_levels_its_logs_disagree_on_are_not_yardsticks() -> None:
     assert "not against it where its logs disagree (jamming indicator)" in result.reason
 
 
-def test_a_whole_log_off_its_baseline_corroborates_only_an_independent_reference() -> None:
-    """It lasts as long as the log: beside a GNSS-only glitch anywhere in it, it would make any log look
-    corroborated."""
+def test_a_whole_log_off_its_baseline_is_an_anomaly_apart() -> None:
+    """It lasts as long as the log: merged with the events in it, it would join them all into one incident
+    and seem to corroborate any GNSS-only glitch anywhere in it."""
+    from spooflens.detectors.base import Alarm, DetectorResult
+    from spooflens.pipeline.verdict import decide
+
     vb = Evidence.VEHICLE_BASELINE
-    assert confidence({vb}) == "low"
-    assert confidence({vb, Evidence.GNSS_ONLY}) == "low"
-    assert confidence({vb, Evidence.RECEIVER}) == "low"
-    assert confidence({vb, Evidence.INERTIAL}) == "high"
+    assert confidence({vb}) == "low" and confidence({vb, Evidence.GNSS_ONLY}) == "low"
+    levels = DetectorResult("receiver_levels", True, alarms=[Alarm(0.0, 600.0, 9.0, 5.0)], evidence=vb)
+    glitch = DetectorResult(
+        "gnss_consistency", True, alarms=[Alarm(300.0, 302.0, 40.0, 301.0)], evidence=Evidence.GNSS_ONLY
+    )
+    jump = DetectorResult(
+        "receiver_evidence", True, alarms=[Alarm(300.5, 303.0, 9.0, 301.0)], evidence=Evidence.RECEIVER
+    )
+    verdict = decide([levels, glitch, jump])
+    assert [(i.start_s, i.evidence, i.confidence) for i in verdict.incidents] == [
+        (0.0, (vb,), "low"),
+        (300.0, (Evidence.GNSS_ONLY, Evidence.RECEIVER), "medium"),
+    ]
