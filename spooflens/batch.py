@@ -37,6 +37,7 @@ from typing import Any
 import click
 from rich.table import Table
 
+from spooflens.cli import baseline_option
 from spooflens.output.console import console, progress, show_progress
 
 EXIT_OK, EXIT_DAMAGED = 0, 3
@@ -128,22 +129,38 @@ def find_logs(patterns: tuple[str, ...]) -> tuple[list[Path], list[Path]]:
     return logs, not_logs
 
 
-def analyse_one(log: str, digest: str, out_dir: str, imu_grade: str | None) -> dict[str, Any]:
-    """The task: analyse one log and write its outputs; never raises (a failure is a record)."""
+def analyse_one(
+    log: str, digest: str, out_dir: str, imu_grade: str | None, baseline: str | None = None
+) -> dict[str, Any]:
+    """The task: analyse one log and write its outputs; never raises (a failure is a record). `baseline`:
+    the vehicle's baseline file, read by the worker (a log of another receiver model fails)."""
     from spooflens.errors import SpooflensError
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_segments
-    from spooflens.service import damage, read_table, require_gnss, segments_summary, write_outputs
+    from spooflens.service import (
+        checked_baseline,
+        damage,
+        load_baseline_option,
+        read_table,
+        require_gnss,
+        segments_summary,
+        write_outputs,
+    )
     from spooflens.threads import limited
 
     path, out = Path(log), Path(out_dir)
     record: dict[str, Any] = {"log": str(path), "sha256": digest, "outputs": str(out)}
     t0 = time.perf_counter()
     try:
+        loaded = load_baseline_option(Path(baseline) if baseline else None)
         table = read_table(path, {}, False)
         require_gnss(path, table)
+        loaded = checked_baseline(loaded, table)
+        if loaded is not None:
+            record["baseline_sha256"] = loaded.sha256
+            record["baseline_warnings"] = list(loaded.warnings)
         with limited(1):  # one task per core already: a second thread per task would only contend
-            analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade))
+            analyses = analyze_segments(table, AnalyzeOptions(imu_grade=imu_grade, baseline=loaded))
         out.mkdir(parents=True, exist_ok=True)
         stem = path.name.rstrip("/")
         files = {"rrd": out / f"{stem}.rrd", "json": out / f"{stem}.json", "html": out / f"{stem}.html"}
@@ -284,6 +301,7 @@ def run_batch(
     workers: int | None = None,
     imu_grade: str | None = None,
     show: bool = False,
+    baseline: Path | None = None,
 ) -> BatchResult:
     """Analyse every log `patterns` match that `results` has not seen (by content) on dask; write the
     fleet tables over everything in `results`."""
@@ -294,7 +312,9 @@ def run_batch(
     logs, not_logs = find_logs(patterns)
     results_dir = results.resolve()
     logs = [p for p in logs if results_dir not in p.parents and p != results_dir]  # never our own outputs
-    before = done_records(results)
+    # a log analysed before with another baseline (or none) is analysed again
+    baseline_sha = hashlib.sha256(baseline.read_bytes()).hexdigest() if baseline is not None else None
+    before = {k: r for k, r in done_records(results).items() if r.get("baseline_sha256") == baseline_sha}
     jobs: list[LogJob] = []
     skipped: list[dict[str, Any]] = []
     first_of: dict[str, Path] = {}
@@ -333,6 +353,7 @@ def run_batch(
                     j.digest,
                     str(results / j.name),
                     imu_grade,
+                    str(baseline.resolve()) if baseline is not None else None,
                     key=f"spooflens-{j.digest}",
                     priority=len(by_size) - rank,
                 )
@@ -396,6 +417,7 @@ def _print(result: BatchResult) -> None:
     help="LocalCluster worker processes (default: one per core, at most one per log).",
 )
 @click.option("--imu-grade", default=None, help="IMU noise preset for every log (default: from each log).")
+@baseline_option
 @click.option("--quiet", is_flag=True, help="Print only the summary line.")
 def command(
     patterns: tuple[str, ...],
@@ -403,13 +425,17 @@ def command(
     scheduler: str | None,
     workers: int | None,
     imu_grade: str | None,
+    baseline_path: Path | None,
     quiet: bool,
 ) -> int:
     """Analyse every log PATTERNS match ('logs/**/*', quoted) on dask: per-log outputs, a fleet table."""
-    from spooflens.service import make_output_folder
+    from spooflens.service import load_baseline_option, make_output_folder
 
+    load_baseline_option(baseline_path)  # a bad baseline is refused before any log is analysed
     make_output_folder(output, "--output")
-    result = run_batch(patterns, output, scheduler, workers, imu_grade, show=not quiet and show_progress())
+    result = run_batch(
+        patterns, output, scheduler, workers, imu_grade, show=not quiet and show_progress(), baseline=baseline_path
+    )
     if quiet:
         failed = sum(r["status"] == "failed" for r in result.analysed)
         click.echo(f"{len(result.analysed) - failed} analysed, {failed} failed, {len(result.skipped)} already done")

@@ -35,6 +35,7 @@ from spooflens.service import (
     check_writable,
     damage,
     finish,
+    load_baseline_option,
     parse_topics,
     print_analysis,
     read_table,
@@ -62,6 +63,7 @@ DIRECTORY_FORMATS = ("csv", "rinex", "ros2bag-sqlite3", "ros2bag-mcap")
 
 # Commands that live in modules of their own: name -> "module:attribute" (imported when used).
 COMMANDS: dict[str, str] = {
+    "baseline": "spooflens.baseline.command:command",
     "report": "spooflens.output.report.command:report",
     "view": "spooflens.output.viewer:view",
     "fleet": "spooflens.fleet.command:command",
@@ -148,6 +150,15 @@ fail_on_jam_option = click.option(
     is_flag=True,
     help="Exit with code 5 when the verdict names jamming / interference (4 for spoofing wins).",
 )
+baseline_option = click.option(
+    "--baseline",
+    "baseline_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="VEHICLE.baseline.json",
+    help="The vehicle's baseline (`spooflens baseline`): detectors judge the log against its clean logs, so an "
+    "attack filling the whole log still shows. A baseline of another receiver model is refused.",
+)
 imu_grade_option = click.option(
     "--imu-grade",
     type=click.Choice(sorted(PRESETS)),
@@ -182,6 +193,7 @@ imu_grade_option = click.option(
 @topic_option
 @station_option
 @imu_grade_option
+@baseline_option
 @quiet_option
 @fail_on_spoof_option
 @fail_on_jam_option
@@ -193,6 +205,7 @@ def analyze(
     topics: tuple[str, ...],
     station_texts: tuple[str, ...],
     imu_grade: str | None,
+    baseline_path: Path | None,
     quiet: bool,
     fail_on_spoof: bool,
     fail_on_jam: bool,
@@ -201,9 +214,10 @@ def analyze(
     output = output or Path(log.name.rstrip("/")).with_suffix(".rrd")
     for hint, path in (("--output", output), ("--json", json_path), ("--html", html_path)):
         check_writable(path, hint)
+    baseline = load_baseline_option(baseline_path)
     recording = EarlyRecording(output)
     try:
-        analyses = analyse_log(log, topics, imu_grade, quiet, station_texts, recording)
+        analyses = analyse_log(log, topics, imu_grade, quiet, station_texts, recording, baseline)
         summaries = write_outputs(analyses, output, json_path, html_path, recording)
     finally:
         recording.abandon()  # begun for an analysis that failed (a taken one is written and in place)
@@ -400,6 +414,7 @@ def parse_jam(text: str) -> tuple[float, float, float]:
         "batch": "spooflens.bench.batch_bench:command",
         "fuzz": "spooflens.bench.fuzz:command",
         "corpus": "spooflens.bench.corpus_bench:command",
+        "baseline": "spooflens.bench.baseline_bench:command",
     },
 )
 def bench() -> None:

@@ -27,6 +27,7 @@ from spooflens.pipeline.verdict import KIND_LABELS, Kind
 from spooflens.threads import side_work
 
 if TYPE_CHECKING:
+    from spooflens.baseline.loaded import LoadedBaseline
     from spooflens.pipeline.run import Analysis
 
 EXIT_OK, EXIT_BUG, EXIT_INPUT, EXIT_DAMAGED, EXIT_SPOOFED, EXIT_JAMMED = 0, 1, 2, 3, 4, 5
@@ -67,10 +68,13 @@ def analyse_log(
     quiet: bool,
     station_texts: tuple[str, ...] = (),
     recording: EarlyRecording | None = None,
+    baseline: LoadedBaseline | None = None,
 ) -> list[Analysis]:
     """Read and analyse LOG (its truth file beside it joins the table, for drawing only): one analysis per
     recording the log joins (usually one). `recording`: the log's recording, begun meanwhile
-    (`recording_side_work`).
+    (`recording_side_work`). `baseline`: the vehicle's (`load_baseline_option`), checked against the log
+    before anything is analysed (another receiver model: BaselineError); how the log differs from the
+    baseline's logs is warned on stderr.
 
     A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
     files.
@@ -85,6 +89,7 @@ def analyse_log(
         raise click.BadParameter(str(err), param_hint="--station") from None
     table = read_table(log, parse_topics(topics), not quiet and show_progress())
     require_gnss(log, table)
+    baseline = checked_baseline(baseline, table)
     with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
     for rid, *_ in given_stations:
         if rid is not None and rid not in with_obs:
@@ -92,7 +97,9 @@ def analyse_log(
                 f"no receiver {rid!r} with raw observations in {log}; receivers with them: {with_obs or 'none'}",
                 param_hint="--station",
             )
-    options = AnalyzeOptions(imu_grade=imu_grade, extra={STATION_OPTION: given_stations} if given_stations else {})
+    options = AnalyzeOptions(
+        imu_grade=imu_grade, extra={STATION_OPTION: given_stations} if given_stations else {}, baseline=baseline
+    )
     with progress(not quiet and show_progress()) as report:
         steps: list[str] = []
 
@@ -102,6 +109,28 @@ def analyse_log(
 
         with side_work(recording_side_work(table, recording)):
             return analyze_segments(table, options, on_step)
+
+
+def load_baseline_option(path: Path | None) -> LoadedBaseline | None:
+    """The `--baseline` file, read and checked before any log is (a bad one: BaselineError, exit 2)."""
+    if path is None:
+        return None
+    from spooflens.baseline.loaded import load
+
+    return load(path)
+
+
+def checked_baseline(loaded: LoadedBaseline | None, table: EpochTable) -> LoadedBaseline | None:
+    """The baseline checked against the log (BaselineError for another receiver model); how the log
+    differs from the baseline's logs is said on stderr, one line each."""
+    if loaded is None:
+        return None
+    from spooflens.baseline.loaded import check
+
+    loaded = check(loaded, table)
+    for w in loaded.warnings:
+        click.echo(f"spooflens: warning: {table.source.name}: baseline {loaded.file}: {w}", err=True)
+    return loaded
 
 
 def recording_side_work(table: EpochTable, recording: EarlyRecording | None) -> Callable[[], None]:
@@ -208,7 +237,7 @@ def write_outputs(
         path = segment_path(output, k, n)
         begun = recording.take(path, table) if recording is not None else None
         write_recording(path, table, analysis.results, lines, verdict, begun)
-        summaries.append(build_summary(table, analysis.results, verdict))
+        summaries.append(build_summary(table, analysis.results, verdict, analysis.options.baseline))
         if html_path:
             from spooflens.output.report import write_report
 
@@ -271,6 +300,16 @@ def print_analysis(summary: dict, output: Path | None, json_path: Path | None, h
         alarms = str(len(a["alarms"])) + (" (advisory)" if a.get("advisory") and a["alarms"] else "")
         t.add_row(a["name"], a.get("evidence_label") or "(product)", "yes" if a["ran"] else "no", alarms, a["reason"])
     out.print(t)
+    if "baseline" in summary:
+        b = summary["baseline"]
+        out.print(
+            f"baseline: {b['file']} (SHA-256 {b['sha256'][:16]}..., {b['logs']} clean log(s))"
+            + ("" if b["used_by"] else ": no analysis could use it on this log")
+        )
+        for name, what in b["used_by"].items():
+            out.print(f"  {name}: {what}")
+        for w in b["warnings"]:
+            out.print(f"  warning: {w}")
     for sk in summary["skipped"]:
         out.print(f"  skipped: {sk['stream']}: {sk['action']} {sk['count']} ({sk['reason']})")
     for made in summary.get("computed", []):

@@ -13,10 +13,12 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.format import Baseline, RicePair
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
 from spooflens.detectors.statistics.rayleigh import (
     Calibration,
     calibrate,
+    fixed_calibration,
     paper_boundary,
     rayleigh_scale,
     scale_changepoint,
@@ -239,21 +241,30 @@ def _beyond_floor(cal: Calibration, scale: FloatArray, opts: DualReceiverOptions
     return np.nan_to_num(scale, nan=np.inf) <= opts.max_collapse_ratio * clean_scale
 
 
-def collapse_rule(t: FloatArray, x: FloatArray, opts: DualReceiverOptions, upper: bool = False) -> RuleResult:
+def collapse_rule(
+    t: FloatArray, x: FloatArray, opts: DualReceiverOptions, upper: bool = False, prior: RicePair | None = None
+) -> RuleResult:
     """Rule 3/4 (window of K) and rule 1/2 (K = 1) on a statistic; `upper` for the baseline error (alarm when
-    the scale grows; Rayleigh)."""
+    the scale grows; Rayleigh). `prior`: the statistic's null model from the vehicle's clean logs (a
+    baseline), used in place of the one fitted on this log."""
     k = window_samples(t, opts)
-    cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-    alarm &= _beyond_floor(cal, scale, opts, upper)
-    # the short window stays: a collapse to almost nothing shows in it at once; the long one sees a collapse
-    # to the receivers' tracking noise that the short one's threshold is far below
-    longest = max(k, round(opts.max_window_s / _period(t)))
-    short_alarm = alarm
-    while not upper and cal.k_eff < opts.min_effective_window and k < longest:
-        k = min(2 * k, longest)
+    if prior is not None:
+        nu, sigma, ratio = prior.nu.centre, prior.sigma.centre, prior.k_eff_ratio.centre
+        cal, scale, alarm = fixed_calibration(x, k, opts.p_false_alarm, nu, sigma, ratio * k, upper)
+        alarm &= _beyond_floor(cal, scale, opts, upper)
+        per_epoch, _, _ = fixed_calibration(x, 1, opts.p_false_alarm, nu, sigma, 1.0, upper)
+    else:
         cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-        alarm = (alarm & _beyond_floor(cal, scale, opts, upper)) | short_alarm
-    per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+        alarm &= _beyond_floor(cal, scale, opts, upper)
+        # the short window stays: a collapse to almost nothing shows in it at once; the long one sees a collapse
+        # to the receivers' tracking noise that the short one's threshold is far below
+        longest = max(k, round(opts.max_window_s / _period(t)))
+        short_alarm = alarm
+        while not upper and cal.k_eff < opts.min_effective_window and k < longest:
+            k = min(2 * k, longest)
+            cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+            alarm = (alarm & _beyond_floor(cal, scale, opts, upper)) | short_alarm
+        per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
     episodes = _episodes(t, x, scale, alarm, k, upper, opts.merge_gap_s)
     flagged = np.zeros(len(t), dtype=bool)
     for ep in episodes:
@@ -355,10 +366,14 @@ def detect(
     opts: DualReceiverOptions | None = None,
     groups: list[ReceiverGroup] | None = None,
     known: dict[str, Station] | None = None,
+    baseline: Baseline | None = None,
 ) -> list[DetectorResult]:
     """The three dual-receiver detectors over every pair of independent receivers (the first against each
     other one; `groups`: the log's receivers as the receivers they are, `group_receivers` by default;
-    `known`: the known stations, `stations` by default)."""
+    `known`: the known stations, `stations` by default); with a vehicle's `baseline`, the collapse rules judge
+    against the null models of its clean logs."""
+    from spooflens.baseline.use import note
+
     opts = opts or DualReceiverOptions()
     groups = group_receivers(table) if groups is None else groups
     known = stations(table, {})[0] if known is None else known
@@ -366,8 +381,8 @@ def detect(
     collapse, pr, err = _new(COLLAPSE), _new(PR_COLLAPSE), _new(BASELINE_ERROR)
     notes: dict[str, list[str]] = {COLLAPSE: [], PR_COLLAPSE: [], BASELINE_ERROR: []}
     one = "; ".join(g.describe() for g in groups if len(g.receivers) > 1)
-    for note in notes.values():
-        note += [one] if one else []
+    for pair_notes in notes.values():
+        pair_notes += [one] if one else []
     for a, b in itertools.product(receivers[:1], receivers[1:]):
         pair = align_pair(table.fixes_of(a), table.fixes_of(b), a, b, opts)
         if len(pair.t) < 3 * opts.min_window:
@@ -375,7 +390,14 @@ def detect(
             continue
         d_enu = pair.baseline_enu()
         dist = np.linalg.norm(d_enu[:, :2], axis=1)
-        rule = collapse_rule(pair.t, dist, opts)
+        pair_model = baseline.pairs.get(f"{a}|{b}") if baseline is not None else None
+        rule = collapse_rule(pair.t, dist, opts, prior=pair_model.baseline_distance if pair_model else None)
+        if pair_model is not None:
+            note(
+                collapse,
+                f"{pair.label}: the clean logs' distance model (Rice nu {rule.cal.nu:.3g} m, sigma "
+                f"{rule.cal.sigma:.3g} m, K_eff/K {pair_model.baseline_distance.k_eff_ratio.centre:.2g})",
+            )
         collapse.series += _rule_series(pair.label, rule, "baseline_distance", "rule 1")
         collapse.series.append(Series(f"{pair.label}/baseline_distance_3d", pair.t, np.linalg.norm(d_enu, axis=1), "m"))
         collapse.alarms += _alarms(rule, (a, b))
@@ -386,7 +408,8 @@ def detect(
             f"(K_eff {rule.cal.k_eff:.1f}), scale threshold {rule.cal.threshold:.3g} m "
             f"(paper's boundary {rule.boundary:.3g} m)"
         )
-        _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE])
+        pr_prior = pair_model.pseudorange_difference_sd if pair_model is not None else None
+        _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE], pr_prior)
         _baseline_error_rule(known, pair, d_enu, opts, err, notes[BASELINE_ERROR])
     out = []
     for res in (collapse, pr, err):
@@ -401,7 +424,12 @@ def detect(
 
 
 def _pseudorange_rule(
-    table: EpochTable, pair: AlignedPair, opts: DualReceiverOptions, res: DetectorResult, notes: list[str]
+    table: EpochTable,
+    pair: AlignedPair,
+    opts: DualReceiverOptions,
+    res: DetectorResult,
+    notes: list[str],
+    prior: RicePair | None = None,
 ) -> None:
     t, sd, n = pseudorange_differences(table.observations, table.fixes_of(pair.b), pair.a, pair.b, opts)
     if len(t) < 3 * opts.min_window:
@@ -410,7 +438,15 @@ def _pseudorange_rule(
             f">= {opts.min_common_satellites} common satellites (needs raw observations of both)"
         )
         return
-    rule = collapse_rule(t, sd, opts)
+    rule = collapse_rule(t, sd, opts, prior=prior)
+    if prior is not None:
+        from spooflens.baseline.use import note
+
+        note(
+            res,
+            f"{pair.label}: the clean logs' model of the spread (Rice nu {rule.cal.nu:.3g} m, "
+            f"sigma {rule.cal.sigma:.3g} m)",
+        )
     res.series += _rule_series(pair.label, rule, "difference_sd", "rule 2")
     res.series.append(Series(f"{pair.label}/common_satellites", t, n.astype(float), "satellites"))
     res.alarms += _alarms(rule, (pair.a, pair.b))
@@ -451,7 +487,9 @@ def _baseline_error_rule(
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     known = known_stations(ctx)[0]
-    return detect(ctx.table, DualReceiverOptions(), receiver_groups(ctx), known)  # type: ignore[arg-type]
+    loaded = ctx.options.baseline
+    baseline = loaded.content if loaded is not None else None
+    return detect(ctx.table, DualReceiverOptions(), receiver_groups(ctx), known, baseline)  # type: ignore[arg-type]
 
 
 _PAPER = "Seed 003 (Dobryakova, Lemieszewski, Ochin: dual-receiver detection of a single-antenna spoofer)"

@@ -82,8 +82,8 @@ def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: f
     return out
 
 
-def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, FloatArray, FloatArray, FloatArray]:
-    """Run the check on one receiver's fixes: (mode, t, normalised residual (N,3), statistic (N,))."""
+def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, FloatArray, FloatArray, FloatArray]:
+    """One receiver's residual: (mode, t, residual (N, 3), its robust scale per ENU axis)."""
     t = fixes["t_s"].to_numpy(dtype=float)
     lat, lon, h = (fixes[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "height_m"))
     v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
@@ -104,14 +104,33 @@ def check_receiver(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, 
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))
-    scale = _robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m)
+    return mode, t, r, _robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m)
+
+
+def check_receiver(
+    fixes: pd.DataFrame, opts: ConsistencyOptions, scale_cap: tuple[str, FloatArray] | None = None
+) -> tuple[str, FloatArray, FloatArray, FloatArray, FloatArray | None]:
+    """Run the check on one receiver's fixes: (mode, t, normalised residual (N,3), statistic (N,), the scale
+    when a cap applied, else None). `scale_cap`: (mode, per-axis largest scale the vehicle's clean logs
+    allow), from a baseline, applied when its mode is the log's: a log attacked throughout cannot teach
+    the check that the attack is its noise."""
+    mode, t, r, scale = residual(fixes, opts)
+    capped = scale_cap is not None and scale_cap[0] == mode
+    if scale_cap is not None and capped:
+        cap = scale_cap[1]
+        scale = np.where(np.isfinite(cap), np.minimum(scale, cap), scale)
     z = r / scale
     stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
-    return mode, t, z, stat
+    return mode, t, z, stat, scale if capped else None
 
 
-def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = None) -> DetectorResult:
-    """The check for every receiver in a fixes frame (schema `fixes`)."""
+def run_gnss_consistency(
+    fixes: pd.DataFrame,
+    opts: ConsistencyOptions | None = None,
+    scale_caps: dict[str, tuple[str, FloatArray]] | None = None,
+) -> DetectorResult:
+    """The check for every receiver in a fixes frame (schema `fixes`). `scale_caps`: receiver id -> (the
+    check's mode, the per-axis cap on its scale) from a baseline; used where the mode is the log's."""
     opts = opts or ConsistencyOptions()
     threshold = float(chi2_isf(opts.p_false_alarm, 3))
     result = DetectorResult(name=NAME, ran=True, evidence=Evidence.GNSS_ONLY)
@@ -119,8 +138,13 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
     for rid, rx in fixes.groupby("receiver_id", sort=False):
         if len(rx) < 3:
             continue
-        mode, t, z, stat = check_receiver(rx.reset_index(drop=True), opts)
+        mode, t, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
         modes.append(f"{rid}: {mode}")
+        if scale is not None:
+            from spooflens.baseline.use import note
+
+            axes = "/".join(f"{s:.2g}" for s in scale)
+            note(result, f"{rid}: residual scale at most the baseline's allowance: {axes} (east/north/up)")
         dof = np.isfinite(z).sum(axis=1)
         alarm = np.nan_to_num(stat, nan=0.0) > np.where(
             dof > 0, chi2_isf(opts.p_false_alarm, np.maximum(dof, 1)), np.inf
@@ -137,7 +161,11 @@ def run_gnss_consistency(fixes: pd.DataFrame, opts: ConsistencyOptions | None = 
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return [run_gnss_consistency(ctx.table.fixes)]
+    from spooflens.baseline.use import consistency_caps
+
+    baseline = ctx.options.baseline
+    caps = consistency_caps(baseline.content, ctx.table) if baseline is not None else None
+    return [run_gnss_consistency(ctx.table.fixes, scale_caps=caps)]
 
 
 _O = ConsistencyOptions()

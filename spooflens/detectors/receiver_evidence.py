@@ -1,7 +1,8 @@
 """Receiver self-report as evidence: what the receiver logs about itself (accuracies, satellites, DOP,
 noise, AGC, C/N0, its own spoofing state; what only a jammer does is
 `spooflens.detectors.interference`'s) against its own baseline in the log and the
-documented normal ranges. Declared in `ANALYSIS` (docs/detectors.md)."""
+documented normal ranges; with a vehicle's baseline (`analyze --baseline`), also against the levels of
+the vehicle's clean logs (`receiver_levels`, docs/baseline.md). Declared in `ANALYSIS` (docs/detectors.md)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.format import Baseline
 from spooflens.detectors.base import (
     Alarm,
     DetectorResult,
@@ -27,6 +29,7 @@ from spooflens.schema import SpoofingFlag
 
 FloatArray = NDArray[np.float64]
 NAME = "receiver_evidence"
+LEVELS = "receiver_levels"  # the level test, with a vehicle baseline only
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,7 @@ INDICATORS: tuple[Indicator, ...] = (
 )
 # the way each moves under interference (a jammer): a change only that way is no spoofing evidence
 INTERFERENCE_DIRECTION = {"noise_per_ms": +1, "jamming_indicator": +1, "agc": -1, "cn0_mean_dbhz": -1}
+LABELS = {ind.column: ind.label for ind in INDICATORS}
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,12 @@ class ReceiverEvidenceOptions:
     min_reference_s: float = 20.0  # the baseline is learned from at least this long a stretch ...
     min_reference_fraction: float = 0.1  # ... and this fraction of the log
     min_changed_s: float = 10.0  # a change of state to learn around lasts this long at least
+    # the level test against a baseline
+    level_window_s: float = 60.0
+    min_level_values: int = 10
+    z_level: float = 3.0
+    min_families: int = 2
+    min_level_s: float = 30.0
 
 
 def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> tuple[NDArray[np.bool_], float]:
@@ -142,7 +152,105 @@ def _onsets(t: FloatArray, quiet: NDArray[np.bool_], alarms: list[Alarm], rid: s
     return out
 
 
-def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> DetectorResult | None:
+@dataclass
+class LevelTest:
+    alarms: list[Alarm]
+    series: list[Series]
+    findings: list[Finding]
+    reason: str
+
+
+def level_test(
+    rid: str, t: FloatArray, fx: pd.DataFrame, baseline: Baseline, opts: ReceiverEvidenceOptions
+) -> LevelTest | None:
+    """Each indicator's level (median over the trailing `level_window_s`) against the vehicle's baseline
+    (see the module docstring); None when the baseline has no level of this receiver's indicators."""
+    from spooflens.baseline.indicators import INDICATORS as SPREADS
+    from spooflens.baseline.use import level_scale, level_z
+
+    index = pd.to_timedelta(t, unit="s")
+    window = pd.Timedelta(seconds=opts.level_window_s)
+    zs: dict[str, FloatArray] = {}
+    used, left = [], []
+    for ind in INDICATORS:
+        q, spec = baseline.indicator(rid, ind.column), SPREADS.get(ind.column)
+        if q is None or spec is None:
+            continue
+        if q.agree is False:
+            left.append(ind.label)
+            continue
+        x = pd.Series(fx[ind.column].to_numpy(dtype=float), index=index)
+        if x.notna().sum() < opts.min_level_values:
+            continue
+        rolled = x.rolling(window, min_periods=opts.min_level_values)
+        med, count = rolled.median().to_numpy(dtype=float), rolled.count().to_numpy(dtype=float)
+        zs[ind.column] = level_z(q, spec, med, count)
+        spread = level_scale(q, spec)
+        used.append(f"{ind.label} {q.centre:.4g} " + (f"x/ {np.exp(spread):.3g}" if spec.log else f"+- {spread:.2g}"))
+    if not zs:
+        return None
+    families = sorted({SPREADS[c].family for c in zs})
+    by_family = np.stack(
+        [
+            np.nanmax(
+                np.stack([np.nan_to_num(z, nan=-np.inf) for c, z in zs.items() if SPREADS[c].family == f]), axis=0
+            )
+            for f in families
+        ],
+        axis=1,
+    )
+    beyond = by_family > opts.z_level
+    raised = beyond.sum(axis=1) >= opts.min_families
+    score = (
+        np.sort(np.where(np.isfinite(by_family), by_family, 0.0), axis=1)[:, -opts.min_families]
+        if len(families) >= opts.min_families
+        else np.zeros(len(t))
+    )
+    alarms = [
+        Alarm(
+            a.start_s,
+            a.end_s,
+            a.peak_statistic,
+            a.peak_s,
+            max(a.start_s - opts.level_window_s, float(t[0])),
+            (max(a.start_s - opts.level_window_s, float(t[0])), a.start_s),
+            rid,
+        )
+        for a in alarm_intervals(t, score, raised, opts.merge_gap_s)
+        if a.end_s - a.start_s >= opts.min_level_s
+    ]
+    findings = []
+    for a in alarms:
+        inside = (t >= a.start_s) & (t <= a.end_s)
+        moved = []
+        for c, z in zs.items():
+            if np.nan_to_num(z[inside], nan=-np.inf).max() > opts.z_level:
+                q = baseline.indicator(rid, c)
+                assert q is not None
+                level = float(np.nanmedian(fx[c].to_numpy(dtype=float)[inside]))
+                moved.append(f"{LABELS[c]} {level:.4g} (baseline {q.centre:.4g})")
+        findings.append(
+            Finding(
+                f"{rid}: indicator levels off the vehicle's baseline: {', '.join(moved)} "
+                f"({a.start_s:.1f}-{a.end_s:.1f} s)",
+                a.start_s,
+                a.end_s,
+                receiver_id=rid,
+            )
+        )
+    reason = f"levels against the baseline ({', '.join(used)})"
+    if left:
+        reason += f"; not against it where its logs disagree ({', '.join(left)})"
+    series = [Series(f"{rid}/level_score", t, score, "level z", opts.z_level)]
+    series.append(
+        Series(f"{rid}/level_z", t, np.stack(list(zs.values()), axis=1), "level z", None, tuple(LABELS[c] for c in zs))
+    )
+    return LevelTest(alarms, series, findings, reason)
+
+
+def check_receiver(
+    rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions, baseline: Baseline | None = None
+) -> DetectorResult | None:
     t = fx["t_s"].to_numpy(dtype=float)
     if len(t) < 10:
         return None
@@ -154,14 +262,16 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
         x = fx[ind.column].to_numpy(dtype=float)
         if np.isfinite(x).sum() < 10 or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
             continue
+        q = baseline.indicator(rid, ind.column) if baseline is not None else None
+        floor = max(ind.floor, q.within or 0.0) if q is not None and q.agree is not False else ind.floor
         z_cols[ind.column] = np.clip(
-            robust_z(x, ind.direction, ind.floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
+            robust_z(x, ind.direction, floor, ind.relative_floor, reference), -opts.z_clip, opts.z_clip
         )
         jam_way = INTERFERENCE_DIRECTION.get(ind.column, 0)
         if not jam_way:
             not_interference[ind.column] = np.nan_to_num(z_cols[ind.column], nan=0.0)
         elif ind.direction == 0:  # a move either way counts: the one a jammer does not make is spoofing-like
-            other_way = robust_z(x, -jam_way, ind.floor, ind.relative_floor, reference)
+            other_way = robust_z(x, -jam_way, floor, ind.relative_floor, reference)
             not_interference[ind.column] = np.clip(np.nan_to_num(other_way, nan=0.0), 0.0, opts.z_clip)
         else:  # it counts only the way a jammer moves it
             not_interference[ind.column] = np.zeros(len(t))
@@ -229,12 +339,14 @@ def check_receiver(rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) ->
     return result
 
 
-def run_receiver_evidence(fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | None = None) -> DetectorResult:
+def run_receiver_evidence(
+    fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | None = None, baseline: Baseline | None = None
+) -> DetectorResult:
     opts = opts or ReceiverEvidenceOptions()
     merged = DetectorResult(NAME, True, evidence=Evidence.RECEIVER)
     notes = []
     for rid, fx in fixes.groupby("receiver_id", sort=False):
-        r = check_receiver(str(rid), fx.reset_index(drop=True), opts)
+        r = check_receiver(str(rid), fx.reset_index(drop=True), opts, baseline)
         if r is None:
             continue
         merged.alarms += r.alarms
@@ -253,8 +365,44 @@ def run_receiver_evidence(fixes: pd.DataFrame, opts: ReceiverEvidenceOptions | N
     return merged
 
 
+def run_receiver_levels(
+    fixes: pd.DataFrame, baseline: Baseline, opts: ReceiverEvidenceOptions | None = None
+) -> DetectorResult:
+    """The level test of every receiver the baseline knows (`LEVELS`, evidence: vehicle baseline)."""
+    opts = opts or ReceiverEvidenceOptions()
+    result = DetectorResult(LEVELS, True, evidence=Evidence.VEHICLE_BASELINE)
+    notes = []
+    for rid, fx in fixes.groupby("receiver_id", sort=False):
+        fx = fx.reset_index(drop=True)
+        levels = level_test(str(rid), fx["t_s"].to_numpy(dtype=float), fx, baseline, opts)
+        if levels is None:
+            continue
+        result.alarms += levels.alarms
+        result.series += levels.series
+        result.findings += levels.findings
+        notes.append(f"{rid}: {levels.reason}")
+    if not notes:
+        return DetectorResult.skipped(
+            LEVELS, "the baseline has no indicator level of this log's receivers", Evidence.VEHICLE_BASELINE
+        )
+    result.reason = "; ".join(notes)
+    result.alarms.sort(key=lambda a: a.start_s)
+    return result
+
+
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    return [run_receiver_evidence(ctx.table.fixes)]
+    loaded = ctx.options.baseline
+    if loaded is None:
+        return [run_receiver_evidence(ctx.table.fixes)]
+    from spooflens.baseline.use import note
+
+    result = run_receiver_evidence(ctx.table.fixes, baseline=loaded.content)
+    if result.ran:
+        note(result, "each indicator's scale at least its typical scale in the clean logs")
+    levels = run_receiver_levels(ctx.table.fixes, loaded.content)
+    if levels.ran:
+        note(levels, "the indicators' levels in the clean logs and how far they vary between them")
+    return [result, levels]
 
 
 _O = ReceiverEvidenceOptions()

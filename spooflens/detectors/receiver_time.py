@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.format import Baseline, ClockBaseline
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, trailing_median
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
@@ -28,6 +29,8 @@ class ReceiverTimeOptions:
     min_duration_s: float = 1.0
     leap_window_s: float = 900.0  # broadcast UTC parameters come every 12.5 min
     max_leap_s: int = 2  # firmware of 2015 or later defaults to 17 or 18 of today's 18
+    drift_ppm: float = 20.0  # a rate this far from the baseline's is a finding (crystals vary by a few ppm)
+    min_drift_s: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -86,7 +89,7 @@ def _kind(
     return "spoofing"
 
 
-def _scale(x: FloatArray, floor: float) -> float:
+def offset_scale(x: FloatArray, floor: float) -> float:
     """Robust sigma of the offset's latency jitter from fix-to-fix differences: a step moves one difference,
     however long the attack lasts (a scale read off the change against the baseline grows with it)."""
     dx = np.diff(x)
@@ -96,11 +99,18 @@ def _scale(x: FloatArray, floor: float) -> float:
 
 
 def judge_receiver(
-    rid: str, t: FloatArray, x: FloatArray, opts: ReceiverTimeOptions, monotonic: bool = False
+    rid: str,
+    t: FloatArray,
+    x: FloatArray,
+    opts: ReceiverTimeOptions,
+    monotonic: bool = False,
+    scale_cap: float = np.inf,
 ) -> ReceiverClockTest:
     """The steps of one receiver's time offset (t sorted, x finite). Fixes inside a step are left out of
-    the baseline of the fixes after it, so the return to the old time is not a second step."""
-    scale = _scale(x, opts.min_scale_s)
+    the baseline of the fixes after it, so the return to the old time is not a second step. `scale_cap`:
+    the largest jitter the vehicle's clean logs allow (a baseline's): a spoofer's jittery clock cannot
+    raise the alarm level."""
+    scale = min(offset_scale(x, opts.min_scale_s), max(scale_cap, opts.min_scale_s))
     thr = max(opts.z_alarm * scale, opts.min_step_s)
     clean = x.copy()
     base = trailing_median(t, clean[:, None], opts.baseline_s, opts.guard_s)[:, 0]
@@ -154,9 +164,12 @@ def run_receiver_time(
     opts: ReceiverTimeOptions | None = None,
     clock: str = "the log's own clock",
     monotonic: bool = False,
+    baseline: Baseline | None = None,
 ) -> DetectorResult:
     """The test for every receiver with its own time; `clock` and `monotonic` say what the readers put it
-    against (the table's `time_offset.clock` and `time_offset.monotonic` metadata)."""
+    against (the table's `time_offset.clock` and `time_offset.monotonic` metadata). With a baseline of
+    the same clock, the jitter scale is capped by the clean logs' allowance and a drift unlike theirs is
+    a finding."""
     opts = opts or ReceiverTimeOptions()
     result = DetectorResult(name=NAME, ran=True, evidence=Evidence.LOG_CLOCK)
     words = []
@@ -166,7 +179,18 @@ def run_receiver_time(
         ok = np.isfinite(x)
         if ok.sum() < MIN_TIMED_FIXES:
             continue
-        test = judge_receiver(str(rid), t[ok], x[ok], opts, monotonic)
+        known = _clock_baseline(baseline, str(rid), clock, monotonic)
+        scale_cap = np.inf
+        if known is not None:
+            from spooflens.baseline.use import cap, note
+
+            scale_cap = cap(known.offset_scale_s)
+            if np.isfinite(scale_cap):
+                note(result, f"{rid}: jitter scale at most {scale_cap * 1e3:.1f} ms (the clean logs' allowance)")
+            drift = _drift_finding(str(rid), t[ok], x[ok], known, opts)
+            if drift is not None:
+                result.findings.append(drift)
+        test = judge_receiver(str(rid), t[ok], x[ok], opts, monotonic, scale_cap)
         words.append(f"{rid}: robust sigma {test.scale_s * 1e3:.1f} ms, alarm level {test.threshold_s:.3f} s")
         result.series.append(Series(f"{rid}/time_offset", test.t, test.offset, "s"))
         result.series.append(Series(f"{rid}/offset_change", test.t, test.change, "s", test.threshold_s))
@@ -198,10 +222,64 @@ def run_receiver_time(
     return result
 
 
+def drift_ppm(t: FloatArray, x: FloatArray) -> tuple[float, float]:
+    """The offset's rate (ppm) from the medians of its first and last thirds (a step or a few late messages
+    inside a third do not move it), and its standard error from the offset's jitter (NaN, NaN when the
+    log is too short to tell)."""
+    if len(t) < 9 or t[-1] - t[0] < 10.0:
+        return float("nan"), float("nan")
+    third = len(t) // 3
+    dt = float(np.median(t[-third:]) - np.median(t[:third]))
+    if dt <= 0:
+        return float("nan"), float("nan")
+    rate = float((np.median(x[-third:]) - np.median(x[:third])) / dt * 1e6)
+    # the median of a third has 1.2533 sigma / sqrt(n) of error; two of them differ
+    error = 1.2533 * offset_scale(x, 1e-6) * np.sqrt(2.0 / third) / dt * 1e6
+    return rate, float(error)
+
+
+def _clock_baseline(baseline: Baseline | None, rid: str, clock: str, monotonic: bool) -> ClockBaseline | None:
+    """The baseline's clock behaviour of this receiver, when it is against the same kind of clock."""
+    rx = baseline.receivers.get(rid) if baseline is not None else None
+    if rx is None or rx.clock is None or rx.clock.clock != clock or rx.clock.monotonic != monotonic:
+        return None
+    return rx.clock
+
+
+def _drift_finding(
+    rid: str, t: FloatArray, x: FloatArray, known: ClockBaseline, opts: ReceiverTimeOptions
+) -> Finding | None:
+    """A finding when the receiver's time runs at another rate against a monotonic log clock than in the
+    clean logs (a spoofer on a free-running clock of its own): beyond `drift_ppm`, the logs' spread
+    thrice and the rate's own error five times, over a log long enough to tell (`min_drift_s`)."""
+    q = known.drift_ppm
+    if q is None or not known.monotonic or t[-1] - t[0] < opts.min_drift_s:
+        return None
+    rate, error = drift_ppm(t, x)
+    off = rate - q.centre
+    if not np.isfinite(off) or abs(off) <= max(opts.drift_ppm, 3.0 * (q.between or 0.0), 5.0 * error):
+        return None
+    return Finding(
+        f"{rid}: the receiver's time ran {rate:+.1f} ppm against the log's clock; in the vehicle's clean logs "
+        f"{q.centre:+.1f} ppm ({q.n_logs} log(s)): a clock of its own (a spoofer's) or another logger",
+        float(t[0]),
+        float(t[-1]),
+        receiver_id=rid,
+    )
+
+
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     meta = ctx.table.metadata
     clock = meta.get("time_offset.clock", "the log's own clock")
-    return [run_receiver_time(ctx.table.fixes, clock=clock, monotonic=meta.get("time_offset.monotonic") == "yes")]
+    loaded = ctx.options.baseline
+    return [
+        run_receiver_time(
+            ctx.table.fixes,
+            clock=clock,
+            monotonic=meta.get("time_offset.monotonic") == "yes",
+            baseline=loaded.content if loaded is not None else None,
+        )
+    ]
 
 
 _O = ReceiverTimeOptions()

@@ -20,6 +20,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rich.table import Table
 
+from spooflens.baseline.loaded import LoadedBaseline
+from spooflens.cli import baseline_option
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import SpooflensError
@@ -48,6 +50,7 @@ class Vehicle:
     offsets: VehicleOffsets | None
     reason: str
     context: AnalysisContext  # what its results were made from: its verdict is assessed again with the fleet's
+    baseline: LoadedBaseline | None = None
 
 
 def _name(path: Path, taken: set[str]) -> str:
@@ -60,14 +63,16 @@ def _name(path: Path, taken: set[str]) -> str:
 
 
 def run_fleet(
-    logs: list[Path], opts: FleetOptions, report=lambda task, done, total: None
+    logs: list[Path], opts: FleetOptions, report=lambda task, done, total: None, baseline: LoadedBaseline | None = None
 ) -> tuple[list[Vehicle], FleetHomology | None, list[str]]:
-    """Analyse every log, measure offsets, compute the homology, and redo each verdict with fleet evidence."""
+    """Analyse every log, measure offsets, compute the homology, and redo each verdict with fleet evidence.
+    `baseline`: one vehicle type's, applied to every log (a log of another receiver model: BaselineError)."""
     from readers import read_log
     from spooflens.fleet.detector import NAME, fleet_result
     from spooflens.gnss.solved_fixes import with_solved_fixes
     from spooflens.pipeline.registry import AnalyzeOptions
     from spooflens.pipeline.run import analyze_table, assess
+    from spooflens.service import checked_baseline
 
     notes: list[str] = []
     vehicles: list[Vehicle] = []
@@ -79,13 +84,24 @@ def run_fleet(
         except SpooflensError as err:
             notes.append(f"{path}: not read ({err}); left out")
             continue
-        analysis = analyze_table(table, AnalyzeOptions(), keep_context=True)
+        analysis = analyze_table(table, AnalyzeOptions(baseline=checked_baseline(baseline, table)), keep_context=True)
         assert analysis.context is not None  # asked for
         name = _name(path, taken)
         off, reason = vehicle_offsets(name, table, analysis.results, analysis.verdict, opts)
         if off is None:
             notes.append(f"{name}: {reason}; left out of the homology")
-        vehicles.append(Vehicle(name, table, analysis.results, analysis.verdict, off, reason, analysis.context))
+        vehicles.append(
+            Vehicle(
+                name,
+                table,
+                analysis.results,
+                analysis.verdict,
+                off,
+                reason,
+                analysis.context,
+                analysis.options.baseline,
+            )
+        )
     report("analysing logs", len(logs), len(logs))
     with_offsets = [v.offsets for v in vehicles if v.offsets is not None]
     overlapping, overlap_notes = overlap_groups(with_offsets)
@@ -140,7 +156,7 @@ def fleet_summary(vehicles: list[Vehicle], fh: FleetHomology | None, notes: list
                 "reference": v.offsets.reference if v.offsets else None,
                 "left_out": None if v.offsets else v.reason,
                 "span_utc": [_utc(x) for x in v.offsets.span] if v.offsets else None,
-                "summary": build_summary(v.table, v.results, v.verdict),
+                "summary": build_summary(v.table, v.results, v.verdict, v.baseline),
             }
             for v in vehicles
         ],
@@ -245,19 +261,28 @@ def write_fleet_recording(path: Path, vehicles: list[Vehicle], fh: FleetHomology
     show_default=True,
     help="Offsets below this (m) do not count as attacked.",
 )
+@baseline_option
 @click.option("--quiet", is_flag=True, help="No progress bars or tables.")
-def command(logs: tuple[Path, ...], out_dir: Path, reference_sats: str, min_offset: float, quiet: bool) -> int:
+def command(
+    logs: tuple[Path, ...],
+    out_dir: Path,
+    reference_sats: str,
+    min_offset: float,
+    baseline_path: Path | None,
+    quiet: bool,
+) -> int:
     """Analyse the logs of several vehicles (or receivers) over the same time and area: each vehicle's offsets
     from its own reference, their homology over time, and a common-attack finding in each verdict."""
     if len(logs) < 2:
         raise click.UsageError("fleet needs at least two logs")
-    from spooflens.service import make_output_folder
+    from spooflens.service import load_baseline_option, make_output_folder
 
+    baseline = load_baseline_option(baseline_path)
     make_output_folder(out_dir, "--output")
     sats = tuple(s.strip().upper() for s in reference_sats.replace(",", "+").split("+") if s.strip())
     opts = FleetOptions(min_offset_m=min_offset, reference_sats=sats)
     with progress(not quiet and show_progress()) as report:
-        vehicles, fh, notes = run_fleet(list(logs), opts, report)
+        vehicles, fh, notes = run_fleet(list(logs), opts, report, baseline)
     if len(vehicles) < 2:
         raise SpooflensError("fewer than two logs could be read: " + "; ".join(notes))
     write_fleet_recording(out_dir / "fleet.rrd", vehicles, fh)

@@ -20,6 +20,10 @@ through a suspected attack rather than learned from it) and the windows whose fi
 are the worst (`trim`), so an attack inside the window cannot inflate the noise it is judged against.
 The search is coordinate-wise on a log scale (factors 3 then sqrt 3, two sweeps), each candidate one
 run of the compiled filter.
+
+With a vehicle's baseline (`NoisePrior`, from `spooflens.baseline.use.noise_prior`) the search starts
+from the values the vehicle's clean logs learned and may not go above their allowance: a log attacked
+from its first fix to its last cannot teach the filter that the attack is the receiver's noise.
 """
 
 from __future__ import annotations
@@ -69,6 +73,16 @@ class LearnOptions:
 
 
 @dataclass(frozen=True)
+class NoisePrior:
+    """What a vehicle's clean logs say about the noise: where the search starts (parameter name ->
+    value, the names of `learn_noise`'s search) and how high each parameter may go."""
+
+    start: dict[str, float]
+    upper: dict[str, float]
+    source: str  # e.g. "baseline vehicle.baseline.json (4 logs)"
+
+
+@dataclass(frozen=True)
 class LearnedNoise:
     noise: GnssNoise
     odometry: OdometryAiding | None
@@ -78,6 +92,10 @@ class LearnedNoise:
     neg_log_likelihood: float
     window_s: tuple[float, float]
     excluded_s: tuple[tuple[float, float], ...]
+    imu_id: str = ""  # the IMU and receiver the filter ran on
+    receiver_id: str = ""
+    prior: str = ""  # the baseline the search started from and stayed under, if any
+    at_upper: tuple[str, ...] = ()  # parameters the log would have raised beyond the baseline's allowance
 
     @property
     def is_prior(self) -> bool:
@@ -90,12 +108,24 @@ class LearnedNoise:
         return not self.is_prior
 
     def describe(self) -> str:
+        return self._describe() + (f"; {self.baseline_note()}" if self.prior else "")
+
+    def baseline_note(self) -> str:
+        """What came from the baseline, and where the log pushed against it."""
+        text = f"started from the {self.prior}"
+        if self.at_upper:
+            text += f"; held at the allowance: {', '.join(self.at_upper)} (the log asked for more noise)"
+        return text
+
+    def _describe(self) -> str:
         n = self.noise
         if not self.learned:
+            whence = "from the baseline" if self.prior else "from the fixes' scatter"
             text = (
                 f"noise NOT learned: {n.source.removeprefix(PRIOR).strip(' ()')}; prior used: position white "
-                f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m (h/v, from the fixes' scatter) + Gauss-Markov "
-                f"{n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, tau {n.tau_pos_s:.0f} s (defaults)"
+                f"{n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m (h/v, {whence}) + Gauss-Markov "
+                f"{n.gm_pos_m[0]:.2g}/{n.gm_pos_m[1]:.2g} m, tau {n.tau_pos_s:.0f} s"
+                + (" (from the baseline)" if self.prior else " (defaults)")
             )
             if n.has_velocity:
                 text += (
@@ -322,6 +352,7 @@ def _search(
     names: Sequence[str],
     opts: LearnOptions,
     best: float | None = None,
+    upper: dict[str, float] | None = None,
 ) -> tuple[float, dict[str, float]]:
     """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps).
 
@@ -335,6 +366,7 @@ def _search(
         before = best
         for name in names:
             lo, hi = BOUNDS.get(name, (1e-4, 1e4))
+            hi = min(hi, (upper or {}).get(name, hi))
             for step in opts.steps:
                 trials = []
                 for factor in (step, 1.0 / step):
@@ -360,6 +392,7 @@ def learn_noise(
     odometry_id: str | None = None,
     exclude: Sequence[tuple[float, float]] = (),
     opts: LearnOptions | None = None,
+    prior: NoisePrior | None = None,
 ) -> LearnedNoise:
     """Maximum-likelihood sensor noise for this log (see the module docstring).
 
@@ -372,7 +405,7 @@ def learn_noise(
     t_end = max(float(tf[k_end]), t0 + opts.min_window_s)
     window = (t0, min(t_end, float(tf[-1])))
     sub = inputs.between(-np.inf, window[1])
-    noise = initial_noise(sub, exclude)
+    noise = initial_noise(sub, exclude)  # the first run and what it leaves out are the same with a prior
     has_vel = noise.has_velocity
     base = FilterOptions(grade=grade, noise=noise, max_block_s=opts.max_block_s, record=False, compare=False)
     objective = _Objective(sub, start, base)
@@ -391,34 +424,23 @@ def learn_noise(
             f"the filter's first {opts.settle_s:.0f} s, at least {opts.min_scored_epochs} over "
             f"{opts.min_scored_s:.0f} s needed)"
         )
+        imu = min(prior.start.get("imu", 1.0), prior.upper.get("imu", np.inf)) if prior is not None else 1.0
         return LearnedNoise(
-            replace(noise, source=why),
+            replace(_from_prior(noise, prior) if prior is not None else noise, source=why),
             odometry,
-            grade,
-            1.0,
+            scaled_grade(grade, imu) if prior is not None else grade,
+            imu,
             objective.evaluations,
             float("nan"),
             window,
             tuple(exclude),
+            inputs.imu_id,
+            inputs.receiver_id,
+            prior.source if prior is not None else "",
         )
 
     objective.inputs, objective.score_mask = _up_to_last_scored(sub, first.t, objective.score_mask)
-    params: dict[str, float] = {
-        "imu": 1.0,
-        "w_h": noise.white_pos_m[0],
-        "w_v": noise.white_pos_m[1],
-        "b_h": noise.gm_pos_m[0],
-        "b_v": noise.gm_pos_m[1],
-        "tau_p": noise.tau_pos_s,
-    }
-    if has_vel:
-        params |= {
-            "wv_h": noise.white_vel_mps[0],
-            "wv_v": noise.white_vel_mps[1],
-            "bv_h": noise.gm_vel_mps[0],
-            "bv_v": noise.gm_vel_mps[1],
-            "tau_v": noise.tau_vel_s,
-        }
+    params = _parameters(noise, 1.0, has_vel)
 
     def options(p: dict[str, float]) -> FilterOptions:
         n = GnssNoise(
@@ -447,17 +469,21 @@ def learn_noise(
             compare=False,
         )
 
-    # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid
-    grid = [{**params, "b_h": b, "b_v": 2.0 * b} for b in opts.wander_grid_m]
+    upper = prior.upper if prior is not None else None
+    # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid (and,
+    # with a baseline, of the values its clean logs learned), every candidate under the baseline's caps
+    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper) for b in opts.wander_grid_m]
+    if prior is not None:
+        grid.append(_capped(_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper))
     values = objective.many([options(g) for g in grid])
     params = grid[int(np.argmin(values))]
-    best, params = _search(objective, options, params, list(params), opts, min(values))
+    best, params = _search(objective, options, params, list(params), opts, min(values), upper)
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)
         if R_vb is not None:
             odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
             params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
-            best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts)
+            best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts, upper=upper)
     final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True, compare=True)
     assert final.noise is not None
     return LearnedNoise(
@@ -469,4 +495,58 @@ def learn_noise(
         best,
         window,
         tuple(exclude),
+        inputs.imu_id,
+        inputs.receiver_id,
+        prior.source if prior is not None else "",
+        tuple(
+            f"{k} {params[k]:.3g}" for k in sorted(upper or {}) if k in params and params[k] >= 0.999 * (upper or {})[k]
+        ),
+    )
+
+
+def _parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, float]:
+    """The search's parameters of a noise model."""
+    params = {
+        "imu": imu,
+        "w_h": noise.white_pos_m[0],
+        "w_v": noise.white_pos_m[1],
+        "b_h": noise.gm_pos_m[0],
+        "b_v": noise.gm_pos_m[1],
+        "tau_p": noise.tau_pos_s,
+    }
+    if has_vel:
+        params |= {
+            "wv_h": noise.white_vel_mps[0],
+            "wv_v": noise.white_vel_mps[1],
+            "bv_h": noise.gm_vel_mps[0],
+            "bv_v": noise.gm_vel_mps[1],
+            "tau_v": noise.tau_vel_s,
+        }
+    return params
+
+
+def _capped(params: dict[str, float], upper: dict[str, float] | None) -> dict[str, float]:
+    return {k: min(v, (upper or {}).get(k, v)) for k, v in params.items()}
+
+
+def _from_prior(noise: GnssNoise, prior: NoisePrior) -> GnssNoise:
+    """The initial guess with the baseline's values in place (each under its cap)."""
+
+    def value(name: str, default: float) -> float:
+        return float(min(prior.start.get(name, default), prior.upper.get(name, np.inf)))
+
+    has_vel = noise.has_velocity
+    return replace(
+        noise,
+        white_pos_m=(value("w_h", noise.white_pos_m[0]), value("w_v", noise.white_pos_m[1])),
+        gm_pos_m=(value("b_h", noise.gm_pos_m[0]), value("b_v", noise.gm_pos_m[1])),
+        tau_pos_s=value("tau_p", noise.tau_pos_s),
+        white_vel_mps=(value("wv_h", noise.white_vel_mps[0]), value("wv_v", noise.white_vel_mps[1]))
+        if has_vel
+        else noise.white_vel_mps,
+        gm_vel_mps=(value("bv_h", noise.gm_vel_mps[0]), value("bv_v", noise.gm_vel_mps[1]))
+        if has_vel
+        else noise.gm_vel_mps,
+        tau_vel_s=value("tau_v", noise.tau_vel_s),
+        source="baseline",
     )

@@ -10,6 +10,8 @@ from functools import partial
 
 import numpy as np
 
+from spooflens.baseline.loaded import LoadedBaseline
+from spooflens.baseline.use import coast_envelope_limit
 from spooflens.detectors.base import SIGMA_SUFFIX, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.estimation.statespace import LinearGaussianModel
@@ -78,7 +80,12 @@ def solve_navigation(
     options (a second pass), which depend on neither the noise nor `exclude`."""
     preset = imu_preset(options)
     inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
-    learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude)
+    prior = None
+    if options.baseline is not None:
+        from spooflens.baseline.use import noise_prior
+
+        prior = noise_prior(options.baseline, inputs.receiver_id, inputs.imu_id, preset.name)
+    learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude, prior=prior)
     opts = FilterOptions(
         grade=learned.grade,
         noise=learned.noise,
@@ -119,13 +126,30 @@ def navigation_of(ctx: AnalysisContext) -> Navigation:
 
 def _run(ctx: AnalysisContext) -> Later:
     nav = navigation_of(ctx)
-    return Later(partial(_result, nav))  # the smoothed track: the detectors after this one run meanwhile
+    # the smoothed track: the detectors after this one run meanwhile
+    return Later(partial(_result, nav, ctx.options.baseline))
 
 
-def _result(nav: Navigation) -> list[DetectorResult]:
+def _result(nav: Navigation, baseline: LoadedBaseline | None = None) -> list[DetectorResult]:
     sol, sm = nav.solution, nav.smoothed
     settled = sol.t > sol.t[0] + FILTER_SETTLE_S
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
+    extras: dict[str, object] = {
+        "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
+        "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
+        "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
+        "imu_grade": sol.grade.name,
+        "imu_noise_scale": nav.learned.imu_scale,
+        # False: the log was too short (or suspected almost throughout) to learn its noise from
+        "noise_learned": nav.learned.learned,
+        "epochs": len(sol.t),
+        "noise_filter_runs": nav.learned.evaluations,
+    }
+    taken = [f"GNSS and IMU noise {nav.learned.baseline_note()}"] if nav.learned.prior else []
+    cap = coast_envelope_limit(baseline, nav.inputs.receiver_id, nav.inputs.imu_id)
+    taken += [cap[1]] if cap is not None else []
+    if taken:
+        extras["from_baseline"] = "; ".join(taken)
     return [
         DetectorResult(
             NAVIGATION,
@@ -150,17 +174,7 @@ def _result(nav: Navigation) -> list[DetectorResult]:
                     sm.track_llh[:, 2],
                 )
             ],
-            extras={
-                "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
-                "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
-                "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
-                "imu_grade": sol.grade.name,
-                "imu_noise_scale": nav.learned.imu_scale,
-                # False: the log was too short (or suspected almost throughout) to learn its noise from
-                "noise_learned": nav.learned.learned,
-                "epochs": len(sol.t),
-                "noise_filter_runs": nav.learned.evaluations,
-            },
+            extras=extras,
         )
     ]
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from spooflens import __version__
 from spooflens.detectors.base import Alarm, DetectorResult, Finding
@@ -17,6 +17,9 @@ from spooflens.inventory import computed, skipped_or_repaired
 from spooflens.pipeline.departure import gnss_departure
 from spooflens.pipeline.evidence import label
 from spooflens.pipeline.verdict import KIND_LABELS, Event, Explanation, Incident, Kind, Verdict
+
+if TYPE_CHECKING:
+    from spooflens.baseline.loaded import LoadedBaseline
 
 
 def json_safe(x: Any) -> Any:
@@ -191,7 +194,22 @@ def _analysis(table: EpochTable, r: DetectorResult) -> dict[str, Any]:
     return out
 
 
-def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Verdict) -> dict[str, Any]:
+def baseline_block(loaded: LoadedBaseline, results: list[DetectorResult]) -> dict[str, Any]:
+    """What came from a baseline: its file and SHA-256, and what each analysis took from it."""
+    b = loaded.content
+    return {
+        "file": loaded.file,
+        "sha256": loaded.sha256,
+        "created_utc": b.created_utc,
+        "logs": len(b.logs),
+        "warnings": list(loaded.warnings),
+        "used_by": {r.name: str(r.extras["from_baseline"]) for r in results if "from_baseline" in r.extras},
+    }
+
+
+def build_summary(
+    table: EpochTable, results: list[DetectorResult], verdict: Verdict, baseline: LoadedBaseline | None = None
+) -> dict[str, Any]:
     incidents = [_incident(table, inc) for inc in verdict.incidents]
     # the reconstruction leaves GNSS out during the incident that made the verdict; during any other
     # incident the track still follows GNSS, so a distance from it would mean nothing
@@ -225,4 +243,6 @@ def build_summary(table: EpochTable, results: list[DetectorResult], verdict: Ver
         },
         "analyses": [_analysis(table, r) for r in results],
     }
+    if baseline is not None:
+        summary["baseline"] = baseline_block(baseline, results)
     return dict(json_safe(summary))

@@ -28,6 +28,7 @@ class Evidence(StrEnum):
     FLEET = "fleet"
     HEADING = "heading"
     INTERFERENCE = "interference"
+    VEHICLE_BASELINE = "vehicle_baseline"
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,13 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
         "receiver self-report",
         "the receiver's flags and indicators (spoofing/jamming state, noise, AGC, C/N0, satellites, "
         "reported accuracy) against their own baseline in the log and their documented normal ranges",
+        False,
+    ),
+    # a log off its vehicle's clean levels (`analyze --baseline`): a different day, place or installation
+    # does that too, and over a whole log it would corroborate any glitch in it (see APART)
+    Evidence.VEHICLE_BASELINE: EvidenceInfo(
+        "vehicle baseline",
+        "the receiver's indicator levels against those of the vehicle's clean logs",
         False,
     ),
     Evidence.RAW_MEASUREMENT: EvidenceInfo(
@@ -77,6 +85,10 @@ EVIDENCE: dict[Evidence, EvidenceInfo] = {
 
 # classes that say what disturbed the signals, not that GNSS was moved: they make no spoofing incident
 NOT_SPOOFING: frozenset[Evidence] = frozenset({Evidence.INTERFERENCE})
+# classes whose alarms make incidents of their own, never merged with another class's alarms and never
+# corroborating them: a level off the vehicle's baseline lasts as long as the log, so it would join every
+# event in it into one incident and seem to corroborate any glitch anywhere in it
+APART: frozenset[Evidence] = frozenset({Evidence.VEHICLE_BASELINE})
 
 # The order evidence is listed in (report timeline strips, console): self-report first, strongest last.
 ORDER: tuple[Evidence, ...] = tuple(EVIDENCE)
@@ -92,9 +104,10 @@ def confidence(classes: set[Evidence]) -> str:
     high: an independent reference and at least one more class agree, or three classes agree;
     medium: one independent reference alone, or two GNSS-internal classes agree;
     low: a single GNSS-internal class (reported as an anomaly, never called spoofing).
-    Classes that are not spoofing evidence (`NOT_SPOOFING`) count for nothing here.
+    Classes that are not spoofing evidence (`NOT_SPOOFING`) and those kept apart (`APART`) count for
+    nothing here: an incident of theirs alone is an anomaly.
     """
-    classes = {c for c in classes if c not in NOT_SPOOFING}
+    classes = {c for c in classes if c not in NOT_SPOOFING | APART}
     independent = {c for c in classes if EVIDENCE[c].independent}
     if (independent and len(classes) >= 2) or len(classes) >= 3:
         return "high"

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.use import coast_envelope_limit
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.errors import SpooflensError
@@ -288,6 +289,26 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
     return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
 
 
+def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Envelope:
+    """How far GNSS departs from INS coasts started all over a log, the stretches `left_out` (its
+    incidents) avoided: what a vehicle's clean log says about its INS and receiver (a baseline's)."""
+    opts = CoastingOptions()
+    end = float(nav.solution.t[-1]) + 1e9  # no incident of its own: every coast is before it
+    return placebo_coasts(nav, opts).envelope((end, end), left_out, opts.margin_s, opts.placebo_trim)
+
+
+def capped(envelope: Envelope, limit: FloatArray | None) -> Envelope:
+    """The envelope at most `limit` per second of horizon (a baseline's allowance: a log attacked
+    throughout has no clean coasts of its own to tell its envelope)."""
+    if limit is None or not len(limit):
+        return envelope
+    grid = np.arange(len(limit), dtype=float)
+    if not envelope.runs:
+        return Envelope(grid, np.maximum(limit, 1.0), 0)
+    allowed = np.interp(envelope.horizon_s, grid, limit)
+    return Envelope(envelope.horizon_s, np.maximum(np.minimum(envelope.kappa, allowed), 1.0), envelope.runs)
+
+
 def coasting_check(
     nav: Navigation,
     onset_s: float,
@@ -415,6 +436,8 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
     placebo = placebo_coasts(nav, opts)
+    cap = coast_envelope_limit(ctx.options.baseline, nav.inputs.receiver_id, nav.inputs.imu_id)
+    limit = cap[0] if cap is not None else None
     envelopes = []
     base: NavSolution | None = None  # the filter with the incidents confirmed so far left out
     current_check: CoastingCheck | None = None  # the coast that confirmed the last incident
@@ -434,6 +457,7 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
         unjudged = [_span(i, opts) for i in ordered[n + 1 :]]
         envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim, later=unjudged)
+        envelope = capped(envelope, limit)
         # a departure from where the next inertial incident's coast begins is that incident's, not this one's
         later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
         check, young = _judge(nav, inc, envelope, later, opts, base)

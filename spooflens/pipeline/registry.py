@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.detectors.base import DetectorResult, Unmet
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
@@ -192,6 +193,8 @@ class AnalyzeOptions:
     receiver_id: str | None = None
     imu_grade: str | None = None
     extra: dict[str, object] = field(default_factory=dict)
+    # a vehicle's clean-log statistics (`spooflens baseline`, `--baseline`): detectors take yardsticks from it
+    baseline: LoadedBaseline | None = None
 
 
 @dataclass

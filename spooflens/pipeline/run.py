@@ -15,7 +15,7 @@ and the first pass stands.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,9 +23,11 @@ from spooflens import plausibility
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
-from spooflens.navigation.product import NAVIGATION, navigation_of, solve_navigation
+from spooflens.navigation.noise_learning import LearnedNoise
+from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of, solve_navigation
 from spooflens.pipeline.events import classify
-from spooflens.pipeline.reconstruction import reconstruct
+from spooflens.pipeline.evidence import APART
+from spooflens.pipeline.reconstruction import Envelope, clean_envelope, reconstruct
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
 from spooflens.pipeline.verdict import Verdict, decide
 from spooflens.schema import FRAMES
@@ -44,6 +46,9 @@ class Analysis:
     # what the results were made from (the navigation solution among them), kept only when asked: to
     # assess the results again with evidence added later (`spooflens fleet`)
     context: AnalysisContext | None = None
+    learned_noise: LearnedNoise | None = None  # the navigation's, when it ran (what a baseline records)
+    # how far GNSS departs from INS coasts started all over this log (`clean_coasts`: a baseline's)
+    clean_envelope: Envelope | None = None
 
 
 def last_fix_s(table: EpochTable) -> float | None:
@@ -77,8 +82,14 @@ def _one_pass(
 
 
 def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
-    """Every incident and anomaly of a verdict, widened by `margin_s`, merged."""
-    spans = sorted((min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s) for i in verdict.incidents)
+    """Every incident and anomaly of a verdict, widened by `margin_s`, merged; not those of the classes
+    kept apart (a log off its vehicle's baseline: the baseline already caps what the noise learning may
+    take from it, and a whole log left out would leave nothing to learn from)."""
+    spans = sorted(
+        (min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s)
+        for i in verdict.incidents
+        if not set(i.evidence) <= APART or not i.evidence
+    )
     merged: list[tuple[float, float]] = []
     for a, b in spans:
         if merged and a <= merged[-1][1]:
@@ -99,7 +110,10 @@ def analyze_table(
     options: AnalyzeOptions | None = None,
     on_step: Callable[[str], None] | None = None,
     keep_context: bool = False,
+    clean_coasts: bool = False,
 ) -> Analysis:
+    """The whole analysis of one recording. `clean_coasts`: also measure how far GNSS departs from INS
+    coasts started all over the log, its incidents left out (what a vehicle's baseline records)."""
     options = options or AnalyzeOptions()
     problems = plausibility.problems({name: table.frame(name) for name in FRAMES})
     if problems:  # a table built by hand: the readers drop and list such rows (spooflens.epoch_table.checked)
@@ -111,12 +125,13 @@ def analyze_table(
     kept = ctx if keep_context else None
     spans = suspected_spans(verdict)
     if not spans or NAVIGATION not in ctx.cache:
-        return Analysis(table, options, ctx.results, verdict, context=kept)
+        nav = ctx.cache.get(NAVIGATION)
+        return _done(Analysis(table, options, ctx.results, verdict, context=kept), nav, clean_coasts)
     first_nav = navigation_of(ctx)
     if not _within_learning(spans, first_nav.learned.window_s):
         # the noise was learned before anything suspected began: learning it again without those
         # stretches gives the same noise, and the second pass the same results
-        return Analysis(table, options, ctx.results, verdict, context=kept)
+        return _done(Analysis(table, options, ctx.results, verdict, context=kept), first_nav, clean_coasts)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     first_results = ctx.results
@@ -130,14 +145,29 @@ def analyze_table(
         return Analysis(table, options, first_results, verdict, context=kept)
     del first_results, kept
     ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
-    return Analysis(table, options, ctx.results, verdict, 2, spans, ctx if keep_context else None)
+    return _done(
+        Analysis(table, options, ctx.results, verdict, 2, spans, ctx if keep_context else None), nav, clean_coasts
+    )
+
+
+def _done(analysis: Analysis, nav: Navigation | None, clean_coasts: bool) -> Analysis:
+    """The analysis with what it keeps of its navigation: the noise it learned and, when asked, the clean
+    coasts' envelope (the solution itself, a gigabyte per hour of 10 Hz GNSS, is let go)."""
+    if nav is None:
+        return analysis
+    spans = [(min(i.onset_s, i.start_s), i.end_s) for i in analysis.verdict.incidents]
+    envelope = clean_envelope(nav, spans) if clean_coasts else None
+    return replace(analysis, learned_noise=nav.learned, clean_envelope=envelope)
 
 
 def analyze_segments(
-    table: EpochTable, options: AnalyzeOptions | None = None, on_step: Callable[[str], None] | None = None
+    table: EpochTable,
+    options: AnalyzeOptions | None = None,
+    on_step: Callable[[str], None] | None = None,
+    clean_coasts: bool = False,
 ) -> list[Analysis]:
     """One analysis per recording: a log that joins several (its clock jumped back) is never analysed
     as one interleaved stream."""
     if len(table.segments) < 2:
-        return [analyze_table(table, options, on_step)]
-    return [analyze_table(table.segment(k), options, on_step) for k in range(len(table.segments))]
+        return [analyze_table(table, options, on_step, clean_coasts)]
+    return [analyze_table(table.segment(k), options, on_step, clean_coasts) for k in range(len(table.segments))]

@@ -29,6 +29,7 @@ from typing import Any
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Track
 from spooflens.pipeline.evidence import (
+    APART,
     CORROBORATION_S,
     NOT_SPOOFING,
     ORDER,
@@ -308,13 +309,16 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
     advisory = tuple(r.name for r in detectors if r.ran and r.advisory)
     not_run = tuple(r.name for r in detectors if not r.ran)
     counted = [r for r in detectors if r.ran and not r.advisory]
-    # what only disturbed the signals (interference) is its own incident: merged with spoofing alarms it
-    # would move their incident's onset and end to the jamming's
-    alarms = [(a, r) for r in counted for a in r.alarms if r.evidence not in NOT_SPOOFING]
-    other = [(a, r) for r in counted for a in r.alarms if r.evidence in NOT_SPOOFING]
-    incidents = sorted(
-        (_incident(g) for part in (alarms, other) for g in _group(part, merge_gap_s)), key=lambda i: i.start_s
-    )
+    # what only disturbed the signals (interference) and what is kept apart (levels off the vehicle's baseline)
+    # make incidents of their own: merged with spoofing alarms they would move their incident's onset and end
+    separate = NOT_SPOOFING | APART
+    alarms = [(a, r) for r in counted for a in r.alarms if r.evidence not in separate]
+    groups = _group(alarms, merge_gap_s) + [
+        g
+        for c in sorted(separate)
+        for g in _group([(a, r) for r in counted for a in r.alarms if r.evidence == c], merge_gap_s)
+    ]
+    incidents = sorted((_incident(g) for g in groups), key=lambda i: i.start_s)
     if log_end_s is not None:
         incidents = [
             replace(i, ongoing_at_end=True, end_method="last alarm, at the end of the log")

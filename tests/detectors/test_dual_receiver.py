@@ -226,3 +226,27 @@ def test_recording_draws_the_histograms_as_bar_charts(gsi, tmp_path):
             assert "/" + entity(histogram_origin(COLLAPSE, h), bars.label) in static
         assert sum(b.counts.sum() for b in h.bars if not b.fitted) > 0
     assert any(title.startswith(COLLAPSE) for title, _ in histogram_views(results))
+
+
+def test_a_collapse_from_the_first_fix_is_seen_only_against_the_clean_logs_model():
+    """Two receivers 1.2 m apart, each with its own noise; a single-antenna spoofer from the first fix
+    leaves only their tracking noise between them: the log's own fit takes that for clean, the model of
+    the vehicle's clean logs does not."""
+    from baseline_support import quantity
+
+    from spooflens.baseline.format import RicePair
+    from spooflens.detectors.dual_receiver import DualReceiverOptions, collapse_rule
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 300.0, 0.2)
+
+    def distance(nu: float, sigma: float) -> np.ndarray:
+        return np.hypot(nu + rng.normal(0.0, sigma, len(t)), rng.normal(0.0, sigma, len(t)))
+
+    opts = DualReceiverOptions()
+    collapsed = distance(0.0, 0.3)
+    assert not collapse_rule(t, collapsed, opts).episodes
+    prior = RicePair(quantity([1.2, 1.25]), quantity([0.35, 0.4]), quantity([0.6, 0.5]), 50)
+    caught = collapse_rule(t, collapsed, opts, prior=prior)
+    assert caught.flagged.mean() > 0.9
+    assert not collapse_rule(t, distance(1.2, 0.35), opts, prior=prior).episodes

@@ -96,9 +96,27 @@ def test_a_fast_flight_far_from_its_first_fix_keeps_its_sensitivity() -> None:
             "vel_u_mps": 0.0,
         }
     )
-    _, _, z, _ = check_receiver(fixes, ConsistencyOptions())
+    _, _, z, _, _ = check_receiver(fixes, ConsistencyOptions())
     assert np.nanmax(np.abs(z[t > 500.0])) < 6.0
     assert not run_gnss_consistency(fixes).alarms
     jumped = fixes.assign(height_m=fixes["height_m"] + 4.0 * (t >= 550.0))
     (alarm,) = run_gnss_consistency(jumped).alarms
     assert 549.0 <= alarm.start_s <= 551.0
+
+
+def test_a_baseline_caps_the_scale_a_log_attacked_throughout_would_learn() -> None:
+    """A position-only ramp from the first fix: the quietest quarter of the log is attacked too, so its
+    scale hides the ramp; a baseline of two clean logs that agree caps it at twice theirs."""
+    mode = "position change vs reported velocity"
+    attacked = _fixes(ramp_rate=1.5, start_s=0.0)
+    assert not run_gnss_consistency(attacked).alarms
+    caps = {"rx": (mode, np.array([1.2, 1.2, 2.0]))}
+    result = run_gnss_consistency(attacked, scale_caps=caps)
+    assert result.alarms and result.alarms[0].start_s < 30.0
+    assert "residual scale at most the baseline's allowance" in str(result.extras["from_baseline"])
+    # a clean log of the vehicle keeps its own (smaller) scale: nothing changes
+    clean = _fixes(ramp_rate=0.0, start_s=0.0)
+    assert not run_gnss_consistency(clean, scale_caps=caps).alarms
+    # a cap measured in the other mode (a log without velocity) is not applied
+    other = {"rx": ("kinematic plausibility (no reported velocity)", np.array([0.01, 0.01, 0.01]))}
+    assert not run_gnss_consistency(attacked, scale_caps=other).alarms

@@ -14,6 +14,7 @@ from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
 from readers import read_log
+from spooflens.baseline.format import Baseline
 from spooflens.cli import main
 from spooflens.detectors.receiver_time import run_receiver_time
 from spooflens.pipeline.evidence import Evidence
@@ -230,3 +231,38 @@ def test_real_phone_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
     (alarm,) = result.alarms
     assert alarm.onset_interval_s == (pytest.approx(198.0, abs=0.05), pytest.approx(204.0, abs=0.05))
     assert result.extras["phone/steps_s"] == [pytest.approx(-30.5, abs=0.01)]
+
+
+def _clock_baseline(n: int = 3) -> Baseline:
+    from baseline_support import measurement
+
+    from spooflens.baseline.learn import aggregate
+
+    return aggregate([measurement(k, {"hdop": (0.8, 0.05)}) for k in range(n)])
+
+
+def test_a_baseline_caps_the_jitter_a_spoofers_clock_would_teach() -> None:
+    """A spoofer's clock jittering 100 ms from the first fix raises the log's own alarm level above a
+    0.5 s step; the clean logs' jitter (20 ms, twice allowed) keeps it at 0.32 s."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 900.0, 0.2)
+    x = rng.normal(0.0, 0.1, len(t)) + 0.5 * (t >= 400.0)
+    fixes = _fixes(t, x).assign(receiver_id="gps")
+    assert not run_receiver_time(fixes, clock="boot clock", monotonic=True).alarms
+    with_baseline = run_receiver_time(fixes, clock="boot clock", monotonic=True, baseline=_clock_baseline())
+    onset = with_baseline.alarms[0].onset_s if with_baseline.alarms else None
+    assert onset is not None and 399.0 <= onset <= 401.0
+    assert "jitter scale at most 40.0 ms" in str(with_baseline.extras["from_baseline"])
+    # another kind of clock than the baseline's: its numbers do not apply
+    assert not run_receiver_time(fixes, clock="host clock", monotonic=False, baseline=_clock_baseline()).alarms
+
+
+def test_a_clock_running_at_another_rate_than_the_vehicles_is_a_finding() -> None:
+    t, x = _logger()
+    fixes = _fixes(t, x).assign(receiver_id="gps")
+    clean = run_receiver_time(fixes, clock="boot clock", monotonic=True, baseline=_clock_baseline())
+    assert not clean.findings and not clean.alarms
+    fast = _fixes(t, x + 250e-6 * t).assign(receiver_id="gps")
+    result = run_receiver_time(fast, clock="boot clock", monotonic=True, baseline=_clock_baseline())
+    (finding,) = result.findings
+    assert "ran +279.6 ppm" in finding.text and "+31.0 ppm (3 log(s))" in finding.text and not result.alarms

@@ -278,3 +278,24 @@ def calibrate(
         clean = new_clean
     assert cal is not None
     return cal, scale, alarm
+
+
+def fixed_calibration(
+    x: FloatArray,
+    k: int,
+    p_false_alarm: float,
+    nu: float,
+    sigma: float,
+    k_eff: float,
+    upper: bool = False,
+    include_current: bool = False,
+) -> tuple[Calibration, FloatArray, BoolArray]:
+    """As `calibrate`, with the null model given (a vehicle's baseline: fitted on its clean logs) instead of
+    fitted on this log, so a log attacked throughout is still judged against a clean model."""
+    x = np.asarray(x, dtype=float)
+    scale = windowed_scale(x, k, include_current)
+    k_eff = float(np.clip(k_eff, 1.0, k))
+    th = scale_threshold(p_false_alarm, max(sigma, 1e-9), nu, k_eff, upper)
+    alarm = np.nan_to_num(scale, nan=-np.inf) > th if upper else np.nan_to_num(scale, nan=np.inf) < th
+    rayleigh = float(np.sqrt(nu * nu / 2.0 + sigma * sigma))  # the Rayleigh ML scale of Rice(nu, sigma) samples
+    return Calibration(nu, sigma, rayleigh, k, k_eff, th, np.isfinite(x), 0, True), scale, alarm

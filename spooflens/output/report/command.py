@@ -7,8 +7,15 @@ from pathlib import Path
 
 import click
 
-from spooflens.cli import fail_on_jam_option, fail_on_spoof_option, imu_grade_option, quiet_option, topic_option
-from spooflens.service import analyse_log, finish
+from spooflens.cli import (
+    baseline_option,
+    fail_on_jam_option,
+    fail_on_spoof_option,
+    imu_grade_option,
+    quiet_option,
+    topic_option,
+)
+from spooflens.service import analyse_log, finish, load_baseline_option
 
 
 @click.command()
@@ -23,6 +30,7 @@ from spooflens.service import analyse_log, finish
 @click.option("--json", "json_path", type=click.Path(path_type=Path), default=None, help="Also write the summary.")
 @topic_option
 @imu_grade_option
+@baseline_option
 @quiet_option
 @fail_on_spoof_option
 @fail_on_jam_option
@@ -32,6 +40,7 @@ def report(
     json_path: Path | None,
     topics: tuple[str, ...],
     imu_grade: str | None,
+    baseline_path: Path | None,
     quiet: bool,
     fail_on_spoof: bool,
     fail_on_jam: bool,
@@ -44,12 +53,13 @@ def report(
     output = output or Path(log.name.rstrip("/")).with_suffix(".html")
     check_writable(output, "--output")
     check_writable(json_path, "--json")
-    analyses = analyse_log(log, topics, imu_grade, quiet)
+    baseline = load_baseline_option(baseline_path)
+    analyses = analyse_log(log, topics, imu_grade, quiet, baseline=baseline)
     summaries = []
     for k, analysis in enumerate(analyses):
         path = segment_path(output, k, len(analyses))
         size = write_report(path, analysis)
-        summary = build_summary(analysis.table, analysis.results, analysis.verdict)
+        summary = build_summary(analysis.table, analysis.results, analysis.verdict, analysis.options.baseline)
         summaries.append(summary)
         prefix = f"recording {k + 1} of {len(analyses)}: " if len(analyses) > 1 else ""
         if quiet:

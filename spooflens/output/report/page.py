@@ -335,12 +335,34 @@ def _library_versions() -> str:
     return ", ".join([f"Python {platform.python_version()}", *out])
 
 
+def _baseline_rows(analysis: Analysis) -> list[tuple[str, object]]:
+    """The vehicle baseline the analysis judged the log against: its file, SHA-256, what each analysis
+    took from it, and how the log differs from the logs it was learned from."""
+    loaded = analysis.options.baseline
+    if loaded is None:
+        return []
+    from spooflens.output.summary import baseline_block
+
+    block = baseline_block(loaded, analysis.results)
+    rows: list[tuple[str, object]] = [
+        ("baseline", f"{block['file']} ({block['logs']} clean log(s), made {block['created_utc']})"),
+        ("baseline SHA-256", Raw(f"<code>{esc(block['sha256'])}</code>")),
+    ]
+    rows += [(f"from the baseline: {name}", what) for name, what in block["used_by"].items()]
+    rows += [("baseline warning", w) for w in block["warnings"]]
+    return rows
+
+
 def provenance_section(analysis: Analysis, identity: InputIdentity) -> str:
     table = analysis.table
     meta = dict(table.metadata)
     enums = {k.removeprefix("enum."): v for k, v in meta.items() if k.startswith("enum.")}
     other = {k: v for k, v in meta.items() if not k.startswith("enum.")}
-    options = {k: v for k, v in asdict(analysis.options).items() if v not in (None, {}, "")}
+    options = {
+        f.name: getattr(analysis.options, f.name)
+        for f in fields(analysis.options)
+        if f.name != "baseline" and getattr(analysis.options, f.name) not in (None, {}, "")
+    }
     start = table.absolute_iso(0.0)
     rows: list[tuple[str, object]] = [
         ("file", identity.name),
@@ -356,6 +378,7 @@ def provenance_section(analysis: Analysis, identity: InputIdentity) -> str:
         ("libraries", _library_versions()),
         ("report written", datetime.now(UTC).isoformat(timespec="seconds")),
     ]
+    rows += _baseline_rows(analysis)
     rows += [(k, v) for k, v in sorted(other.items())]
     out = [_table(("what", "value"), rows)]
     out.append("<h3>Enum meanings applied</h3>")

@@ -1,0 +1,66 @@
+"""Baselines for tests: measurements of made-up clean logs, aggregated as `spooflens baseline` does."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from spooflens.baseline.format import Baseline, Quantity
+from spooflens.baseline.identity import Identity
+from spooflens.baseline.learn import aggregate
+from spooflens.baseline.loaded import LoadedBaseline
+from spooflens.baseline.measure import ClockLevel, Level, LogMeasurement
+
+RID = "gps"
+
+
+def measurement(
+    k: int,
+    levels: Mapping[str, tuple[float, float]],
+    model: str | None = "u-blox ZED-F9P",
+    noise: Mapping[str, float] | None = None,
+    rid: str = RID,
+) -> LogMeasurement:
+    """Clean log k: each indicator's (median, robust scale) as given."""
+    m = LogMeasurement(
+        f"clean{k}.ulg", f"{k:064x}", 600.0, Identity({rid: model}, ("HPG 1.32",), ("PX4 v1.15",), ("imu",))
+    )
+    m.indicators[rid] = {c: Level(med, scale, 3000) for c, (med, scale) in levels.items()}
+    m.clocks[rid] = ClockLevel("boot clock", True, 0.02, 30.0 + k)
+    m.consistency[rid] = ("position change vs reported velocity", np.array([0.3, 0.3, 0.6]))
+    if noise is not None:
+        m.noise = dict(noise)
+        m.navigated = (rid, "imu", "consumer_mems")
+    return m
+
+
+def px4_like(n: int = 4, seed: int = 0) -> Baseline:
+    """A drone's receiver over n clean flights: noise ~95, jamming indicator ~40, C/N0 ~42 dB-Hz."""
+    rng = np.random.default_rng(seed)
+    ms = [
+        measurement(
+            k,
+            {
+                "noise_per_ms": (95.0 * (1 + rng.normal(0, 0.02)), 3.0),
+                "jamming_indicator": (40.0 * (1 + rng.normal(0, 0.08)), 4.0),
+                "cn0_mean_dbhz": (42.0 + rng.normal(0, 0.5), 0.6),
+                "sats_used": (14.0 + round(rng.normal(0, 0.5)), 1.0),
+                "hdop": (0.8 * (1 + rng.normal(0, 0.04)), 0.05),
+            },
+            noise={"w_h": 0.2, "w_v": 0.4, "b_h": 1.0 + 0.1 * k, "b_v": 2.0, "tau_p": 100.0, "imu": 1.0},
+        )
+        for k in range(n)
+    ]
+    return aggregate(ms)
+
+
+def loaded(baseline: Baseline, name: str = "drone.baseline.json") -> LoadedBaseline:
+    return LoadedBaseline(baseline, name, "0" * 64)
+
+
+def quantity(values: list[float], unit: str = "m") -> Quantity:
+    """A quantity measured on clean logs with these per-log values (they agree)."""
+    from spooflens.baseline.learn import between_spread
+
+    return Quantity(float(np.median(values)), unit, tuple(values), None, between_spread(values), True)
