@@ -3,7 +3,8 @@
 For each incident the natural explanations of its alarms are weighed (`spooflens.pipeline.explanations`);
 the alarms they account for stay in the incident and count for nothing, so SPOOFING needs evidence no
 natural cause covers, while evidence a cause does not reach (an inertial departure confirmed by coasting,
-a second receiver, the log's clock) keeps its weight whatever the sky did. Then each incident is:
+a second receiver, the log's clock) keeps its weight whatever the sky did (an inertial alarm yields only
+to the vehicle's own shock, a tumble or an impact its IMU read just before the alarm began). Then each incident is:
 
 - spoofing: still of medium or high confidence;
 - jamming: interference evidence (the interference detector's class, the receiver's jamming state,

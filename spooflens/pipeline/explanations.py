@@ -14,14 +14,20 @@ names a natural cause and the alarm it accounts for:
 - time faults: the receiver's time moved against the log's clock by whole GPS week epochs (1024 weeks:
   a week rollover) or by a whole number of leap seconds;
 - one satellite's range a reflection's length off (NLOS), its C/N0 not raised;
-- a satellite the receiver never used in its fix from the log's start cannot have moved it.
+- a satellite the receiver never used in its fix from the log's start cannot have moved it;
+- an inertial shock: the vehicle's own IMU read a tumble or an impact (angular rate or specific force far
+  beyond flight, at the gyro's or accelerometer's full scale) just before an inertial alarm began; an
+  INS integrating through it, the autopilot's or spooflens', has lost its attitude and departs from GNSS
+  until it re-converges (a crash, a hard landing).
 
 Before any of the receiver's own indicators is read as a natural cause, the marks a spoofer leaves and
 nature does not are looked for (`spoofer_marks`): C/N0 raised above its level or above what the sky
 gives, the satellites at one C/N0 at their usual level, the receiver's own spoofing flag, its time moved
 against the log's clock. Where one is found no natural explanation of the GNSS-internal alarms holds.
-No signature here accounts for an inertial, heading or fleet alarm: their references do not see the
-sky. The tests' numbers and the real logs that show each are in docs/verdict.md.
+No sky signature accounts for an inertial, heading or fleet alarm: their references do not see the
+sky. Only the inertial shock reaches an inertial alarm, and only one that began after the shock: a
+spoofer cannot move an IMU, and an attack under way before the crash keeps its evidence. The tests'
+numbers and the real logs that show each are in docs/verdict.md.
 """
 
 from __future__ import annotations
@@ -101,6 +107,19 @@ class ExplanationOptions:
     never_used_fraction: float = 0.05
     never_used_min_epochs: int = 30
     never_used_from_start_s: float = 30.0
+    # an inertial shock: what no flight reads (ArduPilot's acro rates default to 360 deg/s; consumer gyros
+    # saturate at 2000 deg/s, accelerometers at 16 g), on `shock_min_samples` samples of one IMU
+    shock_rate_dps: float = 1000.0
+    shock_force_g: float = 6.0
+    shock_min_samples: int = 2
+    shock_merge_s: float = 1.0  # shock samples closer than this are one episode
+    # the inertial alarm's statistic still quiet at most this long before the shock's first sample (the
+    # autopilot logs its filter at 10-25 Hz), and first beyond its level after the shock began
+    shock_quiet_before_s: float = 1.0
+    shock_alarm_within_s: float = 5.0  # the alarm begins within this after the shock's end
+    # and ends within this after it: a filter that lost its attitude re-converges on GNSS within seconds
+    # (ArduPilot's in about 10 s); a departure that outlasts this is not the shock's
+    shock_recovery_s: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -115,6 +134,46 @@ class Reading:
     receiver_id: str | None = None
 
 
+@dataclass(frozen=True)
+class Shock:
+    """An episode of the IMU reading what no flight reads: a tumble or an impact."""
+
+    imu_id: str
+    start_s: float
+    end_s: float
+    rate_dps: float  # largest angular rate
+    force_g: float  # largest specific force
+
+
+def inertial_shocks(table: EpochTable, opts: ExplanationOptions) -> list[Shock]:
+    """Every IMU's shock episodes, in time order."""
+    imu = table.imu
+    if not len(imu):
+        return []
+    out = []
+    for imu_id, rows in imu.groupby("imu_id", sort=True):
+        rows = rows.sort_values("t_s")
+        t = rows["t_s"].to_numpy(dtype=float)
+        rate = np.degrees(np.linalg.norm(rows[["wx_radps", "wy_radps", "wz_radps"]].to_numpy(dtype=float), axis=1))
+        force = np.linalg.norm(rows[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(dtype=float), axis=1) / 9.80665
+        k = np.flatnonzero((np.nan_to_num(rate) >= opts.shock_rate_dps) | (np.nan_to_num(force) >= opts.shock_force_g))
+        if not len(k):
+            continue
+        for part in np.split(k, np.flatnonzero(np.diff(t[k]) > opts.shock_merge_s) + 1):
+            if len(part) >= opts.shock_min_samples:
+                span = slice(part[0], part[-1] + 1)
+                out.append(
+                    Shock(
+                        str(imu_id),
+                        float(t[part[0]]),
+                        float(t[part[-1]]),
+                        float(np.nanmax(rate[span])),
+                        float(np.nanmax(force[span])),
+                    )
+                )
+    return sorted(out, key=lambda x: x.start_s)
+
+
 @dataclass
 class _Scene:
     table: EpochTable
@@ -124,6 +183,13 @@ class _Scene:
     # the incident being weighed, from its first alarm to its end: interference is read over all of it
     span: tuple[float, float] = (0.0, 0.0)
     satellites: tuple[str, ...] = ()  # every satellite its detectors named
+    _shocks: list[Shock] | None = None
+
+    @property
+    def shocks(self) -> list[Shock]:
+        if self._shocks is None:
+            self._shocks = inertial_shocks(self.table, self.opts)
+        return self._shocks
 
     def rx(self, rid: str) -> Receiver:
         if rid not in self.receivers:
@@ -277,7 +343,7 @@ def interference_signs(scene: _Scene, rid: str) -> list[str]:
     return signs + receiver_interference_signs(w, scene.opts.interference_z)
 
 
-def _kept(cause: str, kind: Kind, why: str, rid: str) -> Reading:
+def _kept(cause: str, kind: Kind, why: str, rid: str | None) -> Reading:
     return Reading(cause, kind, False, why, receiver_id=rid)
 
 
@@ -537,10 +603,51 @@ def read_never_used(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
     return Reading("satellite never used", Kind.UNKNOWN, True, text, tuple(facts), rid)
 
 
+def read_inertial_shock(scene: _Scene, alarm: Alarm) -> Reading:
+    """An inertial alarm that began as the IMU read a tumble or an impact: the INS, not GNSS, departed."""
+    opts = scene.opts
+    onset = min(alarm.start_s, alarm.onset_s if alarm.onset_s is not None else alarm.start_s)
+    # a shock inside the alarm, or just before it began (one inside an alarm that rose before it is
+    # weighed, and refused, so the report says why)
+    near = [
+        sh
+        for sh in scene.shocks
+        if sh.start_s - opts.shock_quiet_before_s <= alarm.end_s
+        and alarm.start_s <= sh.end_s + opts.shock_alarm_within_s
+    ]
+    if not near:
+        return _kept("inertial shock", Kind.UNKNOWN, "", None)
+    sh = near[0]
+    imu = sh.imu_id if sh.imu_id.upper().startswith("IMU") else f"IMU {sh.imu_id}"
+    what = f"{sh.rate_dps:,.0f} deg/s and {sh.force_g:.1f} g from {sh.start_s:.1f} s to {sh.end_s:.1f} s"
+    if onset < sh.start_s - opts.shock_quiet_before_s or alarm.start_s < sh.start_s:
+        why = f"the inertial alarm rose from {onset:.1f} s, before the IMU read {what}"
+        return _kept("inertial shock", Kind.UNKNOWN, why, None)
+    if alarm.end_s > sh.end_s + opts.shock_recovery_s:
+        why = (
+            f"the inertial alarm lasted until {alarm.end_s:.1f} s, {alarm.end_s - sh.end_s:.0f} s after the IMU "
+            f"read {what}: longer than a filter takes to re-converge ({opts.shock_recovery_s:g} s)"
+        )
+        return _kept("inertial shock", Kind.UNKNOWN, why, None)
+    text = (
+        f"{imu} read {what} (a tumble or an impact) just before the inertial alarm: the INS lost "
+        "its attitude and departed from GNSS until it re-converged, not spoofing"
+    )
+    facts = (
+        f"{imu} angular rate up to {sh.rate_dps:,.0f} deg/s, specific force up to {sh.force_g:.1f} g "
+        f"({sh.start_s:.2f}-{sh.end_s:.2f} s)",
+        f"the inertial alarm quiet until {onset:.2f} s, beyond its level from {alarm.start_s:.2f} s",
+        f"the inertial alarm over by {alarm.end_s:.2f} s, {alarm.end_s - sh.end_s:.1f} s after the shock",
+    )
+    return Reading("inertial shock", Kind.UNKNOWN, True, text, facts, None)
+
+
 def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Reading]:
     """Every signature that applies to this alarm's class, in the order they are preferred."""
     ev = result.evidence
     out: list[Reading] = []
+    if ev == Evidence.INERTIAL:
+        return [read_inertial_shock(scene, alarm)]
     if ev == Evidence.LOG_CLOCK:
         return [read_time_fault(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
     if ev in (Evidence.RAW_MEASUREMENT, Evidence.KNOWN_STATION, Evidence.RECEIVER) and len(alarm.satellites) == 1:

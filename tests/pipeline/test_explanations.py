@@ -177,3 +177,60 @@ def test_the_receivers_indicators_are_arrays_of_their_own_epochs() -> None:
     rx = Receiver.of(table_of("corpus/gpsd/navisys-gr8013.log"), "ubx")
     w = Window.of(rx, 1000.0, 1010.0)
     assert w.fixes == 0 and np.isnan(w.worst("hdop", +1))
+
+
+# --- the vehicle's own IMU: a crash ------------------------------------------------------------------------
+
+CRASH = "corpus/dronekit-la-testdata/log171.bin"  # ArduCopter 3.3 in ACRO, tumbles at 227.7 s and lands
+
+
+def _ekf_dragged(table: EpochTable, start_s: float, rate_mps: float = 2.0, tau_s: float = 5.0) -> EpochTable:
+    """The autopilot's filter as it shows a GNSS drag north from `start_s` it follows with time constant
+    `tau_s` (as tests/detectors/test_autopilot_ekf.py models it): modelled, not a recorded attack."""
+    ekf = table.frame("autopilot_ekf").copy()
+    t = ekf["t_s"].to_numpy(dtype=float)
+    on, dt = t >= start_s, np.clip(t - start_s, 0.0, None)
+    ekf.loc[on, "vel_innov_n_mps"] -= rate_mps * np.exp(-dt[on] / tau_s)
+    ekf.loc[on, "pos_innov_n_m"] -= rate_mps * tau_s * (1.0 - np.exp(-dt[on] / tau_s))
+    return replace(table, autopilot_ekf=ekf)
+
+
+def test_a_crash_the_imu_read_explains_the_autopilot_filters_departure() -> None:
+    # a multirotor in ACRO at 8 m/s tumbles into the ground: all three IMUs at their gyros' full scale
+    # (2000 deg/s) and 11-17 g for 0.7 s; the autopilot's filter, integrating through it, loses its attitude
+    # and rejects GNSS (velocity test ratio 3.1) for 5 s. Its GNSS stayed where the vehicle was: at rest
+    a = analysed(CRASH)
+    assert not a.verdict.spoofed and "NO SPOOFING DETECTED" in a.verdict.headline
+    (inc,) = [i for i in a.verdict.incidents if "autopilot_ekf" in i.detectors]
+    assert inc.confidence_of_alarms == "high" and inc.confidence == "low"
+    assert Evidence.INERTIAL not in inc.unexplained  # what is left is one GNSS-only anomaly
+    (e,) = inc.explanations
+    assert e.cause == "inertial shock" and e.detectors == ("autopilot_ekf",)
+    assert "2,042 deg/s" in e.text and "227.7 s to 228.4 s" in e.text
+    assert any("quiet until 227.5" in f for f in e.facts)
+
+
+def test_an_autopilot_filter_dragged_before_the_crash_is_still_spoofing() -> None:
+    # the drag holds to the end of the log, over the tumble at 227.7 s: from 150 s, or from 215 s (12 s
+    # before it); either departure began before the IMU read the shock, which does not take it away
+    for start_s in (150.0, 215.0):
+        v = analyze_table(_ekf_dragged(table_of(CRASH), start_s)).verdict
+        assert v.spoofed
+        (inc,) = [i for i in v.incidents if i.is_spoofing]
+        assert Evidence.INERTIAL in inc.unexplained and start_s - 0.5 <= inc.onset_s <= start_s + 3.0
+        assert "inertial shock" not in causes(v)
+        (event,) = [e for e in v.events if e.kind == Kind.SPOOFING]
+        assert any("ruled out inertial shock: the inertial alarm rose from" in x for x in event.evidence_against)
+
+
+def test_a_capture_injected_through_the_crash_is_still_spoofing(tmp_path) -> None:
+    # the spoofer's clock 0.6 s off GNSS time (log clock: a reference the crash does not touch), from 215 s
+    # to the end of the log, over the tumble at 227.7 s
+    from spooflens.cli import main
+
+    out = tmp_path / "log171_capture.bin"
+    assert main(["inject", str(real_log(CRASH)), "--attack", "capture:clock=0.6,start=215", "-o", str(out)]) == 0
+    v = analyze_table(read_table(out, {}, False)).verdict
+    assert v.spoofed
+    (inc,) = [i for i in v.incidents if i.is_spoofing]
+    assert Evidence.LOG_CLOCK in inc.unexplained and 214.0 <= inc.start_s <= 220.0
