@@ -27,6 +27,9 @@ class Alarm:
     onset_interval_s: tuple[float, float] | None = None  # credible/confidence interval for the onset
     receiver_id: str | None = None  # the receiver the alarm is about (None: not receiver-specific)
     satellites: tuple[str, ...] = ()  # satellites found inconsistent, for raw-measurement detectors
+    # how far the named satellite's range was off over this alarm (its median, m), where the detector
+    # measures it (RAIM): a reflection makes tens of metres, a counterfeit kilometres (`pipeline.explanations`)
+    range_error_m: float | None = None
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,8 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
         out["receiver_id"] = a.receiver_id
     if a.satellites:
         out["satellites"] = list(a.satellites)
+    if a.range_error_m is not None:
+        out["range_error_m"] = a.range_error_m
     return out
 
 
