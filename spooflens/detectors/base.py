@@ -30,6 +30,9 @@ class Alarm:
     systems: tuple[str, ...] = ()  # GNSS hit (e.g. "GPS", "Galileo"), for detectors that say which
     bands: tuple[str, ...] = ()  # signal bands hit (e.g. "L1", "E1")
     end_interval_s: tuple[float, float] | None = None  # between the last alarmed epoch and the first quiet one
+    # how far the named satellite's range was off over this alarm (its median, m), where the detector
+    # measures it (RAIM): a reflection makes tens of metres, a counterfeit kilometres (`pipeline.explanations`)
+    range_error_m: float | None = None
 
 
 @dataclass(frozen=True)

@@ -85,7 +85,9 @@ def check_receiver(
             )
         if not size >= opts.min_inconsistency_m:
             continue
-        # runs of exclusion over the epochs the satellite was seen in, one missing epoch allowed
+        # runs of exclusion over the epochs the satellite was seen in, one missing epoch allowed; each alarm
+        # carries its own run's size (median and largest inconsistency), which the verdict weighs
+        excluded_rows = rows[res.flag[rows] == FAULT]
         idx = np.flatnonzero(seen)
         flags = faulty_epochs[idx]
         start = None
@@ -98,12 +100,15 @@ def check_receiver(
             elif start is not None:
                 misses += 1
                 if misses > 1 or k >= len(flags):
-                    if last - start + 1 >= opts.min_epochs:
-                        a, b = idx[start], idx[last]
-                        peak = float(np.nanmax(np.abs(inc))) if np.isfinite(inc).any() else float("nan")
-                        alarms.append(
-                            Alarm(float(t[a]), float(t[b]), peak, float(t[a]), float(t[a]), None, rid, (name,))
-                        )
+                    a, b = idx[start], idx[last]
+                    in_run = excluded_rows[(epoch[excluded_rows] >= a) & (epoch[excluded_rows] <= b)]
+                    off = np.abs(res.inconsistency_m[in_run])
+                    off = off[np.isfinite(off)]
+                    run_size = float(np.median(off)) if len(off) else float("nan")
+                    if last - start + 1 >= opts.min_epochs and len(off):
+                        t0, t1 = float(t[a]), float(t[b])
+                        alarm = Alarm(t0, t1, float(off.max()), t0, t0, None, rid, (name,), range_error_m=run_size)
+                        alarms.append(alarm)
                     start, misses = None, 0
     return alarms, findings, series
 
@@ -193,7 +198,10 @@ ANALYSIS = AnalysisSpec(
             "while a degree of freedom remains. A counterfeit satellite, or a spoofer that moved only a few, leaves "
             f"the honest ones to outvote it. An alarm needs the same satellite excluded in {_O.min_epochs} "
             "consecutive solvable epochs (one missing allowed) with a median inconsistency of "
-            f"{_O.min_inconsistency_m:g} m: a reflection spike is short and small, a counterfeit signal neither. A "
+            f"{_O.min_inconsistency_m:g} m: a reflection spike is short and small, a counterfeit signal neither. Each "
+            "alarm carries its run's size (median and largest), which the verdict weighs against a reflection's "
+            "length (a car's phone passes reflections: its satellites are excluded in runs, rarely at most of their "
+            "epochs). A "
             f'satellite excluded at {100 * _O.finding_fraction:.0f}% or more of its epochs is a named finding ("G07 '
             'inconsistent by 100 km, excluded at 100% of its 120 epochs"); the fixes solved from raw observations '
             "use the same exclusion, and each observation row gets a `fault_flag`. Beside it, the receiver's own "

@@ -59,6 +59,8 @@ def _alarm(table: EpochTable, a: Alarm) -> dict[str, Any]:
         out["bands"] = list(a.bands)
     if a.end_interval_s is not None:
         out["end_interval_s"] = list(a.end_interval_s)
+    if a.range_error_m is not None:
+        out["range_error_m"] = a.range_error_m
     return out
 
 

@@ -531,6 +531,9 @@ def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Read
     if others:  # reflections delay satellites each by its own path; several off together is a bias
         why = f"{sv} is not alone: the incident also names {'+'.join(others)}"
         return _kept("reflection", Kind.DEGRADATION, why, rid)
+    # the alarm's own size (a moving receiver passes reflections: its satellites are excluded now and then,
+    # in runs, rarely at most of their epochs), and that of any finding on the satellite over the alarm; the
+    # largest is weighed, so a satellite found far off elsewhere in the same time stays far off
     sizes = [
         f.range_error_m
         for f in result.findings
@@ -539,6 +542,9 @@ def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Read
         and f.start_s <= alarm.end_s
         and f.end_s >= alarm.start_s
     ]
+    if alarm.range_error_m is not None:
+        sizes.append(alarm.range_error_m)
+    sizes = [x for x in sizes if np.isfinite(x)]
     if not sizes:
         return _kept("reflection", Kind.DEGRADATION, "", rid)
     size = max(sizes)

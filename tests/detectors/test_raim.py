@@ -38,3 +38,28 @@ def test_a_phone_whose_fixes_leave_its_own_pseudoranges_is_a_finding_and_a_clean
     assert found, text
     peak, start = float(found.group(1)), float(found.group(2))
     assert 280.0 <= peak <= 360.0 and 100.0 <= start <= 101.0
+
+
+def test_each_alarm_carries_the_size_of_its_own_run_of_exclusions() -> None:
+    # the real Pixel 4 XL drive (GSDC 2021, 5 s epochs) with G09 a counterfeit 2 km late over 200-300 s and
+    # 300 m late over 600-800 s: two alarms, each with its own run's median and largest inconsistency (the
+    # verdict weighs that size against a reflection's), not the satellite's over the whole log
+    import pytest
+    from paths import REAL
+
+    from spooflens.attacks import apply_attack, parse_attack
+
+    log = REAL / "corpus/gnss_lib_py/gsdc2021_Pixel4XL_derived.csv"
+    if not log.exists():
+        pytest.skip(f"real log absent: {log}")
+    table = read_log(log)
+    for spec in ("pr_delay:svs=G09,delay=2000,start=200,end=300", "pr_delay:svs=G09,delay=300,start=600,end=800"):
+        table, _ = apply_attack(table, parse_attack(spec))
+    alarms = [a for a in run_raim(AnalysisContext(table, AnalyzeOptions())).alarms if a.satellites == ("G09",)]
+    assert len(alarms) == 2, alarms
+    for a, (start, end) in zip(alarms, ((200.0, 300.0), (600.0, 800.0)), strict=True):
+        assert start <= a.start_s <= start + 10.0 and end - 15.0 <= a.end_s <= end  # 5 s epochs, some missing
+    first, second = alarms
+    assert first.range_error_m is not None and 1900.0 < first.range_error_m < 2100.0
+    assert second.range_error_m is not None and 250.0 < second.range_error_m < 350.0
+    assert second.peak_statistic < 400.0 < first.peak_statistic

@@ -8,7 +8,7 @@ from functools import cache
 
 import numpy as np
 import pytest
-from paths import real_log
+from paths import REAL, real_log
 
 from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.detectors.receiver_time import run_receiver_time
@@ -234,3 +234,47 @@ def test_a_capture_injected_through_the_crash_is_still_spoofing(tmp_path) -> Non
     assert v.spoofed
     (inc,) = [i for i in v.incidents if i.is_spoofing]
     assert Evidence.LOG_CLOCK in inc.unexplained and 214.0 <= inc.start_s <= 220.0
+
+
+PIXEL4XL = "corpus/gnss_lib_py/gsdc2021_Pixel4XL_derived.csv"  # GSDC 2021, a Pixel 4 XL in a car, clean sky
+
+
+def _pixel4xl() -> EpochTable:
+    if not (REAL / PIXEL4XL).exists():
+        pytest.skip(f"real log absent: {REAL / PIXEL4XL}")
+    return read_table(REAL / PIXEL4XL, {}, False, solve_fixes=False)
+
+
+def test_a_phone_satellite_excluded_in_a_run_a_reflections_length_off_is_no_spoofing() -> None:
+    # a car's phone passes reflections: RAIM excludes its noisy GLONASS R13 (residuals of +-25 m sigma
+    # over the log, sign changing, at 73 deg elevation) in one run of 4 of 6 epochs, 79.8-104.8 s, 33-50 m
+    # off; R13 is excluded at 35 of its 200 epochs, no finding. RAIM alone gave medium; the alarm's own size
+    # is a reflection's
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+
+    a = analyze_table(with_solved_fixes(_pixel4xl()))
+    assert not a.verdict.spoofed, a.verdict.headline
+    raim = [i for i in a.verdict.incidents if "raim" in i.detectors]
+    assert raim and all(i.confidence_of_alarms == "medium" and not i.is_spoofing for i in raim)
+    (alarm,) = next(r for r in a.results if r.name == "raim").alarms
+    assert alarm.satellites == ("R13",) and alarm.range_error_m is not None and 30.0 < alarm.range_error_m < 60.0
+    assert alarm.peak_statistic < 60.0  # the run's own largest, not the satellite's over the whole log (98 m)
+    (e,) = raim[0].explanations
+    assert e.cause == "reflection" and e.kind == Kind.DEGRADATION and e.text.startswith("R13 alone 41 m off")
+
+
+@pytest.mark.parametrize("delay_m", [2000.0, 300.0])
+def test_a_satellite_a_spoofers_length_off_in_the_same_phone_log_is_still_spoofing(delay_m: float) -> None:
+    # the same log with G09 (82 deg, every epoch) a counterfeit delay_m late from 200 s: RAIM's alarm carries
+    # its size, more than any reflection, and nothing natural explains it
+    from spooflens.attacks import apply_attack, parse_attack
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+
+    spoofed, _ = apply_attack(_pixel4xl(), parse_attack(f"pr_delay:svs=G09,delay={delay_m:g},start=200"))
+    a = analyze_table(with_solved_fixes(spoofed))
+    assert a.verdict.spoofed, a.verdict.headline
+    inc = next(i for i in a.verdict.incidents if i.is_spoofing)
+    assert "G09" in inc.satellites and "raim" in inc.detectors and 195.0 <= inc.start_s <= 215.0
+    assert not any(e.cause == "reflection" for e in inc.explanations)
+    sizes = [x.range_error_m for x in next(r for r in a.results if r.name == "raim").alarms if x.satellites == ("G09",)]
+    assert sizes and all(s is not None and 0.9 * delay_m < s < 1.1 * delay_m for s in sizes)
