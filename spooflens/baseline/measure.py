@@ -18,7 +18,7 @@ from spooflens.baseline.indicators import INDICATORS
 from spooflens.detectors.dual_receiver import COLLAPSE, PR_COLLAPSE
 from spooflens.detectors.gnss_consistency import ConsistencyOptions, residual
 from spooflens.detectors.receiver_time import ReceiverTimeOptions, drift_ppm, offset_scale
-from spooflens.navigation.noise_learning import LearnedNoise
+from spooflens.navigation.noise_learning import LearnedNoise, noise_parameters
 from spooflens.pipeline.run import Analysis
 from spooflens.schema import FixType
 
@@ -110,23 +110,7 @@ def _outside(t: FloatArray, spans: tuple[tuple[float, float], ...]) -> NDArray[n
 
 def _noise_parameters(learned: LearnedNoise) -> dict[str, float]:
     n = learned.noise
-    out = {
-        "w_h": n.white_pos_m[0],
-        "w_v": n.white_pos_m[1],
-        "b_h": n.gm_pos_m[0],
-        "b_v": n.gm_pos_m[1],
-        "tau_p": n.tau_pos_s,
-        "imu": learned.imu_scale,
-    }
-    if n.has_velocity:
-        out |= {
-            "wv_h": n.white_vel_mps[0],
-            "wv_v": n.white_vel_mps[1],
-            "bv_h": n.gm_vel_mps[0],
-            "bv_v": n.gm_vel_mps[1],
-            "tau_v": n.tau_vel_s,
-        }
-    return {k: float(v) for k, v in out.items()}
+    return {k: float(v) for k, v in noise_parameters(n, learned.imu_scale, n.has_velocity).items()}
 
 
 def _satellite_levels(sats: pd.DataFrame, spans: tuple[tuple[float, float], ...]) -> dict[str, Level]:

@@ -440,7 +440,7 @@ def learn_noise(
         )
 
     objective.inputs, objective.score_mask = _up_to_last_scored(sub, first.t, objective.score_mask)
-    params = _parameters(noise, 1.0, has_vel)
+    params = noise_parameters(noise, 1.0, has_vel)
 
     def options(p: dict[str, float]) -> FilterOptions:
         n = GnssNoise(
@@ -474,7 +474,7 @@ def learn_noise(
     # with a baseline, of the values its clean logs learned), every candidate under the baseline's caps
     grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper) for b in opts.wander_grid_m]
     if prior is not None:
-        grid.append(_capped(_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper))
+        grid.append(_capped(noise_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper))
     values = objective.many([options(g) for g in grid])
     params = grid[int(np.argmin(values))]
     best, params = _search(objective, options, params, list(params), opts, min(values), upper)
@@ -504,8 +504,8 @@ def learn_noise(
     )
 
 
-def _parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, float]:
-    """The search's parameters of a noise model."""
+def noise_parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, float]:
+    """The search's parameters of a noise model, by the names a baseline records them under."""
     params = {
         "imu": imu,
         "w_h": noise.white_pos_m[0],
