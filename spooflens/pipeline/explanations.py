@@ -105,6 +105,7 @@ class ExplanationOptions:
     skipped_fix_tolerance: float = 0.25
     skipped_fix_max_periods: int = 2
     skipped_fix_min_travel_m: float = 1.0  # slower, a fix period's travel is lost in the fixes' noise
+    repeated_fix_m: float = 0.05  # a fix sent twice: the same position, to the log's decimals
     # a satellite never used
     never_used_fraction: float = 0.05
     never_used_min_epochs: int = 30
@@ -439,7 +440,8 @@ def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     """A fix dropped (or sent twice) by an output cycle that is not locked to the receiver's fixes (an NMEA
     2000 gateway sending 129029 every 1.005 s of 1 Hz fixes drops one every 200 s): between two messages
     the fix moved its velocity's travel plus one (or two) whole fix periods' along the track (minus one:
-    repeated), and no other interval of the check's window moved more than half that beyond its velocity.
+    repeated: the same position twice), and no other interval of the check's window moved more than half that
+    beyond its velocity.
     The check's window then alarms for its own length at most."""
     opts, rx = scene.opts, w.rx
     rid = rx.receiver_id
@@ -467,9 +469,14 @@ def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     n = round(float(ee[i] * te + en[i] * tn) / travel**2)
     miss = float(np.hypot(ee[i] - n * te, en[i] - n * tn))
     when = float(rx.t[k[i] + 1])
-    if n == 0 or abs(n) > opts.skipped_fix_max_periods or miss > opts.skipped_fix_tolerance * travel:
-        why = f"the fix's jump at {when:.1f} s ({excess[i]:.1f} m) is no whole fix period's travel ({travel:.1f} m)"
-        return _kept("skipped fix", Kind.RECEIVER_FAULT, why, rid)
+    moved = float(np.hypot(east[k[i]], north[k[i]]))
+    if (
+        n == 0
+        or abs(n) > opts.skipped_fix_max_periods
+        or miss > opts.skipped_fix_tolerance * travel
+        or (n < 0 and moved > opts.repeated_fix_m)  # a fix sent twice carries the same numbers twice
+    ):  # no jump of whole fix periods: not this cause (nothing to list)
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
     if excess[j] > 0.5 * travel:
         also = f"{excess[j]:.1f} m beyond its velocity at {rx.t[k[j] + 1]:.1f} s"
         why = f"the fix also moved {also}: no single dropped fix"
@@ -490,9 +497,9 @@ def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
         f"({travel:.1f} m per {period:.3f} s) {'ahead' if n > 0 else 'behind'}: an output cycle not locked to the "
         f"fixes {what}{saws}, not spoofing"
     )
-    facts = (
-        f"jump beyond the velocity {excess[i]:.2f} m at {when:.1f} s",
-        f"{n:+d} x {travel:.2f} m (one fix period's travel), off by {miss:.2f} m",
+    facts = (  # one sign: the jump, and that it stands alone
+        f"jump beyond the velocity {excess[i]:.2f} m at {when:.1f} s: {n:+d} x {travel:.2f} m (one fix period's "
+        f"travel), off by {miss:.2f} m",
         f"next largest in the window {excess[j]:.2f} m",
     )
     return Reading("skipped fix", Kind.RECEIVER_FAULT, True, text, facts, rid)
