@@ -31,6 +31,26 @@ class ReceiverTimeOptions:
     max_leap_s: int = 2  # firmware of 2015 or later defaults to 17 or 18 of today's 18
     drift_ppm: float = 20.0  # a rate this far from the baseline's is a finding (crystals vary by a few ppm)
     min_drift_s: float = 60.0
+    # a receiver's time given in whole seconds (or halves), read at instants of a cycle of its own
+    resolutions_s: tuple[float, ...] = (1.0, 0.5)
+    resolution_tolerance_s: float = 0.001  # every time a whole number of them, to the logger's millisecond
+    wrap_tolerance: float = 0.05  # of the resolution: a wrap is one resolution step, less the drift, to 5 %
+    # most of the log on one phase of the steps: a spoofer's time half a second off is on another phase
+    # from its takeover on, and must not hide its own step
+    resolution_share: float = 0.5
+
+
+@dataclass(frozen=True)
+class CoarseTime:
+    """A receiver's time in whole steps of `resolution_s` (1 s: a time field filled to the second, a time
+    truncated when the message was assembled) read at instants that are not locked to those steps (an
+    output or gateway cycle of its own, 1.0055 s for 1 s): the offset against the log's clock saws, drifting
+    by `drift` s per s as the reading instant slides through the second and wrapping back by one step each
+    time it crosses one (`wraps` times). Its true value is known only to within one step."""
+
+    resolution_s: float
+    drift: float
+    wraps: int
 
 
 @dataclass(frozen=True)
@@ -61,6 +81,7 @@ class ReceiverClockTest:
     scale_s: float
     threshold_s: float
     steps: list[Step]
+    coarse: CoarseTime | None = None
 
 
 def _kind(
@@ -98,6 +119,54 @@ def offset_scale(x: FloatArray, floor: float) -> float:
     return max(1.4826 * float(np.median(np.abs(dx - np.median(dx)))) / np.sqrt(2.0), floor)
 
 
+def _on_one_phase(phase: FloatArray, q: float, tol: float) -> float:
+    """The share of the times on their commonest phase (mod `q`, to `tol`): 1.0 for a time in whole steps."""
+    bins = max(round(q / tol), 1)
+    k = np.round(phase / q * bins).astype(np.int64) % bins
+    counts = np.bincount(k, minlength=bins)
+    near = counts + np.roll(counts, 1) + np.roll(counts, -1)  # a time on a bin's edge
+    return float(near.max()) / len(phase)
+
+
+def coarse_time(t: FloatArray, x: FloatArray, scale: float, opts: ReceiverTimeOptions) -> CoarseTime | None:
+    """The sawtooth of a coarse receiver time (`CoarseTime`), or None. All three must hold: the receiver's
+    times (`x + t`, up to a constant) whole numbers of steps of a resolution at least the alarm's least step
+    (most of them: `resolution_share`);
+    the offset drifting steadily (its median rate over a baseline minute more than the alarm's jitter
+    allowance); and wraps, each one step against the drift (less the drift over its interval), no more of
+    them than the drift over the log accounts for (one per step drifted, and one more). A spoofer's clock
+    moves the offset by its own amount and keeps it there: no wrap of exactly one step that the drift then
+    undoes."""
+    if len(t) < 3:
+        return None
+    dt, dx = np.diff(t), np.diff(x)
+    ok = dt > 0
+    if ok.sum() < 2:
+        return None
+    drift = float(np.median(dx[ok] / dt[ok]))
+    if abs(drift) * opts.baseline_s <= opts.z_alarm * scale:
+        return None
+    for q in sorted(opts.resolutions_s, reverse=True):
+        if q < opts.min_step_s:
+            continue
+        if _on_one_phase(np.mod(x + t, q), q, opts.resolution_tolerance_s) < opts.resolution_share:
+            continue
+        jump = dx - drift * dt - (-np.sign(drift) * q)
+        wraps = int(np.sum(np.abs(jump) <= max(opts.wrap_tolerance * q, opts.z_alarm * scale)))
+        drifted = abs(drift) * float(t[-1] - t[0]) / q
+        if 1 <= wraps <= drifted + 1:
+            return CoarseTime(q, drift, wraps)
+    return None
+
+
+def time_resolution_s(t: FloatArray, x: FloatArray, opts: ReceiverTimeOptions | None = None) -> float:
+    """The resolution of a receiver's sawing coarse time (`coarse_time`; t and x finite, t sorted), else 0:
+    how far its offset moves with no move of its time."""
+    opts = opts or ReceiverTimeOptions()
+    coarse = coarse_time(t, x, offset_scale(x, opts.min_scale_s), opts)
+    return coarse.resolution_s if coarse is not None else 0.0
+
+
 def judge_receiver(
     rid: str,
     t: FloatArray,
@@ -112,6 +181,9 @@ def judge_receiver(
     raise the alarm level."""
     scale = min(offset_scale(x, opts.min_scale_s), max(scale_cap, opts.min_scale_s))
     thr = max(opts.z_alarm * scale, opts.min_step_s)
+    coarse = coarse_time(t, x, scale, opts)
+    if coarse is not None:  # the offset and its baseline both lie within one step of the resolution
+        thr += coarse.resolution_s
     clean = x.copy()
     base = trailing_median(t, clean[:, None], opts.baseline_s, opts.guard_s)[:, 0]
     change = x - base
@@ -141,7 +213,7 @@ def judge_receiver(
         base[last + 1 :] = trailing_median(t, clean[:, None], opts.baseline_s, opts.guard_s)[:, 0][last + 1 :]
         change[last + 1 :] = x[last + 1 :] - base[last + 1 :]
         i = last + 1
-    return ReceiverClockTest(rid, t, x, change, scale, thr, steps)
+    return ReceiverClockTest(rid, t, x, change, scale, thr, steps, coarse)
 
 
 def _finding(test: ReceiverClockTest, s: Step, clock: str) -> Finding:
@@ -157,6 +229,15 @@ def _finding(test: ReceiverClockTest, s: Step, clock: str) -> Finding:
         "the receiver's time ran on (not counted)",
     }[s.kind]
     return Finding(text, t0, t1, receiver_id=test.receiver_id)
+
+
+def _coarse_finding(test: ReceiverClockTest, c: CoarseTime, clock: str) -> Finding:
+    text = (
+        f"{test.receiver_id}: the receiver's time is given in whole steps of {c.resolution_s:g} s, read at instants "
+        f"of a cycle of its own: against {clock} it drifts {c.drift * 1e3:+.1f} ms/s and wraps back by "
+        f"{c.resolution_s:g} s ({c.wraps} time(s)), a sawtooth; changes within the resolution are not counted"
+    )
+    return Finding(text, float(test.t[0]), float(test.t[-1]), receiver_id=test.receiver_id)
 
 
 def run_receiver_time(
@@ -192,6 +273,9 @@ def run_receiver_time(
                 result.findings.append(drift)
         test = judge_receiver(str(rid), t[ok], x[ok], opts, monotonic, scale_cap)
         words.append(f"{rid}: robust sigma {test.scale_s * 1e3:.1f} ms, alarm level {test.threshold_s:.3f} s")
+        if test.coarse is not None:
+            words[-1] += f" (raised by its time's resolution, {test.coarse.resolution_s:g} s)"
+            result.findings.append(_coarse_finding(test, test.coarse, clock))
         result.series.append(Series(f"{rid}/time_offset", test.t, test.offset, "s"))
         result.series.append(Series(f"{rid}/offset_change", test.t, test.change, "s", test.threshold_s))
         for s in test.steps:
@@ -311,16 +395,28 @@ ANALYSIS = AnalysisSpec(
             "learns the broadcast ones within 12.5 min; no default is ahead of today's 18), and a step of the "
             "logger's clock (the receiver's time advanced by a fix period between two fixes, the logger's did "
             "not: a host clock set by NTP; only where the log's clock is a host's, never against a monotonic boot "
-            "clock). A spoofer synchronised to GNSS time, or a meaconer's microseconds of delay, is not seen.",
+            "clock). A receiver's time given in whole seconds (or halves) and read at instants of a cycle of its own "
+            "(an NMEA 2000 gateway that sends 129029 with the second it was assembled in every 1.005 s) saws: the "
+            "offset drifts as the reading instant slides through the second and wraps back by one second each time "
+            "it crosses one. Where most of the receiver's times are whole steps of such a resolution, the offset "
+            "drifts steadily and wraps by one step against the drift, no more often than the drift accounts for, "
+            "the alarm level is raised by the resolution (the offset and its baseline both lie within one step "
+            "of it) and the sawtooth is a finding. A spoofer's time moves the whole band and keeps it there; moves "
+            "within the resolution are not seen. A spoofer synchronised to GNSS time, or a meaconer's microseconds "
+            "of delay, is not seen.",
             p_false_alarm="rule thresholds: none seen on real logs",
             threshold=f"max({_O.z_alarm:g} robust sigma, {_O.min_step_s:g} s) for {_O.min_fixes} fixes and "
-            f"{_O.min_duration_s:g} s",
+            f"{_O.min_duration_s:g} s (plus the resolution of a sawing coarse time)",
             checked="Real clean logs: the ArduPilot flight `flightdata_center_0003.bin` (5 Hz GPS rows, robust "
             "sigma 20 ms), the Pixel 6 GnssLogger fixes (1 ms) and its NMEA (16 ms) raise nothing; the ArduPilot "
             "flight with `inject --attack capture:start=20,drag=step,offset=300,clock=3600.5` is SPOOFING, high "
             "(GNSS-only and log clock), from 24.0 s to the end; the Pixel 6 log with "
             "`capture:start=200,clock=-30.5` alarms from the first fix after the takeover (204 s, interval "
-            "198-204 s) (`tests/detectors/test_receiver_time.py`).",
+            "198-204 s). The Aava's NMEA 2000 capture `corpus/signalk/aava-n2k.data` (129029 times to the whole "
+            "second, sent every 1.005 s: -5 ms/s, three wraps) raises nothing but the sawtooth's finding, where "
+            "its wraps were four log-clock incidents; the same capture with a spoofer 30 s or -2 s off GNSS "
+            "time from 200 s (attacked in the table) is SPOOFING, high, from the takeover "
+            "(`tests/detectors/test_receiver_time.py`).",
         ),
     ),
 )

@@ -11,6 +11,8 @@ names a natural cause and the alarm it accounts for:
 - convergence: the receiver's first minutes after its first fix (or after the fix was lost for 10 s),
   its DOP, satellites, fix type or accuracy still settling;
 - mode switch: the fix type changed (SBAS, DGNSS, RTK float/fixed) where the fix moved, by metres;
+- skipped fix: the fix moved one fix period's travel more (or less) than its velocity over one interval,
+  alone: an output or gateway cycle not locked to the fixes dropped (or repeated) one;
 - time faults: the receiver's time moved against the log's clock by whole GPS week epochs (1024 weeks:
   a week rollover) or by a whole number of leap seconds;
 - one satellite's range a reflection's length off (NLOS), its C/N0 not raised;
@@ -38,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.detectors.gnss_consistency import ConsistencyOptions
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import Evidence, Span
 from spooflens.pipeline.indicators import Receiver, Window, running_median
@@ -103,6 +106,12 @@ class ExplanationOptions:
     rollover_tolerance_s: float = 60.0
     max_leap_s: int = 18  # GPS - UTC since 2017
     leap_tolerance_s: float = 0.02
+    # a fix skipped (or repeated) by an output cycle of its own: one interval's excess over the velocity is
+    # a whole fix period's travel along the track (1 or 2 of them), to a quarter of it, and stands alone
+    skipped_fix_tolerance: float = 0.25
+    skipped_fix_max_periods: int = 2
+    skipped_fix_min_travel_m: float = 1.0  # slower, a fix period's travel is lost in the fixes' noise
+    repeated_fix_m: float = 0.05  # a fix sent twice: the same position, to the log's decimals
     # a satellite never used
     never_used_fraction: float = 0.05
     never_used_min_epochs: int = 30
@@ -233,7 +242,7 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
         moved = w.worst("time_offset_s", +1) - w.level("time_offset_s")
         moved_back = w.worst("time_offset_s", -1) - w.level("time_offset_s")
         step = moved if abs(moved) >= abs(moved_back) else moved_back
-        if abs(step) >= opts.time_moved_s:
+        if abs(step) >= opts.time_moved_s + w.rx.time_resolution_s:  # a coarse time saws by its resolution
             marks.append(f"the receiver's time moved {step:+.3f} s against the log's clock")
     return marks
 
@@ -493,6 +502,75 @@ def read_mode_switch(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     return Reading("mode switch", Kind.RECEIVER_FAULT, True, text, facts, rid)
 
 
+def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
+    """A fix dropped (or sent twice) by an output cycle that is not locked to the receiver's fixes (an NMEA
+    2000 gateway sending 129029 every 1.005 s of 1 Hz fixes drops one every 200 s): between two messages
+    the fix moved its velocity's travel plus one (or two) whole fix periods' along the track (minus one:
+    repeated: the same position twice), and no other interval of the check's window moved more than half that
+    beyond its velocity.
+    The check's window then alarms for its own length at most."""
+    opts, rx = scene.opts, w.rx
+    rid = rx.receiver_id
+    window_s = ConsistencyOptions().window_s
+    period = rx.period_s
+    at = min(alarm.start_s, alarm.onset_s if alarm.onset_s is not None else alarm.start_s)
+    k = np.flatnonzero((rx.t[1:] >= at - window_s) & (rx.t[1:] <= alarm.start_s + 2.0 * period))
+    if len(k) < 2:
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
+    lat, lon = rx.col("lat_deg"), rx.col("lon_deg")
+    north = np.diff(lat) * 110_540.0
+    east = np.diff(lon) * 111_320.0 * np.cos(np.radians(np.nanmean(lat[k])))
+    ve, vn, dt = rx.col("vel_e_mps"), rx.col("vel_n_mps"), np.diff(rx.t)
+    me, mn = 0.5 * (ve[1:] + ve[:-1]), 0.5 * (vn[1:] + vn[:-1])
+    ee, en = (east - me * dt)[k], (north - mn * dt)[k]
+    excess = np.hypot(ee, en)
+    if not np.isfinite(excess).all():
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
+    order = np.argsort(-excess)
+    i, j = int(order[0]), int(order[1])
+    te, tn = me[k[i]] * period, mn[k[i]] * period  # one fix period's travel
+    travel = float(np.hypot(te, tn))
+    if travel < opts.skipped_fix_min_travel_m:
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
+    n = round(float(ee[i] * te + en[i] * tn) / travel**2)
+    miss = float(np.hypot(ee[i] - n * te, en[i] - n * tn))
+    when = float(rx.t[k[i] + 1])
+    moved = float(np.hypot(east[k[i]], north[k[i]]))
+    if (
+        n == 0
+        or abs(n) > opts.skipped_fix_max_periods
+        or miss > opts.skipped_fix_tolerance * travel
+        or (n < 0 and moved > opts.repeated_fix_m)  # a fix sent twice carries the same numbers twice
+    ):  # no jump of whole fix periods: not this cause (nothing to list)
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
+    if excess[j] > 0.5 * travel:
+        also = f"{excess[j]:.1f} m beyond its velocity at {rx.t[k[j] + 1]:.1f} s"
+        why = f"the fix also moved {also}: no single dropped fix"
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, why, rid)
+    if alarm.end_s - alarm.start_s > window_s + 3.0 * period:
+        why = f"the alarm lasted {alarm.end_s - alarm.start_s:.1f} s, longer than one jump keeps the check's window"
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, why, rid)
+    if marks:
+        return _kept("skipped fix", Kind.RECEIVER_FAULT, "; ".join(marks), rid)
+    what = f"{'dropped' if n > 0 else 'repeated'} {abs(n)} fix(es)"
+    saws = (
+        f"; its time saws by its {rx.time_resolution_s:g} s resolution the same way (receiver_time)"
+        if rx.time_resolution_s > 0
+        else ""
+    )
+    text = (
+        f"the fix moved {excess[i]:.1f} m beyond its velocity at {when:.1f} s, {abs(n)} fix period(s)' travel "
+        f"({travel:.1f} m per {period:.3f} s) {'ahead' if n > 0 else 'behind'}: an output cycle not locked to the "
+        f"fixes {what}{saws}, not spoofing"
+    )
+    facts = (  # one sign: the jump, and that it stands alone
+        f"jump beyond the velocity {excess[i]:.2f} m at {when:.1f} s: {n:+d} x {travel:.2f} m (one fix period's "
+        f"travel), off by {miss:.2f} m",
+        f"next largest in the window {excess[j]:.2f} m",
+    )
+    return Reading("skipped fix", Kind.RECEIVER_FAULT, True, text, facts, rid)
+
+
 def read_time_fault(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
     opts, rx = scene.opts, scene.rx(rid)
     x = rx.col("time_offset_s")
@@ -669,6 +747,7 @@ def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Read
             out += [
                 read_convergence(scene, alarm, w, marks),
                 read_mode_switch(scene, alarm, w, marks),
+                *([read_skipped_fix(scene, alarm, w, marks)] if result.name == GNSS_CONSISTENCY else []),
                 read_interference(scene, alarm, w, marks),
                 read_degradation(scene, alarm, w, marks, result.name == GNSS_CONSISTENCY),
             ]

@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.detectors.receiver_time import time_resolution_s
 from spooflens.epoch_table import EpochTable
 from spooflens.schema import FixType, SpoofingFlag
 
@@ -105,6 +107,14 @@ class Receiver:
     @property
     def period_s(self) -> float:
         return float(np.median(np.diff(self.t))) if len(self.t) > 2 else 1.0
+
+    @cached_property
+    def time_resolution_s(self) -> float:
+        """How far the receiver's time offset moves with no move of its time: the resolution of a coarse time
+        read on a cycle of its own (`receiver_time.coarse_time`), else 0."""
+        x = self.col("time_offset_s")
+        ok = np.isfinite(x)
+        return time_resolution_s(self.t[ok], x[ok]) if ok.sum() >= 3 else 0.0
 
 
 def _between(t: FloatArray, a: float, b: float) -> slice:

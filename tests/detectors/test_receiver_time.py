@@ -14,10 +14,14 @@ from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
 from readers import read_log
+from spooflens.attacks import apply_attack
+from spooflens.attacks.spec import parse_attack
 from spooflens.baseline.format import Baseline
 from spooflens.cli import main
 from spooflens.detectors.receiver_time import run_receiver_time
 from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.run import analyze_table
+from spooflens.pipeline.verdict import Kind
 
 
 def _fixes(t: np.ndarray, offset: np.ndarray) -> pd.DataFrame:
@@ -231,6 +235,69 @@ def test_real_phone_log_with_a_spoofer_clock_injected(tmp_path: Path) -> None:
     (alarm,) = result.alarms
     assert alarm.onset_interval_s == (pytest.approx(198.0, abs=0.05), pytest.approx(204.0, abs=0.05))
     assert result.extras["phone/steps_s"] == [pytest.approx(-30.5, abs=0.01)]
+
+
+def _coarse(
+    seconds: float = 900.0, cycle_s: float = 1.0055, resolution_s: float = 1.0, seed: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
+    """A gateway that sends the receiver's last time to the whole second on a cycle of its own (1.0055 s, not
+    locked to GNSS seconds), 4 ms of latency jitter: the offset saws, -5.5 ms/s then back by 1 s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, cycle_s) + 0.3
+    receiver = np.floor(t / resolution_s) * resolution_s  # the GNSS time when the message is assembled
+    return t + rng.normal(0.0, 0.004, len(t)), receiver
+
+
+def test_a_time_to_the_whole_second_read_on_a_cycle_of_its_own_is_a_sawtooth_not_a_step() -> None:
+    t, receiver = _coarse()
+    x = receiver - t
+    result = run_receiver_time(_fixes(t, x))
+    assert not result.alarms
+    (finding,) = result.findings
+    assert "whole steps of 1 s" in finding.text and "wraps back by 1 s (5 time(s))" in finding.text
+    assert "alarm level 1.250 s (raised by its time's resolution, 1 s)" in result.reason
+    # ten messages a second, each with the second it was assembled in: the offset falls 1 s/s, 900 wraps
+    t10, r10 = _coarse(cycle_s=0.1)
+    assert not run_receiver_time(_fixes(t10, r10 - t10)).alarms
+    # a receiver whose messages come at its own seconds (1 Hz, whole seconds) has no sawtooth: 0.25 s holds
+    t1 = np.arange(0.0, 900.0, 1.0) + 0.3
+    steady = run_receiver_time(_fixes(t1, np.floor(t1) - t1 + 0.4 * (t1 >= 500.0)))
+    assert "raised" not in steady.reason and steady.alarms[0].onset_s == pytest.approx(500.3)
+
+
+@pytest.mark.parametrize("clock", [30.0, -2.0, 30.5, 3600.0])
+def test_a_spoofer_clock_on_a_sawtooth_is_still_an_alarm(clock: float) -> None:
+    """A spoofer's time moves the whole band of the sawtooth and keeps it moved; wraps of one step undone by
+    the drift are the sawtooth's own. Half a second off, the spoofer's time is on another phase of the
+    seconds after its takeover (most of the log still on one)."""
+    t, receiver = _coarse()
+    x = receiver - t + clock * (t >= 600.0)
+    result = run_receiver_time(_fixes(t, x))
+    (alarm,) = result.alarms
+    assert alarm.onset_s == pytest.approx(600.0, abs=1.1)
+    assert any("a spoofer's clock" in f.text for f in result.findings)
+
+
+def test_the_real_n2k_gateways_sawtooth_is_no_spoofing_and_a_time_attack_on_it_is() -> None:
+    """The Aava's NMEA 2000 capture (clean sky): its 129029 carries the GNSS time to the whole second, sent
+    every 1.005 s of the logger's clock, so the time minus the logger's saws -5 ms/s and wraps back by 1 s at
+    106.6, 279.5 and 448.4 s (it was SPOOFING on the log clock, four incidents). The same capture with a
+    spoofer 30 s off GNSS time from 200 s (inject cannot write NMEA 2000: the table is attacked) is SPOOFING
+    from the takeover, the log clock and the GNSS-only class together."""
+    table = read_log(real_log("corpus/signalk/aava-n2k.data"))
+    result = run_receiver_time(table.fixes)
+    assert not result.alarms and result.extras["N2K/160/steps_s"] == []
+    assert "wraps back by 1 s (3 time(s))" in result.findings[0].text
+    clean = analyze_table(table).verdict
+    assert not clean.spoofed and not any(i.kind == Kind.SPOOFING for i in clean.incidents)
+    assert not any(Evidence.LOG_CLOCK in i.evidence for i in clean.incidents)
+    for clock in (30.0, -2.0):
+        spoofed, _ = apply_attack(table, parse_attack(f"capture:start=200,drag=step,offset=300,clock={clock}"))
+        verdict = analyze_table(spoofed).verdict
+        assert verdict.spoofed
+        (incident,) = [i for i in verdict.incidents if i.kind == Kind.SPOOFING]
+        assert incident.confidence == "high" and Evidence.LOG_CLOCK in incident.evidence
+        assert 200.0 <= incident.onset_s <= 206.0
 
 
 def _clock_baseline(n: int = 3) -> Baseline:

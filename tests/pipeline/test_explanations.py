@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from paths import REAL, real_log
 
+from spooflens.attacks import apply_attack
+from spooflens.attacks.spec import parse_attack
 from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.detectors.receiver_time import run_receiver_time
 from spooflens.epoch_table import EpochTable
@@ -112,6 +114,27 @@ def test_a_switch_of_the_fix_mode_where_the_fix_moved_is_a_receiver_mode_switch(
     result = DetectorResult("gnss_consistency", True, alarms=[quiet], evidence=Evidence.GNSS_ONLY)
     (inc,) = decide([result]).incidents
     assert "mode switch" not in {e.cause for e in explain(mtv.table, [result], inc).explanations}
+
+
+AAVA = "corpus/signalk/aava-n2k.data"
+
+
+def test_a_fix_dropped_by_a_gateways_own_cycle_is_a_receiver_fault() -> None:
+    """The Aava's NMEA 2000 gateway sends 129029 every 1.005 s of 1 Hz fixes: every 190 s one fix is
+    dropped and the position moves two fix periods' travel in one (3.3 m at 6.5 kn), the GNSS-only check's
+    four alarms (its time saws the same way, receiver_time). A spoofer's 50 m step on the same log, or a
+    ramp, is no dropped fix."""
+    verdict = analysed(AAVA).verdict
+    assert not verdict.spoofed and len(verdict.incidents) == 4
+    for inc in verdict.incidents:
+        assert inc.kind == Kind.RECEIVER_FAULT and [e.cause for e in inc.explanations] == ["skipped fix"]
+        text = inc.explanations[0].text
+        assert "dropped 1 fix(es)" in text and "saws by its 1 s resolution" in text
+    table = table_of(AAVA)
+    for attack in ("step:start=300,offset=50", "ramp:start=300,end=340,rate=1"):
+        spoofed, _ = apply_attack(table, parse_attack(attack))
+        (inc,) = [i for i in analyze_table(spoofed).verdict.incidents if i.start_s < 345.0 and i.end_s > 300.0]
+        assert inc.kind == Kind.UNKNOWN and "skipped fix" not in causes(replace(verdict, incidents=(inc,))), attack
 
 
 def _time_stepped(step_s: float, from_s: float = 25.0) -> tuple[EpochTable, list[DetectorResult], Verdict]:
