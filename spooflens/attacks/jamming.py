@@ -1,19 +1,6 @@
 """A jammer as real receivers log it (`jam`), and jamming followed by a spoofer's capture (`jam_spoof`).
 
-Noise-like interference adds power J to the noise N0 every satellite's signal competes with, so every
-satellite's C/N0 falls by the same 10 log10(1 + J/N0) dB whatever its strength; a satellite pushed below
-the tracking threshold (`fix_lost_below`) is lost and comes back 3 dB above it; with fewer than four
-the fix is lost. The front end sees the extra power: its AGC turns the gain down, its noise and jamming
-indicators rise, and the receiver's jamming monitor (where the log has one that is on) says warning, and
-critical when the fix is gone. The code tracking noise grows as 1/sqrt(C/N0): the raw pseudoranges get it,
-the fixes its thermal part through the geometry left, smoothed by the receiver's filter; the accuracies a
-receiver reports grow faster (`acc`), and its DOP with the satellites lost. The jammer's power rises over `ramp` s from
-`start` and fades over `ramp` s before `end`.
-
-`jam_spoof` is the attack real spoofers mount: jam the receiver off the sky, then let it re-acquire on the
-counterfeit signals (`spooflens.attacks.capture`), which are louder than the sky and alike on every
-satellite (one antenna sends them all). Its truth file lists both phases.
-"""
+The rest of its description: docs/interference.md ("Notes from the code")."""
 
 from __future__ import annotations
 

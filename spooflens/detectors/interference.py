@@ -2,26 +2,7 @@
 blocked and from a spoofer. Evidence class `interference`: it says what disturbed the signals, never
 that GNSS was moved, so it makes no spoofing incident.
 
-Per receiver, three signatures, each against the log's own past:
-
-- **Signal loss** (`statistics.signal_loss`): the C/N0 of the receiver's satellites falling together by
-  `min_drop_db` or more, from its sky view (NAV-SAT, GSV, PX4 satellite_info, GnssStatus), else its raw
-  observations, else the fixes' mean C/N0. A jammer lowers every satellite by the same number of dB and
-  loses the weakest; a wall, a tree or a turn of the antenna takes some satellites and not others
-  (uneven drops, low ones first); a tunnel takes all. Noise-like interference also raises the power at
-  the antenna, so the AGC turns down and the noise and jamming indicators rise; attenuation leaves them
-  alone. A loss is an interference alarm when it is uniform and the front end's indicators, if logged,
-  moved with it; or when they (or the receiver's own jamming state) say so whatever the loss looked like.
-- **Front-end power** without a C/N0 loss: two of AGC (down), noise and jamming indicator (up) beyond
-  `z_joint` robust sigma of their log-wide level within `window_s` of each other, for `min_duration_s`.
-- **The receiver's own jamming state** at warning/critical (u-blox) or mitigated/detected (PX4's current
-  definition) for `min_duration_s`; "unknown / monitor off" is kept apart from "ok" in the facts.
-
-Each event's facts (JSON, `extras["events"]`) carry the evidence for and against: the drop and its spread,
-elevation dependence, satellites and fix lost, accuracy inflation, the RF indicators before and during,
-the receiver's state, and how the C/N0 came back (above its old level: a louder source took over).
-Losses that are no alarm are listed too (`extras["rejected"]`), with why. Method and rates: docs/interference.md.
-"""
+The rest of its description: docs/interference.md ("Notes from the code")."""
 
 from __future__ import annotations
 

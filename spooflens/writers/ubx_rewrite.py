@@ -1,21 +1,6 @@
 """Attacked copies of u-blox UBX captures: the messages the reader maps edited in place, every other byte kept.
 
-The capture is framed as the reader frames it (`readers.ubx.frames.split_frames`); each epoch is its NAV
-iTOW, and untimed monitor messages (MON-RF, MON-HW, SEC-SIG) belong to the epoch they follow, as the
-reader joins them. From the table the reader made and its attacked copy:
-
-- NAV-PVT: position (lat, lon, height, hMSL moved alike), NED velocity and ground speed, hAcc, vAcc,
-  sAcc, numSV, pDOP (scaled as HDOP); a fix the attack removed becomes fixType 0 with gnssFixOK clear.
-- NAV-DOP: hDOP and vDOP as the attack left them, the other DOPs scaled as HDOP.
-- NAV-SAT: each satellite's cno; a lost satellite gets cno 0, svUsed clear, qualityInd 1 (searching).
-- RXM-RAWX: per satellite every signal's cno, prMes and doMes moved by the attack's change; a satellite
-  the attack removed loses its measurement blocks (numMeas and the length follow).
-- MON-RF (every RF block), MON-HW: agcCnt, noisePerMS, jamInd and jammingState; SEC-SIG (v1, v2) the
-  jammingState. Monitor values of an epoch whose fix was lost are those of the nearest epoch kept.
-
-Each edited frame gets its checksum (and length) recomputed. Fixes a capture takes from its NMEA output
-(no NAV-PVT) are not edited; the note says so.
-"""
+The rest of its description: docs/interference.md ("Notes from the code")."""
 
 from __future__ import annotations
 

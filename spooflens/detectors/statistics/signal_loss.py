@@ -1,17 +1,7 @@
 """Signal loss: stretches where a receiver's satellites get weaker together, against each satellite's own
 recent past, and what the loss looked like.
 
-Each satellite's reference is its median C/N0 over a trailing window that ends `gap_s` before the epoch
-(so the last seconds cannot move it) and leaves out earlier losses. An epoch's *level* is the median,
-over the satellites tracked at most epochs of that window (the expected ones), of how far each fell below
-its reference, a lost satellite counting as fallen without bound: a jammer lowers every satellite by the
-same amount in dB (C/(N0 + J) for every C) and loses the weakest; a wall or a tunnel loses some or all.
-Where the level reaches `min_drop_db` the reference is frozen, and the loss runs while the level against
-it stays at `hold_db` or more (short recoveries of up to `merge_gap_s` bridged). The onset lies between
-where the level left its floor (the last epoch at or under the median level of the minute before the last
-quiet epoch, level below `quiet_db`) and the first epoch of the loss, the end between its last epoch and
-the next quiet one.
-"""
+The rest of its description: docs/interference.md ("Notes from the code")."""
 
 from __future__ import annotations
 
