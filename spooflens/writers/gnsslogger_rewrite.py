@@ -5,12 +5,12 @@ fields are replaced by the spoofed values (and, with `velocities`, its speed and
 moved the receiver's time, its UnixTimeMillis; where it inflated the reported accuracies, its accuracy
 fields), in the field positions the file's own `# Fix,...` header gives; a fix the attack removed (lost under
 interference) loses its line. Lines are found as the reader placed them: by the phone's clock (`fix_clock`).
-Raw measurement lines keep their pseudoranges: an attack on the fixes only is what a location-spoofing app
-does; attacks on raw pseudoranges are written to RINEX or CSV copies (docs/simulation-and-attacks.md). What
-interference does to the signals is written: each satellite's Cn0DbHz moved by the attack's change (Raw lines
-of every signal of it, and its Status lines), lost satellites' Raw lines removed (Status: Cn0DbHz 0, not used
-in the fix), the AgcDb of the Raw and Agc lines moved as the fixes' AGC was; the extra code noise of a
-weakened signal is not (the Raw lines keep the receiver's clock fields), and the note says so.
+A pseudorange the attack moved (a counterfeit satellite's delay, a weakened signal's code noise) is written
+into its Raw line's ReceivedSvTimeNanos, the satellite's own transmit time as received: `d` metres later is
+`d / c` ns earlier (whole nanoseconds: 0.3 m; the receiver's clock fields stay as logged). What interference
+does to the signals is written: each satellite's Cn0DbHz moved by the attack's change (Raw lines of every
+signal of it, and its Status lines), lost satellites' Raw lines removed (Status: Cn0DbHz 0, not used in the
+fix), the AgcDb of the Raw and Agc lines moved as the fixes' AGC was.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from readers.gnsslogger import FIX_NAMES, android_sv_ids, android_systems, fix_clock, gps_fixes, split_file
+from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable, gps_ns_of_unix_ns
 from spooflens.errors import WriterError
 from spooflens.writers.clock_shift import clock_shifts
@@ -45,7 +46,7 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
     i_speed, i_bearing = index("speed"), index("bearing")
     if i_lat is None or i_lon is None or i_alt is None or i_time is None:
         raise WriterError(f"{src}: Fix header without latitude, longitude, altitude or time: {header}")
-    signals, noise_rows = _signal_changes(src, table, spoofed)
+    signals, ranges = _signal_changes(table, spoofed)
     sky = _sky_changes(table, spoofed)
     fixes = spoofed.fixes
     stamps = table.absolute_ns(fixes["t_s"].to_numpy())
@@ -74,7 +75,7 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
     signal_lines = [0, 0]  # edited, removed
     for line in lines:
         if line.startswith(("Raw,", "Status,", "Agc,")):
-            new = _signal_line(line, headers, signals, sky, fix_edits, table.time_reference)
+            new = _signal_line(line, headers, signals, ranges, sky, fix_edits, table.time_reference)
             signal_lines[0] += new is not None and new != line
             signal_lines[1] += new is None
             if new is not None:
@@ -119,8 +120,8 @@ def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTa
     note += f", {len(fix_edits.removed)} lost)" if fix_edits.removed else ")"
     if signal_lines[0] or signal_lines[1]:
         note += f"; {signal_lines[0]} Raw/Status/Agc lines with their C/N0 or AGC moved, {signal_lines[1]} removed"
-        if noise_rows:
-            note += f" (the code noise of {noise_rows} weakened measurements not written: Raw keeps the clock fields)"
+        if ranges:
+            note += f" ({len(ranges)} pseudoranges moved in their ReceivedSvTimeNanos)"
         return note + ", every other line copied"
     return note + ", Raw and every other line copied"
 
@@ -133,13 +134,12 @@ def _keys(frame: pd.DataFrame, table: EpochTable) -> list[Key]:
     return list(zip(np.asarray(ns).tolist(), frame["sv_id"].astype(str).tolist(), strict=True))
 
 
-def _signal_changes(src: Path, table: EpochTable, spoofed: EpochTable) -> tuple[dict[Key, float | None], int]:
-    """(epoch, satellite) -> the C/N0 change of its Raw measurements (None: the satellite was lost), and how
-    many changed rows also had their pseudorange moved (noise that cannot be written). A pseudorange moved
-    without its C/N0 is an attack on the raw pseudoranges: refused."""
+def _signal_changes(table: EpochTable, spoofed: EpochTable) -> tuple[dict[Key, float | None], dict[Key, float]]:
+    """(epoch, satellite) -> the C/N0 change of its Raw measurements (None: the satellite was lost), and
+    -> the pseudorange change (m) where the attack moved it."""
     before, after = table.observations, spoofed.observations
     if not len(before) or after.equals(before):
-        return {}, 0
+        return {}, {}
     old = pd.DataFrame(before[["pseudorange_m", "cn0_dbhz"]].to_numpy(float), index=_keys(before, table))
     new = pd.DataFrame(after[["pseudorange_m", "cn0_dbhz"]].to_numpy(float), index=_keys(after, table))
     old = old[~old.index.duplicated()]
@@ -147,16 +147,12 @@ def _signal_changes(src: Path, table: EpochTable, spoofed: EpochTable) -> tuple[
     out: dict[Key, float | None] = {k: None for k in old.index.difference(new.index)}
     both = old.index.intersection(new.index)
     o, n = old.loc[both].to_numpy(), new.loc[both].to_numpy()
-    moved_range = np.isfinite(o[:, 0]) & (n[:, 0] != o[:, 0])
+    moved_range = np.isfinite(o[:, 0]) & np.isfinite(n[:, 0]) & (n[:, 0] != o[:, 0])
     moved_cn0 = np.isfinite(o[:, 1]) & np.isfinite(n[:, 1]) & (n[:, 1] != o[:, 1])
-    if (moved_range & ~moved_cn0).any():
-        raise WriterError(
-            f"{src}: an attack on raw pseudoranges cannot be written back into a GnssLogger log (its Raw lines "
-            "keep the receiver's clock fields); inject it into a RINEX or CSV copy instead"
-        )
     for key, d in zip(both[moved_cn0], (n[:, 1] - o[:, 1])[moved_cn0], strict=True):
         out[key] = float(d)
-    return out, int((moved_range & moved_cn0).sum())
+    ranges = {k: float(d) for k, d in zip(both[moved_range], (n[:, 0] - o[:, 0])[moved_range], strict=True)}
+    return out, ranges
 
 
 def _sky_changes(table: EpochTable, spoofed: EpochTable) -> dict[Key, float]:
@@ -230,6 +226,7 @@ def _signal_line(
     line: str,
     headers: dict[str, list[str]],
     signals: dict[Key, float | None],
+    ranges: dict[Key, float],
     sky: dict[Key, float],
     fixes: _FixChanges,
     reference: str,
@@ -256,7 +253,7 @@ def _signal_line(
             return line
         bias = value("BiasNanos")
         tag -= round(bias) if math.isfinite(bias) else 0
-        if not signals and not len(fixes.agc):
+        if not signals and not ranges and not len(fixes.agc):
             return line
         i_agc = at("AgcDb")
         change = fixes.agc_change(tag)
@@ -274,6 +271,13 @@ def _signal_line(
                 i = at("Cn0DbHz")
                 if i is not None and math.isfinite(value("Cn0DbHz")):
                     fields[i] = repr(round(value("Cn0DbHz") + d, 3))
+            i_sv = at("ReceivedSvTimeNanos")
+            if key in ranges and i_sv is not None:
+                try:  # d metres later: the signal left the satellite d / c earlier
+                    sent = int(fields[i_sv])
+                except ValueError:
+                    return line
+                fields[i_sv] = str(sent - round(ranges[key] / SPEED_OF_LIGHT_MPS * 1e9))
     else:  # Status: GnssStatus by the UTC millisecond
         unix_ns = int(value("UnixTimeMillis") * 1_000_000) if math.isfinite(value("UnixTimeMillis")) else 0
         t_ns = int(gps_ns_of_unix_ns(np.array([unix_ns]))[0]) if reference == "gps" else unix_ns

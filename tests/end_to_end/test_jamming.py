@@ -5,6 +5,7 @@ jam_spoof gives both phases."""
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -72,12 +73,15 @@ def test_a_real_rinex_file_with_signal_strengths(tmp_path: Path, capsys: pytest.
 def test_a_real_gnsslogger_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     src = real_log("android_gnsslogger/gps-measurement-tools/pseudoranges_log_2016_08_22_14_45_50.txt")
     out = inject(src, "jam:start=60,end=150,cn0=10", tmp_path / "g.txt", capsys)
-    assert "Raw/Status/Agc lines with their C/N0 or AGC moved" in out and "code noise" in out
+    assert "Raw/Status/Agc lines with their C/N0 or AGC moved" in out and "pseudoranges moved" in out
     caught(tmp_path / "g.txt", 60.0, 150.0)
-    # a pseudorange moved without its C/N0 is an attack on the pseudoranges: still refused for this format
-    delay = ["inject", str(src), "--attack", "pr_delay:delay=300,count=1,start=30", "-o", str(tmp_path / "d.txt")]
-    assert main(delay) == 2
-    assert "cannot be written back into a GnssLogger log" in capsys.readouterr().err
+    # a counterfeit satellite 300 m late lands in its Raw lines' ReceivedSvTimeNanos: the copy reads it back
+    src_table = read_log(src, {"nav": str(src.parent / "hour2350.16n")})
+    inject(src, "pr_delay:delay=300,count=1,start=30", tmp_path / "d.txt", capsys)
+    shutil.copy(src.parent / "hour2350.16n", tmp_path / "hour2350.16n")
+    back = read_log(tmp_path / "d.txt", {"nav": str(tmp_path / "hour2350.16n")})
+    moved = back.observations["pseudorange_m"].to_numpy() - src_table.observations["pseudorange_m"].to_numpy()
+    assert ((np.abs(moved) < 1e-6) | (np.abs(moved - 300.0) < 0.2)).all() and (np.abs(moved - 300.0) < 0.2).sum() > 50
 
 
 @pytest.mark.parametrize(("fmt", "name"), [("ulog", "sim.ulg"), ("csv", "sim_csv")])
