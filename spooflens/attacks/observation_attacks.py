@@ -28,9 +28,13 @@ FloatArray = NDArray[np.float64]
 
 
 def _chosen_satellites(spec: AttackSpec, obs: pd.DataFrame, start: float) -> tuple[list[str], list[str]]:
-    """(attacked, authentic) satellite ids. Random choices are among the satellites tracked at `start`."""
+    """(attacked, authentic) satellite ids. Random choices are among the satellites tracked at `start` whose
+    orbit the log gives (a satellite without one is used by no solution: a counterfeit of it moves nothing a
+    receiver computes, nor anything an analysis can check), all tracked ones where none has an orbit."""
     tracked_all = sorted(set(obs["sv_id"].astype(str)))
     at_start = obs[obs["t_s"] >= start]
+    placed = np.isfinite(at_start[SV_COLUMNS].to_numpy(float)).all(axis=1)
+    at_start = at_start[placed] if placed.any() else at_start
     first = at_start["t_s"].min() if len(at_start) else np.nan
     tracked = sorted(set(at_start.loc[at_start["t_s"] == first, "sv_id"].astype(str)))
     rng = np.random.default_rng(int(spec.params.get("seed", 0)))
