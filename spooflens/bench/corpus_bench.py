@@ -69,6 +69,9 @@ DEFAULT_TIMEOUT_S = 120.0
 DEFAULT_RSS_CAP_MB = 6144.0
 # an attack needs this much of the attacked stream: a third before it, two thirds under attack
 MIN_ATTACKED_SPAN_S = 30.0
+# an attack that reaches fewer of the copy's epochs than this is too short to judge: the alarms' persistence
+# (RAIM's 5 consecutive epochs, the other detectors' 3 to 5) cannot be met however clear the attack
+MIN_ATTACKED_EPOCHS = 5
 
 
 @dataclass(frozen=True)
@@ -362,12 +365,31 @@ def take_injected(result: LogResult, record: TaskRecord) -> None:
     if record.inject is not None and record.inject.outcome == REFUSED:
         result.not_injected[record.attack] = f"inject refuses: {refusal_reason(record.inject.error, result.log.path)}"
         return
+    reached = attacked_epochs(record.truth) if record.truth is not None else None
+    if reached is not None and reached < MIN_ATTACKED_EPOCHS:
+        result.not_injected[record.attack] = (
+            f"not attacked: the attack reached {reached} epoch(s) of the copy, fewer than the "
+            f"{MIN_ATTACKED_EPOCHS} an alarm's persistence needs (too short to judge)"
+        )
+        return
     scored = None
     facts = log_facts(result.summary) if result.summary else None
     if record.summary is not None and record.truth is not None:
         scored = score(record.truth, record.summary, facts.fix_rate_hz if facts else None)
     seen = bool(facts and facts.classes_run & KINDS[record.attack].seen_by)
     result.injected.append(Injected(record.attack, record, scored, seen))
+
+
+def attacked_epochs(truth: dict[str, Any]) -> int | None:
+    """How many of its receiver's epochs (fixes, or solved observation epochs) the attack's sidecar lists
+    from the attack's start to its end (the most of any receiver); None where it lists none."""
+    offsets = truth.get("offsets") or {}
+    start, end = float(truth.get("start_s", 0.0)), truth.get("end_s")
+    counts = [
+        sum(1 for row in rows if row and start <= float(row[0]) and (end is None or float(row[0]) <= float(end)))
+        for rows in offsets.values()
+    ]
+    return max(counts) if counts else None
 
 
 # ---- tables ---------------------------------------------------------------------------------------------
