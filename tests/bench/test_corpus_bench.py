@@ -214,3 +214,16 @@ def test_interference_on_the_clean_pass_lists_alarms_with_what_the_receiver_said
     assert [a["log"] for a in found["alarms"]] == ["a.ubx"]
     assert found["alarms"][0]["receiver_said"]["ubx"]["reported"] == "interference reported"
     assert found["jamming_monitor"] == {"interference reported": ["a.ubx"], "not logged": ["b.nmea"]}
+
+
+def test_an_attack_reaching_fewer_epochs_than_an_alarm_needs_is_not_counted() -> None:
+    # georinex 14601736.18o: 15 s epochs over 30 s, the attack from 14.6 s reaches 2 of them
+    from spooflens.bench.corpus_bench import MIN_ATTACKED_EPOCHS, attacked_epochs
+
+    truth = {
+        "start_s": 14.6,
+        "end_s": 30.0,
+        "offsets": {"st": [[0.0, 0, 0, 0], [15.0, 38, 17, 181], [30.0, 38, 16, 181]]},
+    }
+    assert attacked_epochs(truth) == 2 < MIN_ATTACKED_EPOCHS
+    assert attacked_epochs({"start_s": 0.0, "offsets": {}}) is None
