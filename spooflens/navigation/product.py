@@ -151,6 +151,7 @@ def _result(nav: Navigation) -> list[DetectorResult]:
                 )
             ],
             extras={
+                "receiver_id": sol.receiver_id,  # the receiver whose fixes the filter took
                 "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
                 "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
                 "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,
