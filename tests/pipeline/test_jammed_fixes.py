@@ -15,6 +15,7 @@ from pipeline_support import circling_table
 
 from spooflens.detectors.base import Alarm, DetectorResult, Series
 from spooflens.epoch_table import EpochTable
+from spooflens.output.summary import build_summary
 from spooflens.pipeline.events import classify
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.explanations import JAMMED
@@ -122,6 +123,10 @@ def test_a_takeover_inside_the_alarm_counts_from_the_takeover() -> None:
     jam = verdict.events[spoof.follows] if spoof.follows is not None else None
     assert jam is not None and jam.kind == Kind.JAMMING and jam.start_s == JAM[0]
     assert verdict.headline.startswith("SPOOFING DETECTED") and "after JAMMING / INTERFERENCE" in verdict.headline
+    summary = build_summary(table, [*alarms((101.0, 160.0)), navigation(table, takeover_s=120.0)], verdict)
+    (spoofing,) = [i for i in summary["verdict"]["incidents"] if i["spoofing"]]
+    (part,) = [p for p in spoofing["partly_explained"] if p["start_s"] == 101.0]
+    assert part["evidence"] == "inertial" and part["explained_until_s"] == until
 
 
 def test_a_claimed_accuracy_without_the_c_n0_loss_accounts_for_nothing() -> None:
