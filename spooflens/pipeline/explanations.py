@@ -416,7 +416,10 @@ def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) 
     if marks:
         # a takeover after the jamming: the alarm's stretch before the spoofer's first mark is the jamming's
         until = clean_until(scene, alarm, rid)
-        if until is None or until >= alarm.end_s:
+        if until is not None and until >= alarm.end_s:
+            # the mark shows just after the alarm's last epoch: its last seconds are the takeover's
+            until = alarm.end_s - scene.opts.window_after_s
+        if until is None or until <= alarm.start_s:
             return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
         w = Window.of(w.rx, w.start_s + scene.opts.window_before_s, until, scene.opts.window_before_s)
     stops = ["; ".join(marks)] if until is not None else []
