@@ -135,6 +135,7 @@ def _result(nav: Navigation, baseline: LoadedBaseline | None = None) -> list[Det
     settled = sol.t > sol.t[0] + FILTER_SETTLE_S
     sigma = np.where(sol.used, np.sqrt(np.abs(np.diagonal(sol.S, axis1=1, axis2=2))), np.nan)
     extras: dict[str, object] = {
+        "receiver_id": sol.receiver_id,  # the receiver whose fixes the filter took
         "nis_mean": float(np.nanmean(sol.nis[settled])) if settled.any() else None,
         "nis_p95": float(np.nanpercentile(sol.nis[settled], 95)) if settled.any() else None,
         "nis_dof_mean": float(np.mean(sol.dof[settled])) if settled.any() else None,

@@ -124,6 +124,13 @@ def _incident(table: EpochTable, inc: Incident) -> dict[str, Any]:
         d["onset_interval_s"] = list(inc.onset_interval_s)
     if inc.end_interval_s:
         d["end_interval_s"] = list(inc.end_interval_s)
+    if inc.partly_explained:
+        # alarm intervals a natural cause accounts for up to a time only (a takeover after jamming): what
+        # follows is counted
+        d["partly_explained"] = [
+            {"evidence": str(sp[0]), "start_s": sp[1], "end_s": sp[2], "explained_until_s": until}
+            for sp, until in inc.partly_explained
+        ]
     return d
 
 

@@ -13,9 +13,12 @@ to the vehicle's own shock, a tumble or an impact its IMU read just before the a
   the first of them that names one;
 - unknown: an anomaly nothing explains (one evidence class, never spoofing).
 
-Interference alarms in a spoofing incident that begin before its first spoofing evidence are an event of
-their own, and a jamming event whose end lies within `SEQUENCE_S` of a spoofing event's onset is linked
-to it (`follows` / `followed_by`): jamming to break the receiver's lock, then the takeover.
+Interference alarms in a spoofing incident that begin before its first spoofing evidence, and the stretch
+of its alarms a jammed receiver's noise accounts for before the first evidence no cause accounts for (the
+takeover), are an event of their own (unless a jamming event of the interference detector's covers it):
+the spoofing event begins at the takeover. A jamming event whose end lies within `SEQUENCE_S` of a
+spoofing event's onset is linked to it (`follows` / `followed_by`): jamming to break the receiver's lock,
+then the takeover.
 """
 
 from __future__ import annotations
@@ -23,9 +26,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from spooflens.detectors.base import DetectorResult
+from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.epoch_table import EpochTable
-from spooflens.pipeline.evidence import EVIDENCE, Evidence, label
+from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, Evidence, label
 from spooflens.pipeline.explanations import Weighed, explain, incident_alarms, scene_of
 from spooflens.pipeline.verdict import Event, Incident, Kind, Verdict
 
@@ -146,19 +149,33 @@ def _event(
     )
 
 
+def first_unexplained_s(incident: Incident) -> float | None:
+    """Where the spoofing evidence no natural cause accounts for begins (None: there is none)."""
+    counted = [sp[1] for sp in incident.counted_spans if sp[0] not in NOT_SPOOFING]
+    return min(counted) if counted else None
+
+
 def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) -> Event | None:
-    """The interference that began a spoofing incident before its first spoofing evidence, as an event."""
-    jam = [sp for sp in incident.spans if sp[0] == Evidence.INTERFERENCE]
-    other = [sp[1] for sp in incident.spans if sp[0] != Evidence.INTERFERENCE]
-    lead = [sp for sp in jam if other and sp[1] < min(other)]
-    if not lead:
+    """What began a spoofing incident before its first spoofing evidence, as a jamming event: interference
+    alarms, and the stretch of its alarms the jamming accounts for (a jammed receiver's noise) before the
+    first evidence no cause accounts for."""
+    first = first_unexplained_s(incident)
+    if first is None:
         return None
-    start, end = min(sp[1] for sp in lead), min(max(sp[2] for sp in lead), min(other))
-    names = ", ".join(_detectors_of(incident, results, Evidence.INTERFERENCE))
-    text = (
-        f"jamming from {start:.2f} s to {end:.2f} s, before the spoofing evidence: "
-        f"{label(Evidence.INTERFERENCE)} ({names})"
-    )
+    lead = [sp for sp in incident.spans if sp[0] == Evidence.INTERFERENCE and sp[1] < first]
+    jammed = [e for e in incident.explanations if e.kind == Kind.JAMMING]
+    evidence: list[str] = []
+    start = end = first
+    if lead:
+        start, end = min(sp[1] for sp in lead), min(max(sp[2] for sp in lead), first)
+        names = ", ".join(_detectors_of(incident, results, Evidence.INTERFERENCE))
+        evidence.append(f"{label(Evidence.INTERFERENCE)} ({names})")
+    if jammed and incident.start_s < first:
+        start, end = min(start, incident.start_s), first
+        evidence += [e.text for e in jammed]
+    if not evidence:
+        return None
+    text = f"jamming from {start:.2f} s to {end:.2f} s, before the spoofing evidence: {evidence[0]}"
     return Event(
         Kind.JAMMING,
         start,
@@ -167,13 +184,40 @@ def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) 
         "medium",
         index,
         text,
-        (f"{label(Evidence.INTERFERENCE)} ({names})",),
+        tuple(evidence),
         ("interference corroborates no spoofing by itself",),
         receivers=incident.receivers,
         satellites=incident.satellites,
         systems=_alarm_names(incident, results, "systems"),
         bands=_alarm_names(incident, results, "bands"),
     )
+
+
+def _interference_alarms(results: Sequence[DetectorResult]) -> list[Alarm]:
+    return [a for r in results if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory for a in r.alarms]
+
+
+def _began(alarm: Alarm) -> float:
+    """The earliest the alarm says its cause began: its onset interval's start, its onset, its first alarm."""
+    lo = alarm.onset_interval_s[0] if alarm.onset_interval_s else alarm.start_s
+    return min(lo, alarm.onset_s if alarm.onset_s is not None else alarm.start_s, alarm.start_s)
+
+
+def _after_lead_in(incident: Incident, results: Sequence[DetectorResult], jam_s: float, takeover: float) -> Incident:
+    """The spoofing incident from its first evidence no natural cause accounts for (`takeover`): its first
+    alarm there, and an onset estimated before it (from alarms under the jamming since `jam_s`) replaced by
+    the onset estimates of the alarms that begin there (an alarm the jamming accounts for in part: the
+    takeover)."""
+    incident = replace(incident, start_s=max(incident.start_s, takeover))
+    if incident.onset_s >= takeover:
+        return incident
+    own = [
+        takeover if a.start_s < takeover else a.onset_s if a.onset_s is not None else a.start_s
+        for a, r in incident_alarms(results, incident)
+        if r.evidence not in NOT_SPOOFING and a.end_s >= takeover
+    ]
+    onset = max(min(own, default=takeover), jam_s)
+    return replace(incident, onset_s=onset, onset_interval_s=(onset, takeover) if onset < takeover else None)
 
 
 def link_sequences(events: list[Event], within_s: float = SEQUENCE_S) -> list[Event]:
@@ -194,20 +238,47 @@ def link_sequences(events: list[Event], within_s: float = SEQUENCE_S) -> list[Ev
 def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verdict) -> Verdict:
     """The verdict with every incident's natural explanations weighed and every incident and anomaly an
     event of its kind."""
-    scene = scene_of(table, results)
+    departures = [
+        float(c["departure_s"])
+        for c in verdict.coasting_checks
+        if c.get("confirmed") and c.get("departure_s") is not None
+    ]
+    scene = scene_of(table, results, departures_s=departures)
     spoofing_before = [i for i in verdict.incidents if i.is_spoofing]
     incidents: list[Incident] = []
     events: list[Event] = []
+    leads: list[Event] = []
     for k, inc in enumerate(verdict.incidents):
         weighed = explain(table, results, inc, scene=scene)
-        inc = inc.explained_by(weighed.explanations, weighed.explained_spans)
+        inc = inc.explained_by(weighed.explanations, weighed.explained_spans, weighed.partly_explained)
         decided = _decide(inc, weighed, results)
         inc = replace(inc, kind=decided.kind)
-        incidents.append(inc)
+        alarms = incident_alarms(results, inc)
+        if decided.kind == Kind.JAMMING and alarms and inc.end_method.startswith("GNSS"):
+            # the coast that ended it weighed the jammed fixes with their clean noise: its end is its alarms'
+            inc = replace(
+                inc,
+                end_s=max(a.end_s for a, _ in alarms),
+                end_interval_s=None,
+                ongoing_at_end=False,
+                end_method="last alarm (the coasted INS's departure was the jammed receiver's noise)",
+            )
         lead = _lead_in(inc, k, results) if decided.kind == Kind.SPOOFING else None
         if lead is not None:
-            events.append(lead)
-        events.append(_event(inc, k, decided, results, lead.end_s if lead is not None else None))
+            leads.append(lead)
+            inc = _after_lead_in(inc, results, lead.start_s, lead.end_s)
+        elif decided.kind == Kind.SPOOFING:
+            # an onset estimated back inside interference (a long-window test's estimate reaching into the
+            # jamming before a takeover) is the jamming's, not the takeover's
+            first = first_unexplained_s(inc)
+            under = [(_began(a), a.end_s) for a in _interference_alarms(results) if first is not None]
+            if first is not None and any(a <= inc.onset_s <= b and a < first for a, b in under):
+                inc = _after_lead_in(inc, results, min(a for a, _ in under if a <= inc.onset_s), first)
+        incidents.append(inc)
+        events.append(_event(inc, k, decided, results))
+    # a lead-in the interference detector's own jamming event already covers is that event
+    jams = [e for e in events if e.kind == Kind.JAMMING]
+    events += [lead for lead in leads if not any(j.start_s <= lead.end_s and lead.start_s <= j.end_s for j in jams)]
     events.sort(key=lambda e: (e.start_s, e.kind != Kind.JAMMING))
     # the tracks reconstructed for incidents no longer called spoofing go with them
     reconstructed = verdict.reconstructed

@@ -8,6 +8,10 @@ names a natural cause and the alarm it accounts for:
   accuracy up, satellites lost, the fix lost, while the fix moves no more than a reflection moves it;
 - interference: the receiver's jamming state, jamming indicator, noise or AGC moved (the interference
   detector's class, when it ran);
+- a jammed receiver's noisier fixes against the INS: under interference, GNSS departed from the INS
+  (the navigation filter's innovations) no more than the receiver's error before, grown by the thermal
+  noise its C/N0 loss implies, allows, without a steady drift; an alarm is accounted for up to the
+  first epoch that departs further (a spoofer's takeover inside one alarm), not beyond;
 - convergence: the receiver's first minutes after its first fix (or after the fix was lost for 10 s),
   its DOP, satellites, fix type or accuracy still settling;
 - mode switch: the fix type changed (SBAS, DGNSS, RTK float/fixed) where the fix moved, by metres;
@@ -27,9 +31,11 @@ nature does not are looked for (`spoofer_marks`): C/N0 raised above its level or
 gives, the satellites at one C/N0 at their usual level, the receiver's own spoofing flag, its time moved
 against the log's clock. Where one is found no natural explanation of the GNSS-internal alarms holds.
 No sky signature accounts for an inertial, heading or fleet alarm: their references do not see the
-sky. Only the inertial shock reaches an inertial alarm, and only one that began after the shock: a
-spoofer cannot move an IMU, and an attack under way before the crash keeps its evidence. The tests'
-numbers and the real logs that show each are in docs/verdict.md.
+sky. Two causes reach an inertial alarm: the inertial shock, and only for one that began after the shock
+(a spoofer cannot move an IMU, and an attack under way before the crash keeps its evidence); and a
+jammed receiver's noise, bounded by what its C/N0 loss implies. A cause may account for an alarm from its
+start up to a time (`Reading.until_s`): what follows counts. The tests' numbers and the real logs that
+show each are in docs/verdict.md.
 """
 
 from __future__ import annotations
@@ -43,7 +49,7 @@ from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.detectors.gnss_consistency import ConsistencyOptions
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import Evidence, Span
-from spooflens.pipeline.indicators import Receiver, Window, running_median
+from spooflens.pipeline.indicators import FloatArray, Receiver, Window, running_median
 from spooflens.pipeline.verdict import Explanation, Incident, Kind
 from spooflens.schema import FixType
 
@@ -51,6 +57,10 @@ WEEK_S = 604_800.0
 ROLLOVER_S = 1024 * WEEK_S
 RECEIVER_EVIDENCE = "receiver_evidence"
 GNSS_CONSISTENCY = "gnss_consistency"
+JAMMED = "jammed receiver's noise"
+# a coast starts this long before the onset of the incident it checks (`CoastingOptions.margin_s`, and more)
+DEPARTURE_LEAD_S = 2.0
+NAVIGATION = "navigation"  # the GNSS/INS filter's result (`spooflens.navigation.product`): its innovations
 # the alarms a receiver's indicators can account for: the fix against itself, the receiver's indicators
 INDICATOR_DETECTORS = frozenset({GNSS_CONSISTENCY, RECEIVER_EVIDENCE})
 FIX_NAMES = {
@@ -93,6 +103,17 @@ class ExplanationOptions:
     time_moved_s: float = 0.25
     # interference: robust rise of an indicator against its baseline (receiver_evidence's floors)
     interference_z: float = 6.0
+    # a receiver recovers from interference within seconds to a minute (re-acquisition, its filter settling):
+    # its alarms are the interference's this long after the interference detector's alarm ends
+    interference_recovery_s: float = 60.0
+    # a jammed receiver's fixes against the INS: each epoch's horizontal INS-minus-GNSS position and velocity
+    # within this many sigma of the filter's own innovation sigma and the receiver's jammed error (its error
+    # before, the larger of its reported accuracy and the filter's sigma, grown by the thermal noise its C/N0
+    # loss implies; its reported accuracy only where no C/N0 is logged), over a 3-epoch running median; and
+    # the mean departure over that stretch within `jammed_bias_sigma` of it (noise averages out, a drag not)
+    jammed_bound_sigma: float = 3.0
+    jammed_bias_sigma: float = 1.0
+    jammed_bias_min_epochs: int = 5
     # convergence
     converge_within_s: float = 180.0  # the first minutes after the first fix
     settle_after_s: float = 120.0  # the settled level: the fixes after this long (else the later half)
@@ -141,6 +162,50 @@ class Reading:
     text: str
     facts: tuple[str, ...] = ()
     receiver_id: str | None = None
+    until_s: float | None = None  # held for the alarm from its start up to this time only (None: all of it)
+
+
+@dataclass(frozen=True)
+class Innovations:
+    """The GNSS/INS filter's horizontal INS-minus-GNSS innovations and its own 1-sigma (per axis)."""
+
+    receiver_id: str | None
+    t: FloatArray
+    position_m: FloatArray  # (N,) horizontal distance
+    position_sigma_m: FloatArray
+    velocity_mps: FloatArray
+    velocity_sigma_mps: FloatArray
+    position_en: FloatArray  # (N, 2) east, north: the mean of these is a drift
+    velocity_en: FloatArray
+
+    @classmethod
+    def of(cls, results: Sequence[DetectorResult]) -> Innovations | None:
+        nav = next((r for r in results if r.name == NAVIGATION and r.ran), None)
+        if nav is None:
+            return None
+        series = {x.name: x for x in nav.series}
+        names = ("innovation_position", "innovation_velocity")
+        if any(n not in series or n + "_sigma" not in series for n in names):
+            return None
+        p, v = series["innovation_position"], series["innovation_velocity"]
+        ps, vs = series["innovation_position_sigma"], series["innovation_velocity_sigma"]
+        pe, ve = np.asarray(p.values, float)[:, :2], np.asarray(v.values, float)[:, :2]
+
+        def per_axis(x: object) -> FloatArray:
+            a = np.asarray(x, float)[:, :2]
+            return np.asarray(np.sqrt(np.mean(a**2, axis=1)), float)
+
+        rid = nav.extras.get("receiver_id")
+        return cls(
+            str(rid) if rid is not None else None,
+            np.asarray(p.t, float),
+            np.hypot(pe[:, 0], pe[:, 1]),
+            per_axis(ps.values),
+            np.hypot(ve[:, 0], ve[:, 1]),
+            per_axis(vs.values),
+            pe,
+            ve,
+        )
 
 
 @dataclass(frozen=True)
@@ -192,6 +257,16 @@ class _Scene:
     # the incident being weighed, from its first alarm to its end: interference is read over all of it
     span: tuple[float, float] = (0.0, 0.0)
     satellites: tuple[str, ...] = ()  # every satellite its detectors named
+    innovations: Innovations | None = None
+    innovations_read: bool = False
+    # where the reconstruction stage's coasts confirmed GNSS departing from the coasted INS
+    departures_s: tuple[float, ...] = ()
+
+    def nav(self) -> Innovations | None:
+        if not self.innovations_read:
+            self.innovations, self.innovations_read = Innovations.of(self.results), True
+        return self.innovations
+
     _shocks: list[Shock] | None = None
 
     @property
@@ -385,17 +460,194 @@ def _join(parts: list[str]) -> str:
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
 
+def clean_until(scene: _Scene, alarm: Alarm, rid: str) -> float | None:
+    """The latest time up to which the alarm's window shows none of a spoofer's marks (None: not even at the
+    alarm's first fix). The marks only accumulate as the window grows, so the time is found by bisection."""
+    rx = scene.rx(rid)
+    start = min(alarm.start_s, alarm.onset_s if alarm.onset_s is not None else alarm.start_s)
+    t = rx.t[(rx.t >= alarm.start_s) & (rx.t <= alarm.end_s)]
+
+    def clean(k: int) -> bool:
+        w = Window.of(rx, start, float(t[k]), scene.opts.window_before_s)
+        return w.fixes == 0 or not spoofer_marks(w, scene.opts)
+
+    if not len(t) or not clean(0):
+        return None
+    lo, hi = 0, len(t) - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if clean(mid):
+            lo = mid
+        else:
+            hi = mid - 1
+    return float(t[lo])
+
+
 def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
     rid = w.rx.receiver_id
     signs = interference_signs(scene, rid)
     if not signs:
         return _kept("interference", Kind.JAMMING, "", rid)
+    until = None
     if marks:
-        return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
+        # a takeover after the jamming: the alarm's stretch before the spoofer's first mark is the jamming's
+        until = clean_until(scene, alarm, rid)
+        if until is not None and until >= alarm.end_s:
+            # the mark shows just after the alarm's last epoch: its last seconds are the takeover's
+            until = alarm.end_s - scene.opts.window_after_s
+        if until is None or until <= alarm.start_s:
+            return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
+        w = Window.of(w.rx, w.start_s + scene.opts.window_before_s, until, scene.opts.window_before_s)
+    stops = ["; ".join(marks)] if until is not None else []
+    # an alarm that outlasts the interference detector's alarms is accounted for while they last and while
+    # the receiver recovers (re-acquires, its filter settles), not beyond
+    ended = interference_end_s(scene, rid)
+    recovered = ended + scene.opts.interference_recovery_s if ended is not None else None
+    if recovered is not None and alarm.end_s > recovered:
+        if recovered <= alarm.start_s:
+            return _kept("interference", Kind.JAMMING, f"the interference ended at {ended:.1f} s", rid)
+        if until is None or recovered < until:
+            until = recovered
+            stops = [f"the interference ended at {ended:.1f} s"]
     effects, _ = degradation_signs(w, scene.opts)
     with_effects = " with " + _join([sg.short for sg in effects]) if effects else ""
     text = f"{_join(signs)}{with_effects}: interference, not spoofing"
-    return Reading("interference", Kind.JAMMING, True, text, (*signs, *(sg.fact for sg in effects)), rid)
+    facts = (*signs, *(sg.fact for sg in effects))
+    if until is not None:
+        text += f" (until {until:.1f} s; then {'; '.join(stops)})"
+        facts = (*facts, f"accounts for the alarm until {until:.1f} s, not after: {'; '.join(stops)}")
+    return Reading("interference", Kind.JAMMING, True, text, facts, rid, until)
+
+
+def interference_end_s(scene: _Scene, rid: str) -> float | None:
+    """The end of the interference detector's alarms over the incident for this receiver (None: none)."""
+    w = scene.incident_window(rid)
+    ends = [
+        a.end_s
+        for r in scene.results
+        if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory
+        for a in r.alarms
+        if a.start_s <= w.end_s and a.end_s >= w.start_s and a.receiver_id in (None, rid)
+    ]
+    return max(ends) if ends else None
+
+
+def _interp(t: FloatArray, tx: FloatArray, x: FloatArray) -> FloatArray:
+    ok = np.isfinite(x)
+    if not ok.any():
+        return np.full(len(t), np.nan)
+    return np.interp(t, tx[ok], x[ok])
+
+
+def _cn0_drop_at(w: Window, t: FloatArray) -> tuple[FloatArray, str]:
+    """The C/N0's fall against its level before at times `t` (per satellite where the sky is logged, else the
+    mean C/N0), and what it was read from."""
+    per_sat = w.satellite_cn0_change()
+    if np.isfinite(per_sat).any():
+        return -_interp(t, w.rx.sky.t[w.sky_now], per_sat), "each satellite's C/N0"
+    base = w.level("cn0_mean_dbhz")
+    if not np.isfinite(base):
+        return np.full(len(t), np.nan), ""
+    x = running_median(w.rx.col("cn0_mean_dbhz")[w.now])
+    return base - _interp(t, w.rx.t[w.now], x), "mean C/N0"
+
+
+def read_jammed_fixes(scene: _Scene, alarm: Alarm) -> Reading:
+    """An inertial alarm under interference where GNSS departed from the INS no more than the jammed
+    receiver's error allows (its error before grown by the thermal noise its C/N0 loss implies; what it
+    reports of its accuracy only where no C/N0 is logged), on top of the filter's own sigma; and without a
+    steady drift. Held up to the first epoch that departs further (or shows a spoofer's mark), not beyond."""
+    cause, opts = JAMMED, scene.opts
+    nav = scene.nav()
+    rid = (nav.receiver_id if nav is not None else None) or alarm.receiver_id or next(iter(scene.table.receivers()), "")
+    if nav is None or rid not in scene.table.receivers():
+        return _kept(cause, Kind.JAMMING, "", rid)
+    signs = interference_signs(scene, rid)
+    if not signs:
+        return _kept(cause, Kind.JAMMING, "", rid)
+    w = scene.window(alarm, rid)
+    sel = (nav.t >= alarm.start_s) & (nav.t <= alarm.end_s) & np.isfinite(nav.position_m)
+    t = nav.t[sel]
+    if not len(t) or w.fixes == 0:
+        return _kept(cause, Kind.JAMMING, "", rid)
+    rx = w.rx
+    drop, what = _cn0_drop_at(w, t)
+    # the thermal noise a C/N0 loss of `drop` dB adds, against the noise before: sqrt(10^(drop/10) - 1)
+    thermal = np.sqrt(np.maximum(10.0 ** (np.nan_to_num(drop, nan=0.0) / 10.0) - 1.0, 0.0))
+    thermal = np.where(np.isfinite(drop), thermal, np.nan)
+    ratios, errors = [], []
+    for dist, sigma, column in (
+        (nav.position_m[sel], nav.position_sigma_m[sel], "h_acc_m"),
+        (nav.velocity_mps[sel], nav.velocity_sigma_mps[sel], "vel_acc_mps"),
+    ):
+        claimed = _interp(t, rx.t, rx.col(column))
+        # the receiver's error before (what it claimed then, or the filter's own innovation sigma learned on
+        # the clean log, whichever is more: receivers understate their velocity noise), grown as its C/N0
+        # loss grows thermal noise; what it claims now only where its C/N0 is not logged (a spoofer can
+        # inflate a claim, not the sky's C/N0 loss)
+        implied = np.fmax(w.level(column), sigma) * thermal
+        error = np.where(np.isfinite(implied), implied, claimed)
+        allowed = opts.jammed_bound_sigma * np.hypot(sigma, np.nan_to_num(error, nan=0.0))
+        ratios.append(running_median(np.where(np.isfinite(dist), dist / allowed, 0.0)))
+        errors.append((dist, claimed, implied, allowed))
+    ratio = np.fmax(ratios[0], ratios[1])
+    beyond = np.flatnonzero(~(ratio <= 1.0))
+    n = int(beyond[0]) if len(beyond) else len(t)
+    if n == 0:
+        k = int(np.nanargmax(ratio))
+        why = (
+            f"GNSS departed from the INS {errors[0][0][k]:.1f} m and {errors[1][0][k]:.2f} m/s at {t[k]:.1f} s, "
+            f"{ratio[k]:.1f} x what the receiver's reported accuracy or its C/N0 loss allows"
+        )
+        return _kept(cause, Kind.JAMMING, why, rid)
+    if n >= opts.jammed_bias_min_epochs:
+        for (_, _, _, allowed), en, unit in (
+            (errors[0], nav.position_en[sel], "m"),
+            (errors[1], nav.velocity_en[sel], "m/s"),
+        ):
+            bias = float(np.hypot(*np.nanmean(en[:n], axis=0)))
+            scale = float(np.nanmean(allowed[:n])) / opts.jammed_bound_sigma
+            if bias > opts.jammed_bias_sigma * scale:
+                why = f"GNSS drifted from the INS steadily (mean {bias:.2f} {unit}, the receiver's error {scale:.2f})"
+                return _kept(cause, Kind.JAMMING, why, rid)
+    until = float(t[n - 1]) if n < len(t) else None
+    stops = []
+    if n < len(t):
+        stops.append(f"GNSS departed further from {t[n]:.1f} s")
+    mark_free = clean_until(scene, alarm, rid) if spoofer_marks(w, opts) else alarm.end_s
+    if mark_free is None:
+        return _kept(cause, Kind.JAMMING, "; ".join(spoofer_marks(w, opts)), rid)
+    if mark_free < (until if until is not None else alarm.end_s):
+        until = mark_free
+        stops.append(f"a spoofer's mark from {mark_free:.1f} s")
+    if until is not None and until <= alarm.start_s:
+        return _kept(cause, Kind.JAMMING, "; ".join(stops), rid)
+    m = slice(0, n)
+    (dp, cp, _, ap), (dv, cv, _, av) = errors
+    drop_max = float(np.nanmax(drop[m])) if np.isfinite(drop[m]).any() else float("nan")
+    claimed_text = (
+        f"reported accuracy up to {np.nanmax(cp[m]):.1f} m and {np.nanmax(cv[m]):.2f} m/s"
+        if np.isfinite(cp[m]).any() and np.isfinite(cv[m]).any()
+        else "no reported accuracy"
+    )
+    facts = [
+        f"GNSS minus INS at most {np.nanmax(dp[m]):.1f} m and {np.nanmax(dv[m]):.2f} m/s "
+        f"from {t[0]:.1f} s to {t[n - 1]:.1f} s",
+        claimed_text,
+        f"allowed up to {np.nanmax(ap[m]):.1f} m and {np.nanmax(av[m]):.2f} m/s "
+        f"({opts.jammed_bound_sigma:g} sigma of the filter's own and the jammed receiver's error)",
+        f"{what} down {drop_max:.1f} dB (thermal noise x{np.nanmax(thermal[m]):.1f})"
+        if np.isfinite(drop_max)
+        else "C/N0 not logged",
+        *signs,
+    ]
+    if stops:
+        facts.append(f"accounts for the alarm until {until:.1f} s, not after: {'; '.join(stops)}")
+    text = (
+        f"GNSS within what the jammed receiver's own error allows of the INS ({facts[0]}; {claimed_text}): "
+        "a jammed receiver's noisier fixes, not spoofing" + (f" (until {until:.1f} s)" if until is not None else "")
+    )
+    return Reading(cause, Kind.JAMMING, True, text, tuple(facts), rid, until)
 
 
 def _fix_starts(rx: Receiver, opts: ExplanationOptions) -> list[float]:
@@ -731,7 +983,7 @@ def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Read
     ev = result.evidence
     out: list[Reading] = []
     if ev == Evidence.INERTIAL:
-        return [read_inertial_shock(scene, alarm)]
+        return [read_inertial_shock(scene, alarm), read_jammed_fixes(scene, alarm)]
     if ev == Evidence.LOG_CLOCK:
         return [read_time_fault(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
     if ev in (Evidence.RAW_MEASUREMENT, Evidence.KNOWN_STATION, Evidence.RECEIVER) and len(alarm.satellites) == 1:
@@ -776,6 +1028,8 @@ class Weighed:
     # over the whole incident, per receiver: what the receiver says drowned its signals, and a spoofer's marks
     interference: tuple[str, ...] = ()
     spoofer_marks: tuple[str, ...] = ()
+    # intervals accounted for from their start up to a time only, not beyond
+    partly_explained: tuple[tuple[Span, float], ...] = ()
 
 
 def explain(
@@ -792,13 +1046,16 @@ def explain(
     scene.satellites = incident.satellites
     held: dict[tuple[str, str | None], list[tuple[Reading, str]]] = {}
     refused: dict[str, str] = {}
-    covered: dict[Span, bool] = {}
+    # how far into each interval every alarm behind it is accounted for (its end: all of it)
+    reach: dict[Span, float] = {}
     for alarm, result in incident_alarms(results, incident):
         assert result.evidence is not None
         key = (result.evidence, alarm.start_s, alarm.end_s)
         readings = read_alarm(scene, alarm, result)
-        good = next((rd for rd in readings if rd.held), None)
-        covered[key] = covered.get(key, True) and good is not None
+        good = next((rd for rd in readings if rd.held and rd.until_s is None), None)
+        good = good or next((rd for rd in readings if rd.held), None)
+        upto = float("-inf") if good is None else alarm.end_s if good.until_s is None else good.until_s
+        reach[key] = min(reach.get(key, float("inf")), upto)
         if good is not None:
             held.setdefault((good.cause, good.receiver_id), []).append((good, result.name))
         for rd in readings:
@@ -825,10 +1082,37 @@ def explain(
         interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
         if w.fixes:
             marks += [named(x) for x in spoofer_marks(w, scene.opts)]
-    spans = tuple(sorted(k for k, ok in covered.items() if ok))
-    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks))
+    # the coasts' departure intervals (no alarm behind them): GNSS agreed with the coasted INS until its
+    # departure. Where the jammed receiver's noise accounts for the inertial alarms, a departure that began
+    # under the jamming is that noise (the coast weighs GNSS with its clean noise), and the interval counts
+    # from the first inertial alarm no cause accounts for (the takeover); a departure that began elsewhere
+    # counts from there
+    jammed = [(k, r) for k, r in reach.items() if k[0] == Evidence.INERTIAL and r > k[1]]
+    if jammed and any(rd.cause == JAMMED for items in held.values() for rd, _ in items):
+        inertial = [(k, r) for k, r in reach.items() if k[0] == Evidence.INERTIAL]
+        first_open = min((max(r, k[1]) for k, r in inertial if r < k[2]), default=float("inf"))
+        under = [(k[1], r) for k, r in jammed] + [
+            (a.start_s, a.end_s) for r in results if r.evidence == Evidence.INTERFERENCE and r.ran for a in r.alarms
+        ]
+        for sp in incident.spans:
+            if sp[0] != Evidence.INERTIAL or sp in reach:
+                continue
+            departed = [d for d in scene.departures_s if sp[1] - DEPARTURE_LEAD_S <= d <= sp[2]]
+            elsewhere = [d for d in departed if not any(a <= d <= b for a, b in under)]
+            upto = min([*elsewhere, first_open, sp[2]])
+            if upto > sp[1]:
+                reach[sp] = upto
+    spans = tuple(sorted(k for k, r in reach.items() if r >= k[2]))
+    partly = tuple(sorted((k, r) for k, r in reach.items() if k[1] < r < k[2]))
+    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), partly)
 
 
-def scene_of(table: EpochTable, results: Sequence[DetectorResult], opts: ExplanationOptions | None = None) -> _Scene:
-    """What `explain` reads, shared by the incidents of one log (each receiver's arrays are made once)."""
-    return _Scene(table, results, opts or ExplanationOptions())
+def scene_of(
+    table: EpochTable,
+    results: Sequence[DetectorResult],
+    opts: ExplanationOptions | None = None,
+    departures_s: Sequence[float] = (),
+) -> _Scene:
+    """What `explain` reads, shared by the incidents of one log (each receiver's arrays are made once);
+    `departures_s`: where the reconstruction stage's coasts confirmed GNSS departing from the INS."""
+    return _Scene(table, results, opts or ExplanationOptions(), departures_s=tuple(departures_s))

@@ -37,6 +37,7 @@ FIX_COLUMNS = (
     "vel_e_mps",
     "vel_n_mps",
     "h_acc_m",
+    "vel_acc_mps",
     "sats_used",
     "hdop",
     "vdop",

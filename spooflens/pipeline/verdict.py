@@ -93,13 +93,16 @@ class Incident:
     # the event stage's: the natural causes weighed, the alarm intervals they account for, the event's kind
     explanations: tuple[Explanation, ...] = ()
     explained_spans: tuple[Span, ...] = ()
+    # alarm intervals a natural cause accounts for from their start up to a time, not beyond (a jammed
+    # receiver's noise until the spoofer's takeover inside one alarm): only what follows counts
+    partly_explained: tuple[tuple[Span, float], ...] = ()
     kind: Kind | None = None
 
     def with_spans(self, spans: tuple[Span, ...]) -> Incident:
         """This incident with these evidence intervals: its classes and confidence follow from them (alarm
         intervals a natural cause accounts for count for nothing)."""
         classes = {c for c, _, _ in spans}
-        counted = tuple(sp for sp in spans if sp not in set(self.explained_spans))
+        counted = self._counted(spans)
         return replace(
             self,
             spans=spans,
@@ -107,9 +110,35 @@ class Incident:
             confidence=confidence(corroborated(counted)) if counted else "low",
         )
 
-    def explained_by(self, explanations: tuple[Explanation, ...], spans: tuple[Span, ...]) -> Incident:
-        """This incident with the natural causes weighed and the alarm intervals they account for."""
-        return replace(self, explanations=explanations, explained_spans=spans).with_spans(self.spans)
+    def _counted(self, spans: tuple[Span, ...]) -> tuple[Span, ...]:
+        """The alarm intervals, or their parts, no natural cause accounts for."""
+        explained = set(self.explained_spans)
+        until = dict(self.partly_explained)
+        out = []
+        for sp in spans:
+            if sp in explained:
+                continue
+            start = max(sp[1], until.get(sp, sp[1]))
+            out.append((sp[0], start, sp[2]))
+        return tuple(out)
+
+    @property
+    def counted_spans(self) -> tuple[Span, ...]:
+        """The alarm intervals, or what is left of them, no natural cause accounts for: what the confidence
+        counts."""
+        return self._counted(self.spans)
+
+    def explained_by(
+        self,
+        explanations: tuple[Explanation, ...],
+        spans: tuple[Span, ...],
+        partly: tuple[tuple[Span, float], ...] = (),
+    ) -> Incident:
+        """This incident with the natural causes weighed and the alarm intervals they account for (whole, or
+        from their start up to a time: `partly`)."""
+        return replace(self, explanations=explanations, explained_spans=spans, partly_explained=partly).with_spans(
+            self.spans
+        )
 
     @property
     def corroborating(self) -> tuple[Evidence, ...]:
@@ -121,8 +150,7 @@ class Incident:
     def unexplained(self) -> tuple[Evidence, ...]:
         """The classes that agree in time once the alarms a natural cause accounts for are left out: the
         ones the confidence counts."""
-        explained = set(self.explained_spans)
-        found = corroborated(sp for sp in self.spans if sp not in explained)
+        found = corroborated(self.counted_spans)
         return tuple(c for c in ORDER if c in found)
 
     @property

@@ -20,6 +20,7 @@ from spooflens.detectors.base import Alarm
 from spooflens.detectors.interference import run_interference
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.run import analyze_table
+from spooflens.pipeline.verdict import Kind
 from spooflens.simulation.sensors import ReceiverModel
 from spooflens.simulation.simulate import SCENARIOS, simulate
 from spooflens.writers.ubx_rewrite import rewrite_ubx
@@ -124,3 +125,36 @@ def test_jam_then_capture_both_phases_are_seen() -> None:
         if takeover - 1.0 <= a.start_s <= takeover + 30.0
     ]
     assert new_alarms  # the capture itself draws the spoofing detectors' alarms
+
+
+def test_simulated_pure_jamming_is_named_jamming_not_spoofing() -> None:
+    # the multirotor that drew a SPOOFING verdict from its jammed fixes alone (the inertial tests and the
+    # coast weighed the noisier fixes with their clean noise): every alarm under the jamming is the jamming's
+    from spooflens.bench.realworld_bench import Run, _attacked, called_kind
+
+    table, _, truth = _attacked(Run("multirotor_sky", "jam 15 dB", 41013))
+    analysis = analyze_table(table)
+    jam = truth.phases[0]
+    assert not analysis.verdict.spoofed
+    assert called_kind(analysis, jam["start_s"], jam["end_s"]) == "jamming"
+    explained = {e.cause for i in analysis.verdict.incidents for e in i.explanations}
+    assert "jammed receiver's noise" in explained
+
+
+def test_simulated_jam_then_capture_names_the_jamming_and_the_capture_from_its_takeover() -> None:
+    # car, seed 1000: the jamming (198.4-228.4 s) drew inertial, GNSS-only and receiver alarms that were all
+    # merged with the capture into one spoofing incident from 199 s; now the spoofing event begins at the
+    # takeover and the jamming is an event of its own, linked to it
+    from spooflens.bench.realworld_bench import Run, _attacked, called_kind
+
+    table, _, truth = _attacked(Run("car", "jam then capture", 1000))
+    analysis = analyze_table(table)
+    jam, capture = truth.phases
+    verdict = analysis.verdict
+    assert verdict.spoofed
+    assert called_kind(analysis, jam["start_s"], jam["end_s"], late_s=-1.0) == "jamming"
+    assert called_kind(analysis, capture["start_s"], capture["end_s"]) == "spoofing"
+    (spoof,) = verdict.events_of(Kind.SPOOFING)
+    assert capture["start_s"] - 1.0 <= spoof.start_s <= capture["start_s"] + 2.0
+    assert spoof.follows is not None and verdict.events[spoof.follows].kind == Kind.JAMMING
+    assert verdict.headline.startswith("SPOOFING DETECTED") and "after JAMMING / INTERFERENCE" in verdict.headline
