@@ -4,9 +4,11 @@ One rule runs through it: the baseline caps what a log may teach a detector abou
 log attacked from its first fix to its last would otherwise teach every detector that the attack is
 the receiver's normal behaviour. So a scale a detector learns from the log may be at most `ALLOWANCE`
 times the largest the vehicle's clean logs showed (twice as noisy as its noisiest clean log; for the
-IMU's variance scale its square), and a level (an indicator's typical value, the distance between two
-receivers) comes from the clean logs instead of the log. A clean log of the vehicle learns what it
-learned before, inside the allowance: a baseline makes no clean log noisier than it was.
+IMU's variance scale its square; for a Gauss-Markov error both its size and the rate its driving noise
+feeds it, sigma^2 / tau, the latter the square: `rate_cap`), and a level (an indicator's typical value,
+the distance between two receivers) comes from the clean logs instead of the log. A clean log of the
+vehicle learns what it learned before, inside the allowance: a baseline makes no clean log noisier than
+it was.
 
 A cap needs evidence of what is normal: at least `MIN_LOGS_TO_CAP` clean logs that agree on the
 quantity (`learn`: within a factor of three). One log cannot tell a vehicle's normal from one day's
@@ -54,6 +56,21 @@ def usable(q: Quantity | None) -> bool:
 def cap(q: Quantity | None, allowance: float = ALLOWANCE) -> float:
     """The largest value a log may learn for this scale (inf when the baseline cannot tell: `usable`)."""
     return float(max(q.values) * allowance) if q is not None and usable(q) else float("inf")
+
+
+# a Gauss-Markov error's size and the time constant its driving noise is measured with (2 sigma^2 / tau)
+MARKOV = {"b_h": "tau_p", "b_v": "tau_p", "bv_h": "tau_v", "bv_v": "tau_v"}
+
+
+def rate_cap(sigma: Quantity | None, tau: Quantity | None) -> float:
+    """The largest sigma^2 / tau a log may learn for a Gauss-Markov error (inf when the baseline cannot
+    tell: `usable`, for both). Its driving noise is a noise scale too: a size capped alone would let the
+    search shorten the time constant instead, and a wander of the allowed size that moves ten times
+    faster swallows a drag the clean logs' slow wander never could."""
+    if sigma is None or tau is None or not (usable(sigma) and usable(tau)):
+        return float("inf")
+    rates = [s * s / t for s, t in zip(sigma.per_log, tau.per_log, strict=True) if s is not None and t]
+    return float(max(rates) * ALLOWANCE**2) if len(rates) >= MIN_LOGS_TO_CAP else float("inf")
 
 
 def level_scale(q: Quantity, spec: IndicatorSpread) -> float:
@@ -111,15 +128,17 @@ def noise_prior(loaded: LoadedBaseline, receiver_id: str, imu_id: str, preset: s
         for k, q in params.items()
         if not k.startswith("tau") and usable(q)
     }
+    rates = {s: (tau, r) for s, tau in MARKOV.items() if np.isfinite(r := rate_cap(params.get(s), params.get(tau)))}
     n = max((q.n_logs for q in params.values()), default=0)
     free = [k for k in params if not k.startswith("tau") and k not in upper]
     limits = (
         f"capped at {ALLOWANCE:g} x its noisiest clean log"
+        + (" (its wanders' driving noise too)" if rates else "")
         + (f" but {', '.join(free)} (one log, or its logs disagree)" if free else "")
         if upper
         else "nothing capped (one log, or its logs disagree)"
     )
-    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''}; {limits})")
+    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''}; {limits})", rates)
 
 
 def coast_envelope_limit(loaded: LoadedBaseline | None, receiver_id: str, imu_id: str) -> tuple[FloatArray, str] | None:

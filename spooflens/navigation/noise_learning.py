@@ -22,15 +22,17 @@ The search is coordinate-wise on a log scale (factors 3 then sqrt 3, two sweeps)
 run of the compiled filter.
 
 With a vehicle's baseline (`NoisePrior`, from `spooflens.baseline.use.noise_prior`) the search starts
-from the values the vehicle's clean logs learned and may not go above their allowance: a log attacked
-from its first fix to its last cannot teach the filter that the attack is the receiver's noise.
+from the values the vehicle's clean logs learned and may not go above their allowance, nor feed a
+Gauss-Markov error faster than it (its sigma^2 / tau: a wander held at its size would otherwise be made
+quicker instead): a log attacked from its first fix to its last cannot teach the filter that the attack
+is the receiver's noise.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -80,6 +82,9 @@ class NoisePrior:
     start: dict[str, float]
     upper: dict[str, float]
     source: str  # e.g. "baseline vehicle.baseline.json (4 logs)"
+    # a Gauss-Markov error's size -> (its time constant, the largest size^2 / time constant): the rate its
+    # driving noise feeds it, capped as the sizes are
+    rates: dict[str, tuple[str, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -129,8 +134,10 @@ class LearnedNoise:
             )
             if n.has_velocity:
                 text += (
-                    f"; velocity white {n.white_vel_mps[0]:.2g}/{n.white_vel_mps[1]:.2g} m/s (from the scatter) + "
-                    f"Gauss-Markov {n.gm_vel_mps[0]:.2g}/{n.gm_vel_mps[1]:.2g} m/s, tau {n.tau_vel_s:.0f} s (defaults)"
+                    f"; velocity white {n.white_vel_mps[0]:.2g}/{n.white_vel_mps[1]:.2g} m/s "
+                    f"({'from the baseline' if self.prior else 'from the scatter'}) + Gauss-Markov "
+                    f"{n.gm_vel_mps[0]:.2g}/{n.gm_vel_mps[1]:.2g} m/s, tau {n.tau_vel_s:.0f} s"
+                    + (" (from the baseline)" if self.prior else " (defaults)")
                 )
             if self.odometry is not None:
                 o = self.odometry
@@ -138,7 +145,8 @@ class LearnedNoise:
                     f"; odometry white {'/'.join(f'{x:.2g}' for x in o.sigma_mps)} m/s + Gauss-Markov "
                     f"{'/'.join(f'{x:.2g}' for x in o.gm_mps)} m/s (defaults)"
                 )
-            return text + f"; IMU noise the preset {self.grade.name} as it is"
+            imu = f"{self.imu_scale:.2g} x preset {self.grade.name} (from the baseline)" if self.prior else ""
+            return text + (f"; IMU noise {imu}" if imu else f"; IMU noise the preset {self.grade.name} as it is")
         text = (
             f"noise learned from the log ({self.evaluations} filter runs on {self.window_s[0]:.0f}-"
             f"{self.window_s[1]:.0f} s): position white {n.white_pos_m[0]:.2g}/{n.white_pos_m[1]:.2g} m "
@@ -353,13 +361,15 @@ def _search(
     opts: LearnOptions,
     best: float | None = None,
     upper: dict[str, float] | None = None,
+    rates: dict[str, tuple[str, float]] | None = None,
 ) -> tuple[float, dict[str, float]]:
     """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps).
 
     Each step's two candidates (up and down) are run side by side (`threads.in_parallel`) and judged in
     that order, the first that improves taken: the path and the answer are those of trying them one
     after the other; only the second run is wasted when the first already improved. `best`: the score of
-    `params` when known (not run again)."""
+    `params` when known (not run again). `upper`, `rates`: a baseline's caps (`NoisePrior`), which `params`
+    respects (`_capped`)."""
     if best is None:
         best = objective(make(params))
     for _ in range(opts.sweeps):
@@ -367,6 +377,11 @@ def _search(
         for name in names:
             lo, hi = BOUNDS.get(name, (1e-4, 1e4))
             hi = min(hi, (upper or {}).get(name, hi))
+            for s, (tau, r) in (rates or {}).items():  # the wanders' driving noise under its cap
+                if name == s and tau in params:
+                    hi = min(hi, float(np.sqrt(r * params[tau])))
+                elif name == tau and s in params:
+                    lo = max(lo, params[s] ** 2 / r)
             for step in opts.steps:
                 trials = []
                 for factor in (step, 1.0 / step):
@@ -470,20 +485,25 @@ def learn_noise(
         )
 
     upper = prior.upper if prior is not None else None
+    rates = prior.rates if prior is not None else None
     # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid (and,
     # with a baseline, of the values its clean logs learned), every candidate under the baseline's caps
-    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper) for b in opts.wander_grid_m]
+    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper, rates) for b in opts.wander_grid_m]
     if prior is not None:
-        grid.append(_capped(noise_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper))
+        grid.append(
+            _capped(noise_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper, rates)
+        )
     values = objective.many([options(g) for g in grid])
     params = grid[int(np.argmin(values))]
-    best, params = _search(objective, options, params, list(params), opts, min(values), upper)
+    best, params = _search(objective, options, params, list(params), opts, min(values), upper, rates)
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)
         if R_vb is not None:
             odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
             params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
-            best, params = _search(objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts, upper=upper)
+            best, params = _search(
+                objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts, upper=upper, rates=rates
+            )
     final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True, compare=True)
     assert final.noise is not None
     return LearnedNoise(
@@ -498,10 +518,19 @@ def learn_noise(
         inputs.imu_id,
         inputs.receiver_id,
         prior.source if prior is not None else "",
-        tuple(
-            f"{k} {params[k]:.3g}" for k in sorted(upper or {}) if k in params and params[k] >= 0.999 * (upper or {})[k]
-        ),
+        _at_caps(params, upper or {}, rates or {}),
     )
+
+
+def _at_caps(params: dict[str, float], upper: dict[str, float], rates: dict[str, tuple[str, float]]) -> tuple[str, ...]:
+    """The parameters the search left at a baseline's cap (the log asked for more noise)."""
+    held = [f"{k} {params[k]:.3g}" for k in sorted(upper) if k in params and params[k] >= 0.999 * upper[k]]
+    held += [
+        f"{s} {params[s]:.3g} at {tau} {params[tau]:.3g} s (its driving noise)"
+        for s, (tau, r) in sorted(rates.items())
+        if s in params and tau in params and params[s] ** 2 / params[tau] >= 0.998 * r
+    ]
+    return tuple(held)
 
 
 def noise_parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, float]:
@@ -525,17 +554,27 @@ def noise_parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, f
     return params
 
 
-def _capped(params: dict[str, float], upper: dict[str, float] | None) -> dict[str, float]:
-    return {k: min(v, (upper or {}).get(k, v)) for k, v in params.items()}
+def _capped(
+    params: dict[str, float], upper: dict[str, float] | None, rates: dict[str, tuple[str, float]] | None = None
+) -> dict[str, float]:
+    """The parameters under a baseline's caps; a wander fed faster than its cap allows made slower (its
+    time constant raised, up to its bound), then smaller."""
+    out = {k: min(v, (upper or {}).get(k, v)) for k, v in params.items()}
+    for s, (tau, r) in (rates or {}).items():
+        if s in out and tau in out and out[s] ** 2 > r * out[tau]:
+            out[tau] = min(out[s] ** 2 / r, BOUNDS[tau][1])
+            out[s] = min(out[s], float(np.sqrt(r * out[tau])))
+    return out
 
 
 def _from_prior(noise: GnssNoise, prior: NoisePrior) -> GnssNoise:
     """The initial guess with the baseline's values in place (each under its cap)."""
+    has_vel = noise.has_velocity
+    start = _capped({**noise_parameters(noise, 1.0, has_vel), **prior.start}, prior.upper, prior.rates)
 
     def value(name: str, default: float) -> float:
-        return float(min(prior.start.get(name, default), prior.upper.get(name, np.inf)))
+        return float(start.get(name, default))
 
-    has_vel = noise.has_velocity
     return replace(
         noise,
         white_pos_m=(value("w_h", noise.white_pos_m[0]), value("w_v", noise.white_pos_m[1])),

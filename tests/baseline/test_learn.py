@@ -70,3 +70,14 @@ def test_a_log_may_learn_at_most_twice_the_noisiest_clean_log() -> None:
     assert b.navigation is not None
     q = b.navigation.parameters["b_h"]
     assert cap(q) == pytest.approx(ALLOWANCE * max(q.values)) and cap(None) == np.inf
+
+
+def test_a_wanders_driving_noise_is_capped_as_its_size() -> None:
+    from spooflens.baseline.format import Quantity
+    from spooflens.baseline.use import rate_cap
+
+    sigma = Quantity(0.04, "m/s", (0.05, 0.03), None, 0.02, True)
+    tau = Quantity(12.0, "s", (17.0, 6.0), None, 10.0, True)
+    assert rate_cap(sigma, tau) == pytest.approx(ALLOWANCE**2 * max(0.05**2 / 17.0, 0.03**2 / 6.0))
+    one = Quantity(0.05, "m/s", (0.05,), None, None, None)
+    assert rate_cap(one, tau) == np.inf and rate_cap(sigma, None) == np.inf

@@ -24,3 +24,33 @@ def test_a_prior_caps_what_the_log_may_learn() -> None:
     # a cap well above what the log wants holds nothing
     roomy = NoisePrior({}, {"w_h": 10.0 * free.noise.white_pos_m[0]}, "baseline roomy (3 logs)")
     assert not learn_noise(nav.inputs, preset, nav.start, None, (), prior=roomy).at_upper
+
+
+def test_a_wander_held_at_its_size_is_not_made_faster_instead() -> None:
+    # a cap on a Gauss-Markov error's size alone lets the search shorten its time constant: the same size
+    # moving faster is more noise. With the rate its driving noise feeds it capped (sigma^2 / tau), the
+    # time constant goes no lower than the size asks
+    table = simulate("ground", seed=7, duration_s=120.0).table
+    options = AnalyzeOptions()
+    nav = solve_navigation(table, options)
+    free = nav.learned
+    preset = imu_preset(options)
+    b, tau = free.noise.gm_pos_m[0], free.noise.tau_pos_s
+    rate = 0.25 * b * b / tau  # the log's own wander fed four times too fast
+    prior = NoisePrior({}, {}, "baseline test (2 logs)", {"b_h": ("tau_p", rate)})
+    held = learn_noise(nav.inputs, preset, nav.start, None, (), prior=prior)
+    n = held.noise
+    assert n.gm_pos_m[0] ** 2 / n.tau_pos_s <= rate * (1 + 1e-9)
+    assert any(h.startswith("b_h") and "tau_p" in h for h in held.at_upper)
+
+
+def test_a_prior_that_stands_says_it_came_from_the_baseline() -> None:
+    table = simulate("ground", seed=7, duration_s=120.0).table
+    options = AnalyzeOptions()
+    nav = solve_navigation(table, options)
+    prior = NoisePrior({"wv_h": 0.2, "bv_h": 0.05, "tau_v": 20.0, "imu": 2.0}, {}, "baseline test (2 logs)")
+    stood = learn_noise(nav.inputs, imu_preset(options), nav.start, None, ((-10.0, 1e9),), prior=prior)
+    assert stood.is_prior
+    text = stood.describe()
+    assert "from the scatter" not in text and "(defaults)" not in text
+    assert "IMU noise 2 x preset" in text
