@@ -25,7 +25,9 @@ def test_sec_sig_jamming_warning_without_a_fix_is_a_jamming_event_and_no_spoofin
     assert headline.startswith("NO VERDICT: no spoofing detector could run on this log")
     assert "JAMMING / INTERFERENCE" in headline
     (result,) = [r for r in analysis.results if r.name == "interference"]
-    (event,) = result.extras["events"]
+    events = result.extras["events"]
+    assert isinstance(events, list) and len(events) == 1
+    event = events[0]
     assert event["because"] == "the receiver reported jamming (warning)"
     assert event["fix"] == {"logged": False}
     assert "no C/N0 logged" in result.findings[0].text
@@ -43,7 +45,9 @@ def test_mon_rf_and_mon_hw_without_a_fix_give_the_front_end_and_the_monitors_wor
     assert analysis.verdict.headline.startswith("NO VERDICT: no spoofing detector could run on this log")
     (result,) = [r for r in analysis.results if r.name == "interference"]
     assert result.ran
-    monitor = result.extras["receivers"]["ubx"]["jamming_monitor"]
+    receivers = result.extras["receivers"]
+    assert isinstance(receivers, dict)
+    monitor = receivers["ubx"]["jamming_monitor"]
     assert monitor["reported"] == "interference reported"
     assert monitor["codes_seen"] == {"0": "unknown or monitor off", "3": "critical"}
     assert not result.alarms  # one critical report: the detector needs two (a state held, not a blip)
