@@ -183,6 +183,7 @@ class EpochTable:
     headings: pd.DataFrame = field(default_factory=lambda: empty_frame("headings"))
     autopilot_ekf: pd.DataFrame = field(default_factory=lambda: empty_frame("autopilot_ekf"))
     satellites: pd.DataFrame = field(default_factory=lambda: empty_frame("satellites"))
+    receiver_status: pd.DataFrame = field(default_factory=lambda: empty_frame("receiver_status"))
     streams: list[StreamInfo] = field(default_factory=list)
     skipped: list[Skipped] = field(default_factory=list)
     # the broadcast ephemerides behind the satellite states (a RINEX navigation file, a simulated
@@ -545,6 +546,7 @@ _ROLE_FRAME = {
     "heading": "headings",
     "autopilot_ekf": "autopilot_ekf",
     "satellites": "satellites",
+    "receiver_status": "receiver_status",
 }
 
 

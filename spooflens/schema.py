@@ -239,6 +239,20 @@ SATELLITE_COLUMNS: tuple[Column, ...] = (
     Column("healthy", "float64", "-", "1 healthy, 0 unhealthy, NaN unknown (as the receiver reports)", False),
 )
 
+# What a receiver's own monitors report without a position (u-blox MON-RF/MON-HW, SEC-SIG in a capture
+# with no fix): the front end and the jamming monitor, one row per message, for the interference
+# detector. Rows carry no position, so no position-using detector ever reads them; a receiver with
+# fixes keeps these values on its fixes.
+RECEIVER_STATUS_COLUMNS: tuple[Column, ...] = (
+    T,
+    Column("receiver_id", "string", "-", "receiver id"),
+    Column("jamming_state", "float64", "-", "receiver jamming state code as logged (meaning in metadata)", False),
+    Column("agc", "float64", "-", "automatic gain control monitor (u-blox agcCnt), raw", False),
+    Column("noise_per_ms", "float64", "-", "receiver noise level (u-blox noisePerMS), raw", False),
+    Column("jamming_indicator", "float64", "-", "receiver jamming indicator (raw), NaN if absent", False),
+    Column("spoofing_state", "float64", "-", "receiver spoofing state code as logged (meaning in metadata)", False),
+)
+
 FRAMES: dict[str, tuple[Column, ...]] = {
     "imu": IMU_COLUMNS,
     "fixes": FIX_COLUMNS,
@@ -248,6 +262,7 @@ FRAMES: dict[str, tuple[Column, ...]] = {
     "headings": HEADING_COLUMNS,
     "autopilot_ekf": AUTOPILOT_EKF_COLUMNS,
     "satellites": SATELLITE_COLUMNS,
+    "receiver_status": RECEIVER_STATUS_COLUMNS,
 }
 
 # Which column names the stream a row belongs to, per frame (truth has one stream).
@@ -260,6 +275,7 @@ STREAM_KEY: dict[str, str | None] = {
     "headings": "heading_id",
     "autopilot_ekf": "source",
     "satellites": "receiver_id",
+    "receiver_status": "receiver_id",
 }
 
 # Body-frame axis conventions an IMU stream may declare.

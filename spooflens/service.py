@@ -149,12 +149,16 @@ def import_writers() -> None:
 def require_gnss(log: Path, table: EpochTable) -> None:
     """Raise NoGnssError for a log with no GNSS data at all. Raw observations or satellite reports
     without fixes (a RINEX observation file with no navigation file beside it) are still analysed: the
-    detectors that need only them run (C/N0 across satellites), the others say what they lack."""
-    if len(table.fixes) or len(table.observations) or len(table.satellites):
+    detectors that need only them run (C/N0 across satellites), the others say what they lack; so are a
+    receiver's monitor messages without a fix (its jamming state, AGC, noise: the interference detector)."""
+    if len(table.fixes) or len(table.observations) or len(table.satellites) or len(table.receiver_status):
         return
     lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
     why = f"; lost: {lost}" if lost else ""
-    found = f"no GNSS fixes, raw observations or satellite reports found (streams: {stream_names(table)}{why})"
+    found = (
+        "no GNSS fixes, raw observations or satellite reports found, nor receiver monitor messages "
+        f"(streams: {stream_names(table)}{why})"
+    )
     raise NoGnssError(log, f"{found}; nothing written")
 
 

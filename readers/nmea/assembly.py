@@ -399,15 +399,19 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         invalid = 0
         kinds = Counter(d.kind for d in rx.sentences)
         line_t = times_by_file[id(rx.file)]
+        fixless_sats: list[tuple[int, str, str, float, float, float, float]] = []
         for epoch in rx.epochs.values():
             got = epoch_fix(epoch)
             if got is None:
                 continue
             values, _ = got
+            gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
             if not values:
                 invalid += 1
+                at_ns = line_t.get(epoch.first_line) if logger else gnss_ns
+                if at_ns is not None:
+                    fixless_sats += [(int(at_ns), rx.receiver_id, *sat) for sat in epoch_satellites(epoch)]
                 continue
-            gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
             own: int | None = None
             if logger:
                 t_ns = line_t.get(epoch.first_line)
@@ -427,7 +431,8 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
                 Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
             )
         msgtype = "NMEA " + " ".join(f"{k}" for k in sorted(kinds))
-        if not rows:
+        if not rows:  # a receiver that never had a fix: its sky (GSV) is still what it saw
+            sat_rows += fixless_sats
             streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, 0))
             continue
         cols = {k: np.array([v[k] for _, v in rows], dtype=float) for k in rows[0][1]}

@@ -23,6 +23,9 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   (`readers/rtcm_ephemeris.py`), else from a RINEX navigation file
   (`--topic nav=FILE`, or one beside the capture covering its time), so RAIM and the raw-measurement
   detectors run on the capture.
+- `receiver_status` from MON-RF/MON-HW/SEC-SIG in a capture without any fix (`_receiver_status`): the
+  monitor's word with no position, at the epochs they follow (none: one output cycle per second); the
+  NMEA GSV of such a capture is its `satellites` frame when it has no NAV-SAT.
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
@@ -112,6 +115,10 @@ class _State:
     unused_as_repeat: Counter[str] = field(default_factory=Counter)  # legacy messages beside NAV-PVT
     svinfo: list[m.NavSat] = field(default_factory=list)  # NAV-SVINFO, used when there is no NAV-SAT
     leap_s: float | None = None  # GPS - UTC as NAV-TIMEGPS reports it
+    # every monitor message (MON-RF, MON-HW, SEC-SIG): the epoch it follows (None before any), its cycle
+    # (a new one each time a message name repeats: a receiver sends each once per output cycle), values
+    monitor: list[tuple[int | None, int, dict[str, float]]] = field(default_factory=list)
+    monitor_cycle: set[str] = field(default_factory=set)
     anchor_of: str = ""  # the message that dated the capture first
 
     def epoch(self, itow: int) -> _Epoch:
@@ -121,9 +128,15 @@ class _State:
         self.current = itow
         return self.epochs[itow]
 
-    def untimed(self, values: dict[str, float]) -> None:
+    def untimed(self, values: dict[str, float], name: str = "") -> None:
         target = self.epochs[self.current].values if self.current is not None else self.pending
         target.update(values)
+        if name:
+            if name in self.monitor_cycle:
+                self.monitor_cycle.clear()
+            self.monitor_cycle.add(name)
+            cycle = (self.monitor[-1][1] + (len(self.monitor_cycle) == 1)) if self.monitor else 0
+            self.monitor.append((self.current, cycle, dict(values)))
 
 
 def _name(frame: UbxFrame) -> str:
@@ -226,11 +239,11 @@ def _handle(state: _State, frame: UbxFrame) -> None:
                 gps_s = float(gps_seconds_of_unix_ns(round((m.GPS_EPOCH_UNIX_S + gps_s) * NS)))
             _anchor(state, gps_s, name)
     elif name == "MON-RF":
-        state.untimed(m.mon_rf_values(frame, msg))
+        state.untimed(m.mon_rf_values(frame, msg), name)
     elif name == "MON-HW":
-        state.untimed(m.mon_hw_values(msg))
+        state.untimed(m.mon_hw_values(msg), name)
     elif name == "SEC-SIG":
-        state.untimed(m.sec_sig_values(msg))
+        state.untimed(m.sec_sig_values(msg), name)
     elif name == "MON-VER":
         state.metadata.update(m.mon_ver(msg))
 
@@ -307,14 +320,47 @@ def _fixes(state: _State, epochs: list[tuple[int, dict[str, float]]], ref_s: flo
     sec_spoof = np.array([e.get("sec_spoofing_state", math.nan) for e in rows])
     cols["spoofing_state"] = np.where(np.isfinite(cols["spoofing_state"]), cols["spoofing_state"], sec_spoof)
     cols["spoofing_flag"] = np.array([int(m.spoofing_flag(s)) for s in cols["spoofing_state"]], dtype=np.int8)
-    for out, names in {
-        "jamming_state": ("sec_jamming_state", "rf_jamming_state", "hw_jamming_state"),
-        "noise_per_ms": ("noise_per_ms", "hw_noise_per_ms"),
-        "agc": ("agc", "hw_agc"),
-        "jamming_indicator": ("jamming_indicator", "hw_jamming_indicator"),
-    }.items():
+    for out, names in _MONITOR_COLUMNS.items():
         cols[out] = np.array([_first(e, *names) for e in rows])
     return pd.DataFrame(cols)
+
+
+# each indicator column and the monitor values it is taken from, in order of preference
+_MONITOR_COLUMNS = {
+    "jamming_state": ("sec_jamming_state", "rf_jamming_state", "hw_jamming_state"),
+    "noise_per_ms": ("noise_per_ms", "hw_noise_per_ms"),
+    "agc": ("agc", "hw_agc"),
+    "jamming_indicator": ("jamming_indicator", "hw_jamming_indicator"),
+}
+
+
+def _receiver_status(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | None, str]:
+    """The monitor messages of a capture without a fix, one row per output instant: at the epoch they
+    follow (the first epoch's for those before it); in a capture that has no epoch at all, one output
+    cycle per second in the order received (u-blox's default rate; said in the metadata)."""
+    if not state.monitor:
+        return None, ""
+    first = next(iter(state.epochs), None)
+    merged: dict[tuple[int, int], dict[str, float]] = {}
+    for itow, cycle, values in state.monitor:
+        itow = itow if itow is not None else first
+        key = (0, itow) if itow is not None else (1, cycle)
+        merged.setdefault(key, {}).update(values)
+    keys = list(merged)
+    rows = list(merged.values())
+    timed = np.array([k[0] == 0 for k in keys])
+    if timed.all():
+        itows = np.array([k[1] for k in keys], dtype=np.float64)
+        t_s = _gps_of_itow(itows, ref_s) if ref_s is not None else itows / 1000.0
+        how = "each at the navigation epoch it follows"
+    else:
+        t_s = np.array([k[1] for k in keys], dtype=np.float64)
+        how = "no time in the capture: one output cycle per second, in the order received"
+    cols: dict[str, Any] = {"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER}
+    for out, names in _MONITOR_COLUMNS.items():
+        cols[out] = np.array([_first(e, *names) for e in rows])
+    cols["spoofing_state"] = np.array([_first(e, "sec_spoofing_state") for e in rows])
+    return pd.DataFrame(cols), how
 
 
 def _observations(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | None, int]:
@@ -466,7 +512,7 @@ def _first_unix_ns(out: Assembled | None) -> int | None:
     """The earliest time of the NMEA output when it is dated (UTC ns), else None."""
     if out is None or out.time_reference != "unix":
         return None
-    firsts = [int(df["t_ns"].min()) for df in (out.fixes, out.headings) if df is not None and len(df)]
+    firsts = [int(df["t_ns"].min()) for df in (out.fixes, out.headings, out.satellites) if df is not None and len(df)]
     return min(firsts) if firsts else None
 
 
@@ -604,9 +650,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     satellites = _satellites(state, ref_s)
     headings, nmea_fixes, nmea_streams = None, None, []
     if nmea is not None:
-        first_ubx = _first_ubx_ns(fixes, obs, satellites)
-        anchor_ns = round(ref_s * NS) if ref_s is not None else first_ubx
-        leap = state.leap_s if state.leap_s is not None else 18.0
+        anchor_ns = anchor_ns_of(ref_s, fixes, obs, satellites)
+        leap = leap_of(state)
         headings = _nmea_on_clock(nmea.headings, nmea, reference, anchor_ns, leap)
         nmea_streams = [s for s in nmea.streams if s.role == "heading"]
         if fixes is None:
@@ -628,6 +673,22 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             for s in nmea.streams
             if s.role in ("fix", "heading")
         ]
+    status = None
+    if fixes is None:  # a receiver without a fix: what its monitors and its sky said is still read
+        status, how = _receiver_status(state, ref_s)
+        if status is not None:
+            metadata["clock.receiver_status"] = how
+        if satellites is None and nmea is not None:
+            satellites = _nmea_on_clock(nmea.satellites, nmea, reference, anchor_ns_of(ref_s, obs), leap_of(state))
+            if satellites is not None:
+                ids = dict.fromkeys(satellites["receiver_id"].astype(str))
+                rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
+                satellites = satellites.assign(receiver_id=satellites["receiver_id"].map(rename))
+                per_receiver = satellites.groupby("receiver_id")["t_ns"].nunique()
+                nmea_streams += [
+                    StreamInfo("satellites", str(rid), "NMEA in the UBX stream", "NMEA GSV/GSA", int(n))
+                    for rid, n in per_receiver.items()
+                ]
     streams: list[StreamInfo] = []
     if fixes is not None and not fixes_from_nmea:
         kinds = " ".join(k for k in (*m.PVT_LIKE, *m.LEGACY_FIX, "NAV-DOP", "NAV-STATUS", *_UNTIMED) if state.used[k])
@@ -641,11 +702,14 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             streams.append(nav_info)
     if imu is not None:
         streams.append(StreamInfo("imu", "ubx_esf", "UBX", "UBX ESF-RAW/ESF-MEAS", len(imu), body_frame="FRD"))
-    if satellites is not None:
+    if status is not None:
+        kinds = " ".join(k for k in _UNTIMED if state.used[k])
+        streams.append(StreamInfo("receiver_status", RECEIVER, "UBX", f"UBX {kinds}", len(status)))
+    if satellites is not None and (state.navsat or state.svinfo):
         kind = "NAV-SAT" if state.navsat else "NAV-SVINFO"
         n_reports = len(state.navsat or state.svinfo)
         streams.append(StreamInfo("satellites", RECEIVER, "UBX", f"UBX {kind}", n_reports))
-    if fixes is None and obs is None and imu is None and satellites is None and headings is None:
+    if fixes is None and obs is None and imu is None and satellites is None and headings is None and status is None:
         raise ReaderError(path, refusal(state, frames, nmea), "ubx")
     metadata = {**_header_metadata(frames.comments), **state.metadata, **metadata}
     metadata |= {
@@ -654,7 +718,14 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         "enum.fix_type": m.FIX_MEANING,
     }
     metadata["enum.spoofing_flag"] = f"{int(SpoofingFlag.INDICATED)} when spoofing_state >= 2"
-    frames_ns = {"fixes": fixes, "observations": obs, "imu": imu, "headings": headings, "satellites": satellites}
+    frames_ns = {
+        "fixes": fixes,
+        "observations": obs,
+        "imu": imu,
+        "headings": headings,
+        "satellites": satellites,
+        "receiver_status": status,
+    }
     table = build_table(
         path,
         "ubx",
@@ -669,6 +740,15 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
 
 
 _UNTIMED = ("MON-RF", "MON-HW", "SEC-SIG")
+
+
+def anchor_ns_of(ref_s: float | None, *frames: pd.DataFrame | None) -> int | None:
+    """Where undated NMEA goes: the capture's GPS time, else its first UBX time."""
+    return round(ref_s * NS) if ref_s is not None else _first_ubx_ns(*frames)
+
+
+def leap_of(state: _State) -> float:
+    return state.leap_s if state.leap_s is not None else 18.0
 
 
 def _first_ubx_ns(*frames: pd.DataFrame | None) -> int | None:

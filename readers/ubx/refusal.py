@@ -1,6 +1,7 @@
 """Why a u-blox capture holds nothing to analyse, said by what it does hold.
 
-A capture with no fix, raw observation, satellite report, heading or IMU sample is refused in one line
+A capture with no fix, raw observation, satellite report (NAV-SAT, or GSV in its NMEA), monitor message
+(MON-RF, MON-HW, SEC-SIG: read into `receiver_status`), heading or IMU sample is refused in one line
 that names its kind: a timing receiver's time-only output, a receiver that never had a fix, a session
 of configuration and status messages, navigation messages alone, the receiver's stored log read back.
 """

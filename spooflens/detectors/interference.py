@@ -86,6 +86,9 @@ class _Receiver:
     fixes: pd.DataFrame
     sky: SkyMatrix | None
     sky_source: str  # where the C/N0 came from
+    # where its front end's indicators and jamming state are: its fixes, or for a receiver that never
+    # had one, its monitor messages (the `receiver_status` frame, rows without a position)
+    monitor: pd.DataFrame
 
 
 def _varies(rows: pd.DataFrame) -> bool:
@@ -98,10 +101,12 @@ def _receivers(table: EpochTable) -> list[_Receiver]:
     """Every receiver with its fixes and the best C/N0 it has: its sky view, its raw observations, or the
     mean C/N0 of its fixes."""
     out = []
-    sats, obs, fixes = table.satellites, table.observations, table.fixes
-    ids = list(dict.fromkeys(str(r) for frame in (fixes, sats, obs) for r in frame["receiver_id"].dropna().unique()))
+    sats, obs, fixes, status = table.satellites, table.observations, table.fixes, table.receiver_status
+    frames = (fixes, sats, obs, status)
+    ids = list(dict.fromkeys(str(r) for frame in frames for r in frame["receiver_id"].dropna().unique()))
     for rid in ids:
         fx = fixes[fixes["receiver_id"].astype(str) == rid].reset_index(drop=True)
+        monitor = fx if len(fx) else status[status["receiver_id"].astype(str) == rid].reset_index(drop=True)
         sky, source = None, "none"
         mine = sats[sats["receiver_id"].astype(str) == rid] if len(sats) else sats
         raw = obs[obs["receiver_id"].astype(str) == rid] if len(obs) else obs
@@ -115,7 +120,7 @@ def _receivers(table: EpochTable) -> list[_Receiver]:
             cn0 = fx["cn0_mean_dbhz"].to_numpy(float)[ok][:, None]
             sky = SkyMatrix(t, ("mean",), cn0, np.full(cn0.shape, np.nan), np.full(1, np.nan))
             source = "the mean C/N0 of its fixes"
-        out.append(_Receiver(rid, fx, sky, source))
+        out.append(_Receiver(rid, fx, sky, source, monitor))
     return out
 
 
@@ -331,7 +336,7 @@ def check_receiver(
     rec: _Receiver, meaning: dict[int, str], indicators: tuple[RfIndicator, ...], opts: InterferenceOptions
 ) -> tuple[list[Alarm], list[Finding], list[Series], list[dict[str, Any]], list[dict[str, Any]], dict[str, Any]]:
     """(alarms, findings, series, events, rejected losses, the receiver's facts)."""
-    fx, rid = rec.fixes, rec.rid
+    fx, rid = rec.monitor, rec.rid
     alarms: list[Alarm] = []
     findings: list[Finding] = []
     series: list[Series] = []
@@ -404,7 +409,7 @@ def _event_facts(
     opts: InterferenceOptions,
 ) -> dict[str, Any]:
     """Everything for and against interference in one event, and whether it is an alarm."""
-    fx = rec.fixes
+    fx = rec.monitor
     if loss is not None:
         onset, end_iv = loss.onset_interval_s, loss.end_interval_s
     else:
@@ -428,7 +433,7 @@ def _event_facts(
         "rf": rf,
         "rf_verdict": rf_verdict,
         "receiver_state": None if state is None else {"worst": state, "meaning": meaning.get(state, "?")},
-        "fix": _fix_facts(fx, start, end, reference, opts.gap_factor),
+        "fix": _fix_facts(rec.fixes, start, end, reference, opts.gap_factor),
     }
     if loss is not None and rec.sky is not None:
         shape = _loss_shape(loss, rec.sky, opts)
@@ -491,6 +496,8 @@ def _alarm_and_finding(
         what = f"all {len(kept) + len(lost)} {phrase} satellites lost"
     elif sig == "mean C/N0 drop" and drop:
         what = f"mean C/N0 fell {drop['median']:.0f} dB"
+    elif rec.sky is None and event["rf_verdict"] != "power up":
+        what = "the receiver's own jamming monitor (no C/N0 logged)"
     else:
         what = "the receiver's front end saw more power, the C/N0 did not fall"
     until = "the end of the log" if event["ongoing_at_end"] else f"{end:.1f} s"
@@ -533,7 +540,7 @@ def run_interference(table: EpochTable, opts: InterferenceOptions | None = None)
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows of a satellite not yet seen
         for rec in _receivers(table):
             usable = rec.sky is not None or any(
-                len(rec.fixes) and np.isfinite(rec.fixes[c].to_numpy(float)).any()
+                len(rec.monitor) and np.isfinite(rec.monitor[c].to_numpy(float)).any()
                 for c in ("agc", "noise_per_ms", "jamming_indicator", "jamming_state")
             )
             if not usable:

@@ -94,12 +94,12 @@ def _has_satellite_view(table: EpochTable) -> str | None:
 
 
 def _has_signal_levels(table: EpochTable) -> str | None:
-    if _has_fixes(table) is None or len(table.satellites):
+    if _has_fixes(table) is None or len(table.satellites) or len(table.receiver_status):
         return None
     obs = table.observations
     if len(obs) and np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any():
         return None
-    return "GNSS fixes, satellite reports or raw observations with C/N0"
+    return "GNSS fixes, monitor messages, satellite reports or raw observations with C/N0"
 
 
 def _has_received_ephemerides(table: EpochTable) -> str | None:
@@ -164,8 +164,8 @@ REQUIREMENTS: dict[str, Requirement] = {
         _has_satellite_view,
     ),
     "signal_levels": Requirement(
-        "signal levels: GNSS fixes (their mean C/N0, AGC, noise, jamming indicator or state), per-satellite "
-        "reports or raw observations with C/N0",
+        "signal levels: GNSS fixes (their mean C/N0, AGC, noise, jamming indicator or state), the receiver's "
+        "monitor messages (MON-RF, MON-HW, SEC-SIG), per-satellite reports or raw observations with C/N0",
         _has_signal_levels,
     ),
     "received_ephemerides": Requirement(

@@ -1,0 +1,77 @@
+"""Captures of a receiver that never had a fix but logged its interference monitor or its sky: read
+(the `receiver_status` frame, the satellites frame), the interference detector runs on them, and a
+capture with nothing usable is still refused by what it holds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from paths import real_log
+
+from readers import read_log
+from spooflens.errors import ReaderError
+from spooflens.pipeline.run import analyze_table
+
+
+def test_sec_sig_jamming_warning_without_a_fix_is_a_jamming_event_and_no_spoofing_verdict() -> None:
+    table = read_log(real_log("corpus/pyubx2/pygpsdata-SEC.log"))
+    assert table.fixes.empty and table.satellites.empty  # no position invented
+    status = table.receiver_status
+    assert status["jamming_state"].tolist() == [1.0, 2.0, 2.0]  # SEC-SIG jammingState: ok, warning, warning
+    assert status["spoofing_state"].tolist() == [1.0, 3.0, 1.0]
+    assert "no time in the capture" in table.metadata["clock.receiver_status"]
+    analysis = analyze_table(table)
+    headline = analysis.verdict.headline
+    assert headline.startswith("NO VERDICT: no spoofing detector could run on this log")
+    assert "JAMMING / INTERFERENCE" in headline
+    (result,) = [r for r in analysis.results if r.name == "interference"]
+    events = result.extras["events"]
+    assert isinstance(events, list) and len(events) == 1
+    event = events[0]
+    assert event["because"] == "the receiver reported jamming (warning)"
+    assert event["fix"] == {"logged": False}
+    assert "no C/N0 logged" in result.findings[0].text
+
+
+def test_mon_rf_and_mon_hw_without_a_fix_give_the_front_end_and_the_monitors_word() -> None:
+    table = read_log(real_log("corpus/pyubx2/pygpsdata-MON.log"))
+    status = table.receiver_status
+    # one output cycle (MON-RF, MON-HW) then a second MON-RF: jamInd 255, jammingState 3 (critical)
+    assert status["agc"].tolist() == [1404.0, 1404.0]
+    assert status["noise_per_ms"].tolist() == [92.0, 92.0]
+    assert status["jamming_indicator"].tolist() == [7.0, 255.0]
+    assert status["jamming_state"].tolist() == [0.0, 3.0]
+    analysis = analyze_table(table)
+    assert analysis.verdict.headline.startswith("NO VERDICT: no spoofing detector could run on this log")
+    (result,) = [r for r in analysis.results if r.name == "interference"]
+    assert result.ran
+    receivers = result.extras["receivers"]
+    assert isinstance(receivers, dict)
+    monitor = receivers["ubx"]["jamming_monitor"]
+    assert monitor["reported"] == "interference reported"
+    assert monitor["codes_seen"] == {"0": "unknown or monitor off", "3": "critical"}
+    assert not result.alarms  # one critical report: the detector needs two (a state held, not a blip)
+
+
+def test_a_capture_whose_nmea_reports_its_sky_but_no_fix_is_read_for_its_cn0() -> None:
+    table = read_log(real_log("corpus/pyubx2/2023-4-17_82912_serial-COM3.ubx"))
+    assert table.fixes.empty
+    sats = table.satellites
+    assert set(sats["sv_id"]) >= {"G06", "G25"}
+    assert np.isfinite(sats["cn0_dbhz"].to_numpy(float)).all()
+    analysis = analyze_table(table)
+    (result,) = [r for r in analysis.results if r.name == "interference"]
+    assert result.ran and "C/N0 from the receiver's satellite reports" in result.reason
+    assert not analysis.verdict.spoofed
+
+
+@pytest.mark.parametrize(
+    ("log", "why"),
+    [
+        ("corpus/gpsd/ublox-ned-m8t-sbfrx3.log", "navigation messages only"),
+        ("corpus/gpsd/ublox-zoe-m8b-logretrieve.log", "the receiver's stored log read back"),
+    ],
+)
+def test_captures_with_no_sky_no_monitor_and_no_fix_are_still_refused(log: str, why: str) -> None:
+    with pytest.raises(ReaderError, match=why):
+        read_log(real_log(log))
