@@ -215,7 +215,14 @@ def test_inject_rewrites_the_gps_fix_lines(tmp_path: Path) -> None:
     )
     np.testing.assert_allclose(d[late, 0], 50.0, atol=0.01)
     np.testing.assert_allclose(d[~late], 0.0, atol=0.01)
-    assert main(["inject", str(AUGUST), "--attack", "pr_delay:delay=300,svs=G05", "-o", str(tmp_path / "x.txt")]) == 2
+    # a counterfeit satellite is written into its Raw lines' ReceivedSvTimeNanos (300 m later: 1,000.7 ns earlier)
+    delayed = tmp_path / "delayed.txt"
+    assert main(["inject", str(AUGUST), "--attack", "pr_delay:delay=300,svs=G05", "-o", str(delayed)]) == 0
+    c = read_log(delayed, topics={"nav": str(GMT / "hour2350.16n")})
+    moved = c.observations["pseudorange_m"].to_numpy() - a.observations["pseudorange_m"].to_numpy()
+    g05 = (a.observations["sv_id"] == "G05").to_numpy()
+    np.testing.assert_allclose(moved[g05], 300.0, atol=0.3)  # whole nanoseconds: 0.3 m
+    np.testing.assert_allclose(moved[~g05], 0.0, atol=1e-6)
 
 
 def test_nav_records_give_the_satellite_states_the_navigation_file_gives(tmp_path: Path) -> None:
