@@ -220,6 +220,59 @@ def _after_lead_in(incident: Incident, results: Sequence[DetectorResult], jam_s:
     return replace(incident, onset_s=onset, onset_interval_s=(onset, takeover) if onset < takeover else None)
 
 
+_CONFIDENCE_RANK = {"low": 0, "medium": 1, "high": 2}
+
+
+def _union(*parts: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(dict.fromkeys(x for part in parts for x in part))
+
+
+def fold_jamming(events: list[Event]) -> list[Event]:
+    """Jamming events that overlap in time are one episode of interference (the interference detector's
+    incident and the GNSS-internal alarms it explains are incidents apart): one event, from the first's
+    onset to the last's end, with the evidence of all; it keeps the earliest one's incident."""
+    jams = sorted((e for e in events if e.kind == Kind.JAMMING), key=lambda e: e.start_s)
+    groups: list[list[Event]] = []
+    for e in jams:
+        if groups and e.start_s <= max(g.end_s for g in groups[-1]):
+            groups[-1].append(e)
+        else:
+            groups.append([e])
+    folded = []
+    for g in groups:
+        if len(g) == 1:
+            folded.append(g[0])
+            continue
+        first, last = g[0], max(g, key=lambda e: e.end_s)
+        onset = min(e.onset_s for e in g)
+        confidence = max((e.confidence for e in g), key=lambda c: _CONFIDENCE_RANK.get(c, 0))
+        ongoing = any(e.ongoing_at_end for e in g)
+        evidence_for = _union(*(e.evidence_for for e in g))
+        end = "the end of the log" if ongoing else f"{last.end_s:.2f} s"
+        text = (
+            f"{Kind.JAMMING.value} from {min(onset, first.start_s):.2f} s (alarm {first.start_s:.2f} s) to {end}, "
+            f"confidence {confidence}: " + "; ".join(evidence_for)
+        )
+        folded.append(
+            replace(
+                first,
+                end_s=last.end_s,
+                onset_s=onset,
+                confidence=confidence,
+                text=text,
+                evidence_for=evidence_for,
+                evidence_against=_union(*(e.evidence_against for e in g)),
+                end_interval_s=last.end_interval_s,
+                ongoing_at_end=ongoing,
+                receivers=_union(*(e.receivers for e in g)),
+                satellites=_union(*(e.satellites for e in g)),
+                systems=_union(*(e.systems for e in g)),
+                bands=_union(*(e.bands for e in g)),
+            )
+        )
+    return [e for e in events if e.kind != Kind.JAMMING] + folded
+
+
 def link_sequences(events: list[Event], within_s: float = SEQUENCE_S) -> list[Event]:
     """Each jamming event linked to the first spoofing event whose onset follows its end within `within_s`."""
     out = list(events)
@@ -279,6 +332,7 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
     # a lead-in the interference detector's own jamming event already covers is that event
     jams = [e for e in events if e.kind == Kind.JAMMING]
     events += [lead for lead in leads if not any(j.start_s <= lead.end_s and lead.start_s <= j.end_s for j in jams)]
+    events = fold_jamming(events)
     events.sort(key=lambda e: (e.start_s, e.kind != Kind.JAMMING))
     # the tracks reconstructed for incidents no longer called spoofing go with them
     reconstructed = verdict.reconstructed
