@@ -117,49 +117,32 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     if gpa_parts:
         gpa = pd.concat(gpa_parts, ignore_index=True).drop_duplicates(["TimeUS", "inst"])
         gps = gps.merge(gpa, on=["TimeUS", "inst"], how="left")
-    ubx = log.columns("UBX1", UBX1_FIELDS)
-    if ubx is not None:
-        u = pd.DataFrame(
-            {
-                "TimeUS": ubx["TimeUS"].astype(np.int64),
-                "inst": _instance(ubx, "Instance"),
-                "ubx_noise": ubx["noisePerMS"].astype(float),
-                "ubx_jam": ubx["jamInd"].astype(float),
-                "ubx_agc": ubx["agcCnt"].astype(float),
-            }
-        ).sort_values("TimeUS")
-        gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
-        gps = pd.merge_asof(
-            gps.sort_values("TimeUS"),
-            u,
-            on="TimeUS",
-            by="inst",
-            direction="backward",
-            tolerance=int(UBX_MAX_AGE_S * 1e6),
-        )
+    # the receiver's noise, jamming indicator and AGC (UBX1, u-blox only), the latest one not older than
+    # UBX_MAX_AGE_S
+    ubx1 = {"noisePerMS": "ubx_noise", "jamInd": "ubx_jam", "agcCnt": "ubx_agc"}
+    gps = _join_receiver_message(log, gps, "UBX1", UBX1_FIELDS, ubx1, int(UBX_MAX_AGE_S * 1e6))
     if not gpa_parts:
-        gps = _join_ubx3(log, gps)
+        # before GPA (2016), u-blox receivers' accuracies came as UBX3, logged with each fix: joined as GPA's
+        ubx3 = {"hAcc": "gpa_HAcc", "vAcc": "gpa_VAcc", "sAcc": "gpa_SAcc"}
+        gps = _join_receiver_message(log, gps, "UBX3", UBX3_FIELDS, ubx3, UBX3_MAX_AGE_US)
     return gps.sort_values(["inst", "TimeUS"], kind="stable").reset_index(drop=True)
 
 
-def _join_ubx3(log: DataFlash, gps: pd.DataFrame) -> pd.DataFrame:
-    """Before GPA (2016), u-blox receivers' accuracies came as UBX3 (hAcc, vAcc, sAcc), logged with each
-    fix: joined as GPA's HAcc/VAcc/SAcc to the fix of the same instance logged at or just after it."""
-    ubx3 = log.columns("UBX3", UBX3_FIELDS)
-    if ubx3 is None:
+def _join_receiver_message(
+    log: DataFlash, gps: pd.DataFrame, name: str, fields: tuple[str, ...], columns: dict[str, str], max_age_us: int
+) -> pd.DataFrame:
+    """`gps` with the `columns` of message `name` (renamed) of the same instance joined to each fix: the
+    latest one logged at or before it and not more than `max_age_us` older."""
+    found = log.columns(name, fields)
+    if found is None:
         return gps
     u = pd.DataFrame(
-        {
-            "TimeUS": ubx3["TimeUS"].astype(np.int64),
-            "inst": _instance(ubx3, "Instance"),
-            "gpa_HAcc": ubx3["hAcc"].astype(float),
-            "gpa_VAcc": ubx3["vAcc"].astype(float),
-            "gpa_SAcc": ubx3["sAcc"].astype(float),
-        }
+        {"TimeUS": found["TimeUS"].astype(np.int64), "inst": _instance(found, "Instance")}
+        | {new: found[old].astype(float) for old, new in columns.items()}
     ).sort_values("TimeUS")
     gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
     return pd.merge_asof(
-        gps.sort_values("TimeUS"), u, on="TimeUS", by="inst", direction="backward", tolerance=UBX3_MAX_AGE_US
+        gps.sort_values("TimeUS"), u, on="TimeUS", by="inst", direction="backward", tolerance=max_age_us
     )
 
 

@@ -99,15 +99,10 @@ def pvt_values(msg: Any) -> dict[str, float] | None:
             if int(_get(msg, "diffSoln", 0))
             else FixType.FIX_3D
         )
-    return {
-        "lat_deg": _get(msg, "lat"),
-        "lon_deg": _get(msg, "lon"),
-        "height_m": _get(msg, "height") / 1000,
+    return posllh_values(msg) | {
         "vel_e_mps": _get(msg, "velE") / 1000,
         "vel_n_mps": _get(msg, "velN") / 1000,
         "vel_u_mps": -_get(msg, "velD") / 1000,
-        "h_acc_m": _get(msg, "hAcc") / 1000,
-        "v_acc_m": _get(msg, "vAcc") / 1000,
         "vel_acc_mps": _get(msg, "sAcc") / 1000,
         "sats_used": _get(msg, "numSV"),
         "fix_type": float(kind),
@@ -170,6 +165,7 @@ def tim_tp_week_tow(msg: Any) -> tuple[int, float, bool] | None:
 
 
 def posllh_values(msg: Any) -> dict[str, float]:
+    """Position and its accuracies, as NAV-POSLLH and NAV-PVT both give them (deg, mm)."""
     return {
         "lat_deg": _get(msg, "lat"),
         "lon_deg": _get(msg, "lon"),
