@@ -14,6 +14,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.baseline.format import Baseline, RicePair
+from spooflens.baseline.use import note
 from spooflens.detectors.base import Alarm, Bars, DetectorResult, Histogram, Series, alarm_intervals
 from spooflens.detectors.statistics.rayleigh import (
     Calibration,
@@ -372,8 +373,6 @@ def detect(
     other one; `groups`: the log's receivers as the receivers they are, `group_receivers` by default;
     `known`: the known stations, `stations` by default); with a vehicle's `baseline`, the collapse rules judge
     against the null models of its clean logs."""
-    from spooflens.baseline.use import note
-
     opts = opts or DualReceiverOptions()
     groups = group_receivers(table) if groups is None else groups
     known = stations(table, {})[0] if known is None else known
@@ -440,8 +439,6 @@ def _pseudorange_rule(
         return
     rule = collapse_rule(t, sd, opts, prior=prior)
     if prior is not None:
-        from spooflens.baseline.use import note
-
         note(
             res,
             f"{pair.label}: the clean logs' model of the spread (Rice nu {rule.cal.nu:.3g} m, "

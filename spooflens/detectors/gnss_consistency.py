@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from spooflens.baseline.use import consistency_caps, note
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
 from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import enu_rotation, geodetic_to_ecef, geodetic_to_enu
@@ -141,8 +142,6 @@ def run_gnss_consistency(
         mode, t, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
         modes.append(f"{rid}: {mode}")
         if scale is not None:
-            from spooflens.baseline.use import note
-
             axes = "/".join(f"{s:.2g}" for s in scale)
             note(result, f"{rid}: residual scale at most the baseline's allowance: {axes} (east/north/up)")
         dof = np.isfinite(z).sum(axis=1)
@@ -161,8 +160,6 @@ def run_gnss_consistency(
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:
-    from spooflens.baseline.use import consistency_caps
-
     baseline = ctx.options.baseline
     caps = consistency_caps(baseline.content, ctx.table) if baseline is not None else None
     return [run_gnss_consistency(ctx.table.fixes, scale_caps=caps)]

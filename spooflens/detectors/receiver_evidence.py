@@ -13,6 +13,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.baseline.format import Baseline
+from spooflens.baseline.indicators import INDICATORS as SPREADS
+from spooflens.baseline.use import level_scale, level_z, note
 from spooflens.detectors.base import (
     Alarm,
     DetectorResult,
@@ -165,9 +167,6 @@ def level_test(
 ) -> LevelTest | None:
     """Each indicator's level (median over the trailing `level_window_s`) against the vehicle's baseline
     (see the module docstring); None when the baseline has no level of this receiver's indicators."""
-    from spooflens.baseline.indicators import INDICATORS as SPREADS
-    from spooflens.baseline.use import level_scale, level_z
-
     index = pd.to_timedelta(t, unit="s")
     window = pd.Timedelta(seconds=opts.level_window_s)
     zs: dict[str, FloatArray] = {}
@@ -394,8 +393,6 @@ def _run(ctx: AnalysisContext) -> list[DetectorResult]:
     loaded = ctx.options.baseline
     if loaded is None:
         return [run_receiver_evidence(ctx.table.fixes)]
-    from spooflens.baseline.use import note
-
     result = run_receiver_evidence(ctx.table.fixes, baseline=loaded.content)
     if result.ran:
         note(result, "each indicator's scale at least its typical scale in the clean logs")

@@ -10,6 +10,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.baseline.format import Baseline, ClockBaseline
+from spooflens.baseline.use import cap, note
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Series, trailing_median
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import MIN_TIMED_FIXES, AnalysisContext, AnalysisSpec, DetectorInfo
@@ -263,8 +264,6 @@ def run_receiver_time(
         known = _clock_baseline(baseline, str(rid), clock, monotonic)
         scale_cap = np.inf
         if known is not None:
-            from spooflens.baseline.use import cap, note
-
             scale_cap = cap(known.offset_scale_s)
             if np.isfinite(scale_cap):
                 note(result, f"{rid}: jitter scale at most {scale_cap * 1e3:.1f} ms (the clean logs' allowance)")

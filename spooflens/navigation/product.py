@@ -11,7 +11,7 @@ from functools import partial
 import numpy as np
 
 from spooflens.baseline.loaded import LoadedBaseline
-from spooflens.baseline.use import coast_envelope_limit
+from spooflens.baseline.use import coast_envelope_limit, noise_prior
 from spooflens.detectors.base import SIGMA_SUFFIX, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
 from spooflens.estimation.statespace import LinearGaussianModel
@@ -82,8 +82,6 @@ def solve_navigation(
     inputs, start = aligned if aligned is not None else _aligned(table, options, preset)
     prior = None
     if options.baseline is not None:
-        from spooflens.baseline.use import noise_prior
-
         prior = noise_prior(options.baseline, inputs.receiver_id, inputs.imu_id, preset.name)
     learned = learn_noise(inputs, preset, start, inputs.odometry_id, exclude, prior=prior)
     opts = FilterOptions(
