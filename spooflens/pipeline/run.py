@@ -155,8 +155,9 @@ def _done(analysis: Analysis, nav: Navigation | None, clean_coasts: bool) -> Ana
     coasts' envelope (the solution itself, a gigabyte per hour of 10 Hz GNSS, is let go)."""
     if nav is None:
         return analysis
-    spans = [(min(i.onset_s, i.start_s), i.end_s) for i in analysis.verdict.incidents]
-    envelope = clean_envelope(nav, spans) if clean_coasts else None
+    envelope = None
+    if clean_coasts:
+        envelope = clean_envelope(nav, [(min(i.onset_s, i.start_s), i.end_s) for i in analysis.verdict.incidents])
     return replace(analysis, learned_noise=nav.learned, clean_envelope=envelope)
 
 
