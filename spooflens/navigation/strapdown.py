@@ -58,11 +58,20 @@ class NavState:
 Axes = tuple[FloatArray, FloatArray, FloatArray]
 
 
+def read_only_column(c: FloatArray) -> FloatArray:
+    """A contiguous float view that cannot be written. The kernels are compiled for read-only samples:
+    a log whose body axes are flipped (FRD) hands them some writable columns and some read-only table
+    views, and each mix of the two would be a signature compiled again (40 s for the filter loop)."""
+    view = np.ascontiguousarray(c, dtype=float).view()
+    view.flags.writeable = False
+    return view
+
+
 def axes_of(v: FloatArray | Sequence[FloatArray]) -> Axes:
-    """x, y, z as three contiguous float columns, from (N, 3) rows or three columns (taken as they are
-    when already so: a table's own columns are not copied)."""
+    """x, y, z as three contiguous read-only float columns, from (N, 3) rows or three columns (taken as
+    they are when already so: a table's own columns are not copied)."""
     cols = [v[:, j] for j in range(3)] if isinstance(v, np.ndarray) else list(v)
-    x, y, z = (np.ascontiguousarray(c, dtype=float) for c in cols)
+    x, y, z = (read_only_column(c) for c in cols)
     return x, y, z
 
 
@@ -134,7 +143,7 @@ def preintegrate(
     """The high-rate part over a whole IMU stream (times increasing), compiled (`kernels.preintegrate_rows`).
     `f_b` and `w_b` are (N, 3) rows or three columns each (columns are not copied); `every`: the
     checkpoints' spacing (default: 1 up to DENSE_SAMPLES samples, else CHECKPOINT_EVERY)."""
-    t = np.ascontiguousarray(t, dtype=float)
+    t = read_only_column(t)
     every = every if every is not None else (1 if len(t) <= DENSE_SAMPLES else CHECKPOINT_EVERY)
     f, w = axes_of(f_b), axes_of(w_b)
     Qb, G, H = kernels.preintegrate_rows(t, *f, *w, int(every))
