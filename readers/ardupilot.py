@@ -113,6 +113,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
             continue
         g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k not in ("I", "_ofs")})
         g["inst"] = inst if inst is not None else _instance(cols)
+        g["ofs"] = cols["_ofs"]  # `gpa_ofs` once prefixed: inject patches the GPA row joined to each fix there
         gpa_parts.append(g.add_prefix("gpa_").rename(columns={"gpa_TimeUS": "TimeUS", "gpa_inst": "inst"}))
     if gpa_parts:
         gpa = pd.concat(gpa_parts, ignore_index=True).drop_duplicates(["TimeUS", "inst"])
@@ -132,13 +133,15 @@ def _join_receiver_message(
     log: DataFlash, gps: pd.DataFrame, name: str, fields: tuple[str, ...], columns: dict[str, str], max_age_us: int
 ) -> pd.DataFrame:
     """`gps` with the `columns` of message `name` (renamed) of the same instance joined to each fix: the
-    latest one logged at or before it and not more than `max_age_us` older."""
+    latest one logged at or before it and not more than `max_age_us` older. `<name>_ofs` (lower case) is
+    where the joined message sits in the file, so inject writes the attacked values back to the same one."""
     found = log.columns(name, fields)
     if found is None:
         return gps
     u = pd.DataFrame(
         {"TimeUS": found["TimeUS"].astype(np.int64), "inst": _instance(found, "Instance")}
         | {new: found[old].astype(float) for old, new in columns.items()}
+        | {f"{name.lower()}_ofs": found["_ofs"].astype(np.int64)}
     ).sort_values("TimeUS")
     gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
     return pd.merge_asof(
