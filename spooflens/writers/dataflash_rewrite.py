@@ -182,12 +182,10 @@ def _gps_values(patcher: _Patcher, r: Mapping[str, Any], velocities: bool) -> di
         values |= {"Lat": r["lat_deg"], "Lng": r["lon_deg"], "Alt": old_alt + (r["height_m"] - r["height_m_0"])}
     ve, vn, vu = r["vel_e_mps"], r["vel_n_mps"], r["vel_u_mps"]
     moved = any(_moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps", "vel_u_mps"))
-    if velocities and moved and np.isfinite([ve, vn, vu]).all():
-        values |= {
-            "Spd": math.hypot(ve, vn),
-            "GCrs": math.degrees(math.atan2(ve, vn)) % 360.0,
-            "VZ": -vu,
-        }
+    if velocities and moved and math.isfinite(ve) and math.isfinite(vn):
+        values |= {"Spd": math.hypot(ve, vn), "GCrs": math.degrees(math.atan2(ve, vn)) % 360.0}
+        if math.isfinite(vu):  # unknown before VZ was logged (2014)
+            values["VZ"] = -vu
     for column, field in GPS_INDICATORS.items():
         if _moved(r[column], r[f"{column}_0"]):
             values[field] = r[column]
