@@ -14,10 +14,13 @@ seconds of fixes); it gets the attacked values of the first of them, the fix log
 says what the receiver saw when it was logged, not what came after), or when the attack lost that fix,
 those of the nearest fix it kept (the monitor still shows the jammer while the fix is gone).
 
+The raw measurements the autopilot logs (GRXS, u-blox RXM-RAWX) get the attacked pseudorange (prMes),
+Doppler (doMes) and C/N0 (cno); a measurement the attack removed (a satellite the jammer lost) gets trk
+bit 0 clear, pseudorange not valid, as the receiver marks one it cannot use; the reader drops it.
+
 Messages keep their length and place, so pymavlink and every other DataFlash tool read the copy as they
-read the original. The autopilot's own EKF messages (XKF*) and raw observations (GRXS) are left as
-logged: the copy shows what the receiver was made to report, not what the autopilot would have done with
-it.
+read the original. The autopilot's own EKF messages (XKF*) are left as logged: the copy shows what the
+receiver was made to report, not what the autopilot would have done with it.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows
+from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows, grxs_rows
 from readers.dataflash import DataFlash, open_dataflash
 from readers.dataflash_eras import logged_name
 from spooflens.epoch_table import EpochTable
@@ -65,6 +68,9 @@ JOINED = {
     "ubx3_ofs": {"h_acc_m": "hAcc", "v_acc_m": "vAcc", "vel_acc_mps": "sAcc"},
     "ubx1_ofs": {"noise_per_ms": "noisePerMS", "jamming_indicator": "jamInd", "agc": "agcCnt"},
 }
+# a raw measurement's columns and the GRXS fields that carry them
+MEASURED = {"pseudorange_m": "prMes", "doppler_hz": "doMes", "cn0_dbhz": "cno"}
+PR_VALID = 1  # GRXS trk (RXM-RAWX trkStat) bit 0: the reader keeps a measurement only with it set
 MOTION = ["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps", "vel_u_mps"]
 ATTACKED = [*MOTION, *GPS_INDICATORS, *dict.fromkeys(c for fields in JOINED.values() for c in fields)]
 
@@ -225,6 +231,40 @@ def _write_joined(patcher: _Patcher, plan: pd.DataFrame) -> None:
                 patcher.put(int(r["ofs"]), values)
 
 
+def _measurement_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
+    """One row per GRXS message of a raw measurement of the table: `ofs`, its values as read (`<column>_0`)
+    and as attacked, and `lost` where the attack removed it. The measurements of one satellite at one
+    epoch (one per signal) are told apart by their order, which the reader and the attack both keep."""
+    reference, offset_ns, _ = gps_clock(gps)
+    rows = grxs_rows(log, offset_ns, reference, [])
+    if rows is None or not len(table.observations):
+        return pd.DataFrame()
+    key = ["receiver_id", "t_s", "sv_id"]
+    before, after = (
+        o[[*key, *MEASURED]].assign(nth=o.groupby(key, sort=False).cumcount())
+        for o in (table.observations, spoofed.observations)
+    )
+    change = before.merge(after, on=[*key, "nth"], how="left", suffixes=("_0", ""), indicator=True)
+    change["lost"] = (change.pop("_merge") == "left_only").to_numpy()
+    change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
+    logged = rows[["receiver_id", "t_ns", "sv_id", "ofs"]]
+    logged = logged.assign(nth=logged.groupby(["receiver_id", "t_ns", "sv_id"], sort=False).cumcount())
+    return logged.merge(change, on=["receiver_id", "t_ns", "sv_id", "nth"], how="inner")
+
+
+def _write_measurements(patcher: _Patcher, plan: pd.DataFrame) -> None:
+    """GRXS: what the attack moved of each pseudorange, Doppler and C/N0; a measurement it removed is
+    marked as the receiver marks one it could not use (pseudorange not valid), which the reader drops."""
+    for r in plan.to_dict("records"):
+        ofs = int(r["ofs"])
+        if r["lost"]:
+            patcher.put(ofs, {"trk": float(int(patcher.read(ofs, "trk")) & ~PR_VALID)})
+            continue
+        values = {field: r[c] for c, field in MEASURED.items() if _moved(r[c], r[f"{c}_0"])}
+        if values:
+            patcher.put(ofs, values)
+
+
 def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """Write `src` to `dst` with the attacked table's fixes in its GPS messages and the messages joined to
     them; returns the note `inject` prints (what was rewritten)."""
@@ -236,6 +276,7 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
     patcher = _Patcher(log)
     _write_gps(patcher, plan, velocities)
     _write_joined(patcher, plan)
+    _write_measurements(patcher, _measurement_plan(log, gps, table, spoofed))
     Path(dst).write_bytes(bytes(patcher.data))
     gps_names = set(plan["msg"])
     n_gps = sum(n for name, n in patcher.edited.items() if name in gps_names)
@@ -243,7 +284,4 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
     lost = int(plan["lost"].sum())
     note = f"{n_gps} GPS messages rewritten ({len(spoofed.fixes)} fixes in the table"
     note += f"; {lost} lost: Status 1, no fix)" if lost else ")"
-    note += (f", {others}" if others else "") + ", every other byte copied"
-    if len(spoofed.observations) and not pd.DataFrame.equals(spoofed.observations, table.observations):
-        note += "; GRXS raw observations left as logged (only the receiver's fixes are rewritten)"
-    return note
+    return note + (f", {others}" if others else "") + ", every other byte copied"

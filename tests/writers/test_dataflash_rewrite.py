@@ -168,3 +168,43 @@ def test_a_2013_log_without_vz_or_receiver_messages_is_jammed_in_what_it_has(tmp
     assert (copy.fixes["sats_used"][on] == 7).all() and (copy.fixes["hdop"][on] == 1.6).all()
     np.testing.assert_allclose(copy.fixes["vel_n_mps"], jammed.fixes["vel_n_mps"], atol=0.006)  # Spd in cm/s
     assert copy.fixes["vel_n_mps"][on].std() > 0.05 and copy.fixes["vel_u_mps"].isna().all()
+
+
+def _one_receiver_with_raw_measurements(path: Path, seconds: int = 100) -> Path:
+    """A 2016+ log: a 5 Hz receiver and its RXM-RAWX as the autopilot logs it (GRXH, then a GRXS per
+    satellite) once a second, eight GPS satellites from 32 to 46 dB-Hz."""
+    gps = Fmt(130, "GPS", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U")
+    grxh = Fmt(161, "GRXH", "QdHbBB", "TimeUS,rcvTime,week,leapS,numMeas,recStat")
+    grxs = Fmt(162, "GRXS", "QddfBBBHBBBBB", "TimeUS,prMes,cpMes,doMes,gnss,sv,freq,lock,cno,prD,cpD,doD,trk")
+    msgs = []
+    for i, (boot_ms, tow, lat, lon) in enumerate(flight(5 * seconds)):
+        us = boot_ms * 1000
+        fix = {"Status": 3, "GMS": tow, "GWk": WEEK, "NSats": 8, "HDop": 0.9, "Lat": lat, "Lng": lon}
+        msgs.append(gps.message(TimeUS=us, I=0, **fix, Alt=584, Spd=5, VZ=0.1, U=1))
+        if i % 5 == 0:
+            msgs.append(grxh.message(TimeUS=us + 1000, rcvTime=tow / 1000, week=WEEK, leapS=18, numMeas=8))
+            for sv in range(1, 9):
+                measured = {"prMes": 2.1e7 + 1e5 * sv, "cpMes": 1.1e8, "doMes": -500.0 + 100 * sv, "cno": 30 + 2 * sv}
+                msgs.append(grxs.message(TimeUS=us + 1000, **measured, gnss=0, sv=sv, trk=7))
+    return write_dataflash(path, [gps, grxh, grxs], msgs)
+
+
+def test_raw_measurements_carry_the_jammers_c_n0_noise_and_lost_satellites(tmp_path: Path) -> None:
+    src = _one_receiver_with_raw_measurements(tmp_path / "raw.bin")
+    clean = read_log(src)
+    jammed, truth = apply_attack(clean, parse_attack("jam:start=30,end=60"))
+    assert truth.satellites == ["G01", "G02"]  # 32 and 34 dB-Hz, 15 dB down: below the 20 dB-Hz threshold
+    note = rewrite_dataflash(src, tmp_path / "jam.bin", clean, jammed, True)
+    assert "GRXS" in note
+    copy = read_log(tmp_path / "jam.bin")
+    assert unwritten_changes(clean, jammed, copy) == []
+    a, b = jammed.observations, copy.observations
+    np.testing.assert_array_equal(b[["t_s", "sv_id"]], a[["t_s", "sv_id"]])  # the lost satellites' rows gone
+    np.testing.assert_allclose(b["cn0_dbhz"], a["cn0_dbhz"], atol=0.5)  # cno: whole dB-Hz
+    np.testing.assert_array_equal(b["pseudorange_m"], a["pseudorange_m"])
+    np.testing.assert_allclose(b["doppler_hz"], a["doppler_hz"], atol=1e-4)  # doMes: float32
+    moved = b.merge(clean.observations, on=["t_s", "sv_id"], suffixes=("", "_clean"))
+    noise = (moved["pseudorange_m"] - moved["pseudorange_m_clean"]).abs()
+    assert noise.max() > 1.0  # the jammer's thermal noise, 0.5 m x sqrt(10^1.5 - 1) at full power
+    (dropped,) = [s.count for s in copy.skipped if "pseudorange not valid" in s.reason]
+    assert dropped == len(clean.observations) - len(jammed.observations)
