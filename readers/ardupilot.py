@@ -113,6 +113,7 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
             continue
         g = pd.DataFrame({k: v for k, v in cols.items() if v.dtype.kind != "S" and k not in ("I", "_ofs")})
         g["inst"] = inst if inst is not None else _instance(cols)
+        g["ofs"] = cols["_ofs"]  # `gpa_ofs` once prefixed: inject patches the GPA row joined to each fix there
         gpa_parts.append(g.add_prefix("gpa_").rename(columns={"gpa_TimeUS": "TimeUS", "gpa_inst": "inst"}))
     if gpa_parts:
         gpa = pd.concat(gpa_parts, ignore_index=True).drop_duplicates(["TimeUS", "inst"])
@@ -132,13 +133,15 @@ def _join_receiver_message(
     log: DataFlash, gps: pd.DataFrame, name: str, fields: tuple[str, ...], columns: dict[str, str], max_age_us: int
 ) -> pd.DataFrame:
     """`gps` with the `columns` of message `name` (renamed) of the same instance joined to each fix: the
-    latest one logged at or before it and not more than `max_age_us` older."""
+    latest one logged at or before it and not more than `max_age_us` older. `<name>_ofs` (lower case) is
+    where the joined message sits in the file, so inject writes the attacked values back to the same one."""
     found = log.columns(name, fields)
     if found is None:
         return gps
     u = pd.DataFrame(
         {"TimeUS": found["TimeUS"].astype(np.int64), "inst": _instance(found, "Instance")}
         | {new: found[old].astype(float) for old, new in columns.items()}
+        | {f"{name.lower()}_ofs": found["_ofs"].astype(np.int64)}
     ).sort_values("TimeUS")
     gps["TimeUS"] = gps["TimeUS"].astype(np.int64)
     return pd.merge_asof(
@@ -393,17 +396,12 @@ def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[Stre
     return pd.concat(frames, ignore_index=True), streams
 
 
-def _raw_observations(
-    log: DataFlash,
-    offset_ns: int,
-    reference: str,
-    topics: Mapping[str, str] | None,
-    skipped: list[Skipped],
-) -> tuple[pd.DataFrame | None, list[StreamInfo], NavFile | None]:
-    """GRXH/GRXS (u-blox RXM-RAWX as logged) -> observation rows of receiver GPS[0]."""
+def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skipped]) -> pd.DataFrame | None:
+    """GRXH/GRXS (u-blox RXM-RAWX as logged) -> observation rows of receiver GPS[0], without satellite
+    states, and `ofs`: where each row's GRXS message sits in the file (inject patches it there)."""
     hdr, sat = log.columns("GRXH", GRXH_FIELDS), log.columns("GRXS", GRXS_FIELDS)
     if hdr is None or sat is None:
-        return None, [], None
+        return None
     h_ofs, s_ofs = hdr["_ofs"], sat["_ofs"]
     # each GRXS belongs to the GRXH written just before it in the file
     k = np.searchsorted(h_ofs, s_ofs, side="right") - 1
@@ -430,7 +428,7 @@ def _raw_observations(
     freq[glo] = 1602.0e6 + (sat["freq"].astype(float)[glo] - 7.0) * 0.5625e6
     doppler = sat["doMes"].astype(float)
     cp_valid = (sat["trk"].astype(np.int64) & 2) == 2
-    rows = pd.DataFrame(
+    return pd.DataFrame(
         {
             "t_ns": t_gps_ns,
             "receiver_id": "GPS[0]",
@@ -441,8 +439,23 @@ def _raw_observations(
             "carrier_phase_cycles": np.where(cp_valid, sat["cpMes"].astype(float), np.nan),
             "carrier_freq_hz": freq,
             "cn0_dbhz": sat["cno"].astype(float),
+            "ofs": s_ofs,
         }
     )[keep].reset_index(drop=True)
+
+
+def _raw_observations(
+    log: DataFlash,
+    offset_ns: int,
+    reference: str,
+    topics: Mapping[str, str] | None,
+    skipped: list[Skipped],
+) -> tuple[pd.DataFrame | None, list[StreamInfo], NavFile | None]:
+    """GRXH/GRXS -> observation rows of receiver GPS[0] with their satellites' states."""
+    found = grxs_rows(log, offset_ns, reference, skipped)
+    if found is None:
+        return None, [], None
+    rows = found.drop(columns="ofs")
     nav = None
     if len(rows) and reference == "gps":
         nav = navigation_for(log.path, topics, rows["t_ns"].to_numpy() / 1e9, skipped)

@@ -409,7 +409,7 @@ ANALYSIS = AnalysisSpec(
             checked="Real clean logs: the ArduPilot flight `flightdata_center_0003.bin` (5 Hz GPS rows, robust "
             "sigma 20 ms), the Pixel 6 GnssLogger fixes (1 ms) and its NMEA (16 ms) raise nothing; the ArduPilot "
             "flight with `inject --attack capture:start=20,drag=step,offset=300,clock=3600.5` is SPOOFING, high "
-            "(GNSS-only and log clock), from 24.0 s to the end; the Pixel 6 log with "
+            "(GNSS-only, receiver self-report and log clock), from 24.0 s to the end; the Pixel 6 log with "
             "`capture:start=200,clock=-30.5` alarms from the first fix after the takeover (204 s, interval "
             "198-204 s). The Aava's NMEA 2000 capture `corpus/signalk/aava-n2k.data` (129029 times to the whole "
             "second, sent every 1.005 s: -5 ms/s, three wraps) raises nothing but the sawtooth's finding, where "

@@ -8,6 +8,7 @@ import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -94,6 +95,67 @@ def test_simulated_jamming_in_px4_ulog_and_csv(fmt: str, name: str, tmp_path: Pa
     assert truth["kind"] == "jam" and truth["phases"][0]["start_s"] == 100.0
     a = caught(out, 100.0, 160.0)
     assert a.systems == ("GPS", "Galileo")
+
+
+LOG171 = "corpus/dronekit-la-testdata/log171.bin"  # ArduCopter 3.3 (2015): UBX1 every ~2 s, no C/N0, no INS run
+
+
+def analyze_json(path: Path, tmp_path: Path) -> dict[str, Any]:
+    """`spooflens analyze LOG --json`'s summary."""
+    report = tmp_path / f"{path.name}.json"
+    assert main(["analyze", str(path), "-o", str(tmp_path / "x.rrd"), "--json", str(report), "--quiet"]) == 0
+    summary: dict[str, Any] = json.loads(report.read_text())
+    return summary
+
+
+def events_of(summary: dict[str, Any], kind: str) -> list[dict[str, Any]]:
+    return [e for e in summary["verdict"]["events"] if e["kind"] == kind]
+
+
+def interference_alarms(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    (result,) = [a for a in summary["analyses"] if a["name"] == "interference"]
+    alarms: list[dict[str, Any]] = result["alarms"]
+    return alarms
+
+
+def test_a_real_dataflash_log_with_ubx1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = real_log(LOG171)
+    clean = analyze_json(src, tmp_path)
+    assert not clean["verdict"]["spoofed"] and not events_of(clean, "jamming") and not interference_alarms(clean)
+    out = inject(src, "jam:start=100,end=150", tmp_path / "jam.bin", capsys)
+    assert "UBX1" in out and "not in the copy" not in out
+    jammed = analyze_json(tmp_path / "jam.bin", tmp_path)
+    assert not jammed["verdict"]["spoofed"] and not events_of(jammed, "spoofing")
+    (event,) = events_of(jammed, "jamming")
+    # the jammer's noisier fixes and inflated accuracies open the event within a second of the jammer's
+    # start; a GNSS-only alarm on those fixes 8 s after its end closes it
+    assert 100.0 <= event["start_s"] <= 101.0 and 150.0 <= event["end_s"] <= 160.0
+    # the RF indicators alone: UBX1 comes every ~2 s and the jammer ramps up over 2 s, and the detector
+    # holds each indicator's largest excursion over 5 s, so its alarm starts up to 3 s late and ends up
+    # to 6 s late
+    (alarm,) = interference_alarms(jammed)
+    assert 100.0 <= alarm["start_s"] <= 103.0 and 150.0 <= alarm["end_s"] <= 156.0
+    rf = next(f for f in jammed["verdict"]["findings"] if "front end saw more power" in str(f))
+    assert "AGC down 40 %" in str(rf) and "jamming indicator 34 -> 184" in str(rf)
+
+
+def test_jam_then_capture_in_a_real_dataflash_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the capture's drag carries its velocity with it and this log's IMU stops for 2 s at 61 s (no INS
+    # runs), so the spoofing is seen where the spoofer lets go at 200 s and the receiver falls back on the
+    # real sky; the verdict still puts the jamming first and the spoofing after it
+    src = real_log(LOG171)
+    out = inject(src, "jam_spoof:start=100,jam=30,end=200", tmp_path / "js.bin", capsys)
+    assert "UBX1" in out and "lost: Status 1" in out and "not in the copy" not in out
+    summary = analyze_json(tmp_path / "js.bin", tmp_path)
+    verdict = summary["verdict"]
+    assert verdict["spoofed"] and "after JAMMING / INTERFERENCE" in verdict["headline"]
+    (jam,) = events_of(summary, "jamming")
+    (spoof,) = events_of(summary, "spoofing")
+    # the jammer stops at the takeover (130 s); the receiver's re-acquisition on the spoofer over the next
+    # 4 s draws alarms that stay with the jamming
+    assert 100.0 <= jam["start_s"] <= 102.0 and 130.0 <= jam["end_s"] <= 150.0
+    assert verdict["events"][spoof["sequence"]["follows"]] == jam
+    assert spoof["onset_interval_s"][0] <= 200.0 <= spoof["end_s"]
 
 
 def test_a_format_without_a_place_for_it_says_what_was_not_written(

@@ -9,61 +9,17 @@ the bytes are what that firmware wrote, the values are made up.
 
 from __future__ import annotations
 
-import struct
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+from dataflash_support import WEEK, Fmt, flight, write_dataflash
 from paths import real_log
-from pymavlink.DFReader import FORMAT_TO_STRUCT, DFReader_binary
+from pymavlink.DFReader import DFReader_binary
 
 from readers import read_log
 from spooflens.cli import main
 from spooflens.schema import FixType
-
-HEAD = b"\xa3\x95"
-
-
-@dataclass(frozen=True)
-class Fmt:
-    type: int
-    name: str
-    format: str
-    columns: str
-
-    def size(self) -> int:
-        return 3 + struct.calcsize("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in self.format))
-
-    def fmt_message(self) -> bytes:
-        body = struct.pack(
-            "<BB4s16s64s", self.type, self.size(), self.name.encode(), self.format.encode(), self.columns.encode()
-        )
-        return HEAD + b"\x80" + body
-
-    def message(self, **values: float) -> bytes:
-        """One message; values in the units the log shows (scaled fields multiplied back, as logged)."""
-        out = []
-        for letter, col in zip(self.format, self.columns.split(","), strict=True):
-            code, mult, _ = FORMAT_TO_STRUCT[letter]
-            v = values.get(col, 0)
-            out.append(round(v / mult) if mult is not None else (int(v) if code not in "fd" else float(v)))
-        return HEAD + bytes([self.type]) + struct.pack("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in self.format), *out)
-
-
-FMT_FMT = Fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
-WEEK, TOW0_MS = 1770, 130_040_000  # 2013-12-08
-LAT0, LON0 = -35.3547178, 149.1696673
-
-
-def _write(path: Path, fmts: list[Fmt], messages: list[bytes]) -> Path:
-    path.write_bytes(b"".join(f.fmt_message() for f in [FMT_FMT, *fmts]) + b"".join(messages))
-    return path
-
-
-def _flight(n_gps: int = 20) -> list[tuple[int, int, float, float]]:
-    """(boot ms, ms of week, lat, lon) of a 5 Hz receiver moving north at 5 m/s."""
-    return [(40_000 + 200 * i, TOW0_MS + 200 * i, LAT0 + 5 * 0.2 * i / 111_320, LON0) for i in range(n_gps)]
 
 
 def test_2014_revision_timems_clock_gps_week_and_board_time_t(tmp_path: Path) -> None:
@@ -75,7 +31,7 @@ def test_2014_revision_timems_clock_gps_week_and_board_time_t(tmp_path: Path) ->
     ekf3 = Fmt(142, "EKF3", "Icccccchhhc", "TimeMS,IVN,IVE,IVD,IPN,IPE,IPD,IMX,IMY,IMZ,IVT")
     ekf4 = Fmt(143, "EKF4", "Icccccchhhc", "TimeMS,SVN,SVE,SVD,SPN,SPE,SPD,SMX,SMY,SMZ,SVT")
     msgs = []
-    for boot_ms, tow, lat, lon in _flight():
+    for boot_ms, tow, lat, lon in flight():
         for k in range(10):
             msgs.append(imu.message(TimeMS=boot_ms - 200 + 20 * k, AccZ=-9.81, GyrZ=0.01))
         fix = {"Status": 3, "TimeMS": tow, "Week": WEEK, "NSats": 9, "HDop": 1.2, "Lat": lat, "Lng": lon}
@@ -83,7 +39,7 @@ def test_2014_revision_timems_clock_gps_week_and_board_time_t(tmp_path: Path) ->
         msgs.append(gps2.message(**fix, Alt=584.9, Spd=5.0, GCrs=0.0, VZ=-0.5, T=boot_ms + 3))
         msgs.append(ekf3.message(TimeMS=boot_ms + 5, IVN=0.12, IPN=-0.4))
         msgs.append(ekf4.message(TimeMS=boot_ms + 5, SVN=0.3))
-    t = read_log(_write(tmp_path / "2014.bin", [gps, gps2, imu, ekf3, ekf4], msgs))
+    t = read_log(write_dataflash(tmp_path / "2014.bin", [gps, gps2, imu, ekf3, ekf4], msgs))
     assert t.time_reference == "gps"
     # the fixes sit at their boot time T on the GPS clock given by week and ms of week
     gps_s = t.gps_seconds(t.fixes["t_s"].to_numpy())
@@ -108,10 +64,10 @@ def test_2013_revision_gps_without_board_time_is_placed_by_the_message_before_it
     gps = Fmt(130, "GPS", "BIHBcLLeeEe", "Status,TimeMS,Week,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs")
     imu = Fmt(131, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
     msgs = []
-    for boot_ms, tow, lat, lon in _flight():
+    for boot_ms, tow, lat, lon in flight():
         msgs += [imu.message(TimeMS=boot_ms - 20 * k, AccZ=-9.81) for k in range(10, 0, -1)]
         msgs.append(gps.message(Status=3, TimeMS=tow, Week=WEEK, NSats=8, HDop=1.5, Lat=lat, Lng=lon, Alt=584, Spd=5))
-    path = _write(tmp_path / "2013.bin", [gps, imu], msgs)
+    path = write_dataflash(tmp_path / "2013.bin", [gps, imu], msgs)
     t = read_log(path)
     assert t.time_reference == "gps" and len(t.fixes) == 20 and len(t.imu) == 200
     assert t.fixes["vel_u_mps"].isna().all()  # no VZ in this revision: vertical velocity unknown
@@ -128,10 +84,10 @@ def test_early_2013_revision_without_week_or_clock_keeps_relative_time(tmp_path:
     gps = Fmt(130, "GPS", "BIBcLLeeEe", "Status,Time,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs")
     imu = Fmt(131, "IMU", "ffffff", "GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
     msgs = []
-    for _, tow, lat, lon in _flight():
+    for _, tow, lat, lon in flight():
         msgs += [imu.message(AccZ=-9.81) for _ in range(10)]
         msgs.append(gps.message(Status=3, Time=tow, NSats=7, HDop=2.0, Lat=lat, Lng=lon, Alt=584, Spd=5))
-    t = read_log(_write(tmp_path / "2013early.bin", [gps, imu], msgs))
+    t = read_log(write_dataflash(tmp_path / "2013early.bin", [gps, imu], msgs))
     assert t.time_reference == "relative" and "time of week" in t.metadata["clock"]
     np.testing.assert_allclose(np.diff(t.fixes["t_s"]), 0.2, atol=1e-9)
     assert not len(t.imu)
@@ -146,14 +102,14 @@ def test_2015_revision_timeus_with_the_first_ekfs_test_ratios(tmp_path: Path) ->
     imu = Fmt(131, "IMU", "QffffffIIfBB", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,ErrG,ErrA,Temp,GyHlt,AcHlt")
     ekf4 = Fmt(143, "EKF4", "QcccccccbbBBH", "TimeUS,SV,SP,SH,SMX,SMY,SMZ,SVT,OFN,EFE,FS,TS,SS")
     msgs = []
-    for boot_ms, tow, lat, lon in _flight():
+    for boot_ms, tow, lat, lon in flight():
         us = boot_ms * 1000
         msgs += [imu.message(TimeUS=us - 20_000 * k, AccZ=-9.81) for k in range(10, 0, -1)]
         fix = {"Status": 3, "GMS": tow, "GWk": WEEK, "NSats": 11, "HDop": 0.9, "Lat": lat, "Lng": lon}
         msgs.append(gps.message(TimeUS=us, **fix, Alt=584, Spd=5, VZ=0.1, U=1))
         msgs.append(gpa.message(TimeUS=us, VDop=1.4, HAcc=1.8, VAcc=2.5, SAcc=0.3))
         msgs.append(ekf4.message(TimeUS=us + 1000, SV=0.2, SP=0.1, SH=0.05, SMX=0.3, SMY=0.6, SMZ=0.1))
-    t = read_log(_write(tmp_path / "2015.bin", [gps, gpa, imu, ekf4], msgs))
+    t = read_log(write_dataflash(tmp_path / "2015.bin", [gps, gpa, imu, ekf4], msgs))
     np.testing.assert_allclose(t.fixes[["h_acc_m", "v_acc_m", "vel_acc_mps", "vdop"]].iloc[0], [1.8, 2.5, 0.3, 1.4])
     ekf = t.autopilot_ekf
     np.testing.assert_allclose(ekf["mag_test_ratio"], 0.6)  # the largest axis
