@@ -49,7 +49,7 @@ from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.detectors.gnss_consistency import ConsistencyOptions
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import Evidence, Span
-from spooflens.pipeline.indicators import FloatArray, Receiver, Window, running_median
+from spooflens.pipeline.indicators import BoolArray, FloatArray, Receiver, Window, running_median
 from spooflens.pipeline.verdict import Explanation, Incident, Kind
 from spooflens.schema import FixType
 
@@ -660,6 +660,24 @@ def _fix_starts(rx: Receiver, opts: ExplanationOptions) -> list[float]:
     return [float(tv[0]), *tv[1:][gap].tolist()]
 
 
+def _settled_at(t: FloatArray, off: BoolArray, window: BoolArray, opts: ExplanationOptions) -> float:
+    """When the run of fixes off their settled level that a start begins with ended (NaN when the first
+    fixes were at it). Only that first run: a receiver converges once, and a later stretch off level in
+    the same minutes (interference, an obstruction) is another event, not a longer convergence."""
+    idx = np.flatnonzero(window)
+    flags = off[idx]
+    began = np.flatnonzero(flags[: opts.first_fixes])
+    if not len(began):
+        return float("nan")
+    back = np.flatnonzero(~flags[began[0] :])
+    last = began[0] + back[0] - 1 if len(back) else len(flags) - 1
+    return float(t[idx[last]])
+
+
+def _later(a: float, b: float) -> float:
+    return b if not np.isfinite(a) else a if not np.isfinite(b) else max(a, b)
+
+
 def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
     opts, rx = scene.opts, w.rx
     rid = rx.receiver_id
@@ -696,18 +714,15 @@ def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
             unsettled.append(f"{label} {start:.{digits}f} -> {level:.{digits}f}")
             run = running_median(x)
             far = (run > max(ratio, 1.25) * level + 0.2) if direction > 0 else (run < level - 1.0)
-            out_of_level = np.flatnonzero(span & far & (rx.t <= s0 + opts.converge_within_s))
-            if len(out_of_level):
-                final = max(np.nan_to_num(final, nan=s0), float(rx.t[out_of_level[-1]]))
+            final = _later(final, _settled_at(rx.t, far, span & (rx.t <= s0 + opts.converge_within_s), opts))
     kinds = rx.fix_type[span & (rx.fix_type >= FixType.FIX_2D)]
     settled_kind = int(np.median(rx.fix_type[settled])) if settled.any() else None
     if settled_kind is not None and len(kinds) and int(kinds[0]) < settled_kind:
         unsettled.append(
             f"{FIX_NAMES.get(FixType(int(kinds[0])), 'fix')} -> {FIX_NAMES.get(FixType(settled_kind), 'fix')}"
         )
-        better = np.flatnonzero(span & (rx.fix_type < settled_kind) & (rx.t <= s0 + opts.converge_within_s))
-        if len(better):
-            final = max(np.nan_to_num(final, nan=s0), float(rx.t[better[-1]]))
+        worse = rx.fix_type < settled_kind
+        final = _later(final, _settled_at(rx.t, worse, span & (rx.t <= s0 + opts.converge_within_s), opts))
     after_loss = s0 > every_start[0]
     how = f"its fix back at {s0:.1f} s" if after_loss else f"its first fix at {s0:.1f} s"
     if not unsettled:

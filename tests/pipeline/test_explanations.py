@@ -301,3 +301,19 @@ def test_a_satellite_a_spoofers_length_off_in_the_same_phone_log_is_still_spoofi
     assert not any(e.cause == "reflection" for e in inc.explanations)
     sizes = [x.range_error_m for x in next(r for r in a.results if r.name == "raim").alarms if x.satellites == ("G09",)]
     assert sizes and all(s is not None and 0.9 * delay_m < s < 1.1 * delay_m for s in sizes)
+
+
+def test_a_cold_start_settles_where_its_first_fixes_do_not_at_jamming_minutes_later() -> None:
+    # log171's receiver settles within its first minute; a jammer at 100-150 s inflates its HDOP and
+    # accuracies again inside the minutes a convergence may last. That second stretch is the jamming's, not
+    # a longer convergence: read as one, it explained alarms up to 149 s as a cold start
+    jammed, _ = apply_attack(table_of(CRASH), parse_attack("jam:start=100,end=150"))
+    settled = [
+        float(f.removeprefix("settled by ").removesuffix(" s"))
+        for i in analyze_table(jammed).verdict.incidents
+        for e in i.explanations
+        if e.cause == "convergence"
+        for f in e.facts
+        if f.startswith("settled by ")
+    ]
+    assert settled and max(settled) < 100.0
