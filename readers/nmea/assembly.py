@@ -15,7 +15,10 @@ separation is blank, the receiver's last known height when the epoch has none, 0
 never gives one: each listed as a repair); velocity from RMC, else VTG (speed over ground and course,
 no vertical); satellites used from GGA/GNS, else the GSA lists; HDOP/VDOP from GSA, else GGA; 1-sigma
 horizontal accuracy sqrt((sigma_lat^2 + sigma_lon^2)/2) and vertical sigma from GST; `cn0_mean_dbhz`
-the mean over the satellites GSV reports with a C/N0 (per satellite the strongest signal).
+the mean over the satellites GSV reports with a C/N0 (per satellite the strongest signal). The GSV of
+every epoch with a fix, and of the epochs without one from the receiver's first fix on, is the
+`satellites` frame: a receiver that loses its fix to jamming keeps the C/N0 collapse that lost it
+(`_fixless_sky_placed` says which fix-less epochs are placed).
 
 **Time.** A time of day becomes a date with the RMC/ZDA dates of its receiver (or, for a receiver
 that sends none, of the log), across midnight by unwrapping the time of day (a drop of more than 12 h
@@ -47,6 +50,7 @@ from readers.nmea.sentences import (
     Decoded,
 )
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
+from spooflens.plausibility import STRAY_GAP_NS
 from spooflens.schema import FixType
 
 DAY_S = 86_400
@@ -306,6 +310,61 @@ def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> n
     return h
 
 
+def _fixless_sky_placed(fix_ns: list[int], fixless_ns: list[int]) -> list[bool]:
+    """Which fix-less epochs' sky goes into the satellites frame: those from the receiver's first fix on that no
+    hour of silence separates from its fixes (every one of a receiver that never had a fix). Before its first
+    fix a receiver is acquiring: a cold start's sky, no level a later loss is measured against. And a receiver
+    that does not know the time stamps its epochs with its own default clock (gpsd's MTK-3301 and RGM3800
+    logs: 1980-01-05 23:59, hours from their fixes; GP-320FW's after a reboot): such a time would stretch
+    the log over hours it never recorded."""
+    if not fix_ns:
+        return [True] * len(fixless_ns)
+    t = np.array(fix_ns + fixless_ns, dtype=np.int64)
+    is_fix = np.arange(len(t)) < len(fix_ns)
+    order = np.argsort(t, kind="stable")
+    run = np.empty(len(t), dtype=np.int64)
+    run[order] = np.cumsum(np.concatenate(([0], np.diff(t[order]) > STRAY_GAP_NS)))
+    placed = np.isin(run, run[is_fix]) & (t >= min(fix_ns))
+    return placed[len(fix_ns) :].tolist()
+
+
+SatRow = tuple[int, str, str, float, float, float, float]  # t_ns, receiver, sv, elevation, azimuth, C/N0, used
+
+
+def _receiver_sky(
+    rx: Receiver,
+    sky_epochs: list[tuple[int, Epoch, bool]],
+    fixless_epochs: dict[tuple[str, int], tuple[Epoch, Path]],
+    skipped: list[Skipped],
+) -> list[SatRow]:
+    """The satellites rows of the receiver's epochs (time, epoch, has a fix), in file order: every epoch with
+    a fix, and those without one that `_fixless_sky_placed` places (each recorded in `fixless_epochs`; those
+    on another clock are counted). File order, because a time that goes back in it is where a log joins
+    recordings."""
+    fix_ns = [t for t, _, has_fix in sky_epochs if has_fix]
+    fixless_ns = [t for t, _, has_fix in sky_epochs if not has_fix]
+    placed = iter(_fixless_sky_placed(fix_ns, fixless_ns))
+    first_fix = min(fix_ns, default=None)
+    out: list[SatRow] = []
+    astray = 0  # on another clock: an hour or more from the fixes (before the first fix: acquiring, not counted)
+    for at_ns, epoch, has_fix in sky_epochs:
+        keep = has_fix or next(placed)
+        sky = epoch_satellites(epoch)
+        if sky and not keep and first_fix is not None and at_ns >= first_fix:
+            astray += 1
+        elif sky and keep:
+            out += [(at_ns, rx.receiver_id, *sat) for sat in sky]
+            if not has_fix:
+                fixless_epochs.setdefault((rx.receiver_id, at_ns), (epoch, rx.file.scan.path))
+    if astray:
+        why = (
+            "sky (GSV) of epochs without a fix an hour or more of silence from any fix (the receiver's own clock "
+            "before it knew the time): not placed"
+        )
+        skipped.append(Skipped(rx.receiver_id, why, astray))
+    return out
+
+
 @dataclass
 class Clock:
     """How table times are made: the logger's clock or GNSS time (`reference` as EpochTable has it)."""
@@ -349,6 +408,8 @@ class Assembled:
     # (receiver id, fix time in ns on the log's clock) -> the epoch behind that fix row and its file (inject)
     fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = field(default_factory=dict)
     satellites: pd.DataFrame | None = None
+    # the same for the epochs without a fix whose sky is in `satellites` (inject: a jammer's C/N0 in their GSV)
+    fixless_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = field(default_factory=dict)
 
 
 def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
@@ -379,8 +440,9 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         metadata["log_header"] = " | ".join(comments)
 
     fix_parts: list[pd.DataFrame] = []
-    sat_rows: list[tuple[int, str, str, float, float, float, float]] = []
+    sat_rows: list[SatRow] = []
     fix_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = {}
+    fixless_epochs: dict[tuple[str, int], tuple[Epoch, Path]] = {}
     streams: list[StreamInfo] = []
     offsets: list[float] = []
     times_by_file: dict[int, dict[int, int]] = {}
@@ -399,18 +461,18 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         invalid = 0
         kinds = Counter(d.kind for d in rx.sentences)
         line_t = times_by_file[id(rx.file)]
-        fixless_sats: list[tuple[int, str, str, float, float, float, float]] = []
+        sky_epochs: list[tuple[int, Epoch, bool]] = []  # every timed epoch in file order, and whether it has a fix
         for epoch in rx.epochs.values():
             got = epoch_fix(epoch)
             if got is None:
                 continue
             values, _ = got
             gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
-            if not values:
+            if not values:  # no fix, but its sky (GSV) is what the receiver saw: a fix lost to jamming shows there
                 invalid += 1
                 at_ns = line_t.get(epoch.first_line) if logger else gnss_ns
                 if at_ns is not None:
-                    fixless_sats += [(int(at_ns), rx.receiver_id, *sat) for sat in epoch_satellites(epoch)]
+                    sky_epochs.append((int(at_ns), epoch, False))
                 continue
             own: int | None = None
             if logger:
@@ -425,14 +487,14 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
             rows.append((int(t_ns), values))
             own_ns.append(own)
             fix_epochs.setdefault((rx.receiver_id, int(t_ns)), (epoch, rx.file.scan.path))
-            sat_rows += [(int(t_ns), rx.receiver_id, *sat) for sat in epoch_satellites(epoch)]
+            sky_epochs.append((int(t_ns), epoch, True))
         if invalid:
             skipped.append(
                 Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
             )
+        sat_rows += _receiver_sky(rx, sky_epochs, fixless_epochs, skipped)
         msgtype = "NMEA " + " ".join(f"{k}" for k in sorted(kinds))
-        if not rows:  # a receiver that never had a fix: its sky (GSV) is still what it saw
-            sat_rows += fixless_sats
+        if not rows:  # a receiver that never had a fix
             streams.append(StreamInfo("fix", rx.receiver_id, rx.file.scan.path.name, msgtype, 0))
             continue
         cols = {k: np.array([v[k] for _, v in rows], dtype=float) for k in rows[0][1]}
@@ -468,6 +530,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         metadata,
         fix_epochs,
         satellites,
+        fixless_epochs,
     )
 
 

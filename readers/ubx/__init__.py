@@ -14,7 +14,11 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   the messages before it (`legacy.py`: NAV-POSLLH or NAV-POSECEF/NAV-SOL position, NAV-VELNED or
   NAV-VELECEF/NAV-SOL velocity, NAV-SOL or NAV-STATUS fix type). A capture with no UBX fix takes its
   fixes from the receiver's own NMEA output in the same stream (GGA/RMC..., read by `readers.nmea`);
-  with UBX fixes that NMEA is the same solution again and is counted, not used.
+  with UBX fixes that NMEA is the same solution again and is counted, not used. A capture with neither
+  takes them from the receiver's stored position log read back (LOG-RETRIEVEPOS: position, hAcc, height
+  above mean sea level, ground speed and heading, fixType, numSV), each record at its own UTC date and
+  time, sorted by it (metadata `fixes.source` says these are stored fixes, not live output); beside live
+  fixes the stored log is counted, not mixed in.
 - `satellites` from NAV-SVINFO (u-blox's single satellite numbering) when there is no NAV-SAT.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
@@ -93,6 +97,15 @@ class _Epoch:
     parts_from: set[str] = field(default_factory=set)  # which legacy messages gave them
 
 
+@dataclass(frozen=True)
+class _Stored:
+    """One record of the receiver's stored position log read back (LOG-RETRIEVEPOS)."""
+
+    entry: int  # its index in the log: the order it is retrieved in
+    utc_ns: int | None  # its own UTC date and time, None when it states none
+    values: dict[str, float] | None  # its fix in schema names, None when it is no fix
+
+
 @dataclass
 class _State:
     epochs: dict[int, _Epoch] = field(default_factory=dict)
@@ -120,6 +133,7 @@ class _State:
     monitor: list[tuple[int | None, int, dict[str, float]]] = field(default_factory=list)
     monitor_cycle: set[str] = field(default_factory=set)
     anchor_of: str = ""  # the message that dated the capture first
+    stored: list[_Stored] = field(default_factory=list)  # the stored log's records, as retrieved
 
     def epoch(self, itow: int) -> _Epoch:
         if itow not in self.epochs:
@@ -246,6 +260,9 @@ def _handle(state: _State, frame: UbxFrame) -> None:
         state.untimed(m.sec_sig_values(msg), name)
     elif name == "MON-VER":
         state.metadata.update(m.mon_ver(msg))
+    elif name == "LOG-RETRIEVEPOS":  # dated by itself, not by iTOW: kept apart from the live epochs
+        entry = int(getattr(msg, "entryIndex", -1))
+        state.stored.append(_Stored(entry, m.retrievepos_utc_ns(msg), m.retrievepos_values(msg)))
 
 
 def _gps_of_itow(itows: np.ndarray, ref_s: float) -> np.ndarray:
@@ -303,10 +320,8 @@ def _fix_epochs(state: _State) -> list[tuple[int, dict[str, float]]]:
 def _fixes(state: _State, epochs: list[tuple[int, dict[str, float]]], ref_s: float | None) -> pd.DataFrame | None:
     if not epochs:
         return None
-    rows = [v for _, v in epochs]
     itow = np.array([i for i, _ in epochs], dtype=np.float64)
     t_s = _gps_of_itow(itow, ref_s) if ref_s is not None else itow / 1000.0
-    cols: dict[str, Any] = {"t_ns": np.round(t_s * NS).astype(np.int64), "receiver_id": RECEIVER}
     reports = {s.itow_ms: s for s in (state.navsat or state.svinfo)}
     for e_itow, v in epochs:  # from the epoch's satellite report what the fix message did not say
         report = reports.get(e_itow)
@@ -314,6 +329,12 @@ def _fixes(state: _State, epochs: list[tuple[int, dict[str, float]]], ref_s: flo
             v.setdefault("cn0_mean_dbhz", report.cn0_mean)
             if not math.isfinite(v.get("sats_used", math.nan)):
                 v["sats_used"] = float(np.nansum(report.rows["used"]))
+    return _fix_frame(np.round(t_s * NS).astype(np.int64), [v for _, v in epochs])
+
+
+def _fix_frame(t_ns: np.ndarray, rows: list[dict[str, float]]) -> pd.DataFrame:
+    """The fixes frame of the receiver's fixes (schema names, monitor values by preference) at `t_ns`."""
+    cols: dict[str, Any] = {"t_ns": t_ns, "receiver_id": RECEIVER}
     for c in _FIX_COLUMNS:
         cols[c] = np.array([e.get(c, math.nan) for e in rows])
     cols["fix_type"] = np.array([e["fix_type"] for e in rows]).astype(np.int8)
@@ -332,6 +353,68 @@ _MONITOR_COLUMNS = {
     "agc": ("agc", "hw_agc"),
     "jamming_indicator": ("jamming_indicator", "hw_jamming_indicator"),
 }
+
+
+# what the messages spooflens reads no column from are, where the type's name does not say it
+UNUSED_WHY = {
+    "LOG-RETRIEVEPOSEXTRA": "the stored log's odometer records (distance travelled: no column for it)",
+    "LOG-RETRIEVESTRING": "text the host wrote into the receiver's stored log",
+}
+STORED = "LOG-RETRIEVEPOS"
+STORED_SOURCE = (
+    "the receiver's stored position log read back (UBX LOG-RETRIEVEPOS): fixes it recorded earlier, not its "
+    "live output; each at its own UTC date and time (whole seconds)"
+)
+
+
+def _stored_log_fixes(
+    state: _State, live: bool, skipped: list[Skipped], metadata: dict[str, str]
+) -> pd.DataFrame | None:
+    """The fixes of the receiver's stored log on GPS time, from each record's own date, sorted by it: the log
+    is retrieved in entry order, which a log that wrapped (oldest entries overwritten) does not keep in time.
+    None beside `live` fixes: the receiver's past and its present are not one stream."""
+    if not state.stored:
+        return None
+    if live:
+        why = "the receiver's stored log read back beside its live fixes (not mixed into them)"
+        skipped.append(Skipped(STORED, why, len(state.stored)))
+        return None
+    no_fix = sum(r.values is None for r in state.stored)
+    if no_fix:
+        skipped.append(Skipped(STORED, "stored-log records without a fix (fixType 0 or 5)", no_fix))
+    undated = sum(r.values is not None and r.utc_ns is None for r in state.stored)
+    if undated:
+        skipped.append(Skipped(STORED, "stored-log records without a valid date and time", undated))
+    fixes = [(r.utc_ns, r.entry, r.values) for r in state.stored if r.values is not None and r.utc_ns is not None]
+    if not fixes:
+        return None
+    utc = np.array([u for u, _, _ in fixes], dtype=np.int64)
+    backwards = int((np.diff(utc) < 0).sum())
+    if backwards:
+        why = "stored-log records retrieved in entry order, not in time order: sorted by their own date and time"
+        skipped.append(Skipped(STORED, why, backwards, "repaired"))
+        metadata["fixes.order"] = f"{why} (time went backwards {backwards} times in entry order)"
+    order = np.argsort(utc, kind="stable")
+    skipped.append(
+        Skipped(
+            STORED,
+            "height above mean sea level (hMSL, no geoid separation): taken as the ellipsoidal height "
+            "(error up to ~100 m)",
+            len(fixes),
+            "repaired",
+        )
+    )
+    metadata["fixes.source"] = STORED_SOURCE
+    return _fix_frame(gps_ns_of_unix_ns(utc[order]), [fixes[i][2] for i in order.tolist()])
+
+
+def _count_undated_beside_stored(skipped: list[Skipped], *frames: pd.DataFrame | None) -> None:
+    """The live rows of a capture that dates nothing of its own (seconds of an unknown week) are left out:
+    nothing puts them on the stored log's clock, and a guessed week would misplace them."""
+    for frame in frames:
+        if frame is not None:
+            why = "live output of a capture that states no date, beside the stored log's dated fixes: no clock for it"
+            skipped.append(Skipped(RECEIVER, why, len(frame), "undated"))
 
 
 def _receiver_status(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | None, str]:
@@ -596,7 +679,7 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         if num not in RTCM_EPHEMERIS:
             skipped.append(Skipped(f"RTCM3 {num}", "RTCM3 corrections fed to the receiver (not used)", n))
     for name, n in sorted(state.unused.items()):
-        skipped.append(Skipped(name, "UBX message type spooflens does not use", n))
+        skipped.append(Skipped(name, UNUSED_WHY.get(name, "UBX message type spooflens does not use"), n))
     for name, n in sorted(state.polls.items()):
         skipped.append(Skipped(name, "poll requests the host sent to the receiver (no data)", n))
     for name, n in state.bad.items():
@@ -615,6 +698,8 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         skipped.append(Skipped("NAV-SVINFO", why, len(state.svinfo)))
     nmea = _nmea_assembled(frames, path, not fix_epochs, skipped)
     metadata: dict[str, str] = {}
+    live = bool(fix_epochs) or (nmea is not None and nmea.fixes is not None)
+    stored_fixes = _stored_log_fixes(state, live, skipped, metadata)
     ref_s = state.gps_refs[0] if state.gps_refs else None
     nmea_utc = _first_unix_ns(nmea)
     if ref_s is None and nmea_utc is not None:  # the receiver's NMEA dates give the week
@@ -623,6 +708,9 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     reference = "gps" if ref_s is not None else "relative"
     if ref_s is not None:
         metadata["clock"] = f"GPS time: iTOW in the week of {state.anchor_of}, the capture's first dated message"
+    elif stored_fixes is not None:
+        reference = "gps"
+        metadata["clock"] = "GPS time: each stored-log record's own UTC date and time (leap seconds added)"
     else:
         epochs = len(state.epochs) + len(state.rawx)
         why = (
@@ -631,7 +719,7 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         )
         metadata["clock"] = why
         skipped.append(Skipped("<ubx>", why, max(epochs, 1), "undated"))
-    fixes = _fixes(state, fix_epochs, ref_s)
+    fixes = stored_fixes if stored_fixes is not None else _fixes(state, fix_epochs, ref_s)
     obs, no_pr = _observations(state, ref_s)
     nav_info, ephemerides = None, None
     if obs is not None:
@@ -648,6 +736,9 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             skipped.append(Skipped(f"RTCM3 {num}", why, frames.rtcm[num]))
     imu = _imu(state, ref_s, skipped)
     satellites = _satellites(state, ref_s)
+    if stored_fixes is not None and ref_s is None:
+        _count_undated_beside_stored(skipped, satellites, obs, imu)
+        satellites = obs = imu = None
     headings, nmea_fixes, nmea_streams = None, None, []
     if nmea is not None:
         anchor_ns = anchor_ns_of(ref_s, fixes, obs, satellites)
@@ -690,7 +781,9 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
                     for rid, n in per_receiver.items()
                 ]
     streams: list[StreamInfo] = []
-    if fixes is not None and not fixes_from_nmea:
+    if stored_fixes is not None:
+        streams.append(StreamInfo("fix", RECEIVER, "UBX stored log", f"UBX {STORED}", len(stored_fixes)))
+    elif fixes is not None and not fixes_from_nmea:
         kinds = " ".join(k for k in (*m.PVT_LIKE, *m.LEGACY_FIX, "NAV-DOP", "NAV-STATUS", *_UNTIMED) if state.used[k])
         streams.append(StreamInfo("fix", RECEIVER, "UBX", f"UBX {kinds}", len(fixes)))
     streams += nmea_streams

@@ -44,7 +44,9 @@ MSG = {  # (class, id) -> name, for the messages spooflens reads
     (0x0D, 0x01): "TIM-TP",
     # NAV-PVT's layout again: sensor fusion's PVAT, and fixes the receiver batched in its memory
     (0x01, 0x17): "NAV-PVAT",
-    (0x21, 0x14): "LOG-BATCH",
+    (0x21, 0x11): "LOG-BATCH",
+    # the receiver's stored position log read back: fixes it recorded earlier, each with its UTC date
+    (0x21, 0x0B): "LOG-RETRIEVEPOS",
 }
 PVT_LIKE = ("NAV-PVT", "NAV-PVAT", "LOG-BATCH")  # a whole fix in one message, NAV-PVT's field names
 LEGACY_FIX = ("NAV-POSLLH", "NAV-POSECEF", "NAV-SOL", "NAV-VELNED", "NAV-VELECEF")  # a fix in parts
@@ -84,21 +86,7 @@ def pvt_values(msg: Any) -> dict[str, float] | None:
     fix_ok = _get(msg, "gnssFixOk", _get(msg, "gnssFixOK", 0))  # NAV-PVAT and LOG-BATCH spell it gnssFixOK
     if fix_type in (0, 5) or not int(fix_ok) or int(_get(msg, "invalidLlh", 0)):
         return None
-    if fix_type == 1:
-        kind = FixType.UNKNOWN
-    elif fix_type == 2:
-        kind = FixType.FIX_2D
-    else:
-        carr = int(_get(msg, "carrSoln", 0))
-        kind = (
-            FixType.RTK_FIXED
-            if carr == 2
-            else FixType.RTK_FLOAT
-            if carr == 1
-            else FixType.DGNSS
-            if int(_get(msg, "diffSoln", 0))
-            else FixType.FIX_3D
-        )
+    kind = fix_kind(fix_type, int(_get(msg, "carrSoln", 0)), int(_get(msg, "diffSoln", 0)))
     return posllh_values(msg) | {
         "vel_e_mps": _get(msg, "velE") / 1000,
         "vel_n_mps": _get(msg, "velN") / 1000,
@@ -109,6 +97,43 @@ def pvt_values(msg: Any) -> dict[str, float] | None:
     }
 
 
+def fix_kind(fix_type: int, carr_soln: int = 0, diff_soln: int = 0) -> FixType:
+    """NAV-PVT's fixType (1 dead reckoning only, 2 2-D, 3 3-D, 4 GNSS + dead reckoning) with its carrier
+    and differential solution flags as a FixType."""
+    if fix_type == 1:
+        return FixType.UNKNOWN
+    if fix_type == 2:
+        return FixType.FIX_2D
+    if carr_soln == 2:
+        return FixType.RTK_FIXED
+    if carr_soln == 1:
+        return FixType.RTK_FLOAT
+    return FixType.DGNSS if diff_soln else FixType.FIX_3D
+
+
+def retrievepos_values(msg: Any) -> dict[str, float] | None:
+    """A fix of the receiver's stored log (LOG-RETRIEVEPOS) in schema names, or None when the record says
+    it is no fix (fixType as NAV-PVT's). The record has NAV-PVT's position and horizontal accuracy, a
+    height above mean sea level (hMSL: no geoid separation, kept as the height), ground speed and heading
+    of motion (no vertical velocity, no vertical or speed accuracy)."""
+    fix_type = int(_get(msg, "fixType", 0))
+    if fix_type in (0, 5):
+        return None
+    speed_mps, heading = _get(msg, "gSpeed") / 1000, math.radians(_get(msg, "heading"))
+    return posllh_values(msg) | {
+        "height_m": _get(msg, "hMSL") / 1000,
+        "vel_e_mps": speed_mps * math.sin(heading),
+        "vel_n_mps": speed_mps * math.cos(heading),
+        "sats_used": _get(msg, "numSV"),
+        "fix_type": float(fix_kind(fix_type)),
+    }
+
+
+def retrievepos_utc_ns(msg: Any) -> int | None:
+    """UTC of a stored-log record (to the second: the record has no fraction), None when it is no date."""
+    return _utc_ns(msg, "second", 0, minute="minute")
+
+
 def pvt_utc_ns(msg: Any) -> int | None:
     """UTC of a NAV-PVT (or NAV-PVAT, LOG-BATCH) in ns since 1970, when the receiver says date and time
     are valid."""
@@ -117,7 +142,7 @@ def pvt_utc_ns(msg: Any) -> int | None:
     return _utc_ns(msg, "second" if hasattr(msg, "second") else "sec", _get(msg, "nano", _get(msg, "fracSec", 0)))
 
 
-def _utc_ns(msg: Any, seconds: str, nano: float) -> int | None:
+def _utc_ns(msg: Any, seconds: str, nano: float, minute: str = "min") -> int | None:
     import datetime as dt
 
     try:
@@ -126,7 +151,7 @@ def _utc_ns(msg: Any, seconds: str, nano: float) -> int | None:
             int(msg.month),
             int(msg.day),
             int(msg.hour),
-            int(msg.min),
+            int(getattr(msg, minute)),
             int(getattr(msg, seconds)),
             tzinfo=dt.UTC,
         )

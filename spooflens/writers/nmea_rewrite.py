@@ -282,7 +282,8 @@ def rewrite_nmea_log(src: Path, dst: Path, table: EpochTable, spoofed: EpochTabl
     """Write `src` (a file or a directory of NMEA logs) to `dst` with the spoofed fixes in it."""
     src, dst = Path(src), Path(dst)
     files, skipped = decode_log(src)
-    epochs: dict[tuple[str, int], tuple[Epoch, Path]] = assemble(files, list(skipped)).fix_epochs
+    assembled = assemble(files, list(skipped))
+    epochs: dict[tuple[str, int], tuple[Epoch, Path]] = {**assembled.fixless_epochs, **assembled.fix_epochs}
     edits: dict[Path, list[tuple[int, int, bytes]]] = {f.scan.path: [] for f in files}
     changed = _changed_rows(table, spoofed)
     reported = _reported_changes(table, spoofed)

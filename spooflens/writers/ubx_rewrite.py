@@ -299,8 +299,8 @@ def rewrite_ubx(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
     if not has_pvt and (plan.fixes or plan.lost):
         # a copy whose fixes were not moved would be an unattacked log with an attack's truth beside it
         raise WriterError(
-            f"{src}: the capture's fixes are not NAV-PVT messages (NAV-POSLLH/SOL or its NMEA output): an attack on "
-            "them cannot be written in UBX"
+            f"{src}: the capture's fixes are not NAV-PVT messages (NAV-POSLLH/SOL, its NMEA output or its stored "
+            "log): an attack on them cannot be written in UBX"
         )
     for frame in frames.ubx:
         key = (frame.msg_class, frame.msg_id)
