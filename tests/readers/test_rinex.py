@@ -11,7 +11,6 @@ from __future__ import annotations
 import itertools
 import math
 import shutil
-import time
 from pathlib import Path
 
 import numpy as np
@@ -603,15 +602,13 @@ def test_rinex3_cut_short_epochs_and_garbage(tmp_path: Path) -> None:
     assert len(table.observations) == 49 and any("not a number" in s.reason for s in table.skipped)
 
 
-def test_a_million_rows_read_fast_enough(tmp_path: Path) -> None:
-    """200,000 satellite rows well within seconds (a 1 Hz day, ~1M rows, reads in ~4 s on 2 cores)."""
+def test_a_long_observation_file_is_read_whole(tmp_path: Path) -> None:
+    """200,000 satellite rows, every one kept (how fast: `spooflens bench read`, not a timing assertion)."""
     path = tmp_path / "big.rnx"
     path.write_text(_v3_obs(20_000, sats=10))
-    start = time.perf_counter()
     table = read_log(path)
-    elapsed = time.perf_counter() - start
     assert len(table.observations) == 200_000
-    assert elapsed < 10.0, f"{elapsed:.1f} s"
+    assert table.observations["t_s"].nunique() == 20_000
 
 
 def test_parse_fixed_accepts_numbers_and_flags_garbage() -> None:
