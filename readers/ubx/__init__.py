@@ -28,8 +28,8 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
   (`--topic nav=FILE`, or one beside the capture covering its time), so RAIM and the raw-measurement
   detectors run on the capture.
 - `receiver_status` from MON-RF/MON-HW/SEC-SIG in a capture without any fix (`_receiver_status`): the
-  monitor's word with no position, at the epochs they follow (none: one output cycle per second); the
-  NMEA GSV of such a capture is its `satellites` frame when it has no NAV-SAT.
+  monitor's word with no position, at the epochs they follow (none: one output cycle per second).
+- `satellites` from the NMEA GSV in the stream when the capture has no NAV-SAT (with or without fixes).
 - `imu` from ESF-RAW / ESF-MEAS (gyro and accelerometer, vehicle frame FRD) when present.
 - `headings` from NMEA HDT/THS in the stream (a dual-antenna receiver's heading).
 
@@ -765,21 +765,23 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
             if s.role in ("fix", "heading")
         ]
     status = None
-    if fixes is None:  # a receiver without a fix: what its monitors and its sky said is still read
+    if fixes is None:  # a receiver without a fix: what its monitors said is still read
         status, how = _receiver_status(state, ref_s)
         if status is not None:
             metadata["clock.receiver_status"] = how
-        if satellites is None and nmea is not None:
-            satellites = _nmea_on_clock(nmea.satellites, nmea, reference, anchor_ns_of(ref_s, obs), leap_of(state))
-            if satellites is not None:
-                ids = dict.fromkeys(satellites["receiver_id"].astype(str))
-                rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
-                satellites = satellites.assign(receiver_id=satellites["receiver_id"].map(rename))
-                per_receiver = satellites.groupby("receiver_id")["t_ns"].nunique()
-                nmea_streams += [
-                    StreamInfo("satellites", str(rid), "NMEA in the UBX stream", "NMEA GSV/GSA", int(n))
-                    for rid, n in per_receiver.items()
-                ]
+    if satellites is None and nmea is not None:
+        # the receiver's sky as its NMEA states it (GSV C/N0 per satellite) when no NAV-SAT does, on the
+        # capture's clock as its headings are: the interference and satellite-signal tests read it
+        satellites = _nmea_on_clock(nmea.satellites, nmea, reference, anchor_ns_of(ref_s, obs), leap_of(state))
+        if satellites is not None:
+            ids = dict.fromkeys(satellites["receiver_id"].astype(str))
+            rename = {r: RECEIVER if len(ids) == 1 else f"{RECEIVER}/{r}" for r in ids}
+            satellites = satellites.assign(receiver_id=satellites["receiver_id"].map(rename))
+            per_receiver = satellites.groupby("receiver_id")["t_ns"].nunique()
+            nmea_streams += [
+                StreamInfo("satellites", str(rid), "NMEA in the UBX stream", "NMEA GSV/GSA", int(n))
+                for rid, n in per_receiver.items()
+            ]
     streams: list[StreamInfo] = []
     if stored_fixes is not None:
         streams.append(StreamInfo("fix", RECEIVER, "UBX stored log", f"UBX {STORED}", len(stored_fixes)))

@@ -68,3 +68,20 @@ def test_a_capture_whose_nmea_reports_its_sky_but_no_fix_is_read_for_its_cn0() -
 def test_a_capture_with_no_sky_no_monitor_and_no_fix_is_still_refused() -> None:
     with pytest.raises(ReaderError, match="navigation messages only"):
         read_log(real_log("corpus/gpsd/ublox-ned-m8t-sbfrx3.log"))
+
+
+def test_a_capture_fixed_by_its_nmea_keeps_the_sky_its_gsv_states() -> None:
+    # RTKLIB's 2008 capture: UBX RXM-RAW/SFRB and the receiver's NMEA; its fixes are the NMEA's GGA/RMC
+    # and its sky the GSV (no NAV-SAT). The GSV's C/N0 per satellite is what the interference test and
+    # the satellite-signal tests read; it was dropped once the capture had fixes
+    table = read_log(real_log("corpus/rtklib/ubx_20080526.ubx"))
+    assert len(table.fixes) == 242
+    sats = table.satellites
+    assert len(sats) > 10 * len(table.fixes) // 2 and np.isfinite(sats["cn0_dbhz"]).mean() > 0.5
+    assert set(sats["receiver_id"].astype(str)) == set(table.fixes["receiver_id"].astype(str))
+    t_fix, t_sky = table.fixes["t_s"].to_numpy(float), sats["t_s"].to_numpy(float)
+    assert t_sky.min() >= t_fix.min() - 1.0 and t_sky.max() <= t_fix.max() + 1.0  # on the fixes' clock
+    analysis = analyze_table(table)
+    interference = next(r for r in analysis.results if r.name == "interference")
+    assert interference.ran and "satellite reports" in interference.reason
+    assert not analysis.verdict.spoofed
