@@ -14,6 +14,7 @@ from spooflens.geodesy import ecef_to_enu_vectors, geodetic_to_ecef
 from spooflens.gnss.fault_exclusion import FAULT, RaimOptions, RaimResult, solve_with_fde
 from spooflens.gnss.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
 from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.preconditions import ORBIT_TIMING, time_tags_off
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 NAME = "raim"
@@ -159,7 +160,11 @@ def run_raim(ctx: AnalysisContext, opts: RaimDetectorOptions | None = None) -> D
     table = ctx.table
     result = DetectorResult(NAME, True, evidence=Evidence.RAW_MEASUREMENT)
     notes = []
+    tags_off = time_tags_off(ctx)
     for rid, rows, t_gps in ranged_by_receiver(table):
+        if rid in tags_off:
+            notes.append(f"{rid}: not judged, {tags_off[rid].describe()}")
+            continue
         res = raim_of(rows, t_gps, table.ionosphere, opts)
         alarms, findings, series = check_receiver(rid, rows, res, opts)
         own_series, own_findings = fix_against_own_solution(rid, res.solution, table.fixes_of(rid), opts)
@@ -217,4 +222,5 @@ ANALYSIS = AnalysisSpec(
             "(`tests/detectors/test_raim.py`).",
         ),
     ),
+    preconditions=(ORBIT_TIMING,),
 )

@@ -16,6 +16,7 @@ from spooflens.gnss.fault_exclusion import RaimOptions, solve_with_fde
 from spooflens.gnss.signals import SYSTEM_NAMES
 from spooflens.gnss.single_point import SinglePointOptions, SinglePointSolution, ranged_by_receiver
 from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.preconditions import ORBIT_TIMING, time_tags_off
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
 NAME = "system_agreement"
@@ -118,7 +119,11 @@ def run_system_agreement(ctx: AnalysisContext, opts: SystemAgreementOptions | No
     table = ctx.table
     result = DetectorResult(NAME, True, evidence=Evidence.RAW_MEASUREMENT)
     notes = []
+    tags_off = time_tags_off(ctx)
     for rid, rows, t_gps in ranged_by_receiver(table):
+        if rid in tags_off:
+            notes.append(f"{rid}: not judged, {tags_off[rid].describe()}")
+            continue
         sols = _solutions(rows, t_gps, SinglePointOptions(iono=table.ionosphere), opts)
         if len(sols) < 2:
             continue
@@ -179,4 +184,5 @@ ANALYSIS = AnalysisSpec(
             "(`tests/detectors/test_system_agreement.py`).",
         ),
     ),
+    preconditions=(ORBIT_TIMING,),
 )

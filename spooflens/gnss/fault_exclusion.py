@@ -43,7 +43,9 @@ class RaimResult:
     inconsistency_m: FloatArray  # per row: residual against the solution without it (faults), else NaN
 
 
-def _design(obs: pd.DataFrame, sol: SinglePointSolution, opts: SinglePointOptions, used_rows: NDArray[np.bool_]):
+def residual_design(
+    obs: pd.DataFrame, sol: SinglePointSolution, opts: SinglePointOptions, used_rows: NDArray[np.bool_]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray, FloatArray, FloatArray]:
     """Padded (E, W, m) design matrix at the solution, weights and post-fit residuals of the used rows."""
     epoch, _, _ = epochs_of(obs)
     n_e = len(sol.t_s)
@@ -145,7 +147,7 @@ def _fde(
     leave-one-out subsets of the first solution."""
     excluded = np.zeros(len(obs), dtype=bool)
     sol = solve(obs, t_gps_s, opts)
-    epoch, slot, H, W, r = _design(obs, sol, opts, np.isfinite(sol.residual_m))
+    epoch, slot, H, W, r = residual_design(obs, sol, opts, np.isfinite(sol.residual_m))
     m = H.shape[2]
     dof = (W > 0).sum(axis=1) - m
     T_loo, _, T_all = _leave_one_out(H, W, r)
@@ -184,7 +186,7 @@ def _fde(
         rows = row_of[rest, j[rest]]
         excluded[rows[rows >= 0]] = True
         sol = solve(obs, t_gps_s, opts, exclude=excluded)
-        epoch, slot, H, W, r = _design(obs, sol, opts, np.isfinite(sol.residual_m))
+        epoch, slot, H, W, r = residual_design(obs, sol, opts, np.isfinite(sol.residual_m))
         dof = (W > 0).sum(axis=1) - m
         T_loo, _res_loo, T_all = _leave_one_out(H, W, r)
         threshold = np.where(dof >= 1, chi2_isf(ropts.p_false_alarm, np.maximum(dof, 1)), np.nan)

@@ -19,6 +19,8 @@ import numpy as np
 
 from spooflens.detectors.base import Unmet
 from spooflens.errors import SpooflensError
+from spooflens.gnss.single_point import SinglePointOptions, ranged_by_receiver
+from spooflens.gnss.time_tags import TimeTagFit, TimeTagOptions, time_tag_fit
 
 if TYPE_CHECKING:
     from spooflens.pipeline.registry import AnalysisContext
@@ -282,6 +284,44 @@ def surveyed_sites(ctx: AnalysisContext) -> Unmet | None:
     )
 
 
+# --- raw observations against the orbits ------------------------------------------------------------
+
+
+def receiver_time_tags(ctx: AnalysisContext) -> dict[str, TimeTagFit | None]:
+    """Each receiver with pseudoranges and satellite states: how far its time tags are from the time its
+    pseudoranges fit the orbits at (None where no epoch shows it); computed once per analysis."""
+
+    def fits() -> dict[str, TimeTagFit | None]:
+        options = SinglePointOptions(iono=ctx.table.ionosphere)
+        return {rid: time_tag_fit(rows, t_gps, options) for rid, rows, t_gps in ranged_by_receiver(ctx.table)}
+
+    found: dict[str, TimeTagFit | None] = ctx.cached("receiver_time_tags", fits)
+    return found
+
+
+def time_tags_off(ctx: AnalysisContext) -> dict[str, TimeTagFit]:
+    """The receivers whose pseudoranges fit the orbits only at other times than their tags: a test of one
+    satellite against the others cannot judge them (every satellite is off)."""
+    return {rid: fit for rid, fit in receiver_time_tags(ctx).items() if fit is not None and fit.tags_off()}
+
+
+def orbit_timing(ctx: AnalysisContext) -> Unmet | None:
+    """Some receiver whose pseudoranges fit the orbits at their logged times (each one that does not is
+    left out by the detector itself)."""
+    fits = receiver_time_tags(ctx)
+    off = time_tags_off(ctx)
+    if not fits or len(off) < len(fits):
+        return None
+    return Unmet(
+        ORBIT_TIMING,
+        "; ".join(f"{rid}: {fit.describe()}" for rid, fit in off.items()),
+        "the raw-measurement tests need pseudoranges that fit the orbits at their logged times (tags off the "
+        "time the signals were measured at, a receiver clock or logging fault, put every satellite off by its "
+        "range rate times the offset: no satellite or system can be judged against the others)",
+        {f"time_tag_offset_s.{rid}": round(fit.offset_s, 4) for rid, fit in off.items()},
+    )
+
+
 STRAPDOWN_IMU = "strapdown_imu"
 INERTIAL_SPAN = "inertial_span"
 NOISE_LEARNING = "noise_learning"
@@ -290,6 +330,8 @@ PSEUDORANGE_ARCS = "pseudorange_arcs"
 INDEPENDENT_REFERENCE = "independent_reference"
 INDEPENDENT_RECEIVERS = "independent_receivers"
 SURVEYED_SITES = "surveyed_sites"
+ORBIT_TIMING = "orbit_timing"
+_TAGS = TimeTagOptions()
 
 PRECONDITIONS: dict[str, Precondition] = {
     STRAPDOWN_IMU: Precondition(
@@ -338,5 +380,13 @@ PRECONDITIONS: dict[str, Precondition] = {
         "two independent receivers each at a known static station (RINEX header positions, checked as for "
         "independent_reference): the baseline vector is then known",
         surveyed_sites,
+    ),
+    ORBIT_TIMING: Precondition(
+        "a receiver whose pseudoranges fit the broadcast orbits at their logged times: not a time offset of "
+        f"{_TAGS.min_offset_s:g} s or more that its epochs agree on (interquartile range within "
+        f"{_TAGS.max_relative_spread:.0%} of it, over {_TAGS.min_epochs} or more epochs with a redundant satellite) "
+        f"and that shrinks the residuals {_TAGS.min_improvement:g} times or more (`spooflens.gnss.time_tags`); "
+        "a receiver that fails it is left out",
+        orbit_timing,
     ),
 }
