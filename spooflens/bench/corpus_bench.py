@@ -82,6 +82,15 @@ class AttackKind:
     # the independent references that see this attack: a log whose clean analysis ran none of them can
     # show the attack only as GNSS-only or receiver evidence, which alone is never a spoofing verdict
     seen_by: frozenset[str] = frozenset()
+    # where only some detectors of a class can see it: those detectors, by name (a satellite below the
+    # horizon test shares RAIM's class but cannot see a delayed satellite)
+    seen_by_analyses: frozenset[str] = frozenset()
+
+    def seen_in(self, facts: LogFacts) -> bool:
+        """The log's clean analysis ran a reference that sees this attack."""
+        if self.seen_by_analyses:
+            return bool(facts.analyses_run & self.seen_by_analyses)
+        return bool(facts.classes_run & self.seen_by)
 
 
 # what each attack needs of a log, and how to tell from its clean analysis
@@ -100,7 +109,11 @@ BATTERY: tuple[AttackKind, ...] = (
     AttackKind("step 50 m", ATTACKS["step 50 m"], "fixes", FIX_REFERENCES),
     AttackKind("capture", ATTACKS["capture"], "logged fixes", FIX_REFERENCES),
     AttackKind(
-        "counterfeit satellite", "pr_delay:count=1,delay=300,cn0=6", "raw observations", frozenset({"raw_measurement"})
+        "counterfeit satellite",
+        "pr_delay:count=1,delay=300,cn0=6",
+        "raw observations",
+        frozenset({"raw_measurement"}),
+        frozenset({"raim", "system_agreement"}),
     ),
     AttackKind("single antenna", "single_antenna:rate=1", "two receivers with fixes", frozenset({"second_receiver"})),
 )
@@ -376,7 +389,7 @@ def take_injected(result: LogResult, record: TaskRecord) -> None:
     facts = log_facts(result.summary) if result.summary else None
     if record.summary is not None and record.truth is not None:
         scored = score(record.truth, record.summary, facts.fix_rate_hz if facts else None)
-    seen = bool(facts and facts.classes_run & KINDS[record.attack].seen_by)
+    seen = bool(facts and KINDS[record.attack].seen_in(facts))
     result.injected.append(Injected(record.attack, record, scored, seen))
 
 

@@ -273,6 +273,7 @@ class LogFacts:
     fix_rate_hz: float | None
     # the evidence classes of the detectors that ran and count: what an attack could be compared with
     classes_run: frozenset[str] = frozenset()
+    analyses_run: frozenset[str] = frozenset()  # the names of those detectors
 
 
 def _span(streams: list[dict[str, Any]]) -> tuple[float, float] | None:
@@ -288,6 +289,16 @@ def log_facts(summary: dict[str, Any]) -> LogFacts:
     fixes = [s for s in streams if s.get("role") == "fix"]
     obs = [s for s in streams if s.get("role") == "observations"]
     rates = [float(s["rate_hz"]) for s in fixes if s.get("rate_hz")]
+    counted = [
+        a
+        for seg in parts
+        for a in seg.get("analyses") or []
+        if isinstance(a, dict)
+        and a.get("ran")
+        and a.get("evidence")
+        and not a.get("advisory")
+        and a.get("name") not in RECORDED_REFERENCES
+    ]
     return LogFacts(
         recordings=len(parts),
         logged_fix_receivers=tuple(dict.fromkeys(str(s["stream_id"]) for s in fixes if s["stream_id"] not in computed)),
@@ -296,16 +307,8 @@ def log_facts(summary: dict[str, Any]) -> LogFacts:
         fix_span_s=_span(fixes),
         observation_span_s=_span(obs),
         fix_rate_hz=max(rates) if rates else None,
-        classes_run=frozenset(
-            str(a["evidence"])
-            for seg in parts
-            for a in seg.get("analyses") or []
-            if isinstance(a, dict)
-            and a.get("ran")
-            and a.get("evidence")
-            and not a.get("advisory")
-            and a.get("name") not in RECORDED_REFERENCES
-        ),
+        classes_run=frozenset(str(a["evidence"]) for a in counted),
+        analyses_run=frozenset(str(a["name"]) for a in counted),
     )
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,7 @@ from spooflens.bench.corpus_bench import (
     run_corpus,
 )
 from spooflens.bench.corpus_logs import discover, is_truth_of_another, tags_of
-from spooflens.bench.corpus_runs import DAMAGED, INTERNAL, READ, REFUSED, TIMEOUT, command_result, score
+from spooflens.bench.corpus_runs import DAMAGED, INTERNAL, READ, REFUSED, TIMEOUT, LogFacts, command_result, score
 from spooflens.bench.sandbox import RunResult
 
 HEADER = "path\tformat\tvehicle\tduration_s\tsource_repo\tcommit\tsource_path\tlicence\tnotes\n"
@@ -227,3 +228,14 @@ def test_an_attack_reaching_fewer_epochs_than_an_alarm_needs_is_not_counted() ->
     }
     assert attacked_epochs(truth) == 2 < MIN_ATTACKED_EPOCHS
     assert attacked_epochs({"start_s": 0.0, "offsets": {}}) is None
+
+
+def test_a_counterfeit_satellite_counts_as_seen_only_where_raim_or_the_systems_comparison_ran() -> None:
+    # satellite_horizon shares RAIM's evidence class but cannot see a delayed satellite: a log where it
+    # alone of that class ran (CEDA, whose time tags keep RAIM from judging it) has no reference for it
+    kind = next(k for k in BATTERY if k.name == "counterfeit satellite")
+    facts = LogFacts(1, (), ("rx",), ("rx",), (0.0, 1.0), (0.0, 1.0), 1.0, frozenset({"raw_measurement"}))
+    assert not kind.seen_in(replace(facts, analyses_run=frozenset({"satellite_horizon"})))
+    assert kind.seen_in(replace(facts, analyses_run=frozenset({"satellite_horizon", "raim"})))
+    ramp = next(k for k in BATTERY if k.name == "ramp 2 m/s")
+    assert not ramp.seen_in(facts) and ramp.seen_in(replace(facts, classes_run=frozenset({"inertial"})))
