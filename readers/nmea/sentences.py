@@ -274,13 +274,26 @@ _DECODERS = {
 
 def is_empty(sentence: Sentence) -> bool:
     """True for a sentence with no digit in its data fields (`$IIHDT,,T*0C`, an empty GSV)."""
-    body = sentence.text[sentence.text.find(b",") : sentence.text.rfind(b"*")]
+    star = sentence.text.rfind(b"*")
+    body = sentence.text[sentence.text.find(b",") : star if star >= 0 else len(sentence.text)]
     return not any(48 <= b <= 57 for b in body)
+
+
+def with_checksum(text: bytes) -> bytes:
+    """The sentence with its checksum: pynmeagps parses nothing without one, and a sentence of a file whose
+    talker sends none (lines.py takes those unverified) is decoded as the same sentence checksummed."""
+    if b"*" in text:
+        return text
+    total = 0
+    for b in text[1:]:
+        total ^= b
+    return text + b"*%02X" % total
 
 
 def decode(sentence: Sentence) -> Decoded:
     """Values of a sentence of a WANTED kind; raises one of ParseErrors when its fields are not valid."""
-    msg = NMEAReader.parse(sentence.text, validate=VALNONE)  # checksum already verified (lines.py)
+    # checksum already verified (lines.py), or absent from the whole file
+    msg = NMEAReader.parse(with_checksum(sentence.text), validate=VALNONE)
     if msg is None:
         raise NMEAParseError(f"pynmeagps does not know {sentence.talker}{sentence.kind}")
     out = Decoded(sentence)

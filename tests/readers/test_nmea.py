@@ -319,3 +319,20 @@ def test_nmea_satellite_numbers(talker: str, svid: int, expected: str | None) ->
     from readers.nmea.assembly import nmea_sv_id
 
     assert nmea_sv_id(talker, svid) == expected
+
+
+def test_a_talker_that_sends_no_checksums_is_read_unverified() -> None:
+    # an HP 58534A timing receiver (2010): no sentence has a checksum; pynmeagps decodes none without one
+    table = read_log(real_log("corpus/gpsd/hp58534a.log"))
+    assert len(table.fixes) == 2
+    lat, lon = table.fixes["lat_deg"].to_numpy(float), table.fixes["lon_deg"].to_numpy(float)
+    assert np.allclose(lat, -33.8172283, atol=1e-6) and np.allclose(lon, 18.7321367, atol=1e-6)
+    assert set(table.satellites["cn0_dbhz"].dropna().astype(int)) >= {31, 35, 46}
+    assert any(s.action == "unverified" and "without a checksum" in s.reason for s in table.skipped)
+
+
+def test_a_sentence_is_checksummed_as_its_talker_would() -> None:
+    from readers.nmea.sentences import with_checksum
+
+    for sent in (b"$GPGSV,1,1,00*79", b"$GPRMC,001902.00,V,,,,,,,020211,,,N*77"):
+        assert with_checksum(sent[:-3]) == sent and with_checksum(sent) == sent
