@@ -108,10 +108,14 @@ def test_fixes_the_jammer_lost_are_written_as_no_fix(tmp_path: Path, capsys: pyt
     assert no_fix[0] == before[0] + lost
 
 
+# the GPS message of ArduPilot 3.4 on (2016+): microsecond boot time, instance, GPS week and milliseconds
+GPS_2016 = Fmt(130, "GPS", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U")
+
+
 def _two_receivers_with_ubx1(path: Path, seconds: int = 120) -> Path:
     """A 2016+ log: two u-blox receivers at 5 Hz, each with its GPA and a UBX1 (MON-HW) once a second,
     logged 2 ms before the fix it is joined to first."""
-    gps = Fmt(130, "GPS", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U")
+    gps = GPS_2016
     gpa = Fmt(152, "GPA", "QBCCCCfBIHf", "TimeUS,I,VDop,HAcc,VAcc,SAcc,YAcc,VV,SMS,Delta,Und")
     ubx1 = Fmt(160, "UBX1", "QBHBBHI", "TimeUS,Instance,noisePerMS,jamInd,aPower,agcCnt,config")
     msgs = []
@@ -173,7 +177,7 @@ def test_a_2013_log_without_vz_or_receiver_messages_is_jammed_in_what_it_has(tmp
 def _one_receiver_with_raw_measurements(path: Path, seconds: int = 100) -> Path:
     """A 2016+ log: a 5 Hz receiver and its RXM-RAWX as the autopilot logs it (GRXH, then a GRXS per
     satellite) once a second, eight GPS satellites from 32 to 46 dB-Hz."""
-    gps = Fmt(130, "GPS", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U")
+    gps = GPS_2016
     grxh = Fmt(161, "GRXH", "QdHbBB", "TimeUS,rcvTime,week,leapS,numMeas,recStat")
     grxs = Fmt(162, "GRXS", "QddfBBBHBBBBB", "TimeUS,prMes,cpMes,doMes,gnss,sv,freq,lock,cno,prD,cpD,doD,trk")
     msgs = []
