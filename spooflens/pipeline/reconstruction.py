@@ -46,7 +46,7 @@ from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.evidence import CORROBORATION_S, NOT_SPOOFING, Evidence
-from spooflens.pipeline.registry import AnalysisContext
+from spooflens.pipeline.registry import AnalysisContext, navigation_parts
 from spooflens.pipeline.verdict import Incident, Verdict, incident_of
 
 FloatArray = NDArray[np.float64]
@@ -422,16 +422,51 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
 
 def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict: Verdict) -> Verdict:
     """Confirm, extend and reconstruct every incident that has inertial evidence: the verdict anew, with the
-    tracks reconstructed with GNSS left out and each coast's facts (nothing in `results` is changed)."""
+    tracks reconstructed with GNSS left out and each coast's facts (nothing in `results` is changed).
+
+    Where the navigation ran between the IMU's gaps (`navigation_parts`), each incident is judged on the
+    stretch its coast starts in, never coasted across a gap: GNSS that had not agreed again by the end of
+    that stretch is said to, and the incident ends there (the log goes on, unnavigated); an incident
+    outside every stretch stays as the alarms made it."""
     navigated = any(r.name == NAVIGATION and r.ran for r in results)
-    candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
-    if not navigated or not candidates:
+    if not navigated or not any(Evidence.INERTIAL in i.evidence for i in verdict.incidents):
         return verdict
+    parts = navigation_parts(ctx)
+    if parts[0] is ctx:
+        return _on_navigation(ctx, results, verdict, None)
+    tf = ctx.table.fixes["t_s"].to_numpy(dtype=float)
+    log_end = float(np.nanmax(tf)) if len(tf) else -np.inf
+    rest, judged = list(verdict.incidents), []
+    for part in parts:
+        a, b = part.span_s or (np.nan, np.nan)
+        mine = tuple(i for i in rest if a <= _coast_start(i) <= b)
+        rest = [i for i in rest if i not in mine]
+        if any(Evidence.INERTIAL in i.evidence for i in mine):
+            judged.append(_on_navigation(part, results, replace(verdict, incidents=mine), log_end))
+        else:
+            rest += mine
+    incidents = sorted([*rest, *(i for v in judged for i in v.incidents)], key=lambda i: i.start_s)
+    return replace(
+        verdict,
+        spoofed=any(i.is_spoofing for i in incidents),
+        incidents=tuple(incidents),
+        reconstructed=tuple(tr for v in judged for tr in v.reconstructed),
+        coasting_checks=tuple(c for v in judged for c in v.coasting_checks),
+    )
+
+
+def _on_navigation(
+    ctx: AnalysisContext, results: Sequence[DetectorResult], verdict: Verdict, log_end_s: float | None
+) -> Verdict:
+    """`reconstruct` on the navigation of `ctx`: the whole log's, or one stretch between the IMU's gaps of a
+    log whose fixes go on to `log_end_s`."""
     try:
         nav = navigation_of(ctx)
     except SpooflensError:
         return verdict
     t_first, t_last = float(nav.solution.t[0]), float(nav.solution.t[-1])
+    # the IMU stopped before the log's fixes did: nothing after this stretch was coasted
+    stopped = log_end_s is not None and t_last < log_end_s
     opts = CoastingOptions()
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
@@ -503,6 +538,8 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
             )
         else:
             interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
+        if check.end_s is None and stopped:
+            method += f" before the IMU stopped at {t_last:.1f} s; nothing after was navigated with this stretch"
         if not envelope.runs:
             method += f"; {NO_CLEAN_COASTS}"
         onset, onset_interval = _onset_before(results, inc, check.departure_s)
@@ -515,7 +552,7 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
                 onset_interval_s=onset_interval,
                 end_s=end,
                 end_interval_s=interval,
-                ongoing_at_end=check.end_s is None,
+                ongoing_at_end=check.end_s is None and not stopped,
                 end_method=method,
                 offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
                 offset_end_m=float(offsets[-1]) if len(offsets) else None,
