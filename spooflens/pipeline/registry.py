@@ -375,7 +375,8 @@ def _stretches(ctx: AnalysisContext) -> list[AnalysisContext] | None:
 def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
     later: list[tuple[int, AnalysisSpec, Later]] = []  # where each one's results go in ctx.results
     for spec in analyses():
-        parts = navigation_parts(ctx) if spec.navigated else [ctx]
+        # an analysis the log lacks the streams for does not run anywhere: said once, for the whole log
+        parts = navigation_parts(ctx) if spec.navigated and not spec.missing(ctx.table) else [ctx]
         if parts[0] is ctx:
             out = _started(spec, ctx, on_step)
         else:

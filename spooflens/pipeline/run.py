@@ -135,9 +135,9 @@ def analyze_table(
     ctx, verdict = _one_pass(table, options, on_step, {})
     kept = ctx if keep_context else None
     spans = suspected_spans(verdict)
-    parts = navigation_parts(ctx)
-    navs = [nav for _, nav in navigations(ctx)]
-    if not spans or not any(_within_learning(spans, part, nav) for part, nav in navigations(ctx)):
+    parts, navigated = navigation_parts(ctx), navigations(ctx)
+    navs = [nav for _, nav in navigated]
+    if not spans or not any(_within_learning(spans, part, nav) for part, nav in navigated):
         # nothing suspected, or only after the noise was learned: learning it again without those
         # stretches gives the same noise, and the second pass the same results
         return _done(Analysis(table, options, ctx.results, verdict, context=kept), navs, clean_coasts)
@@ -146,7 +146,7 @@ def analyze_table(
     again = [_again(part, spans) for part in parts]
     segmented = parts[0] is not ctx
     first_results = ctx.results
-    del ctx, parts, navs
+    del ctx, parts, navigated, navs
     if on_step:
         on_step("learning the noise again without the suspected stretches")
     try:
