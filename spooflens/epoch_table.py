@@ -207,11 +207,24 @@ class EpochTable:
             ephemerides=self.ephemerides,
             metadata={**self.metadata, "segment": f"{index + 1} of {len(self.segments)}"},
         )
+        self._rows_into(out, seg.start_s, seg.end_s, seg.start_s)
+        return out
+
+    def between(self, start_s: float, end_s: float) -> EpochTable:
+        """The rows from `start_s` to `end_s` on the same time axis, as a log of their own (the navigation
+        runs on each stretch between an IMU's gaps like this: `spooflens.navigation.segments`)."""
+        out = replace(self, streams=[], metadata=dict(self.metadata), segments=list(self.segments))
+        self._rows_into(out, start_s, end_s, 0.0)
+        return out
+
+    def _rows_into(self, out: EpochTable, start_s: float, end_s: float, shift_s: float) -> None:
+        """`out`'s frames: this table's rows from `start_s` to `end_s`, their times less `shift_s`; its
+        streams: this table's, counted over them (a stream without a row there left out)."""
         for name in FRAMES:
             df = self.frame(name)
-            sel = (df["t_s"] >= seg.start_s - 1e-9) & (df["t_s"] <= seg.end_s + 1e-9)
+            sel = (df["t_s"] >= start_s - 1e-9) & (df["t_s"] <= end_s + 1e-9)
             part = df[sel].reset_index(drop=True)
-            part["t_s"] = part["t_s"] - seg.start_s
+            part["t_s"] = part["t_s"] - shift_s
             setattr(out, name, part)
         for st in self.streams:
             frame = _ROLE_FRAME.get(st.role)
@@ -225,7 +238,6 @@ class EpochTable:
             count = len(np.unique(t)) if st.role in EPOCH_ROLES else len(rows)
             if count:
                 out.streams.append(replace(st, count=count, first_s=float(t[0]), last_s=float(t[-1])))
-        return out
 
     @property
     def ionosphere(self) -> Klobuchar | None:

@@ -121,4 +121,5 @@ ANALYSIS = AnalysisSpec(
         ),
     ),
     preconditions=(STRAPDOWN_IMU, INERTIAL_SPAN, NOISE_LEARNING),
+    navigated=True,
 )

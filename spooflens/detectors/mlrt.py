@@ -395,4 +395,5 @@ ANALYSIS = AnalysisSpec(
         ),
     ),
     preconditions=(STRAPDOWN_IMU, INERTIAL_SPAN, NOISE_LEARNING),
+    navigated=True,
 )

@@ -274,4 +274,5 @@ ANALYSIS = AnalysisSpec(
         ),
     ),
     preconditions=(INDEPENDENT_REFERENCE, PSEUDORANGE_ARCS),
+    navigated=True,  # the INS reference: run on each stretch the navigation ran on
 )

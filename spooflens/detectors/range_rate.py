@@ -318,4 +318,5 @@ ANALYSIS = AnalysisSpec(
         ),
     ),
     preconditions=(INDEPENDENT_REFERENCE, CARRIER_CONTINUITY),
+    navigated=True,  # the INS reference: run on each stretch the navigation ran on
 )

@@ -73,6 +73,18 @@ class LearnOptions:
     min_scored_epochs: int = 50  # with fewer clean epochs than this, the prior stands (nothing to learn from)
     min_scored_s: float = 30.0
 
+    def enough(self, t_fix: FloatArray) -> bool:
+        """Whether fixes at these times leave the learning enough to learn from once the filter has
+        settled (before anything suspected is left out): else the prior stands."""
+        epochs, seconds = self.scored(t_fix)
+        return epochs >= self.min_scored_epochs and seconds >= self.min_scored_s
+
+    def scored(self, t_fix: FloatArray) -> tuple[int, float]:
+        """(epochs, seconds) of fixes at these times after the filter's first `settle_s`."""
+        t = np.asarray(t_fix, dtype=float)
+        after = t[t >= t[0] + self.settle_s] if len(t) else t
+        return len(after), float(after[-1] - after[0]) if len(after) >= 2 else 0.0
+
 
 @dataclass(frozen=True)
 class NoisePrior:

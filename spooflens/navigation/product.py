@@ -14,6 +14,7 @@ from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.baseline.use import coast_envelope_limit, noise_prior
 from spooflens.detectors.base import SIGMA_SUFFIX, DetectorResult, Series, Track
 from spooflens.epoch_table import EpochTable
+from spooflens.errors import AnalysisError
 from spooflens.estimation.statespace import LinearGaussianModel
 from spooflens.navigation.alignment import Alignment, heading_from_course
 from spooflens.navigation.imu_models import ImuGrade, grade
@@ -31,7 +32,14 @@ from spooflens.navigation.noise_learning import LearnedNoise, estimate_mount, le
 from spooflens.navigation.smoother import SmoothedSolution, check_smoothable, smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.preconditions import NOISE_LEARNING, STRAPDOWN_IMU
-from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, AnalyzeOptions, DetectorInfo, Later
+from spooflens.pipeline.registry import (
+    AnalysisContext,
+    AnalysisSpec,
+    AnalyzeOptions,
+    DetectorInfo,
+    Later,
+    navigation_parts,
+)
 from spooflens.threads import core_idle, started
 
 NAVIGATION = "navigation"  # the analysis, its result and the solution it shares with the others
@@ -117,9 +125,21 @@ def _aligned(
 
 def navigation_of(ctx: AnalysisContext) -> Navigation:
     """The GNSS/INS solution of the log's first IMU and receiver, made once per analysis and shared by
-    every analysis that needs it (raises AnalysisError if it cannot run)."""
+    every analysis that needs it (raises AnalysisError if it cannot run). Where the IMU stops, one per
+    stretch between its gaps: `ctx` is then one of `navigation_parts`, never the whole log's."""
+    if navigation_parts(ctx)[0] is not ctx:
+        raise AnalysisError(
+            f"{ctx.table.source}: the IMU stops, so the navigation runs on each stretch between its gaps "
+            "(navigation_parts), never across them"
+        )
     nav: Navigation = ctx.cached(NAVIGATION, lambda: solve_navigation(ctx.table, ctx.options))
     return nav
+
+
+def navigations(ctx: AnalysisContext) -> list[tuple[AnalysisContext, Navigation]]:
+    """Each part of the log the navigation ran on (`navigation_parts`: the whole log, or the stretches
+    between the IMU's gaps) with its solution, where one was made."""
+    return [(part, part.cache[NAVIGATION]) for part in navigation_parts(ctx) if NAVIGATION in part.cache]
 
 
 def _run(ctx: AnalysisContext) -> Later:
@@ -199,4 +219,5 @@ ANALYSIS = AnalysisSpec(
         ),
     ),
     preconditions=(STRAPDOWN_IMU, NOISE_LEARNING),
+    navigated=True,
 )

@@ -117,17 +117,27 @@ class RecordingWriter:
         h: NDArray[np.float64],
         colour: tuple[int, int, int],
     ) -> None:
-        """A trajectory: whole line on the map and in local ENU, plus a moving point over time."""
+        """A trajectory: whole line on the map and in local ENU, plus a moving point over time. A NaN row
+        breaks the line (a track the navigation made on each stretch between an IMU's gaps)."""
+        known = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+        t, lat, lon, h = (np.asarray(x, dtype=float)[known] for x in (t, lat, lon, h))
         if not len(t):
             return
+        pieces = np.split(np.arange(len(t)), np.flatnonzero(np.diff(np.cumsum(~known)[known]) > 0) + 1)
         latlon = np.c_[lat, lon]
         self.rec.log(
             entity("map", name, "track"),
-            rr.GeoLineStrings(lat_lon=[latlon], colors=[colour], radii=rr.Radius.ui_points(2.0)),
+            rr.GeoLineStrings(
+                lat_lon=[latlon[k] for k in pieces], colors=[colour] * len(pieces), radii=rr.Radius.ui_points(2.0)
+            ),
             static=True,
         )
         enu = geodetic_to_enu(lat, lon, h, *self.origin)
-        self.rec.log(entity("local", name, "track"), rr.LineStrips3D([enu], colors=[colour]), static=True)
+        self.rec.log(
+            entity("local", name, "track"),
+            rr.LineStrips3D([enu[k] for k in pieces], colors=[colour] * len(pieces)),
+            static=True,
+        )
         for a in range(0, len(t), BLOCK_ROWS):
             b = a + BLOCK_ROWS
             index = self._indexes(t[a:b])

@@ -23,6 +23,7 @@ from spooflens.gnss.single_point import SinglePointOptions, ranged_by_receiver
 from spooflens.gnss.time_tags import TimeTagFit, TimeTagOptions, time_tag_fit
 
 if TYPE_CHECKING:
+    from spooflens.navigation.segments import ImuSpan
     from spooflens.pipeline.registry import AnalysisContext
 
 # Strapdown integrates each IMU sample over the interval to the next: below tens of Hz a vehicle's
@@ -88,7 +89,23 @@ def imu_rate_and_gap(t: np.ndarray) -> tuple[float, float, float]:
     return float(1.0 / np.median(dt)), float(dt[k]), float(t[k])
 
 
+def imu_spans_of(ctx: AnalysisContext) -> tuple[ImuSpan, ...]:
+    """The navigation IMU's span cut at its gaps over MAX_IMU_GAP_S, each stretch navigated or not and why
+    (`spooflens.navigation.segments`; computed once per analysis)."""
+    from spooflens.navigation.segments import imu_spans
+
+    def cut() -> tuple[ImuSpan, ...]:
+        imu_id, receiver_id = navigation_streams(ctx)
+        ti = ctx.table.imu_of(imu_id)["t_s"].to_numpy(dtype=float)
+        return imu_spans(ti, ctx.table.fixes_of(receiver_id)["t_s"].to_numpy(dtype=float), MAX_IMU_GAP_S)
+
+    spans: tuple[ImuSpan, ...] = ctx.cached("imu_spans", cut)
+    return spans
+
+
 def strapdown_imu(ctx: AnalysisContext) -> Unmet | None:
+    """Unmet and stopping below the rate strapdown needs, or when no stretch between the IMU's gaps is long
+    enough to navigate; unmet and limiting when there are gaps and the navigation runs between them."""
     imu_id, _ = navigation_streams(ctx)
     t = ctx.table.imu_of(imu_id)["t_s"].to_numpy(dtype=float)
     rate, gap, at = imu_rate_and_gap(t)
@@ -97,14 +114,31 @@ def strapdown_imu(ctx: AnalysisContext) -> Unmet | None:
         return Unmet(
             STRAPDOWN_IMU, f"IMU {imu_id} at {rate:.2g} Hz", f"strapdown needs >= {MIN_STRAPDOWN_HZ:g} Hz", values
         )
-    if gap > MAX_IMU_GAP_S:
+    if gap <= MAX_IMU_GAP_S:
+        return None
+    gaps = int(np.count_nonzero(np.diff(t) > MAX_IMU_GAP_S))
+    spans = imu_spans_of(ctx)
+    navigated = [s for s in spans if s.navigated]
+    values |= {"gaps": gaps, "navigated_s": round(sum(s.end_s - s.start_s for s in navigated), 3)}
+    found = f"IMU {imu_id} stops for {gap:.2f} s at {at:.1f} s" + (
+        f" and {gaps - 1} more time(s) for over {MAX_IMU_GAP_S:g} s" if gaps > 1 else ""
+    )
+    lost = f"strapdown needs no gap over {MAX_IMU_GAP_S:g} s (the rotation in it is lost)"
+    if not navigated:
         return Unmet(
             STRAPDOWN_IMU,
-            f"IMU {imu_id} stops for {gap:.2f} s at {at:.1f} s",
-            f"strapdown needs no gap over {MAX_IMU_GAP_S:g} s (the rotation in it is lost)",
+            f"{found}; no stretch between its gaps is long enough to navigate",
+            f"{lost}, over a stretch long enough to align and learn the noise",
             values,
         )
-    return None
+    return Unmet(
+        STRAPDOWN_IMU,
+        found,
+        f"{lost}: navigated anew on each stretch between the gaps, on {', '.join(s.describe() for s in navigated)}; "
+        f"not navigated on {'; '.join(s.describe() for s in spans if not s.navigated)}",
+        values,
+        stops=False,
+    )
 
 
 def _fixes_with_imu(ctx: AnalysisContext) -> np.ndarray:
@@ -139,13 +173,12 @@ def noise_learning(ctx: AnalysisContext) -> Unmet | None:
     o = LearnOptions()
     tf = _fixes_with_imu(ctx)
     span = float(tf[-1] - tf[0]) if len(tf) >= 2 else 0.0
-    scored = tf[tf >= (tf[0] if len(tf) else 0.0) + o.settle_s]
-    scored_s = float(scored[-1] - scored[0]) if len(scored) >= 2 else 0.0
-    values: dict[str, float | int | str] = {"span_s": round(span, 3), "scored_epochs": len(scored)}
-    if len(scored) < o.min_scored_epochs or scored_s < o.min_scored_s:
+    scored, _ = o.scored(tf)
+    values: dict[str, float | int | str] = {"span_s": round(span, 3), "scored_epochs": scored}
+    if not o.enough(tf):
         return Unmet(
             NOISE_LEARNING,
-            f"GNSS with the IMU for {span:.0f} s ({len(scored)} epochs after the filter's {o.settle_s:g} s settling)",
+            f"GNSS with the IMU for {span:.0f} s ({scored} epochs after the filter's {o.settle_s:g} s settling)",
             f"noise learning needs {o.min_scored_s:g} s and {o.min_scored_epochs} epochs after it: nothing was "
             "learned, the prior stands (the IMU preset, and the fixes' own scatter as their white noise)",
             values,
@@ -237,7 +270,7 @@ def known_stations(ctx: AnalysisContext) -> tuple[dict[str, object], dict[str, s
 def independent_reference(ctx: AnalysisContext) -> Unmet | None:
     """An IMU strapdown can use, or a known static station."""
     ins = strapdown_imu(ctx) if len(ctx.table.imu) else None
-    if len(ctx.table.imu) and ins is None:
+    if len(ctx.table.imu) and (ins is None or not ins.stops):  # navigated, if only between its gaps
         return None
     found, why = known_stations(ctx)
     if found:
@@ -336,7 +369,10 @@ _TAGS = TimeTagOptions()
 PRECONDITIONS: dict[str, Precondition] = {
     STRAPDOWN_IMU: Precondition(
         f"the IMU the navigation uses at >= {MIN_STRAPDOWN_HZ:g} Hz (median sample interval) with no gap over "
-        f"{MAX_IMU_GAP_S:g} s: strapdown integrates each sample over the interval to the next",
+        f"{MAX_IMU_GAP_S:g} s: strapdown integrates each sample over the interval to the next. An IMU that stops "
+        "for longer is navigated anew on each stretch between its gaps whose fixes the noise learning can learn "
+        "from (50 over 30 s after the filter's first 20 s), every inertial test with it: this limits, and says "
+        "which spans were navigated and why the others were not; it stops when no stretch is long enough",
         strapdown_imu,
     ),
     INERTIAL_SPAN: Precondition(

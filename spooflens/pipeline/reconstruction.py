@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -46,7 +47,8 @@ from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of
 from spooflens.navigation.smoother import smooth
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.evidence import CORROBORATION_S, NOT_SPOOFING, Evidence
-from spooflens.pipeline.registry import AnalysisContext
+from spooflens.pipeline.explanations import ExplanationOptions, Shock, inertial_shocks
+from spooflens.pipeline.registry import AnalysisContext, navigation_parts
 from spooflens.pipeline.verdict import Incident, Verdict, incident_of
 
 FloatArray = NDArray[np.float64]
@@ -122,6 +124,7 @@ class CoastingCheck:
     end_interval_s: tuple[float, float] | None
     inconclusive_from_s: float | None = None  # the reference became too uncertain to see an end from here
     offset_en_m: FloatArray | None = None  # (M, 2) GNSS - reference, east and north
+    lost_s: float | None = None  # an IMU shock the coast met: nothing was judged from here
 
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -267,7 +270,19 @@ class Placebo:
         return np.where(inside, 0.0, np.where(before, np.minimum(H, a - self.starts), H))
 
 
-def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
+def shocks_of(nav: Navigation) -> list[Shock]:
+    """The shocks every IMU of the navigation's table read (`spooflens.pipeline.explanations`)."""
+    return inertial_shocks(nav.inputs.table, ExplanationOptions())
+
+
+def reference_lost_at(shocks: Sequence[Shock], t_from: float) -> float:
+    """Where a coast from `t_from` loses its reference: the start of the first shock not over by then (inf:
+    none). An INS integrating a tumble or an impact has lost its attitude, and what GNSS says against it
+    from there is the crash's, not the sky's: no coast is judged beyond, clean or not."""
+    return min((sh.start_s for sh in shocks if sh.end_s >= t_from), default=np.inf)
+
+
+def placebo_coasts(nav: Navigation, opts: CoastingOptions, shocks: Sequence[Shock] = ()) -> Placebo:
     t = nav.solution.t
     H = float(np.clip(0.5 * (t[-1] - t[0]), *opts.placebo_horizon_s))
     starts = np.arange(t[0] + opts.settle_s, t[-1] - H, min(H / 2.0, 30.0))
@@ -280,7 +295,7 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions) -> Placebo:
         if sol is None:  # no fix in the horizon: a clean coast needs GNSS to be compared with
             continue
         r = _ratio(sol, opts.p_disagree)
-        fine = np.isfinite(r)
+        fine = np.isfinite(r) & (sol.t < reference_lost_at(shocks, float(s)))
         if fine.sum() < 3:
             continue
         running = np.maximum.accumulate(np.where(fine, r, 0.0))
@@ -294,7 +309,7 @@ def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Enve
     incidents) avoided: what a vehicle's clean log says about its INS and receiver (a baseline's)."""
     opts = CoastingOptions()
     end = float(nav.solution.t[-1]) + 1e9  # no incident of its own: every coast is before it
-    return placebo_coasts(nav, opts).envelope((end, end), left_out, opts.margin_s, opts.placebo_trim)
+    return placebo_coasts(nav, opts, shocks_of(nav)).envelope((end, end), left_out, opts.margin_s, opts.placebo_trim)
 
 
 def capped(envelope: Envelope, limit: FloatArray | None) -> Envelope:
@@ -316,11 +331,14 @@ def coasting_check(
     deadline_s: float | None = None,
     opts: CoastingOptions | None = None,
     base: NavSolution | None = None,
+    shocks: Sequence[Shock] = (),
 ) -> CoastingCheck:
     """Coast from `onset_s` and judge GNSS against the reference: confirmed when a sustained departure
-    begins by `deadline_s` (default `confirm_window_s` after the onset); then when it ends."""
+    begins by `deadline_s` (default `confirm_window_s` after the onset); then when it ends. Nothing is
+    judged from the first of `shocks` the coast meets on (`reference_lost_at`)."""
     opts = opts or CoastingOptions()
     t_ex = onset_s - opts.margin_s
+    lost = reference_lost_at(shocks, t_ex)
     deadline = deadline_s if deadline_s is not None else onset_s + opts.confirm_window_s
     # first a coast just past the deadline: most anomalies are not confirmed, and a coast to the end of a
     # day-long log for each of them made the check quadratic in the log's length (21 anomalies of a 24 h
@@ -330,15 +348,18 @@ def coasting_check(
     sol = coast(nav, t_ex, deadline + opts.first_look_s, base=base)
     last = (base if base is not None else nav.solution).t[-1]
     if sol is not None:
-        t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(sol, t_ex, deadline, envelope, opts)
+        t, ratio, kappa, offset, disagree, departure, open_at_end = _departure(
+            sol, t_ex, deadline, envelope, opts, lost
+        )
     if sol is None or departure is not None or (open_at_end and t[-1] < last):
         sol = coast(nav, t_ex, base=base)
         if sol is None:  # no fix from here to the end: nothing GNSS said can depart from the reference
             none = np.array([])
             return CoastingCheck(t_ex, none, none, none, none, False, None, None, None, None, np.zeros((0, 2)))
-        t, ratio, kappa, offset, disagree, departure, _ = _departure(sol, t_ex, deadline, envelope, opts)
+        t, ratio, kappa, offset, disagree, departure, _ = _departure(sol, t_ex, deadline, envelope, opts, lost)
+    met = lost if lost <= t[-1] else None
     if departure is None:
-        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2])
+        return CoastingCheck(t_ex, t, ratio, kappa, offset, False, None, None, None, None, sol.nu[:, :2], met)
     end = end_interval = None
     # the reference can tell agreement only while its own uncertainty is well below the departure seen so
     # far beyond that uncertainty; a consumer INS coasting for minutes cannot
@@ -348,7 +369,7 @@ def coasting_check(
     peak = np.maximum.accumulate(np.where(np.arange(len(t)) >= departure, beyond, 0.0))
     # judged against the departure reached up to `agree_s` later: a growing one keeps ahead of the drift
     ahead = peak[np.minimum(np.searchsorted(t, t + opts.agree_s), len(t) - 1)]
-    conclusive = sigma_ref < ahead / opts.resolution
+    conclusive = (sigma_ref < ahead / opts.resolution) & (t < lost)
     # GNSS agrees again when it is back where the reference is (within its uncertainty, or the metres a
     # receiver wanders), not merely under a clean envelope that a consumer INS's coasts made wide
     back = np.nan_to_num(offset, nan=np.inf) <= np.maximum(opts.min_departure_m, 3.0 * sigma_ref)
@@ -366,15 +387,27 @@ def coasting_check(
             break
     inconclusive_from = float(t[lost_at]) if end is None and lost_at is not None else None
     return CoastingCheck(
-        t_ex, t, ratio, kappa, offset, True, float(t[departure]), end, end_interval, inconclusive_from, sol.nu[:, :2]
+        t_ex,
+        t,
+        ratio,
+        kappa,
+        offset,
+        True,
+        float(t[departure]),
+        end,
+        end_interval,
+        inconclusive_from,
+        sol.nu[:, :2],
+        met,
     )
 
 
 def _departure(
-    sol: NavSolution, t_ex: float, deadline: float, envelope: Envelope, opts: CoastingOptions
+    sol: NavSolution, t_ex: float, deadline: float, envelope: Envelope, opts: CoastingOptions, lost: float
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_], int | None, bool]:
     """(t, ratio, kappa, offset, disagree, departure epoch or None, whether a disagreement that began by
-    the deadline is still running at the coast's last epoch) of a coast from t_ex."""
+    the deadline is still running at the coast's last epoch) of a coast from t_ex that lost its reference
+    at `lost`."""
     t = sol.t
     ratio = _ratio(sol, opts.p_disagree)
     kappa = envelope.at(t - t_ex)
@@ -384,7 +417,7 @@ def _departure(
     away = (np.nan_to_num(offset) > opts.min_departure_m) | (
         young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
     )
-    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away
+    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away & (t < lost)
     departure, open_at_end = None, False
     for a, b in _runs(disagree):
         if t[a] > deadline:
@@ -422,20 +455,56 @@ def _reconstructed_track(nav: Navigation, t_from: float, t_to: float | None, vel
 
 def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict: Verdict) -> Verdict:
     """Confirm, extend and reconstruct every incident that has inertial evidence: the verdict anew, with the
-    tracks reconstructed with GNSS left out and each coast's facts (nothing in `results` is changed)."""
+    tracks reconstructed with GNSS left out and each coast's facts (nothing in `results` is changed).
+
+    Where the navigation ran between the IMU's gaps (`navigation_parts`), each incident is judged on the
+    stretch its coast starts in, never coasted across a gap: GNSS that had not agreed again by the end of
+    that stretch is said to, and the incident ends there (the log goes on, unnavigated); an incident
+    outside every stretch stays as the alarms made it."""
     navigated = any(r.name == NAVIGATION and r.ran for r in results)
-    candidates = [i for i in verdict.incidents if Evidence.INERTIAL in i.evidence]
-    if not navigated or not candidates:
+    if not navigated or not any(Evidence.INERTIAL in i.evidence for i in verdict.incidents):
         return verdict
+    parts = navigation_parts(ctx)
+    if parts[0] is ctx:
+        return _on_navigation(ctx, results, verdict, None)
+    tf = ctx.table.fixes["t_s"].to_numpy(dtype=float)
+    log_end = float(np.nanmax(tf)) if len(tf) else -np.inf
+    rest, judged = list(verdict.incidents), []
+    for part in parts:
+        a, b = part.span_s or (np.nan, np.nan)
+        mine = tuple(i for i in rest if a <= _coast_start(i) <= b)
+        rest = [i for i in rest if i not in mine]
+        if any(Evidence.INERTIAL in i.evidence for i in mine):
+            judged.append(_on_navigation(part, results, replace(verdict, incidents=mine), log_end))
+        else:
+            rest += mine
+    incidents = sorted([*rest, *(i for v in judged for i in v.incidents)], key=lambda i: i.start_s)
+    return replace(
+        verdict,
+        spoofed=any(i.is_spoofing for i in incidents),
+        incidents=tuple(incidents),
+        reconstructed=tuple(tr for v in judged for tr in v.reconstructed),
+        coasting_checks=tuple(c for v in judged for c in v.coasting_checks),
+    )
+
+
+def _on_navigation(
+    ctx: AnalysisContext, results: Sequence[DetectorResult], verdict: Verdict, log_end_s: float | None
+) -> Verdict:
+    """`reconstruct` on the navigation of `ctx`: the whole log's, or one stretch between the IMU's gaps of a
+    log whose fixes go on to `log_end_s`."""
     try:
         nav = navigation_of(ctx)
     except SpooflensError:
         return verdict
     t_first, t_last = float(nav.solution.t[0]), float(nav.solution.t[-1])
+    # the IMU stopped before the log's fixes did: nothing after this stretch was coasted
+    stopped = log_end_s is not None and t_last < log_end_s
     opts = CoastingOptions()
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
-    placebo = placebo_coasts(nav, opts)
+    shocks = shocks_of(nav)
+    placebo = placebo_coasts(nav, opts, shocks)
     cap = coast_envelope_limit(ctx.options.baseline, nav.inputs.receiver_id, nav.inputs.imu_id)
     limit = cap[0] if cap is not None else None
     envelopes = []
@@ -456,20 +525,23 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
             continue
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
         unjudged = [_span(i, opts) for i in ordered[n + 1 :]]
-        envelope = placebo.envelope(_span(inc, opts), confirmed_spans, opts.margin_s, opts.placebo_trim, later=unjudged)
-        envelope = capped(envelope, limit)
+
+        envelope_of = partial(_envelope, placebo, confirmed_spans, unjudged, limit, opts)
+        envelope = envelope_of(inc)
         # a departure from where the next inertial incident's coast begins is that incident's, not this one's
         later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
-        check, young = _judge(nav, inc, envelope, later, opts, base)
+        check, young = _judge(nav, inc, envelope, later, opts, base, shocks)
         if not check.confirmed or young:
             # alarms of an unrelated glitch before the attack merge into its incident and start its coast
             # too early (a consumer INS coasted for a minute cannot see a 300 m jump); coast again from
-            # each later burst of inertial alarms, the first confirmed departure splitting the incident
+            # each later burst of inertial alarms, the first confirmed departure splitting the incident; the
+            # alarms before it are then judged the log's own, so the clean coasts through them count
             split = next(
                 (
-                    (before, after, later_check)
+                    (before, after, later_check, after_envelope)
                     for before, after in later_onsets(results, inc)[: opts.max_later_coasts]
-                    for later_check, later_young in (_judge(nav, after, envelope, later, opts, base),)
+                    for after_envelope in (envelope_of(after),)
+                    for later_check, later_young in (_judge(nav, after, after_envelope, later, opts, base, shocks),)
                     if later_check.confirmed and not later_young
                 ),
                 None,
@@ -479,11 +551,11 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
                 envelopes.append(envelope)
                 incidents.append(_not_confirmed(inc, check, young, t_first, envelope))
                 continue
-            before, inc, later_check = split
+            before, inc, later_check, after_envelope = split
             checks += [(before, check), (inc, later_check)]
-            envelopes += [envelope, envelope]
+            envelopes += [envelope, after_envelope]
             incidents.append(_not_confirmed(before, check, young, t_first, envelope))
-            check = later_check
+            check, envelope = later_check, after_envelope
         else:
             checks.append((inc, check))
             envelopes.append(envelope)
@@ -503,6 +575,8 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
             )
         else:
             interval, method = (t_last, t_last), "GNSS never agreed again with the coasted INS reference"
+        if check.end_s is None and stopped:
+            method += f" before the IMU stopped at {t_last:.1f} s; nothing after was navigated with this stretch"
         if not envelope.runs:
             method += f"; {NO_CLEAN_COASTS}"
         onset, onset_interval = _onset_before(results, inc, check.departure_s)
@@ -515,7 +589,7 @@ def reconstruct(ctx: AnalysisContext, results: Sequence[DetectorResult], verdict
                 onset_interval_s=onset_interval,
                 end_s=end,
                 end_interval_s=interval,
-                ongoing_at_end=check.end_s is None,
+                ongoing_at_end=check.end_s is None and not stopped,
                 end_method=method,
                 offset_peak_m=float(np.nanmax(offsets)) if len(offsets) else None,
                 offset_end_m=float(offsets[-1]) if len(offsets) else None,
@@ -648,6 +722,20 @@ def _coast_start(inc: Incident) -> float:
     return min(inc.onset_s, inc.onset_interval_s[0] if inc.onset_interval_s else inc.onset_s, inc.start_s)
 
 
+def _envelope(
+    placebo: Placebo,
+    confirmed: list[tuple[float, float]],
+    unjudged: list[tuple[float, float]],
+    limit: FloatArray | None,
+    opts: CoastingOptions,
+    inc: Incident,
+) -> Envelope:
+    """The clean envelope `inc` is judged against (`Placebo.envelope`, capped by a baseline's `limit`)."""
+    return capped(
+        placebo.envelope(_span(inc, opts), confirmed, opts.margin_s, opts.placebo_trim, later=unjudged), limit
+    )
+
+
 def _judge(
     nav: Navigation,
     inc: Incident,
@@ -655,14 +743,16 @@ def _judge(
     later: list[float],
     opts: CoastingOptions,
     base: NavSolution | None,
+    shocks: Sequence[Shock],
 ) -> tuple[CoastingCheck, bool]:
     """The coasting check of `inc` from its coast start, and whether the reference was still converging
-    there; `later`: where the next inertial incidents' coasts begin (a departure from there is theirs)."""
+    where the coast leaves GNSS out (`margin_s` before that); `later`: where the next inertial incidents'
+    coasts begin (a departure from there is theirs)."""
     start = _coast_start(inc)
     reach = start + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
     deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
-    check = coasting_check(nav, start, envelope, deadline, opts, base)
-    return check, start < float(nav.solution.t[0]) + opts.converge_s
+    check = coasting_check(nav, start, envelope, deadline, opts, base, shocks)
+    return check, check.excluded_from_s < float(nav.solution.t[0]) + opts.converge_s
 
 
 def _not_confirmed(inc: Incident, check: CoastingCheck, young: bool, t_first: float, envelope: Envelope) -> Incident:
@@ -677,6 +767,8 @@ def _not_confirmed(inc: Incident, check: CoastingCheck, young: bool, t_first: fl
             "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty and this "
             "log's own clean departures (a receiver glitch, not a sustained departure)"
         )
+    if check.lost_s is not None:
+        why += f"; judged up to {check.lost_s:.1f} s, where the IMU read a shock and the INS lost its attitude"
     if not envelope.runs:
         why += f"; {NO_CLEAN_COASTS}"
     return replace(

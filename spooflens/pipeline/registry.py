@@ -19,6 +19,7 @@ import importlib
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,8 @@ from spooflens.detectors.base import DetectorResult, Unmet
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.preconditions import unmet_preconditions
+from spooflens.pipeline.joined import joined, spanned
+from spooflens.pipeline.preconditions import STRAPDOWN_IMU, imu_spans_of, unmet_preconditions
 
 MIN_FIXES = 3
 MIN_IMU_SAMPLES = 50
@@ -206,6 +208,9 @@ class AnalysisContext:
     cache: dict[str, Any] = field(default_factory=dict)
     # of the analyses that ran before (one that finishes `Later` joins them when every analysis has run)
     results: list[DetectorResult] = field(default_factory=list)
+    # the stretch of the log this context holds, when it is one the navigation ran on between the IMU's
+    # gaps (`navigation_parts`); None: the whole log
+    span_s: tuple[float, float] | None = None
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
         if key not in self.cache:
@@ -258,6 +263,9 @@ class AnalysisSpec:
     # what the model of every detector here requires of the data, checked before it runs (names in
     # spooflens.pipeline.preconditions.PRECONDITIONS)
     preconditions: tuple[str, ...] = ()
+    # runs on the GNSS/INS navigation: where the navigation runs between the IMU's gaps, this runs on
+    # each stretch it ran on (`navigation_parts`, each with its own preconditions), the results joined
+    navigated: bool = False
 
     def __post_init__(self) -> None:
         unknown = [n for n in self.needs if n not in REQUIREMENTS]
@@ -333,36 +341,102 @@ def run_analyses(
     return run_with_context(AnalysisContext(table, options or AnalyzeOptions()), on_step)
 
 
+NAVIGATION_PARTS = "navigation_parts"
+
+
+def navigation_parts(ctx: AnalysisContext) -> list[AnalysisContext]:
+    """The contexts the navigation, and every analysis on it, runs on: the log's own; or, when the IMU
+    stops for longer than strapdown bridges and the navigation runs between its gaps (`strapdown_imu`
+    limits), one per stretch navigated, holding the log's rows in it on the same time axis
+    (`spooflens.navigation.segments`). Made once per analysis."""
+    parts: list[AnalysisContext] | None = ctx.cached(NAVIGATION_PARTS, partial(_stretches, ctx))
+    return parts if parts is not None else [ctx]
+
+
+def navigation_coverage(ctx: AnalysisContext) -> Unmet | None:
+    """What the navigation covers, when it runs between the IMU's gaps: where it ran, where not and why
+    (`strapdown_imu`, unmet and limiting); None when it runs on the whole log or not at all."""
+    if _has_imu(ctx.table) is not None or _has_fixes(ctx.table) is not None or ctx.span_s is not None:
+        return None
+    found = unmet_preconditions((STRAPDOWN_IMU,), ctx)
+    return found[0] if found and not found[0].stops else None
+
+
+def _stretches(ctx: AnalysisContext) -> list[AnalysisContext] | None:
+    if navigation_coverage(ctx) is None:
+        return None
+    return [
+        AnalysisContext(ctx.table.between(s.start_s, s.end_s), ctx.options, span_s=(s.start_s, s.end_s))
+        for s in imu_spans_of(ctx)
+        if s.navigated
+    ]
+
+
 def run_with_context(ctx: AnalysisContext, on_step: Callable[[str], None] | None = None) -> list[DetectorResult]:
-    later: list[tuple[int, AnalysisSpec, Later, list[Unmet]]] = []  # where each one's results go in ctx.results
+    later: list[tuple[int, AnalysisSpec, Later]] = []  # where each one's results go in ctx.results
     for spec in analyses():
-        missing = spec.missing(ctx.table)
-        if missing:
-            ctx.results.extend(_not_run(spec, "needs " + ", ".join(dict.fromkeys(missing))))
-            continue
-        unmet = spec.unmet(ctx)
-        stops = [u for u in unmet if u.stops]
-        if stops:
-            ctx.results.extend(_not_run(spec, "; ".join(u.text for u in stops), stops))
-            continue
-        limits = [u for u in unmet if not u.stops]
-        if on_step:
-            on_step(spec.name)
-        try:
-            out = spec.run(ctx)
-        except SpooflensError as err:
-            ctx.results.extend(_not_run(spec, str(err)))
-            continue
-        if isinstance(out, Later):
-            later.append((len(ctx.results), spec, out, limits))
+        # an analysis the log lacks the streams for does not run anywhere: said once, for the whole log
+        parts = navigation_parts(ctx) if spec.navigated and not spec.missing(ctx.table) else [ctx]
+        if parts[0] is ctx:
+            out = _started(spec, ctx, on_step)
         else:
-            ctx.results.extend(_declared(spec, r, ctx, limits) for r in out)
+            out = _on_parts(spec, parts, navigation_coverage(ctx), on_step)
+        if isinstance(out, Later):
+            later.append((len(ctx.results), spec, out))
+        else:
+            ctx.results.extend(out)
     if on_step and later:  # the time waited for them is theirs, not the last analysis's
-        on_step("finishing " + ", ".join(spec.name for _, spec, _, _ in later))
-    finished = [(at, _finished(spec, pending, ctx, limits)) for at, spec, pending, limits in later]
+        on_step("finishing " + ", ".join(spec.name for _, spec, _ in later))
+    finished = [(at, pending.finish()) for at, _, pending in later]
     for at, results in reversed(finished):  # the last first: the earlier places stay where they were
         ctx.results[at:at] = results
     return ctx.results
+
+
+def _started(
+    spec: AnalysisSpec, ctx: AnalysisContext, on_step: Callable[[str], None] | None
+) -> list[DetectorResult] | Later:
+    """`spec` run on `ctx`, its results as declared; or not run, saying why; `Later` when they wait on work
+    begun in the background (its finish raises nothing: an error then is the analysis's not running)."""
+    missing = spec.missing(ctx.table)
+    if missing:
+        return _not_run(spec, "needs " + ", ".join(dict.fromkeys(missing)))
+    unmet = spec.unmet(ctx)
+    stops = [u for u in unmet if u.stops]
+    if stops:
+        return _not_run(spec, "; ".join(u.text for u in stops), stops)
+    limits = [u for u in unmet if not u.stops]
+    if on_step:
+        on_step(spec.name if ctx.span_s is None else f"{spec.name} on {spanned(ctx.span_s)}")
+    try:
+        out = spec.run(ctx)
+    except SpooflensError as err:
+        return _not_run(spec, str(err))
+    if isinstance(out, Later):
+        return Later(partial(_finished, spec, out, ctx, limits))
+    return [_declared(spec, r, ctx, limits) for r in out]
+
+
+def _on_parts(
+    spec: AnalysisSpec, parts: list[AnalysisContext], coverage: Unmet | None, on_step: Callable[[str], None] | None
+) -> list[DetectorResult] | Later:
+    """`spec` on each stretch the navigation ran on, its results joined, each saying what the navigation
+    covered (`coverage`)."""
+    outs = [_started(spec, part, on_step) for part in parts]
+
+    def finish() -> list[DetectorResult]:
+        done = [out.finish() if isinstance(out, Later) else out for out in outs]
+        spans = [part.span_s or (np.nan, np.nan) for part in parts]
+        return [_covered(r, coverage) for r in joined(list(zip(spans, done, strict=True)))]
+
+    return Later(finish) if any(isinstance(out, Later) for out in outs) else finish()
+
+
+def _covered(result: DetectorResult, coverage: Unmet | None) -> DetectorResult:
+    if coverage is None:
+        return result
+    result = replace(result, reason=f"{result.reason}; LIMITED: {coverage.text}")
+    return replace(result, limitations=[coverage, *result.limitations]) if result.ran else result
 
 
 def _finished(spec: AnalysisSpec, pending: Later, ctx: AnalysisContext, limits: list[Unmet]) -> list[DetectorResult]:

@@ -23,12 +23,21 @@ from spooflens import plausibility
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
+from spooflens.navigation.alignment import Alignment
+from spooflens.navigation.loosely_coupled import FilterInputs
 from spooflens.navigation.noise_learning import LearnedNoise
-from spooflens.navigation.product import NAVIGATION, Navigation, navigation_of, solve_navigation
+from spooflens.navigation.product import NAVIGATION, Navigation, navigations, solve_navigation
+from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.events import classify
 from spooflens.pipeline.evidence import APART
 from spooflens.pipeline.reconstruction import Envelope, clean_envelope, reconstruct
-from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_with_context
+from spooflens.pipeline.registry import (
+    NAVIGATION_PARTS,
+    AnalysisContext,
+    AnalyzeOptions,
+    navigation_parts,
+    run_with_context,
+)
 from spooflens.pipeline.verdict import Verdict, decide
 from spooflens.schema import FRAMES
 
@@ -99,10 +108,12 @@ def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tup
     return tuple(merged)
 
 
-def _within_learning(spans: tuple[tuple[float, float], ...], window_s: tuple[float, float]) -> bool:
+def _within_learning(spans: tuple[tuple[float, float], ...], part: AnalysisContext, nav: Navigation) -> bool:
     """Whether a suspected stretch touches the fixes the noise was learned from (the initial guess
-    reads every fix up to the learning window's end, the likelihood those inside it)."""
-    return any(a <= window_s[1] for a, _ in spans)
+    reads every fix of the part up to the learning window's end, the likelihood those inside it): a part
+    between the IMU's gaps holds no fix before its span."""
+    since = part.span_s[0] if part.span_s is not None else -np.inf
+    return any(a <= nav.learned.window_s[1] and b >= since for a, b in spans)
 
 
 def analyze_table(
@@ -124,37 +135,72 @@ def analyze_table(
     ctx, verdict = _one_pass(table, options, on_step, {})
     kept = ctx if keep_context else None
     spans = suspected_spans(verdict)
-    if not spans or NAVIGATION not in ctx.cache:
-        nav = ctx.cache.get(NAVIGATION)
-        return _done(Analysis(table, options, ctx.results, verdict, context=kept), nav, clean_coasts)
-    first_nav = navigation_of(ctx)
-    if not _within_learning(spans, first_nav.learned.window_s):
-        # the noise was learned before anything suspected began: learning it again without those
+    parts, navigated = navigation_parts(ctx), navigations(ctx)
+    navs = [nav for _, nav in navigated]
+    if not spans or not any(_within_learning(spans, part, nav) for part, nav in navigated):
+        # nothing suspected, or only after the noise was learned: learning it again without those
         # stretches gives the same noise, and the second pass the same results
-        return _done(Analysis(table, options, ctx.results, verdict, context=kept), first_nav, clean_coasts)
+        return _done(Analysis(table, options, ctx.results, verdict, context=kept), navs, clean_coasts)
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
+    again = [_again(part, spans) for part in parts]
+    segmented = parts[0] is not ctx
     first_results = ctx.results
-    aligned = (first_nav.inputs, first_nav.start)  # the IMU integrated and the alignment: reused as they are
-    del ctx, first_nav
+    del ctx, parts, navigated, navs
     if on_step:
         on_step("learning the noise again without the suspected stretches")
     try:
-        nav = solve_navigation(table, options, exclude=spans, aligned=aligned)
+        solved = [
+            None if p.aligned is None else solve_navigation(p.table, options, exclude=spans, aligned=p.aligned)
+            for p in again
+        ]
     except SpooflensError:
         return Analysis(table, options, first_results, verdict, context=kept)
     del first_results, kept
-    ctx, verdict = _one_pass(table, options, on_step, {NAVIGATION: nav})
+    if segmented:
+        seed: dict[str, object] = {
+            NAVIGATION_PARTS: [
+                AnalysisContext(p.table, options, {NAVIGATION: nav} if nav is not None else p.cache, span_s=p.span_s)
+                for p, nav in zip(again, solved, strict=True)
+            ]
+        }
+    else:
+        seed = {NAVIGATION: solved[0]}
+    del again, solved
+    ctx, verdict = _one_pass(table, options, on_step, seed)
     return _done(
-        Analysis(table, options, ctx.results, verdict, 2, spans, ctx if keep_context else None), nav, clean_coasts
+        Analysis(table, options, ctx.results, verdict, 2, spans, ctx if keep_context else None),
+        [nav for _, nav in navigations(ctx)],
+        clean_coasts,
     )
 
 
-def _done(analysis: Analysis, nav: Navigation | None, clean_coasts: bool) -> Analysis:
+@dataclass(frozen=True)
+class _SecondPass:
+    """What the second pass takes of a part of the log the first navigated (`navigation_parts`)."""
+
+    table: EpochTable
+    span_s: tuple[float, float] | None
+    # the IMU integrated and the alignment, when its noise is learned again (neither depends on the noise)
+    aligned: tuple[FilterInputs, tuple[NavState, Alignment | None]] | None
+    # else the part's work as it is: its noise was learned before anything suspected, and stands
+    cache: dict[str, object]
+
+
+def _again(part: AnalysisContext, spans: tuple[tuple[float, float], ...]) -> _SecondPass:
+    nav: Navigation | None = part.cache.get(NAVIGATION)
+    if nav is not None and _within_learning(spans, part, nav):
+        return _SecondPass(part.table, part.span_s, (nav.inputs, nav.start), {})
+    return _SecondPass(part.table, part.span_s, None, dict(part.cache))
+
+
+def _done(analysis: Analysis, navs: list[Navigation], clean_coasts: bool) -> Analysis:
     """The analysis with what it keeps of its navigation: the noise it learned and, when asked, the clean
-    coasts' envelope (the solution itself, a gigabyte per hour of 10 Hz GNSS, is let go)."""
-    if nav is None:
+    coasts' envelope (the solution itself, a gigabyte per hour of 10 Hz GNSS, is let go). Where the IMU
+    stops, the longest stretch's: a baseline keeps one noise per log, and that stretch taught the most."""
+    if not navs:
         return analysis
+    nav = max(navs, key=lambda n: float(n.solution.t[-1] - n.solution.t[0]))
     envelope = None
     if clean_coasts:
         envelope = clean_envelope(nav, [(min(i.onset_s, i.start_s), i.end_s) for i in analysis.verdict.incidents])

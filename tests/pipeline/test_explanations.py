@@ -207,6 +207,15 @@ def test_the_receivers_indicators_are_arrays_of_their_own_epochs() -> None:
 CRASH = "corpus/dronekit-la-testdata/log171.bin"  # ArduCopter 3.3 in ACRO, tumbles at 227.7 s and lands
 
 
+def _unnavigable(table: EpochTable) -> EpochTable:
+    """The log with its IMU stopping for 1 s every 40 s: no stretch between the gaps is long enough to
+    navigate, so the autopilot's filter is the only inertial reference, as in a log whose IMU spooflens
+    cannot mechanise; the tumble (227.7-228.4 s) stays whole. (Navigated, log171 judges its crash by
+    coasting its own INS: tests/navigation/test_imu_gaps.py.)"""
+    t = table.imu["t_s"].to_numpy(dtype=float)
+    return replace(table, imu=table.imu[t % 40.0 < 39.0].reset_index(drop=True))
+
+
 def _ekf_dragged(table: EpochTable, start_s: float, rate_mps: float = 2.0, tau_s: float = 5.0) -> EpochTable:
     """The autopilot's filter as it shows a GNSS drag north from `start_s` it follows with time constant
     `tau_s` (as tests/detectors/test_autopilot_ekf.py models it): modelled, not a recorded attack."""
@@ -222,8 +231,9 @@ def test_a_crash_the_imu_read_explains_the_autopilot_filters_departure() -> None
     # a multirotor in ACRO at 8 m/s tumbles into the ground: all three IMUs at their gyros' full scale
     # (2000 deg/s) and 11-17 g for 0.7 s; the autopilot's filter, integrating through it, loses its attitude
     # and rejects GNSS (velocity test ratio 3.1) for 5 s. Its GNSS stayed where the vehicle was: at rest
-    a = analysed(CRASH)
+    a = analyze_table(_unnavigable(table_of(CRASH)))
     assert not a.verdict.spoofed and "NO SPOOFING DETECTED" in a.verdict.headline
+    assert not next(r for r in a.results if r.name == "navigation").ran
     (inc,) = [i for i in a.verdict.incidents if "autopilot_ekf" in i.detectors]
     assert inc.confidence_of_alarms == "high" and inc.confidence == "low"
     assert Evidence.INERTIAL not in inc.unexplained  # what is left is one GNSS-only anomaly
@@ -237,7 +247,7 @@ def test_an_autopilot_filter_dragged_before_the_crash_is_still_spoofing() -> Non
     # the drag holds to the end of the log, over the tumble at 227.7 s: from 150 s, or from 215 s (12 s
     # before it); either departure began before the IMU read the shock, which does not take it away
     for start_s in (150.0, 215.0):
-        v = analyze_table(_ekf_dragged(table_of(CRASH), start_s)).verdict
+        v = analyze_table(_ekf_dragged(_unnavigable(table_of(CRASH)), start_s)).verdict
         assert v.spoofed
         (inc,) = [i for i in v.incidents if i.is_spoofing]
         assert Evidence.INERTIAL in inc.unexplained and start_s - 0.5 <= inc.onset_s <= start_s + 3.0

@@ -55,12 +55,26 @@ def test_an_imu_decimated_to_telemetry_rate_is_not_mechanised(husky: EpochTable)
     assert unmet.values["rate_hz"] == pytest.approx(30.0 / 43, rel=0.01)
 
 
-def test_a_long_gap_in_the_imu_is_named_with_its_time(husky: EpochTable) -> None:
+def test_a_long_gap_in_the_imu_is_named_with_its_time_and_navigated_around(husky: EpochTable) -> None:
     t = husky.imu["t_s"].to_numpy(float)
     holed = replace(husky, imu=husky.imu[(t < 100.0) | (t > 102.0)].reset_index(drop=True))
     unmet = _check(pc.STRAPDOWN_IMU, holed)
-    assert unmet is not None and unmet.found.startswith("IMU /imu/data stops for 2.0")
-    assert "at 100.0 s" in unmet.found and "no gap over 0.5 s" in unmet.requires
+    assert unmet is not None and not unmet.stops  # limits: the navigation runs on each side of the gap
+    assert unmet.found.startswith("IMU /imu/data stops for 2.0") and "at 100.0 s" in unmet.found
+    assert "no gap over 0.5 s" in unmet.requires
+    assert "navigated anew on each stretch between the gaps, on 0.0-100.0 s, 102.0-" in unmet.requires
+    assert "not navigated on 100.0-102.0 s (the IMU stopped for 2.0" in unmet.requires
+    assert unmet.values["gaps"] == 1
+
+
+def test_an_imu_whose_stretches_between_gaps_are_all_too_short_is_not_mechanised(husky: EpochTable) -> None:
+    # a 1 s gap every 40 s: no stretch holds the 50 fixes over 30 s after the filter's 20 s the noise needs
+    t = husky.imu["t_s"].to_numpy(float)
+    holed = replace(husky, imu=husky.imu[(t - t[0]) % 40.0 < 39.0].reset_index(drop=True))
+    unmet = _check(pc.STRAPDOWN_IMU, holed)
+    assert unmet is not None and unmet.stops
+    assert "no stretch between its gaps is long enough to navigate" in unmet.found
+    assert unmet.values["navigated_s"] == 0.0
 
 
 def test_detectors_on_a_slow_imu_do_not_run_and_say_why_in_the_json(husky: EpochTable) -> None:
