@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, Evidence, label
-from spooflens.pipeline.explanations import Weighed, explain, incident_alarms, scene_of
+from spooflens.pipeline.explanations import ExplanationOptions, Weighed, alarm_began, explain, incident_alarms, scene_of
 from spooflens.pipeline.verdict import Event, Incident, Kind, Verdict
 
 # a takeover within this long of the end of the interference is one attack with it (jam, then spoof):
@@ -149,6 +149,62 @@ def _event(
     )
 
 
+def jamming_span(
+    incident: Incident, results: Sequence[DetectorResult], lead_s: float = ExplanationOptions.interference_lead_s
+) -> tuple[float, float] | None:
+    """Where a jamming incident's interference was: the interference detector's alarms in it and the alarms
+    the jamming explains (with the receiver's recovery), and the incident's alarms that began with them. An
+    incident merged from interference and other alarms (an INS's misfit on a clean stretch) is jamming only
+    there; None: no time the interference shows."""
+    times = [
+        (alarm_began(a), a.end_s)
+        for a in _interference_alarms(results)
+        if alarm_began(a) <= incident.end_s and a.end_s >= incident.start_s
+    ]
+    if incident.explanations and all(e.kind == Kind.JAMMING for e in incident.explanations):
+        times += [(sp[1], sp[2]) for sp in incident.explained_spans]
+        times += [(sp[1], min(sp[2], until)) for sp, until in incident.partly_explained]
+    if not times:
+        return None
+    j0, j1 = min(t for t, _ in times), max(t for _, t in times)
+    with_it = [a.start_s for a, _ in incident_alarms(results, incident) if j0 - lead_s <= a.start_s <= j1]
+    return max(incident.start_s, min([j0, *with_it])), min(incident.end_s, j1)
+
+
+def _outside_jamming(
+    incident: Incident, index: int, span: tuple[float, float], results: Sequence[DetectorResult]
+) -> list[Event]:
+    """The parts of a jamming incident before and after its interference, as anomalies of their own."""
+    parts = []
+    if incident.start_s < span[0]:
+        parts.append((incident.start_s, span[0], False, "before"))
+    if incident.end_s > span[1]:
+        parts.append((span[1], incident.end_s, incident.ongoing_at_end, "after"))
+    alarms = incident_alarms(results, incident)
+    events = []
+    for lo, hi, ongoing, where in parts:
+        names = sorted({r.name for a, r in alarms if a.start_s < hi and a.end_s > lo})
+        end = "the end of the log" if ongoing else f"{hi:.2f} s"
+        text = f"unknown from {lo:.2f} s to {end}, confidence low: alarms {where} the interference, not explained by it"
+        against = ("not spoofing: they belong to an incident that was not spoofing",)
+        events.append(
+            Event(
+                Kind.UNKNOWN,
+                lo,
+                hi,
+                lo,
+                "low",
+                index,
+                text,
+                (f"alarms of {', '.join(names)}",) if names else (),
+                against,
+                ongoing_at_end=ongoing,
+                receivers=incident.receivers,
+            )
+        )
+    return events
+
+
 def first_unexplained_s(incident: Incident) -> float | None:
     """Where the spoofing evidence no natural cause accounts for begins (None: there is none)."""
     counted = [sp[1] for sp in incident.counted_spans if sp[0] not in NOT_SPOOFING]
@@ -195,12 +251,6 @@ def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) 
 
 def _interference_alarms(results: Sequence[DetectorResult]) -> list[Alarm]:
     return [a for r in results if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory for a in r.alarms]
-
-
-def _began(alarm: Alarm) -> float:
-    """The earliest the alarm says its cause began: its onset interval's start, its onset, its first alarm."""
-    lo = alarm.onset_interval_s[0] if alarm.onset_interval_s else alarm.start_s
-    return min(lo, alarm.onset_s if alarm.onset_s is not None else alarm.start_s, alarm.start_s)
 
 
 def _after_lead_in(incident: Incident, results: Sequence[DetectorResult], jam_s: float, takeover: float) -> Incident:
@@ -324,11 +374,27 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
             # an onset estimated back inside interference (a long-window test's estimate reaching into the
             # jamming before a takeover) is the jamming's, not the takeover's
             first = first_unexplained_s(inc)
-            under = [(_began(a), a.end_s) for a in _interference_alarms(results) if first is not None]
+            under = [(alarm_began(a), a.end_s) for a in _interference_alarms(results) if first is not None]
             if first is not None and any(a <= inc.onset_s <= b and a < first for a, b in under):
                 inc = _after_lead_in(inc, results, min(a for a, _ in under if a <= inc.onset_s), first)
-        incidents.append(inc)
-        events.append(_event(inc, k, decided, results))
+        span = jamming_span(inc, results, scene.opts.interference_lead_s) if decided.kind == Kind.JAMMING else None
+        if span is not None and span != (inc.start_s, inc.end_s):
+            # the incident is the jamming where it was; its alarms before and after are anomalies of their own
+            trimmed = replace(
+                inc,
+                start_s=span[0],
+                end_s=span[1],
+                onset_s=max(inc.onset_s, span[0] - scene.opts.interference_lead_s),
+                onset_interval_s=None,
+                end_interval_s=None,
+                ongoing_at_end=inc.ongoing_at_end and span[1] >= inc.end_s,
+            )
+            incidents.append(trimmed)
+            events.append(_event(trimmed, k, decided, results))
+            events += _outside_jamming(inc, k, span, results)
+        else:
+            incidents.append(inc)
+            events.append(_event(inc, k, decided, results))
     # a lead-in the interference detector's own jamming event already covers is that event
     jams = [e for e in events if e.kind == Kind.JAMMING]
     events += [lead for lead in leads if not any(j.start_s <= lead.end_s and lead.start_s <= j.end_s for j in jams)]

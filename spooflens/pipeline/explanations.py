@@ -106,6 +106,9 @@ class ExplanationOptions:
     # a receiver recovers from interference within seconds to a minute (re-acquisition, its filter settling):
     # its alarms are the interference's this long after the interference detector's alarm ends
     interference_recovery_s: float = 60.0
+    # and from this long before the interference detector's first alarm began (its loss must hold 3 s against a
+    # reference window that ends 3 s before it): an alarm that began earlier has another cause
+    interference_lead_s: float = 6.0
     # a jammed receiver's fixes against the INS: each epoch's horizontal INS-minus-GNSS position and velocity
     # within this many sigma of the filter's own innovation sigma and the receiver's jammed error (its error
     # before, the larger of its reported accuracy and the filter's sigma, grown by the thermal noise its C/N0
@@ -499,6 +502,9 @@ def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) 
             return _kept("interference", Kind.JAMMING, "; ".join(marks), rid)
         w = Window.of(w.rx, w.start_s + scene.opts.window_before_s, until, scene.opts.window_before_s)
     stops = ["; ".join(marks)] if until is not None else []
+    began = interference_start_s(scene, rid)
+    if began is not None and alarm.start_s < began - scene.opts.interference_lead_s:
+        return _kept("interference", Kind.JAMMING, f"the alarm began before the interference ({began:.1f} s)", rid)
     # an alarm that outlasts the interference detector's alarms is accounted for while they last and while
     # the receiver recovers (re-acquires, its filter settles), not beyond
     ended = interference_end_s(scene, rid)
@@ -519,17 +525,32 @@ def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) 
     return Reading("interference", Kind.JAMMING, True, text, facts, rid, until)
 
 
-def interference_end_s(scene: _Scene, rid: str) -> float | None:
-    """The end of the interference detector's alarms over the incident for this receiver (None: none)."""
+def _interference_alarms_over(scene: _Scene, rid: str) -> list[Alarm]:
+    """The interference detector's alarms over the incident for this receiver."""
     w = scene.incident_window(rid)
-    ends = [
-        a.end_s
+    return [
+        a
         for r in scene.results
         if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory
         for a in r.alarms
         if a.start_s <= w.end_s and a.end_s >= w.start_s and a.receiver_id in (None, rid)
     ]
-    return max(ends) if ends else None
+
+
+def interference_end_s(scene: _Scene, rid: str) -> float | None:
+    """The end of the interference detector's alarms over the incident for this receiver (None: none)."""
+    return max((a.end_s for a in _interference_alarms_over(scene, rid)), default=None)
+
+
+def interference_start_s(scene: _Scene, rid: str) -> float | None:
+    """The earliest the interference detector's alarms over the incident say it began (None: none)."""
+    return min((alarm_began(a) for a in _interference_alarms_over(scene, rid)), default=None)
+
+
+def alarm_began(alarm: Alarm) -> float:
+    """The earliest the alarm says its cause began: its onset interval's start, its onset, its first alarm."""
+    lo = alarm.onset_interval_s[0] if alarm.onset_interval_s else alarm.start_s
+    return min(lo, alarm.onset_s if alarm.onset_s is not None else alarm.start_s, alarm.start_s)
 
 
 def _interp(t: FloatArray, tx: FloatArray, x: FloatArray) -> FloatArray:

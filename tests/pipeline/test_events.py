@@ -153,3 +153,23 @@ def test_every_kind_has_a_label(kind: Kind) -> None:
     from spooflens.pipeline.verdict import KIND_LABELS
 
     assert KIND_LABELS[kind]
+
+
+def test_an_alarm_that_began_before_the_interference_is_not_the_jammings() -> None:
+    # a receiver's fixes disagreeing with their velocities from 60 s to 200 s, jammed from 100 s to 130 s:
+    # the jammer cannot have caused what began 40 s before it; the alarm stays an anomaly of its own, and
+    # the jamming event is the jammer's 30 s, not "jamming from 60 s to 200 s"
+    noisy = result("gnss_consistency", Evidence.GNSS_ONLY, Alarm(60.0, 200.0, 9.0, 61.0, 60.0, receiver_id="/gps/fix"))
+    verdict = verdict_of(circling(), [jamming(100.0, 130.0), noisy])
+    anomaly, jam = verdict.events
+    assert (anomaly.kind, anomaly.start_s, anomaly.end_s) == (Kind.UNKNOWN, 60.0, 200.0)
+    assert (jam.kind, jam.start_s, jam.end_s) == (Kind.JAMMING, 100.0, 130.0)
+    explanation = next(i for i in verdict.incidents if i.kind == Kind.UNKNOWN)
+    assert not any(e.cause == "interference" for e in explanation.explanations)
+    assert "JAMMING / INTERFERENCE from 100.00 s to 130.00 s" in verdict.headline
+    # an alarm that began with the jamming is still the jamming's
+    with_it = result(
+        "gnss_consistency", Evidence.GNSS_ONLY, Alarm(97.0, 135.0, 9.0, 98.0, 97.0, receiver_id="/gps/fix")
+    )
+    (event,) = verdict_of(circling(), [jamming(100.0, 130.0), with_it]).events
+    assert event.kind == Kind.JAMMING
