@@ -59,3 +59,21 @@ def test_a_gnss_outage_longer_than_a_coast_leaves_nothing_to_compare_and_the_ana
     analysis = analyze_table(table)
     attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
     assert 495.0 <= attack.onset_s <= 501.0 and attack.ongoing_at_end
+
+
+def test_a_clean_coast_cut_short_by_an_incident_still_bounds_the_longer_horizons() -> None:
+    """Each clean coast's curve is a running maximum: one cut at 20 s (it reached a later incident) after
+    departing to 6x the model by 10 s would have been at least that far at 50 s. Two quiet coasts that ran
+    their full length do not make the envelope at 50 s the model's alone (on the husky bag attacked from
+    157 s, that let its own wander of 2x at 50 s confirm a fictitious incident from 52 s)."""
+    from spooflens.pipeline.reconstruction import Placebo
+
+    grid = np.arange(0.0, 61.0)
+    loud = np.minimum(grid * 0.6, 6.0)  # 6x the model by 10 s
+    curves = np.vstack([loud, np.full(len(grid), 0.7), np.full(len(grid), 0.9)])
+    placebo = Placebo(np.array([30.0, 90.0, 240.0]), grid, curves)
+    envelope = placebo.envelope((52.0, 60.0), [], 1.0, trim=0.0, later=[(152.0, 400.0)])
+    # coast 30 s is clean up to the incident (20 s); coast 240 s starts inside the later one and counts nowhere
+    assert envelope.runs == 2
+    assert envelope.at(np.array([5.0]))[0] == 3.0
+    assert envelope.at(np.array([50.0]))[0] == 6.0
