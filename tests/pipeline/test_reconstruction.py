@@ -10,8 +10,17 @@ import numpy as np
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.product import solve_navigation
-from spooflens.pipeline.reconstruction import CoastingOptions, coasting_check, placebo_coasts
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.reconstruction import (
+    CoastingCheck,
+    CoastingOptions,
+    Placebo,
+    _jumps_back,
+    coasting_check,
+    placebo_coasts,
+)
 from spooflens.pipeline.registry import AnalyzeOptions
+from spooflens.pipeline.verdict import Incident
 from spooflens.simulation.simulate import simulate
 
 
@@ -66,8 +75,6 @@ def test_a_clean_coast_cut_short_by_an_incident_still_bounds_the_longer_horizons
     departing to 6x the model by 10 s would have been at least that far at 50 s. Two quiet coasts that ran
     their full length do not make the envelope at 50 s the model's alone (on the husky bag attacked from
     157 s, that let its own wander of 2x at 50 s confirm a fictitious incident from 52 s)."""
-    from spooflens.pipeline.reconstruction import Placebo
-
     grid = np.arange(0.0, 61.0)
     loud = np.minimum(grid * 0.6, 6.0)  # 6x the model by 10 s
     curves = np.vstack([loud, np.full(len(grid), 0.7), np.full(len(grid), 0.9)])
@@ -77,3 +84,22 @@ def test_a_clean_coast_cut_short_by_an_incident_still_bounds_the_longer_horizons
     assert envelope.runs == 2
     assert envelope.at(np.array([5.0]))[0] == 3.0
     assert envelope.at(np.array([50.0]))[0] == 6.0
+
+
+def _coast_offsets(before_en: tuple[float, float], after_en: tuple[float, float], at_s: float) -> CoastingCheck:
+    """A coasting check whose GNSS-minus-reference offset is `before_en` up to `at_s`, `after_en` after."""
+    t = np.arange(100.0, 200.0, 0.4)
+    d = np.where((t < at_s)[:, None], np.array(before_en), np.array(after_en))
+    nothing = np.zeros_like(t)
+    offset = np.hypot(d[:, 0], d[:, 1])
+    return CoastingCheck(100.0, t, nothing, nothing, offset, True, 120.0, None, None, 130.0, d)
+
+
+def test_only_a_jump_back_toward_the_reference_is_the_receivers_return() -> None:
+    """GNSS 20 m east of the coasted reference: a transient across which it comes back to the reference
+    ends the incident; one across which it jumps 50 m further away (a spoofer's step, a new attack) does not,
+    though it is as large."""
+    transient = Incident(157.6, 158.0, 157.2, None, ("gnss_consistency",), "low", (Evidence.GNSS_ONLY,))
+    assert _jumps_back(_coast_offsets((20.0, 0.0), (1.0, 0.5), 157.6), transient, 10.0)
+    assert not _jumps_back(_coast_offsets((20.0, 0.0), (70.0, 0.0), 157.6), transient, 10.0)
+    assert not _jumps_back(_coast_offsets((20.0, 0.0), (20.0, 50.0), 157.6), transient, 10.0)
