@@ -185,6 +185,20 @@ def test_an_injected_ramp_on_the_real_husky_bag_is_an_incident_that_ends_with_th
     assert inc.end_interval_s is not None and inc.end_interval_s[0] - 1.0 <= 300.0 <= inc.end_interval_s[1] + 1.0
 
 
+def test_a_step_on_the_real_husky_bag_opens_its_own_incident_and_leaves_the_clean_start_alone(husky_bag: Path) -> None:
+    """A 50 m step from 157.4 s: the fixes before it are the clean bag's. Its alarms are its incident's
+    start, not the end of one confirmed from the bag's own wander at 102 s (which the coasts cut short by
+    the attack left the clean envelope's long horizons too few to bound)."""
+    table = read_log(husky_bag)
+    spoofed, _ = apply_attack(table, parse_attack("step:offset=50,start=157.4"))
+    verdict = analyze_table(spoofed).verdict
+    spoofing = [i for i in verdict.incidents if i.is_spoofing]
+    assert len(spoofing) == 1, verdict.incidents
+    attack = spoofing[0]
+    assert abs(attack.onset_s - 157.4) <= 3.0 and attack.start_s >= 150.0, attack
+    assert Evidence.INERTIAL in attack.evidence and attack.ongoing_at_end
+
+
 def test_the_clean_real_husky_bag_is_not_called_spoofed(husky_bag: Path) -> None:
     verdict = analyze_table(read_log(husky_bag)).verdict
     assert not verdict.spoofed, verdict.incidents

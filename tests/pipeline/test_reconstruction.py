@@ -10,8 +10,17 @@ import numpy as np
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.product import solve_navigation
-from spooflens.pipeline.reconstruction import CoastingOptions, coasting_check, placebo_coasts
+from spooflens.pipeline.evidence import Evidence
+from spooflens.pipeline.reconstruction import (
+    CoastingCheck,
+    CoastingOptions,
+    Placebo,
+    _jumps_back,
+    coasting_check,
+    placebo_coasts,
+)
 from spooflens.pipeline.registry import AnalyzeOptions
+from spooflens.pipeline.verdict import Incident
 from spooflens.simulation.simulate import simulate
 
 
@@ -59,3 +68,38 @@ def test_a_gnss_outage_longer_than_a_coast_leaves_nothing_to_compare_and_the_ana
     analysis = analyze_table(table)
     attack = next(i for i in analysis.verdict.incidents if i.is_spoofing)
     assert 495.0 <= attack.onset_s <= 501.0 and attack.ongoing_at_end
+
+
+def test_a_clean_coast_cut_short_by_an_incident_still_bounds_the_longer_horizons() -> None:
+    """Each clean coast's curve is a running maximum: one cut at 20 s (it reached a later incident) after
+    departing to 6x the model by 10 s would have been at least that far at 50 s. Two quiet coasts that ran
+    their full length do not make the envelope at 50 s the model's alone (on the husky bag attacked from
+    157 s, that let its own wander of 2x at 50 s confirm a fictitious incident from 52 s)."""
+    grid = np.arange(0.0, 61.0)
+    loud = np.minimum(grid * 0.6, 6.0)  # 6x the model by 10 s
+    curves = np.vstack([loud, np.full(len(grid), 0.7), np.full(len(grid), 0.9)])
+    placebo = Placebo(np.array([30.0, 90.0, 240.0]), grid, curves)
+    envelope = placebo.envelope((52.0, 60.0), [], 1.0, trim=0.0, later=[(152.0, 400.0)])
+    # coast 30 s is clean up to the incident (20 s); coast 240 s starts inside the later one and counts nowhere
+    assert envelope.runs == 2
+    assert envelope.at(np.array([5.0]))[0] == 3.0
+    assert envelope.at(np.array([50.0]))[0] == 6.0
+
+
+def _coast_offsets(before_en: tuple[float, float], after_en: tuple[float, float], at_s: float) -> CoastingCheck:
+    """A coasting check whose GNSS-minus-reference offset is `before_en` up to `at_s`, `after_en` after."""
+    t = np.arange(100.0, 200.0, 0.4)
+    d = np.where((t < at_s)[:, None], np.array(before_en), np.array(after_en))
+    nothing = np.zeros_like(t)
+    offset = np.hypot(d[:, 0], d[:, 1])
+    return CoastingCheck(100.0, t, nothing, nothing, offset, True, 120.0, None, None, 130.0, d)
+
+
+def test_only_a_jump_back_toward_the_reference_is_the_receivers_return() -> None:
+    """GNSS 20 m east of the coasted reference: a transient across which it comes back to the reference
+    ends the incident; one across which it jumps 50 m further away (a spoofer's step, a new attack) does not,
+    though it is as large."""
+    transient = Incident(157.6, 158.0, 157.2, None, ("gnss_consistency",), "low", (Evidence.GNSS_ONLY,))
+    assert _jumps_back(_coast_offsets((20.0, 0.0), (1.0, 0.5), 157.6), transient, 10.0)
+    assert not _jumps_back(_coast_offsets((20.0, 0.0), (70.0, 0.0), 157.6), transient, 10.0)
+    assert not _jumps_back(_coast_offsets((20.0, 0.0), (20.0, 50.0), 157.6), transient, 10.0)
