@@ -7,16 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from baseline_support import measurement, px4_like
+from baseline_support import indicator_levels, px4_like
 
 from spooflens.baseline.format import Baseline, Quantity
 from spooflens.baseline.indicators import INDICATORS
 from spooflens.baseline.learn import aggregate
-from spooflens.baseline.measure import LogMeasurement, level
 from spooflens.baseline.use import level_z
 from spooflens.bench.baseline_sim import LogSpec, simulate_log
 from spooflens.detectors.receiver_evidence import run_receiver_levels
-from spooflens.epoch_table import EpochTable
 from spooflens.schema import make_frame
 
 
@@ -37,20 +35,9 @@ def test_a_clean_logs_level_z_is_a_standard_normal_deviate_whatever_the_number_o
     assert abs(float(np.median(z))) < 0.1
 
 
-def _clean_levels(table: EpochTable, k: int) -> LogMeasurement:
-    """Clean log k of a simulated vehicle as `spooflens baseline` measures its indicators (nothing left out)."""
-    fx = table.fixes
-    levels = {}
-    for c in INDICATORS:
-        lv = level(fx[c].to_numpy(dtype=float))
-        if lv is not None:
-            levels[c] = (lv.median, lv.scale)
-    return measurement(k, levels, model=None, rid=str(fx["receiver_id"].iloc[0]))
-
-
 def _vehicle(vehicle: str, seed: int) -> Baseline:
     """The bench's baseline of a simulated vehicle from its eight clean logs (their indicator levels)."""
-    return aggregate([_clean_levels(simulate_log(LogSpec(vehicle, seed, 1000 * seed + k))[0], k) for k in range(8)])
+    return aggregate([indicator_levels(simulate_log(LogSpec(vehicle, seed, 1000 * seed + k))[0], k) for k in range(8)])
 
 
 @pytest.mark.parametrize(("vehicle", "seed", "log"), [("car", 1, 1600), ("aircraft", 1, 1601)])
