@@ -162,6 +162,11 @@ class Incident:
     def is_spoofing(self) -> bool:
         return self.confidence != "low"
 
+    @property
+    def kept_apart(self) -> bool:
+        """Only a class kept apart alarmed in it (`APART`: levels off the vehicle's baseline)."""
+        return bool(self.evidence) and set(self.evidence) <= APART
+
 
 @dataclass(frozen=True)
 class Event:
