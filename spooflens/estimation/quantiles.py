@@ -53,7 +53,7 @@ def two_sided_as_one_sided(z: ArrayLike) -> NDArray[np.float64]:
 
 def largest_of_k_as_normal(z: ArrayLike, k: int) -> NDArray[np.float64]:
     """The normal deviate of the p-value of the largest of k standard normal deviates (Sidak): the largest
-    of six is beyond 1.7 as often as one alone is beyond 1, so it weighs as 1. Exact for independent ones,
+    of six is beyond 1.9 as often as one alone is beyond 1, so it weighs as 1. Exact for independent ones,
     conservative for correlated ones."""
     tail = special.ndtr(-np.asarray(z, dtype=np.float64))
     with np.errstate(divide="ignore"):  # a deviate of -inf: every one of the k below anything, tail 1
