@@ -10,7 +10,8 @@ one drone's jamming indicator reads 40, another's 250) are compared as logarithm
 relative; satellites used and C/N0 (already decibels) as they are. Families group indicators one natural
 cause moves together: an obstructed sky moves the whole geometry family (satellites, DOP, accuracies),
 more power in the band the RF-power family (noise level, AGC); the jamming indicator and C/N0 are
-families of their own. A level alarm needs two families.
+families of their own. A level alarm needs two families beyond three spreads, or three or more a little
+off together the way an attack moves them (`receiver_evidence.joint_level`).
 """
 
 from __future__ import annotations

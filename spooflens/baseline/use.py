@@ -29,14 +29,14 @@ from spooflens.baseline.indicators import TWO_LOG_RANGE, IndicatorSpread
 from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
-from spooflens.estimation.quantiles import chi2_isf
+from spooflens.estimation.quantiles import t_as_normal
 
 if TYPE_CHECKING:
     from spooflens.navigation.noise_learning import NoisePrior
 
 FloatArray = NDArray[np.float64]
 ALLOWANCE = 2.0  # a log's learned noise scale may be this many times the noisiest clean log's
-UPPER_CONFIDENCE = 0.95  # the between-log spread of three logs or more: its upper confidence bound
+MIN_LOGS_FOR_SPREAD = 3  # an indicator's between-log spread measured on fewer logs is the prior's
 
 
 def note(result: DetectorResult, text: str) -> None:
@@ -76,26 +76,34 @@ def rate_cap(sigma: Quantity | None, tau: Quantity | None) -> float:
 def level_scale(q: Quantity, spec: IndicatorSpread) -> float:
     """How far a clean log's level of an indicator may naturally lie from the baseline's centre (one
     sigma, on the indicator's comparison scale: `IndicatorSpread.scale`): with three logs or more, the
-    upper 95% confidence bound of their standard deviation, times sqrt(1 + 1/n) for a new log; with fewer,
-    the indicator's prior spread (`indicators.INDICATORS`); never below its resolution."""
+    standard deviation of their levels times sqrt(1 + 1/n), a new log's prediction error (`level_z` reads
+    it with the n - 1 degrees of freedom it was estimated with); with fewer, the indicator's prior spread
+    (`indicators.INDICATORS`); never below its resolution."""
     v = spec.scale(np.asarray(q.values, dtype=float))
     n = len(v)
     floor = spec.resolution_on_scale(q.centre)
-    if n >= 3:
-        sd = float(np.std(v, ddof=1)) * np.sqrt((n - 1) / float(chi2_isf(UPPER_CONFIDENCE, n - 1)))
-        return float(max(sd * np.sqrt(1.0 + 1.0 / n), floor))
+    if n >= MIN_LOGS_FOR_SPREAD:
+        return float(max(float(np.std(v, ddof=1)) * np.sqrt(1.0 + 1.0 / n), floor))
     spread = float(abs(v[1] - v[0]) / TWO_LOG_RANGE * np.sqrt(1.5)) if n == 2 else 0.0
     return float(max(spread, spec.prior_on_scale(q.centre), floor))
 
 
 def level_z(q: Quantity, spec: IndicatorSpread, level: FloatArray, count: FloatArray) -> FloatArray:
-    """An indicator's level (median over `count` values) against the baseline: (level - centre) over
-    `level_scale` and the level's own sampling error, in the direction an attack moves it (either way
-    for direction 0)."""
-    centre = float(np.median(spec.scale(np.asarray(q.values, dtype=float))))
+    """An indicator's level (median over `count` values) against the baseline, in the direction an attack
+    moves it (either way for direction 0: then |z|): (level - centre) over `level_scale` and the level's
+    own sampling error. With a spread measured on n logs this is a t of n - 1 degrees of freedom, given as
+    the normal deviate of the same tail probability: a standard normal deviate for a clean log, whatever
+    n, so levels judged on 3 logs and on 8 read on one scale (and can be added across indicators:
+    `receiver_evidence`'s joint test). An upper confidence bound of the spread in its place shrinks every
+    deviation by one factor (2.9 with four logs, at 95%): a level five prediction errors off, which a
+    clean log shows less than once in a hundred, would read as 1.7."""
+    values = spec.scale(np.asarray(q.values, dtype=float))
+    centre = float(np.median(values))
     within = (q.within or 0.0) / (abs(q.centre) + spec.resolution_abs) if spec.log else (q.within or 0.0)
     scale = np.sqrt(level_scale(q, spec) ** 2 + (1.2533 * within) ** 2 / np.maximum(count, 1.0))
     z = (spec.scale(level) - centre) / scale
+    if len(values) >= MIN_LOGS_FOR_SPREAD:
+        z = t_as_normal(z, len(values) - 1)
     return np.asarray(np.abs(z) if spec.direction == 0 else spec.direction * z, dtype=float)
 
 

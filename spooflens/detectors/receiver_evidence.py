@@ -25,6 +25,7 @@ from spooflens.detectors.base import (
     robust_z,
     trailing_max,
 )
+from spooflens.estimation.quantiles import largest_of_k_as_normal, two_sided_as_one_sided
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo
 from spooflens.schema import SpoofingFlag
@@ -79,6 +80,10 @@ class ReceiverEvidenceOptions:
     z_level: float = 3.0
     min_families: int = 2
     min_level_s: float = 30.0
+    # ... or families together: this many or more, each at least `joint_each` the attack's way, their
+    # deviates (each at most `z_level` either way) summed over sqrt(families logged) beyond `z_level`
+    joint_min_families: int = 3
+    joint_each: float = 1.0
 
 
 def reference_epochs(t: FloatArray, fx: pd.DataFrame, opts: ReceiverEvidenceOptions) -> tuple[NDArray[np.bool_], float]:
@@ -199,12 +204,14 @@ def level_test(
         axis=1,
     )
     beyond = by_family > opts.z_level
-    raised = beyond.sum(axis=1) >= opts.min_families
-    score = (
+    joint = joint_level(zs, opts)
+    raised = (beyond.sum(axis=1) >= opts.min_families) | (joint > opts.z_level)
+    two = (
         np.sort(np.where(np.isfinite(by_family), by_family, 0.0), axis=1)[:, -opts.min_families]
         if len(families) >= opts.min_families
         else np.zeros(len(t))
     )
+    score = np.fmax(two, joint)
     alarms = [
         Alarm(
             a.start_s,
@@ -222,15 +229,23 @@ def level_test(
     for a in alarms:
         inside = (t >= a.start_s) & (t <= a.end_s)
         moved = []
-        for c, z in zs.items():
-            if np.nan_to_num(z[inside], nan=-np.inf).max() > opts.z_level:
+        # over a whole log the typical level says more than the peak (the takeover's transient)
+        typical = {c: _median(z[inside]) for c, z in zs.items()}
+        for c in sorted(typical, key=lambda c: -typical[c]):
+            if typical[c] > opts.joint_each:
                 q = baseline.indicator(rid, c)
                 assert q is not None
-                level = float(np.nanmedian(fx[c].to_numpy(dtype=float)[inside]))
-                moved.append(f"{LABELS[c]} {level:.4g} (baseline {q.centre:.4g})")
+                level = _median(fx[c].to_numpy(dtype=float)[inside])
+                moved.append(f"{LABELS[c]} {level:.4g} (baseline {q.centre:.4g}, z {typical[c]:.1f})")
+        together = np.nan_to_num(joint[inside], nan=-np.inf).max()
+        how = (
+            f"; {opts.joint_min_families} or more families together, joint z up to {together:.1f}"
+            if together > opts.z_level
+            else ""
+        )
         findings.append(
             Finding(
-                f"{rid}: indicator levels off the vehicle's baseline: {', '.join(moved)} "
+                f"{rid}: indicator levels off the vehicle's baseline: {', '.join(moved)}{how} "
                 f"({a.start_s:.1f}-{a.end_s:.1f} s)",
                 a.start_s,
                 a.end_s,
@@ -240,11 +255,52 @@ def level_test(
     reason = f"levels against the baseline ({', '.join(used)})"
     if left:
         reason += f"; not against it where its logs disagree ({', '.join(left)})"
-    series = [Series(f"{rid}/level_score", t, score, "level z", opts.z_level)]
+    series = [
+        Series(f"{rid}/level_score", t, score, "level z", opts.z_level),
+        Series(f"{rid}/level_joint", t, joint, "level z", opts.z_level),
+    ]
     series.append(
         Series(f"{rid}/level_z", t, np.stack(list(zs.values()), axis=1), "level z", None, tuple(LABELS[c] for c in zs))
     )
     return LevelTest(alarms, series, findings, reason)
+
+
+def _median(x: FloatArray) -> float:
+    """The median of the values that are there (-inf when none is)."""
+    x = x[~np.isnan(x)]
+    return float(np.median(x)) if len(x) else float("-inf")
+
+
+def family_deviates(zs: dict[str, FloatArray]) -> dict[str, FloatArray]:
+    """Each family's level z as one standard normal deviate for a clean log: an indicator that may move
+    either way as the one-sided deviate of its two-sided p-value, and a family's largest as the deviate of
+    its p-value among the family's k (NaN where none of its indicators has a level yet). Summed, the
+    largest of several and a |z| would each add more than a clean log's share."""
+    members: dict[str, list[FloatArray]] = {}
+    for c, z in zs.items():
+        spec = SPREADS[c]
+        members.setdefault(spec.family, []).append(two_sided_as_one_sided(z) if spec.direction == 0 else z)
+    return {
+        f: largest_of_k_as_normal(np.fmax.reduce(np.stack(zz), axis=0), len(zz)) for f, zz in sorted(members.items())
+    }
+
+
+def joint_level(zs: dict[str, FloatArray], opts: ReceiverEvidenceOptions) -> FloatArray:
+    """The families' level deviates together (Stouffer: their sum over the square root of how many are
+    logged, a standard normal deviate for a clean log whose families vary independently), where at least
+    `joint_min_families` of them lie `joint_each` or more the attack's way; NaN elsewhere. A takeover moves
+    every family a little (a capture's noise x1.15, AGC x0.9, C/N0 +4 dB, each two or three spreads of the
+    vehicle's clean days), none far enough alone. Each family counts at most `z_level` either way, so one
+    family far off (more noise from the vehicle's own electronics) is still one family, and one that moved
+    the other way (C/N0 down, as a jammer or an obstructed sky moves it) counts against."""
+    deviates = family_deviates(zs)
+    d = np.clip(np.stack(list(deviates.values()), axis=1), -opts.z_level, opts.z_level)
+    logged = (~np.isnan(d)).sum(axis=1)
+    if d.shape[1] < opts.joint_min_families:
+        return np.full(len(d), np.nan)
+    agreeing = np.sort(np.nan_to_num(d, nan=-np.inf), axis=1)[:, -opts.joint_min_families]
+    together = np.nansum(d, axis=1) / np.sqrt(np.maximum(logged, 1))
+    return np.where((logged >= opts.joint_min_families) & (agreeing >= opts.joint_each), together, np.nan)
 
 
 def check_receiver(

@@ -36,6 +36,30 @@ def norm_isf(p: float) -> float:
     return float(-special.ndtri(p))
 
 
+def t_as_normal(t: ArrayLike, dof: float) -> NDArray[np.float64]:
+    """The normal deviate with the same one-sided tail probability as t(dof) has beyond t (signed: -t gives
+    its negative), so tests of different degrees of freedom read on one scale."""
+    x = np.asarray(t, dtype=np.float64)
+    tail = special.stdtr(dof, -np.abs(x))
+    return np.asarray(np.sign(x) * -special.ndtri(tail), dtype=np.float64)
+
+
+def two_sided_as_one_sided(z: ArrayLike) -> NDArray[np.float64]:
+    """The one-sided normal deviate of the same p-value as a two-sided |z|: standard normal when z is, so a
+    change either way adds as much evidence as a change one way does (0 for |z| = 0.674, the median)."""
+    p = np.minimum(2.0 * special.ndtr(-np.abs(np.asarray(z, dtype=np.float64))), 1.0)
+    return np.asarray(-special.ndtri(p), dtype=np.float64)
+
+
+def largest_of_k_as_normal(z: ArrayLike, k: int) -> NDArray[np.float64]:
+    """The normal deviate of the p-value of the largest of k standard normal deviates (Sidak): the largest
+    of six is beyond 1.9 as often as one alone is beyond 1, so it weighs as 1. Exact for independent ones,
+    conservative for correlated ones."""
+    tail = special.ndtr(-np.asarray(z, dtype=np.float64))
+    with np.errstate(divide="ignore"):  # a deviate of -inf: every one of the k below anything, tail 1
+        return np.asarray(-special.ndtri(-np.expm1(k * np.log1p(-tail))), dtype=np.float64)
+
+
 def norm_cdf(x: float) -> float:
     return float(special.ndtr(x))
 

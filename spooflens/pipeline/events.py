@@ -82,6 +82,8 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
     detector = Evidence.INTERFERENCE in incident.evidence
     ruled_out = tuple(f"ruled out {r}" for r in weighed.ruled_out)
     marks = tuple(f"also a spoofer's mark: {m}" for m in weighed.spoofer_marks)
+    if incident.kept_apart:
+        return _off_baseline(incident, results, ruled_out)
     if jamming or detector or weighed.interference:
         # the receiver's own signs count for the kind even where a spoofer's mark keeps them from explaining
         # any alarm away: a receiver jammed and flagging spoofing is jammed, and its flag is listed
@@ -108,6 +110,30 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
     detectors = sorted({n for c in classes for n in _detectors_of(incident, results, c)})
     alone = f"{_classes_text(classes)} ({', '.join(detectors)})"
     return _Decided(Kind.UNKNOWN, "low", (alone, *support), (_not_spoofing(incident), *ruled_out))
+
+
+def _off_baseline(incident: Incident, results: Sequence[DetectorResult], ruled_out: tuple[str, ...]) -> _Decided:
+    """A log off its vehicle's baseline: an anomaly, said with what is off. The receiver's own signs of
+    interference over the incident are no reading of it: they compare the log with itself, and this
+    incident spans the log (a takeover's transient at its start would name it all jamming); which way the
+    levels moved against the clean logs is in the level test's finding."""
+    classes = incident.evidence
+    found = [
+        f.text
+        for a, r in incident_alarms(results, incident)
+        for f in r.findings
+        if f.start_s == a.start_s and f.end_s == a.end_s and f.receiver_id == a.receiver_id
+    ]
+    detectors = sorted({n for c in classes for n in _detectors_of(incident, results, c)})
+    support = (f"{_classes_text(classes)} ({', '.join(detectors)})" + "".join(f": {x}" for x in found[:1]), *found[1:])
+    against = (
+        _not_spoofing(incident),
+        "another antenna installation, receiver configuration or place also moves a receiver's levels; a "
+        "takeover from before the first fix may show nothing else (its drag, the velocity consistent from the "
+        "start, moves no inertial reference)",
+        *ruled_out,
+    )
+    return _Decided(Kind.UNKNOWN, "low", support, against)
 
 
 def _alarm_names(incident: Incident, results: Sequence[DetectorResult], attribute: str) -> tuple[str, ...]:

@@ -520,7 +520,9 @@ def _on_navigation(
     for n, inc in enumerate(ordered):
         current = incidents[-1] if incidents and incidents[-1].is_spoofing else None
         interference_only = bool(inc.evidence) and all(e in NOT_SPOOFING for e in inc.evidence)
-        if current is not None and inc.start_s <= current.end_s and not interference_only:
+        # a log off its vehicle's baseline stays an incident apart (`APART`): absorbed into an earlier
+        # incident it begins inside, it would end where that one ends, not with the log
+        if current is not None and inc.start_s <= current.end_s and not (interference_only or inc.kept_apart):
             # inside a confirmed incident the filter state has followed the spoofed fixes, so no coast can
             # start there; its alarms belong to the incident, and inside the stretch where the reference
             # could no longer tell, they are how the receiver's return to the real sky shows

@@ -162,6 +162,11 @@ class Incident:
     def is_spoofing(self) -> bool:
         return self.confidence != "low"
 
+    @property
+    def kept_apart(self) -> bool:
+        """Only a class kept apart alarmed in it (`APART`: levels off the vehicle's baseline)."""
+        return bool(self.evidence) and set(self.evidence) <= APART
+
 
 @dataclass(frozen=True)
 class Event:
@@ -261,9 +266,18 @@ class Verdict:
                 parts.append(
                     f"{words} {_interval_text(events[0].start_s, events[0].end_s, events[0].ongoing_at_end)}{more}"
                 )
-        unknown = len(self.events_of(Kind.UNKNOWN))
-        if unknown:
-            parts.append(f"{unknown} anomaly(ies) of one evidence class noted, not confirmed")
+        # a log off its vehicle's baseline is named: it may last the whole log, which no other anomaly does
+        unknown = self.events_of(Kind.UNKNOWN)
+        apart = [e for e in unknown if self.incidents[e.incident].kept_apart]
+        if apart:
+            more = f" (and {len(apart) - 1} more)" if len(apart) > 1 else ""
+            parts.append(
+                f"receiver indicators off the vehicle's baseline "
+                f"{_interval_text(apart[0].start_s, apart[0].end_s, apart[0].ongoing_at_end)}{more} "
+                "(one evidence class, not confirmed)"
+            )
+        if len(unknown) > len(apart):
+            parts.append(f"{len(unknown) - len(apart)} anomaly(ies) of one evidence class noted, not confirmed")
         return "".join(f"; {p}" for p in parts)
 
 

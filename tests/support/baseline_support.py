@@ -8,9 +8,11 @@ import numpy as np
 
 from spooflens.baseline.format import Baseline, Quantity
 from spooflens.baseline.identity import Identity
+from spooflens.baseline.indicators import INDICATORS
 from spooflens.baseline.learn import aggregate
 from spooflens.baseline.loaded import LoadedBaseline
-from spooflens.baseline.measure import ClockLevel, Level, LogMeasurement
+from spooflens.baseline.measure import ClockLevel, Level, LogMeasurement, level
+from spooflens.epoch_table import EpochTable
 
 RID = "gps"
 
@@ -32,6 +34,18 @@ def measurement(
     if noise is not None:
         m.noise = dict(noise)
         m.navigated = (rid, "imu", "consumer_mems")
+    return m
+
+
+def indicator_levels(table: EpochTable, k: int) -> LogMeasurement:
+    """Clean log k's receiver indicators as `spooflens baseline` measures them (nothing left out), and
+    nothing else: a baseline of these caps no noise and supplies no other level."""
+    ident = Identity({rid: None for rid in table.receivers()}, (), (), ())
+    m = LogMeasurement(f"clean{k}", f"{k:064x}", float(table.duration_s), ident)
+    for rid in table.receivers():
+        fx = table.fixes_of(rid)
+        levels = {c: lv for c in INDICATORS if c in fx and (lv := level(fx[c].to_numpy(dtype=float)))}
+        m.indicators[rid] = levels
     return m
 
 
