@@ -67,6 +67,8 @@ def _spoofing(incident: Incident, weighed: Weighed, results: Sequence[DetectorRe
 
 def _not_spoofing(incident: Incident) -> str:
     if incident.confidence_of_alarms == "low":
+        if not incident.corroborating:
+            return "not spoofing: no evidence class confirmed"
         return f"not spoofing: one evidence class only ({_classes_text(incident.corroborating)})"
     explained = [c for c in incident.corroborating if c not in incident.unexplained]
     return (
@@ -108,7 +110,12 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
     support = tuple(e.text for e in weighed.explanations)
     classes = incident.unexplained or incident.evidence
     detectors = sorted({n for c in classes for n in _detectors_of(incident, results, c)})
-    alone = f"{_classes_text(classes)} ({', '.join(detectors)})"
+    # alarms with no evidence class left: inertial ones the coasting check did not confirm
+    alone = (
+        f"{_classes_text(classes)} ({', '.join(detectors)})"
+        if classes
+        else f"alarms no check confirmed ({', '.join(incident.detectors)})"
+    )
     return _Decided(Kind.UNKNOWN, "low", (alone, *support), (_not_spoofing(incident), *ruled_out))
 
 
