@@ -5,9 +5,8 @@ day of the vehicle, or the same shifts with the C/N0 fallen as a jammer's or an 
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
-from baseline_support import indicator_levels, px4_like
+from baseline_support import indicator_levels, px4_like, receiver_fixes
 
 from spooflens.baseline.format import Baseline, Quantity
 from spooflens.baseline.indicators import INDICATORS
@@ -15,7 +14,6 @@ from spooflens.baseline.learn import aggregate
 from spooflens.baseline.use import level_z
 from spooflens.bench.baseline_sim import LogSpec, simulate_log
 from spooflens.detectors.receiver_evidence import run_receiver_levels
-from spooflens.schema import make_frame
 
 
 @pytest.mark.parametrize("n", [3, 4, 8])
@@ -59,36 +57,14 @@ def test_a_capture_from_the_first_fix_is_off_its_vehicles_levels_all_log_long(
         assert not run_receiver_levels(simulate_log(LogSpec(vehicle, seed, clean))[0].fixes, baseline).alarms
 
 
-def _fixes(noise: float, jamming: float, cn0: float, hdop: float, seconds: float = 600.0) -> pd.DataFrame:
-    rng = np.random.default_rng(1)
-    t = np.arange(0.0, seconds, 0.2)
-    n = len(t)
-    return make_frame(
-        "fixes",
-        {
-            "t_s": t,
-            "receiver_id": np.full(n, "gps"),
-            "lat_deg": np.full(n, 47.0),
-            "lon_deg": np.full(n, 8.0),
-            "height_m": np.full(n, 500.0),
-            "fix_type": np.full(n, 2),
-            "noise_per_ms": np.round(noise + rng.normal(0, 3.0, n)),
-            "jamming_indicator": np.clip(np.round(jamming + rng.normal(0, 4.0, n)), 0, 255),
-            "cn0_mean_dbhz": cn0 + rng.normal(0, 0.6, n),
-            "sats_used": np.full(n, 14.0),
-            "hdop": hdop + rng.normal(0, 0.03, n),
-        },
-    )
-
-
 def test_families_a_little_off_together_are_flagged_the_attacks_way_only() -> None:
     baseline = px4_like()
     # each family two or three of the clean flights' spreads off: noise, jamming indicator, HDOP up and the
     # C/N0 up (a signal louder than the sky), none far enough alone
-    louder = run_receiver_levels(_fixes(noise=104.0, jamming=50.0, cn0=44.0, hdop=0.86), baseline)
+    louder = run_receiver_levels(receiver_fixes(noise=104.0, jamming=50.0, cn0=44.0, hdop=0.86), baseline)
     (alarm,) = louder.alarms
     assert alarm.start_s < 70.0 and alarm.end_s > 590.0
     # the same with the C/N0 fallen as much: what a jammer or an obstructed sky does, not a takeover
-    assert not run_receiver_levels(_fixes(noise=104.0, jamming=50.0, cn0=40.0, hdop=0.86), baseline).alarms
+    assert not run_receiver_levels(receiver_fixes(noise=104.0, jamming=50.0, cn0=40.0, hdop=0.86), baseline).alarms
     # two families alone are the two-family test's to judge: not beyond three each, no alarm
-    assert not run_receiver_levels(_fixes(noise=104.0, jamming=50.0, cn0=42.0, hdop=0.79), baseline).alarms
+    assert not run_receiver_levels(receiver_fixes(noise=104.0, jamming=50.0, cn0=42.0, hdop=0.79), baseline).alarms

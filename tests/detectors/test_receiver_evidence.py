@@ -3,41 +3,16 @@ levels from its first fix to its last shows there, where against its own median 
 
 from __future__ import annotations
 
-import numpy as np
-import pandas as pd
-from baseline_support import px4_like
+from baseline_support import px4_like, receiver_fixes
 
 from spooflens.detectors.receiver_evidence import run_receiver_evidence, run_receiver_levels
 from spooflens.pipeline.evidence import Evidence, confidence
-from spooflens.schema import make_frame
-
-
-def _fixes(noise: float, jamming: float, cn0: float = 42.0, seconds: float = 600.0, seed: int = 1) -> pd.DataFrame:
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, seconds, 0.2)
-    n = len(t)
-    return make_frame(
-        "fixes",
-        {
-            "t_s": t,
-            "receiver_id": np.full(n, "gps"),
-            "lat_deg": np.full(n, 47.0),
-            "lon_deg": np.full(n, 8.0),
-            "height_m": np.full(n, 500.0),
-            "fix_type": np.full(n, 2),
-            "noise_per_ms": np.round(noise + rng.normal(0, 3.0, n)),
-            "jamming_indicator": np.clip(np.round(jamming + rng.normal(0, 4.0, n)), 0, 255),
-            "cn0_mean_dbhz": cn0 + rng.normal(0, 0.6, n),
-            "sats_used": np.full(n, 14.0),
-            "hdop": 0.8 + rng.normal(0, 0.03, n),
-        },
-    )
 
 
 def test_a_log_attacked_throughout_is_flagged_only_against_the_baseline() -> None:
     """Issue 42: real PX4 logs recorded whole under attack read twice their clean noise level and a tenth
     of their jamming indicator."""
-    attacked = _fixes(noise=190.0, jamming=4.0)
+    attacked = receiver_fixes(noise=190.0, jamming=4.0)
     assert not run_receiver_evidence(attacked).alarms
     assert not run_receiver_evidence(attacked, baseline=px4_like()).alarms  # against itself: nothing changed
     with_baseline = run_receiver_levels(attacked, px4_like())
@@ -50,7 +25,7 @@ def test_a_log_attacked_throughout_is_flagged_only_against_the_baseline() -> Non
 
 def test_a_clean_log_of_the_vehicle_stays_clean_against_its_baseline() -> None:
     for seed in range(3):
-        clean = _fixes(noise=96.0, jamming=38.0, cn0=42.4, seed=seed)
+        clean = receiver_fixes(noise=96.0, jamming=38.0, cn0=42.4, seed=seed)
         assert not run_receiver_evidence(clean, baseline=px4_like()).alarms
         result = run_receiver_levels(clean, px4_like())
         assert not result.alarms, result.findings
@@ -59,7 +34,7 @@ def test_a_clean_log_of_the_vehicle_stays_clean_against_its_baseline() -> None:
 
 def test_one_family_off_is_no_alarm() -> None:
     """More noise alone (the vehicle's own electronics, a jammer's power) is one family: no level alarm."""
-    assert not run_receiver_levels(_fixes(noise=190.0, jamming=40.0), px4_like()).alarms
+    assert not run_receiver_levels(receiver_fixes(noise=190.0, jamming=40.0), px4_like()).alarms
 
 
 def test_levels_its_logs_disagree_on_are_not_yardsticks() -> None:
@@ -73,7 +48,7 @@ def test_levels_its_logs_disagree_on_are_not_yardsticks() -> None:
             measurement(1, {"noise_per_ms": (96.0, 3.0), "jamming_indicator": (250.0, 8.0)}),
         ]
     )
-    result = run_receiver_levels(_fixes(noise=190.0, jamming=4.0), split)
+    result = run_receiver_levels(receiver_fixes(noise=190.0, jamming=4.0), split)
     assert not result.alarms
     assert "not against it where its logs disagree (jamming indicator)" in result.reason
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import pandas as pd
 
 from spooflens.baseline.format import Baseline, Quantity
 from spooflens.baseline.identity import Identity
@@ -13,6 +14,7 @@ from spooflens.baseline.learn import aggregate
 from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.baseline.measure import ClockLevel, Level, LogMeasurement, level
 from spooflens.epoch_table import EpochTable
+from spooflens.schema import make_frame
 
 RID = "gps"
 
@@ -78,3 +80,29 @@ def quantity(values: list[float], unit: str = "m") -> Quantity:
     from spooflens.baseline.learn import between_spread
 
     return Quantity(float(np.median(values)), unit, tuple(values), None, between_spread(values), True)
+
+
+def receiver_fixes(
+    noise: float, jamming: float, cn0: float = 42.0, hdop: float = 0.8, seconds: float = 600.0, seed: int = 1
+) -> pd.DataFrame:
+    """A still u-blox receiver's 5 Hz fixes with its indicators at these levels and their usual scatter
+    (noise level +-3, jamming indicator +-4, mean C/N0 +-0.6 dB, HDOP +-0.03): the levels tests' log."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 0.2)
+    n = len(t)
+    return make_frame(
+        "fixes",
+        {
+            "t_s": t,
+            "receiver_id": np.full(n, "gps"),
+            "lat_deg": np.full(n, 47.0),
+            "lon_deg": np.full(n, 8.0),
+            "height_m": np.full(n, 500.0),
+            "fix_type": np.full(n, 2),
+            "noise_per_ms": np.round(noise + rng.normal(0, 3.0, n)),
+            "jamming_indicator": np.clip(np.round(jamming + rng.normal(0, 4.0, n)), 0, 255),
+            "cn0_mean_dbhz": cn0 + rng.normal(0, 0.6, n),
+            "sats_used": np.full(n, 14.0),
+            "hdop": hdop + rng.normal(0, 0.03, n),
+        },
+    )
