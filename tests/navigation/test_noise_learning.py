@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
+from functools import cache
+
+from spooflens.navigation.imu_models import ImuGrade
 from spooflens.navigation.noise_learning import NoisePrior, learn_noise
-from spooflens.navigation.product import imu_preset, solve_navigation
+from spooflens.navigation.product import Navigation, imu_preset, solve_navigation
 from spooflens.pipeline.registry import AnalyzeOptions
 from spooflens.simulation.simulate import simulate
 
 
-def test_a_prior_caps_what_the_log_may_learn() -> None:
-    table = simulate("ground", seed=7, duration_s=120.0).table
+@cache
+def car() -> tuple[Navigation, ImuGrade]:
+    """A simulated car's 120 s navigated without a prior, and the IMU preset its noise search starts from."""
     options = AnalyzeOptions()
-    nav = solve_navigation(table, options)
+    return solve_navigation(simulate("ground", seed=7, duration_s=120.0).table, options), imu_preset(options)
+
+
+def test_a_prior_caps_what_the_log_may_learn() -> None:
+    nav, preset = car()
     free = nav.learned
-    preset = imu_preset(options)
     low = 0.5 * free.noise.white_pos_m[0]  # the simulated car's receiver: white errors of 1.5 m
     prior = NoisePrior({"w_h": low}, {"w_h": low}, "baseline test (2 logs)")
     held = learn_noise(nav.inputs, preset, nav.start, None, (), prior=prior)
@@ -30,11 +37,8 @@ def test_a_wander_held_at_its_size_is_not_made_faster_instead() -> None:
     # a cap on a Gauss-Markov error's size alone lets the search shorten its time constant: the same size
     # moving faster is more noise. With the rate its driving noise feeds it capped (sigma^2 / tau), the
     # time constant goes no lower than the size asks
-    table = simulate("ground", seed=7, duration_s=120.0).table
-    options = AnalyzeOptions()
-    nav = solve_navigation(table, options)
+    nav, preset = car()
     free = nav.learned
-    preset = imu_preset(options)
     b, tau = free.noise.gm_pos_m[0], free.noise.tau_pos_s
     rate = 0.25 * b * b / tau  # the log's own wander fed four times too fast
     prior = NoisePrior({}, {}, "baseline test (2 logs)", {"b_h": ("tau_p", rate)})
@@ -45,11 +49,9 @@ def test_a_wander_held_at_its_size_is_not_made_faster_instead() -> None:
 
 
 def test_a_prior_that_stands_says_it_came_from_the_baseline() -> None:
-    table = simulate("ground", seed=7, duration_s=120.0).table
-    options = AnalyzeOptions()
-    nav = solve_navigation(table, options)
+    nav, preset = car()
     prior = NoisePrior({"wv_h": 0.2, "bv_h": 0.05, "tau_v": 20.0, "imu": 2.0}, {}, "baseline test (2 logs)")
-    stood = learn_noise(nav.inputs, imu_preset(options), nav.start, None, ((-10.0, 1e9),), prior=prior)
+    stood = learn_noise(nav.inputs, preset, nav.start, None, ((-10.0, 1e9),), prior=prior)
     assert stood.is_prior
     text = stood.describe()
     assert "from the scatter" not in text and "(defaults)" not in text
