@@ -17,6 +17,7 @@ from typing import Any
 
 from pynmeagps import NMEAReader
 from pynmeagps.exceptions import NMEAMessageError, NMEAParseError, NMEATypeError
+from pynmeagps.nmeahelpers import calc_checksum
 from pynmeagps.nmeatypes_core import VALNONE
 
 from readers.nmea.lines import Sentence
@@ -284,10 +285,7 @@ def with_checksum(text: bytes) -> bytes:
     talker sends none (lines.py takes those unverified) is decoded as the same sentence checksummed."""
     if b"*" in text:
         return text
-    total = 0
-    for b in text[1:]:
-        total ^= b
-    return text + b"*%02X" % total
+    return text + b"*" + calc_checksum(text[1:].decode("latin-1")).encode("ascii")
 
 
 def decode(sentence: Sentence) -> Decoded:

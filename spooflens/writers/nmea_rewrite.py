@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pynmeagps.nmeahelpers import calc_checksum
 
 from readers.nmea import decode_log
 from readers.nmea.assembly import Epoch, assemble, nmea_sv_id
@@ -54,11 +55,9 @@ def _number(value: float, template: str) -> str:
 
 
 def _with_checksum(body: str, old: bytes) -> bytes:
-    check = 0
-    for b in body[1:].encode("latin-1"):
-        check ^= b
-    lower = old[-2:].decode("latin-1").islower()
-    return f"{body}*{check:02x}".encode("latin-1") if lower else f"{body}*{check:02X}".encode("latin-1")
+    check = calc_checksum(body[1:])
+    lower = old[-2:].decode("latin-1").islower()  # written as the talker wrote its own
+    return f"{body}*{check.lower() if lower else check}".encode("latin-1")
 
 
 def _fields(d: Decoded) -> list[str]:
