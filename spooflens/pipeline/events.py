@@ -26,10 +26,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, Evidence, label
-from spooflens.pipeline.explanations import ExplanationOptions, Weighed, alarm_began, explain, incident_alarms, scene_of
+from spooflens.pipeline.explanations import (
+    ExplanationOptions,
+    Weighed,
+    alarm_began,
+    explain,
+    incident_alarms,
+    interference_alarms,
+    scene_of,
+)
 from spooflens.pipeline.verdict import Event, Incident, Kind, Verdict
 
 # a takeover within this long of the end of the interference is one attack with it (jam, then spoof):
@@ -191,7 +199,7 @@ def jamming_span(
     there; None: no time the interference shows."""
     times = [
         (alarm_began(a), a.end_s)
-        for a in _interference_alarms(results)
+        for a in interference_alarms(results)
         if alarm_began(a) <= incident.end_s and a.end_s >= incident.start_s
     ]
     if incident.explanations and all(e.kind == Kind.JAMMING for e in incident.explanations):
@@ -280,10 +288,6 @@ def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) 
         systems=_alarm_names(incident, results, "systems"),
         bands=_alarm_names(incident, results, "bands"),
     )
-
-
-def _interference_alarms(results: Sequence[DetectorResult]) -> list[Alarm]:
-    return [a for r in results if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory for a in r.alarms]
 
 
 def _after_lead_in(incident: Incident, results: Sequence[DetectorResult], jam_s: float, takeover: float) -> Incident:
@@ -407,7 +411,7 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
             # an onset estimated back inside interference (a long-window test's estimate reaching into the
             # jamming before a takeover) is the jamming's, not the takeover's
             first = first_unexplained_s(inc)
-            under = [(alarm_began(a), a.end_s) for a in _interference_alarms(results) if first is not None]
+            under = [(alarm_began(a), a.end_s) for a in interference_alarms(results) if first is not None]
             if first is not None and any(a <= inc.onset_s <= b and a < first for a, b in under):
                 inc = _after_lead_in(inc, results, min(a for a, _ in under if a <= inc.onset_s), first)
         span = jamming_span(inc, results, scene.opts.interference_lead_s) if decided.kind == Kind.JAMMING else None

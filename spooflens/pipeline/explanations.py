@@ -525,14 +525,17 @@ def read_interference(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) 
     return Reading("interference", Kind.JAMMING, True, text, facts, rid, until)
 
 
+def interference_alarms(results: Sequence[DetectorResult]) -> list[Alarm]:
+    """The counted alarms of the interference detector."""
+    return [a for r in results if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory for a in r.alarms]
+
+
 def _interference_alarms_over(scene: _Scene, rid: str) -> list[Alarm]:
     """The interference detector's alarms over the incident for this receiver."""
     w = scene.incident_window(rid)
     return [
         a
-        for r in scene.results
-        if r.evidence == Evidence.INTERFERENCE and r.ran and not r.advisory
-        for a in r.alarms
+        for a in interference_alarms(scene.results)
         if a.start_s <= w.end_s and a.end_s >= w.start_s and a.receiver_id in (None, rid)
     ]
 
@@ -695,10 +698,6 @@ def _settled_at(t: FloatArray, off: BoolArray, window: BoolArray, opts: Explanat
     return float(t[idx[last]])
 
 
-def _later(a: float, b: float) -> float:
-    return b if not np.isfinite(a) else a if not np.isfinite(b) else max(a, b)
-
-
 def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
     opts, rx = scene.opts, w.rx
     rid = rx.receiver_id
@@ -735,7 +734,7 @@ def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
             unsettled.append(f"{label} {start:.{digits}f} -> {level:.{digits}f}")
             run = running_median(x)
             far = (run > max(ratio, 1.25) * level + 0.2) if direction > 0 else (run < level - 1.0)
-            final = _later(final, _settled_at(rx.t, far, span & (rx.t <= s0 + opts.converge_within_s), opts))
+            final = float(np.fmax(final, _settled_at(rx.t, far, span & (rx.t <= s0 + opts.converge_within_s), opts)))
     kinds = rx.fix_type[span & (rx.fix_type >= FixType.FIX_2D)]
     settled_kind = int(np.median(rx.fix_type[settled])) if settled.any() else None
     if settled_kind is not None and len(kinds) and int(kinds[0]) < settled_kind:
@@ -743,7 +742,7 @@ def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
             f"{FIX_NAMES.get(FixType(int(kinds[0])), 'fix')} -> {FIX_NAMES.get(FixType(settled_kind), 'fix')}"
         )
         worse = rx.fix_type < settled_kind
-        final = _later(final, _settled_at(rx.t, worse, span & (rx.t <= s0 + opts.converge_within_s), opts))
+        final = float(np.fmax(final, _settled_at(rx.t, worse, span & (rx.t <= s0 + opts.converge_within_s), opts)))
     after_loss = s0 > every_start[0]
     how = f"its fix back at {s0:.1f} s" if after_loss else f"its first fix at {s0:.1f} s"
     if not unsettled:
