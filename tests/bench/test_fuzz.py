@@ -1,4 +1,4 @@
-"""A few hundred damaged inputs through `spooflens inspect`, each in its own process: no internal
+"""A hundred and more damaged inputs through `spooflens inspect`, each in its own process: no internal
 error, no hang, no runaway memory. (`spooflens bench fuzz --n 10000` is the full run; see README.)"""
 
 from __future__ import annotations
@@ -36,9 +36,13 @@ def _seeds(tmp: Path) -> list[SeedLog]:
     ]
 
 
-def test_a_few_hundred_mutants_are_all_handled(tmp_path: Path) -> None:
+# in every test run: a hundred and more, a few of each seed's kinds of damage (the bench's 2,000 are the figure)
+MUTANTS = 130
+
+
+def test_a_hundred_mutants_are_all_handled(tmp_path: Path) -> None:
     report = run_fuzz(
-        250,
+        MUTANTS,
         seed=12,
         commands=("inspect",),
         limits=Limits(timeout_s=60.0, rss_cap_mb=1024.0),
@@ -47,9 +51,9 @@ def test_a_few_hundred_mutants_are_all_handled(tmp_path: Path) -> None:
     )
     failures = "\n".join(f"{f['command']} [{f['mutation']}]: {f['error']}" for f in report.failures)
     assert report.failed == 0, failures
-    assert sum(report.counts.values()) == 250 + 12  # every mutant and every unmutated seed ran
+    assert sum(report.counts.values()) == MUTANTS + 12  # every mutant and every unmutated seed ran
     assert set(report.baseline.values()) <= set(HANDLED) and report.peak_rss_mb < 1024
-    assert report.counts.get("inspect exit-2", 0) > 20 and report.counts.get("inspect exit-3", 0) > 20
+    assert report.counts.get("inspect exit-2", 0) > 10 and report.counts.get("inspect exit-3", 0) > 10
 
 
 def test_the_sandbox_sees_crashes_hangs_and_memory(tmp_path: Path) -> None:
