@@ -10,6 +10,9 @@ ground speed, course and `VZ` (down): ve = Spd sin(GCrs), vn = Spd cos(GCrs), vu
 `noise_per_ms` (noisePerMS), `jamming_indicator` (jamInd) and `agc` (agcCnt): the latest report of
 the same receiver at or before the fix, within 5 s.
 
+**Receiver status.** Every `UBX1` report is also a row of the `receiver_status` frame (receiver
+`GPS[<Instance>]`), with or without a fix: a jammer that costs the fix still shows in them.
+
 **IMU.** `IMU` rows per instance (`IMU[0]`, `IMU[1]`, ...; older logs `IMU`, `IMU2`, `IMU3`), body
 frame FRD (the autopilot has applied the board orientation). The primary is instance 0, the IMU
 ArduPilot uses while it is healthy, unless `--topic imu=IMU[1]` names another; it is listed first, so
@@ -127,6 +130,26 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
         ubx3 = {"hAcc": "gpa_HAcc", "vAcc": "gpa_VAcc", "sAcc": "gpa_SAcc"}
         gps = _join_receiver_message(log, gps, "UBX3", UBX3_FIELDS, ubx3, UBX3_MAX_AGE_US)
     return gps.sort_values(["inst", "TimeUS"], kind="stable").reset_index(drop=True)
+
+
+def ubx1_reports(log: DataFlash, offset_ns: int) -> pd.DataFrame | None:
+    """Every UBX1 (u-blox MON-HW) report as a `receiver_status` row of its receiver (`GPS[<Instance>]`, as
+    its fixes are named), plus `ofs`, where it sits in the file (inject patches it there). The reports
+    come whether the receiver has a fix or not: a jammer that costs the fix is seen through them."""
+    found = log.columns("UBX1", UBX1_FIELDS)
+    if found is None:
+        return None
+    inst = _instance(found, "Instance")
+    return pd.DataFrame(
+        {
+            "t_ns": found["TimeUS"].astype(np.int64) * 1000 + offset_ns,
+            "receiver_id": np.array([f"GPS[{i}]" for i in inst], dtype=object),
+            "noise_per_ms": found["noisePerMS"].astype(float),
+            "jamming_indicator": found["jamInd"].astype(float),
+            "agc": found["agcCnt"].astype(float),
+            "ofs": found["_ofs"].astype(np.int64),
+        }
+    )
 
 
 def _join_receiver_message(
@@ -506,6 +529,12 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
             streams.append(
                 StreamInfo("fix", name, "GPS", "ardupilot/GPS+GPA", int((fixes["receiver_id"] == name).sum()))
             )
+    status = ubx1_reports(log, offset_ns)
+    if status is not None:
+        frames["receiver_status"] = status.drop(columns="ofs")
+        for rid in dict.fromkeys(status["receiver_id"]):
+            n = int((status["receiver_id"] == rid).sum())
+            streams.append(StreamInfo("receiver_status", rid, "UBX1", "ardupilot/UBX1 (u-blox MON-HW)", n))
     if progress:
         progress(1, 4)
     primary = (topics or {}).get("imu")

@@ -240,9 +240,9 @@ SATELLITE_COLUMNS: tuple[Column, ...] = (
 )
 
 # What a receiver's own monitors report without a position (u-blox MON-RF/MON-HW, SEC-SIG in a capture
-# with no fix): the front end and the jamming monitor, one row per message, for the interference
-# detector. Rows carry no position, so no position-using detector ever reads them; a receiver with
-# fixes keeps these values on its fixes.
+# with no fix; ArduPilot UBX1 always, fix or no fix): the front end and the jamming monitor, one row per
+# message, for the interference detector, which reads them in place of the same values joined to the
+# fixes. Rows carry no position, so no position-using detector ever reads them.
 RECEIVER_STATUS_COLUMNS: tuple[Column, ...] = (
     T,
     Column("receiver_id", "string", "-", "receiver id"),

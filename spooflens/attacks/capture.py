@@ -57,6 +57,31 @@ def _drag(spec: AttackSpec, tau: FloatArray, axes: FloatArray) -> tuple[FloatArr
     return frac * p["offset"] * axes, rate
 
 
+def _indicator(column: str, x: FloatArray, transient: FloatArray, during: NDArray[np.bool_]) -> FloatArray:
+    """A receiver indicator moved by the takeover's `transient` and while `during` the capture."""
+    how, worst, captured = _INDICATORS[column]
+    if how == "add":
+        return x + worst * transient + captured * during
+    if how == "drop":
+        return np.maximum(np.round(x * (1.0 - (1.0 - worst) * transient) * np.where(during, captured, 1.0)), 3)
+    return x * (1.0 + (worst - 1.0) * transient) * np.where(during, captured, 1.0)
+
+
+def _capture_reports(status: pd.DataFrame, rid: str, start: float, end: float, lost: float, duration: float) -> None:
+    """The receiver's monitor reports (`receiver_status`) moved in place as its fixes' indicators are: the
+    front end sees the spoofer whether the receiver has a fix or not."""
+    rows = np.flatnonzero(status["receiver_id"].astype(str).to_numpy() == rid) if len(status) else np.zeros(0, int)
+    if not len(rows):
+        return
+    t = status["t_s"].to_numpy(dtype=float)[rows]
+    release = _bump(t - end, lost / 2.0) if end < duration else np.zeros_like(t)
+    transient = np.maximum(_bump(t - start, lost), release)
+    during = (t >= start + lost) & (t <= end)
+    for c in ("noise_per_ms", "jamming_indicator", "agc"):
+        x = status[c].to_numpy(dtype=float)[rows]
+        status.iloc[rows, status.columns.get_loc(c)] = _indicator(c, x, transient, during)
+
+
 def apply_capture(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:
     receivers = table.receivers()
     if not receivers:
@@ -81,6 +106,7 @@ def apply_capture(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Atta
     )
     keep = np.ones(len(table.fixes), dtype=bool)
     fixes = table.fixes.copy()
+    status = table.receiver_status.copy()
     for rid in targets:
         rows = np.flatnonzero(fixes["receiver_id"].to_numpy() == rid)
         fx = fixes.iloc[rows]
@@ -113,15 +139,8 @@ def apply_capture(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Atta
         for c, factor in (("h_acc_m", p["acc"]), ("v_acc_m", p["acc"]), ("vel_acc_mps", 2.5 * p["acc"])):
             x = fx[c].to_numpy(dtype=float)
             fixes.iloc[rows, cols.get_loc(c)] = x * (1.0 + (factor - 1.0) * transient) * np.where(during, 1.3, 1.0)
-        for c, (how, worst, captured) in _INDICATORS.items():
-            x = fx[c].to_numpy(dtype=float)
-            if how == "add":
-                y = x + worst * transient + captured * during
-            elif how == "drop":
-                y = np.maximum(np.round(x * (1.0 - (1.0 - worst) * transient) * np.where(during, captured, 1.0)), 3)
-            else:
-                y = x * (1.0 + (worst - 1.0) * transient) * np.where(during, captured, 1.0)
-            fixes.iloc[rows, cols.get_loc(c)] = y
+        for c in _INDICATORS:
+            fixes.iloc[rows, cols.get_loc(c)] = _indicator(c, fx[c].to_numpy(dtype=float), transient, during)
         if "time_offset_s" in cols:  # the receiver keeps the spoofer's time while it is captured
             off = fx["time_offset_s"].to_numpy(dtype=float)
             fixes.iloc[rows, cols.get_loc("time_offset_s")] = off + p["clock"] * during
@@ -132,7 +151,9 @@ def apply_capture(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, Atta
         keep[rows[gap]] = False
         actual = geodetic_to_enu(new_lat, new_lon, new_h, lat[0], lon[0], h[0]) - p_enu
         truth.offsets[rid] = np.c_[t, actual][~gap].round(4).tolist()
+        _capture_reports(status, rid, start, end, lost, table.duration_s)
     spoofed = copy.copy(table)
     spoofed.fixes = pd.DataFrame(fixes[keep]).reset_index(drop=True)
+    spoofed.receiver_status = status
     spoofed.validate()
     return spoofed, truth

@@ -131,6 +131,8 @@ def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTr
         spec.kind.value, dict(p), start, end, list(targets), KINDS[spec.kind].seed, str(table.source), table.t0_ns
     )
     sats, obs, fixes = table.satellites.copy(), table.observations.copy(), table.fixes.copy()
+    status = table.receiver_status.copy()
+    agc_in_db = table.metadata.get("units.agc", "").startswith("dB")
     keep_obs = np.ones(len(obs), dtype=bool)
     keep_fix = np.ones(len(fixes), dtype=bool)
     lost_all: set[str] = set()
@@ -166,17 +168,19 @@ def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTr
             if counts is None or not is_obs:
                 counts = _sky_counts(sub.assign(_cn0=cn0), tracked)
         f_rows = np.flatnonzero(fixes["receiver_id"].astype(str).to_numpy() == rid) if len(fixes) else np.zeros(0, int)
+        t = fixes["t_s"].to_numpy(float)[f_rows] if len(f_rows) else np.zeros(0)
+        lost_mask = np.zeros(len(f_rows), dtype=bool)
         if len(f_rows):
-            agc_in_db = table.metadata.get("units.agc", "").startswith("dB")
             lost_mask, offsets = _jam_fixes(fixes, f_rows, counts, p, start, end, acc, agc_in_db, rng)
             keep_fix[f_rows[lost_mask]] = False
-            t = fixes["t_s"].to_numpy(float)[f_rows]
             truth.offsets[rid] = np.c_[t, offsets][~lost_mask].round(4).tolist()
             fix_lost += _runs(t, lost_mask)
+        _jam_reports(status, rid, t, lost_mask, p, start, end, agc_in_db)
     jammed = copy.copy(table)
     jammed.satellites = pd.DataFrame(sats).reset_index(drop=True)
     jammed.observations = pd.DataFrame(obs[keep_obs]).reset_index(drop=True)
     jammed.fixes = pd.DataFrame(fixes[keep_fix]).reset_index(drop=True)
+    jammed.receiver_status = status
     jammed.validate()
     truth.satellites = sorted(lost_all)
     truth.phases = [
@@ -278,22 +282,67 @@ def _jam_fixes(
     fixes.iloc[rows, cols.get_loc("height_m")] = new_h
     for i, c in enumerate(("vel_e_mps", "vel_n_mps", "vel_u_mps")):
         fixes.iloc[rows, cols.get_loc(c)] = fx[c].to_numpy(float) + dv[:, i]
-    agc = fx["agc"].to_numpy(float)
+    _jam_front_end(fixes, rows, power, p, agc_in_db, lost)
+    return lost, np.where(lost[:, None], 0.0, dp)
+
+
+def _jam_front_end(
+    frame: pd.DataFrame,
+    rows: NDArray[np.int64],
+    power: FloatArray,
+    p: dict[str, Any],
+    agc_in_db: bool,
+    without_fix: BoolArray,
+) -> None:
+    """The front end's indicators of these rows (fixes, or the receiver's monitor reports) in place: AGC
+    down, noise and jamming indicator up with the jammer's power; a jamming monitor that is on warns, and
+    says critical where the receiver has no fix."""
+    cols = frame.columns
+    at = frame.iloc[rows]
+    drop = p["cn0"] * power
+    agc = at["agc"].to_numpy(float)
     if agc_in_db:  # the gain itself (Android AgcDb): turned down by the power the jammer adds
-        fixes.iloc[rows, cols.get_loc("agc")] = agc - drop
+        frame.iloc[rows, cols.get_loc("agc")] = agc - drop
     else:
-        fixes.iloc[rows, cols.get_loc("agc")] = np.round(agc * (1.0 - (1.0 - p["agc"]) * power))
-    noise = fx["noise_per_ms"].to_numpy(float)
-    fixes.iloc[rows, cols.get_loc("noise_per_ms")] = np.round(noise * (1.0 + NOISE_RISE * power))
-    jam = fx["jamming_indicator"].to_numpy(float)
-    fixes.iloc[rows, cols.get_loc("jamming_indicator")] = np.clip(
+        frame.iloc[rows, cols.get_loc("agc")] = np.round(agc * (1.0 - (1.0 - p["agc"]) * power))
+    noise = at["noise_per_ms"].to_numpy(float)
+    frame.iloc[rows, cols.get_loc("noise_per_ms")] = np.round(noise * (1.0 + NOISE_RISE * power))
+    jam = at["jamming_indicator"].to_numpy(float)
+    frame.iloc[rows, cols.get_loc("jamming_indicator")] = np.clip(
         np.round(jam + JAMMING_INDICATOR_RISE * power), 0, 255
     )
-    state = fx["jamming_state"].to_numpy(float)
+    state = at["jamming_state"].to_numpy(float)
     if np.nan_to_num(state, nan=0.0).max() >= 1:  # a monitor that is on says what it sees; one off stays off
-        said = np.where(drop >= WARNING_DB, np.where(lost, 3.0, 2.0), state)
-        fixes.iloc[rows, cols.get_loc("jamming_state")] = np.where(np.isfinite(state), np.maximum(state, said), state)
-    return lost, np.where(lost[:, None], 0.0, dp)
+        said = np.where(drop >= WARNING_DB, np.where(without_fix, 3.0, 2.0), state)
+        frame.iloc[rows, cols.get_loc("jamming_state")] = np.where(np.isfinite(state), np.maximum(state, said), state)
+
+
+def _nearest(sorted_t: FloatArray, t: FloatArray) -> NDArray[np.int64]:
+    """Index of the element of `sorted_t` (not empty) nearest each of `t`."""
+    k = np.searchsorted(sorted_t, t)
+    lo, hi = np.clip(k - 1, 0, len(sorted_t) - 1), np.clip(k, 0, len(sorted_t) - 1)
+    return np.where(np.abs(t - sorted_t[lo]) <= np.abs(sorted_t[hi] - t), lo, hi)
+
+
+def _jam_reports(
+    status: pd.DataFrame,
+    rid: str,
+    fix_t: FloatArray,
+    fix_lost: BoolArray,
+    p: dict[str, Any],
+    start: float,
+    end: float,
+    agc_in_db: bool,
+) -> None:
+    """The receiver's monitor reports (`receiver_status`) jammed in place, as its fixes are: a report
+    says what the front end saw when it was logged, fix or no fix. Without a fix is the nearest fix's
+    state (lost or kept) for a receiver with fixes; always, for one that has none."""
+    rows = np.flatnonzero(status["receiver_id"].astype(str).to_numpy() == rid) if len(status) else np.zeros(0, int)
+    if not len(rows):
+        return
+    t = status["t_s"].to_numpy(float)[rows]
+    without_fix = fix_lost[_nearest(fix_t, t)] if len(fix_t) else np.ones(len(rows), dtype=bool)
+    _jam_front_end(status, rows, jammer_power(t, start, end, p["ramp"]), p, agc_in_db, without_fix)
 
 
 def apply_jam_spoof(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:

@@ -86,8 +86,8 @@ class _Receiver:
     fixes: pd.DataFrame
     sky: SkyMatrix | None
     sky_source: str  # where the C/N0 came from
-    # where its front end's indicators and jamming state are: its fixes, or for a receiver that never
-    # had one, its monitor messages (the `receiver_status` frame, rows without a position)
+    # where its front end's indicators and jamming state are: its monitor messages (the `receiver_status`
+    # frame) when it logged them, else its fixes
     monitor: pd.DataFrame
 
 
@@ -106,7 +106,10 @@ def _receivers(table: EpochTable) -> list[_Receiver]:
     ids = list(dict.fromkeys(str(r) for frame in frames for r in frame["receiver_id"].dropna().unique()))
     for rid in ids:
         fx = fixes[fixes["receiver_id"].astype(str) == rid].reset_index(drop=True)
-        monitor = fx if len(fx) else status[status["receiver_id"].astype(str) == rid].reset_index(drop=True)
+        reports = status[status["receiver_id"].astype(str) == rid].reset_index(drop=True)
+        # a reader that keeps the monitor's reports also joins them to the fixes (ArduPilot UBX1): read
+        # once, where each report is one row and none is lost with the fix, never both
+        monitor = reports if len(reports) else fx
         sky, source = None, "none"
         mine = sats[sats["receiver_id"].astype(str) == rid] if len(sats) else sats
         raw = obs[obs["receiver_id"].astype(str) == rid] if len(obs) else obs

@@ -8,11 +8,11 @@ GWk/GMS. Where the attack moved them, its NSats and HDop follow; a fix the attac
 fix), which the reader drops as it drops the receiver's own fix-less rows.
 
 The messages the reader joins to each fix (`readers.ardupilot.gps_rows`) are written back to the same
-message it read: GPA (VDop, HAcc, VAcc, SAcc), before 2016 UBX3 (hAcc, vAcc, sAcc), and UBX1 (u-blox
-MON-HW: noisePerMS, jamInd, agcCnt). One UBX1 record is joined to every fix up to the next one (a few
-seconds of fixes); it gets the attacked values of the first of them, the fix logged with it (a report
-says what the receiver saw when it was logged, not what came after), or when the attack lost that fix,
-those of the nearest fix it kept (the monitor still shows the jammer while the fix is gone).
+message it read: GPA (VDop, HAcc, VAcc, SAcc), before 2016 UBX3 (hAcc, vAcc, sAcc). UBX1 (u-blox
+MON-HW: noisePerMS, jamInd, agcCnt) is the receiver's own report, one `receiver_status` row each
+(`readers.ardupilot.ubx1_reports`): every record gets the attacked values of its row, what the front end
+saw when it was logged, whether the receiver had a fix then or the attack lost it. The fixes it is also
+joined to read those values back.
 
 The raw measurements the autopilot logs (GRXS, u-blox RXM-RAWX) get the attacked pseudorange (prMes),
 Doppler (doMes) and C/N0 (cno); a measurement the attack removed (a satellite the jammer lost) gets trk
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows, grxs_rows
+from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows, grxs_rows, ubx1_reports
 from readers.dataflash import DataFlash, open_dataflash
 from readers.dataflash_eras import logged_name
 from spooflens.epoch_table import EpochTable
@@ -66,8 +66,10 @@ GPS_INDICATORS = {"sats_used": "NSats", "hdop": "HDop"}
 JOINED = {
     "gpa_ofs": {"vdop": "VDop", "h_acc_m": "HAcc", "v_acc_m": "VAcc", "vel_acc_mps": "SAcc"},
     "ubx3_ofs": {"h_acc_m": "hAcc", "v_acc_m": "vAcc", "vel_acc_mps": "sAcc"},
-    "ubx1_ofs": {"noise_per_ms": "noisePerMS", "jamming_indicator": "jamInd", "agc": "agcCnt"},
 }
+# UBX1 (u-blox MON-HW), one `receiver_status` row each: table column -> field. Written from those rows,
+# not from the fixes it is also joined to, so a report logged while the fix was lost gets its own values
+REPORTED = {"noise_per_ms": "noisePerMS", "jamming_indicator": "jamInd", "agc": "agcCnt"}
 # a raw measurement's columns and the GRXS fields that carry them
 MEASURED = {"pseudorange_m": "prMes", "doppler_hz": "doMes", "cn0_dbhz": "cno"}
 PR_VALID = 1  # GRXS trk (RXM-RAWX trkStat) bit 0: the reader keeps a measurement only with it set
@@ -231,6 +233,32 @@ def _write_joined(patcher: _Patcher, plan: pd.DataFrame) -> None:
                 patcher.put(int(r["ofs"]), values)
 
 
+def _report_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
+    """One row per UBX1 message of a `receiver_status` row of the table: `ofs`, its values as read
+    (`<column>_0`) and as attacked. Reports of one receiver at one instant are told apart by their order."""
+    _, offset_ns, _ = gps_clock(gps)
+    rows = ubx1_reports(log, offset_ns)
+    if rows is None or not len(table.receiver_status):
+        return pd.DataFrame()
+    key = ["receiver_id", "t_s"]
+    before, after = (
+        s[[*key, *REPORTED]].assign(nth=s.groupby(key, sort=False).cumcount())
+        for s in (table.receiver_status, spoofed.receiver_status)
+    )
+    change = before.merge(after, on=[*key, "nth"], how="left", suffixes=("_0", ""))
+    change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
+    logged = rows[["receiver_id", "t_ns", "ofs"]]
+    logged = logged.assign(nth=logged.groupby(["receiver_id", "t_ns"], sort=False).cumcount())
+    return logged.merge(change, on=["receiver_id", "t_ns", "nth"], how="inner")
+
+
+def _write_reports(patcher: _Patcher, plan: pd.DataFrame) -> None:
+    for r in plan.to_dict("records"):
+        values = {field: r[c] for c, field in REPORTED.items() if _moved(r[c], r[f"{c}_0"])}
+        if values:
+            patcher.put(int(r["ofs"]), values)
+
+
 def _measurement_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
     """One row per GRXS message of a raw measurement of the table: `ofs`, its values as read (`<column>_0`)
     and as attacked, and `lost` where the attack removed it. The measurements of one satellite at one
@@ -276,6 +304,7 @@ def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTab
     patcher = _Patcher(log)
     _write_gps(patcher, plan, velocities)
     _write_joined(patcher, plan)
+    _write_reports(patcher, _report_plan(log, gps, table, spoofed))
     _write_measurements(patcher, _measurement_plan(log, gps, table, spoofed))
     Path(dst).write_bytes(bytes(patcher.data))
     gps_names = set(plan["msg"])

@@ -139,6 +139,31 @@ def test_a_real_dataflash_log_with_ubx1(tmp_path: Path, capsys: pytest.CaptureFi
     assert "AGC down 40 %" in str(rf) and "jamming indicator 34 -> 184" in str(rf)
 
 
+def test_a_jammer_that_costs_the_fix_is_seen_through_the_ubx1_reports(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 7 of the 10 satellites lost from half power on: no fix from 101 s to 149 s, so no fix carries the
+    # front end's indicators; the receiver's UBX1 reports go on every ~2 s and carry them
+    src = real_log(LOG171)
+    out = inject(src, "jam:start=100,end=150,lost=7", tmp_path / "lost.bin", capsys)
+    assert "lost: Status 1" in out and "UBX1" in out and "not in the copy" not in out
+    copy = read_log(tmp_path / "lost.bin")
+    fix_t = copy.fixes["t_s"].to_numpy()
+    assert not ((fix_t > 102) & (fix_t < 149)).any()
+    summary = analyze_json(tmp_path / "lost.bin", tmp_path)
+    assert not summary["verdict"]["spoofed"] and not events_of(summary, "spoofing")
+    (event,) = events_of(summary, "jamming")
+    assert 100.0 <= event["start_s"] <= 101.0 and 150.0 <= event["end_s"] <= 160.0
+    # as when the fix holds: the next report after the jammer's start opens it, the 5 s hold closes it late
+    (alarm,) = interference_alarms(summary)
+    assert 100.0 <= alarm["start_s"] <= 103.0 and 150.0 <= alarm["end_s"] <= 156.0
+    assert alarm["onset_interval_s"][0] <= 101.0 and alarm["end_interval_s"][0] <= 156.0
+    (result,) = [a for a in summary["analyses"] if a["name"] == "interference"]
+    (found,) = result["facts"]["events"]
+    assert found["found_by"] == "front-end power" and found["fix"]["lost_s"] > 40.0
+    assert found["rf"]["jamming_indicator"]["during"] == 184.0 and found["rf"]["agc"]["change_pct"] == -40.0
+
+
 def test_jam_then_capture_in_a_real_dataflash_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # the capture's drag carries its velocity with it and this log's IMU stops for 2 s at 61 s (no INS
     # runs), so the spoofing is seen where the spoofer lets go at 200 s and the receiver falls back on the

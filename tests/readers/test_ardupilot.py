@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mavlink_support import write_tlog
-from paths import REAL
+from paths import REAL, real_log
 
 from readers import read_log, sniff_format
 from readers.ardupilot import attitude_quaternion
@@ -106,6 +106,28 @@ def test_copter_log_imu_attitude_and_receiver_indicators() -> None:
     assert np.isnan(fx["agc"].iloc[0]) and fx["agc"].iloc[1] == 1872.0
     assert fx["jamming_indicator"].iloc[1] == 5.0 and fx["noise_per_ms"].iloc[1] == 113.0
     assert set(t.autopilot_ekf["source"]) == {"EKF3 core 0", "EKF3 core 1"}
+
+
+def test_every_ubx1_report_reaches_receiver_status_with_or_without_a_fix() -> None:
+    # log171 (ArduCopter 3.3): the receiver reports UBX1 every ~2 s from boot, and its GPS rows say
+    # Status 1 (no fix) until its first fix 33.7 s in; the 17 reports of those 32 s joined no fix
+    log = real_log("corpus/dronekit-la-testdata/log171.bin")
+    t = read_log(log)
+    logged = _pymavlink_rows(log, "UBX1")
+    status = t.receiver_status
+    assert len(logged) == 121 and len(status) == len(logged)
+    assert set(status["receiver_id"]) == {"GPS[0]"}  # named as the fixes are
+    for column, field in (("noise_per_ms", "noisePerMS"), ("jamming_indicator", "jamInd"), ("agc", "agcCnt")):
+        np.testing.assert_array_equal(status[column].to_numpy(float), [float(m[field]) for m in logged])
+    assert status["jamming_state"].isna().all()  # UBX1 carries no jamming state
+    first_fix = float(t.fixes["t_s"].min())
+    without_fix = status["t_s"].to_numpy() < first_fix - 1.0
+    assert first_fix == pytest.approx(33.676) and without_fix.sum() == 17
+    assert any(s.stream == "GPS[0]" and "no fix" in s.reason and s.count == 161 for s in t.skipped)
+    info = t.stream("receiver_status", "GPS[0]")
+    assert info is not None and info.count == 121 and info.topic == "UBX1"
+    # the fixes still carry the latest report (receiver_evidence and the baseline read them there)
+    assert t.fixes["agc"].notna().all() and t.fixes["jamming_indicator"].iloc[0] in set(status["jamming_indicator"])
 
 
 def test_attitude_quaternion_conventions() -> None:

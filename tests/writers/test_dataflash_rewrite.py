@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from paths import real_log
 
 from readers import read_log
-from readers.ardupilot import gps_clock, gps_fixes, gps_rows
+from readers.ardupilot import gps_clock, gps_fixes, gps_rows, ubx1_reports
 from readers.dataflash import open_dataflash
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.cli import main
@@ -53,10 +53,22 @@ def _ubx1_record_of_each_fix(path: Path, table: EpochTable) -> NDArray[np.float6
     return joined["ubx1_ofs"].to_numpy(float)
 
 
-def _first_of_each_record(values: NDArray[np.float64], record: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Each fix's value replaced by that of the first fix joined to the same record (fixes in time order)."""
-    first = pd.Series(values).groupby(record).transform("first").to_numpy(float)
-    return np.where(np.isfinite(record), first, values)
+MONITOR = ["noise_per_ms", "jamming_indicator", "agc"]
+
+
+def _report_of_each_fix(path: Path, table: EpochTable, reports: pd.DataFrame) -> NDArray[np.float64]:
+    """The values of the `reports` (`receiver_status` rows on `table`'s clock) whose UBX1 record each of
+    the table's fixes was joined to: NaN for a fix joined to none."""
+    log = open_dataflash(path)
+    gps = gps_rows(log, [])
+    assert gps is not None
+    _, offset_ns, _ = gps_clock(gps)
+    logged = ubx1_reports(log, offset_ns)
+    assert logged is not None
+    given = reports.assign(t_ns=table.absolute_ns(reports["t_s"].to_numpy()))
+    by_record = logged[["receiver_id", "t_ns", "ofs"]].merge(given, on=["receiver_id", "t_ns"], validate="one_to_one")
+    by_record = by_record.set_index("ofs")[MONITOR]
+    return by_record.reindex(_ubx1_record_of_each_fix(path, table)).to_numpy(float)
 
 
 def test_a_jammed_copy_of_an_old_log_carries_ubx1_ubx3_satellites_and_hdop(
@@ -77,12 +89,12 @@ def test_a_jammed_copy_of_an_old_log_carries_ubx1_ubx3_satellites_and_hdop(
     np.testing.assert_allclose(b["hdop"], a["hdop"], atol=0.005)  # HDop is logged in 0.01
     for column in ("h_acc_m", "v_acc_m", "vel_acc_mps"):  # UBX3: float32
         np.testing.assert_allclose(b[column], a[column], rtol=1e-6)
-    # each UBX1 record carries the jammed values of the fix logged with it, and every fix joined to it reads them
-    record = _ubx1_record_of_each_fix(out, copy)
-    assert np.isfinite(record).mean() > 0.9
-    for column in ("noise_per_ms", "jamming_indicator", "agc"):
-        expected = _first_of_each_record(a[column].to_numpy(float), record)
-        np.testing.assert_array_equal(b[column].to_numpy(float), expected)
+    # each UBX1 record carries the jammed values of its own report (its receiver_status row), and every fix
+    # joined to it reads them
+    np.testing.assert_array_equal(copy.receiver_status[MONITOR], jammed.receiver_status[MONITOR])
+    assert (copy.receiver_status[MONITOR] != clean.receiver_status[MONITOR]).any(axis=1).sum() == 25
+    assert np.isfinite(_ubx1_record_of_each_fix(out, copy)).mean() > 0.9
+    np.testing.assert_array_equal(b[MONITOR].to_numpy(float), _report_of_each_fix(out, copy, jammed.receiver_status))
     t = b["t_s"].to_numpy()
     full_power = (t > 105) & (t < 145)
     before = clean.fixes["jamming_indicator"].to_numpy()
@@ -106,6 +118,17 @@ def test_fixes_the_jammer_lost_are_written_as_no_fix(tmp_path: Path, capsys: pyt
     no_fix = [s.count for s in copy.skipped if s.stream == "GPS[0]" and "no fix" in s.reason]
     before = [s.count for s in clean.skipped if s.stream == "GPS[0]" and "no fix" in s.reason]
     assert no_fix[0] == before[0] + lost
+    # the receiver's UBX1 reports go on without the fix: each is written with the jammer at its own time
+    assert "UBX1" in note
+    np.testing.assert_array_equal(copy.receiver_status[MONITOR], jammed.receiver_status[MONITOR])
+    t = copy.receiver_status["t_s"].to_numpy()
+    fix_t = copy.fixes["t_s"].to_numpy()
+    outage = (t > 103) & (t < 148)
+    assert outage.sum() >= 20 and not ((fix_t > 102) & (fix_t < 149)).any()
+    rise = copy.receiver_status["jamming_indicator"].to_numpy() - clean.receiver_status["jamming_indicator"].to_numpy()
+    assert (rise[outage] == 150).all()  # +150 at full power, as on a fix
+    agc = copy.receiver_status["agc"].to_numpy() / clean.receiver_status["agc"].to_numpy()
+    np.testing.assert_allclose(agc[outage], 0.6, atol=1e-3)
 
 
 # the GPS message of ArduPilot 3.4 on (2016+): microsecond boot time, instance, GPS week and milliseconds
@@ -144,9 +167,9 @@ def test_each_receivers_ubx1_is_written_back_to_its_own_records(tmp_path: Path) 
         a = jammed.fixes[jammed.fixes["receiver_id"] == rid]
         b = copy.fixes[copy.fixes["receiver_id"] == rid]
         np.testing.assert_allclose(b[indicators[3:]], a[indicators[3:]], atol=0.005)  # GPA and HDop in 0.01
-        # a UBX1 record once every 5 fixes: the five read the values the attack gave the first
-        first = np.repeat(a[indicators[:3]].to_numpy()[::5], 5, axis=0)
-        np.testing.assert_array_equal(b[indicators[:3]].to_numpy(), first)
+        # a UBX1 record once every 5 fixes, logged 2 ms before the first: the five read its report's values
+        reports = jammed.receiver_status[jammed.receiver_status["receiver_id"] == rid]
+        np.testing.assert_array_equal(b[MONITOR].to_numpy(), np.repeat(reports[MONITOR].to_numpy(), 5, axis=0))
     jammer_on = copy.fixes["t_s"].between(45, 75).to_numpy()
     gps1 = (copy.fixes["receiver_id"] == "GPS[1]").to_numpy()
     np.testing.assert_array_equal(copy.fixes["agc"][jammer_on & gps1], 0.6 * 5100)  # agc=0.6 at full power
