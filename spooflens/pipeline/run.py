@@ -9,7 +9,7 @@ the learning window would teach the filter that the attack is noise, so when the
 anything suspicious inside the stretch the noise was learned from, the noise is learned again with
 those stretches left out and the analyses run a second time on that filter: the noise is kept fixed
 through a suspected attack. Anything suspected after that stretch could not have taught the filter,
-and the first pass stands; so does it when the suspected stretches leave too little to learn from again.
+and the first pass stands.
 """
 
 from __future__ import annotations
