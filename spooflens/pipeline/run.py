@@ -167,12 +167,11 @@ def analyze_table(
         for nav, learned in zip(solved, first_learned, strict=True)
         if nav is not None and nav.learned.is_prior and learned
     ]
-    if unlearned and options.baseline is None:
+    if unlearned:
         # without the suspected stretches too little was left to learn from: the prior (a noise read off the
         # fixes' scatter, which a receiver's own smoothing makes centimetres) would judge the log on a
         # yardstick the log never showed. The noise learned with those stretches in it stands: an attack
-        # in it can only have inflated it (less sensitive, never more). A vehicle's baseline is a prior
-        # its clean logs showed: it stands as it is
+        # in it can only have inflated it (less sensitive, never more)
         note = (
             f"; not learned again without the suspected stretches ({_spans_text(spans)}): "
             f"{unlearned[0].removeprefix(PRIOR).strip(' ()')}; the noise learned with them stands"
