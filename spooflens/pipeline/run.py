@@ -25,7 +25,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
 from spooflens.navigation.alignment import Alignment
 from spooflens.navigation.loosely_coupled import FilterInputs
-from spooflens.navigation.noise_learning import PRIOR, LearnedNoise
+from spooflens.navigation.noise_learning import LearnedNoise
 from spooflens.navigation.product import NAVIGATION, Navigation, navigations, solve_navigation
 from spooflens.navigation.strapdown import NavState
 from spooflens.pipeline.events import classify
@@ -108,10 +108,6 @@ def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tup
     return tuple(merged)
 
 
-def _spans_text(spans: tuple[tuple[float, float], ...]) -> str:
-    return ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in spans)
-
-
 def _within_learning(spans: tuple[tuple[float, float], ...], part: AnalysisContext, nav: Navigation) -> bool:
     """Whether a suspected stretch touches the fixes the noise was learned from (the initial guess
     reads every fix of the part up to the learning window's end, the likelihood those inside it): a part
@@ -148,8 +144,6 @@ def analyze_table(
     # the first pass's shared work (its navigation solution: a gigabyte per hour of 10 Hz GNSS) goes
     # before the second pass builds its own; its results stay for when the second pass cannot run
     again = [_again(part, spans) for part in parts]
-    # whether each part's first noise was learned, not the prior (kept without the solution itself)
-    first_learned = [NAVIGATION in part.cache and not part.cache[NAVIGATION].learned.is_prior for part in parts]
     segmented = parts[0] is not ctx
     first_results = ctx.results
     del ctx, parts, navigated, navs
@@ -162,22 +156,6 @@ def analyze_table(
         ]
     except SpooflensError:
         return Analysis(table, options, first_results, verdict, context=kept)
-    unlearned = [
-        nav.learned.noise.source
-        for nav, learned in zip(solved, first_learned, strict=True)
-        if nav is not None and nav.learned.is_prior and learned
-    ]
-    if unlearned:
-        # without the suspected stretches too little was left to learn from: the prior (a noise read off the
-        # fixes' scatter, which a receiver's own smoothing makes centimetres) would judge the log on a
-        # yardstick the log never showed. The noise learned with those stretches in it stands: an attack
-        # in it can only have inflated it (less sensitive, never more)
-        note = (
-            f"; not learned again without the suspected stretches ({_spans_text(spans)}): "
-            f"{unlearned[0].removeprefix(PRIOR).strip(' ()')}; the noise learned with them stands"
-        )
-        kept_results = [replace(r, reason=r.reason + note) if r.name == NAVIGATION else r for r in first_results]
-        return Analysis(table, options, kept_results, verdict, 1, spans, kept)
     del first_results, kept
     if segmented:
         seed: dict[str, object] = {
