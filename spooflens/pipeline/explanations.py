@@ -379,12 +379,11 @@ def _robust_rise(
     w: Window, column: str, floor: float, relative: float, direction: int, z: float
 ) -> tuple[float, float] | None:
     """(baseline, worst) of an indicator that moved `z` robust sigma in `direction` (+1 up, -1 down), else None."""
-    x = w.rx.col(column)
-    if w.base is None:
+    now, base = w.values(column)
+    if base is None:
         return None
-    base = x[w.base]
     base = base[np.isfinite(base)]
-    if len(base) < 3 or not np.isfinite(x[w.now]).any():
+    if len(base) < 3 or not np.isfinite(now).any():
         return None
     med = float(np.median(base))
     scale = max(1.4826 * float(np.median(np.abs(base - med))), floor, relative * abs(med))
@@ -396,7 +395,7 @@ def receiver_interference_signs(w: Window, z: float) -> list[str]:
     """What the receiver itself says drowned its signals: its jamming state at warning or worse, a jump of
     its jamming indicator or noise, its gain turned down."""
     signs = []
-    state = w.rx.col("jamming_state")[w.now]
+    state = w.values("jamming_state")[0]
     if (np.nan_to_num(state) >= 2).any():
         signs.append(f"the receiver's own jamming state at warning or worse ({int(np.nanmax(state))})")
     for column, label, floor, relative, direction in (

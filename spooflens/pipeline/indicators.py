@@ -2,7 +2,8 @@
 explanations (`spooflens.pipeline.explanations`) read.
 
 Per receiver the fixes (fix type, satellites used, DOP, reported accuracy, mean C/N0, noise, AGC,
-jamming state and indicator, spoofing flag, time against the log's clock) and its sky (each satellite's
+jamming state and indicator, spoofing flag, time against the log's clock), its monitor reports where it
+logged them apart from its fixes (noise, AGC, jamming state and indicator) and its sky (each satellite's
 C/N0 and whether the receiver used it: the `satellites` frame, else the raw observations) as arrays.
 A window's level is read through a 3-epoch running median (one odd epoch moves nothing); its baseline
 is the minute before it, or the minute after it when fewer than 5 fixes lie before (an alarm at the
@@ -48,6 +49,9 @@ FIX_COLUMNS = (
     "cn0_mean_dbhz",
     "time_offset_s",
 )
+# the front end's monitor: read from the receiver's own reports (`receiver_status`) when it logged any, which
+# go on where a jammer costs the fix (ArduPilot UBX1), else from its fixes (the interference detector's rule)
+MONITOR_COLUMNS = ("noise_per_ms", "agc", "jamming_state", "jamming_indicator")
 
 
 @dataclass(frozen=True)
@@ -79,8 +83,23 @@ class Sky:
 
 
 @dataclass(frozen=True)
+class Monitor:
+    """One receiver's monitor reports (`receiver_status`) as arrays, on their own times."""
+
+    t: FloatArray
+    columns: dict[str, FloatArray]
+
+    @classmethod
+    def of(cls, table: EpochTable, rid: str) -> Monitor | None:
+        rows = table.receiver_status[table.receiver_status["receiver_id"].astype(str) == rid].sort_values("t_s")
+        if not len(rows):
+            return None
+        return cls(rows["t_s"].to_numpy(float), {c: rows[c].to_numpy(float) for c in MONITOR_COLUMNS if c in rows})
+
+
+@dataclass(frozen=True)
 class Receiver:
-    """One receiver's fixes as arrays, and its sky."""
+    """One receiver's fixes as arrays, its sky and its monitor reports."""
 
     receiver_id: str
     t: FloatArray
@@ -88,6 +107,7 @@ class Receiver:
     fix_type: NDArray[np.int64]
     spoofing_flag: NDArray[np.int64]
     sky: Sky
+    monitor: Monitor | None = None
 
     @classmethod
     def of(cls, table: EpochTable, rid: str) -> Receiver:
@@ -100,6 +120,7 @@ class Receiver:
             fx["fix_type"].to_numpy(np.int64),
             fx["spoofing_flag"].to_numpy(np.int64),
             Sky.of(table, rid),
+            Monitor.of(table, rid),
         )
 
     def col(self, name: str) -> FloatArray:
@@ -143,6 +164,8 @@ class Window:
     base_where: str  # "before" | "after" | ""
     sky_now: slice
     sky_base: slice | None
+    monitor_now: slice | None = None  # the monitor reports in the window and its baseline (`Receiver.monitor`)
+    monitor_base: slice | None = None
 
     @classmethod
     def of(cls, rx: Receiver, start_s: float, end_s: float, lead_s: float = 0.0) -> Window:
@@ -155,27 +178,51 @@ class Window:
             (start_s - lead_s, (end_s + GUARD_S, end_s + BASELINE_S), "after"),
         )
         lo, base, where = start_s - lead_s, None, ""
+        bounds: tuple[float, float] | None = None
         for w0, (b0, b1), side in choices:
             span = _between(rx.t, b0, b1)
             if span.stop - span.start >= MIN_BASELINE_FIXES:
-                lo, base, where = w0, span, side
-                sky_base: slice | None = _between(rx.sky.t, b0, b1)
+                lo, base, where, bounds = w0, span, side, (b0, b1)
                 break
-        else:
-            sky_base = None
-        return cls(rx, lo, end_s, _between(rx.t, lo, end_s), base, where, _between(rx.sky.t, lo, end_s), sky_base)
+        sky_base = _between(rx.sky.t, *bounds) if bounds is not None else None
+        mon = rx.monitor
+        monitor_now = _between(mon.t, lo, end_s) if mon is not None else None
+        monitor_base = _between(mon.t, *bounds) if mon is not None and bounds is not None else None
+        return cls(
+            rx,
+            lo,
+            end_s,
+            _between(rx.t, lo, end_s),
+            base,
+            where,
+            _between(rx.sky.t, lo, end_s),
+            sky_base,
+            monitor_now,
+            monitor_base,
+        )
 
     @property
     def fixes(self) -> int:
         return self.now.stop - self.now.start
 
+    def values(self, name: str) -> tuple[FloatArray, FloatArray | None]:
+        """The indicator's values in the window and in its baseline (None: no baseline); a monitor's from
+        the receiver's own reports when it logged any."""
+        mon = self.rx.monitor
+        if mon is not None and name in MONITOR_COLUMNS and self.monitor_now is not None:
+            x = mon.columns.get(name, np.full(len(mon.t), np.nan))
+            return x[self.monitor_now], (x[self.monitor_base] if self.monitor_base is not None else None)
+        x = self.rx.col(name)
+        return x[self.now], (x[self.base] if self.base is not None else None)
+
     def level(self, name: str) -> float:
         """The indicator's baseline level (NaN without a baseline or values)."""
-        return _finite_median(self.rx.col(name)[self.base]) if self.base is not None else float("nan")
+        base = self.values(name)[1]
+        return _finite_median(base) if base is not None else float("nan")
 
     def worst(self, name: str, direction: int) -> float:
         """The indicator's largest (direction +1) or smallest (-1) running-median level in the window."""
-        x = running_median(self.rx.col(name)[self.now])
+        x = running_median(self.values(name)[0])
         x = x[np.isfinite(x)]
         if not len(x):
             return float("nan")

@@ -5,6 +5,7 @@ jam_spoof gives both phases."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -162,6 +163,8 @@ def test_a_jammer_that_costs_the_fix_is_seen_through_the_ubx1_reports(
     (found,) = result["facts"]["events"]
     assert found["found_by"] == "front-end power" and found["fix"]["lost_s"] > 40.0
     assert found["rf"]["jamming_indicator"]["during"] == 184.0 and found["rf"]["agc"]["change_pct"] == -40.0
+    # the event's own reading quotes the reports too, not the last fixes before the loss (34 -> 142 there)
+    assert re.search(r"jamming indicator 3\d -> 18\d, noise level \d+ -> 14\d", json.dumps(summary["verdict"]))
 
 
 def test_jam_then_capture_in_a_real_dataflash_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
