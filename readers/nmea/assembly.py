@@ -47,6 +47,7 @@ from readers.nmea.sentences import (
     FIX_MEANING,
     HEADING_KINDS,
     POSITION_KINDS,
+    PROPRIETARY_FIX_MEANING,
     SELF_CONTAINED_KINDS,
     Decoded,
 )
@@ -446,7 +447,10 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
     logger = bool(all_sentences) and with_host >= len(all_sentences) / 2
     reference = "unix" if (logger or dated) else "relative"
     clock = Clock(logger, reference)
-    metadata: dict[str, str] = {"enum.fix_type": FIX_MEANING, "time_source": "logger" if logger else "gnss"}
+    meaning = FIX_MEANING
+    if any(d.kind in SELF_CONTAINED_KINDS for d in all_sentences):
+        meaning += ". " + PROPRIETARY_FIX_MEANING
+    metadata: dict[str, str] = {"enum.fix_type": meaning, "time_source": "logger" if logger else "gnss"}
     comments = [c for f in files for c in f.scan.comments if c][:12]
     if comments:
         metadata["log_header"] = " | ".join(comments)

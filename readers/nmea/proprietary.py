@@ -206,7 +206,6 @@ NOT_READ: dict[str, str] = {
     "PSSNRBD": "Septentrio rover-to-base direction, not the vehicle's heading: not read",
     "PSSNRBV": "Septentrio rover-to-base velocity: not read",
     "GRSH": "range residuals (secondary antenna): no place in the schema",
-    "ROT": "rate of turn: no place in the schema",
     "ROT2": "rate of turn: no place in the schema",
 }
 

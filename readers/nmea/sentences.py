@@ -65,7 +65,10 @@ MODE = {
 FIX_MEANING = (
     "NMEA GGA quality 0 invalid, 1 GNSS, 2 DGNSS/SBAS, 3 PPS, 4 RTK fixed, 5 RTK float, 6 estimated (dead "
     "reckoning), 7 manual, 8 simulator; RMC/GLL/GNS mode A autonomous, D differential, R/F RTK, E estimated, "
-    "M manual, S simulator, N invalid. Estimated, manual and simulator positions are kept with fix_type UNKNOWN. "
+    "M manual, S simulator, N invalid. Estimated, manual and simulator positions are kept with fix_type UNKNOWN"
+)
+# added to FIX_MEANING for a log with proprietary positions (a log without them needs no word of them)
+PROPRIETARY_FIX_MEANING = (
     "Trimble PTNL,GGK quality 0 invalid, 1 autonomous, 2/6/8 RTK float, 3/7/9 RTK fixed, 4/13 DGPS, 5 SBAS, "
     "10/11 OmniSTAR (DGNSS), 12 Location RTK (UNKNOWN); Feyman FMI, Fugro FUGDP and Unicore HPD positions "
     "state no quality spooflens can map: UNKNOWN"
