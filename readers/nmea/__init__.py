@@ -1,18 +1,22 @@
 """NMEA 0183 logs (a ship's voyage record, a receiver's text output) to an EpochTable.
 
 A log is one file of sentences, or a directory of them (each file a source of its own). Sentences are
-split off their logger's wrapping and checked (`lines.py`), decoded with pynmeagps
-(`sentences.py`), and assembled into receivers, epochs and headings on one clock (`assembly.py`):
+split off their logger's wrapping and checked (`lines.py`), decoded with pynmeagps (`sentences.py`;
+proprietary and variant sentences in `proprietary.py`), and assembled into receivers, epochs and
+headings on one clock (`assembly.py`):
 
-- `fixes`: one row per receiver epoch, from GGA/GNS/RMC/GLL with VTG, GSA, GSV and GST;
+- `fixes`: one row per receiver epoch, from GGA/GNS/RMC/GLL with VTG, GSA, GSV and GST (and from the
+  proprietary position sentences: Trimble PTNL,GGK, Feyman FMI, Fugro FUGDP, Unicore HPD; Unicore's
+  secondary-antenna GGAH... as a receiver of their own);
 - `headings`: true headings from HDT, THS, HDG and VHW (a gyrocompass is a reference a spoofer cannot
   move; a GNSS dual-antenna THS can be moved, its talker says which it is), with VHW's speed through the
-  water from the vessel's log.
+  water from the vessel's log; and the headings of proprietary attitude sentences (PASHR, PTNL,AVR,
+  PSSN,HRP, Unicore HPR/TRA2/THS2), filed as GNSS headings.
 
 Time reference `unix` when the log has dates (RMC, ZDA) or logger times, else `relative`. Every
 sentence that is not used is counted by type; bad checksums, cut lines and garbage are counted and
 skipped. `inject` writes a spoofed copy with GGA/GNS/RMC/GLL positions edited in place
-(`spooflens.writers.nmea_rewrite`), every other byte unchanged.
+(`spooflens.writers.nmea_rewrite`), every other byte unchanged (proprietary positions are not edited).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from pathlib import Path
 from readers import ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
 from readers.nmea.lines import UNVERIFIED, SentenceScan, scan_sentences
+from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
 from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, is_empty
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
@@ -52,20 +57,28 @@ def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
     empty: dict[str, int] = {}
     bad: dict[str, int] = {}
     first_error = ""
+    not_read: dict[tuple[str, str], int] = {}
     for s in scan.sentences:
-        what = f"{s.talker}{s.kind}"
-        if s.kind not in WANTED or s.talker.startswith("P"):
-            unused[what] = unused.get(what, 0) + 1
+        what = sentence_name(s)
+        family = family_of(s)
+        standard = s.kind in WANTED and not s.talker.startswith("P")
+        if not standard and family is None:
+            reason = not_read_reason(s)
+            if reason is None:
+                unused[what] = unused.get(what, 0) + 1
+            else:
+                not_read[(what, reason)] = not_read.get((what, reason), 0) + 1
             continue
         if is_empty(s):
             empty[what] = empty.get(what, 0) + 1
             continue
         try:
-            decoded.append(decode(s))
+            decoded.append(decode(s) if family is None else decode_variant(s, family))
         except ParseErrors as err:
             bad[what] = bad.get(what, 0) + 1
             first_error = first_error or f"line {s.line + 1}: {err}"
     skipped += [Skipped(w, "sentence type spooflens does not use", n) for w, n in sorted(unused.items())]
+    skipped += [Skipped(w, reason, n) for (w, reason), n in sorted(not_read.items())]
     skipped += [Skipped(w, "empty sentences (no data in their fields)", n) for w, n in sorted(empty.items())]
     skipped += [Skipped(w, f"sentences pynmeagps cannot decode ({first_error})", n, "lost") for w, n in bad.items()]
     return DecodedFile(label, scan, decoded, skipped)

@@ -47,6 +47,8 @@ from readers.nmea.sentences import (
     FIX_MEANING,
     HEADING_KINDS,
     POSITION_KINDS,
+    PROPRIETARY_FIX_MEANING,
+    SELF_CONTAINED_KINDS,
     Decoded,
 )
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
@@ -55,7 +57,7 @@ from spooflens.schema import FixType
 
 DAY_S = 86_400
 GNSS_TALKERS = ("GN", "GP", "GL", "GA", "GB", "BD", "GQ", "QZ", "GI")
-POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3}
+POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3, **{k: 4 for k in SELF_CONTAINED_KINDS}}
 
 
 @dataclass
@@ -82,6 +84,7 @@ class Epoch:
 class Receiver:
     receiver_id: str
     file: DecodedFile
+    antenna: str = ""  # "H": a Unicore receiver's secondary antenna
     sentences: list[Decoded] = field(default_factory=list)
     epochs: dict[tuple[bool, int], Epoch] = field(default_factory=dict)
     day_anchor_s: float = math.nan  # unwrapped time of day + anchor = seconds since 1970
@@ -105,17 +108,22 @@ def receivers_of(files: list[DecodedFile], skipped: list[Skipped]) -> list[Recei
     for f in files:
         for d in f.decoded:
             if d.kind in POSITION_KINDS:
-                rid = _rid(_source(f, d), d.talker)
-                out.setdefault(rid, Receiver(rid, f))
+                rid = _rid(_source(f, d), d.receiver)
+                out.setdefault(rid, Receiver(rid, f, d.antenna))
         orphans: Counter[str] = Counter()
         for d in f.decoded:
             if d.kind in HEADING_KINDS:
                 continue
             source = _source(f, d)
-            rid = _rid(source, d.talker)
+            rid = _rid(source, d.receiver)
             if rid not in out:
-                mine = [r for r in out.values() if r.file is f and r.receiver_id.rpartition("/")[0] == source]
-                gn = _rid(source, "GN")
+                # never across antennas: a secondary antenna's sky and DOPs are not the primary's
+                mine = [
+                    r
+                    for r in out.values()
+                    if r.file is f and r.receiver_id.rpartition("/")[0] == source and r.antenna == d.antenna
+                ]
+                gn = _rid(source, "GN" + d.antenna)
                 rid = gn if gn in out else (mine[0].receiver_id if len(mine) == 1 else "")
             if rid:
                 out[rid].sentences.append(d)
@@ -204,11 +212,13 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
     gsa = by_kind["GSA"]
     if fix_type == FixType.FIX_3D and gsa and all(g.nav_mode == 2 for g in gsa):
         fix_type = int(FixType.FIX_2D)
-    speed = _first(d.speed_mps for d in by_kind["RMC"] + by_kind["VTG"])
-    course = _first(d.course_deg for d in by_kind["RMC"] + by_kind["VTG"] if math.isfinite(d.speed_mps))
+    own = [d for k in SELF_CONTAINED_KINDS for d in by_kind[k]]  # their own height, satellites, velocity
+    moving = by_kind["RMC"] + by_kind["VTG"] + own
+    speed = _first(d.speed_mps for d in moving)
+    course = _first(d.course_deg for d in moving if math.isfinite(d.speed_mps))
     if speed == 0.0 and not math.isfinite(course):
         course = 0.0
-    gga = by_kind["GGA"] + by_kind["GNS"]
+    gga = by_kind["GGA"] + by_kind["GNS"] + own
     gsa_used = sum(len(g.used_svids) for g in gsa)
     gst = by_kind["GST"]
     std_lat, std_lon = _first(g.std_lat_m for g in gst), _first(g.std_lon_m for g in gst)
@@ -217,11 +227,14 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
         for sv, _, _, c, _ in g.satellites:
             if math.isfinite(c) and c > 0:
                 cn0[(g.talker, sv)] = max(c, cn0.get((g.talker, sv), 0.0))
+    alt, sep = _first(d.alt_msl_m for d in gga), _first(d.geoid_sep_m for d in gga)
+    if math.isfinite(pos.height_m):  # already above the ellipsoid: no separation to add
+        alt, sep = pos.height_m, 0.0
     values = {
         "lat_deg": pos.lat,
         "lon_deg": pos.lon,
-        "alt_msl_m": _first(d.alt_msl_m for d in gga),
-        "geoid_sep_m": _first(d.geoid_sep_m for d in gga),
+        "alt_msl_m": alt,
+        "geoid_sep_m": sep,
         "vel_e_mps": speed * math.sin(math.radians(course)),
         "vel_n_mps": speed * math.cos(math.radians(course)),
         "sats_used": _first([*(d.sats_used for d in gga), float(gsa_used) if gsa_used else math.nan]),
@@ -434,7 +447,10 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
     logger = bool(all_sentences) and with_host >= len(all_sentences) / 2
     reference = "unix" if (logger or dated) else "relative"
     clock = Clock(logger, reference)
-    metadata: dict[str, str] = {"enum.fix_type": FIX_MEANING, "time_source": "logger" if logger else "gnss"}
+    meaning = FIX_MEANING
+    if any(d.kind in SELF_CONTAINED_KINDS for d in all_sentences):
+        meaning += ". " + PROPRIETARY_FIX_MEANING
+    metadata: dict[str, str] = {"enum.fix_type": meaning, "time_source": "logger" if logger else "gnss"}
     comments = [c for f in files for c in f.scan.comments if c][:12]
     if comments:
         metadata["log_header"] = " | ".join(comments)
@@ -542,12 +558,13 @@ def _headings(
     untimed: Counter[str] = Counter()
     magnetic: Counter[str] = Counter()
     outside: Counter[str] = Counter()
+    labels: dict[str, str] = {}  # heading id -> its sentence (HDT, THS2, ASHR, SSNHRP)
     for f in files:
         line_t = times_by_file[id(f)]
         for d in f.decoded:
             if d.kind not in HEADING_KINDS:
                 continue
-            hid = _rid(_source(f, d), f"{d.talker}{d.kind}")
+            hid = _rid(_source(f, d), d.name)
             if not d.valid or not math.isfinite(d.heading_deg):
                 no_value[hid] += 1
                 continue
@@ -559,7 +576,8 @@ def _headings(
                 outside[hid] += 1
                 continue
             magnetic[hid] += d.magnetic_only
-            rows.append((t, hid, d.heading_deg % 360.0, d.talker, d.water_speed_mps))
+            rows.append((t, hid, d.heading_deg % 360.0, d.heading_talker or d.talker, d.water_speed_mps))
+            labels[hid] = d.name[len(d.talker) :]
     for hid, n in no_value.items():
         reason = "headings without a value (invalid, or a speed log without heading)"
         skipped.append(Skipped(hid, reason, n))
@@ -576,7 +594,7 @@ def _headings(
         return None, []
     frame = pd.DataFrame(rows, columns=["t_ns", "heading_id", "heading_deg", "talker", "water_speed_mps"])
     streams = [
-        StreamInfo("heading", str(hid), str(hid), f"NMEA {str(hid)[-3:]}", int(n))
+        StreamInfo("heading", str(hid), str(hid), f"NMEA {labels[str(hid)]}", int(n))
         for hid, n in frame["heading_id"].value_counts(sort=False).items()
     ]
     return frame, streams

@@ -5,13 +5,15 @@ Read: GGA and GNS (position, MSL altitude and geoid separation, quality, satelli
 GSV (per-satellite elevation, azimuth, C/N0), GST (position error sigmas), ZDA (date), and the
 headings HDT and THS (true) and HDG (magnetic; made true with the deviation and variation it carries);
 HDM and an HDG without variation are magnetic headings taken as true, said so where they are assembled.
-Every other sentence type is counted and skipped.
+Proprietary and variant sentences (Unicore, Trimble, Septentrio, Feyman, Fugro) are read in
+`proprietary.py` into the same values. Every other sentence type is counted and skipped.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,9 +26,13 @@ from readers.nmea.lines import Sentence
 from spooflens.schema import FixType
 
 KNOT_MPS = 1852.0 / 3600.0
-POSITION_KINDS = ("GGA", "GNS", "RMC", "GLL")
-TIMED_KINDS = ("GGA", "GNS", "RMC", "GLL", "GST", "ZDA")
-HEADING_KINDS = ("HDT", "THS", "HDG", "HDM", "VHW")
+# position sentences that carry their own height, satellites and velocity, no GSA/GSV/VTG beside them
+# (proprietary.py): Trimble PTNL,GGK, Feyman FMI, Fugro FUGDP, Unicore HPD
+SELF_CONTAINED_KINDS = ("GGK", "FMI", "FUGDP", "HPD")
+POSITION_KINDS = ("GGA", "GNS", "RMC", "GLL", *SELF_CONTAINED_KINDS)
+TIMED_KINDS = ("GGA", "GNS", "RMC", "GLL", "GST", "ZDA", *SELF_CONTAINED_KINDS)
+# ATT: a proprietary attitude sentence's heading (proprietary.py), from GNSS antennas or a GNSS-aided INS
+HEADING_KINDS = ("HDT", "THS", "HDG", "HDM", "VHW", "ATT")
 EPOCH_KINDS = ("VTG", "GSA", "GSV")  # no time of their own: they belong to their receiver's current epoch
 WANTED = frozenset(POSITION_KINDS + TIMED_KINDS + HEADING_KINDS + EPOCH_KINDS)
 
@@ -61,6 +67,12 @@ FIX_MEANING = (
     "reckoning), 7 manual, 8 simulator; RMC/GLL/GNS mode A autonomous, D differential, R/F RTK, E estimated, "
     "M manual, S simulator, N invalid. Estimated, manual and simulator positions are kept with fix_type UNKNOWN"
 )
+# added to FIX_MEANING for a log with proprietary positions (a log without them needs no word of them)
+PROPRIETARY_FIX_MEANING = (
+    "Trimble PTNL,GGK quality 0 invalid, 1 autonomous, 2/6/8 RTK float, 3/7/9 RTK fixed, 4/13 DGPS, 5 SBAS, "
+    "10/11 OmniSTAR (DGNSS), 12 Location RTK (UNKNOWN); Feyman FMI, Fugro FUGDP and Unicore HPD positions "
+    "state no quality spooflens can map: UNKNOWN"
+)
 
 ParseErrors = (
     NMEAMessageError,
@@ -79,6 +91,10 @@ class Decoded:
     """One sentence's values, in SI units and degrees (NaN where the sentence leaves a field blank)."""
 
     sentence: Sentence
+    kind: str = ""  # the role it plays in assembly: GGA for a Unicore GGAH, GGK for PTNL,GGK, ATT for PASHR
+    name: str = ""  # as the log names it: GNGGAH, PTNLGGK, PASHR (its heading stream's id)
+    receiver: str = ""  # receiver key: the talker, + "H" for a secondary antenna, or the proprietary address
+    antenna: str = ""  # "H": a Unicore dual-antenna receiver's secondary antenna (its own receiver)
     tod_s: float = math.nan  # UTC seconds of day
     day: int | None = None  # days since 1970-01-01 (RMC, ZDA)
     lat: float = math.nan
@@ -87,6 +103,7 @@ class Decoded:
     fix_type: int = int(FixType.FIX_3D)
     alt_msl_m: float = math.nan
     geoid_sep_m: float = math.nan
+    height_m: float = math.nan  # ellipsoidal height, where the sentence gives that (PTNL,GGK "EHT")
     speed_mps: float = math.nan
     course_deg: float = math.nan
     sats_used: float = math.nan
@@ -100,11 +117,13 @@ class Decoded:
     heading_deg: float = math.nan
     water_speed_mps: float = math.nan  # VHW: the vessel's log, speed through the water
     magnetic_only: bool = False  # HDM, or HDG without variation: a magnetic heading, taken as true
+    heading_talker: str = ""  # the talker a heading row is filed under when not the sentence's own
     satellites: list[tuple[int, float, float, float, int]] = field(default_factory=list)  # svid, el, az, C/N0, sig
 
-    @property
-    def kind(self) -> str:
-        return self.sentence.kind
+    def __post_init__(self) -> None:
+        self.kind = self.kind or self.sentence.kind
+        self.name = self.name or f"{self.sentence.talker}{self.sentence.kind}"
+        self.receiver = self.receiver or self.sentence.talker
 
     @property
     def talker(self) -> str:
@@ -121,8 +140,8 @@ def _str(msg: Any, name: str) -> str:
     return v if isinstance(v, str) else ""
 
 
-def _tod(msg: Any) -> float:
-    t = getattr(msg, "time", None)
+def _tod(msg: Any, name: str = "time") -> float:
+    t = getattr(msg, name, None)
     if not isinstance(t, dt.time):
         return math.nan
     return t.hour * 3600 + t.minute * 60 + t.second + t.microsecond / 1e6
@@ -255,7 +274,9 @@ def _vhw(d: Decoded, msg: Any) -> None:
     d.water_speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
 
 
-_DECODERS = {
+Reader = Callable[[Decoded, Any], None]
+
+DECODERS: dict[str, Reader] = {
     "GGA": _gga,
     "GNS": _gns,
     "RMC": _rmc,
@@ -288,12 +309,18 @@ def with_checksum(text: bytes) -> bytes:
     return text + b"*" + calc_checksum(text[1:].decode("latin-1")).encode("ascii")
 
 
-def decode(sentence: Sentence) -> Decoded:
-    """Values of a sentence of a WANTED kind; raises one of ParseErrors when its fields are not valid."""
+def parse(sentence: Sentence) -> Any:
+    """pynmeagps' message of a sentence; raises one of ParseErrors when its fields are not valid."""
     # checksum already verified (lines.py), or absent from the whole file
     msg = NMEAReader.parse(with_checksum(sentence.text), validate=VALNONE)
     if msg is None:
         raise NMEAParseError(f"pynmeagps does not know {sentence.talker}{sentence.kind}")
+    return msg
+
+
+def decode(sentence: Sentence) -> Decoded:
+    """Values of a sentence of a WANTED kind; raises one of ParseErrors when its fields are not valid."""
+    msg = parse(sentence)
     out = Decoded(sentence)
-    _DECODERS[sentence.kind](out, msg)
+    DECODERS[sentence.kind](out, msg)
     return out
