@@ -232,8 +232,29 @@ def spoofed(summary: dict[str, Any]) -> bool:
     return bool((summary.get("verdict") or {}).get("spoofed"))
 
 
+GNSS_ROLES = ("fix", "observations", "satellites")
+# the longest interval between a receiver's epochs that still counts as logged time (RINEX at 30 s is logged
+# throughout); beyond it, a stream's epochs count this long each
+MAX_EPOCH_PERIOD_S = 60.0
+
+
 def hours(summary: dict[str, Any]) -> float:
-    return sum(float(seg.get("duration_s") or 0.0) for seg in segments(summary)) / 3600.0
+    """The hours of GNSS the log holds: per recording its duration, but at most what its GNSS streams cover
+    (each epoch at most `MAX_EPOCH_PERIOD_S`): a test snippet stitched from sessions years apart holds a
+    handful of fixes, not the years between them (pynmeagps' Unicore sample: 78 million seconds)."""
+    total = 0.0
+    for seg in segments(summary):
+        duration = float(seg.get("duration_s") or 0.0)
+        streams = [st for st in seg.get("streams") or summary.get("streams") or [] if st.get("role") in GNSS_ROLES]
+        covered = 0.0
+        for st in streams:
+            count = int(st.get("count") or 0)
+            first, last = st.get("first_s"), st.get("last_s")
+            span = float(last) - float(first) if first is not None and last is not None and count > 1 else 0.0
+            period = min(span / (count - 1), MAX_EPOCH_PERIOD_S) if count > 1 else MAX_EPOCH_PERIOD_S
+            covered = max(covered, min(span, count * period) if count > 1 else min(float(count) * period, duration))
+        total += min(duration, covered) if streams else duration
+    return total / 3600.0
 
 
 def verdict_extras(summary: dict[str, Any]) -> dict[str, Any]:

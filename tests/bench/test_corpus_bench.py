@@ -24,7 +24,17 @@ from spooflens.bench.corpus_bench import (
     run_corpus,
 )
 from spooflens.bench.corpus_logs import discover, is_truth_of_another, tags_of
-from spooflens.bench.corpus_runs import DAMAGED, INTERNAL, READ, REFUSED, TIMEOUT, LogFacts, command_result, score
+from spooflens.bench.corpus_runs import (
+    DAMAGED,
+    INTERNAL,
+    READ,
+    REFUSED,
+    TIMEOUT,
+    LogFacts,
+    command_result,
+    hours,
+    score,
+)
 from spooflens.bench.sandbox import RunResult
 
 HEADER = "path\tformat\tvehicle\tduration_s\tsource_repo\tcommit\tsource_path\tlicence\tnotes\n"
@@ -239,3 +249,18 @@ def test_a_counterfeit_satellite_counts_as_seen_only_where_raim_or_the_systems_c
     assert kind.seen_in(replace(facts, analyses_run=frozenset({"satellite_horizon", "raim"})))
     ramp = next(k for k in BATTERY if k.name == "ramp 2 m/s")
     assert not ramp.seen_in(facts) and ramp.seen_in(replace(facts, classes_run=frozenset({"inertial"})))
+
+
+def test_a_log_stitched_from_sessions_years_apart_counts_the_time_its_fixes_cover() -> None:
+    # one fix 78 million seconds after the rest (pynmeagps' Unicore sample): a minute, not 2.5 years; a day
+    # of 30 s RINEX epochs counts whole, a log without GNSS streams counts its duration
+    stitched = {"duration_s": 78e6, "streams": [{"role": "fix", "count": 1, "first_s": 78e6, "last_s": 78e6}]}
+    assert hours(stitched) == pytest.approx(60.0 / 3600.0)
+    rinex = {
+        "duration_s": 86370.0,
+        "streams": [{"role": "observations", "count": 2880, "first_s": 0.0, "last_s": 86370.0}],
+    }
+    assert hours(rinex) == pytest.approx(86370.0 / 3600.0)
+    gappy = {"duration_s": 7200.0, "streams": [{"role": "fix", "count": 11, "first_s": 0.0, "last_s": 7200.0}]}
+    assert hours(gappy) == pytest.approx(11 * 60.0 / 3600.0)
+    assert hours({"duration_s": 600.0, "streams": []}) == pytest.approx(600.0 / 3600.0)
