@@ -16,9 +16,11 @@ to the vehicle's own shock, a tumble or an impact its IMU read just before the a
 Interference alarms in a spoofing incident that begin before its first spoofing evidence, and the stretch
 of its alarms a jammed receiver's noise accounts for before the first evidence no cause accounts for (the
 takeover), are an event of their own (unless a jamming event of the interference detector's covers it):
-the spoofing event begins at the takeover. A jamming event whose end lies within `SEQUENCE_S` of a
-spoofing event's onset is linked to it (`follows` / `followed_by`): jamming to break the receiver's lock,
-then the takeover.
+the spoofing event begins at the takeover. Likewise alarms that corroborated nothing before the spoofing
+evidence began (natural causes, one-class anomalies, separated from it by more than the corroboration
+window) are an event of their own kind, and the spoofing incident begins with its evidence. A jamming event
+whose end lies within `SEQUENCE_S` of a spoofing event's onset is linked to it (`follows` / `followed_by`):
+jamming to break the receiver's lock, then the takeover.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from dataclasses import dataclass, replace
 
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
-from spooflens.pipeline.evidence import EVIDENCE, NOT_SPOOFING, Evidence, label
+from spooflens.pipeline.evidence import CORROBORATION_S, EVIDENCE, NOT_SPOOFING, Evidence, confidence, label
 from spooflens.pipeline.explanations import (
     ExplanationOptions,
     Weighed,
@@ -290,6 +292,57 @@ def _lead_in(incident: Incident, index: int, results: Sequence[DetectorResult]) 
     )
 
 
+def spoofing_begins_s(incident: Incident) -> float | None:
+    """Where the incident's spoofing evidence begins: the first time evidence no natural cause accounts
+    for corroborates (an independent reference, or two classes within `CORROBORATION_S`), moved back over
+    the unexplained alarms chained to it by gaps of at most `CORROBORATION_S` (a ramp's GNSS-only alarms
+    before its second class confirms it are the ramp's). None: nothing corroborates."""
+    spans = sorted(sp for sp in incident.counted_spans if sp[0] not in NOT_SPOOFING)
+    times = [a0 for c, a0, _ in spans if confidence({c}) != "low"]
+    times += [
+        max(a0, b0)
+        for c, a0, a1 in spans
+        for d, b0, b1 in spans
+        if c != d and b0 <= a1 + CORROBORATION_S and a0 <= b1 + CORROBORATION_S and confidence({c, d}) != "low"
+    ]
+    if not times:
+        return None
+    begins = min(times)
+    moved = True
+    while moved:
+        moved = False
+        for _, a0, a1 in spans:
+            if a0 < begins <= a1 + CORROBORATION_S:
+                begins, moved = a0, True
+    return begins
+
+
+def _natural_lead_in(incident: Incident, index: int, begins: float) -> Event:
+    """The stretch of a spoofing incident before its spoofing evidence begins (`spoofing_begins_s`), where
+    the alarms corroborated nothing: natural causes, or anomalies of one class at a time, an event of its
+    own (an urban drive's degradation for 10 minutes, then a spoofer: the spoofing begins with the spoofer)."""
+    named = [e for e in incident.explanations if e.kind not in (Kind.UNKNOWN, Kind.JAMMING, Kind.SPOOFING)]
+    kind = named[0].kind if named else Kind.UNKNOWN
+    evidence = tuple(e.text for e in named) or ("alarms of one evidence class at a time, none corroborated",)
+    text = (
+        f"{kind.value.replace('_', ' ')} from {incident.start_s:.2f} s to {begins:.2f} s, before the spoofing "
+        f"evidence: {evidence[0]}"
+    )
+    return Event(
+        kind,
+        incident.start_s,
+        begins,
+        incident.start_s,
+        "low",
+        index,
+        text,
+        evidence,
+        ("nothing corroborated before the spoofing evidence began",),
+        receivers=incident.receivers,
+        satellites=incident.satellites,
+    )
+
+
 def _after_lead_in(incident: Incident, results: Sequence[DetectorResult], jam_s: float, takeover: float) -> Incident:
     """The spoofing incident from its first evidence no natural cause accounts for (`takeover`): its first
     alarm there, and an onset estimated before it (from alarms under the jamming since `jam_s`) replaced by
@@ -404,6 +457,9 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
                 end_method="last alarm (the coasted INS's departure was the jammed receiver's noise)",
             )
         lead = _lead_in(inc, k, results) if decided.kind == Kind.SPOOFING else None
+        begins = spoofing_begins_s(inc) if decided.kind == Kind.SPOOFING and lead is None else None
+        if lead is None and begins is not None and begins - inc.start_s > CORROBORATION_S:
+            lead = _natural_lead_in(inc, k, begins)
         if lead is not None:
             leads.append(lead)
             inc = _after_lead_in(inc, results, lead.start_s, lead.end_s)

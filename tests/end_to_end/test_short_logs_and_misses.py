@@ -22,6 +22,7 @@ from spooflens.geodesy import add_enu_offset
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.reconstruction import NO_CLEAN_COASTS, Placebo
 from spooflens.pipeline.run import analyze_table
+from spooflens.pipeline.verdict import Kind
 from spooflens.schema import FRAMES
 
 
@@ -160,6 +161,22 @@ def test_a_drag_of_the_real_pair_with_each_receivers_tracking_noise_under_it_is_
     alarms = _collapse_alarms(_tracking_noise(spoofed, start_s, 0.1, seed=3))
     assert alarms and start_s <= alarms[0].start_s <= start_s + 15.0
     assert abs((alarms[0].onset_s or 0.0) - start_s) <= 10.0
+
+
+def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_before_it() -> None:
+    """The drive's first 10 minutes are one long anomaly of natural causes (HDOP x55, satellites 12 -> 6,
+    mode switches: an urban canyon), and the drag from 600 s joins it: the incident read "SPOOFING from
+    46 s". Nothing corroborated before 601 s, and the unexplained one-class alarms before it end at 414 s:
+    the spoofing now begins with its evidence, the stretch before is an event of its own kind."""
+    table = read_log(real_log("corpus/gps-measurement-tools"))
+    spoofed, _ = apply_attack(table, parse_attack("single_antenna:rate=1,start=600"))
+    verdict = analyze_table(_tracking_noise(spoofed, 600.0, 0.1, seed=3)).verdict
+    (attack,) = [i for i in verdict.incidents if i.is_spoofing]
+    assert 598.0 <= attack.onset_s <= 602.0 and 600.0 <= attack.start_s <= 602.0, attack
+    assert Evidence.SECOND_RECEIVER in attack.unexplained
+    (before,) = [e for e in verdict.events if e.end_s <= attack.start_s and e.start_s < 100.0]
+    assert before.kind == Kind.DEGRADATION and "before the spoofing evidence" in before.text
+    assert verdict.headline.startswith("SPOOFING DETECTED: 1 incident(s); first from 600.00 s")
 
 
 @pytest.mark.parametrize("start_s", [600.0, 1200.0])
