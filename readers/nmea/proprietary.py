@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from readers.nmea.lines import Sentence
-from readers.nmea.sentences import DECODERS, Decoded, Reader, _num, _str, _tod, parse
+from readers.nmea.sentences import DECODERS, Decoded, Reader, field_number, field_text, parse, time_of_day
 from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, NS, gps_utc_offset_ns
 from spooflens.schema import FixType
 
@@ -64,7 +64,7 @@ def _key(s: Sentence) -> str:
 
 def _unicore_attitude(d: Decoded, msg: Any) -> None:
     """HPR, HPR2, TRA2: heading of the antenna baseline, degrees from true north."""
-    d.heading_deg = _num(msg, "heading")
+    d.heading_deg = field_number(msg, "heading")
 
 
 def _unicore_hpd(d: Decoded, msg: Any) -> None:
@@ -73,13 +73,13 @@ def _unicore_hpd(d: Decoded, msg: Any) -> None:
     pynmeagps does not say which height `alt` is: it is taken as the GGA altitude is (above MSL, no
     separation), which assembly lists as a repair. The heading it carries is not read: one sentence makes one
     row, and the receiver's own heading sentences (HPR, THS2) carry it too."""
-    week, tow = _num(msg, "wno"), _num(msg, "tow")
+    week, tow = field_number(msg, "wno"), field_number(msg, "tow")
     if math.isfinite(week) and math.isfinite(tow):
         gps_ns = round((week * 7 * 86_400 + tow) * NS)
         unix_s = (gps_ns - int(gps_utc_offset_ns(gps_ns)) + GPS_EPOCH_UNIX_NS) / NS
         d.day, d.tod_s = int(unix_s // 86_400), unix_s % 86_400
-    d.lat, d.lon, d.alt_msl_m = _num(msg, "lat"), _num(msg, "lon"), _num(msg, "alt")
-    east, north = _num(msg, "velE"), _num(msg, "velN")
+    d.lat, d.lon, d.alt_msl_m = field_number(msg, "lat"), field_number(msg, "lon"), field_number(msg, "alt")
+    east, north = field_number(msg, "velE"), field_number(msg, "velN")
     d.speed_mps = math.hypot(east, north)
     d.course_deg = math.degrees(math.atan2(east, north)) % 360.0
     d.fix_type = int(FixType.UNKNOWN)
@@ -120,27 +120,27 @@ def _trimble_ggk(d: Decoded, msg: Any) -> None:
     """PTNL,GGK. Its date is not read: Trimble's manuals give it as ddmmyy and as mmddyy (pynmeagps reads
     ddmmyy, and finds no date in `051910`), so the receiver's times stay days-less as a GGA's. Its DOP is a
     PDOP, which the schema has no column for."""
-    d.tod_s = _tod(msg, "utctime")
-    d.lat, d.lon = _num(msg, "lat"), _num(msg, "lon")
+    d.tod_s = time_of_day(msg, "utctime")
+    d.lat, d.lon = field_number(msg, "lat"), field_number(msg, "lon")
     quality = getattr(msg, "gpsQual", "")
     if isinstance(quality, int):
         d.fix_type = int(TRIMBLE_GGK_QUALITY.get(quality, FixType.UNKNOWN))
         d.valid = quality != 0
-    d.sats_used = _num(msg, "sip")
-    d.height_m = _ellipsoidal(_str(msg, "height"))
+    d.sats_used = field_number(msg, "sip")
+    d.height_m = _ellipsoidal(field_text(msg, "height"))
 
 
 def _trimble_avr(d: Decoded, msg: Any) -> None:
     """PTNL,AVR: yaw of the moving-baseline vector, degrees; quality 0 is no vector."""
-    d.heading_deg = _num(msg, "yaw")
+    d.heading_deg = field_number(msg, "yaw")
     d.valid = getattr(msg, "gpsQual", "") != 0
     d.heading_talker = GNSS_HEADING_TALKER
 
 
 def _pashr(d: Decoded, msg: Any) -> None:
     """PASHR (RT300 attitude): the heading, when flagged T (true north)."""
-    d.heading_deg = _num(msg, "trueHdg")
-    d.valid = _str(msg, "trueHdgInd") == "T"
+    d.heading_deg = field_number(msg, "trueHdg")
+    d.valid = field_text(msg, "trueHdgInd") == "T"
     d.heading_talker = GNSS_HEADING_TALKER
 
 
@@ -149,7 +149,7 @@ def _pashr(d: Decoded, msg: Any) -> None:
 
 def _septentrio_hrp(d: Decoded, msg: Any) -> None:
     """PSSN,HRP: the true heading, degrees. Its attitude-mode code is not documented in pynmeagps: not read."""
-    d.heading_deg = _num(msg, "hdg")
+    d.heading_deg = field_number(msg, "hdg")
     d.heading_talker = GNSS_HEADING_TALKER
 
 
@@ -157,17 +157,17 @@ def _feyman_fmi(d: Decoded, msg: Any) -> None:
     """GPFMI: time, position (degrees), altitude and satellites used. Exactly 0 deg, 0 deg is the module
     before it has a solution (pynmeagps' own sample starts so), not a place. Its attitude angles are not read:
     pynmeagps gives no unit for them; nor is its navigation mode, whose codes it does not list."""
-    d.tod_s = _tod(msg)
-    d.lat, d.lon, d.alt_msl_m = _num(msg, "lat"), _num(msg, "lon"), _num(msg, "alt")
+    d.tod_s = time_of_day(msg)
+    d.lat, d.lon, d.alt_msl_m = field_number(msg, "lat"), field_number(msg, "lon"), field_number(msg, "alt")
     d.valid = not (d.lat == 0.0 and d.lon == 0.0)
-    d.sats_used = _num(msg, "numSV")
+    d.sats_used = field_number(msg, "numSV")
     d.fix_type = int(FixType.UNKNOWN)
 
 
 def _fugro_gdp(d: Decoded, msg: Any) -> None:
     """PFUGDP: time and position. Its satellites are in view (not used), its quality code is undocumented."""
-    d.tod_s = _tod(msg, "utctime")
-    d.lat, d.lon = _num(msg, "lat"), _num(msg, "lon")
+    d.tod_s = time_of_day(msg, "utctime")
+    d.lat, d.lon = field_number(msg, "lat"), field_number(msg, "lon")
     d.fix_type = int(FixType.UNKNOWN)
 
 

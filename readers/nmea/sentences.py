@@ -130,17 +130,20 @@ class Decoded:
         return self.sentence.talker
 
 
-def _num(msg: Any, name: str) -> float:
+def field_number(msg: Any, name: str) -> float:
+    """A decoded sentence's numeric field (NaN when empty or not a number)."""
     v = getattr(msg, name, "")
     return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else math.nan
 
 
-def _str(msg: Any, name: str) -> str:
+def field_text(msg: Any, name: str) -> str:
+    """A decoded sentence's text field ("" when empty)."""
     v = getattr(msg, name, "")
     return v if isinstance(v, str) else ""
 
 
-def _tod(msg: Any, name: str = "time") -> float:
+def time_of_day(msg: Any, name: str = "time") -> float:
+    """A decoded sentence's time field as seconds of the day (NaN when empty)."""
     t = getattr(msg, name, None)
     if not isinstance(t, dt.time):
         return math.nan
@@ -155,7 +158,7 @@ def _day(year: int, month: int, day: int) -> int | None:
 
 
 def _position(d: Decoded, msg: Any) -> None:
-    d.lat, d.lon = _num(msg, "lat"), _num(msg, "lon")
+    d.lat, d.lon = field_number(msg, "lat"), field_number(msg, "lon")
 
 
 def _mode(d: Decoded, mode: str) -> None:
@@ -165,48 +168,48 @@ def _mode(d: Decoded, mode: str) -> None:
 
 
 def _gga(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
+    d.tod_s = time_of_day(msg)
     _position(d, msg)
     quality = getattr(msg, "quality", "")
     if isinstance(quality, int):
         d.fix_type = int(GGA_QUALITY.get(quality, FixType.UNKNOWN))
         d.valid = quality != 0
-    d.sats_used, d.hdop = _num(msg, "numSV"), _num(msg, "HDOP")
-    d.alt_msl_m, d.geoid_sep_m = _num(msg, "alt"), _num(msg, "sep")
+    d.sats_used, d.hdop = field_number(msg, "numSV"), field_number(msg, "HDOP")
+    d.alt_msl_m, d.geoid_sep_m = field_number(msg, "alt"), field_number(msg, "sep")
 
 
 def _gns(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
+    d.tod_s = time_of_day(msg)
     _position(d, msg)
-    _mode(d, _str(msg, "posMode"))
-    d.sats_used, d.hdop = _num(msg, "numSV"), _num(msg, "HDOP")
-    d.alt_msl_m, d.geoid_sep_m = _num(msg, "alt"), _num(msg, "sep")
+    _mode(d, field_text(msg, "posMode"))
+    d.sats_used, d.hdop = field_number(msg, "numSV"), field_number(msg, "HDOP")
+    d.alt_msl_m, d.geoid_sep_m = field_number(msg, "alt"), field_number(msg, "sep")
 
 
 def _rmc(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
+    d.tod_s = time_of_day(msg)
     _position(d, msg)
-    d.valid = _str(msg, "status") == "A"
-    _mode(d, _str(msg, "posMode"))
-    d.speed_mps = _num(msg, "spd") * KNOT_MPS
-    d.course_deg = _num(msg, "cog")
+    d.valid = field_text(msg, "status") == "A"
+    _mode(d, field_text(msg, "posMode"))
+    d.speed_mps = field_number(msg, "spd") * KNOT_MPS
+    d.course_deg = field_number(msg, "cog")
     date = getattr(msg, "date", None)
     if isinstance(date, dt.date):
         d.day = (date - dt.date(1970, 1, 1)).days
 
 
 def _gll(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
+    d.tod_s = time_of_day(msg)
     _position(d, msg)
-    d.valid = _str(msg, "status") == "A"
-    _mode(d, _str(msg, "posMode"))
+    d.valid = field_text(msg, "status") == "A"
+    _mode(d, field_text(msg, "posMode"))
 
 
 def _vtg(d: Decoded, msg: Any) -> None:
-    knots, kmh = _num(msg, "sogn"), _num(msg, "sogk")
+    knots, kmh = field_number(msg, "sogn"), field_number(msg, "sogk")
     d.speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
-    d.course_deg = _num(msg, "cogt")
-    _mode(d, _str(msg, "posMode"))
+    d.course_deg = field_number(msg, "cogt")
+    _mode(d, field_text(msg, "posMode"))
 
 
 def _gsa(d: Decoded, msg: Any) -> None:
@@ -214,7 +217,7 @@ def _gsa(d: Decoded, msg: Any) -> None:
     d.used_svids = tuple(v for v in svids if isinstance(v, int))
     nav = getattr(msg, "navMode", "")
     d.nav_mode = nav if isinstance(nav, int) else 0
-    d.hdop, d.vdop = _num(msg, "HDOP"), _num(msg, "VDOP")
+    d.hdop, d.vdop = field_number(msg, "HDOP"), field_number(msg, "VDOP")
 
 
 def _gsv(d: Decoded, msg: Any) -> None:
@@ -224,53 +227,67 @@ def _gsv(d: Decoded, msg: Any) -> None:
         sv = getattr(msg, f"svid_{i:02d}", "")
         if isinstance(sv, int):
             d.satellites.append(
-                (sv, _num(msg, f"elv_{i:02d}"), _num(msg, f"az_{i:02d}"), _num(msg, f"cno_{i:02d}"), int(sig))
+                (
+                    sv,
+                    field_number(msg, f"elv_{i:02d}"),
+                    field_number(msg, f"az_{i:02d}"),
+                    field_number(msg, f"cno_{i:02d}"),
+                    int(sig),
+                )
             )
 
 
 def _gst(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
-    d.std_lat_m, d.std_lon_m, d.std_alt_m = _num(msg, "stdLat"), _num(msg, "stdLong"), _num(msg, "stdAlt")
+    d.tod_s = time_of_day(msg)
+    d.std_lat_m, d.std_lon_m, d.std_alt_m = (
+        field_number(msg, "stdLat"),
+        field_number(msg, "stdLong"),
+        field_number(msg, "stdAlt"),
+    )
 
 
 def _zda(d: Decoded, msg: Any) -> None:
-    d.tod_s = _tod(msg)
+    d.tod_s = time_of_day(msg)
     y, m, day = (getattr(msg, k, "") for k in ("year", "month", "day"))
     if isinstance(y, int) and isinstance(m, int) and isinstance(day, int):
         d.day = _day(y, m, day)
 
 
 def _hdt(d: Decoded, msg: Any) -> None:
-    d.heading_deg = _num(msg, "headingT")
+    d.heading_deg = field_number(msg, "headingT")
 
 
 def _ths(d: Decoded, msg: Any) -> None:
-    d.heading_deg = _num(msg, "headt")
-    d.valid = _str(msg, "mi") not in ("V",)  # V: data not valid; A autonomous, E estimated, M manual, S simulator
+    d.heading_deg = field_number(msg, "headt")
+    d.valid = field_text(msg, "mi") not in ("V",)  # V: data not valid; A autonomous, E estimated, M manual, S simulator
 
 
 def _hdg(d: Decoded, msg: Any) -> None:
     """Magnetic sensor heading + deviation + variation (east positive) = true heading; NaN without variation."""
-    heading, deviation, variation = _num(msg, "headingM"), _num(msg, "deviation"), _num(msg, "variation")
+    heading, deviation, variation = (
+        field_number(msg, "headingM"),
+        field_number(msg, "deviation"),
+        field_number(msg, "variation"),
+    )
     sign = {"E": 1.0, "W": -1.0}
-    dev = deviation * sign.get(_str(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
-    if not math.isfinite(variation) or _str(msg, "variationEW") not in sign:
+    dev = deviation * sign.get(field_text(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
+    if not math.isfinite(variation) or field_text(msg, "variationEW") not in sign:
         d.heading_deg = heading + dev
         d.magnetic_only = True
         return
-    d.heading_deg = heading + dev + variation * sign[_str(msg, "variationEW")]
+    d.heading_deg = heading + dev + variation * sign[field_text(msg, "variationEW")]
 
 
 def _hdm(d: Decoded, msg: Any) -> None:
     """A magnetic heading (an autopilot's, a fluxgate's), no deviation or variation to make it true."""
-    d.heading_deg = _num(msg, "headingM")
+    d.heading_deg = field_number(msg, "headingM")
     d.magnetic_only = True
 
 
 def _vhw(d: Decoded, msg: Any) -> None:
     """The speed log's sentence: true heading (when the compass feeds it) and speed through the water."""
-    d.heading_deg = _num(msg, "hdgT")
-    knots, kmh = _num(msg, "spdN"), _num(msg, "spdK")
+    d.heading_deg = field_number(msg, "hdgT")
+    knots, kmh = field_number(msg, "spdN"), field_number(msg, "spdK")
     d.water_speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
 
 
