@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from functools import cache
 
+import numpy as np
+import pytest
+
 from spooflens.navigation.imu_models import ImuGrade
-from spooflens.navigation.noise_learning import NoisePrior, learn_noise
+from spooflens.navigation.noise_learning import LearnOptions, NoisePrior, coordinate_search, learn_noise
 from spooflens.navigation.product import Navigation, imu_preset, solve_navigation
 from spooflens.pipeline.registry import AnalyzeOptions
 from spooflens.simulation.simulate import simulate
@@ -56,3 +59,28 @@ def test_a_prior_that_stands_says_it_came_from_the_baseline() -> None:
     text = stood.describe()
     assert "from the scatter" not in text and "(defaults)" not in text
     assert "IMU noise 2 x preset" in text
+
+
+class _Bowl:
+    """A likelihood with its best IMU scale at `best`: what `coordinate_search` sees of a log (no filter run)."""
+
+    def __init__(self, best: float) -> None:
+        self.best = best
+
+    def __call__(self, opts: float) -> float:
+        return 100.0 * float(np.log(opts / self.best)) ** 2
+
+    def first_better(self, candidates: list[float], best: float) -> tuple[int, float] | None:
+        return next(((i, v) for i, c in enumerate(candidates) if (v := self(c)) < best), None)
+
+
+@pytest.mark.parametrize(("optimum", "learned"), [(300.0, (240.0, 380.0)), (1.0 / 300.0, (1 / 27.5, 1 / 26.5))])
+def test_a_noise_still_rising_at_the_top_of_the_sweeps_reach_goes_on_and_one_falling_stops_there(
+    optimum: float, learned: tuple[float, float]
+) -> None:
+    # two sweeps of x3 and x sqrt(3) reach 27 times the start: a log noisier than that (log171's vibrating
+    # IMU) is searched on; one quieter stays at 1/27 (the INS trusted less than it could be: never more
+    # false alarms, and trusting it more would need the long false-alarm runs first)
+    bowl, make = _Bowl(optimum), lambda p: p["imu"]
+    _, params = coordinate_search(bowl, make, {"imu": 1.0}, ["imu"], LearnOptions())  # type: ignore[arg-type]
+    assert learned[0] <= params["imu"] <= learned[1]
