@@ -398,4 +398,12 @@ def _is_tlog(path: Path, head: bytes) -> bool:
     return True
 
 
-FORMATS = (ReaderFormat("tlog", "MAVLink telemetry log (.tlog)", read_tlog, _is_tlog),)
+FORMATS = (
+    ReaderFormat(
+        "tlog",
+        "MAVLink telemetry log (.tlog)",
+        read_tlog,
+        _is_tlog,
+        rewrite="spooflens.writers.tlog_rewrite:rewrite_tlog",
+    ),
+)
