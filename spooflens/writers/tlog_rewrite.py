@@ -27,7 +27,6 @@ bytes across damage). A packet that fails its CRC is no fix of the table: it is 
 from __future__ import annotations
 
 import math
-import os
 import struct
 from collections import Counter
 from collections.abc import Mapping
@@ -45,16 +44,16 @@ from spooflens.writers.clock_shift import clock_shifts
 V1, V2 = 0xFE, 0xFD
 SIGNED = 0x01  # MAVLink 2 incompat flag: a signature follows the CRC
 NO_FIX = 1  # GPS_FIX_TYPE_NO_FIX
-HEADER_LEN = {V1: 6, V2: 10}
 MOTION = ["lat_deg", "lon_deg", "height_m", "vel_e_mps", "vel_n_mps"]
-# table column -> (field, scale to the field's unit, largest value that is not the field's "unknown")
+# table column -> (field, scale to the field's unit, its range without the values that mean "unknown":
+# 65535 DOP, 255 satellites, 0 accuracy)
 INDICATORS = {
-    "hdop": ("eph", 100.0, 65534),
-    "vdop": ("epv", 100.0, 65534),
-    "h_acc_m": ("h_acc", 1000.0, 2**32 - 1),
-    "v_acc_m": ("v_acc", 1000.0, 2**32 - 1),
-    "vel_acc_mps": ("vel_acc", 1000.0, 2**32 - 1),
-    "sats_used": ("satellites_visible", 1.0, 254),
+    "hdop": ("eph", 100.0, 0, 65534),
+    "vdop": ("epv", 100.0, 0, 65534),
+    "h_acc_m": ("h_acc", 1000.0, 1, 2**32 - 1),
+    "v_acc_m": ("v_acc", 1000.0, 1, 2**32 - 1),
+    "vel_acc_mps": ("vel_acc", 1000.0, 1, 2**32 - 1),
+    "sats_used": ("satellites_visible", 1.0, 0, 254),
 }
 ATTACKED = [*MOTION, *INDICATORS]
 INT32 = (-(2**31), 2**31 - 1)
@@ -69,7 +68,6 @@ NOT_REWRITTEN = {
 
 def _dialect() -> Any:
     """pymavlink's ardupilotmega dialect, the one the reader parses with (v2: it parses v1 packets too)."""
-    os.environ.setdefault("MAVLINK20", "1")
     from pymavlink.dialects.v20 import ardupilotmega
 
     return ardupilotmega
@@ -143,9 +141,9 @@ def _new_fields(r: Mapping[str, Any], fields: Mapping[str, Any], velocities: boo
     if r["lost"]:
         return {"fix_type": NO_FIX}
     out = _position(r, fields) | (_velocity(r) if velocities else {})
-    for column, (field, scale, high) in INDICATORS.items():
+    for column, (field, scale, low, high) in INDICATORS.items():
         if _moved(r[column], r[f"{column}_0"]):
-            out[field] = _clipped(r[column] * scale, 0, high)
+            out[field] = _clipped(r[column] * scale, low, high)
     time_usec = int(fields.get("time_usec", 0))
     shift_us = round(float(r["shift_s"]) * 1e6)
     if shift_us and time_usec >= UNIX_US_MIN:  # the receiver's own UNIX time, moved with the spoofer's clock

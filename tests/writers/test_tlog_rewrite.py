@@ -205,3 +205,31 @@ def test_a_packet_that_fails_its_crc_is_copied_as_it_is(tmp_path: Path, capsys: 
     assert len(bad) == damaged and all(p0 == p1 for p0, p1 in bad)
     assert sum(p0 != p1 for p0, p1 in gps) == 150 - damaged
     assert len(read_log(dst).fixes) == 300 - damaged
+
+
+def analyze_json(path: Path, tmp_path: Path) -> dict[str, Any]:
+    report = tmp_path / f"{path.name}.json"
+    assert main(["analyze", str(path), "-o", str(tmp_path / "x.rrd"), "--json", str(report), "--quiet"]) == 0
+    summary: dict[str, Any] = json.loads(report.read_text())
+    return summary
+
+
+@pytest.mark.slow
+def test_analyze_finds_the_step_and_sees_the_jammer_only_as_degradation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A tlog carries no C/N0, AGC, noise or jamming indicator: the interference detector cannot run on the
+    jammed copy, and the satellites lost with the accuracies grown read as a degradation, not spoofing."""
+    src = tmp_path / "flight.tlog"
+    write_tlog(src, seconds=90.0)
+    inject(src, "step:offset=50,start=50", tmp_path / "step.tlog", capsys)
+    (spoofing,) = analyze_json(tmp_path / "step.tlog", tmp_path)["verdict"]["events"]
+    assert spoofing["kind"] == "spoofing" and 49.0 <= spoofing["onset_s"] <= 50.5
+
+    inject(src, "jam:start=40,end=80,lost=5", tmp_path / "jam.tlog", capsys)
+    summary = analyze_json(tmp_path / "jam.tlog", tmp_path)
+    assert not summary["verdict"]["spoofed"]
+    (degradation,) = summary["verdict"]["events"]
+    assert degradation["kind"] == "degradation" and degradation["start_s"] <= 41.0 and degradation["end_s"] >= 79.0
+    (interference,) = [a for a in summary["analyses"] if a["name"] == "interference"]
+    assert not interference["ran"] and interference["reason"].startswith("no C/N0 (per satellite or mean), AGC")
