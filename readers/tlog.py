@@ -30,11 +30,13 @@ station's clock is `time_offset_s`.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import os
 import struct
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -58,6 +60,7 @@ _FIX = {
     7: FixType.FIX_3D,
     8: FixType.DGNSS,
 }
+GPS_KINDS = ("GPS_RAW_INT", "GPS2_RAW")  # a fix each; the receiver id is the message's name
 WANTED = [
     "GPS_RAW_INT",
     "GPS2_RAW",
@@ -91,13 +94,34 @@ MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_TYPE_GCS = 6
 
 
-def _messages(path: Path) -> tuple[dict[str, list[tuple[float, int, dict]]], int]:
-    """type -> [(ground station time s, source system, fields)], and how many bad packets were met."""
+@dataclasses.dataclass
+class Telemetry:
+    """The wanted messages of a tlog: type -> [(ground station time s, source system, fields)], how many bad
+    packets were met, and where each GPS message's packet starts in the file (`GPS_KINDS` -> byte
+    offsets, in the order of `messages`)."""
+
+    messages: dict[str, list[tuple[float, int, dict]]]
+    bad: int
+    offsets: dict[str, list[int]]
+
+    def of_system(self, system: int) -> Telemetry:
+        """Only the messages (and GPS packet offsets) `system` sent."""
+        kept = {k: [i for i, (_, s, _) in enumerate(v) if s == system] for k, v in self.messages.items()}
+        return Telemetry(
+            {k: [self.messages[k][i] for i in idx] for k, idx in kept.items()},
+            self.bad,
+            {k: [v[i] for i in kept.get(k, [])] for k, v in self.offsets.items()},
+        )
+
+
+def read_telemetry(path: Path) -> Telemetry:
+    """Parse `path` with pymavlink's tlog reader (never `mavlink_connection`: see the module docstring)."""
     os.environ.setdefault("MAVLINK20", "1")  # the v2 dialect parses v1 and v2 packets alike
     from pymavlink import mavutil
 
     mavutil.set_dialect("ardupilotmega")
     out: dict[str, list[tuple[float, int, dict]]] = {}
+    offsets: dict[str, list[int]] = {k: [] for k in GPS_KINDS}
     bad = 0
     chatter = io.StringIO()
     try:
@@ -111,13 +135,22 @@ def _messages(path: Path) -> tuple[dict[str, list[tuple[float, int, dict]]], int
                 if kind == "BAD_DATA":
                     bad += 1
                     continue
+                if kind in offsets:
+                    offsets[kind].append(_packet_offset(log, m))
                 out.setdefault(kind, []).append((float(m._timestamp), int(m.get_srcSystem()), m.to_dict()))
             log.close()
     except OSError as err:
         raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
     except Exception as err:  # pymavlink raises its own and struct errors on damaged packets
         raise ReaderError(path, f"not a readable MAVLink telemetry log: {type(err).__name__}: {err}") from err
-    return out, bad
+    return Telemetry(out, bad, offsets)
+
+
+def _packet_offset(log: Any, m: Any) -> int:
+    """Where the packet `m` (just decoded) starts in the file: its bytes end where the parser's unread
+    buffer begins (past damage the parser may have joined bytes across a timestamp it read: whoever
+    uses the offset checks the packet is there)."""
+    return int(log.f.tell() - log.mav.buf_len() - len(m.get_msgbuf()))
 
 
 def _boot_us(fields: dict) -> int | None:
@@ -127,55 +160,60 @@ def _boot_us(fields: dict) -> int | None:
     return t if 0 < t < UNIX_US_MIN else None
 
 
-def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
-    path = Path(path)
-    msgs, bad = _messages(path)
-    skipped: list[Skipped] = []
-    meta: dict[str, str] = {}
-    if bad:
-        skipped.append(Skipped("<tlog>", "bytes that are no valid MAVLink packet (bad CRC, cut, garbage)", bad, "lost"))
+def vehicle_of(path: Path, msgs: Mapping[str, list[tuple[float, int, dict]]]) -> int:
+    """The system read: the one that sent most GPS messages, else the first vehicle heartbeat's."""
     gps_count: dict[int, int] = {}
-    for _, sysid, _ in msgs.get("GPS_RAW_INT", []) + msgs.get("GPS2_RAW", []):
-        gps_count[sysid] = gps_count.get(sysid, 0) + 1
-    beats = [(s, f) for _, s, f in msgs.get("HEARTBEAT", []) if f.get("type") != MAV_TYPE_GCS]
-    vehicle = max(gps_count, key=lambda s: gps_count[s]) if gps_count else (beats[0][0] if beats else None)
+    for kind in GPS_KINDS:
+        for _, sysid, _ in msgs.get(kind, []):
+            gps_count[sysid] = gps_count.get(sysid, 0) + 1
+    beats = [s for _, s, f in msgs.get("HEARTBEAT", []) if f.get("type") != MAV_TYPE_GCS]
+    vehicle = max(gps_count, key=lambda s: gps_count[s]) if gps_count else (beats[0] if beats else None)
     if vehicle is None:
         raise ReaderError(path, f"no vehicle GPS or heartbeat in this telemetry log (messages: {sorted(msgs)})")
-    others = sum(1 for v in msgs.values() for _, s, _ in v if s != vehicle)
-    if others:
-        skipped.append(Skipped("<tlog>", f"messages of other systems than vehicle {vehicle}", others))
-    msgs = {k: [(t, s, f) for t, s, f in v if s == vehicle] for k, v in msgs.items()}
-    ardupilot = any(f.get("autopilot") == MAV_AUTOPILOT_ARDUPILOTMEGA for s, f in beats if s == vehicle)
-    meta["vehicle"] = f"system {vehicle}" + (" (ArduPilot)" if ardupilot else "")
+    return vehicle
+
+
+@dataclasses.dataclass(frozen=True)
+class TlogClock:
+    """The vehicle's boot clock on UTC (`offset_ns`), how it was found, and the link's latency: the ground
+    station's receive times against the boot-stamped messages' own times."""
+
+    offset_ns: int
+    latency_ns: int
+    description: str
+
+    def stamp_ns(self, t_gcs: float, fields: dict) -> int:
+        """A message's time: its own boot stamp on UTC, its UNIX time_usec, else its receive time."""
+        b = _boot_us(fields)
+        if b is not None:
+            return b * 1000 + self.offset_ns
+        t = int(fields.get("time_usec", 0))
+        return t * 1000 if t >= UNIX_US_MIN else round(t_gcs * 1e9)
+
+
+def tlog_clock(path: Path, msgs: Mapping[str, list[tuple[float, int, dict]]]) -> TlogClock:
+    """The clock of one vehicle's messages: SYSTEM_TIME's offset when sent, else the receive times'."""
     # every boot-stamped message with the ground station's receive time: the clock without SYSTEM_TIME,
     # and the link's latency
     sent = [(t, b) for v in msgs.values() for t, _, f in v if (b := _boot_us(f)) is not None and t > 0]
-    # boot clock -> UNIX
     sys_time = [f for _, _, f in msgs.get("SYSTEM_TIME", []) if f["time_unix_usec"] > 0 and f["time_boot_ms"] > 0]
     if sys_time:
         offset_ns = int(np.median([f["time_unix_usec"] * 1000 - f["time_boot_ms"] * 1_000_000 for f in sys_time]))
-        meta["clock"] = f"vehicle boot time + SYSTEM_TIME offset (median of {len(sys_time)})"
+        description = f"vehicle boot time + SYSTEM_TIME offset (median of {len(sys_time)})"
     else:
         if not sent:
             raise ReaderError(path, "no message carries a boot-time stamp the log can be timed by")
         offset_ns = int(np.median([t * 1e9 - b * 1000 for t, b in sent]))
-        meta["clock"] = (
-            "vehicle boot time + median offset to the ground station's receive times (link latency included)"
-        )
-
-    def stamp_ns(t_gcs: float, fields: dict) -> int:
-        b = _boot_us(fields)
-        if b is not None:
-            return b * 1000 + offset_ns
-        t = int(fields.get("time_usec", 0))
-        return t * 1000 if t >= UNIX_US_MIN else round(t_gcs * 1e9)
-
-    # the link's latency: the ground station's receive times against the boot-stamped messages' own times
+        description = "vehicle boot time + median offset to the ground station's receive times (link latency included)"
     latency = int(np.median([t * 1e9 - (b * 1000 + offset_ns) for t, b in sent])) if sent else 0
-    frames: dict[str, pd.DataFrame] = {}
-    streams: list[StreamInfo] = []
+    return TlogClock(offset_ns, latency, description)
+
+
+def gps_rows(msgs: Mapping[str, list[tuple[float, int, dict]]], clock: TlogClock) -> pd.DataFrame:
+    """One fixes row per GPS message (no-fix ones too), in the order of `msgs`, with `packet` (its index in
+    `msgs[receiver_id]`), `ell` (height from alt_ellipsoid) and `unix` (placed by the receive time)."""
     fix_rows = []
-    for kind in ("GPS_RAW_INT", "GPS2_RAW"):
+    for kind in GPS_KINDS:
         rows = msgs.get(kind, [])
         gcs_ns = np.array([round(t * 1e9) for t, _, _ in rows], dtype=np.int64)
         own_ns = np.array([int(f.get("time_usec", 0)) * 1000 for _, _, f in rows], dtype=np.int64)
@@ -183,8 +221,6 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         # ground station's clock (less the link's latency) and the difference is `time_offset_s`
         unix = own_ns >= UNIX_US_MIN * 1000
         offsets = time_offset_s(own_ns, gcs_ns, unix)
-        if unix.any():
-            meta |= log_clock("the ground station's receive time, less the link latency", False)
         for i, (t_gcs, _, f) in enumerate(rows):
             fix_type = _FIX.get(int(f["fix_type"]), FixType.NO_FIX)
             ell = int(f.get("alt_ellipsoid", 0) or 0)
@@ -192,7 +228,7 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
             cog = np.radians(f["cog"] / 100.0) if f["cog"] != 65535 else np.nan
             fix_rows.append(
                 {
-                    "t_ns": int(gcs_ns[i]) - latency if unix[i] else stamp_ns(t_gcs, f),
+                    "t_ns": int(gcs_ns[i]) - clock.latency_ns if unix[i] else clock.stamp_ns(t_gcs, f),
                     "time_offset_s": offsets[i],
                     "receiver_id": kind,
                     "lat_deg": f["lat"] * 1e-7,
@@ -208,10 +244,40 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
                     "vel_acc_mps": f.get("vel_acc", 0) / 1000.0 if f.get("vel_acc", 0) else np.nan,
                     "sats_used": f["satellites_visible"] if f["satellites_visible"] != 255 else np.nan,
                     "fix_type": fix_type,
+                    "packet": i,
+                    "unix": bool(unix[i]),
                 }
             )
-    if fix_rows:
-        fixes = pd.DataFrame(fix_rows)
+    return pd.DataFrame(fix_rows)
+
+
+def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    path = Path(path)
+    telemetry = read_telemetry(path)
+    msgs = telemetry.messages
+    skipped: list[Skipped] = []
+    meta: dict[str, str] = {}
+    if telemetry.bad:
+        skipped.append(
+            Skipped("<tlog>", "bytes that are no valid MAVLink packet (bad CRC, cut, garbage)", telemetry.bad, "lost")
+        )
+    vehicle = vehicle_of(path, msgs)
+    others = sum(1 for v in msgs.values() for _, s, _ in v if s != vehicle)
+    if others:
+        skipped.append(Skipped("<tlog>", f"messages of other systems than vehicle {vehicle}", others))
+    msgs = telemetry.of_system(vehicle).messages
+    beats = [f for _, _, f in msgs.get("HEARTBEAT", []) if f.get("type") != MAV_TYPE_GCS]
+    ardupilot = any(f.get("autopilot") == MAV_AUTOPILOT_ARDUPILOTMEGA for f in beats)
+    meta["vehicle"] = f"system {vehicle}" + (" (ArduPilot)" if ardupilot else "")
+    clock = tlog_clock(path, msgs)
+    offset_ns, stamp_ns = clock.offset_ns, clock.stamp_ns
+    meta["clock"] = clock.description
+    frames: dict[str, pd.DataFrame] = {}
+    streams: list[StreamInfo] = []
+    fixes = gps_rows(msgs, clock)
+    if len(fixes):
+        if fixes["unix"].any():
+            meta |= log_clock("the ground station's receive time, less the link latency", False)
         no_fix = fixes["fix_type"] == FixType.NO_FIX
         for rid in fixes.loc[no_fix, "receiver_id"].unique():
             skipped.append(
@@ -221,7 +287,7 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         meta["height"] = (
             "ellipsoidal (alt_ellipsoid)" if fixes["ell"].all() else "AMSL (alt): the vehicle sent no alt_ellipsoid"
         )
-        frames["fixes"] = fixes.drop(columns=["ell"]).astype({"fix_type": np.int8})
+        frames["fixes"] = fixes.drop(columns=["ell", "packet", "unix"]).astype({"fix_type": np.int8})
         for rid in fixes["receiver_id"].unique():
             streams.append(
                 StreamInfo("fix", str(rid), str(rid), f"mavlink/{rid}", int((fixes["receiver_id"] == rid).sum()))
@@ -302,7 +368,7 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     return table
 
 
-def _packet_length(head: bytes, at: int) -> int | None:
+def packet_length(head: bytes, at: int) -> int | None:
     """Length of the MAVLink packet starting at `at` (v1 0xFE or v2 0xFD), None if there is none."""
     if at + 3 > len(head):
         return None
@@ -325,11 +391,19 @@ def _is_tlog(path: Path, head: bytes) -> bool:
         (t_us,) = struct.unpack(">Q", head[at : at + 8])
         if not UNIX_US_MIN <= t_us <= 4_102_444_800_000_000:  # 2000 - 2100
             return False
-        n = _packet_length(head, at + 8)
+        n = packet_length(head, at + 8)
         if n is None:
             return False
         at += 8 + n
     return True
 
 
-FORMATS = (ReaderFormat("tlog", "MAVLink telemetry log (.tlog)", read_tlog, _is_tlog),)
+FORMATS = (
+    ReaderFormat(
+        "tlog",
+        "MAVLink telemetry log (.tlog)",
+        read_tlog,
+        _is_tlog,
+        rewrite="spooflens.writers.tlog_rewrite:rewrite_tlog",
+    ),
+)

@@ -244,8 +244,9 @@ KINDS: dict[Kind, KindSpec] = {
         "down then `cn0` dB above its old level, a velocity transient of `jump` m/s; then the drag: the "
         "position pulled at `rate` m/s (`drag=ramp`), moved by `offset` m (`step`) or pulled to `offset` m "
         "over 60 s (`pull`), the reported velocity consistent with it; a spoofer `clock` s off GNSS time "
-        "moves the receiver's time against the log's clock while it is captured (PX4, ArduPilot, GnssLogger, "
-        "CSV and ROS TimeReference copies write it); when the spoofer switches off at `end`, the receiver loses and "
+        "moves the receiver's time against the log's clock while it is captured (PX4, ArduPilot DataFlash and "
+        "telemetry, GnssLogger, CSV and ROS TimeReference copies write it); when the spoofer switches off at `end`, "
+        "the receiver loses and "
         "re-acquires the real sky again",
         (
             Param("drag", "text", "ramp", "how the position is dragged: ramp, step or pull"),
