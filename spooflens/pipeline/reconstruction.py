@@ -81,6 +81,8 @@ class CoastingOptions:
     placebo_runs: int = 24
     settle_s: float = 30.0
     converge_s: float = 20.0  # a reference younger than this cannot confirm anything (still converging)
+    # a GNSS outage longer than this leaves the INS to re-converge for `converge_s` once fixes are back
+    outage_s: float = 10.0
     # GNSS must also have moved this far from the reference: real receivers wander and jump by metres
     # (an SBAS solution converging, a correction switching), which no spoofing verdict should rest on
     min_departure_m: float = 10.0
@@ -503,7 +505,7 @@ def _on_navigation(
         nav = navigation_of(ctx)
     except SpooflensError:
         return verdict
-    t_first, t_last = float(nav.solution.t[0]), float(nav.solution.t[-1])
+    t_last = float(nav.solution.t[-1])
     # the IMU stopped before the log's fixes did: nothing after this stretch was coasted
     stopped = log_end_s is not None and t_last < log_end_s
     opts = CoastingOptions()
@@ -557,12 +559,12 @@ def _on_navigation(
             if split is None:
                 checks.append((inc, check))
                 envelopes.append(envelope)
-                incidents.append(_not_confirmed(inc, check, young, t_first, envelope))
+                incidents.append(_not_confirmed(inc, check, young, envelope))
                 continue
             before, inc, later_check, after_envelope = split
             checks += [(before, check), (inc, later_check)]
             envelopes += [envelope, after_envelope]
-            incidents.append(_not_confirmed(before, check, young, t_first, envelope))
+            incidents.append(_not_confirmed(before, check, young, envelope))
             check, envelope = later_check, after_envelope
         else:
             checks.append((inc, check))
@@ -758,24 +760,46 @@ def _judge(
     opts: CoastingOptions,
     base: NavSolution | None,
     shocks: Sequence[Shock],
-) -> tuple[CoastingCheck, bool]:
-    """The coasting check of `inc` from its coast start, and whether the reference was still converging
-    where the coast leaves GNSS out (`margin_s` before that); `later`: where the next inertial incidents'
-    coasts begin (a departure from there is theirs)."""
+) -> tuple[CoastingCheck, str]:
+    """The coasting check of `inc` from its coast start, and why the reference could not tell yet where the
+    coast leaves GNSS out (`margin_s` before that: still converging from the log's start or re-converging
+    after a GNSS outage; "" when it could); `later`: where the next inertial incidents' coasts begin (a
+    departure from there is theirs)."""
     start = _coast_start(inc)
     reach = start + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
     deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
     check = coasting_check(nav, start, envelope, deadline, opts, base, shocks)
-    return check, check.excluded_from_s < float(nav.solution.t[0]) + opts.converge_s
-
-
-def _not_confirmed(inc: Incident, check: CoastingCheck, young: bool, t_first: float, envelope: Envelope) -> Incident:
-    """`inc` with its inertial evidence dropped: the coast did not confirm it."""
-    if young:
-        why = (
-            f"inertial alarm not confirmed: the INS reference had run only {_coast_start(inc) - t_first:.0f} s "
-            "and was still converging"
+    t_first = float(nav.solution.t[0])
+    if check.excluded_from_s < t_first + opts.converge_s:
+        return check, f"the INS reference had run only {start - t_first:.0f} s and was still converging"
+    back = aided_again_s(base if base is not None else nav.solution, check.excluded_from_s, opts.outage_s)
+    # the INS unaided for longer than an outage where the coast begins, or back for less than its convergence
+    t_ex = check.excluded_from_s
+    if back is not None and t_ex - back[0] > opts.outage_s and t_ex < back[1] + opts.converge_s:
+        # the INS coasted through a GNSS outage (a tunnel, a jammer that cost the fix): what the returning
+        # fixes say against it is its drift over the outage until the filter has re-converged, not a departure
+        return check, (
+            f"GNSS came back at {back[1]:.1f} s after {back[1] - back[0]:.0f} s without a fix and the INS reference "
+            f"was still re-converging from its drift over the outage"
         )
+    return check, ""
+
+
+def aided_again_s(sol: NavSolution, t_ex: float, outage_s: float) -> tuple[float, float] | None:
+    """(last fix before, first fix after) of the last GNSS outage longer than `outage_s` up to the first fix
+    after `t_ex` (a coast that begins inside the outage began where the INS was last aided): a gap between
+    the receiver's fixes, not a stretch the analysis left out (whose fixes are there); None if none."""
+    k = int(np.searchsorted(sol.t, t_ex, side="right")) + 1
+    t = sol.t[:k][np.isfinite(sol.z[:k, :3]).any(axis=1)]
+    gaps = np.flatnonzero(np.diff(t) > outage_s)
+    return (float(t[gaps[-1]]), float(t[gaps[-1] + 1])) if len(gaps) else None
+
+
+def _not_confirmed(inc: Incident, check: CoastingCheck, young: str, envelope: Envelope) -> Incident:
+    """`inc` with its inertial evidence dropped: the coast did not confirm it (`young`: why the reference
+    could not tell yet, if that was why)."""
+    if young:
+        why = f"inertial alarm not confirmed: {young}"
     else:
         why = (
             "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty and this "
