@@ -4,7 +4,9 @@ byte is copied, and `analyze` of the copy finds the jammer in those reports alon
 
 from __future__ import annotations
 
+import copy
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +18,8 @@ from pyubx2 import UBXMessage
 
 from readers import read_log
 from readers.ubx.frames import split_frames
+from spooflens.attacks import apply_attack, parse_attack
+from spooflens.attacks.spec import AttackError
 from spooflens.cli import main
 
 WEEK, TOW0_MS = 2300, 300_000_000  # a dated capture: NAV-TIMEGPS states its week
@@ -131,3 +135,14 @@ def test_inject_jam_on_a_real_capture_with_two_monitor_reports_and_no_fix(tmp_pa
     assert after["jamming_state"].tolist() == [3.0, 3.0]
     assert non_monitor_bytes(src) == non_monitor_bytes(out)
     assert len(src.read_bytes()) == len(out.read_bytes()) and src.read_bytes() != out.read_bytes()
+
+
+def test_a_table_without_any_gnss_is_refused_for_what_it_lacks() -> None:
+    table = read_log(real_log("corpus/pyubx2/pygpsdata-MON.log"))
+    jammed, truth = apply_attack(table, parse_attack("jam:start=0,ramp=0"))
+    assert truth.receivers == ["ubx"] and (jammed.receiver_status["agc"] < 1404.0).all()
+    bare = copy.copy(table)
+    bare.receiver_status = table.receiver_status.iloc[:0]
+    lacks = "no GNSS receiver to jam (no fixes, satellites, observations or monitor reports)"
+    with pytest.raises(AttackError, match=re.escape(lacks)):
+        apply_attack(bare, parse_attack("jam:start=0"))
