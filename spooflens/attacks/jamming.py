@@ -117,10 +117,13 @@ def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTr
     p = spec.params
     start = spec.start_s
     end = min(spec.end_s if spec.end_s is not None else table.duration_s, table.duration_s)
-    frames = (table.fixes, table.observations, table.satellites)
+    # a receiver that logged only its monitor reports (no fix yet) is jammed too: the reports are its front end
+    frames = (table.fixes, table.observations, table.satellites, table.receiver_status)
     receivers = list(dict.fromkeys(str(r) for f in frames for r in f["receiver_id"].dropna().unique()))
     if not receivers:
-        raise AttackError(f"{table.source}: no GNSS fixes, satellites or observations to jam")
+        raise AttackError(
+            f"{table.source}: no GNSS receiver to jam (no fixes, satellites, observations or monitor reports)"
+        )
     targets = [p["receiver"]] if "receiver" in p else receivers
     unknown = [r for r in targets if r not in receivers]
     if unknown:

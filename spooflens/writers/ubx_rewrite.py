@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from readers.ubx.frames import UbxFrame, fletcher, split_frames
-from readers.ubx.messages import RAWX_MEAS, sv_ids
+from readers.ubx.messages import LEGACY_FIX, MSG, PVT_LIKE, RAWX_MEAS, sv_ids
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 
@@ -21,6 +22,18 @@ WEEK_MS = 604_800_000
 NAV_PVT, NAV_DOP, NAV_SAT, NAV_STATUS, NAV_TIMEGPS = (1, 0x07), (1, 0x04), (1, 0x35), (1, 0x03), (1, 0x20)
 RXM_RAWX, MON_RF, MON_HW, SEC_SIG = (2, 0x15), (0x0A, 0x38), (0x0A, 0x09), (0x27, 0x09)
 TIMED = {NAV_PVT, NAV_DOP, NAV_SAT, NAV_STATUS, NAV_TIMEGPS}
+MONITORS = (MON_RF, MON_HW, SEC_SIG)
+# the messages the reader opens a navigation epoch with (iTOW first in each): a monitor report is stamped
+# with the last one's iTOW (the first one's before any), or by its output cycle in a capture without any
+EPOCH_OPENERS = {
+    key
+    for key, name in MSG.items()
+    if name in {*PVT_LIKE, *LEGACY_FIX, "NAV-SAT", "NAV-DOP", "NAV-STATUS", "NAV-TIMEGPS", "NAV-TIMEUTC"}
+    and name != "LOG-BATCH"  # no iTOW first, and only ever beside fixes (no monitor rows then)
+}
+REPORT_COLUMNS = ["agc", "noise_per_ms", "jamming_indicator", "jamming_state"]
+ReportKey = tuple[bool, int]  # (stamped by an epoch, its iTOW in ms) or (False, its output cycle)
+Change = Callable[[str, float], float]  # (column, the message's own value) -> the value to write
 FIX_COLUMNS = [
     "lat_deg",
     "lon_deg",
@@ -50,6 +63,8 @@ class _Plan:
     sats: dict[tuple[int, str], float] = field(default_factory=dict)  # (iTOW, sv) -> C/N0 change, NaN lost
     raw: dict[tuple[int, str], tuple[float, float, float] | None] = field(default_factory=dict)
     edited: dict[str, int] = field(default_factory=dict)
+    # the receiver's monitor reports (`receiver_status`) the attack moved: key -> (as read, as attacked)
+    reports: dict[ReportKey, tuple[dict[str, float], dict[str, float]]] = field(default_factory=dict)
 
     def monitor(self, itow: int) -> dict[str, float] | None:
         """The attacked fix's values at this epoch (the nearest kept one for a lost fix)."""
@@ -86,7 +101,35 @@ def _plan(table: EpochTable, spoofed: EpochTable) -> _Plan:
     plan.kept = sorted(plan.fixes)
     plan.sats = _sky_changes(table, spoofed)
     plan.raw = _raw_changes(table, spoofed)
+    plan.reports = _report_changes(table, spoofed)
     return plan
+
+
+def _report_changes(
+    table: EpochTable, spoofed: EpochTable
+) -> dict[ReportKey, tuple[dict[str, float], dict[str, float]]]:
+    """Each moved `receiver_status` row by the stamp the reader gave it: the iTOW of its epoch (timed
+    captures), or its output cycle (its time in whole seconds, in a capture without any epoch); both keys
+    are given, the rewriter picks the one its capture's messages were stamped by."""
+    old, new = table.receiver_status, spoofed.receiver_status
+    if not len(old) or not len(new):
+        return {}
+    before = old.drop_duplicates("t_s").set_index("t_s")[REPORT_COLUMNS].astype(float)
+    after = new.drop_duplicates("t_s").set_index("t_s")[REPORT_COLUMNS].astype(float)
+    both = before.index.intersection(after.index)
+    a, b = after.loc[both].to_numpy(), before.loc[both].to_numpy()
+    moved = ~((a == b) | (np.isnan(a) & np.isnan(b))).all(axis=1)
+    ms = np.round(np.asarray(table.absolute_ns(both.to_numpy(float)[moved]), dtype=np.float64) / 1e6).astype(np.int64)
+    out: dict[ReportKey, tuple[dict[str, float], dict[str, float]]] = {}
+    for t_ms, row_b, row_a in zip(ms.tolist(), b[moved], a[moved], strict=True):
+        pair = (
+            dict(zip(REPORT_COLUMNS, row_b.tolist(), strict=True)),
+            dict(zip(REPORT_COLUMNS, row_a.tolist(), strict=True)),
+        )
+        out[(True, int(t_ms) % WEEK_MS)] = pair
+        if t_ms % 1000 == 0:
+            out[(False, int(t_ms) // 1000)] = pair
+    return out
 
 
 def _sky_changes(table: EpochTable, spoofed: EpochTable) -> dict[tuple[int, str], float]:
@@ -249,17 +292,47 @@ def _rawx(p: bytearray, plan: _Plan) -> bytearray | None:
     return out
 
 
-def _monitor(p: bytearray, key: tuple[int, int], values: dict[str, float]) -> bool:
-    """MON-RF (every block), MON-HW, SEC-SIG: the attacked fix's AGC, noise, jamming indicator, state."""
+def _fix_values(values: dict[str, float]) -> Change:
+    """The attacked fix's value of each column, whatever the message said (kept where it has none)."""
+
+    def change(column: str, own: float) -> float:
+        value = values[column]
+        return value if math.isfinite(value) else own
+
+    return change
+
+
+def _report_moves(before: dict[str, float], after: dict[str, float]) -> Change:
+    """The move of the message's own `receiver_status` row carried onto its own reading: AGC and noise
+    scaled, the jamming indicator raised, by the row's; the monitor's state as the row now says. The row
+    holds one message's reading (MON-RF's L1 block before MON-HW's), so another message of the same
+    report, or MON-RF's other bands, keep their own level and get the same jammer."""
+
+    def change(column: str, own: float) -> float:
+        a, b = after[column], before[column]
+        if not (math.isfinite(a) and math.isfinite(b)) or a == b:
+            return own
+        if column in ("agc", "noise_per_ms"):
+            return own * a / b if b > 0 else a
+        if column == "jamming_indicator":
+            return own + a - b
+        return a
+
+    return change
+
+
+def _monitor(p: bytearray, key: tuple[int, int], change: Change) -> bool:
+    """MON-RF (every block), MON-HW, SEC-SIG: AGC, noise, jamming indicator and state moved by `change`."""
 
     def state_bits(byte: int, shift: int) -> int:
-        state = values["jamming_state"]
+        state = change("jamming_state", float((byte >> shift) & 3))
         return byte if not math.isfinite(state) else (byte & ~(3 << shift)) | ((int(state) & 3) << shift)
 
     def counters(noise: int, agc: int, jam: int) -> None:
         for col, offset, fmt in (("noise_per_ms", noise, "<H"), ("agc", agc, "<H"), ("jamming_indicator", jam, "<B")):
-            if math.isfinite(values[col]):
-                _put(p, fmt, offset, values[col])
+            value = change(col, float(struct.unpack_from(fmt, p, offset)[0]))
+            if math.isfinite(value):
+                _put(p, fmt, offset, value)
 
     if key == MON_RF:
         n = min(p[1], (len(p) - 4) // 24) if len(p) >= 4 else 0
@@ -282,6 +355,48 @@ def _monitor(p: bytearray, key: tuple[int, int], values: dict[str, float]) -> bo
     return False
 
 
+def _report_stamps(frames: list[UbxFrame]) -> dict[int, ReportKey]:
+    """Each monitor message's (by its offset) report stamp, as the reader gives it (`readers/ubx`,
+    `_State.untimed` and `_receiver_status`): the iTOW of the epoch it follows, the first epoch's before any;
+    in a capture without any epoch its output cycle, a new one each time a message name repeats."""
+    openers = [f for f in frames if (f.msg_class, f.msg_id) in EPOCH_OPENERS and len(f.payload) >= 4]
+    if openers:
+        current = struct.unpack_from("<I", openers[0].payload, 0)[0]
+        timed: dict[int, ReportKey] = {}
+        for f in frames:
+            key = (f.msg_class, f.msg_id)
+            if key in EPOCH_OPENERS and len(f.payload) >= 4:
+                current = struct.unpack_from("<I", f.payload, 0)[0]
+            elif key in MONITORS:
+                timed[f.offset] = (True, current)
+        return timed
+    cycles: dict[int, ReportKey] = {}
+    seen: set[tuple[int, int]] = set()
+    cycle = -1
+    for f in frames:
+        key = (f.msg_class, f.msg_id)
+        if key not in MONITORS:
+            continue
+        if key in seen or cycle < 0:
+            seen.clear()
+            cycle += 1
+        seen.add(key)
+        cycles[f.offset] = (False, cycle)
+    return cycles
+
+
+def _monitor_edit(
+    p: bytearray, key: tuple[int, int], plan: _Plan, stamp: ReportKey | None, current: int | None
+) -> bool:
+    """A monitor message moved by its own report's row where the capture has such rows (no fix), else by
+    the attacked fix of its epoch."""
+    report = plan.reports.get(stamp) if stamp is not None else None
+    if report is not None:
+        return _monitor(p, key, _report_moves(*report))
+    values = plan.monitor(current) if current is not None and not plan.reports else None
+    return values is not None and _monitor(p, key, _fix_values(values))
+
+
 def rewrite_ubx(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """Write `src` to `dst` with the attacked table's fixes, satellites and measurements in its messages."""
     src, dst = Path(src), Path(dst)
@@ -296,6 +411,7 @@ def rewrite_ubx(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
     current: int | None = None
     counts: dict[str, int] = {}
     has_pvt = any((f.msg_class, f.msg_id) == NAV_PVT for f in frames.ubx)
+    stamps = _report_stamps(frames.ubx)
     if not has_pvt and (plan.fixes or plan.lost):
         # a copy whose fixes were not moved would be an unattacked log with an attack's truth beside it
         raise WriterError(
@@ -312,9 +428,8 @@ def rewrite_ubx(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, ve
             new = p if edit is not None and edit(p, plan, current) else None
         elif key == RXM_RAWX:
             new = _rawx(p, plan)
-        elif key in (MON_RF, MON_HW, SEC_SIG) and current is not None:
-            values = plan.monitor(current)
-            new = p if values is not None and _monitor(p, key, values) else None
+        elif key in MONITORS:
+            new = p if _monitor_edit(p, key, plan, stamps.get(frame.offset), current) else None
         if new is None or bytes(new) == frame.payload:
             continue
         name = {NAV_PVT: "NAV-PVT", NAV_DOP: "NAV-DOP", NAV_SAT: "NAV-SAT", RXM_RAWX: "RXM-RAWX"}.get(key, "monitor")
