@@ -246,15 +246,19 @@ def hours(summary: dict[str, Any]) -> float:
     for seg in segments(summary):
         duration = float(seg.get("duration_s") or 0.0)
         streams = [st for st in seg.get("streams") or summary.get("streams") or [] if st.get("role") in GNSS_ROLES]
-        covered = 0.0
-        for st in streams:
-            count = int(st.get("count") or 0)
-            first, last = st.get("first_s"), st.get("last_s")
-            span = float(last) - float(first) if first is not None and last is not None and count > 1 else 0.0
-            period = min(span / (count - 1), MAX_EPOCH_PERIOD_S) if count > 1 else MAX_EPOCH_PERIOD_S
-            covered = max(covered, min(span, count * period) if count > 1 else min(float(count) * period, duration))
+        covered = max((_covered_s(st) for st in streams), default=0.0)
         total += min(duration, covered) if streams else duration
     return total / 3600.0
+
+
+def _covered_s(stream: dict[str, Any]) -> float:
+    """The seconds a stream's epochs cover: its span, each epoch counted at most `MAX_EPOCH_PERIOD_S`."""
+    count = int(stream.get("count") or 0)
+    if count < 2:
+        return count * MAX_EPOCH_PERIOD_S
+    first, last = stream.get("first_s"), stream.get("last_s")
+    span = float(last) - float(first) if first is not None and last is not None else 0.0
+    return min(span, count * MAX_EPOCH_PERIOD_S)
 
 
 def verdict_extras(summary: dict[str, Any]) -> dict[str, Any]:
