@@ -142,7 +142,7 @@ def analyse_one(
         damage,
         load_baseline_option,
         read_table,
-        require_gnss,
+        require_data,
         segments_summary,
         write_outputs,
     )
@@ -154,7 +154,7 @@ def analyse_one(
     try:
         loaded = load_baseline_option(Path(baseline) if baseline else None)
         table = read_table(path, {}, False)
-        require_gnss(path, table)
+        require_data(path, table)
         loaded = checked_baseline(loaded, table)
         if loaded is not None:
             record["baseline_sha256"] = loaded.sha256

@@ -82,6 +82,35 @@ def stream_rows(table: EpochTable) -> list[StreamRow]:
     return rows
 
 
+def has_gnss(table: EpochTable) -> bool:
+    """Whether the log holds anything a GNSS detector reads: fixes, raw observations, satellite reports or
+    a receiver's monitor messages (its jamming state, AGC, noise)."""
+    return bool(len(table.fixes) or len(table.observations) or len(table.satellites) or len(table.receiver_status))
+
+
+def fixless_receivers(table: EpochTable) -> list[str]:
+    """Each receiver that reported epochs but never a fix, with what became of its epochs (a receiver that
+    saw no satellite all log long: indoors, cold, its antenna off, or jammed; the log cannot tell which)."""
+    never = {s.stream_id for s in table.streams if s.role == "fix" and not s.count}
+    return [
+        f"receiver {s.stream} never had a fix: {s.count} {s.reason}"
+        for s in table.skipped
+        if s.stream in never and s.action != "lost" and s.count
+    ]
+
+
+def without_gnss(table: EpochTable) -> str:
+    """Why a log without GNSS data has nothing to judge, in what it holds instead ('' for a log with GNSS
+    data, and for one that holds no data at all: that is an empty log, refused)."""
+    if has_gnss(table):
+        return ""
+    fixless = fixless_receivers(table)
+    held = [f"{s.role} {s.topic} ({s.count})" for s in table.streams if s.count]
+    if not fixless and not held:
+        return ""
+    return "no GNSS data to judge: " + "; ".join(fixless + ([f"the log holds {', '.join(held)}"] if held else []))
+
+
 def skipped_or_repaired(table: EpochTable) -> list[Skipped]:
     return [s for s in table.skipped if s.action != COMPUTED]
 

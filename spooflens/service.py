@@ -21,6 +21,7 @@ from rich.table import Table
 
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import NoGnssError
+from spooflens.inventory import has_gnss, without_gnss
 from spooflens.output.console import console, progress, show_progress
 from spooflens.output.early_recording import EarlyRecording
 from spooflens.pipeline.verdict import KIND_LABELS, Kind
@@ -76,8 +77,8 @@ def analyse_log(
     before anything is analysed (another receiver model: BaselineError); how the log differs from the
     baseline's logs is warned on stderr.
 
-    A log without GNSS data raises NoGnssError before anything is written: a failed analysis leaves no
-    files.
+    A log without any data raises NoGnssError before anything is written: a failed analysis leaves no
+    files. One without GNSS data that holds other data is analysed to a NO VERDICT that says why.
     """
     from spooflens.gnss.stations import STATION_OPTION, parse_station
     from spooflens.pipeline.registry import AnalyzeOptions
@@ -88,7 +89,7 @@ def analyse_log(
     except ValueError as err:
         raise click.BadParameter(str(err), param_hint="--station") from None
     table = read_table(log, parse_topics(topics), not quiet and show_progress())
-    require_gnss(log, table)
+    require_data(log, table)
     baseline = checked_baseline(baseline, table)
     with_obs = list(dict.fromkeys(table.observations["receiver_id"].astype(str)))
     for rid, *_ in given_stations:
@@ -151,15 +152,27 @@ def require_gnss(log: Path, table: EpochTable) -> None:
     without fixes (a RINEX observation file with no navigation file beside it) are still analysed: the
     detectors that need only them run (C/N0 across satellites), the others say what they lack; so are a
     receiver's monitor messages without a fix (its jamming state, AGC, noise: the interference detector)."""
-    if len(table.fixes) or len(table.observations) or len(table.satellites) or len(table.receiver_status):
+    if has_gnss(table):
         return
+    raise NoGnssError(log, f"{_no_gnss_found(table)}; nothing written")
+
+
+def require_data(log: Path, table: EpochTable) -> None:
+    """Raise NoGnssError for a log that holds no data at all. A log without GNSS data that holds other data
+    (an IMU, a heading, a receiver that never had a fix) is analysed: its verdict is NO VERDICT saying why
+    (`inventory.without_gnss`), and its recording and report show what it holds."""
+    if has_gnss(table) or without_gnss(table):
+        return
+    raise NoGnssError(log, f"{_no_gnss_found(table)}; nothing written")
+
+
+def _no_gnss_found(table: EpochTable) -> str:
     lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
     why = f"; lost: {lost}" if lost else ""
-    found = (
+    return (
         "no GNSS fixes, raw observations or satellite reports found, nor receiver monitor messages "
         f"(streams: {stream_names(table)}{why})"
     )
-    raise NoGnssError(log, f"{found}; nothing written")
 
 
 def finish(log: Path, analyses: list[Analysis], fail_on_spoof: bool, fail_on_jam: bool = False) -> int:

@@ -23,6 +23,7 @@ from spooflens import plausibility
 from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import AnalysisError, SpooflensError
+from spooflens.inventory import without_gnss
 from spooflens.navigation.alignment import Alignment
 from spooflens.navigation.loosely_coupled import FilterInputs
 from spooflens.navigation.noise_learning import LearnedNoise
@@ -73,7 +74,7 @@ def assess(
     incidents their alarms make, each inertial one confirmed, ended and reconstructed by coasting the INS
     of `ctx`, then each weighed against its natural explanations and given its kind. Every front end
     decides through here."""
-    verdict = decide(list(results), log_end_s=last_fix_s(ctx.table))
+    verdict = decide(list(results), log_end_s=last_fix_s(ctx.table), without_gnss=without_gnss(ctx.table))
     if on_step and verdict.incidents:
         on_step("confirmation and reconstruction")
     verdict = reconstruct(ctx, results, verdict)

@@ -212,6 +212,8 @@ class Verdict:
     coasting_checks: tuple[dict[str, Any], ...] = ()
     # the event stage's: every incident and anomaly as an event of its kind (`spooflens.pipeline.events`)
     events: tuple[Event, ...] = ()
+    # why a log without GNSS data has nothing to judge (`inventory.without_gnss`), else ''
+    without_gnss: str = ""
 
     @property
     def deciding_incident(self) -> Incident | None:
@@ -227,7 +229,8 @@ class Verdict:
         """One line; it always begins with `NO VERDICT`, `NO SPOOFING DETECTED` or `SPOOFING DETECTED` (scripts
         grep them), then names the other kinds of event."""
         if not self.detectors_run:
-            return f"NO VERDICT: no spoofing detector could run on this log{self._other_kinds()}"
+            why = self.without_gnss or "no spoofing detector could run on this log"
+            return f"NO VERDICT: {why}{self._other_kinds()}"
         if not self.spoofed:
             advisory = f" ({len(self.detectors_advisory)} more advisory only)" if self.detectors_advisory else ""
             return f"NO SPOOFING DETECTED by {len(self.detectors_run)} detector(s){advisory}{self._other_kinds()}"
@@ -341,10 +344,13 @@ def _incident(group: list[tuple[Alarm, DetectorResult]]) -> Incident:
     ).with_spans(spans)
 
 
-def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: float | None = None) -> Verdict:
+def decide(
+    results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: float | None = None, without_gnss: str = ""
+) -> Verdict:
     """Incidents from every counted detector's alarms. An incident whose last alarm is within a second of
     `log_end_s` (the last GNSS fix) was still going on when the log ended: its end is the log's, not the
-    attack's (the reconstruction stage says the same for the incidents it confirms)."""
+    attack's (the reconstruction stage says the same for the incidents it confirms). `without_gnss`: why the
+    log has nothing to judge (`inventory.without_gnss`), said in the headline."""
     detectors = [r for r in results if r.is_detector]
     # the detectors a spoofing verdict rests on: one that can only say what disturbed the signals is none
     ran = tuple(r.name for r in detectors if r.ran and not r.advisory and r.evidence not in NOT_SPOOFING)
@@ -369,7 +375,15 @@ def decide(results: list[DetectorResult], merge_gap_s: float = 5.0, log_end_s: f
             for i in incidents
         ]
     findings = tuple(f for r in counted for f in r.findings)
-    return Verdict(any(i.is_spoofing for i in incidents), tuple(incidents), ran, not_run, advisory, findings)
+    return Verdict(
+        any(i.is_spoofing for i in incidents),
+        tuple(incidents),
+        ran,
+        not_run,
+        advisory,
+        findings,
+        without_gnss=without_gnss,
+    )
 
 
 def incident_of(alarms: list[tuple[Alarm, DetectorResult]]) -> Incident:

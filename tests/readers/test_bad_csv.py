@@ -58,15 +58,13 @@ def test_a_bad_t0_comment_is_refused_in_one_line(
     # the file with the bad clock is left out and listed; the IMU file is still read
     assert main(["inspect", str(log)]) == 3
     assert "fixes.csv: lost 1 (file not read: # t0_ns:" in capsys.readouterr().out
-    # with no fixes left there is nothing to analyse: one line that says why
-    assert main(["analyze", str(log), "-o", str(tmp_path / "x.rrd"), "--quiet"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert (
-        len(err) == 1
-        and "no GNSS fixes, raw observations or satellite reports found" in err[0]
-        and "fixes.csv: lost 1 (file not read: # t0_ns:" in err[0]
-    )
-    assert why in err[0] and not (tmp_path / "x.rrd").exists()
+    # with no fixes left there is no GNSS to judge: the IMU is analysed, the verdict says why, the loss is listed
+    assert main(["analyze", str(log), "-o", str(tmp_path / "x.rrd"), "--quiet"]) == 3
+    captured = capsys.readouterr()
+    assert "NO VERDICT: no GNSS data to judge: the log holds imu" in captured.out
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "input damaged" in err[0] and "fixes.csv: lost 1 (file not read: # t0_ns:" in err[0]
+    assert why in err[0] and (tmp_path / "x.rrd").exists()
     # a single CSV file with a bad clock is refused outright
     assert main(["inspect", str(log / "fixes.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -137,7 +138,11 @@ def test_cli_gives_one_line_and_nonzero_exit(tmp_path: Path, capsys: pytest.Capt
     assert err == [f"spooflens: error: {tmp_path / 'empty.bag'}: file is empty (0 bytes)"]
 
 
-def test_cli_on_a_log_without_gnss_fails_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_on_a_log_without_gnss_says_there_is_nothing_to_judge(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An IMU without GNSS is not an empty log: it is analysed to a NO VERDICT that says why, and its recording
+    and report show what it holds."""
     table = circling_table(seconds=20.0)
     table.fixes = table.fixes.iloc[:0]
     path = tmp_path / "imu_only.mcap"
@@ -146,12 +151,29 @@ def test_cli_on_a_log_without_gnss_fails_and_writes_nothing(tmp_path: Path, caps
     code = main(
         ["analyze", str(path), "-o", str(outputs[0]), "--json", str(outputs[1]), "--html", str(outputs[2]), "--quiet"]
     )
+    out = capsys.readouterr().out
+    assert code == 0 and all(p.exists() for p in outputs)
+    headline = json.loads(outputs[1].read_text())["verdict"]["headline"]
+    assert headline.startswith("NO VERDICT: no GNSS data to judge: the log holds imu ") and headline in out
+
+
+def test_cli_on_a_log_without_any_data_fails_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    table = circling_table(seconds=20.0)
+    table.fixes, table.imu = table.fixes.iloc[:0], table.imu.iloc[:0]
+    path = tmp_path / "nothing.mcap"
+    write_log(table, path, "mcap-ros2")
+    outputs = [tmp_path / "x.rrd", tmp_path / "x.json", tmp_path / "x.html"]
+    code = main(
+        ["analyze", str(path), "-o", str(outputs[0]), "--json", str(outputs[1]), "--html", str(outputs[2]), "--quiet"]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert (
         code == 2
         and len(err) == 1
         and "no GNSS fixes, raw observations or satellite reports found" in err[0]
-        and "imu_only.mcap" in err[0]
+        and "nothing.mcap" in err[0]
     )
     assert "nothing written" in err[0] and not any(p.exists() for p in outputs)
 

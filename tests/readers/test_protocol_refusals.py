@@ -3,6 +3,7 @@ headings without a fix read as headings, AIS traffic said to be AIS."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,28 @@ def test_instruments_with_a_heading_and_no_fix_are_read_as_headings(log: str, st
     reasons = " ".join(s.reason for s in t.skipped if s.action == "repaired")
     assert "taken as true" in reasons and "placed by line number" in reasons
     assert main(["inspect", str(real_log(log))]) == 0
+
+
+@pytest.mark.parametrize(
+    ("log", "why"),
+    [
+        (f"{GPSD}/pypilot.log", "the log holds heading APHDM (7)"),
+        (f"{GPSD}/ublox-lea-5q.log", "receiver GP never had a fix: 10 epochs without a valid position"),
+        (f"{GPSD}/eXplorist110.log", "receiver GP never had a fix: 29 epochs without a valid position"),
+        ("corpus/px4-pyulog/sample.ulg", "the log holds imu sensor_combined (17070)"),
+    ],
+)
+def test_a_log_without_gnss_data_is_analysed_to_no_verdict(
+    log: str, why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Not an empty log: a heading, an IMU or a receiver that never saw a satellite. What the log holds is
+    recorded and the verdict says there is no GNSS to judge, and why."""
+    capsys.readouterr()
+    json_path = tmp_path / "v.json"
+    args = ["analyze", str(real_log(log)), "-o", str(tmp_path / "v.rrd"), "--json", str(json_path), "--quiet"]
+    assert main(args) == 0
+    headline = json.loads(json_path.read_text())["verdict"]["headline"]
+    assert headline.startswith("NO VERDICT: no GNSS data to judge: ") and why in headline
 
 
 def test_doubled_dollar_sentences() -> None:
