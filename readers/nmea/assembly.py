@@ -249,6 +249,8 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
 
 
 _TALKER_SYSTEM = {"GP": "G", "GL": "R", "GA": "E", "GB": "C", "BD": "C", "GQ": "J", "QZ": "J", "GI": "I"}
+# NMEA 4.10 GSA system IDs, as the talker of that system
+_GSA_SYSTEM_TALKER = {1: "GP", 2: "GL", 3: "GA", 4: "GB", 5: "GQ", 6: "GI"}
 
 
 def nmea_sv_id(talker: str, svid: int) -> str | None:
@@ -291,7 +293,8 @@ def epoch_satellites(epoch: Epoch) -> list[tuple[str, float, float, float, float
                     row[2] = c
         elif d.kind == "GSA":
             has_gsa = True
-            used.update(sv for v in d.used_svids if (sv := nmea_sv_id(d.talker, v)) is not None)
+            talker = _GSA_SYSTEM_TALKER.get(d.gsa_system, d.talker)
+            used.update(sv for v in d.used_svids if (sv := nmea_sv_id(talker, v)) is not None)
     return [(sv, el, az, c, (1.0 if sv in used else 0.0) if has_gsa else math.nan) for sv, (el, az, c) in sky.items()]
 
 

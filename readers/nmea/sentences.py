@@ -108,6 +108,9 @@ class Decoded:
     course_deg: float = math.nan
     sats_used: float = math.nan
     used_svids: tuple[int, ...] = ()
+    # GSA's system ID (NMEA 4.10: 1 GPS, 2 GLONASS, 3 Galileo, 4 BeiDou, 5 QZSS, 6 NavIC; 0 absent): a GN
+    # talker's list is of that system alone
+    gsa_system: int = 0
     nav_mode: int = 0  # GSA: 1 no fix, 2 2-D, 3 3-D
     hdop: float = math.nan
     vdop: float = math.nan
@@ -215,14 +218,27 @@ def _vtg(d: Decoded, msg: Any) -> None:
 def _gsa(d: Decoded, msg: Any) -> None:
     svids = [getattr(msg, f"svid_{i:02d}", "") for i in range(1, 13)]
     d.used_svids = tuple(v for v in svids if isinstance(v, int))
+    d.gsa_system = _hex_id(getattr(msg, "systemId", ""))
     nav = getattr(msg, "navMode", "")
     d.nav_mode = nav if isinstance(nav, int) else 0
     d.hdop, d.vdop = field_number(msg, "HDOP"), field_number(msg, "VDOP")
 
 
+def _hex_id(value: object) -> int:
+    """An NMEA 4.10 system or signal ID as pynmeagps gives it (a hex digit as text, or a number); 0 when
+    absent or not one."""
+    if isinstance(value, int):
+        return value
+    if isinstance(value, str) and value.strip():
+        try:
+            return int(value.strip(), 16)
+        except ValueError:
+            return 0
+    return 0
+
+
 def _gsv(d: Decoded, msg: Any) -> None:
-    signal = getattr(msg, "signalID", "")
-    sig = int(signal, 16) if isinstance(signal, str) and signal.strip() else (signal if isinstance(signal, int) else 0)
+    sig = _hex_id(getattr(msg, "signalID", ""))
     for i in range(1, 5):
         sv = getattr(msg, f"svid_{i:02d}", "")
         if isinstance(sv, int):

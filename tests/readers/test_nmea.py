@@ -336,3 +336,14 @@ def test_a_sentence_is_checksummed_as_its_talker_would() -> None:
 
     for sent in (b"$GPGSV,1,1,00*79", b"$GPRMC,001902.00,V,,,,,,,020211,,,N*77"):
         assert with_checksum(sent[:-3]) == sent and with_checksum(sent) == sent
+
+
+def test_a_gn_talkers_gsa_lists_are_of_the_system_their_id_names() -> None:
+    """NMEA 4.10 `GNGSA,...,3` lists Galileo satellites by Galileo numbers: E01, E11, E12, E24, E31, E33 used,
+    not the GPS satellites of those numbers (the ZED-F9K drive's first epoch; BeiDou's list is system 4)."""
+    t = read_log(real_log("corpus/gps-measurement-tools/MTV.Local1.ublox-F9K.20200206-181434.nmea"))
+    first = t.satellites[t.satellites["t_s"] == t.satellites["t_s"].min()].set_index("sv_id")["used"]
+    galileo = {sv for sv in first.index if sv.startswith("E") and first[sv] == 1.0}
+    assert galileo == {"E01", "E11", "E12", "E24", "E31", "E33"}
+    assert {sv for sv in first.index if sv.startswith("C") and first[sv] == 1.0} == {"C27", "C28", "C30", "C36", "C37"}
+    assert first["G30"] == 0.0 and first["E05"] == 0.0
