@@ -184,7 +184,8 @@ def fix_units(cols: Columns, t_s: FloatArray) -> list[Scale]:
 def stray_stamps(t_ns: np.ndarray) -> BoolArray:
     """Rows (of a stream sorted by time) in a small group that an hour or more of silence separates from
     the rest: a corrupt stamp, not a recording. A log paused for hours keeps both of its parts, each far
-    larger than the 0.1% (at least 3 rows) a stray group may hold."""
+    larger than the 0.1% (at least 3 rows) a stray group may hold. Where every group is that small there is
+    no rest to stray from (a few sentences of sessions years apart): nothing is dropped."""
     t = np.asarray(t_ns, dtype=np.int64)
     out = np.zeros(len(t), dtype=bool)
     if len(t) < 4:
@@ -194,7 +195,10 @@ def stray_stamps(t_ns: np.ndarray) -> BoolArray:
         return out
     bounds = np.concatenate(([0], gaps + 1, [len(t)]))
     small = max(3, len(t) // 1000)
-    for a, b in itertools.pairwise(bounds.tolist()):
+    groups = list(itertools.pairwise(bounds.tolist()))
+    if all(b - a <= small for a, b in groups):
+        return out
+    for a, b in groups:
         if b - a <= small:
             out[a:b] = True
     return out

@@ -301,3 +301,15 @@ def test_a_day_in_which_no_stream_has_a_stamp_separates_recordings_and_wild_stam
     scattered["receiver_id"] = np.repeat([f"rx{k}" for k in range(20)], 5)
     frames, layout = _segment_frames({"fixes": scattered}, skipped)
     assert layout == [] and frames["fixes"] is scattered and [s.action for s in skipped] == ["not segmented"]
+
+
+def test_a_stream_made_only_of_small_groups_far_apart_keeps_them_all() -> None:
+    """A stray group is one far from the rest of its stream; four sentences of sessions years apart (the
+    Unicore sample of pynmeagps) have no rest to stray from, and dropping every one left no fix."""
+    from spooflens.plausibility import stray_stamps
+
+    hour = 3_600_000_000_000
+    scattered = np.array([0, 2 * hour, 5 * hour, 9 * hour], dtype=np.int64)
+    assert not stray_stamps(scattered).any()
+    recording = np.r_[np.arange(10, dtype=np.int64) * 1_000_000_000, 20 * hour]  # ten rows and one far off
+    assert stray_stamps(recording).tolist() == [False] * 10 + [True]
