@@ -40,7 +40,7 @@ from readers.dataflash import DataFlash, open_dataflash
 from readers.dataflash_eras import logged_name
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
-from spooflens.writers.clock_shift import clock_shifts
+from spooflens.writers.fix_changes import fix_changes, moved
 
 # DataFlash format letter -> (struct code, multiplier from the value to what is stored)
 _PACK = {
@@ -145,10 +145,6 @@ class _Patcher:
             self.edited[name] += 1
 
 
-def _moved(new: float, old: float) -> bool:
-    return math.isfinite(new) and new != old
-
-
 def _plan(gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
     """One row per GPS message of a fix of the table: where it and the messages joined to it sit, its values
     as read (`<column>_0`) and as attacked (NaN where the attack lost the fix: `lost`), and `shift_s`, how
@@ -157,14 +153,7 @@ def _plan(gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataF
     rows = gps_fixes(gps, offset_ns, [], {})[["receiver_id", "t_ns", "msg", "ofs"]]
     logged = [c for c in ("GWk", "GMS", *JOINED) if c in gps]
     rows = rows.merge(gps[["ofs", *logged]].rename(columns={"GWk": "GWk_log", "GMS": "GMS_log"}), on="ofs")
-    key = ["receiver_id", "t_s"]
-    change = table.fixes[[*key, *ATTACKED]].merge(
-        spoofed.fixes[[*key, *ATTACKED]], on=key, how="left", suffixes=("_0", ""), indicator=True
-    )
-    change["lost"] = (change.pop("_merge") == "left_only").to_numpy()
-    change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
-    change = change.merge(clock_shifts(table, spoofed.fixes), on=["receiver_id", "t_ns"], how="left")
-    change["shift_s"] = change["shift_s"].fillna(0.0)
+    change = fix_changes(table, spoofed, ATTACKED)
     return rows.merge(change, on=["receiver_id", "t_ns"], how="inner")
 
 
@@ -185,17 +174,17 @@ def _gps_values(patcher: _Patcher, r: Mapping[str, Any], velocities: bool) -> di
     and its indicators. An unmoved velocity is left as logged: a stopped receiver's logged course would
     come back as atan2(0, 0)."""
     values: dict[str, float] = {}
-    if any(_moved(r[c], r[f"{c}_0"]) for c in ("lat_deg", "lon_deg", "height_m")):
+    if any(moved(r[c], r[f"{c}_0"]) for c in ("lat_deg", "lon_deg", "height_m")):
         old_alt = patcher.read(int(r["ofs"]), "Alt")
         values |= {"Lat": r["lat_deg"], "Lng": r["lon_deg"], "Alt": old_alt + (r["height_m"] - r["height_m_0"])}
     ve, vn, vu = r["vel_e_mps"], r["vel_n_mps"], r["vel_u_mps"]
-    moved = any(_moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps", "vel_u_mps"))
-    if velocities and moved and math.isfinite(ve) and math.isfinite(vn):
+    velocity_moved = any(moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps", "vel_u_mps"))
+    if velocities and velocity_moved and math.isfinite(ve) and math.isfinite(vn):
         values |= {"Spd": math.hypot(ve, vn), "GCrs": math.degrees(math.atan2(ve, vn)) % 360.0}
         if math.isfinite(vu):  # unknown before VZ was logged (2014)
             values["VZ"] = -vu
     for column, field in GPS_INDICATORS.items():
-        if _moved(r[column], r[f"{column}_0"]):
+        if moved(r[column], r[f"{column}_0"]):
             values[field] = r[column]
     return values
 
@@ -228,7 +217,7 @@ def _write_joined(patcher: _Patcher, plan: pd.DataFrame) -> None:
         if ofs_column not in plan:
             continue
         for r in _joined_values(plan, ofs_column, list(fields)).to_dict("records"):
-            values = {field: r[c] for c, field in fields.items() if _moved(r[c], r[f"{c}_0"])}
+            values = {field: r[c] for c, field in fields.items() if moved(r[c], r[f"{c}_0"])}
             if values:
                 patcher.put(int(r["ofs"]), values)
 
@@ -254,7 +243,7 @@ def _report_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoofed: 
 
 def _write_reports(patcher: _Patcher, plan: pd.DataFrame) -> None:
     for r in plan.to_dict("records"):
-        values = {field: r[c] for c, field in REPORTED.items() if _moved(r[c], r[f"{c}_0"])}
+        values = {field: r[c] for c, field in REPORTED.items() if moved(r[c], r[f"{c}_0"])}
         if values:
             patcher.put(int(r["ofs"]), values)
 
@@ -288,7 +277,7 @@ def _write_measurements(patcher: _Patcher, plan: pd.DataFrame) -> None:
         if r["lost"]:
             patcher.put(ofs, {"trk": float(int(patcher.read(ofs, "trk")) & ~PR_VALID)})
             continue
-        values = {field: r[c] for c, field in MEASURED.items() if _moved(r[c], r[f"{c}_0"])}
+        values = {field: r[c] for c, field in MEASURED.items() if moved(r[c], r[f"{c}_0"])}
         if values:
             patcher.put(ofs, values)
 

@@ -25,7 +25,7 @@ from readers.gnsslogger import FIX_NAMES, android_sv_ids, android_systems, fix_c
 from spooflens.constants import SPEED_OF_LIGHT_MPS
 from spooflens.epoch_table import EpochTable, gps_ns_of_unix_ns
 from spooflens.errors import WriterError
-from spooflens.writers.clock_shift import clock_shifts
+from spooflens.writers.fix_changes import clock_shifts
 
 
 def rewrite_gnsslogger(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:

@@ -35,7 +35,7 @@ from readers import formats, foxglove_messages, ros_messages, sniff_format
 from readers.streams import match_velocities, velocity_receiver
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError, one_line
-from spooflens.writers.clock_shift import clock_shifts
+from spooflens.writers.fix_changes import clock_shifts
 
 # stamp ns -> (lat, lon, h, ve, vn, vu) per receiver topic
 Replacement = dict[int, tuple[float, float, float, float, float, float]]

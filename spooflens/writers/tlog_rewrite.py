@@ -39,7 +39,7 @@ from readers.tlog import UNIX_US_MIN, gps_rows, packet_length, read_telemetry, t
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.schema import FixType
-from spooflens.writers.clock_shift import clock_shifts
+from spooflens.writers.fix_changes import fix_changes, moved
 
 V1, V2 = 0xFE, 0xFD
 SIGNED = 0x01  # MAVLink 2 incompat flag: a signature follows the CRC
@@ -90,21 +90,8 @@ def _plan(src: Path, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
         fields=[mine.messages[k][i][2] for k, i in zip(kinds, index, strict=True)],
     )
     rows["nth"] = rows.groupby(["receiver_id", "t_ns"], sort=False).cumcount()
-    key = ["receiver_id", "t_s"]
-    before, after = (
-        f[[*key, *ATTACKED]].assign(nth=f.groupby(key, sort=False).cumcount()) for f in (table.fixes, spoofed.fixes)
-    )
-    change = before.merge(after, on=[*key, "nth"], how="left", suffixes=("_0", ""), indicator=True)
-    change["lost"] = (change.pop("_merge") == "left_only").to_numpy()
-    change["t_ns"] = table.absolute_ns(change["t_s"].to_numpy())
-    shifts = clock_shifts(table, spoofed.fixes).drop_duplicates(["receiver_id", "t_ns"])
-    change = change.merge(shifts, on=["receiver_id", "t_ns"], how="left")
-    change["shift_s"] = change["shift_s"].fillna(0.0)
+    change = fix_changes(table, spoofed, ATTACKED, by_order=True)
     return rows.merge(change, on=["receiver_id", "t_ns", "nth"], how="inner")
-
-
-def _moved(new: float, old: float) -> bool:
-    return math.isfinite(new) and math.isfinite(old) and new != old
 
 
 def _clipped(value: float, low: int, high: int) -> int:
@@ -113,10 +100,10 @@ def _clipped(value: float, low: int, high: int) -> int:
 
 def _position(r: Mapping[str, Any], fields: Mapping[str, Any]) -> dict[str, int]:
     """lat/lon, and the height's change on both altitudes (the reader read the ellipsoidal one if sent)."""
-    if not any(_moved(r[c], r[f"{c}_0"]) for c in ("lat_deg", "lon_deg", "height_m")):
+    if not any(moved(r[c], r[f"{c}_0"]) for c in ("lat_deg", "lon_deg", "height_m")):
         return {}
     out = {"lat": _clipped(r["lat_deg"] * 1e7, *INT32), "lon": _clipped(r["lon_deg"] * 1e7, *INT32)}
-    dh_mm = round((r["height_m"] - r["height_m_0"]) * 1000.0) if _moved(r["height_m"], r["height_m_0"]) else 0
+    dh_mm = round((r["height_m"] - r["height_m_0"]) * 1000.0) if moved(r["height_m"], r["height_m_0"]) else 0
     if dh_mm:
         out["alt"] = _clipped(int(fields["alt"]) + dh_mm, *INT32)
         if int(fields.get("alt_ellipsoid", 0) or 0):
@@ -128,7 +115,7 @@ def _velocity(r: Mapping[str, Any]) -> dict[str, int]:
     """Ground speed and course of the attacked horizontal velocity; an unmoved one is left as sent (a stopped
     receiver's course would come back as atan2(0, 0))."""
     ve, vn = r["vel_e_mps"], r["vel_n_mps"]
-    if not any(_moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps")):
+    if not any(moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps")):
         return {}
     if not (math.isfinite(ve) and math.isfinite(vn)):
         return {}
@@ -142,7 +129,7 @@ def _new_fields(r: Mapping[str, Any], fields: Mapping[str, Any], velocities: boo
         return {"fix_type": NO_FIX}
     out = _position(r, fields) | (_velocity(r) if velocities else {})
     for column, (field, scale, low, high) in INDICATORS.items():
-        if _moved(r[column], r[f"{column}_0"]):
+        if moved(r[column], r[f"{column}_0"]):
             out[field] = _clipped(r[column] * scale, low, high)
     time_usec = int(fields.get("time_usec", 0))
     shift_us = round(float(r["shift_s"]) * 1e6)
@@ -239,11 +226,11 @@ def rewrite_tlog(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, v
     for why, n in sorted(skipped.items()):
         note += f", {n} attacked fixes' packets copied unchanged: {NOT_REWRITTEN[why]}"
     note += ", every other byte copied"
-    if lost or _self_report_moved(plan):
+    if lost or _self_reportmoved(plan):
         note += " (its GPS messages have no C/N0, AGC, noise or jamming indicator to carry a jammer's other marks)"
     return note
 
 
-def _self_report_moved(plan: pd.DataFrame) -> bool:
+def _self_reportmoved(plan: pd.DataFrame) -> bool:
     """Whether the attack moved what the receiver reports of itself (satellites, DOP, accuracies)."""
     return any(bool((plan[c].notna() & plan[f"{c}_0"].notna() & (plan[c] != plan[f"{c}_0"])).any()) for c in INDICATORS)
