@@ -309,7 +309,10 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
         marks.append(f"mean C/N0 up to {strongest:.1f} dB-Hz, more than the sky gives ({opts.max_sky_cn0_dbhz:g})")
     _, rise, what = w.cn0_change_db()
     if rise >= opts.spoofer_cn0_rise_db:
-        marks.append(f"{what} rose {_db(rise)} above its level {w.base_where}: a stronger signal than the sky's")
+        marks.append(
+            f"{what} rose {_db(rise)} above its level {w.base_where} and its usual level: a stronger signal than the "
+            "sky's"
+        )
     equal = w.equal_cn0(opts.equal_cn0_db, opts.equal_min_satellites, opts.equal_min_epochs)
     if equal is not None and not equal[1] < w.cn0_level_before() - opts.equal_below_level_db:
         marks.append(

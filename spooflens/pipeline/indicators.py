@@ -63,6 +63,15 @@ class Sky:
     cn0: FloatArray
     used: FloatArray  # 1 used in the fix, 0 left out, NaN unknown
 
+    @cached_property
+    def typical_cn0(self) -> FloatArray:
+        """Each satellite's median C/N0 over the whole log: the level its sky usually gives it."""
+        if not self.cn0.size:
+            return np.zeros(self.cn0.shape[1:])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a satellite never tracked
+            return np.nanmedian(self.cn0, axis=0)
+
     @classmethod
     def of(cls, table: EpochTable, rid: str) -> Sky:
         rows = table.satellites[table.satellites["receiver_id"] == rid]
@@ -228,9 +237,11 @@ class Window:
             return float("nan")
         return float(x.max() if direction > 0 else x.min())
 
-    def satellite_cn0_change(self) -> FloatArray:
+    def satellite_cn0_change(self, above_typical: bool = False) -> FloatArray:
         """Per epoch of the window, the median over satellites of each one's C/N0 against its own baseline
-        (running median; NaN where fewer than 3 satellites have both)."""
+        (running median; NaN where fewer than 3 satellites have both). `above_typical`: against the higher of
+        its baseline and its typical level in the log (`Sky.typical_cn0`): a sky coming back to its usual
+        strength after a stretch of obstruction rises against the minute before, and no higher."""
         sky = self.rx.sky
         if self.sky_base is None or not len(sky.t):
             return np.zeros(0)
@@ -240,21 +251,28 @@ class Window:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # satellites not tracked in the baseline
             own = np.nanmedian(base, axis=0)
+            if above_typical:
+                own = np.where(np.isfinite(own), np.fmax(own, sky.typical_cn0), own)
             delta = sky.cn0[self.sky_now] - own
             enough = np.isfinite(delta).sum(axis=1) >= MIN_COMMON_SATELLITES
             per_epoch = np.where(enough, np.nanmedian(np.where(enough[:, None], delta, 0.0), axis=1), np.nan)
         return running_median(per_epoch)
 
     def cn0_change_db(self) -> tuple[float, float, str]:
-        """(largest drop, largest rise) of the C/N0 in dB against its baseline, and what it was read from:
-        per satellite where the receiver reports its sky, else the mean C/N0 of its fixes."""
+        """(largest drop, largest rise) of the C/N0 in dB, and what it was read from: per satellite where the
+        receiver reports its sky, else the mean C/N0 of its fixes. The drop is against the baseline; the rise
+        against the higher of the baseline and the log's typical level (a sky recovering from obstruction
+        rises to its usual strength, a spoofer's signal above it)."""
         per_sat = self.satellite_cn0_change()
         if np.isfinite(per_sat).any():
-            return float(-np.nanmin(per_sat)), float(np.nanmax(per_sat)), "each satellite's C/N0"
+            rise = self.satellite_cn0_change(above_typical=True)
+            return float(-np.nanmin(per_sat)), float(np.nanmax(rise)), "each satellite's C/N0"
         base = self.level("cn0_mean_dbhz")
         if not np.isfinite(base):
             return float("nan"), float("nan"), ""
-        return base - self.worst("cn0_mean_dbhz", -1), self.worst("cn0_mean_dbhz", +1) - base, "mean C/N0"
+        typical = _finite_median(self.rx.col("cn0_mean_dbhz"))
+        above = max(base, typical) if np.isfinite(typical) else base
+        return base - self.worst("cn0_mean_dbhz", -1), self.worst("cn0_mean_dbhz", +1) - above, "mean C/N0"
 
     def equal_cn0(self, within_db: float, min_satellites: int, min_epochs: int) -> tuple[float, float] | None:
         """(spread, level) where `min_satellites` or more satellites sat within `within_db` of each other (5-epoch

@@ -17,7 +17,7 @@ from spooflens.detectors.receiver_time import run_receiver_time
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.events import classify
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.explanations import ROLLOVER_S, explain
+from spooflens.pipeline.explanations import ROLLOVER_S, explain, scene_of, spoofer_marks
 from spooflens.pipeline.run import Analysis, analyze_table
 from spooflens.pipeline.verdict import Kind, Verdict, decide
 from spooflens.service import read_table
@@ -114,6 +114,24 @@ def test_a_switch_of_the_fix_mode_where_the_fix_moved_is_a_receiver_mode_switch(
     result = DetectorResult("gnss_consistency", True, alarms=[quiet], evidence=Evidence.GNSS_ONLY)
     (inc,) = decide([result]).incidents
     assert "mode switch" not in {e.cause for e in explain(mtv.table, [result], inc).explanations}
+
+
+def test_a_sky_back_to_its_usual_strength_after_an_obstruction_is_no_spoofers_signal(mtv: Analysis) -> None:
+    """The same drive cut to 1062-1462 s, as an investigator might export it: the minute before the receiver's
+    alarm at 1147 s (its fix back at 1143 s) is obstructed, its satellites' C/N0 4 dB below it, yet no higher
+    than their usual level in the log. Against the minute alone that rise read as a spoofer's stronger signal,
+    vetoed the RTK mode switch that explains the alarm, and the cut was SPOOFING (medium)."""
+    cut = mtv.table.between(1062.2, 1462.2)
+    analysis = analyze_table(cut)
+    verdict = analysis.verdict
+    assert not verdict.spoofed
+    (inc,) = [i for i in verdict.incidents if i.start_s == 1147.0]
+    assert "mode switch" in {e.cause for e in inc.explanations} and inc.kind == Kind.RECEIVER_FAULT
+    scene = scene_of(cut, analysis.results)
+    alarm = next(a for r in scene.results if r.name == "receiver_evidence" for a in r.alarms if a.start_s == 1147.0)
+    w = scene.window(alarm, "GN")
+    assert np.nanmax(w.satellite_cn0_change()) >= 3.0 > np.nanmax(w.satellite_cn0_change(above_typical=True))
+    assert not spoofer_marks(w, scene.opts)
 
 
 AAVA = "corpus/signalk/aava-n2k.data"
