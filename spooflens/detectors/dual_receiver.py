@@ -256,15 +256,23 @@ def collapse_rule(
         per_epoch, _, _ = fixed_calibration(x, 1, opts.p_false_alarm, nu, sigma, 1.0, upper)
     else:
         cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-        alarm &= _beyond_floor(cal, scale, opts, upper)
+        # a fit on fewer than three windows of clean samples is a fit on every sample, a collapse included:
+        # it cannot tell a collapse from the pair's own wander, and raises nothing
+        alarm &= _beyond_floor(cal, scale, opts, upper) & cal.calibrated
         # the short window stays: a collapse to almost nothing shows in it at once; the long one sees a collapse
-        # to the receivers' tracking noise that the short one's threshold is far below
+        # to the receivers' tracking noise that the short one's threshold is far below. It grows only while
+        # the log holds three such windows of clean samples: two receivers' errors wander for minutes, and a
+        # window of most of a short log found their natural approach a collapse (a boat's two receivers, a
+        # 150 s stretch)
         longest = max(k, round(opts.max_window_s / _period(t)))
         short_alarm = alarm
         while not upper and cal.k_eff < opts.min_effective_window and k < longest:
-            k = min(2 * k, longest)
-            cal, scale, alarm = calibrate(x, k, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
-            alarm = (alarm & _beyond_floor(cal, scale, opts, upper)) | short_alarm
+            wider = min(2 * k, longest)
+            cal_w, scale_w, alarm_w = calibrate(x, wider, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
+            if not cal_w.calibrated:
+                break
+            k, cal, scale = wider, cal_w, scale_w
+            alarm = (alarm_w & _beyond_floor(cal, scale, opts, upper)) | short_alarm
         per_epoch, _, _ = calibrate(x, 1, opts.p_false_alarm, upper=upper, rayleigh_only=upper)
     episodes = _episodes(t, x, scale, alarm, k, upper, opts.merge_gap_s)
     flagged = np.zeros(len(t), dtype=bool)
