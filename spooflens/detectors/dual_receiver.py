@@ -50,6 +50,11 @@ class DualReceiverOptions:
     # under the spoofer, a tenth of a consumer receiver's scatter) stayed above it
     min_effective_window: float = 3.0
     max_window_s: float = 120.0
+    # the clean part a pair's distance model is fitted on, at least, for its collapses to count: two
+    # receivers' errors wander over minutes (multipath, the atmosphere, orbits), and a shorter stretch holds
+    # too few of their swings to know the distance's floor (a boat's two receivers, cut to 90 s, came from
+    # 13 m to 4 m apart by themselves). On less the collapses are shown, not counted
+    min_clean_s: float = 300.0
     p_false_alarm: float = 1e-5  # per epoch, each detector
     max_collapse_ratio: float = 0.5  # a collapse at least halves the clean part's window scale
     min_baseline_error_m: float = 5.0  # below it a baseline error is multipath or a receiver's jump
@@ -283,6 +288,11 @@ def collapse_rule(
     return RuleResult(t, x, scale, cal, alarm, per_epoch, episodes, flagged, sigma_s, boundary)
 
 
+def clean_seconds(rule: RuleResult) -> float:
+    """How long the clean part the rule's model was fitted on lasts (its samples times the sampling period)."""
+    return float(np.count_nonzero(rule.cal.clean) * _period(rule.t)) if len(rule.t) else 0.0
+
+
 def _alarms(rule: RuleResult, receivers: tuple[str, ...]) -> list[Alarm]:
     """The rule's alarms, one per receiver of the pair (a single spoofer feeds both)."""
     return [replace(ep.alarm, receiver_id=rid) for ep in rule.episodes for rid in receivers]
@@ -390,6 +400,8 @@ def detect(
     one = "; ".join(g.describe() for g in groups if len(g.receivers) > 1)
     for pair_notes in notes.values():
         pair_notes += [one] if one else []
+    short: list[tuple[str, list[Alarm]]] = []  # pairs whose clean part is too short for their collapses to count
+    fitted = 0
     for a, b in itertools.product(receivers[:1], receivers[1:]):
         pair = align_pair(table.fixes_of(a), table.fixes_of(b), a, b, opts)
         if len(pair.t) < 3 * opts.min_window:
@@ -407,7 +419,12 @@ def detect(
             )
         collapse.series += _rule_series(pair.label, rule, "baseline_distance", "rule 1")
         collapse.series.append(Series(f"{pair.label}/baseline_distance_3d", pair.t, np.linalg.norm(d_enu, axis=1), "m"))
-        collapse.alarms += _alarms(rule, (a, b))
+        fitted += 1
+        clean_s = clean_seconds(rule)
+        if pair_model is None and clean_s < opts.min_clean_s:
+            short.append((f"{pair.label}: {clean_s:.0f} s of clean distance", _alarms(rule, (a, b))))
+        else:
+            collapse.alarms += _alarms(rule, (a, b))
         collapse.histograms += rule_histograms(rule, f"{pair.label}/baseline_distance", "baseline distance (m)")
         collapse.extras[pair.label] = _facts(rule)
         notes[COLLAPSE].append(
@@ -418,6 +435,18 @@ def detect(
         pr_prior = pair_model.pseudorange_difference_sd if pair_model is not None else None
         _pseudorange_rule(table, pair, opts, pr, notes[PR_COLLAPSE], pr_prior)
         _baseline_error_rule(known, pair, d_enu, opts, err, notes[BASELINE_ERROR])
+    if short:
+        why = (
+            f"{'; '.join(w for w, _ in short)}: two receivers' errors wander over minutes, and the distance's "
+            f"floor needs at least {opts.min_clean_s:.0f} s of clean samples to be known"
+        )
+        if len(short) == fitted:  # no pair long enough: its collapses are shown, not counted
+            collapse.alarms += [alarm for _, alarms in short for alarm in alarms]
+            collapse.advisory = True
+            why += ", so this test's alarms are advisory"
+        else:
+            why += "; that pair's collapses are not counted"
+        notes[COLLAPSE].append(why)
     out = []
     for res in (collapse, pr, err):
         if not res.series:
