@@ -415,6 +415,7 @@ def parse_jam(text: str) -> tuple[float, float, float]:
         "fuzz": "spooflens.bench.fuzz:command",
         "corpus": "spooflens.bench.corpus_bench:command",
         "baseline": "spooflens.bench.baseline_bench:command",
+        "windows": "spooflens.bench.windows_bench:command",
     },
 )
 def bench() -> None:
