@@ -59,6 +59,10 @@ INDICATORS: tuple[Indicator, ...] = (
 # the way each moves under interference (a jammer): a change only that way is no spoofing evidence
 INTERFERENCE_DIRECTION = {"noise_per_ms": +1, "jamming_indicator": +1, "agc": -1, "cn0_mean_dbhz": -1}
 LABELS = {ind.column: ind.label for ind in INDICATORS}
+# indicators that are one estimate of the receiver's, counted once towards the indicators that must agree: the
+# three accuracies are read off one covariance, the two DOPs off one geometry (a fix gone bad moves all three
+# accuracies, and one worse fix is not three witnesses)
+ONE_ESTIMATE = {"h_acc_m": "accuracy", "v_acc_m": "accuracy", "vel_acc_mps": "accuracy", "hdop": "dop", "vdop": "dop"}
 
 
 @dataclass(frozen=True)
@@ -346,11 +350,15 @@ def check_receiver(
     Z = np.stack([z_cols[n] for n in names], axis=1) if names else np.zeros((len(t), 0))
     Zw = np.stack([trailing_max(t, Z[:, i], opts.window_s) for i in range(Z.shape[1])], axis=1) if names else Z
     beyond = np.nan_to_num(Zw, nan=0.0) > opts.z_alarm
-    count = beyond.sum(axis=1).astype(float)
+    # per estimate (`ONE_ESTIMATE`): its indicators' largest windowed z
+    estimates = sorted({ONE_ESTIMATE.get(n, n) for n in names})
+    columns = [[i for i, n in enumerate(names) if ONE_ESTIMATE.get(n, n) == e] for e in estimates]
+    Ze = np.stack([np.fmax.reduce(Zw[:, c], axis=1) for c in columns], axis=1) if names else Z
+    count = (np.nan_to_num(Ze, nan=0.0) > opts.z_alarm).sum(axis=1).astype(float)
     other = np.stack([trailing_max(t, not_interference[n], opts.window_s) for n in names], axis=1) if names else Z
     joint = (count >= opts.min_indicators) & ((other > opts.z_alarm).sum(axis=1) >= 1)
-    # the score: the second largest windowed z (the weaker of the two strongest agreeing indicators)
-    score = np.sort(np.nan_to_num(Zw, nan=0.0), axis=1)[:, -2] if Z.shape[1] >= 2 else np.zeros(len(t))
+    # the score: the second largest windowed z of the estimates (the weaker of the two strongest agreeing)
+    score = np.sort(np.nan_to_num(Ze, nan=0.0), axis=1)[:, -2] if Ze.shape[1] >= 2 else np.zeros(len(t))
     raised = joint | spoof_flag | too_strong
     alarms = [
         a
@@ -482,7 +490,8 @@ ANALYSIS = AnalysisSpec(
             "together at one time and stay worse (a takeover lasting to the end can fill most of the log, and "
             "then the whole log's median is the attack's state), the part before it. An alarm needs "
             f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s of each "
-            f"other for {_O.min_duration_s:g} s, one of them not the way a jammer moves it (noise or jamming "
+            f"other for {_O.min_duration_s:g} s (the three accuracies are one indicator, read off one covariance, "
+            "and the two DOPs one), one of them not the way a jammer moves it (noise or jamming "
             "indicator up, AGC or C/N0 down: the interference detector reads those), the receiver's own "
             "spoofing flag (as decoded by the log's "
             "message definition), or a mean C/N0 above "

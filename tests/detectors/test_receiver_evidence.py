@@ -3,6 +3,8 @@ levels from its first fix to its last shows there, where against its own median 
 
 from __future__ import annotations
 
+import numpy as np
+import pandas as pd
 from baseline_support import px4_like, receiver_fixes
 
 from spooflens.detectors.receiver_evidence import run_receiver_evidence, run_receiver_levels
@@ -73,3 +75,34 @@ def test_a_whole_log_off_its_baseline_is_an_anomaly_apart() -> None:
         (0.0, (vb,), "low"),
         (300.0, (Evidence.GNSS_ONLY, Evidence.RECEIVER), "medium"),
     ]
+
+
+def _accuracies_worse(satellites_lost: bool) -> pd.DataFrame:
+    """1 Hz fixes for 300 s whose three reported accuracies triple from 150 s to 180 s (one fix gone bad),
+    their satellites used falling from 14 to 4 there too when asked."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 300.0, 1.0)
+    bad = (t >= 150.0) & (t < 180.0)
+    noise = lambda scale: scale * rng.standard_normal(len(t))  # noqa: E731
+    return pd.DataFrame(
+        {
+            "t_s": t,
+            "receiver_id": "gps",
+            "h_acc_m": np.where(bad, 4.5, 1.5) + noise(0.05),
+            "v_acc_m": np.where(bad, 7.5, 2.5) + noise(0.08),
+            "vel_acc_mps": np.where(bad, 1.2, 0.4) + noise(0.01),
+            "sats_used": np.where(bad & satellites_lost, 4.0, 14.0) + rng.integers(-1, 2, len(t)),
+            "fix_type": 3,
+            "spoofing_flag": 0,
+            **dict.fromkeys(("hdop", "vdop", "noise_per_ms", "jamming_indicator", "agc", "cn0_mean_dbhz"), np.nan),
+        }
+    )
+
+
+def test_three_accuracies_of_one_fix_are_one_witness() -> None:
+    """A receiver's horizontal, vertical and speed accuracies are read off one covariance: a fix gone bad
+    moves all three, which the two agreeing indicators the test asks for must not count three times (the
+    clean husky bag's accuracies alone made an alarm). With the satellites lost beside them, two agree."""
+    assert not run_receiver_evidence(_accuracies_worse(satellites_lost=False)).alarms
+    (alarm,) = run_receiver_evidence(_accuracies_worse(satellites_lost=True)).alarms
+    assert 150.0 <= alarm.start_s <= 152.0

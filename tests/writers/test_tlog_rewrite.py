@@ -230,7 +230,7 @@ def test_analyze_finds_the_step_and_sees_the_jammer_only_as_degradation(
     summary = analyze_json(tmp_path / "jam.tlog", tmp_path)
     assert not summary["verdict"]["spoofed"]
     (degradation,) = summary["verdict"]["events"]
-    assert degradation["kind"] == "degradation" and degradation["start_s"] <= 41.0 and degradation["end_s"] >= 79.0
+    assert degradation["kind"] == "degradation" and degradation["start_s"] <= 42.0 and degradation["end_s"] >= 79.0
     (interference,) = [a for a in summary["analyses"] if a["name"] == "interference"]
     assert not interference["ran"] and interference["reason"].startswith("no C/N0 (per satellite or mean), AGC")
 
