@@ -86,13 +86,13 @@ SAMPLES: tuple[Sample, ...] = (
         "dual_receiver.mcap",
         "mcap-ros2",
         "dual_receiver",
-        90.0,
+        420.0,
         25.0,
         5.0,
         2,
-        "single_antenna:rate=1,start=60",
-        "car with two GNSS receivers 1.2 m apart (/gps/fix, /gps2/fix); from 60 s one spoofer antenna feeds "
-        "both (seed 003's attack): the baseline collapses",
+        "single_antenna:rate=1,start=360",
+        "car with two GNSS receivers 1.2 m apart (/gps/fix, /gps2/fix); from 360 s one spoofer antenna feeds "
+        "both (seed 003's attack): the baseline collapses (the six minutes before show the pair's own wander)",
     ),
 )
 

@@ -146,7 +146,7 @@ def test_align_pair_interpolates_the_denser_receiver_within_its_gap_bound():
 
 
 def test_the_clean_sample_pair_stays_clean():
-    # sample_logs/dual_receiver.mcap before its attack: scenario dual_receiver, seed 2, 90 s, 5 Hz
+    # the scenario and seed of sample_logs/dual_receiver.mcap, its first 90 s (before its attack), 5 Hz
     res = {r.name: r for r in detect(_dual(2, 90.0))}
     assert res[COLLAPSE].ran and not res[COLLAPSE].alarms
 
