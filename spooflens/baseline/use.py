@@ -53,6 +53,12 @@ def usable(q: Quantity | None) -> bool:
     return q is not None and q.n_logs >= MIN_LOGS_TO_CAP and q.agree is True
 
 
+def floor(q: Quantity | None) -> float:
+    """The smallest value a log may learn for this noise scale: its quietest clean log's (0 when the
+    baseline cannot tell: `usable`). A receiver or IMU is not quieter on one day than on every clean day."""
+    return float(min(q.values)) if q is not None and usable(q) else 0.0
+
+
 def cap(q: Quantity | None, allowance: float = ALLOWANCE) -> float:
     """The largest value a log may learn for this scale (inf when the baseline cannot tell: `usable`)."""
     return float(max(q.values) * allowance) if q is not None and usable(q) else float("inf")
@@ -137,16 +143,17 @@ def noise_prior(loaded: LoadedBaseline, receiver_id: str, imu_id: str, preset: s
         if not k.startswith("tau") and usable(q)
     }
     rates = {s: (tau, r) for s, tau in MARKOV.items() if np.isfinite(r := rate_cap(params.get(s), params.get(tau)))}
+    lower = {k: floor(q) for k, q in params.items() if not k.startswith("tau") and floor(q) > 0.0}
     n = max((q.n_logs for q in params.values()), default=0)
     free = [k for k in params if not k.startswith("tau") and k not in upper]
     limits = (
-        f"capped at {ALLOWANCE:g} x its noisiest clean log"
+        f"capped at {ALLOWANCE:g} x its noisiest clean log, not below its quietest"
         + (" (its wanders' driving noise too)" if rates else "")
         + (f" but {', '.join(free)} (one log, or its logs disagree)" if free else "")
         if upper
         else "nothing capped (one log, or its logs disagree)"
     )
-    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''}; {limits})", rates)
+    return NoisePrior(start, upper, f"baseline {loaded.file} ({n} log{'s' if n != 1 else ''}; {limits})", rates, lower)
 
 
 def coast_envelope_limit(loaded: LoadedBaseline | None, receiver_id: str, imu_id: str) -> tuple[FloatArray, str] | None:

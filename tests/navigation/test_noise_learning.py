@@ -36,6 +36,21 @@ def test_a_prior_caps_what_the_log_may_learn() -> None:
     assert not learn_noise(nav.inputs, preset, nav.start, None, (), prior=roomy).at_upper
 
 
+def test_a_prior_floors_what_the_log_may_learn() -> None:
+    """Not quieter than the vehicle's quietest clean log: trusting a receiver more than any of its clean days
+    did makes ordinary excursions alarms (with a baseline of 2 clean logs the simulated vehicles' clean
+    logs raised 4 one-class anomalies, without one 3)."""
+    nav, preset = car()
+    free = nav.learned
+    high = 2.0 * free.noise.white_pos_m[0]
+    prior = NoisePrior({"w_h": high}, {"w_h": 4.0 * high}, "baseline test (2 logs)", lower={"w_h": high})
+    held = learn_noise(nav.inputs, preset, nav.start, None, (), prior=prior)
+    assert held.noise.white_pos_m[0] >= high * (1 - 1e-9)
+    # a floor below what the log wants holds nothing
+    low = NoisePrior({}, {}, "baseline low (3 logs)", lower={"w_h": 0.1 * free.noise.white_pos_m[0]})
+    assert learn_noise(nav.inputs, preset, nav.start, None, (), prior=low).noise.white_pos_m[0] > low.lower["w_h"]
+
+
 def test_a_wander_held_at_its_size_is_not_made_faster_instead() -> None:
     # a cap on a Gauss-Markov error's size alone lets the search shorten its time constant: the same size
     # moving faster is more noise. With the rate its driving noise feeds it capped (sigma^2 / tau), the
