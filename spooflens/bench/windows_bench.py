@@ -53,6 +53,18 @@ class Stretch:
     error: str = ""
 
 
+@dataclass(frozen=True)
+class Cutting:
+    """Where and how the stretches are cut: `draws` of each of `lengths` per log from starts `seed` draws,
+    of logs whose GNSS spans at least `min_span_s`, each analysed within `timeout_s`."""
+
+    seed: int = 1
+    lengths: tuple[float, ...] = DEFAULT_LENGTHS_S
+    draws: int = 2
+    min_span_s: float = 240.0
+    timeout_s: float = 120.0
+
+
 class _Timeout(Exception):
     pass
 
@@ -70,9 +82,7 @@ def starts(seed: int, name: str, span: tuple[float, float], length_s: float, dra
     return [round(rng.uniform(a, b - length_s), 1) for _ in range(draws)]
 
 
-def stretches_of(
-    path: str, name: str, seed: int, lengths: tuple[float, ...], draws: int, min_span_s: float, timeout_s: float
-) -> list[Stretch]:
+def stretches_of(path: str, name: str, cutting: Cutting) -> list[Stretch]:
     """Read one log and analyse its stretches (in a worker process). A log that cannot be read, is not one
     recording or holds too little GNSS gives none."""
     from spooflens.errors import SpooflensError
@@ -88,15 +98,15 @@ def stretches_of(
     if not has_gnss(table) or len(table.segments) > 1 or len(t) < 20:
         return []
     span = (float(t.min()), float(t.max()))
-    if span[1] - span[0] < min_span_s:
+    if span[1] - span[0] < cutting.min_span_s:
         return []
     out: list[Stretch] = []
     signal.signal(signal.SIGALRM, _alarm)
-    for length in lengths:
-        for start in starts(seed, name, span, length, draws):
+    for length in cutting.lengths:
+        for start in starts(cutting.seed, name, span, length, cutting.draws):
             t0 = time.perf_counter()
             try:
-                signal.setitimer(signal.ITIMER_REAL, timeout_s)
+                signal.setitimer(signal.ITIMER_REAL, cutting.timeout_s)
                 analyses = analyze_segments(table.between(start, start + length))
                 signal.setitimer(signal.ITIMER_REAL, 0)
             except _Timeout:
@@ -129,21 +139,10 @@ def clean_logs(roots: list[Path], only: tuple[str, ...]) -> list[CorpusLog]:
     return [c for c in logs if not only or any(fnmatch.fnmatch(c.name, g) for g in only)]
 
 
-def run_windows(
-    logs: list[CorpusLog],
-    seed: int,
-    lengths: tuple[float, ...],
-    draws: int,
-    min_span_s: float,
-    timeout_s: float,
-    jobs: int,
-    show: bool,
-) -> list[Stretch]:
+def run_windows(logs: list[CorpusLog], cutting: Cutting, jobs: int, show: bool) -> list[Stretch]:
     out: list[Stretch] = []
     with progress(show) as report, ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [
-            pool.submit(stretches_of, str(c.path), c.name, seed, lengths, draws, min_span_s, timeout_s) for c in logs
-        ]
+        futures = [pool.submit(stretches_of, str(c.path), c.name, cutting) for c in logs]
         for done, future in enumerate(as_completed(futures), 1):
             out += future.result()
             report("stretches of clean logs", done, len(futures))
@@ -236,14 +235,14 @@ def command(
     if any(x <= 0 for x in lengths):
         raise click.BadParameter("lengths must be positive", param_hint="--length")
     t0 = time.perf_counter()
-    logs = clean_logs(roots, only)
-    stretches = run_windows(logs, seed, lengths, draws, min_span_s, timeout_s, jobs, show_progress())
+    cutting = Cutting(seed, lengths, draws, min_span_s, timeout_s)
+    stretches = run_windows(clean_logs(roots, only), cutting, jobs, show_progress())
     print_report(stretches, time.perf_counter() - t0)
     if json_path:
-        settings = {"seed": seed, "lengths": lengths, "draws": draws, "min_span_s": min_span_s, "roots": roots}
+        settings = asdict(cutting) | {"roots": roots}
         json_path.write_text(json.dumps(report_json(stretches, settings), indent=1, default=str))
         console().print(f"JSON: {json_path}")
     return 0
 
 
-__all__ = ["command", "run_windows", "starts", "stretches_of"]
+__all__ = ["Cutting", "command", "run_windows", "starts", "stretches_of"]
