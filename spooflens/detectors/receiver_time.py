@@ -154,7 +154,10 @@ def coarse_time(t: FloatArray, x: FloatArray, scale: float, opts: ReceiverTimeOp
             continue
         jump = dx - drift * dt - (-np.sign(drift) * q)
         wraps = int(np.sum(np.abs(jump) <= max(opts.wrap_tolerance * q, opts.z_alarm * scale)))
-        drifted = abs(drift) * float(t[-1] - t[0]) / q
+        # how many steps the offset drifted: its change end to end with the wraps taken out (the median rate
+        # of a sawtooth read at its own cycle can be a fifth short, and a stretch holding three wraps 170 s
+        # apart in 400 s was then one wrap too many)
+        drifted = abs(float(x[-1] - x[0]) + np.sign(drift) * q * wraps) / q
         if 1 <= wraps <= drifted + 1:
             return CoarseTime(q, drift, wraps)
     return None
