@@ -890,13 +890,30 @@ def read_time_fault(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
     )
 
 
+def off_together(scene: _Scene, alarm: Alarm) -> list[str]:
+    """The incident's other satellites named off at the same time as this alarm's (their alarms overlapping
+    half or more of the shorter of the two): a car passing buildings has its satellites reflected one after
+    another (a phone's R14 for 20 s, then R13), a bias moves several at once."""
+    mine = set(alarm.satellites)
+    others: set[str] = set()
+    for result in scene.results:
+        for a in result.alarms:
+            named = set(a.satellites) & set(scene.satellites)
+            if a is alarm or not named - mine:
+                continue
+            overlap = min(a.end_s, alarm.end_s) - max(a.start_s, alarm.start_s)
+            if overlap >= 0.5 * min(a.end_s - a.start_s, alarm.end_s - alarm.start_s):
+                others |= named - mine
+    return sorted(others)
+
+
 def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Reading:
     """One satellite's range a reflection's length off, its C/N0 not raised: NLOS or multipath."""
     rid = alarm.receiver_id or ""
     sv = alarm.satellites[0]
-    others = [x for x in scene.satellites if x != sv]
+    others = off_together(scene, alarm)
     if others:  # reflections delay satellites each by its own path; several off together is a bias
-        why = f"{sv} is not alone: the incident also names {'+'.join(others)}"
+        why = f"{sv} is not alone: {'+'.join(others)} off at the same time"
         return _kept("reflection", Kind.DEGRADATION, why, rid)
     # the alarm's own size (a moving receiver passes reflections: its satellites are excluded now and then,
     # in runs, rarely at most of their epochs), and that of any finding on the satellite over the alarm; the

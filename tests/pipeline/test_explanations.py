@@ -315,6 +315,19 @@ def test_a_phone_satellite_excluded_in_a_run_a_reflections_length_off_is_no_spoo
     assert e.cause == "reflection" and e.kind == Kind.DEGRADATION and e.text.startswith("R13 alone 41 m off")
 
 
+def test_satellites_reflected_one_after_another_are_not_a_bias() -> None:
+    """The same phone drive cut to 31.3-931.3 s (its solution learns another scale): RAIM excludes R14 over
+    64.8-84.8 s, 53 m off, then R13 over 79.8-104.8 s, 41 m off, overlapping 5 s. The incident named both, and
+    a reflection must be alone: SPOOFING (medium). A bias moves satellites at the same time; these were off
+    one after another, as a car passes buildings."""
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+
+    a = analyze_table(with_solved_fixes(_pixel4xl()).between(31.3, 931.3))
+    assert not a.verdict.spoofed, a.verdict.headline
+    (inc,) = [i for i in a.verdict.incidents if "raim" in i.detectors]
+    assert set(inc.satellites) == {"R13", "R14"} and [e.cause for e in inc.explanations] == ["reflection"]
+
+
 @pytest.mark.parametrize("delay_m", [2000.0, 300.0])
 def test_a_satellite_a_spoofers_length_off_in_the_same_phone_log_is_still_spoofing(delay_m: float) -> None:
     # the same log with G09 (82 deg, every epoch) a counterfeit delay_m late from 200 s: RAIM's alarm carries
