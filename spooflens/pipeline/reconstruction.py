@@ -67,6 +67,13 @@ HORIZONTAL_ROWS = (0, 1, 3, 4)
 class CoastingOptions:
     p_disagree: float = 1e-3
     margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
+    # ... widened where fewer than `calibrating_coasts` clean coasts (and no vehicle baseline) measured that
+    # envelope (`Envelope.margin`), to this with none: a short log's reference drifts as far as its
+    # unlearned noise lets it, which the filter's own uncertainty understates (the real husky bag cut to
+    # 60 s: a clean stretch departed 2.7 times the filter's uncertainty, a 2 m/s ramp 9.6 times; cut to
+    # 150 s, with 2 clean coasts: 3.0, and the ramps 160 and more)
+    uncalibrated_margin: float = 5.0
+    calibrating_coasts: int = 5
     min_disagree_s: float = 2.0
     min_disagree_epochs: int = 3
     # after the incident's last alarm (and before the next incident), within the clean envelope's reach: a
@@ -106,6 +113,17 @@ class Envelope:
     horizon_s: FloatArray
     kappa: FloatArray
     runs: int
+    from_baseline: bool = False  # capped by the vehicle's baseline (`capped`): its clean logs calibrate it
+
+    def margin(self, opts: CoastingOptions) -> float:
+        """How far a departure must exceed this envelope: `opts.margin`, widened where few clean coasts measured
+        it (the largest of n coasts is exceeded by the next clean one once in n + 1), by 1 + 1/sqrt(n), up to
+        `opts.uncalibrated_margin` with none; a vehicle baseline's envelope needs no widening."""
+        if self.from_baseline or self.runs >= opts.calibrating_coasts:
+            return opts.margin
+        if not self.runs:
+            return opts.uncalibrated_margin
+        return min(opts.uncalibrated_margin, opts.margin * (1.0 + 1.0 / float(np.sqrt(self.runs))))
 
     def at(self, h: FloatArray) -> FloatArray:
         if not len(self.horizon_s):
@@ -327,9 +345,10 @@ def capped(envelope: Envelope, limit: FloatArray | None) -> Envelope:
         return envelope
     grid = np.arange(len(limit), dtype=float)
     if not envelope.runs:
-        return Envelope(grid, np.maximum(limit, 1.0), 0)
+        return Envelope(grid, np.maximum(limit, 1.0), 0, from_baseline=True)
     allowed = np.interp(envelope.horizon_s, grid, limit)
-    return Envelope(envelope.horizon_s, np.maximum(np.minimum(envelope.kappa, allowed), 1.0), envelope.runs)
+    kappa = np.maximum(np.minimum(envelope.kappa, allowed), 1.0)
+    return Envelope(envelope.horizon_s, kappa, envelope.runs, from_baseline=True)
 
 
 def coasting_check(
@@ -425,7 +444,8 @@ def _departure(
     away = (np.nan_to_num(offset) > opts.min_departure_m) | (
         young & (np.nan_to_num(velocity_off) > opts.min_departure_mps)
     )
-    disagree = (np.nan_to_num(ratio) > opts.margin * kappa) & away & (t < lost)
+    margin = envelope.margin(opts)
+    disagree = (np.nan_to_num(ratio) > margin * kappa) & away & (t < lost)
     departure, open_at_end = None, False
     for a, b in _runs(disagree):
         if t[a] > deadline:

@@ -192,3 +192,19 @@ def test_a_drag_is_caught_beside_a_sparse_receiver_that_wanders_by_metres(start_
     spoofed, _ = apply_attack(chip, parse_attack(f"single_antenna:rate=1,start={start_s:g}"))
     alarms = _collapse_alarms(_tracking_noise(spoofed, start_s, 0.1, seed=3))
     assert alarms and start_s <= alarms[0].start_s <= start_s + 150.0
+
+
+@pytest.mark.parametrize(("start_s", "seconds", "ramp_s"), [(12.2, 60.0, 42.2), (243.5, 150.0, 300.0)])
+def test_a_short_stretch_judges_its_coasts_against_a_widened_margin(
+    husky_bag: Path, start_s: float, seconds: float, ramp_s: float
+) -> None:
+    """The husky bag cut where `bench windows` cut it: 60 s (noise not learned, no clean coast) and 150 s (2
+    clean coasts). Their references drift further than their few coasts measured, and clean they were SPOOFING
+    (a departure 2.7 and 3.0 times the envelope). A departure must now exceed it by 2 (1 + 1/sqrt(n)) times
+    with n < 5 clean coasts, 5 times with none: clean, no spoofing; a 2 m/s ramp (9.6 and 160 times) caught."""
+    stretch = read_log(husky_bag).between(start_s, start_s + seconds)
+    assert not analyze_table(stretch).verdict.spoofed
+    ramped, _ = apply_attack(stretch, parse_attack(f"ramp:rate=2,start={ramp_s}"))
+    verdict = analyze_table(ramped).verdict
+    attack = next(i for i in verdict.incidents if i.is_spoofing)
+    assert Evidence.INERTIAL in attack.evidence and attack.end_s >= start_s + seconds - 1.0

@@ -134,18 +134,23 @@ def test_a_step_written_into_log171_after_its_gap_is_caught_by_the_ins_of_that_s
     assert 150.0 <= check["departure_s"] <= 151.0
 
 
-def test_a_ramp_on_log171s_vibrating_imu_is_caught_once_the_search_reaches_the_imus_noise(
+def test_a_ramp_on_log171s_vibrating_imu_reaches_the_imus_noise_but_three_clean_coasts_confirm_nothing(
     real: Path, tmp_path: Path
 ) -> None:
     # on the ground, motors running, the copter's 50 Hz IMU reads 0.09 rad/s of gyro noise: the two sweeps
-    # left its scale at their reach (27 x the consumer preset, still gaining) and the filter overconfident,
-    # its clean coasts 6-9 times its uncertainty within seconds; the ramp gave one-class anomalies only.
-    # The search goes on while a noise is still rising at the top of its reach
+    # left its scale at their reach (27 x the consumer preset, still gaining) and the filter overconfident.
+    # The search goes on while a noise is still rising at the top of its reach (81 x here). The ramp's
+    # inertial detectors alarm over the ramp; but this log holds only 3 clean coasts to measure how far its
+    # reference drifts, and a departure must exceed that envelope by 2 (1 + 1/sqrt 3) = 3.15 times: within the
+    # confirmation window it does not, so the ramp stays a one-class anomaly (caught with a margin of 2 before;
+    # the same margin made clean stretches of the husky bag SPOOFING)
     out = tmp_path / "log171_ramp.bin"
     assert main(["inject", str(real / LOG171), "--attack", "ramp:rate=2,vel=1,start=162.4", "-o", str(out)]) == 0
     a = analyze_table(read_table(out, {}, False))
-    assert a.verdict.spoofed, a.verdict.headline
-    (attack,) = [i for i in a.verdict.incidents if i.is_spoofing]
-    assert Evidence.INERTIAL in attack.evidence and 162.0 <= attack.start_s <= 165.0
     navigation = next(r for r in a.results if r.name == "navigation")
     assert float(navigation.extras["imu_noise_scale"]) > 27.5  # type: ignore[arg-type]
+    assert not a.verdict.spoofed, a.verdict.headline
+    (ramp,) = [i for i in a.verdict.incidents if i.start_s <= 165.0 <= i.end_s]
+    assert "glrt" in ramp.detectors and Evidence.INERTIAL not in ramp.evidence
+    checks = [c for c in a.verdict.coasting_checks if c["clean_coasts"] == 3]
+    assert checks and not any(c["confirmed"] for c in checks)
