@@ -182,8 +182,10 @@ def test_web_viewer_is_served_on_loopback_and_calls_nowhere(tmp_path: Path) -> N
         assert _listening(port), "spooflens view --web did not start"
         url = f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
         with Browser() as browser:
-            page = browser.open(url, settle_s=8.0)
-            browser.collect(page)
+            page = browser.open(url)
+            # until the viewer asked for the recording, then long enough for what it would call after that
+            asked = f"http://127.0.0.1:{grpc}/"
+            browser.wait_for(page, lambda p: any(r.startswith(asked) for r in p.requests), 30.0, then_s=3.0)
         loopback = ("http://127.0.0.1:", "http://localhost:")
         assert any(r.endswith("re_viewer_bg.wasm") for r in page.requests)  # the viewer itself loaded
         assert any(r.startswith(f"http://127.0.0.1:{grpc}/") for r in page.requests)  # and asked for the data

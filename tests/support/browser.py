@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -223,3 +224,12 @@ class Browser:
         """Fold events received since the last call into the page's requests and errors."""
         page.evaluate("1")
         self._drain(page)
+
+    def wait_for(self, page: Page, done: Callable[[Page], bool], timeout_s: float, then_s: float = 0.0) -> None:
+        """Collect the page's events until `done(page)` holds (or `timeout_s`), then for `then_s` more."""
+        deadline = time.monotonic() + timeout_s
+        while not done(page) and time.monotonic() < deadline:
+            time.sleep(0.2)
+            self.collect(page)
+        time.sleep(then_s)
+        self.collect(page)
