@@ -376,19 +376,18 @@ def coordinate_search(
     names: Sequence[str],
     opts: LearnOptions,
     best: float | None = None,
-    upper: dict[str, float] | None = None,
-    rates: dict[str, tuple[str, float]] | None = None,
-    lower: dict[str, float] | None = None,
+    prior: NoisePrior | None = None,
 ) -> tuple[float, dict[str, float]]:
     """Coordinate descent on a log scale over `names` (factors `opts.steps`, `opts.sweeps` sweeps).
 
     Each step's two candidates (up and down) are run side by side (`threads.in_parallel`) and judged in
     that order, the first that improves taken: the path and the answer are those of trying them one
     after the other; only the second run is wasted when the first already improved. `best`: the score of
-    `params` when known (not run again). `upper`, `rates`, `lower`: a baseline's caps and floors
-    (`NoisePrior`), which `params` respects (`_capped`)."""
+    `params` when known (not run again). `prior`: a baseline's caps and floors, which `params` respects
+    (`_capped`)."""
     if best is None:
         best = objective(make(params))
+    upper, rates, lower = (prior.upper, prior.rates, prior.lower) if prior is not None else ({}, {}, {})
     start = dict(params)
     reach = float(np.prod(opts.steps)) ** opts.sweeps
     sweep = 0
@@ -397,9 +396,9 @@ def coordinate_search(
         before = best
         for name in names:
             lo, hi = BOUNDS.get(name, (1e-4, 1e4))
-            hi = min(hi, (upper or {}).get(name, hi))
-            lo = min(max(lo, (lower or {}).get(name, lo)), hi)
-            for s, (tau, r) in (rates or {}).items():  # the wanders' driving noise under its cap
+            hi = min(hi, upper.get(name, hi))
+            lo = min(max(lo, lower.get(name, lo)), hi)
+            for s, (tau, r) in rates.items():  # the wanders' driving noise under its cap
                 if name == s and tau in params:
                     hi = min(hi, float(np.sqrt(r * params[tau])))
                 elif name == tau and s in params:
@@ -523,35 +522,21 @@ def learn_noise(
             compare=False,
         )
 
-    upper = prior.upper if prior is not None else None
-    rates = prior.rates if prior is not None else None
-    lower = prior.lower if prior is not None else None
     # the likelihood is flat along large slow wanders: start the search from the best of a coarse grid (and,
     # with a baseline, of the values its clean logs learned), every candidate under the baseline's caps
-    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, upper, rates, lower) for b in opts.wander_grid_m]
+    grid = [_capped({**params, "b_h": b, "b_v": 2.0 * b}, prior) for b in opts.wander_grid_m]
     if prior is not None:
-        grid.append(
-            _capped(
-                noise_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), upper, rates, lower
-            )
-        )
+        grid.append(_capped(noise_parameters(_from_prior(noise, prior), prior.start.get("imu", 1.0), has_vel), prior))
     values = objective.many([options(g) for g in grid])
     params = grid[int(np.argmin(values))]
-    best, params = coordinate_search(objective, options, params, list(params), opts, min(values), upper, rates, lower)
+    best, params = coordinate_search(objective, options, params, list(params), opts, min(values), prior)
     if odometry_id is not None:
         R_vb = estimate_mount(sub, odometry_id)
         if R_vb is not None:
             odometry = OdometryAiding(R_vb, (0.1, 0.1, 0.1), odometry_id, (0.05, 0.05, 0.05), 30.0, "learned")
             params |= {"o_f": 0.1, "o_l": 0.1, "o_b": 0.05, "tau_o": 30.0}
             best, params = coordinate_search(
-                objective,
-                options,
-                params,
-                ["o_f", "o_l", "o_b", "tau_o", "imu"],
-                opts,
-                upper=upper,
-                rates=rates,
-                lower=lower,
+                objective, options, params, ["o_f", "o_l", "o_b", "tau_o", "imu"], opts, prior=prior
             )
     final = replace(options(params), max_block_s=FilterOptions().max_block_s, record=True, compare=True)
     assert final.noise is not None
@@ -567,7 +552,7 @@ def learn_noise(
         inputs.imu_id,
         inputs.receiver_id,
         prior.source if prior is not None else "",
-        _at_caps(params, upper or {}, rates or {}),
+        _at_caps(params, prior.upper, prior.rates) if prior is not None else (),
     )
 
 
@@ -603,16 +588,13 @@ def noise_parameters(noise: GnssNoise, imu: float, has_vel: bool) -> dict[str, f
     return params
 
 
-def _capped(
-    params: dict[str, float],
-    upper: dict[str, float] | None,
-    rates: dict[str, tuple[str, float]] | None = None,
-    lower: dict[str, float] | None = None,
-) -> dict[str, float]:
-    """The parameters under a baseline's caps and above its floors; a wander fed faster than its cap allows
-    made slower (its time constant raised, up to its bound), then smaller."""
-    out = {k: min(max(v, (lower or {}).get(k, v)), (upper or {}).get(k, np.inf)) for k, v in params.items()}
-    for s, (tau, r) in (rates or {}).items():
+def _capped(params: dict[str, float], prior: NoisePrior | None) -> dict[str, float]:
+    """The parameters under a baseline's caps and above its floors (as they are without one); a wander fed
+    faster than its cap allows made slower (its time constant raised, up to its bound), then smaller."""
+    if prior is None:
+        return dict(params)
+    out = {k: min(max(v, prior.lower.get(k, v)), prior.upper.get(k, np.inf)) for k, v in params.items()}
+    for s, (tau, r) in prior.rates.items():
         if s in out and tau in out and out[s] ** 2 > r * out[tau]:
             out[tau] = min(out[s] ** 2 / r, BOUNDS[tau][1])
             out[s] = min(out[s], float(np.sqrt(r * out[tau])))
@@ -622,7 +604,7 @@ def _capped(
 def _from_prior(noise: GnssNoise, prior: NoisePrior) -> GnssNoise:
     """The initial guess with the baseline's values in place (each under its cap)."""
     has_vel = noise.has_velocity
-    start = _capped({**noise_parameters(noise, 1.0, has_vel), **prior.start}, prior.upper, prior.rates, prior.lower)
+    start = _capped({**noise_parameters(noise, 1.0, has_vel), **prior.start}, prior)
 
     def value(name: str, default: float) -> float:
         return float(start.get(name, default))
