@@ -894,11 +894,11 @@ def off_together(scene: _Scene, alarm: Alarm) -> list[str]:
     """The incident's other satellites named off at the same time as this alarm's (their alarms overlapping
     half or more of the shorter of the two): a car passing buildings has its satellites reflected one after
     another (a phone's R14 for 20 s, then R13), a bias moves several at once."""
-    mine = set(alarm.satellites)
+    mine, incident = set(alarm.satellites), set(scene.satellites)
     others: set[str] = set()
     for result in scene.results:
         for a in result.alarms:
-            named = set(a.satellites) & set(scene.satellites)
+            named = set(a.satellites) & incident
             if a is alarm or not named - mine:
                 continue
             overlap = min(a.end_s, alarm.end_s) - max(a.start_s, alarm.start_s)

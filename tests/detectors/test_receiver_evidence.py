@@ -9,6 +9,7 @@ from baseline_support import px4_like, receiver_fixes
 
 from spooflens.detectors.receiver_evidence import run_receiver_evidence, run_receiver_levels
 from spooflens.pipeline.evidence import Evidence, confidence
+from spooflens.schema import make_frame
 
 
 def test_a_log_attacked_throughout_is_flagged_only_against_the_baseline() -> None:
@@ -84,18 +85,20 @@ def _accuracies_worse(satellites_lost: bool) -> pd.DataFrame:
     t = np.arange(0.0, 300.0, 1.0)
     bad = (t >= 150.0) & (t < 180.0)
     noise = lambda scale: scale * rng.standard_normal(len(t))  # noqa: E731
-    return pd.DataFrame(
+    return make_frame(
+        "fixes",
         {
             "t_s": t,
-            "receiver_id": "gps",
+            "receiver_id": np.full(len(t), "gps"),
+            "lat_deg": np.full(len(t), 47.0),
+            "lon_deg": np.full(len(t), 8.0),
+            "height_m": np.full(len(t), 500.0),
             "h_acc_m": np.where(bad, 4.5, 1.5) + noise(0.05),
             "v_acc_m": np.where(bad, 7.5, 2.5) + noise(0.08),
             "vel_acc_mps": np.where(bad, 1.2, 0.4) + noise(0.01),
             "sats_used": np.where(bad & satellites_lost, 4.0, 14.0) + rng.integers(-1, 2, len(t)),
-            "fix_type": 3,
-            "spoofing_flag": 0,
-            **dict.fromkeys(("hdop", "vdop", "noise_per_ms", "jamming_indicator", "agc", "cn0_mean_dbhz"), np.nan),
-        }
+            "fix_type": np.full(len(t), 3),
+        },
     )
 
 
