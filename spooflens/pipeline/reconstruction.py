@@ -58,6 +58,13 @@ NO_CLEAN_COASTS = (
     "no clean stretch of this log was long enough to measure its own departures from a coasted reference "
     "(a short log): judged against the filter's own uncertainty and the physical floors alone"
 )
+# said of an inertial alarm that nothing of this log or its vehicle calibrated (`CoastingOptions.calibrating_s`)
+UNCALIBRATED = (
+    "the INS reference was never calibrated on this log: its noise was not learned (too little clean data) and "
+    "no clean stretch before the alarm was long enough to coast it and measure how far it departs by "
+    "itself (a vibrating IMU's coast departs tens of times further than the IMU preset says); a vehicle baseline "
+    "(`--baseline`) would calibrate it"
+)
 # The check compares horizontal position and velocity: receivers' heights wander by tens of metres
 # (an SBAS solution converging), and the vertical channel of a coasting INS diverges.
 HORIZONTAL_ROWS = (0, 1, 3, 4)
@@ -87,6 +94,13 @@ class CoastingOptions:
     placebo_trim: float = 0.1  # the largest tenth of the clean coasts is left out (another attack, if any)
     placebo_runs: int = 24
     settle_s: float = 30.0
+    # where no placebo coast is clean before an incident, coasts from the reference's convergence on, every
+    # `calibration_step_s`, each up to the incident, measure its departures; one counts when clean this long
+    # (the real log171 copter cut to 45 s: its INS departed 10-50 times the preset's uncertainty within 10 s
+    # of every start, and an alarm 0.2 s after convergence was confirmed at 40 times with nothing to measure
+    # that against; the husky bag's coasts stayed below 1.7, a 5 m/s ramp on it 100 and more)
+    calibrating_s: float = 5.0
+    calibration_step_s: float = 5.0
     converge_s: float = 20.0  # a reference younger than this cannot confirm anything (still converging)
     # a GNSS outage longer than this leaves the INS to re-converge for `converge_s` once fixes are back
     outage_s: float = 10.0
@@ -246,11 +260,13 @@ class Placebo:
         trim: float = 0.1,
         min_runs: int = 4,
         later: Sequence[tuple[float, float]] = (),
+        min_clean_s: float = 0.0,
     ) -> Envelope:
         """The largest clean departure per horizon over the coasts (and the part of each) before this
         incident, away from the incidents already confirmed and from the `later` ones not judged yet;
         with fewer than `min_runs` of those, the coasts anywhere away from them, leaving out the largest
-        `trim`. Beyond the longest clean horizon the last value holds.
+        `trim`. Beyond the longest clean horizon the last value holds. A coast counts when clean for more
+        than `min_clean_s`.
 
         A later incident may be the attack: a coast that runs into it measures the attack, not the log's
         clean behaviour (a simulated meaconer 300 m off made the envelope 800 times the model's, and the
@@ -263,8 +279,9 @@ class Placebo:
             usable = np.minimum(usable, self._clean(span, margin_s))
         # the stretch before the incident is the baseline a later attack or its end cannot spoil
         earlier = np.minimum(usable, np.clip(own[0] - self.starts, 0.0, None))
-        if (earlier > 0).sum() >= min_runs:
+        if (earlier > min_clean_s).sum() >= min_runs:
             usable = earlier
+        usable = np.where(usable > min_clean_s, usable, 0.0)
         runs = np.flatnonzero(usable > 0)
         if not len(runs):
             return Envelope(np.array([]), np.array([]), 0)
@@ -314,10 +331,21 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions, shocks: Sequence[Shoc
     starts = np.arange(t[0] + opts.settle_s, t[-1] - H, min(H / 2.0, 30.0))
     if len(starts) > opts.placebo_runs:
         starts = starts[np.linspace(0, len(starts) - 1, opts.placebo_runs).round().astype(int)]
-    grid = np.arange(0.0, H + 1.0, 1.0)
+    return _coasted(nav, opts, shocks, starts, starts + H, np.arange(0.0, H + 1.0, 1.0))
+
+
+def _coasted(
+    nav: Navigation,
+    opts: CoastingOptions,
+    shocks: Sequence[Shock],
+    starts: FloatArray,
+    ends: FloatArray,
+    grid: FloatArray,
+) -> Placebo:
+    """The coasts from `starts` to `ends`, each as the running maximum of its ratio on `grid`."""
     kept, curves = [], []
-    for s in starts:
-        sol = coast(nav, float(s), float(s) + H)
+    for s, e in zip(starts, ends, strict=True):
+        sol = coast(nav, float(s), float(e))
         if sol is None:  # no fix in the horizon: a clean coast needs GNSS to be compared with
             continue
         r = _ratio(sol, opts.p_disagree)
@@ -328,6 +356,16 @@ def placebo_coasts(nav: Navigation, opts: CoastingOptions, shocks: Sequence[Shoc
         kept.append(float(s))
         curves.append(np.interp(grid, sol.t - s, running))
     return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
+
+
+def calibration_coasts(nav: Navigation, opts: CoastingOptions, until_s: float, shocks: Sequence[Shock] = ()) -> Placebo:
+    """Coasts from the reference's convergence on, every `calibration_step_s`, each run up to `until_s` (an
+    incident's coast start): what this log's INS departs by itself where no placebo coast is clean before
+    that incident (a short log, or an alarm soon after the start)."""
+    t0 = float(nav.solution.t[0])
+    starts = np.arange(t0 + opts.converge_s, until_s - opts.margin_s - opts.calibrating_s, opts.calibration_step_s)
+    grid = np.arange(0.0, max(until_s - t0 - opts.converge_s, 0.0) + 1.0, 1.0)
+    return _coasted(nav, opts, shocks, starts, np.full(len(starts), until_s), grid)
 
 
 def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Envelope:
@@ -556,7 +594,7 @@ def _on_navigation(
         confirmed_spans = [_span(i, opts) for i in incidents if i.is_spoofing]
         unjudged = [_span(i, opts) for i in ordered[n + 1 :]]
 
-        envelope_of = partial(_envelope, placebo, confirmed_spans, unjudged, limit, opts)
+        envelope_of = partial(_envelope, nav, shocks, placebo, confirmed_spans, unjudged, limit, opts)
         envelope = envelope_of(inc)
         # a departure from where the next inertial incident's coast begins is that incident's, not this one's
         later = [_coast_start(i) - opts.margin_s for i in ordered[n + 1 :] if Evidence.INERTIAL in i.evidence]
@@ -759,6 +797,8 @@ def _coast_start(inc: Incident) -> float:
 
 
 def _envelope(
+    nav: Navigation,
+    shocks: Sequence[Shock],
     placebo: Placebo,
     confirmed: list[tuple[float, float]],
     unjudged: list[tuple[float, float]],
@@ -766,10 +806,14 @@ def _envelope(
     opts: CoastingOptions,
     inc: Incident,
 ) -> Envelope:
-    """The clean envelope `inc` is judged against (`Placebo.envelope`, capped by a baseline's `limit`)."""
-    return capped(
-        placebo.envelope(_span(inc, opts), confirmed, opts.margin_s, opts.placebo_trim, later=unjudged), limit
-    )
+    """The clean envelope `inc` is judged against (`Placebo.envelope`, capped by a baseline's `limit`); with no
+    clean placebo coast and no baseline, the calibration coasts' before it (`calibration_coasts`)."""
+    span = _span(inc, opts)
+    envelope = placebo.envelope(span, confirmed, opts.margin_s, opts.placebo_trim, later=unjudged)
+    if not envelope.runs and limit is None:
+        early = calibration_coasts(nav, opts, _coast_start(inc), shocks)
+        envelope = early.envelope(span, confirmed, opts.margin_s, opts.placebo_trim, min_clean_s=opts.calibrating_s)
+    return capped(envelope, limit)
 
 
 def _judge(
@@ -792,6 +836,8 @@ def _judge(
     t_first = float(nav.solution.t[0])
     if check.excluded_from_s < t_first + opts.converge_s:
         return check, f"the INS reference had run only {start - t_first:.0f} s and was still converging"
+    if not envelope.runs and not envelope.from_baseline and not nav.learned.learned:
+        return check, UNCALIBRATED
     back = aided_again_s(base if base is not None else nav.solution, check.excluded_from_s, opts.outage_s)
     # the INS unaided for longer than an outage where the coast begins, or back for less than its convergence
     t_ex = check.excluded_from_s
@@ -827,7 +873,7 @@ def _not_confirmed(inc: Incident, check: CoastingCheck, young: str, envelope: En
         )
     if check.lost_s is not None:
         why += f"; judged up to {check.lost_s:.1f} s, where the IMU read a shock and the INS lost its attitude"
-    if not envelope.runs:
+    if not envelope.runs and young != UNCALIBRATED:
         why += f"; {NO_CLEAN_COASTS}"
     return replace(
         inc,

@@ -20,7 +20,7 @@ from spooflens.detectors.dual_receiver import COLLAPSE, detect
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import add_enu_offset
 from spooflens.pipeline.evidence import Evidence
-from spooflens.pipeline.reconstruction import NO_CLEAN_COASTS, Placebo
+from spooflens.pipeline.reconstruction import NO_CLEAN_COASTS, UNCALIBRATED, Placebo
 from spooflens.pipeline.run import analyze_table
 from spooflens.pipeline.verdict import Kind
 from spooflens.schema import FRAMES
@@ -41,9 +41,10 @@ def test_a_short_real_log_says_what_it_could_not_learn_and_still_catches_a_ramp(
     husky_bag: Path, seconds: float
 ) -> None:
     """The real husky bag (consumer IMU, wheel odometry, SBAS fixes) cut to its first minute or minute and
-    a half: too short for the noise learning (300 s window) and for any clean coast (30 s settling, 60 s
-    horizon), which the navigation result and the coasting check say; clean, no spoofing incident; with a
-    5 m/s ramp from 30 s, spoofing from the ramp's start to the end of the log."""
+    a half: too short for the noise learning (300 s window) and for any placebo coast (30 s settling, 60 s
+    horizon), which the navigation result says. Clean, its one inertial alarm (28 s, before any clean coast
+    could run) is not confirmed and says why; with a 5 m/s ramp from 30 s, a coast from the reference's
+    convergence at 20 s up to the ramp calibrates the check, and the ramp is spoofing to the end of the log."""
     table = _first(read_log(husky_bag), seconds)
     clean = analyze_table(table)
     navigation = next(r for r in clean.results if r.name == "navigation")
@@ -51,14 +52,33 @@ def test_a_short_real_log_says_what_it_could_not_learn_and_still_catches_a_ramp(
     assert "noise NOT learned" in navigation.reason and "prior used" in navigation.reason
     assert not clean.verdict.spoofed, clean.verdict.incidents
     assert all(c["clean_coasts"] == 0 for c in clean.verdict.coasting_checks)
-    assert any(NO_CLEAN_COASTS in i.end_method for i in clean.verdict.incidents)
+    assert any(UNCALIBRATED in i.end_method for i in clean.verdict.incidents)
 
     spoofed, _ = apply_attack(table, parse_attack("ramp:rate=5,start=30"))
     verdict = analyze_table(spoofed).verdict
     attack = next(i for i in verdict.incidents if i.is_spoofing)
     assert Evidence.INERTIAL in attack.evidence and attack.ongoing_at_end
     assert 29.0 <= attack.onset_s <= 31.0 and attack.start_s <= 32.0
-    assert NO_CLEAN_COASTS in attack.end_method
+    (check,) = verdict.coasting_checks
+    assert check["confirmed"] and check["clean_coasts"] >= 1
+    assert NO_CLEAN_COASTS not in attack.end_method
+
+
+@pytest.mark.parametrize("start_s", [165.0, 169.1, 190.2])
+def test_an_alarm_before_anything_calibrated_the_ins_is_no_spoofing(start_s: float) -> None:
+    """45 s of a real ArduCopter flight (log171, clean whole: `bench windows` cut it there). Its vibrating IMU
+    coasts 10-50 times further than the preset says within 10 s of any start; its noise cannot be learned
+    from 45 s and its inertial alarms come 20-37 s in, with no clean stretch before them to coast. They were
+    SPOOFING (medium) at 37-141 times the filter's uncertainty; now an anomaly saying the reference was never
+    calibrated on this log. An alarm later in the same stretch is judged against a coast before it."""
+    stretch = read_log(real_log("corpus/dronekit-la-testdata/log171.bin")).between(start_s, start_s + 45.0)
+    verdict = analyze_table(stretch).verdict
+    assert not verdict.spoofed, verdict.incidents
+    if start_s == 165.0:  # alarms at 20.2 s (still converging) and 28.2 s: a coast from 20 s measured 9.3
+        assert [c["clean_coasts"] for c in verdict.coasting_checks] == [0, 1]
+        assert "still converging" in verdict.incidents[0].end_method
+    else:
+        assert any(UNCALIBRATED in i.end_method for i in verdict.incidents)
 
 
 def test_a_meaconer_is_confirmed_although_an_earlier_alarm_opened_its_incident(tmp_path: Path) -> None:
