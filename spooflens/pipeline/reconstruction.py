@@ -78,7 +78,7 @@ class CoastingOptions:
     # envelope (`Envelope.margin`), to this with none: a short log's reference drifts as far as its
     # unlearned noise lets it, which the filter's own uncertainty understates (the real husky bag cut to
     # 60 s: a clean stretch departed 2.7 times the filter's uncertainty, a 2 m/s ramp 9.6 times; cut to
-    # 150 s, with 2 clean coasts: 3.0, and the ramps 160 and more)
+    # 150 s, with 2 clean coasts: 3.0, and the ramps 160 and more; cut to 240 s, with 3: 3.3)
     uncalibrated_margin: float = 5.0
     calibrating_coasts: int = 5
     min_disagree_s: float = 2.0
@@ -131,13 +131,13 @@ class Envelope:
 
     def margin(self, opts: CoastingOptions) -> float:
         """How far a departure must exceed this envelope: `opts.margin`, widened where few clean coasts measured
-        it (the largest of n coasts is exceeded by the next clean one once in n + 1), by 1 + 1/sqrt(n), up to
+        it (the largest of n coasts is exceeded by the next clean one once in n + 1), by 1 + 2/sqrt(n), up to
         `opts.uncalibrated_margin` with none; a vehicle baseline's envelope needs no widening."""
         if self.from_baseline or self.runs >= opts.calibrating_coasts:
             return opts.margin
         if not self.runs:
             return opts.uncalibrated_margin
-        return min(opts.uncalibrated_margin, opts.margin * (1.0 + 1.0 / float(np.sqrt(self.runs))))
+        return min(opts.uncalibrated_margin, opts.margin * (1.0 + 2.0 / float(np.sqrt(self.runs))))
 
     def at(self, h: FloatArray) -> FloatArray:
         if not len(self.horizon_s):
@@ -484,11 +484,16 @@ def _departure(
     )
     margin = envelope.margin(opts)
     disagree = (np.nan_to_num(ratio) > margin * kappa) & away & (t < lost)
+    # a departure is sustained within the horizons the clean coasts measured: beyond them the envelope only
+    # holds its last value while the reference goes on drifting (the real husky bag cut to 240 s: a coast
+    # reached 2 times its envelope 60.2 s in, where its clean coasts ended, its offset growing as INS drift does)
+    measured = t - t_ex <= (float(envelope.horizon_s[-1]) if envelope.runs or envelope.from_baseline else np.inf)
     departure, open_at_end = None, False
     for a, b in _runs(disagree):
         if t[a] > deadline:
             break
-        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
+        b_in = a + int(np.count_nonzero(measured[a : b + 1])) - 1
+        if b_in - a + 1 >= opts.min_disagree_epochs and t[b_in] - t[a] >= opts.min_disagree_s:
             departure = int(a)
             break
         open_at_end = b == len(t) - 1
