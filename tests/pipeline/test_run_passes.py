@@ -60,11 +60,12 @@ def test_the_learning_runs_stop_at_the_last_scored_epoch_and_learn_what_runs_to_
     from spooflens.navigation import noise_learning
     from spooflens.navigation.imu_models import grade
 
-    table = simulate("aircraft", seed=4, duration_s=330.0).table
+    table = simulate("aircraft", seed=4, duration_s=160.0).table
     nav = solve_navigation(table, AnalyzeOptions())
     preset = grade("consumer_mems")
     t0 = float(nav.inputs.fixes["t_s"].iloc[0])
-    suspected = ((t0 + 150.0, t0 + 1e6),)
+    suspected = ((t0 + 70.0, t0 + 1e6),)
+    opts = noise_learning.LearnOptions(min_window_s=120.0, max_epochs=1000)  # a short window: fewer runs
     ends: list[float] = []
     cut = noise_learning._up_to_last_scored
 
@@ -78,11 +79,11 @@ def test_the_learning_runs_stop_at_the_last_scored_epoch_and_learn_what_runs_to_
     for name, stop in (("stopped", spy), ("whole", lambda inputs, t, mask: (inputs, mask))):
         monkeypatch.setattr(noise_learning, "_up_to_last_scored", stop)
         learned[name] = [
-            noise_learning.learn_noise(nav.inputs, preset, nav.start, None, exclude) for exclude in ((), suspected)
+            noise_learning.learn_noise(nav.inputs, preset, nav.start, None, exclude, opts) for exclude in ((), suspected)
         ]
     assert learned["stopped"] == learned["whole"]  # noise, IMU scale, run count and likelihood, exactly
     assert learned["whole"][1].neg_log_likelihood != learned["whole"][0].neg_log_likelihood
-    assert t0 + 120.0 < ends[1] < t0 + 150.0  # the second pass's runs stop where the suspected stretch begins
+    assert t0 + 40.0 < ends[1] < t0 + 70.0  # the second pass's runs stop where the suspected stretch begins
 
 
 def test_a_coast_from_the_solution_that_keeps_every_tenth_covariance_is_the_full_solutions() -> None:
