@@ -484,16 +484,11 @@ def _departure(
     )
     margin = envelope.margin(opts)
     disagree = (np.nan_to_num(ratio) > margin * kappa) & away & (t < lost)
-    # a departure is sustained within the horizons the clean coasts measured: beyond them the envelope only
-    # holds its last value while the reference goes on drifting (the real husky bag cut to 240 s: a coast
-    # reached 2 times its envelope 60.2 s in, where its clean coasts ended, its offset growing as INS drift does)
-    measured = t - t_ex <= (float(envelope.horizon_s[-1]) if envelope.runs or envelope.from_baseline else np.inf)
     departure, open_at_end = None, False
     for a, b in _runs(disagree):
         if t[a] > deadline:
             break
-        b_in = a + int(np.count_nonzero(measured[a : b + 1])) - 1
-        if b_in - a + 1 >= opts.min_disagree_epochs and t[b_in] - t[a] >= opts.min_disagree_s:
+        if b - a + 1 >= opts.min_disagree_epochs and t[b] - t[a] >= opts.min_disagree_s:
             departure = int(a)
             break
         open_at_end = b == len(t) - 1
@@ -835,7 +830,9 @@ def _judge(
     after a GNSS outage; "" when it could); `later`: where the next inertial incidents' coasts begin (a
     departure from there is theirs)."""
     start = _coast_start(inc)
-    reach = start + (float(envelope.horizon_s[-1]) if envelope.runs else opts.confirm_window_s)
+    # beyond its longest clean horizon an envelope holds its last value; a short log's calibration coasts
+    # (`calibration_coasts`) measure a few seconds, which must not shorten the confirmation window
+    reach = start + max(float(envelope.horizon_s[-1]) if envelope.runs else 0.0, opts.confirm_window_s)
     deadline = min([inc.end_s + opts.confirm_window_s, reach, *later])
     check = coasting_check(nav, start, envelope, deadline, opts, base, shocks)
     t_first = float(nav.solution.t[0])
