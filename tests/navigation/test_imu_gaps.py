@@ -142,8 +142,8 @@ def test_a_ramp_on_log171s_vibrating_imu_reaches_the_imus_noise_but_three_clean_
     # The search goes on while a noise is still rising at the top of its reach (81 x here). The ramp's
     # inertial detectors alarm over the ramp; but this log holds only 3 clean coasts to measure how far its
     # reference drifts, and a departure must exceed that envelope by 2 (1 + 2/sqrt 3) = 4.3 times: within the
-    # confirmation window it does not (nor 3.15 times), so the ramp stays a one-class anomaly (caught with a margin of 2 before;
-    # the same margin made clean stretches of the husky bag SPOOFING)
+    # confirmation window it does not (nor 3.15 times), so the ramp stays a one-class anomaly (caught with a
+    # margin of 2 before; the same margin made clean stretches of the husky bag SPOOFING)
     out = tmp_path / "log171_ramp.bin"
     assert main(["inject", str(real / LOG171), "--attack", "ramp:rate=2,vel=1,start=162.4", "-o", str(out)]) == 0
     a = analyze_table(read_table(out, {}, False))

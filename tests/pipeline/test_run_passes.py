@@ -79,7 +79,8 @@ def test_the_learning_runs_stop_at_the_last_scored_epoch_and_learn_what_runs_to_
     for name, stop in (("stopped", spy), ("whole", lambda inputs, t, mask: (inputs, mask))):
         monkeypatch.setattr(noise_learning, "_up_to_last_scored", stop)
         learned[name] = [
-            noise_learning.learn_noise(nav.inputs, preset, nav.start, None, exclude, opts) for exclude in ((), suspected)
+            noise_learning.learn_noise(nav.inputs, preset, nav.start, None, exclude, opts)
+            for exclude in ((), suspected)
         ]
     assert learned["stopped"] == learned["whole"]  # noise, IMU scale, run count and likelihood, exactly
     assert learned["whole"][1].neg_log_likelihood != learned["whole"][0].neg_log_likelihood
