@@ -106,8 +106,8 @@ def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() 
     from spooflens.estimation.kalman import forward_filter
     from spooflens.estimation.ramp_signature import RampPass
 
-    sim = simulate("ground", seed=5, duration_s=240.0)
-    table, _ = apply_attack(sim.table, parse_attack("ramp:rate=1.5,axes=en,start=120"))
+    sim = simulate("ground", seed=5, duration_s=120.0)
+    table, _ = apply_attack(sim.table, parse_attack("ramp:rate=1.5,axes=en,start=60"))
     model = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade)).error_model()
     opts = MlrtOptions()
     fwd = forward_filter(model, keep_states=False)
