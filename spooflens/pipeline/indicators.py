@@ -72,6 +72,11 @@ class Sky:
             warnings.simplefilter("ignore", RuntimeWarning)  # a satellite never tracked
             return np.nanmedian(self.cn0, axis=0)
 
+    @cached_property
+    def usual_cn0(self) -> float:
+        """The sky's usual strength: the median over satellites of their typical C/N0 (NaN with none)."""
+        return _finite_median(self.typical_cn0)
+
     @classmethod
     def of(cls, table: EpochTable, rid: str) -> Sky:
         rows = table.satellites[table.satellites["receiver_id"] == rid]

@@ -328,6 +328,19 @@ def test_satellites_reflected_one_after_another_are_not_a_bias() -> None:
     assert set(inc.satellites) == {"R13", "R14"} and [e.cause for e in inc.explanations] == ["reflection"]
 
 
+def test_a_weak_satellite_gaining_a_few_db_is_still_a_reflection() -> None:
+    """A 2016 phone log (GnssLogger 1.4) cut to 123.1-168.1 s, where `bench windows` cut it: RAIM excludes G05
+    over 127-137 s, 30 m off, and G05's C/N0 goes from 14.8 to 18-20 dB-Hz. "Its C/N0 rose 5 dB: no
+    reflection does that" made it SPOOFING (medium). A spoofer's signal rises above the sky's usual strength
+    (30 dB-Hz here); a satellite near its tracking threshold gaining a few dB is still a weak one."""
+    log = real_log("android_gnsslogger/gps-measurement-tools/pseudoranges_log_2016_08_22_14_45_50.txt")
+    a = analyze_table(read_table(log, {}, False).between(123.1, 168.1))
+    assert not a.verdict.spoofed, a.verdict.headline
+    (inc,) = [i for i in a.verdict.incidents if "raim" in i.detectors]
+    assert inc.satellites == ("G05",) and [e.cause for e in inc.explanations] == ["reflection"]
+    assert inc.explanations[0].text.startswith("G05 alone 30 m off")
+
+
 @pytest.mark.parametrize("delay_m", [2000.0, 300.0])
 def test_a_satellite_a_spoofers_length_off_in_the_same_phone_log_is_still_spoofing(delay_m: float) -> None:
     # the same log with G09 (82 deg, every epoch) a counterfeit delay_m late from 200 s: RAIM's alarm carries
