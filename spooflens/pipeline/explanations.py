@@ -947,7 +947,7 @@ def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Read
                 rise = float(np.nanmax(during) - np.nanmedian(before))
                 # a spoofer's signal rises above the sky's usual strength; a satellite near its tracking
                 # threshold that gains a few dB is still a weak, likely reflected one (a 2016 phone's G05:
-                # 14.8 -> 19.9 dB-Hz, a 30 m NLOS range, where the log's satellites sit near 25)
+                # 14.8 -> 19.9 dB-Hz, a 30 m NLOS range, where the log's satellites sit near 30)
                 above_sky = np.isnan(rx.sky.usual_cn0) or float(np.nanmax(during)) > rx.sky.usual_cn0
                 if rise >= scene.opts.spoofer_cn0_rise_db and above_sky:
                     return _kept(

@@ -807,7 +807,7 @@ def _envelope(
     inc: Incident,
 ) -> Envelope:
     """The clean envelope `inc` is judged against (`Placebo.envelope`, capped by a baseline's `limit`); with no
-    clean placebo coast and no baseline, the calibration coasts' before it (`calibration_coasts`)."""
+    clean placebo coast and no baseline, the envelope of the calibration coasts before it (`calibration_coasts`)."""
     span = _span(inc, opts)
     envelope = placebo.envelope(span, confirmed, opts.margin_s, opts.placebo_trim, later=unjudged)
     if not envelope.runs and limit is None:
