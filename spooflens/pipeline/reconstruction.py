@@ -359,13 +359,15 @@ def _coasted(
 
 
 def calibration_coasts(nav: Navigation, opts: CoastingOptions, until_s: float, shocks: Sequence[Shock] = ()) -> Placebo:
-    """Coasts from the reference's convergence on, every `calibration_step_s`, each run up to `until_s` (an
-    incident's coast start): what this log's INS departs by itself where no placebo coast is clean before
-    that incident (a short log, or an alarm soon after the start)."""
-    t0 = float(nav.solution.t[0])
-    starts = np.arange(t0 + opts.converge_s, until_s - opts.margin_s - opts.calibrating_s, opts.calibration_step_s)
-    grid = np.arange(0.0, max(until_s - t0 - opts.converge_s, 0.0) + 1.0, 1.0)
-    return _coasted(nav, opts, shocks, starts, np.full(len(starts), until_s), grid)
+    """Coasts every `calibration_step_s` over the placebo horizon before `until_s` (an incident's coast start),
+    from the reference's convergence on, each run up to `until_s`: what this log's INS departs by itself where
+    no placebo coast is clean before that incident (a short log, or an alarm soon after the start). Bounded
+    by that horizon, a late incident in a long log costs a dozen short coasts, not one per 5 s of the log."""
+    horizon = opts.placebo_horizon_s[1]
+    first = max(float(nav.solution.t[0]) + opts.converge_s, until_s - opts.margin_s - horizon)
+    starts = np.arange(first, until_s - opts.margin_s - opts.calibrating_s, opts.calibration_step_s)
+    grid = np.arange(0.0, max(min(until_s - first, horizon), 0.0) + 1.0, 1.0)
+    return _coasted(nav, opts, shocks, starts, np.minimum(starts + horizon, until_s), grid)
 
 
 def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Envelope:

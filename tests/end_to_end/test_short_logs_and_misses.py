@@ -218,10 +218,11 @@ def test_a_drag_is_caught_beside_a_sparse_receiver_that_wanders_by_metres(start_
 def test_a_short_stretch_judges_its_coasts_against_a_widened_margin(
     husky_bag: Path, start_s: float, seconds: float, ramp_s: float
 ) -> None:
-    """The husky bag cut where `bench windows` cut it: 60 s (noise not learned, no clean coast) and 150 s (2
+    """The husky bag cut where `bench windows` cut it: 60 s (noise not learned, no placebo coast) and 150 s (2
     clean coasts). Their references drift further than their few coasts measured, and clean they were SPOOFING
     (a departure 2.7 and 3.0 times the envelope). A departure must now exceed it by 2 (1 + 2/sqrt(n)) times
-    with n < 5 clean coasts, 5 times with none: clean, no spoofing; a 2 m/s ramp (9.6 and 160 times) caught."""
+    with n < 5 clean coasts (the 60 s stretch's from calibration coasts before its alarms; an alarm with none
+    before it and its noise not learned confirms nothing): clean, no spoofing; a 2 m/s ramp caught."""
     stretch = read_log(husky_bag).between(start_s, start_s + seconds)
     assert not analyze_table(stretch).verdict.spoofed
     ramped, _ = apply_attack(stretch, parse_attack(f"ramp:rate=2,start={ramp_s}"))
