@@ -140,9 +140,19 @@ class Envelope:
         return min(opts.uncalibrated_margin, opts.margin * (1.0 + 2.0 / float(np.sqrt(self.runs))))
 
     def at(self, h: FloatArray) -> FloatArray:
+        """The envelope at horizons `h`. Beyond the longest horizon a clean coast measured, nothing says how
+        much faster than its own uncertainty the INS drifts on this log: the ratio goes on growing as the
+        square of the horizon (the drift one power of time ahead of the uncertainty, as an unmodelled tilt or
+        heading error makes it). A short log's calibration coasts measure seconds (the real log171 copter
+        cut to 75 s: one clean coast of 8 s at 3.7 times its uncertainty, then a coast through its next
+        manoeuvres at 65 times by 19 s)."""
         if not len(self.horizon_s):
             return np.ones_like(h)
-        return np.interp(h, self.horizon_s, self.kappa, left=self.kappa[0], right=self.kappa[-1])
+        inside = np.interp(h, self.horizon_s, self.kappa, left=self.kappa[0], right=self.kappa[-1])
+        last = float(self.horizon_s[-1])
+        if last <= 0:
+            return inside
+        return np.where(h > last, self.kappa[-1] * (np.asarray(h, dtype=float) / last) ** 2, inside)
 
 
 @dataclass(frozen=True)

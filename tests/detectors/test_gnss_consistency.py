@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pandas as pd
+import pytest
+from paths import real_log
 
+from readers import read_log
+from spooflens.attacks import apply_attack
+from spooflens.attacks.spec import parse_attack
 from spooflens.detectors.gnss_consistency import ConsistencyOptions, run_gnss_consistency
+from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import enu_to_geodetic
 from spooflens.schema import make_frame
 
@@ -120,3 +128,39 @@ def test_a_baseline_caps_the_scale_a_log_attacked_throughout_would_learn() -> No
     # a cap measured in the other mode (a log without velocity) is not applied
     other = {"rx": ("kinematic plausibility (no reported velocity)", np.array([0.01, 0.01, 0.01]))}
     assert not run_gnss_consistency(attacked, scale_caps=other).alarms
+
+
+@cache
+def _yacht() -> EpochTable:
+    """A yacht's 4 h NMEA log: GLL positions at 0.001 arcmin, VTG relayed by the instrument bus."""
+    return read_log(real_log("nmea_boats/signalk_plaka.log"))
+
+
+def test_a_receiver_heavier_tailed_than_gaussian_has_its_threshold_raised_from_its_own_bursts() -> None:
+    """At the Gaussian threshold the clean yacht log alarms in 194 bursts where the design expects 0.07;
+    from their tail the threshold is raised, and what remains is its one worst moment."""
+    fixes = _yacht().fixes
+    nominal = run_gnss_consistency(fixes, ConsistencyOptions(min_bursts_to_recalibrate=10**9))
+    assert len(nominal.alarms) > 150
+    raised = run_gnss_consistency(fixes)
+    assert len(raised.alarms) <= 2 and "heavier-tailed than Gaussian, threshold raised" in raised.reason
+    (series,) = [s for s in raised.series if s.name.endswith("/statistic")]
+    assert series.threshold is not None and series.threshold > 50.0
+
+
+@pytest.mark.parametrize(
+    "attack", ["ramp:rate=0.5,axes=en,start=6000,end=6600", "step:offset=20,axes=e,start=6000,end=6600"]
+)
+def test_on_the_raised_threshold_a_drag_or_a_step_is_still_caught(attack: str) -> None:
+    spoofed, _ = apply_attack(_yacht(), parse_attack(attack))
+    alarms = run_gnss_consistency(spoofed.fixes).alarms
+    assert [a for a in alarms if 6000.0 <= a.start_s <= 6020.0]
+
+
+def test_a_weak_drag_over_most_of_the_log_does_not_teach_the_test_its_tail() -> None:
+    """A 1 m/s ramp over the last 63 % of the yacht's log alarms in dozens of long bursts: only bursts no
+    longer than the window say how the receiver's own errors behave, so the threshold stays nominal."""
+    spoofed, _ = apply_attack(_yacht(), parse_attack("ramp:rate=1,axes=en,start=6000"))
+    result = run_gnss_consistency(spoofed.fixes)
+    assert "threshold raised" not in result.reason
+    assert len([a for a in result.alarms if a.start_s >= 6000.0]) >= 10

@@ -81,6 +81,21 @@ def test_an_alarm_before_anything_calibrated_the_ins_is_no_spoofing(start_s: flo
         assert any(UNCALIBRATED in i.end_method for i in verdict.incidents)
 
 
+@pytest.mark.parametrize(("start_s", "seconds"), [(98.8, 60.0), (99.0, 75.0)])
+def test_a_coast_past_the_horizon_its_calibration_measured_is_judged_against_a_growing_envelope(
+    start_s: float, seconds: float
+) -> None:
+    """The same copter from 99 s (`bench windows` seeds 16-24 cut it there): one clean coast of 8 s measured
+    3.7 times the filter's uncertainty; the next coast, from 126 s through the copter's manoeuvres, reached
+    65 times by 19 s, 64 m, and the stretch was SPOOFING (high) with a GNSS-only alarm beside it. Nothing had
+    measured this INS beyond 8 s: there the envelope grows as the square of the horizon, and the coast is
+    within it."""
+    stretch = read_log(real_log("corpus/dronekit-la-testdata/log171.bin")).between(start_s, start_s + seconds)
+    verdict = analyze_table(stretch).verdict
+    assert not verdict.spoofed, verdict.incidents
+    assert any(c["clean_coasts"] == 1 and not c["confirmed"] for c in verdict.coasting_checks)
+
+
 def test_a_meaconer_is_confirmed_although_an_earlier_alarm_opened_its_incident(tmp_path: Path) -> None:
     """A simulated car logging raw observations, meaconed 300 m east from 200 s: a windowed range-rate
     t-test alarm from 186 s (its window reaching back to 133 s) merged with the attack's alarms. Its coast
@@ -187,16 +202,20 @@ def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_be
     """The drive's first 10 minutes are one long anomaly of natural causes (HDOP x55, satellites 12 -> 6,
     mode switches: an urban canyon), and the drag from 600 s joins it: the incident read "SPOOFING from
     46 s". Nothing corroborated before 601 s, and the unexplained one-class alarms before it end at 414 s:
-    the spoofing now begins with its evidence, the stretch before is an event of its own kind."""
+    the spoofing now begins with its evidence, the stretch before is an event of its own kind. (Its first
+    alarm comes at 611 s: on this receiver, whose residual is heavier-tailed than Gaussian, the GNSS-only
+    test's threshold is raised, and the drag crosses it 10 m in; the satellites' alarms of the first minutes
+    are then anomalies apart, and the degradation from 383 s leads into the spoofing.)"""
     table = read_log(real_log("corpus/gps-measurement-tools"))
     spoofed, _ = apply_attack(table, parse_attack("single_antenna:rate=1,start=600"))
     verdict = analyze_table(_tracking_noise(spoofed, 600.0, 0.1, seed=3)).verdict
     (attack,) = [i for i in verdict.incidents if i.is_spoofing]
-    assert 598.0 <= attack.onset_s <= 602.0 and 600.0 <= attack.start_s <= 602.0, attack
+    assert 598.0 <= attack.onset_s <= 602.0 and 600.0 <= attack.start_s <= 615.0, attack
     assert Evidence.SECOND_RECEIVER in attack.unexplained
-    (before,) = [e for e in verdict.events if e.end_s <= attack.start_s and e.start_s < 100.0]
-    assert before.kind == Kind.DEGRADATION and "before the spoofing evidence" in before.text
-    assert verdict.headline.startswith("SPOOFING DETECTED: 1 incident(s); first from 600.00 s")
+    (before,) = [e for e in verdict.events if e.end_s <= attack.start_s and "before the spoofing evidence" in e.text]
+    assert before.kind == Kind.DEGRADATION and before.start_s < 600.0
+    assert not [e for e in verdict.events if e.kind == Kind.SPOOFING and e.start_s < 600.0]
+    assert verdict.headline.startswith(f"SPOOFING DETECTED: 1 incident(s); first from {attack.onset_s:.2f} s")
 
 
 @pytest.mark.parametrize("start_s", [600.0, 1200.0])
