@@ -35,7 +35,7 @@ from spooflens.baseline.use import coast_envelope_limit
 from spooflens.detectors.base import DetectorResult, Track
 from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.errors import SpooflensError
-from spooflens.estimation.quantiles import chi2_isf
+from spooflens.estimation.quantiles import chi2_isf, norm_isf
 from spooflens.navigation.loosely_coupled import (
     SMOOTHER_NEEDS,
     FilterOptions,
@@ -74,13 +74,14 @@ HORIZONTAL_ROWS = (0, 1, 3, 4)
 class CoastingOptions:
     p_disagree: float = 1e-3
     margin: float = 2.0  # a departure must exceed the log's own clean envelope by this factor
-    # ... widened where fewer than `calibrating_coasts` clean coasts (and no vehicle baseline) measured that
-    # envelope (`Envelope.margin`), to this with none: a short log's reference drifts as far as its
-    # unlearned noise lets it, which the filter's own uncertainty understates (the real husky bag cut to
-    # 60 s: a clean stretch departed 2.7 times the filter's uncertainty, a 2 m/s ramp 9.6 times; cut to
-    # 150 s, with 2 clean coasts: 3.0, and the ramps 160 and more; cut to 240 s, with 3: 3.3)
+    # ... to this with no clean coast (and no vehicle baseline) to measure that envelope (`Envelope.margin`):
+    # a short log's reference drifts as far as its unlearned noise lets it, which the filter's own
+    # uncertainty understates (the real husky bag cut to 60 s: a clean stretch departed 2.7 times the
+    # filter's uncertainty, a 2 m/s ramp 9.6 times)
     uncalibrated_margin: float = 5.0
-    calibrating_coasts: int = 5
+    # ... and where few clean coasts measured it, the bound of a next clean coast (`clean_coast_bound`)
+    coast_spread: float = 0.9
+    p_next_coast: float = 0.01
     min_disagree_s: float = 2.0
     min_disagree_epochs: int = 3
     # after the incident's last alarm (and before the next incident), within the clean envelope's reach: a
@@ -130,14 +131,14 @@ class Envelope:
     from_baseline: bool = False  # capped by the vehicle's baseline (`capped`): its clean logs calibrate it
 
     def margin(self, opts: CoastingOptions) -> float:
-        """How far a departure must exceed this envelope: `opts.margin`, widened where few clean coasts measured
-        it (the largest of n coasts is exceeded by the next clean one once in n + 1), by 1 + 2/sqrt(n), up to
-        `opts.uncalibrated_margin` with none; a vehicle baseline's envelope needs no widening."""
-        if self.from_baseline or self.runs >= opts.calibrating_coasts:
+        """How far a departure must exceed this envelope: `opts.margin`, or where few clean coasts measured it
+        the bound a next clean coast stays below (`clean_coast_bound`), whichever is larger;
+        `opts.uncalibrated_margin` over the model with none; a vehicle baseline's envelope needs no widening."""
+        if self.from_baseline:
             return opts.margin
         if not self.runs:
             return opts.uncalibrated_margin
-        return min(opts.uncalibrated_margin, opts.margin * (1.0 + 2.0 / float(np.sqrt(self.runs))))
+        return max(opts.margin, clean_coast_bound(self.runs, opts))
 
     def at(self, h: FloatArray) -> FloatArray:
         """The envelope at horizons `h`. Beyond the longest horizon a clean coast measured, nothing says how
@@ -153,6 +154,18 @@ class Envelope:
         if last <= 0:
             return inside
         return np.where(h > last, self.kappa[-1] * (np.asarray(h, dtype=float) / last) ** 2, inside)
+
+
+def clean_coast_bound(n: int, opts: CoastingOptions) -> float:
+    """How far above the largest of `n` clean coasts' peaks the next clean coast stays, but for a share
+    `p_next_coast` of them: the peaks as log-normal with the spread `coast_spread` (the real husky bag's clean
+    coasts: a log standard deviation of 0.9, so that the largest of one or two says little about the next),
+    the largest of n near their mean plus the expected largest of n standard normals (Blom's approximation),
+    and the next one's bound from the mean over the spread widened by the mean's own uncertainty. With one
+    coast it is 19 times, with 5 3.5 times, and from about 14 on below `opts.margin`."""
+    expected_largest = norm_isf(1.0 - (n - 0.375) / (n + 0.25))
+    z = norm_isf(opts.p_next_coast) * float(np.sqrt(1.0 + 1.0 / n))
+    return float(np.exp(opts.coast_spread * (z - expected_largest)))
 
 
 @dataclass(frozen=True)
@@ -581,6 +594,7 @@ def _on_navigation(
     opts = CoastingOptions()
     incidents: list[Incident] = []
     checks: list[tuple[Incident, CoastingCheck]] = []
+    cleared: set[int] = set()  # ids of the incidents in `checks` whose coast cleared them (`_cleared`)
     shocks = shocks_of(nav)
     placebo = placebo_coasts(nav, opts, shocks)
     cap = coast_envelope_limit(ctx.options.baseline, nav.inputs.receiver_id, nav.inputs.imu_id)
@@ -629,12 +643,18 @@ def _on_navigation(
             if split is None:
                 checks.append((inc, check))
                 envelopes.append(envelope)
-                incidents.append(_not_confirmed(inc, check, young, envelope))
+                if _cleared(inc, check, young):
+                    cleared.add(id(inc))
+                else:
+                    incidents.append(_not_confirmed(inc, check, young, envelope, opts))
                 continue
             before, inc, later_check, after_envelope = split
             checks += [(before, check), (inc, later_check)]
             envelopes += [envelope, after_envelope]
-            incidents.append(_not_confirmed(before, check, young, envelope))
+            if _cleared(before, check, young):
+                cleared.add(id(before))
+            else:
+                incidents.append(_not_confirmed(before, check, young, envelope, opts))
             check, envelope = later_check, after_envelope
         else:
             checks.append((inc, check))
@@ -705,6 +725,8 @@ def _on_navigation(
             "clean_coasts": e.runs,
             "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
             "peak_ratio_over_envelope": float(np.nanmax(c.ratio / c.kappa)) if np.isfinite(c.ratio).any() else None,
+            # an inertial alarm the coast cleared is no incident: this record is where it shows
+            "cleared": id(inc) in cleared,
         }
         for (inc, c), e in zip(checks, envelopes, strict=True)
     )
@@ -875,11 +897,39 @@ def aided_again_s(sol: NavSolution, t_ex: float, outage_s: float) -> tuple[float
     return (float(t[gaps[-1]]), float(t[gaps[-1] + 1])) if len(gaps) else None
 
 
-def _not_confirmed(inc: Incident, check: CoastingCheck, young: str, envelope: Envelope) -> Incident:
+def _cleared(inc: Incident, check: CoastingCheck, young: str) -> bool:
+    """Whether `inc` is an inertial alarm alone whose coast stayed within this log's clean departures all the
+    way (never above the envelope, nor cut short by a shock, from a reference that could tell): the
+    filter's own test alarmed where GNSS agreed with the coasted INS, which is no anomaly of GNSS. It stays
+    in the coasting checks (`cleared`), not among the anomalies."""
+    if young or check.lost_s is not None or set(inc.evidence) != {Evidence.INERTIAL}:
+        return False
+    over = check.ratio / check.kappa
+    return bool(np.isfinite(over).any() and np.nanmax(over) <= 1.0)
+
+
+def _not_confirmed(
+    inc: Incident, check: CoastingCheck, young: str, envelope: Envelope, opts: CoastingOptions
+) -> Incident:
     """`inc` with its inertial evidence dropped: the coast did not confirm it (`young`: why the reference
     could not tell yet, if that was why)."""
+    over = check.ratio / check.kappa
+    peak = float(np.nanmax(over)) if np.isfinite(over).any() else 0.0
     if young:
         why = f"inertial alarm not confirmed: {young}"
+    elif peak > 1.0 and envelope.runs:
+        # above what the clean coasts showed: say how far, and why that confirmed nothing
+        margin = envelope.margin(opts)
+        why = (
+            f"inertial alarm not confirmed: GNSS departed up to {peak:.1f} times this log's own clean departures, "
+            + (
+                f"within the {margin:.1f} times that {envelope.runs} clean coast(s) allow (the next clean coast of a "
+                "real INS may depart that far)"
+                if peak <= margin
+                else f"beyond the {margin:.1f} times that {envelope.runs} clean coast(s) allow only briefly, by less "
+                f"than {opts.min_departure_m:g} m or after the confirmation window"
+            )
+        )
     else:
         why = (
             "inertial alarm not confirmed: GNSS stayed within the coasted INS reference's uncertainty and this "
