@@ -81,6 +81,7 @@ class CoastingOptions:
     uncalibrated_margin: float = 5.0
     # ... and where few clean coasts measured it, the bound of a next clean coast (`clean_coast_bound`)
     coast_spread: float = 0.9
+    coast_spread_weight: float = 4.0
     p_next_coast: float = 0.01
     min_disagree_s: float = 2.0
     min_disagree_epochs: int = 3
@@ -129,6 +130,9 @@ class Envelope:
     kappa: FloatArray
     runs: int
     from_baseline: bool = False  # capped by the vehicle's baseline (`capped`): its clean logs calibrate it
+    # the log standard deviation of the clean coasts' peaks (floored at the model, 1): how far apart this
+    # log's own clean coasts fall; None with fewer than two
+    peak_log_sd: float | None = None
 
     def margin(self, opts: CoastingOptions) -> float:
         """How far a departure must exceed this envelope: `opts.margin`, or where few clean coasts measured it
@@ -138,7 +142,7 @@ class Envelope:
             return opts.margin
         if not self.runs:
             return opts.uncalibrated_margin
-        return max(opts.margin, clean_coast_bound(self.runs, opts))
+        return max(opts.margin, clean_coast_bound(self.runs, opts, self.peak_log_sd))
 
     def at(self, h: FloatArray) -> FloatArray:
         """The envelope at horizons `h`. Beyond the longest horizon a clean coast measured, nothing says how
@@ -156,16 +160,22 @@ class Envelope:
         return np.where(h > last, self.kappa[-1] * (np.asarray(h, dtype=float) / last) ** 2, inside)
 
 
-def clean_coast_bound(n: int, opts: CoastingOptions) -> float:
+def clean_coast_bound(n: int, opts: CoastingOptions, peak_log_sd: float | None = None) -> float:
     """How far above the largest of `n` clean coasts' peaks the next clean coast stays, but for a share
-    `p_next_coast` of them: the peaks as log-normal with the spread `coast_spread` (the real husky bag's clean
+    `p_next_coast` of them: the peaks as log-normal, the largest of n near their mean plus the expected
+    largest of n standard normals (Blom's approximation), and the next one's bound from the mean over the
+    spread widened by the mean's own uncertainty. The spread: `coast_spread` (the real husky bag's clean
     coasts: a log standard deviation of 0.9, so that the largest of one or two says little about the next),
-    the largest of n near their mean plus the expected largest of n standard normals (Blom's approximation),
-    and the next one's bound from the mean over the spread widened by the mean's own uncertainty. With one
-    coast it is 19 times, with 5 3.5 times, and from about 14 on below `opts.margin`."""
+    weighing as `coast_spread_weight` coasts against the log's own `peak_log_sd` over n - 1 (a conjugate
+    prior on the variance). With the prior alone it is 19 times with one coast, 3.4 with five, and from
+    about 14 on below `opts.margin`."""
+    spread2 = opts.coast_spread**2
+    if peak_log_sd is not None and n >= 2:
+        w = opts.coast_spread_weight
+        spread2 = (w * spread2 + (n - 1) * peak_log_sd**2) / (w + n - 1)
     expected_largest = norm_isf(1.0 - (n - 0.375) / (n + 0.25))
     z = norm_isf(opts.p_next_coast) * float(np.sqrt(1.0 + 1.0 / n))
-    return float(np.exp(opts.coast_spread * (z - expected_largest)))
+    return float(np.exp(float(np.sqrt(spread2)) * (z - expected_largest)))
 
 
 @dataclass(frozen=True)
@@ -324,7 +334,9 @@ class Placebo:
         # had shown 6x by 10 s)
         held = np.where(valid, self.curves, peaks[:, None])
         kappa = np.where(counted[:, None], held, -np.inf).max(axis=0)
-        return Envelope(self.grid, np.maximum(kappa, 1.0), int(counted.sum()))
+        logs = np.log(np.maximum(peaks[counted], 1.0))
+        spread = float(np.std(logs, ddof=1)) if len(logs) >= 2 else None
+        return Envelope(self.grid, np.maximum(kappa, 1.0), int(counted.sum()), peak_log_sd=spread)
 
     def _clean(self, span: tuple[float, float], margin_s: float) -> FloatArray:
         """How long each coast runs before it reaches `span` (its full horizon if it never does, 0 if it
@@ -411,7 +423,7 @@ def capped(envelope: Envelope, limit: FloatArray | None) -> Envelope:
         return Envelope(grid, np.maximum(limit, 1.0), 0, from_baseline=True)
     allowed = np.interp(envelope.horizon_s, grid, limit)
     kappa = np.maximum(np.minimum(envelope.kappa, allowed), 1.0)
-    return Envelope(envelope.horizon_s, kappa, envelope.runs, from_baseline=True)
+    return replace(envelope, kappa=kappa, from_baseline=True)
 
 
 def coasting_check(
