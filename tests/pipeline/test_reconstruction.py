@@ -5,6 +5,7 @@ coast to the end."""
 from __future__ import annotations
 
 from dataclasses import replace
+from itertools import pairwise
 
 import numpy as np
 
@@ -14,8 +15,10 @@ from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.reconstruction import (
     CoastingCheck,
     CoastingOptions,
+    Envelope,
     Placebo,
     _jumps_back,
+    clean_coast_bound,
     coasting_check,
     placebo_coasts,
 )
@@ -103,3 +106,25 @@ def test_only_a_jump_back_toward_the_reference_is_the_receivers_return() -> None
     assert _jumps_back(_coast_offsets((20.0, 0.0), (1.0, 0.5), 157.6), transient, 10.0)
     assert not _jumps_back(_coast_offsets((20.0, 0.0), (70.0, 0.0), 157.6), transient, 10.0)
     assert not _jumps_back(_coast_offsets((20.0, 0.0), (20.0, 50.0), 157.6), transient, 10.0)
+
+
+def test_the_margin_over_few_clean_coasts_is_a_next_clean_coasts_bound() -> None:
+    """With one clean coast of an INS as spread as the real husky bag's, the next clean one may depart 19
+    times further (1 % of them more); the bound falls with more coasts, and faster when the log's own coasts
+    agree closely; a baseline's envelope, or many coasts, need only `margin`; none, the model's 5 times."""
+    opts = CoastingOptions()
+    prior = [clean_coast_bound(n, opts) for n in (1, 2, 5, 10, 30)]
+    assert 18.0 < prior[0] < 21.0 and all(a > b for a, b in pairwise(prior))
+    assert clean_coast_bound(5, opts, peak_log_sd=0.1) < clean_coast_bound(5, opts) < clean_coast_bound(5, opts, 1.5)
+    grid = np.arange(0.0, 61.0)
+    few = Envelope(grid, np.ones_like(grid), 1)
+    assert few.margin(opts) == clean_coast_bound(1, opts)
+    assert Envelope(grid, np.ones_like(grid), 40, peak_log_sd=0.2).margin(opts) == opts.margin
+    assert Envelope(grid, np.ones_like(grid), 1, from_baseline=True).margin(opts) == opts.margin
+    assert Envelope(np.array([]), np.array([]), 0).margin(opts) == opts.uncalibrated_margin
+
+
+def test_beyond_its_longest_clean_horizon_the_envelope_grows_as_its_square() -> None:
+    """A calibration coast of 8 s measured 3.7: at 16 s nothing measured says less than 4 times that."""
+    envelope = Envelope(np.arange(0.0, 9.0), np.full(9, 3.7), 1)
+    assert np.allclose(envelope.at(np.array([4.0, 8.0, 16.0])), [3.7, 3.7, 14.8])
