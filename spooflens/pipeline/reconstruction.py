@@ -167,12 +167,14 @@ def clean_coast_bound(n: int, opts: CoastingOptions, peak_log_sd: float | None =
     spread widened by the mean's own uncertainty. The spread: `coast_spread` (the real husky bag's clean
     coasts: a log standard deviation of 0.9, so that the largest of one or two says little about the next),
     weighing as `coast_spread_weight` coasts against the log's own `peak_log_sd` over n - 1 (a conjugate
-    prior on the variance). With the prior alone it is 19 times with one coast, 3.4 with five, and from
-    about 14 on below `opts.margin`."""
+    prior on the variance), and never wider than it. With the prior alone it is 19 times with one coast,
+    3.4 with five, and from about 14 on below `opts.margin`."""
     spread2 = opts.coast_spread**2
     if peak_log_sd is not None and n >= 2:
         w = opts.coast_spread_weight
-        spread2 = (w * spread2 + (n - 1) * peak_log_sd**2) / (w + n - 1)
+        # never wider than the prior: it is the widest a real INS showed, and "clean" coasts spread wider
+        # than that hold something else (an attack filling the log made a car's two coasts 10 times apart)
+        spread2 = min(spread2, (w * spread2 + (n - 1) * peak_log_sd**2) / (w + n - 1))
     expected_largest = norm_isf(1.0 - (n - 0.375) / (n + 0.25))
     z = norm_isf(opts.p_next_coast) * float(np.sqrt(1.0 + 1.0 / n))
     return float(np.exp(float(np.sqrt(spread2)) * (z - expected_largest)))
@@ -261,7 +263,33 @@ def coast(
         record=False,
         compare=True,
     )
-    return continued(nav, sol, t_from, opts, t_end)
+    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
+    if k < 0:
+        return continued(nav, sol, t_from, opts, t_end)
+    x, P, g = _updated_at(nav, sol, k)
+    opts = replace(opts, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g)
+    return with_heading_curvature(run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts), float(P[2, 2]))
+
+
+def with_heading_curvature(sol: NavSolution, heading_var: float) -> NavSolution:
+    """A coast's innovation covariance with the second-order term of its heading error. A heading error d
+    turns the coast's manoeuvres (its displacement from straight, steady motion M, its velocity change dV)
+    by d: to first order across them, which the filter's linear covariance holds, and by d^2 / 2 along
+    them, which it does not. That term is small where the coast flies straight and grows with the turn:
+    a simulated aircraft's coast began 14 degrees off in heading (1.85 sigma) and entered a 1.1 g turn, and
+    the linear covariance, thin along the turn's displacement, made its error 7 times the clean envelope.
+    Added: the mean square of d^2 / 2, 3/4 of the heading variance squared, times M M^T (position) and
+    dV dV^T (velocity)."""
+    if len(sol.t) < 2 or not np.isfinite(heading_var) or heading_var <= 0:
+        return sol
+    dv = sol.state[:, 3:5] - sol.state[0, 3:5]
+    dt = np.diff(sol.t)[:, None]
+    m = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (dv[1:] + dv[:-1]) * dt, axis=0)])
+    c = 0.75 * heading_var**2
+    S = sol.S_all.copy()
+    S[:, 0:2, 0:2] += c * m[:, :, None] * m[:, None, :]
+    S[:, 3:5, 3:5] += c * dv[:, :, None] * dv[:, None, :]
+    return replace(sol, S_all=S)
 
 
 def _ratio(sol: NavSolution, p: float, window_s: float = 1.0) -> FloatArray:
@@ -731,6 +759,8 @@ def _on_navigation(
     coasting_checks = tuple(
         {
             "incident_onset_s": inc.onset_s,
+            "incident_start_s": inc.start_s,
+            "incident_end_s": inc.end_s,
             "confirmed": c.confirmed,
             "departure_s": c.departure_s,
             "end_s": c.end_s,

@@ -92,13 +92,22 @@ def _one_pass(
 
 
 def suspected_spans(verdict: Verdict, margin_s: float = SUSPECT_MARGIN_S) -> tuple[tuple[float, float], ...]:
-    """Every incident and anomaly of a verdict, widened by `margin_s`, merged; not those of the classes
-    kept apart (a log off its vehicle's baseline: the baseline already caps what the noise learning may
-    take from it, and a whole log left out would leave nothing to learn from)."""
+    """Every incident and anomaly of a verdict, and every inertial alarm its coast cleared (no anomaly, yet
+    where the filter's test alarmed: a capture filling the log alarms there too), widened by `margin_s`,
+    merged; not those of the classes kept apart (a log off its vehicle's baseline: the baseline already
+    caps what the noise learning may take from it, and a whole log left out would leave nothing to learn
+    from)."""
     spans = sorted(
-        (min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s)
-        for i in verdict.incidents
-        if not set(i.evidence) <= APART or not i.evidence
+        [
+            (min(i.onset_s, i.start_s) - margin_s, i.end_s + margin_s)
+            for i in verdict.incidents
+            if not set(i.evidence) <= APART or not i.evidence
+        ]
+        + [
+            (min(c["incident_onset_s"], c["incident_start_s"]) - margin_s, c["incident_end_s"] + margin_s)
+            for c in verdict.coasting_checks
+            if c.get("cleared")
+        ]
     )
     merged: list[tuple[float, float]] = []
     for a, b in spans:

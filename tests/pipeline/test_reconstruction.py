@@ -111,11 +111,14 @@ def test_only_a_jump_back_toward_the_reference_is_the_receivers_return() -> None
 def test_the_margin_over_few_clean_coasts_is_a_next_clean_coasts_bound() -> None:
     """With one clean coast of an INS as spread as the real husky bag's, the next clean one may depart 19
     times further (1 % of them more); the bound falls with more coasts, and faster when the log's own coasts
-    agree closely; a baseline's envelope, or many coasts, need only `margin`; none, the model's 5 times."""
+    agree closely (never slower when they spread wider); a baseline's envelope, or many coasts, need only
+    `margin`; none, the model's 5 times."""
     opts = CoastingOptions()
     prior = [clean_coast_bound(n, opts) for n in (1, 2, 5, 10, 30)]
     assert 18.0 < prior[0] < 21.0 and all(a > b for a, b in pairwise(prior))
-    assert clean_coast_bound(5, opts, peak_log_sd=0.1) < clean_coast_bound(5, opts) < clean_coast_bound(5, opts, 1.5)
+    assert clean_coast_bound(5, opts, peak_log_sd=0.1) < clean_coast_bound(5, opts)
+    # "clean" coasts spread wider than any real INS's hold something else: they never widen the bound
+    assert clean_coast_bound(5, opts, peak_log_sd=1.5) == clean_coast_bound(5, opts)
     grid = np.arange(0.0, 61.0)
     few = Envelope(grid, np.ones_like(grid), 1)
     assert few.margin(opts) == clean_coast_bound(1, opts)
