@@ -87,10 +87,10 @@ def tail_offset(bursts: list[Alarm], n_epochs: int, opts: ConsistencyOptions) ->
     lasts (a weak ramp over most of a log alarms in dozens of long bursts, which must not teach the test
     its tail). Their peaks' excesses over the threshold are modelled as exponential (peaks over threshold;
     a Gaussian residual's chi-square tail has a mean excess of 2), the mean excess read off their median
-    (robust while attacks make fewer than half of them), and the
-    threshold raised to where the design's count of bursts, `p_false_alarm` per epoch, is expected above
-    it. An attack that moves position against velocity by more than the receiver's own worst moments is
-    still caught; one hidden in them is left to the other classes."""
+    (robust while attacks make fewer than half of them), and the threshold raised to where the design's
+    count of bursts, `p_false_alarm` per epoch, is expected above it. An attack that moves position against
+    velocity by more than the receiver's own worst moments is still caught; one hidden in them is left to
+    the other classes."""
     design = opts.p_false_alarm * n_epochs
     excess = [b.peak_statistic for b in bursts if b.end_s - b.start_s <= opts.window_s]
     n = len(excess)
