@@ -167,7 +167,6 @@ def run_gnss_consistency(
         if len(rx) < 3:
             continue
         mode, t, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
-        modes.append(f"{rid}: {mode}")
         if scale is not None:
             axes = "/".join(f"{s:.2g}" for s in scale)
             note(result, f"{rid}: residual scale at most the baseline's allowance: {axes} (east/north/up)")
@@ -184,7 +183,7 @@ def run_gnss_consistency(
                 f"residual heavier-tailed than Gaussian, threshold raised by {raised:.1f}"
             )
             alarms = alarm_intervals(t, excess, excess > raised, merge_gap_s=opts.window_s)
-        modes[-1] = f"{rid}: {mode}"
+        modes.append(f"{rid}: {mode}")
         alarms = [replace(a, peak_statistic=float(stat[np.searchsorted(t, a.peak_s)])) for a in alarms]
         result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0, rid=str(rid))
         result.series.append(Series(f"{rid}/statistic", t, stat, "chi2(3)", threshold + raised))

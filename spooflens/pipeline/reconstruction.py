@@ -36,6 +36,7 @@ from spooflens.detectors.base import DetectorResult, Track
 from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.errors import SpooflensError
 from spooflens.estimation.quantiles import chi2_isf, norm_isf
+from spooflens.navigation.error_model import PHI
 from spooflens.navigation.loosely_coupled import (
     SMOOTHER_NEEDS,
     FilterOptions,
@@ -195,6 +196,12 @@ class CoastingCheck:
     offset_en_m: FloatArray | None = None  # (M, 2) GNSS - reference, east and north
     lost_s: float | None = None  # an IMU shock the coast met: nothing was judged from here
 
+    @property
+    def peak_over_envelope(self) -> float | None:
+        """The largest ratio over the clean envelope along the coast (None: nothing compared)."""
+        over = self.ratio / self.kappa
+        return float(np.nanmax(over)) if np.isfinite(over).any() else None
+
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
@@ -213,12 +220,19 @@ def continued(
     after that update: the fixes up to it are in them) to `t_end`, or from the log's start when `t_from`
     comes before `sol`'s first epoch. A smoothed or compared estimate after that epoch is the one a run
     over the whole log with the same options gives."""
+    return _continued(nav, sol, t_from, opts, t_end)[0]
+
+
+def _continued(
+    nav: Navigation, sol: NavSolution, t_from: float, opts: FilterOptions, t_end: float | None
+) -> tuple[NavSolution, FloatArray | None]:
+    """`continued`, and the covariance it started from (None when it ran from the log's start)."""
     k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
     if k < 0:
-        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start)
+        return run_prepared(nav.inputs.between(-np.inf, t_end), opts, nav.start), None
     x, P, g = _updated_at(nav, sol, k)
     opts = replace(opts, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g)
-    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts)
+    return run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts), P
 
 
 def _updated_at(nav: Navigation, sol: NavSolution, k: int) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -263,12 +277,9 @@ def coast(
         record=False,
         compare=True,
     )
-    k = int(np.searchsorted(sol.t, t_from, side="right")) - 1
-    if k < 0:
-        return continued(nav, sol, t_from, opts, t_end)
-    x, P, g = _updated_at(nav, sol, k)
-    opts = replace(opts, initial=NavState.from_vector(x), initial_covariance=P, initial_gm=g)
-    return with_heading_curvature(run_prepared(nav.inputs.between(float(sol.t[k]), t_end), opts), float(P[2, 2]))
+    out, P0 = _continued(nav, sol, t_from, opts, t_end)
+    # the attitude error's third (vertical) axis: the heading
+    return out if P0 is None else with_heading_curvature(out, float(P0[PHI, PHI][2, 2]))
 
 
 def with_heading_curvature(sol: NavSolution, heading_var: float) -> NavSolution:
@@ -766,7 +777,7 @@ def _on_navigation(
             "end_s": c.end_s,
             "clean_coasts": e.runs,
             "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
-            "peak_ratio_over_envelope": float(np.nanmax(c.ratio / c.kappa)) if np.isfinite(c.ratio).any() else None,
+            "peak_ratio_over_envelope": c.peak_over_envelope,
             # an inertial alarm the coast cleared is no incident: this record is where it shows
             "cleared": id(inc) in cleared,
         }
@@ -946,8 +957,8 @@ def _cleared(inc: Incident, check: CoastingCheck, young: str) -> bool:
     in the coasting checks (`cleared`), not among the anomalies."""
     if young or check.lost_s is not None or set(inc.evidence) != {Evidence.INERTIAL}:
         return False
-    over = check.ratio / check.kappa
-    return bool(np.isfinite(over).any() and np.nanmax(over) <= 1.0)
+    peak = check.peak_over_envelope
+    return peak is not None and peak <= 1.0
 
 
 def _not_confirmed(
@@ -955,8 +966,7 @@ def _not_confirmed(
 ) -> Incident:
     """`inc` with its inertial evidence dropped: the coast did not confirm it (`young`: why the reference
     could not tell yet, if that was why)."""
-    over = check.ratio / check.kappa
-    peak = float(np.nanmax(over)) if np.isfinite(over).any() else 0.0
+    peak = check.peak_over_envelope or 0.0
     if young:
         why = f"inertial alarm not confirmed: {young}"
     elif peak > 1.0 and envelope.runs:
