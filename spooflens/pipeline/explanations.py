@@ -5,7 +5,9 @@ the receiver's indicators against their level just before, its sky, its time, th
 names a natural cause and the alarm it accounts for:
 
 - degradation (multipath, NLOS, obstruction, foliage): the C/N0 falls and one more of DOP or reported
-  accuracy up, satellites lost, the fix lost, while the fix moves no more than a reflection moves it;
+  accuracy up, satellites lost, the fix lost, while the fix moves no more than a reflection moves it; or,
+  the C/N0 steady, satellites lost and the DOP or reported accuracy up with them (satellites blocked whole
+  leave those still tracked as strong as before);
 - interference: the receiver's jamming state, jamming indicator, noise or AGC moved (the interference
   detector's class, when it ran);
 - a jammed receiver's noisier fixes against the INS: under interference, GNSS departed from the INS
@@ -334,6 +336,7 @@ class Sign:
 
     short: str  # "C/N0 -8.1 dB"
     fact: str  # "each satellite's C/N0 fell -8.1 dB below its level before"
+    kind: str = ""  # "geometry" (DOP or reported accuracy up), "satellites" (satellites used lost)
 
 
 def _ratio_sign(w: Window, column: str, label: str, ratio: float, min_rise: float, unit: str = "") -> Sign | None:
@@ -342,7 +345,9 @@ def _ratio_sign(w: Window, column: str, label: str, ratio: float, min_rise: floa
         return None
     if worst >= ratio * base and worst - base >= min_rise:
         return Sign(
-            f"{label} x{worst / base:.1f}", f"{label} {base:.2f}{unit} -> {worst:.2f}{unit} (x{worst / base:.1f})"
+            f"{label} x{worst / base:.1f}",
+            f"{label} {base:.2f}{unit} -> {worst:.2f}{unit} (x{worst / base:.1f})",
+            "geometry",
         )
     return None
 
@@ -370,7 +375,7 @@ def degradation_signs(w: Window, opts: ExplanationOptions) -> tuple[list[Sign], 
     lost = used - fewest if np.isfinite(used) and np.isfinite(fewest) else 0.0
     if lost >= max(opts.min_satellites_lost, opts.satellites_lost_fraction * used):
         text = f"satellites used {used:.0f} -> {fewest:.0f}"
-        signs.append(Sign(text, text))
+        signs.append(Sign(text, text, "satellites"))
     gap = w.longest_gap_s()
     if gap >= max(opts.fix_lost_min_s, opts.fix_lost_periods * w.rx.period_s):
         text = f"fix lost for {gap:.1f} s"
@@ -444,7 +449,10 @@ def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], f
         return _kept("degradation", Kind.DEGRADATION, "; ".join(marks), rid)
     if interference_signs(scene, rid):
         return _kept("degradation", Kind.DEGRADATION, "the receiver's interference indicators moved too", rid)
-    if np.isfinite(drop) and drop < opts.min_cn0_drop_db:
+    # satellites set or blocked whole (terrain, a structure, the vehicle's own body in a bank) leave the C/N0
+    # of those still tracked where it was: fewer satellites and the DOP up with them need no fall
+    fewer = {"geometry", "satellites"} <= {sg.kind for sg in signs}
+    if np.isfinite(drop) and drop < opts.min_cn0_drop_db and not fewer:
         also = f"; only {'; '.join(facts)}" if facts else ""
         return _kept("degradation", Kind.DEGRADATION, f"the C/N0 did not fall ({_db(-drop)}){also}", rid)
     if len(signs) < 2:
@@ -456,6 +464,12 @@ def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], f
         return _kept("degradation", Kind.DEGRADATION, why, rid)
     moved = " while the fix jumped" if fix_alarm else ""
     text = f"{_join([sg.short for sg in signs])}{moved}: degradation (multipath, obstruction), not spoofing"
+    if np.isfinite(drop) and drop < opts.min_cn0_drop_db:
+        facts.append(f"the C/N0 of the satellites still tracked steady ({_db(-drop)})")
+        text = (
+            f"{_join([sg.short for sg in signs])}, the C/N0 steady{moved}: fewer satellites in view (set, or "
+            "blocked by terrain or a structure), not spoofing"
+        )
     if fix_alarm:
         facts.append(f"largest jump of the fix beyond its velocity {jump:.1f} m")
     return Reading("degradation", Kind.DEGRADATION, True, text, tuple(facts), rid)

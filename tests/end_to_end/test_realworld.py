@@ -265,3 +265,12 @@ def test_a_coast_into_a_turn_with_its_heading_off_is_no_false_incident() -> None
     (`with_heading_curvature`) is in the coast's covariance now."""
     out = one_run(Run("aircraft", None, 71602))
     assert out["false_incidents"] == 0
+
+
+def test_a_receiver_losing_satellites_with_its_dop_is_no_false_incident() -> None:
+    """A clean simulated multirotor (`bench realworld --clean-hours 100 --seed 75000`'s one false incident):
+    its receiver lost satellites over 40 s (9 -> 5, the C/N0 of the rest steady), its DOP and reported
+    accuracies rose with them; receiver self-report alarmed, and one GNSS-only epoch inside it made a medium
+    SPOOFING incident. Satellites blocked whole are degradation without a fall of the C/N0."""
+    out = one_run(Run("multirotor", None, 75054))
+    assert out["false_incidents"] == 0

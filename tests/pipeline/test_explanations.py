@@ -209,6 +209,44 @@ def test_a_stronger_signal_is_no_degradation() -> None:
     assert any("rose" in x and "a stronger signal than the sky's" in x for x in against)
 
 
+def _blocked_whole(sats_used: bool) -> EpochTable:
+    """The navisys window with its satellites blocked whole: those it stopped using gone from its sky, the
+    others at their C/N0 before (`sats_used` False: its satellites-used count held at its level too)."""
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    sats, fixes = a.table.satellites.copy(), a.table.fixes.copy()
+    before, during = sats["t_s"] < 6.0, sats["t_s"] >= 6.0
+    level = sats[before].groupby("sv_id")["cn0_dbhz"].median()
+    used_during = set(sats.loc[during & (sats["used"] > 0), "sv_id"])
+    sats = sats[before | sats["sv_id"].isin(used_during)].copy()
+    later = sats["t_s"] >= 6.0
+    sats.loc[later, "cn0_dbhz"] = sats.loc[later, "sv_id"].map(level).fillna(sats.loc[later, "cn0_dbhz"])
+    if not sats_used:
+        fixes["sats_used"] = 10.0
+    return replace(a.table, satellites=sats, fixes=fixes)
+
+
+def test_satellites_blocked_whole_are_degradation_without_a_fall_of_the_c_n0() -> None:
+    # terrain or a structure hides satellites whole: the receiver loses them (10 -> 6) and its DOP rises,
+    # while those it still tracks keep their C/N0; no spoofer's mark, the receiver's interference signs quiet
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    table = _blocked_whole(sats_used=True)
+    verdict = classify(table, a.results, decide(a.results))
+    assert not verdict.spoofed and verdict.incidents[0].kind == Kind.DEGRADATION
+    (e,) = verdict.incidents[0].explanations
+    assert "fewer satellites in view" in e.text and "the C/N0 steady" in e.text
+    assert any("satellites used 10 -> 6" in f for f in e.facts)
+    assert any("C/N0 of the satellites still tracked steady" in f for f in e.facts)
+
+
+def test_dop_up_alone_without_a_fall_of_the_c_n0_is_no_degradation() -> None:
+    # the same window with no satellite lost: the DOP and the reported accuracy rose with the sky unchanged,
+    # which no blocked sky explains
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    verdict = classify(_blocked_whole(sats_used=False), a.results, decide(a.results))
+    assert verdict.spoofed and verdict.incidents[0].kind == Kind.SPOOFING
+    assert any("the C/N0 did not fall" in x for x in verdict.events[0].evidence_against)
+
+
 def test_the_receivers_own_jamming_state_makes_the_event_jamming() -> None:
     # the navisys window with the receiver's jamming state modelled at 'critical' while its sky fell
     a = analysed("corpus/gpsd/navisys-gr8013.log")
