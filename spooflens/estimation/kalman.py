@@ -141,7 +141,9 @@ def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> Forw
     """The forward filter; without `keep_states` the state estimates and their covariances are not kept
     (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
     innovations, gains and S does without)."""
-    out = _forward(*_model_arrays(model), model.x0.astype(float), np.ascontiguousarray(model.P0), keep_states)
+    # every argument given, defaults too: the kernel compiled ahead of time is the one for all twelve
+    x0, P0 = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+    out = _forward(*_model_arrays(model), x0, P0, keep_states, False, -1)
     return ForwardResult(*out[:-2])
 
 
