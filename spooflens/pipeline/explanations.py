@@ -451,8 +451,8 @@ def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], f
         return _kept("degradation", Kind.DEGRADATION, "the receiver's interference indicators moved too", rid)
     # satellites set or blocked whole (terrain, a structure, the vehicle's own body in a bank) leave the C/N0
     # of those still tracked where it was: fewer satellites and the DOP up with them need no fall
-    fewer = {"geometry", "satellites"} <= {sg.kind for sg in signs}
-    if np.isfinite(drop) and drop < opts.min_cn0_drop_db and not fewer:
+    steady = bool(np.isfinite(drop) and drop < opts.min_cn0_drop_db)
+    if steady and not {"geometry", "satellites"} <= {sg.kind for sg in signs}:
         also = f"; only {'; '.join(facts)}" if facts else ""
         return _kept("degradation", Kind.DEGRADATION, f"the C/N0 did not fall ({_db(-drop)}){also}", rid)
     if len(signs) < 2:
@@ -463,13 +463,12 @@ def read_degradation(scene: _Scene, alarm: Alarm, w: Window, marks: list[str], f
         why = f"the fix jumped {jump:,.0f} m, more than multipath or NLOS moves it ({opts.max_reflection_m:g} m)"
         return _kept("degradation", Kind.DEGRADATION, why, rid)
     moved = " while the fix jumped" if fix_alarm else ""
-    text = f"{_join([sg.short for sg in signs])}{moved}: degradation (multipath, obstruction), not spoofing"
-    if np.isfinite(drop) and drop < opts.min_cn0_drop_db:
+    cause = "degradation (multipath, obstruction)"
+    if steady:
         facts.append(f"the C/N0 of the satellites still tracked steady ({_db(-drop)})")
-        text = (
-            f"{_join([sg.short for sg in signs])}, the C/N0 steady{moved}: fewer satellites in view (set, or "
-            "blocked by terrain or a structure), not spoofing"
-        )
+        moved = f", the C/N0 steady{moved}"
+        cause = "fewer satellites in view (set, or blocked by terrain or a structure)"
+    text = f"{_join([sg.short for sg in signs])}{moved}: {cause}, not spoofing"
     if fix_alarm:
         facts.append(f"largest jump of the fix beyond its velocity {jump:.1f} m")
     return Reading("degradation", Kind.DEGRADATION, True, text, tuple(facts), rid)
