@@ -1,9 +1,8 @@
-"""Numba's `njit`, with numba imported only when a compiled kernel is first called (and not at all when
-the ahead-of-time module has the kernel for its arguments' types; docs/compile.md)."""
+"""Numba's `njit`, with numba imported only when a kernel is called with argument types the ahead-of-time
+module was not built for (docs/compile.md)."""
 
 from __future__ import annotations
 
-import sys
 import threading
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
@@ -12,69 +11,84 @@ from spooflens.compile import aot
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-# modules whose globals may hold a kernel (their own, or one imported from another module)
-_PACKAGES = ("spooflens", "readers")
-
 _lock = threading.Lock()
-_pending: list[LazyKernel] = []
 _numba_njit: Callable[..., Any] | None = None
 
 
 class LazyKernel:
-    """A kernel not compiled yet: called, it makes every pending kernel's dispatcher and calls its own."""
+    """A kernel. Called from Python, it runs the ahead-of-time build for its arguments' types when there
+    is one, else numba's dispatcher (made, and numba imported, at its first such call); each call decides
+    afresh, so one call numba must compile never moves the others off their ahead-of-time builds. Inside
+    another kernel numba types it as its dispatcher, so kernels call (and inline) kernels as numba's own do."""
 
     def __init__(self, function: Callable[..., Any], options: dict[str, Any]) -> None:
         self.function = function
         self.options = options
-        self.dispatcher: Callable[..., Any] | None = None
+        self._dispatcher: Callable[..., Any] | None = None
+        code = function.__code__
+        self._arity = code.co_argcount
+        self._defaults: tuple[Any, ...] = function.__defaults__ or ()
         self.__name__ = function.__name__
         self.__qualname__ = function.__qualname__
         self.__module__ = function.__module__
         self.__doc__ = function.__doc__
 
+    @property
+    def py_func(self) -> Callable[..., Any]:
+        """The Python function, as numba's dispatcher names it."""
+        return self.function
+
+    def with_defaults(self, args: tuple[Any, ...]) -> tuple[Any, ...]:
+        """`args` with the defaults of the parameters left out: one signature for a call with or without
+        them, the one the warm-up records and builds ahead of time."""
+        missing = self._arity - len(args)
+        if 0 < missing <= len(self._defaults):
+            return args + self._defaults[len(self._defaults) - missing :]
+        return args
+
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        if self.dispatcher is None:
-            ahead = None if kwargs else aot.compiled(self.function, args)
+        if not kwargs:
+            args = self.with_defaults(args)
+            ahead = aot.compiled(self.function, args)
             if ahead is not None:  # built at install for these argument types: numba need not start
                 return ahead(*args)
-            dispatch_all()
-        assert self.dispatcher is not None
-        return self.dispatcher(*args, **kwargs)
+        return self.numba_dispatcher()(*args, **kwargs)
+
+    def numba_dispatcher(self) -> Callable[..., Any]:
+        """Numba's dispatcher of the kernel (numba imported and the dispatcher made at the first need)."""
+        if self._dispatcher is None:
+            njit = _numba()
+            with _lock:
+                if self._dispatcher is None:
+                    self._dispatcher = njit(**self.options)(self.function)
+        return self._dispatcher
 
     def __repr__(self) -> str:
-        return f"<kernel {self.__module__}.{self.__qualname__}, not compiled yet>"
+        return f"<kernel {self.__module__}.{self.__qualname__}>"
 
 
 def njit(**options: Any) -> Callable[[F], F]:
-    """`numba.njit(**options)`, numba imported at the first call of a kernel (see the module)."""
+    """`numba.njit(**options)`, numba imported at the first call ahead-of-time code cannot answer."""
 
     def wrap(function: F) -> F:
-        with _lock:
-            if _numba_njit is not None:
-                return cast(F, _numba_njit(**options)(function))
-            kernel = LazyKernel(function, options)
-            _pending.append(kernel)
-            return cast(F, kernel)
+        return cast(F, LazyKernel(function, options))
 
     return wrap
 
 
-def dispatch_all() -> None:
-    """Import numba, make the dispatcher of every kernel defined so far and rebind the names that held
-    the wrappers (once: another thread may have done it)."""
+def _numba() -> Callable[..., Any]:
+    """Numba's `njit`, importing numba and teaching its typing that a kernel called from a kernel is
+    that kernel's dispatcher (once: another thread may have done it)."""
     global _numba_njit
     with _lock:
         if _numba_njit is None:
             from numba import njit as numba_njit
+            from numba.core import types
+            from numba.core.typing.typeof import typeof_impl
+
+            @typeof_impl.register(LazyKernel)
+            def _typeof_kernel(kernel: LazyKernel, context: Any) -> Any:
+                return types.Dispatcher(kernel.numba_dispatcher())
 
             _numba_njit = numba_njit
-        for kernel in _pending:
-            kernel.dispatcher = _numba_njit(**kernel.options)(kernel.function)
-        _pending.clear()
-        for name, module in list(sys.modules.items()):
-            if module is None or name.split(".", 1)[0] not in _PACKAGES:
-                continue
-            names = vars(module)
-            for key, value in list(names.items()):
-                if isinstance(value, LazyKernel) and value.dispatcher is not None:
-                    names[key] = value.dispatcher
+        return _numba_njit

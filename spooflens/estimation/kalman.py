@@ -137,13 +137,16 @@ def _model_arrays(model: LinearGaussianModel, epochs: slice = slice(None)) -> _M
     return c(A.head), c(A.tail), c(Q.head), c(Q.tail), c(model.C[epochs]), c(model.R[epochs]), c(model.y[epochs])
 
 
+def prior(model: LinearGaussianModel) -> tuple[FloatArray, FloatArray]:
+    """(x0, P0) of `model` as the kernels take them: float, the covariance C-contiguous."""
+    return model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+
+
 def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> ForwardResult:
     """The forward filter; without `keep_states` the state estimates and their covariances are not kept
     (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
     innovations, gains and S does without)."""
-    # every argument given, defaults too: the kernel compiled ahead of time is the one for all twelve
-    x0, P0 = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
-    out = _forward(*_model_arrays(model), x0, P0, keep_states, False, -1)
+    out = _forward(*_model_arrays(model), *prior(model), keep_states)
     return ForwardResult(*out[:-2])
 
 
@@ -154,7 +157,7 @@ def forward_blocks(
     epochs lo..reach(hi) - 1). A consumer that reads some epochs past each block's end (a sliding window)
     gets them from `reach`; the next block starts from the estimate after hi - 1, so every epoch's numbers
     are those of `forward_filter`, and only a block and its reach are held at a time."""
-    x, P = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+    x, P = prior(model)
     N, block = model.n_epochs, max(1, block)
     for lo in range(0, N, block):
         hi = min(lo + block, N)

@@ -18,6 +18,7 @@ from spooflens.estimation.kalman import (
     information_predict_back,
     information_update,
     noise_factor,
+    prior,
 )
 from spooflens.estimation.kalman_update import masked_update, masked_update_into, observed_parts, update_scratch
 from spooflens.estimation.sparse_products import congruence, full_pattern, nonzero_mask, pattern_of_mask, times_vector
@@ -617,7 +618,7 @@ def _offline(
         y,
         np.ascontiguousarray(model.t[: last + 1], dtype=float),
     )
-    x0, P0 = model.x0.astype(float), np.ascontiguousarray(model.P0, dtype=float)
+    x0, P0 = prior(model)
     rows_index, Sigma = np.array(rows, dtype=np.int64), np.diag(sigma**2)
     a_ptr, a_col = pattern_of_mask(augmented_mask(block_mask(A), len(rows), ramp))
     jumping = -1 if ramp else model.n_states  # `_offline_at`'s `first`

@@ -1,6 +1,6 @@
-"""`spooflens.compile.jit`: numba is imported at the first call of a compiled kernel, never by a log without one.
+"""`spooflens.compile.jit`: numba imported only for a call ahead-of-time code cannot answer, and for that call only.
 
-Each check runs in a new interpreter: this one has long imported numba for other tests."""
+The import check runs in a new interpreter: this one has long imported numba for other tests."""
 
 from __future__ import annotations
 
@@ -8,7 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 from spooflens.bench.e2e_bench import write_gnss_only
+from spooflens.compile import aot
+from spooflens.compile.jit import LazyKernel, njit
 
 
 def _run(code: str) -> str:
@@ -30,24 +35,38 @@ def test_a_log_of_gnss_fixes_only_is_analysed_without_importing_numba(tmp_path: 
     assert out.split() == ["False", "False"]
 
 
-def test_the_first_kernel_called_puts_dispatchers_in_place_of_every_wrapper() -> None:
-    out = _run(
-        "import sys\n"
-        "import spooflens.estimation.marginalised_likelihood as mlrt\n"
-        "import spooflens.estimation.kalman_update as update\n"
-        "import spooflens.navigation.kernels as kernels\n"
-        "from spooflens.compile.jit import LazyKernel\n"
-        "assert 'numba' not in sys.modules\n"
-        "assert isinstance(kernels.gravity, LazyKernel) and isinstance(kernels.update_scratch, LazyKernel)\n"
-        "python_value = kernels.gravity.function(0.7, 120.0)\n"
-        "value = kernels.gravity(0.7, 120.0)\n"
-        "from numba.core.dispatcher import Dispatcher\n"
-        "assert 'numba' in sys.modules and value == python_value\n"
-        # the defining module's names and the names other modules imported from it are the dispatchers
-        "assert isinstance(kernels.gravity, Dispatcher) and isinstance(update.update_scratch, Dispatcher)\n"
-        "assert kernels.update_scratch is update.update_scratch is mlrt.update_scratch\n"
-        "from spooflens.compile.jit import njit\n"
-        "assert isinstance(njit(cache=False)(lambda x: x + 1), Dispatcher)\n"  # later kernels: dispatchers
-        "print('ok')\n"
-    )
-    assert out.strip() == "ok"
+@njit(cache=False, inline="always")
+def _scaled(x: float, k: float = 2.0) -> float:
+    return x * k
+
+
+@njit(cache=False)
+def _sum_scaled(a: np.ndarray) -> float:
+    total = 0.0
+    for v in a:
+        total += _scaled(v)  # a kernel called (and inlined) from a kernel
+    return total
+
+
+def test_a_kernel_calls_and_inlines_a_kernel_inside_numba() -> None:
+    assert isinstance(_sum_scaled, LazyKernel) and isinstance(_scaled, LazyKernel)
+    assert _sum_scaled(np.arange(4.0)) == 12.0
+
+
+def test_a_call_numba_must_compile_leaves_the_other_calls_on_their_ahead_of_time_builds(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    ran: list[tuple[object, ...]] = []
+
+    def ahead(*args: object) -> float:
+        ran.append(args)
+        return -1.0  # not what the kernel computes: shows which one answered
+
+    built_for = aot.type_key((1.5, 2.0))  # the full signature: the default given
+    name = aot.kernel_name(_scaled.py_func)  # type: ignore[attr-defined]
+    monkeypatch.setattr(aot, "_table", {(name, built_for): ahead})
+    assert _scaled(1.5, np.float32(2.0)) == 3.0  # type: ignore[arg-type]  # types it was not built for: numba
+    assert _scaled(1.5, 2.0) == -1.0  # the next call with its types: the build, numba running or not
+    assert _scaled(1.5) == -1.0  # the default left out: the same signature, the same build
+    assert ran == [(1.5, 2.0), (1.5, 2.0)]
+    monkeypatch.setattr(aot, "_table", None)  # the next test loads the table afresh
