@@ -9,7 +9,7 @@ pair of bytes, so random data is still "unknown format".
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 HEAD = 64 * 1024
@@ -170,5 +170,16 @@ def _proprietary_sentences(data: bytes) -> str | None:
     addresses = [m.group(1).decode() for ln in lines if (m := re.match(rb"^\$([A-Z][A-Z0-9]{2,15}),", ln))]
     if not lines or len(addresses) * 2 < len(lines):
         return None
-    names = ", ".join(f"${a}" for a in dict.fromkeys(addresses))
-    return f"proprietary NMEA-style sentences only ({names[:80]}), no standard sentence"
+    return f"proprietary NMEA-style sentences only ({_first_names(dict.fromkeys(addresses))}), no standard sentence"
+
+
+def _first_names(addresses: Iterable[str], width: int = 80) -> str:
+    """'$A, $B, ...' as far as `width` characters go, then how many more (never a name cut in two)."""
+    names = [f"${a}" for a in addresses]
+    shown: list[str] = []
+    for name in names:
+        if shown and len(", ".join([*shown, name])) > width:
+            break
+        shown.append(name)
+    rest = len(names) - len(shown)
+    return ", ".join(shown) + (f" and {rest} more" if rest else "")

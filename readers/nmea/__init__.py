@@ -117,14 +117,34 @@ def decode_log(path: Path, progress: Progress | None = None) -> tuple[list[Decod
 
 
 AIS_KINDS = ("VDM", "VDO")
+AIS_POSITION_TYPES = {1, 2, 3, 18, 19, 27}  # ITU-R M.1371 position reports (class A, class B, long range)
 
 
 def _what_it_holds(decoded: list[DecodedFile], skipped: list[Skipped]) -> str:
-    """Why a log has nothing to use: AIS traffic only (other vessels' reports), else what was skipped."""
-    kinds = [s.kind for f in decoded for s in f.scan.sentences]
-    if kinds and all(k in AIS_KINDS for k in kinds):
-        return f"AIS messages only ({len(kinds)} VDM/VDO: other vessels' reports, no own position or heading)"
+    """Why a log has nothing to use: AIS traffic only (other stations' reports, and how many of its own
+    station's VDO carry a position), else what was skipped."""
+    sentences = [s for f in decoded for s in f.scan.sentences]
+    if sentences and all(s.kind in AIS_KINDS for s in sentences):
+        own = [s for s in sentences if s.kind == "VDO"]
+        text = f"AIS messages only ({len(sentences) - len(own)} VDM: other stations' reports"
+        if not own:
+            return text + "; none of its own station's, VDO)"
+        positions = sum(_ais_message_type(s.text) in AIS_POSITION_TYPES for s in own)
+        return (
+            text + f"; {len(own)} VDO sentences, its own station's, {positions} of them a position report: "
+            "spooflens reads a vessel's own GNSS fixes, not AIS position reports)"
+        )
     return "; ".join(str(s) for s in skipped[:6]) or "no sentences"
+
+
+def _ais_message_type(text: bytes) -> int | None:
+    """The message type of an AIS sentence's first fragment (the payload's first six-bit character),
+    None for a later fragment or a sentence too short to hold one."""
+    fields = text.split(b",")
+    if len(fields) < 6 or fields[2] != b"1" or not fields[5]:
+        return None
+    value = fields[5][0] - 48
+    return value - 8 if value > 40 else value
 
 
 def read_nmea(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:

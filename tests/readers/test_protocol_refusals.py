@@ -112,6 +112,25 @@ def test_doubled_dollar_sentences() -> None:
     assert len(t.fixes) >= 10
 
 
-def test_ais_traffic_is_said_to_be_ais(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["inspect", str(real_log(f"{GPSD}/ais-18-27.log"))]) == 2
-    assert "AIS messages only" in capsys.readouterr().err
+@pytest.mark.parametrize(
+    ("log", "holds"),
+    [
+        ("ais-18-27.log", "AIS messages only (276 VDM: other stations' reports; none of its own station's, VDO)"),
+        # a base station's own reports (!BSVDO, !AIVDO): one class A position report among them, two fragments
+        # of one binary message counted as the sentences they are
+        (
+            "ais-nmea-type6-fid55.log",
+            "1474 VDM: other stations' reports; 6 VDO sentences, its own station's, 1 of them",
+        ),
+    ],
+)
+def test_ais_traffic_is_said_to_be_ais(log: str, holds: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(real_log(f"{GPSD}/{log}"))]) == 2
+    err = capsys.readouterr().err
+    assert holds in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_long_list_of_proprietary_sentences_is_cut_between_names() -> None:
+    with pytest.raises(UnsupportedFormatError) as refusal:
+        sniff_format(real_log("corpus/pynmeagps/quectel_nmea_response.log"))
+    assert "$PQTMCFGUART and 36 more), no standard sentence" in str(refusal.value)
