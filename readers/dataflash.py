@@ -97,7 +97,9 @@ class DataFlash:
             elif code.endswith("s"):
                 np_type = f"S{code[:-1]}"
             else:
-                np_type = "<" + code
+                # by size ('<u8', not '<Q'): numpy's long long is a type of its own beside its uint64, which
+                # pandas cannot join on
+                np_type = np.dtype("<" + code).str
             names.append(col)
             formats.append(np_type)
             if mult is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from dataflash_support import WEEK, Fmt, flight, write_dataflash
 from paths import real_log
@@ -138,3 +139,16 @@ def test_arducopter_3_3_log171_reads_with_its_own_clocks() -> None:
     assert t.imus() == ["IMU[0]", "IMU[1]", "IMU[2]"] and len(t.imu_of("IMU[0]")) == 11916
     ekf = t.autopilot_ekf
     assert set(ekf["source"]) == {"EKF1 core 0"} and ekf["vel_test_ratio"].notna().sum() == 2383
+
+
+def test_columns_are_typed_by_size_so_pandas_can_join_them_in_any_order() -> None:
+    """A 'Q' field was numpy's `ulonglong`, a type of its own beside `uint64` that pandas' hash join does
+    not know: a log whose GPS rows were not in time order (a fuzzed DataFlash log) failed joining GPA."""
+    from readers.dataflash import open_dataflash
+
+    log = open_dataflash(real_log("ardupilot_dataflash/amc_backend_log_80k.bin"))
+    cols = log.columns("GPS")
+    assert cols is not None and cols["TimeUS"].dtype.type is np.uint64
+    frame = pd.DataFrame({"TimeUS": cols["TimeUS"][::-1], "inst": 0})
+    joined = frame.merge(frame.drop_duplicates(), on=["TimeUS", "inst"], how="left")
+    assert len(joined) == len(frame)
