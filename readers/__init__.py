@@ -30,6 +30,7 @@ READER_MODULES: tuple[str, ...] = (
     "readers.rosbag",
     "readers.ulog",
     "readers.rinex",
+    "readers.packed",  # any format packed (after RINEX, which unpacks its own; before text, which a tar holds)
     "readers.ubx",
     "readers.nmea",
     "readers.n2k",

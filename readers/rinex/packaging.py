@@ -93,7 +93,7 @@ def _inflate(path: Path, data: bytes, kind: str, limit: int, out: Unpacked) -> b
     return b"".join(chunks)
 
 
-def _zip_members(path: Path, data: bytes, limit: int, out: Unpacked) -> dict[str, bytes]:
+def zip_members(path: Path, data: bytes, limit: int, out: Unpacked) -> dict[str, bytes]:
     """Every file in a zip archive (name -> bytes); an archive cut short (no central directory) is read
     from its members' own headers, up to the cut."""
     members: dict[str, bytes] = {}
@@ -156,7 +156,7 @@ def _outer(path: Path, data: bytes, out: Unpacked, limit: int) -> bytes:
     if kind in ("gzip", "bzip2"):
         return _inflate(path, data, kind, limit, out)
     if kind == "zip":
-        name, body = _rinex_member(path, _zip_members(path, data, limit, out))
+        name, body = _rinex_member(path, zip_members(path, data, limit, out))
         out.packing[-1] = f"zip ({name})"
         return body
     import ncompress
@@ -248,7 +248,7 @@ def archive_folder(path: Path) -> Iterator[Path | None]:
         yield None
         return
     out = Unpacked(b"")
-    members = _zip_members(path, path.read_bytes(), MAX_UNPACKED_BYTES, out)
+    members = zip_members(path, path.read_bytes(), MAX_UNPACKED_BYTES, out)
     rinex = {n: b for n, b in members.items() if b"RINEX VERS" in b[:240] or is_compact(b)}
     if len(rinex) < 2:
         yield None

@@ -18,6 +18,7 @@ be rerun by hand.
 from __future__ import annotations
 
 import contextlib
+import gzip
 import io
 import json
 import random
@@ -113,6 +114,14 @@ def simulated_seeds(workdir: Path) -> list[SeedLog]:
         with contextlib.redirect_stdout(io.StringIO()):  # it prints a line per file
             convert_ulog2csv(str(workdir / "sim.ulg"), None, str(px4_csv), ",", None, None)
     seeds.append(SeedLog(px4_csv))
+    # packed as shipped (readers/packed.py): a compressed stream, and an archive of a log's folder
+    ulog_gz = workdir / "sim.ulg.gz"
+    if not ulog_gz.exists():
+        ulog_gz.write_bytes(gzip.compress((workdir / "sim.ulg").read_bytes()))
+    bag_zip = workdir / "sim_ros2bag_mcap.zip"
+    if not bag_zip.exists():
+        shutil.make_archive(str(bag_zip.with_suffix("")), "zip", workdir, "sim_ros2bag_mcap")
+    seeds += [SeedLog(ulog_gz), SeedLog(bag_zip)]
     return seeds
 
 

@@ -358,6 +358,15 @@ def rewrite_with_writer(src: Path, dst: Path, table: EpochTable, spoofed: EpochT
     return f"{note}: {len(spoofed.fixes)} fixes{extra}"
 
 
+def rewrite_packed(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
+    """A log inside gzip, zip ...: the log unpacked and rewritten in its own format, written unpacked."""
+    from readers.packed import unpacked
+
+    with unpacked(src) as content:
+        note = rewrite_log(content.log, dst, table, spoofed, velocities)
+    return f"{note} (from the {content.label} log, written unpacked)"
+
+
 def rewrite_container(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """MCAP files and ROS bags: every message copied, the fix messages edited in place."""
     is_mcap = sniff_format(src) == "mcap"

@@ -1,0 +1,357 @@
+"""Logs as they are shipped, archived or mailed: any log of another format inside gzip, bzip2, xz, Unix
+compress (.Z), a zip or a tar archive (`flight.ulg.gz`, `track.nmea.bz2`, a zip of a ROS2 bag folder,
+`capture.tar.gz`).
+
+The packing is recognised by content, never by name, and taken off into a temporary folder, streamed,
+with a ceiling on what it may unpack to (an archive that would fill the disk is refused, not unpacked);
+what is inside is then read as if it had been given unpacked. A stream cut short or damaged keeps what
+came before the damage, the loss listed, as a cut plain log does. Archive members are written by their
+names with every path part that could leave the folder (absolute paths, '..', links, devices) dropped:
+nothing in an input file decides where a byte lands outside it. Packed RINEX is its reader's own
+(`readers.rinex.packaging`: it also expands Hatanaka's Compact RINEX and reads the navigation file beside
+the observations in a zip).
+"""
+
+from __future__ import annotations
+
+import bz2
+import lzma
+import shutil
+import tarfile
+import tempfile
+import threading
+import zipfile
+import zlib
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import IO, Any
+
+from readers import Progress, ReaderFormat
+from spooflens.epoch_table import EpochTable, Skipped
+from spooflens.errors import ReaderError
+
+MAX_UNPACKED_BYTES = 16 * 2**30  # a day-long multi-gigabyte ULog or bag fits; a decompression bomb does not
+SPARE_BYTES = 2**30  # left free on the temporary folder's disk
+MAX_DEPTH = 3  # a tar in a gzip in a zip; a zip that unpacks to itself does not go on for ever
+CHUNK = 1 << 20
+STREAMS: dict[bytes, str] = {b"\x1f\x8b": "gzip", b"BZh": "bzip2", b"\xfd7zXZ\x00": "xz", b"\x1f\x9d": "compress (.Z)"}
+ZIP = b"PK\x03\x04"
+SUFFIXES = (".gz", ".gzip", ".bz2", ".xz", ".Z", ".zip", ".tgz", ".tar", ".tbz2", ".txz")
+JUNK = ("__MACOSX", ".DS_Store", "Thumbs.db")  # what archivers add beside the files
+
+
+def packing_of(head: bytes) -> str | None:
+    """The packing a file's first bytes show (a compressed stream, a zip or a tar archive), or None."""
+    for magic, name in STREAMS.items():
+        if head.startswith(magic):
+            return name
+    if head.startswith(ZIP):
+        return "zip"
+    if head[257:262] == b"ustar":
+        return "tar"
+    return None
+
+
+def _sniff(path: Path, head: bytes) -> bool:
+    return path.is_file() and packing_of(head) is not None
+
+
+_nesting = threading.local()
+
+
+def _ceiling(folder: Path) -> int:
+    """What a file may unpack to: the ceiling, or less when the disk has less to spare."""
+    return max(0, min(MAX_UNPACKED_BYTES, shutil.disk_usage(folder).free - SPARE_BYTES))
+
+
+def _too_big(path: Path, packing: str, limit: int) -> ReaderError:
+    return ReaderError(
+        path, f"{packing} unpacks to more than {limit / 2**30:.1f} GiB (the ceiling, or what the disk spares): refused"
+    )
+
+
+def _copy(
+    path: Path, packing: str, source: IO[bytes], target: IO[bytes], limit: int, written: int = 0
+) -> tuple[int, str | None]:
+    """Copy a stream, its total held under `limit`; (bytes written, the damage that stopped it or None)."""
+    try:
+        while piece := source.read(CHUNK):
+            written += len(piece)
+            if written > limit:
+                raise _too_big(path, packing, limit)
+            target.write(piece)
+    except EOFError:
+        return written, f"{packing} stream cut short: what came after the cut is lost"
+    except (OSError, zlib.error, lzma.LZMAError, ValueError) as err:
+        return written, f"{packing} stream damaged ({err}): what came after the damage is lost"
+    return written, None
+
+
+def _unpack_stream(path: Path, packing: str, folder: Path) -> tuple[Path, list[str]]:
+    """A compressed stream's content as one file in `folder`, named as `path` without its suffix."""
+    name = path.name
+    for suffix in SUFFIXES:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            name = name[: -len(suffix)] + (".tar" if suffix in (".tgz", ".tbz2", ".txz") else "")
+            break
+    inner = folder / (name if name != path.name else f"{name}.unpacked")
+    losses: list[str] = []
+    limit = _ceiling(folder)
+    with inner.open("wb") as target:
+        if packing == "compress (.Z)":
+            import ncompress
+
+            try:
+                data = ncompress.decompress(path.read_bytes())
+            except (ValueError, RuntimeError, OSError) as err:
+                raise ReaderError(path, f"Unix compress (.Z) stream that cannot be expanded: {err}") from err
+            if len(data) > limit:
+                raise _too_big(path, packing, limit)
+            target.write(data)
+            written = len(data)
+        else:
+            written, damage = _inflate(path, packing, target, limit)
+            if damage:
+                losses.append(damage)
+    if not written:
+        raise ReaderError(path, f"{packing} stream holds nothing" + (f" readable: {losses[0]}" if losses else ""))
+    return inner, losses
+
+
+Decompressor = Any  # zlib's, bz2's or lzma's decompressor object
+
+
+def _decompressor(packing: str) -> Decompressor:
+    if packing == "gzip":
+        return zlib.decompressobj(16 + zlib.MAX_WBITS)
+    return bz2.BZ2Decompressor() if packing == "bzip2" else lzma.LZMADecompressor()
+
+
+def _inflate(path: Path, packing: str, target: IO[bytes], limit: int) -> tuple[int, str | None]:
+    """A gzip, bzip2 or xz stream (members one after another) written out a bounded piece at a time;
+    (bytes written, the damage or cut that ended it, None when whole). A stream cut or damaged keeps
+    every byte decoded before the cut, not only whole pieces."""
+    written = 0
+    dec = _decompressor(packing)
+    pending = b""  # input read and not yet taken by the decompressor
+    with path.open("rb") as source:
+        while True:
+            more_output = not getattr(dec, "needs_input", not getattr(dec, "unconsumed_tail", b""))
+            if not pending and not more_output:
+                pending = source.read(CHUNK)
+                if not pending:
+                    break
+            try:
+                out = dec.decompress(pending, CHUNK)
+            except (zlib.error, OSError, EOFError, lzma.LZMAError, ValueError) as err:
+                return written, f"{packing} stream damaged ({err}): what came after the damage is lost"
+            pending = getattr(dec, "unconsumed_tail", b"")
+            written += len(out)
+            if written > limit:
+                raise _too_big(path, packing, limit)
+            target.write(out)
+            if dec.eof:  # a member ended: another may follow (gzip -c a >> b), else only padding
+                rest = dec.unused_data + pending + source.read(CHUNK)
+                if not rest.strip(b"\0"):
+                    return written, None
+                dec, pending = _decompressor(packing), rest
+    if isinstance(dec, type(zlib.decompressobj())):
+        tail = dec.flush()
+        written += len(tail)
+        target.write(tail)
+    return written, f"{packing} stream cut short: what came after the cut is lost"
+
+
+def _safe_parts(name: str) -> tuple[str, ...] | None:
+    """A member's path inside the folder, or None for one that would leave it or is an archiver's junk."""
+    parts = tuple(p for p in PurePosixPath(name.replace("\\", "/")).parts if p not in ("", ".", "/"))
+    if "\0" in name or not parts or ".." in parts or any(":" in p for p in parts) or any(p in JUNK for p in parts):
+        return None
+    return parts
+
+
+def _unpack_zip(path: Path, folder: Path) -> list[str]:
+    losses: list[str] = []
+    written, limit = 0, _ceiling(folder)
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as err:
+        return _unpack_cut_zip(path, folder, f"{err}")
+    with archive:
+        for info in archive.infolist():
+            parts = _safe_parts(info.filename)
+            if parts is None:
+                losses.append(_dropped("zip", info.filename))
+            if info.is_dir() or parts is None:
+                continue
+            target = folder.joinpath(*parts)
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with archive.open(info) as source, target.open("wb") as out:
+                    written, damage = _copy(path, "zip", source, out, limit, written)
+            except (zipfile.BadZipFile, NotImplementedError, RuntimeError, OSError, EOFError, ValueError) as err:
+                damage = f"zip member {info.filename!r} not read ({err})"  # damaged, encrypted, a name no file can have
+            if damage:
+                losses.append(damage)
+    return losses
+
+
+def _unpack_cut_zip(path: Path, folder: Path, why: str) -> list[str]:
+    """A zip whose directory at its end is lost (cut short): its members read from their own headers."""
+    from readers.rinex.packaging import MAX_UNPACKED_BYTES as IN_MEMORY
+    from readers.rinex.packaging import Unpacked, zip_members
+
+    if path.stat().st_size > IN_MEMORY:
+        raise ReaderError(path, f"zip archive damaged or cut short, its directory unreadable ({why})")
+    out = Unpacked(b"")
+    losses: list[str] = []
+    for name, body in zip_members(path, path.read_bytes(), min(IN_MEMORY, _ceiling(folder)), out).items():
+        parts = _safe_parts(name)
+        if parts is None:
+            losses.append(_dropped("zip", name))
+            continue
+        target = folder.joinpath(*parts)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(body)
+        except OSError as err:  # a name this file system cannot hold
+            losses.append(f"zip member {name!r} not unpacked ({err})")
+    return [*out.losses, *losses]
+
+
+def _dropped(packing: str, name: str) -> str:
+    return (
+        f"{packing} member {name!r} not unpacked: its path would leave the archive's folder (or is an archiver's own)"
+    )
+
+
+def _unpack_tar(path: Path, folder: Path) -> list[str]:
+    losses: list[str] = []
+    written, limit = 0, _ceiling(folder)
+    try:
+        with tarfile.open(path, "r:") as archive:
+            for member in archive:
+                parts = _safe_parts(member.name)
+                if parts is None and not member.isdir():
+                    losses.append(_dropped("tar", member.name))
+                if not member.isfile() or parts is None:  # links, devices, fifos: never made
+                    continue
+                source = archive.extractfile(member)
+                if source is None:
+                    continue
+                target = folder.joinpath(*parts)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with target.open("wb") as out:
+                    written, damage = _copy(path, "tar", source, out, limit, written)
+                if damage:
+                    losses.append(damage)
+    except (tarfile.TarError, OSError, EOFError, ValueError) as err:
+        losses.append(f"tar archive damaged or cut short ({err}): the members after the damage are lost")
+    return losses
+
+
+def _what_to_read(path: Path, packing: str, folder: Path, losses: list[str]) -> Path:
+    """The one log an archive holds: its only file or folder, else the folder it unpacked to as one log
+    (a ROS2 bag's files, a folder of NMEA files); refused naming what it holds when it is none."""
+    entries = sorted(folder.iterdir())
+    if not entries:
+        raise ReaderError(
+            path, f"{packing} archive holds no file" + (f" readable: {'; '.join(losses)}" if losses else "")
+        )
+    if len(entries) == 1:
+        return entries[0]
+    return folder
+
+
+def _unpacked(path: Path, folder: Path) -> tuple[str, Path, list[str]]:
+    with path.open("rb") as f:
+        packing = packing_of(f.read(512))
+    if packing is None:  # changed since it was sniffed
+        raise ReaderError(path, "no longer a packed file")
+    if packing == "zip":
+        losses = _unpack_zip(path, folder)
+    elif packing == "tar":
+        losses = _unpack_tar(path, folder)
+    else:
+        inner, losses = _unpack_stream(path, packing, folder)
+        return packing, inner, losses
+    return packing, _what_to_read(path, packing, folder, losses), losses
+
+
+def _several(packing: str, folder: Path, problem: str) -> str:
+    """Why an archive of several files is no one log: the logs it holds, else the reader's reason."""
+    from readers import separate_logs
+
+    logs = separate_logs(folder, None)
+    if not logs:
+        return f"{packing} of several files: {problem}"
+    listed = ", ".join(f"{p.name} ({fmt})" for p, fmt in logs[:4]) + (" ..." if len(logs) > 4 else "")
+    return f"{packing} of {len(logs)} separate logs, not one: {listed}; unpack it and analyse each"
+
+
+@dataclass(frozen=True)
+class Unpacked:
+    """A packed file's content laid out in a temporary folder: the one log to read, how it was packed
+    ("gzip", "zip (logs/r4.log)"), what unpacking lost."""
+
+    log: Path
+    label: str
+    losses: tuple[str, ...]
+    folder: Path
+
+
+@contextmanager
+def unpacked(path: Path) -> Iterator[Unpacked]:
+    """`path` unpacked (see the module) for the block's length; the folder is removed after it."""
+    depth = getattr(_nesting, "depth", 0)
+    if depth >= MAX_DEPTH:
+        raise ReaderError(path, f"packed {depth + 1} times over (an archive that holds itself?): not unpacked further")
+    folder = Path(tempfile.mkdtemp(prefix="spooflens-unpacked-"))
+    _nesting.depth = depth + 1
+    try:
+        packing, inner, losses = _unpacked(path, folder)
+        inside = inner.relative_to(folder).as_posix() if inner != folder else ""
+        yield Unpacked(inner, f"{packing} ({inside})" if inside else packing, tuple(losses), folder)
+    finally:
+        _nesting.depth = depth
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def read_packed(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
+    """Read the log inside a packed file (see the module), as its own format's reader reads it."""
+    from readers import read_log
+
+    path = Path(path)
+    with unpacked(path) as content:
+        try:
+            table = read_log(content.log, topics, progress)
+        except ReaderError as err:
+            problem = err.problem.replace(str(content.folder), path.name)
+            packing = content.label.split(" (")[0]
+            where = (
+                f"{content.label}: {problem}"
+                if content.log != content.folder
+                else _several(packing, content.folder, problem)
+            )
+            if content.losses:
+                where += f" ({'; '.join(content.losses)})"
+            raise type(err)(path, where, err.stream) from err
+    table.source = path
+    table.metadata = {**table.metadata, "packing": content.label}
+    note = f"read as shipped: {content.label}, unpacked to a temporary folder"
+    lost = [Skipped(path.name, loss, 1, "lost") for loss in content.losses]
+    table.skipped = [*table.skipped, Skipped(path.name, note, 1, "unpacked"), *lost]
+    return table
+
+
+FORMATS = (
+    ReaderFormat(
+        "packed",
+        "every format here inside gzip, bzip2, xz, Unix compress (.Z), zip or tar (flight.ulg.gz, a zipped ROS2 bag)",
+        read_packed,
+        _sniff,
+        rewrite="spooflens.writers.rewrite:rewrite_packed",
+    ),
+)
