@@ -45,7 +45,7 @@ JUNK = ("__MACOSX", ".DS_Store", "Thumbs.db")  # what archivers add beside the f
 def packing_of(head: bytes) -> str | None:
     """The packing a file's first bytes show (a compressed stream, a zip or a tar archive), or None."""
     for magic, name in STREAMS.items():
-        if head.startswith(magic):
+        if head.startswith(magic) and (name != "bzip2" or head[3:4].isdigit()):  # "BZh" and a block size
             return name
     if head.startswith(ZIP):
         return "zip"
