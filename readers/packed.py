@@ -29,6 +29,7 @@ from pathlib import Path, PurePosixPath
 from typing import IO, Any
 
 from readers import Progress, ReaderFormat
+from readers.rinex.packaging import packing_of as rinex_packing_of
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
 
@@ -36,19 +37,18 @@ MAX_UNPACKED_BYTES = 16 * 2**30  # a day-long multi-gigabyte ULog or bag fits; a
 SPARE_BYTES = 2**30  # left free on the temporary folder's disk
 MAX_DEPTH = 3  # a tar in a gzip in a zip; a zip that unpacks to itself does not go on for ever
 CHUNK = 1 << 20
-STREAMS: dict[bytes, str] = {b"\x1f\x8b": "gzip", b"BZh": "bzip2", b"\xfd7zXZ\x00": "xz", b"\x1f\x9d": "compress (.Z)"}
-ZIP = b"PK\x03\x04"
-SUFFIXES = (".gz", ".gzip", ".bz2", ".xz", ".Z", ".zip", ".tgz", ".tar", ".tbz2", ".txz")
+XZ = b"\xfd7zXZ\x00"
+SUFFIXES = (".gz", ".gzip", ".bz2", ".xz", ".Z", ".tgz", ".tbz2", ".txz")  # what a compressed stream's name ends in
 JUNK = ("__MACOSX", ".DS_Store", "Thumbs.db")  # what archivers add beside the files
 
 
 def packing_of(head: bytes) -> str | None:
-    """The packing a file's first bytes show (a compressed stream, a zip or a tar archive), or None."""
-    for magic, name in STREAMS.items():
-        if head.startswith(magic) and (name != "bzip2" or head[3:4].isdigit()):  # "BZh" and a block size
-            return name
-    if head.startswith(ZIP):
-        return "zip"
+    """The packing a file's first bytes show: the RINEX reader's (gzip, bzip2, zip, compress (.Z)), xz,
+    or a tar archive; None for none."""
+    if (packing := rinex_packing_of(head)) is not None:
+        return packing
+    if head.startswith(XZ):
+        return "xz"
     if head[257:262] == b"ustar":
         return "tar"
     return None
@@ -172,6 +172,17 @@ def _safe_parts(name: str) -> tuple[str, ...] | None:
     return parts
 
 
+def _member_target(folder: Path, packing: str, name: str, losses: list[str]) -> Path | None:
+    """Where archive member `name` is written in `folder`, or None (the drop listed in `losses`) for a
+    name that would leave it or is an archiver's own."""
+    parts = _safe_parts(name)
+    if parts is None:
+        leaves = "its path would leave the archive's folder (or is an archiver's own)"
+        losses.append(f"{packing} member {name!r} not unpacked: {leaves}")
+        return None
+    return folder.joinpath(*parts)
+
+
 def _unpack_zip(path: Path, folder: Path) -> list[str]:
     losses: list[str] = []
     written, limit = 0, _ceiling(folder)
@@ -181,12 +192,8 @@ def _unpack_zip(path: Path, folder: Path) -> list[str]:
         return _unpack_cut_zip(path, folder, f"{err}")
     with archive:
         for info in archive.infolist():
-            parts = _safe_parts(info.filename)
-            if parts is None:
-                losses.append(_dropped("zip", info.filename))
-            if info.is_dir() or parts is None:
+            if info.is_dir() or (target := _member_target(folder, "zip", info.filename, losses)) is None:
                 continue
-            target = folder.joinpath(*parts)
             try:
                 target.parent.mkdir(parents=True, exist_ok=True)
                 with archive.open(info) as source, target.open("wb") as out:
@@ -208,11 +215,8 @@ def _unpack_cut_zip(path: Path, folder: Path, why: str) -> list[str]:
     out = Unpacked(b"")
     losses: list[str] = []
     for name, body in zip_members(path, path.read_bytes(), min(IN_MEMORY, _ceiling(folder)), out).items():
-        parts = _safe_parts(name)
-        if parts is None:
-            losses.append(_dropped("zip", name))
+        if (target := _member_target(folder, "zip", name, losses)) is None:
             continue
-        target = folder.joinpath(*parts)
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_bytes(body)
@@ -221,27 +225,19 @@ def _unpack_cut_zip(path: Path, folder: Path, why: str) -> list[str]:
     return [*out.losses, *losses]
 
 
-def _dropped(packing: str, name: str) -> str:
-    return (
-        f"{packing} member {name!r} not unpacked: its path would leave the archive's folder (or is an archiver's own)"
-    )
-
-
 def _unpack_tar(path: Path, folder: Path) -> list[str]:
     losses: list[str] = []
     written, limit = 0, _ceiling(folder)
     try:
         with tarfile.open(path, "r:") as archive:
             for member in archive:
-                parts = _safe_parts(member.name)
-                if parts is None and not member.isdir():
-                    losses.append(_dropped("tar", member.name))
-                if not member.isfile() or parts is None:  # links, devices, fifos: never made
+                if member.isdir():
                     continue
+                if (target := _member_target(folder, "tar", member.name, losses)) is None or not member.isfile():
+                    continue  # links, devices, fifos: never made
                 source = archive.extractfile(member)
                 if source is None:
                     continue
-                target = folder.joinpath(*parts)
                 target.parent.mkdir(parents=True, exist_ok=True)
                 with target.open("wb") as out:
                     written, damage = _copy(path, "tar", source, out, limit, written)
@@ -293,13 +289,22 @@ def _several(packing: str, folder: Path, problem: str) -> str:
 
 @dataclass(frozen=True)
 class Unpacked:
-    """A packed file's content laid out in a temporary folder: the one log to read, how it was packed
-    ("gzip", "zip (logs/r4.log)"), what unpacking lost."""
+    """A packed file's content laid out in a temporary folder: the one log to read (the folder itself for
+    an archive of several files), its packing, what unpacking lost."""
 
     log: Path
-    label: str
+    packing: str
     losses: tuple[str, ...]
     folder: Path
+
+    @property
+    def label(self) -> str:
+        """How it was packed, and the log inside when that is one file or folder: "zip (logs/r4.log)"."""
+        return (
+            self.packing
+            if self.log == self.folder
+            else f"{self.packing} ({self.log.relative_to(self.folder).as_posix()})"
+        )
 
 
 @contextmanager
@@ -312,8 +317,7 @@ def unpacked(path: Path) -> Iterator[Unpacked]:
     _nesting.depth = depth + 1
     try:
         packing, inner, losses = _unpacked(path, folder)
-        inside = inner.relative_to(folder).as_posix() if inner != folder else ""
-        yield Unpacked(inner, f"{packing} ({inside})" if inside else packing, tuple(losses), folder)
+        yield Unpacked(inner, packing, tuple(losses), folder)
     finally:
         _nesting.depth = depth
         shutil.rmtree(folder, ignore_errors=True)
@@ -329,11 +333,10 @@ def read_packed(path: Path, topics: Mapping[str, str] | None = None, progress: P
             table = read_log(content.log, topics, progress)
         except ReaderError as err:
             problem = err.problem.replace(str(content.folder), path.name)
-            packing = content.label.split(" (")[0]
             where = (
                 f"{content.label}: {problem}"
                 if content.log != content.folder
-                else _several(packing, content.folder, problem)
+                else _several(content.packing, content.folder, problem)
             )
             if content.losses:
                 where += f" ({'; '.join(content.losses)})"
