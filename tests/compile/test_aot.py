@@ -124,8 +124,8 @@ def test_a_call_with_types_the_module_was_not_built_for_is_not_answered_by_it(mo
     from spooflens.navigation import kernels
 
     monkeypatch.setattr(aot, "_table", None)
-    kernel: Any = kernels.correct_all  # a LazyKernel, or numba's dispatcher once numba started in this process
-    function = kernel.py_func if hasattr(kernel, "py_func") else kernel.function
+    kernel: Any = kernels.correct_all
+    function = kernel.py_func
     states, dx = np.zeros((4, 22)), np.zeros((4, 24))
     assert aot.compiled(function, (states, dx)) is not None  # as the analysis calls it
     assert aot.compiled(function, (states.astype(np.float32), dx)) is None
