@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from readers.buffers import release_freed_memory
-from spooflens.epoch_table import EpochTable
-from spooflens.errors import ReaderError, UnsupportedFormatError
+from spooflens.epoch_table import EpochTable, holding_nothing
+from spooflens.errors import NothingToJudgeError, ReaderError, UnsupportedFormatError
 
 Progress = Callable[[int, int], None]
 ReaderFn = Callable[[Path, Mapping[str, str] | None, Progress | None], EpochTable]
@@ -190,7 +190,10 @@ def read_log(path: Path | str, topics: Mapping[str, str] | None = None, progress
     """Read any supported log into an EpochTable (what could be read, with what was skipped listed)."""
     path = Path(path)
     fmt = sniff_format(path)
-    table = READERS[fmt](path, topics, progress)
+    try:
+        table = READERS[fmt](path, topics, progress)
+    except NothingToJudgeError as err:
+        return holding_nothing(path, fmt, err.problem, err.skipped)
     table.validate()
     release_freed_memory()
     return table

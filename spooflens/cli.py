@@ -95,7 +95,7 @@ topic_option = click.option(
 @topic_option
 def inspect(log: Path, topics: tuple[str, ...]) -> int:
     """List the streams of LOG, what was skipped, and which analyses it supports."""
-    from spooflens.inventory import computed, skipped_or_repaired, stream_rows
+    from spooflens.inventory import computed, skipped_or_repaired, stream_rows, without_gnss
     from spooflens.pipeline.preconditions import unmet_preconditions
     from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, analyses
 
@@ -109,6 +109,8 @@ def inspect(log: Path, topics: tuple[str, ...]) -> int:
     for row in stream_rows(table):
         streams.add_row(row.role, row.stream, row.source, row.type, row.count, row.rate, row.span, row.body_frame)
     out.print(streams)
+    if nothing := without_gnss(table):
+        out.print(f"[bold]{nothing}[/]")
     lost, made = skipped_or_repaired(table), computed(table)
     if lost:
         out.print("[bold]Skipped or repaired[/]")

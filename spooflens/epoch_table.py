@@ -314,6 +314,22 @@ class EpochTable:
         return f"{int(self.absolute_ns(t_s)) / 1e9:.3f} s ({self.time_reference})"
 
 
+HOLDS = "holds"  # metadata key: what a sound log with nothing to judge holds instead (`holding_nothing`)
+
+
+def holding_nothing(source: Path, fmt: str, holds: str, skipped: list[Skipped] | None = None) -> EpochTable:
+    """The table of a log with nothing any detector reads: no stream, what it holds said, and what the
+    reader skipped or lost listed."""
+    return EpochTable(
+        source=Path(source),
+        format=fmt,
+        t0_ns=0,
+        time_reference="relative",
+        skipped=list(skipped or []),
+        metadata={HOLDS: holds},
+    )
+
+
 def _ids(column: pd.Series) -> list[str]:
     """The distinct stream ids of a column, in order of appearance (hashing, not a string per row)."""
     return [str(v) for v in column.unique()]

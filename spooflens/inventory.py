@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo
+from spooflens.epoch_table import HOLDS, EpochTable, Skipped, StreamInfo
 from spooflens.schema import FIX_COLUMNS, SpoofingFlag
 
 COMPUTED = "computed"
@@ -106,9 +106,12 @@ def without_gnss(table: EpochTable) -> str:
         return ""
     fixless = fixless_receivers(table)
     held = [f"{s.role} {s.topic} ({s.count})" for s in table.streams if s.count]
-    if not fixless and not held:
+    holds = [table.metadata[HOLDS]] if HOLDS in table.metadata else []
+    if not fixless and not held and not holds:
         return ""
-    return "no GNSS data to judge: " + "; ".join(fixless + ([f"the log holds {', '.join(held)}"] if held else []))
+    return "no GNSS data to judge: " + "; ".join(
+        fixless + holds + ([f"the log holds {', '.join(held)}"] if held else [])
+    )
 
 
 def skipped_or_repaired(table: EpochTable) -> list[Skipped]:

@@ -21,16 +21,17 @@ skipped. `inject` writes a spoofed copy with GGA/GNS/RMC/GLL positions edited in
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from readers import ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
-from readers.nmea.lines import UNVERIFIED, SentenceScan, scan_sentences
+from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences
 from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
 from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, is_empty
 from spooflens.epoch_table import EpochTable, Skipped
-from spooflens.errors import ReaderError
+from spooflens.errors import NothingToJudgeError, ReaderError
 
 Progress = Callable[[int, int], None]
 
@@ -42,6 +43,10 @@ _LOST = (
     "sentences without a checksum (cut short?)",
     "binary garbage (not text)",
 )
+
+
+EMPTY = "empty sentences (no data in their fields)"
+UNDECODABLE = "sentences pynmeagps cannot decode"
 
 
 def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
@@ -79,8 +84,8 @@ def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
             first_error = first_error or f"line {s.line + 1}: {err}"
     skipped += [Skipped(w, "sentence type spooflens does not use", n) for w, n in sorted(unused.items())]
     skipped += [Skipped(w, reason, n) for (w, reason), n in sorted(not_read.items())]
-    skipped += [Skipped(w, "empty sentences (no data in their fields)", n) for w, n in sorted(empty.items())]
-    skipped += [Skipped(w, f"sentences pynmeagps cannot decode ({first_error})", n, "lost") for w, n in bad.items()]
+    skipped += [Skipped(w, EMPTY, n) for w, n in sorted(empty.items())]
+    skipped += [Skipped(w, f"{UNDECODABLE} ({first_error})", n, "lost") for w, n in bad.items()]
     return DecodedFile(label, scan, decoded, skipped)
 
 
@@ -110,9 +115,10 @@ def decode_log(path: Path, progress: Progress | None = None) -> tuple[list[Decod
         if progress:
             progress(i + 1, len(files))
     if not any(p.decoded for p in decoded):
-        raise ReaderError(
-            path, f"no usable NMEA sentence (position, heading, satellites): {_what_it_holds(decoded, skipped)}", "nmea"
-        )
+        sentences = [s for f in decoded for s in f.scan.sentences]
+        if sentences:
+            raise NothingToJudgeError(path, _what_it_holds(sentences, skipped), "nmea", skipped)
+        raise ReaderError(path, f"no NMEA sentence in the log: {'; '.join(map(str, skipped[:6]))}", "nmea")
     return decoded, skipped
 
 
@@ -120,11 +126,11 @@ AIS_KINDS = ("VDM", "VDO")
 AIS_POSITION_TYPES = {1, 2, 3, 18, 19, 27}  # ITU-R M.1371 position reports (class A, class B, long range)
 
 
-def _what_it_holds(decoded: list[DecodedFile], skipped: list[Skipped]) -> str:
-    """Why a log has nothing to use: AIS traffic only (other stations' reports, and how many of its own
-    station's VDO carry a position), else what was skipped."""
-    sentences = [s for f in decoded for s in f.scan.sentences]
-    if sentences and all(s.kind in AIS_KINDS for s in sentences):
+def _what_it_holds(sentences: list[Sentence], skipped: list[Skipped]) -> str:
+    """What a log of sentences none of which gave a position, heading or satellite holds: AIS traffic
+    (other stations' reports, and how many of its own station's VDO carry a position), or its sentences
+    by address, with how many of those spooflens reads were empty (a receiver without a fix) or broken."""
+    if all(s.kind in AIS_KINDS for s in sentences):
         own = [s for s in sentences if s.kind == "VDO"]
         text = f"AIS messages only ({len(sentences) - len(own)} VDM: other stations' reports"
         if not own:
@@ -134,7 +140,15 @@ def _what_it_holds(decoded: list[DecodedFile], skipped: list[Skipped]) -> str:
             text + f"; {len(own)} VDO sentences, its own station's, {positions} of them a position report: "
             "spooflens reads a vessel's own GNSS fixes, not AIS position reports)"
         )
-    return "; ".join(str(s) for s in skipped[:6]) or "no sentences"
+    counts = Counter(f"${s.talker}{s.kind}" for s in sentences)
+    kinds = [f"{name} x{n}" for name, n in counts.most_common()]
+    listed = ", ".join(kinds[:6]) + (f" and {len(kinds) - 6} more kinds" if len(kinds) > 6 else "")
+    empty = sum(s.count for s in skipped if s.reason == EMPTY)
+    broken = sum(s.count for s in skipped if s.reason.startswith(UNDECODABLE))
+    if not empty and not broken:
+        return f"only sentences spooflens does not read ({listed}): no position, heading or satellite report"
+    why = [f"{n} of them {what}" for n, what in ((empty, "empty: no fix"), (broken, "undecodable")) if n]
+    return f"no position, heading or satellite report in its sentences ({listed}; {', '.join(why)})"
 
 
 def _ais_message_type(text: bytes) -> int | None:

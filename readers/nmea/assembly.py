@@ -89,6 +89,7 @@ class Receiver:
     epochs: dict[tuple[bool, int], Epoch] = field(default_factory=dict)
     day_anchor_s: float = math.nan  # unwrapped time of day + anchor = seconds since 1970
     date_jumps: int = 0
+    untimed: int = 0  # sentences without a time of day in a receiver that never gave one
 
     def clock_s(self, key_ms: int) -> float:
         return key_ms / 1000 + (self.day_anchor_s if math.isfinite(self.day_anchor_s) else 0.0)
@@ -172,6 +173,7 @@ def assign_epochs(rx: Receiver) -> None:
                 epoch.sentences.extend(pending)
                 pending = []
             current = key
+    rx.untimed = len(pending)
 
 
 def _own_time_ns(rx: Receiver, epoch: Epoch) -> int:
@@ -439,6 +441,8 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         if not math.isfinite(rx.day_anchor_s) and dated and rx.epochs:
             rx.day_anchor_s = log_anchor
             skipped.append(Skipped(rx.receiver_id, "no RMC/ZDA date: the log's date taken", len(rx.epochs), "repaired"))
+        if rx.untimed:
+            skipped.append(Skipped(rx.receiver_id, "sentences without a time of day, in no epoch", rx.untimed))
         if rx.date_jumps:
             skipped.append(
                 Skipped(

@@ -36,8 +36,10 @@ _TIME = rb"(\d{9,19}(?:\.\d*)?)"
 _NUMERIC_PREFIX = re.compile(rb"^" + _TIME + rb"[ \t;,]+(?:[A-Za-z];)?")
 _ISO_PREFIX = re.compile(rb"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(?:\.\d+)?)(?:Z|[+-]00:?00)?[ \t;,]+")
 _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
-# a talker is two letters, or a bus address's two digits (canboat's n2kd writes `$04HDM`)
-_ADDRESS = re.compile(rb"^[$!]([A-Z0-9][A-Z0-9]{3,5}),")
+# a talker is two letters, or a bus address's two digits (canboat's n2kd writes `$04HDM`); a proprietary
+# address is P, a maker's three letters and its own sentence name, often longer ($PQTMCFGUART); SkyTraq's
+# loader writes three letters ($STI)
+_ADDRESS = re.compile(rb"^[$!](P[A-Z0-9]{3,15}|[A-Z0-9][A-Z0-9]{2,5}),")
 _HEX = b"0123456789ABCDEFabcdef"
 _HEX_VALUE = np.full(256, -256, dtype=np.int64)  # byte -> its hex digit value (negative: not one)
 for _i, _c in enumerate(b"0123456789ABCDEF"):

@@ -66,7 +66,7 @@ from readers.rtcm_ephemeris import RTCM_EPHEMERIS, rtcm_ephemerides
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
 from readers.ubx.legacy import legacy_fix
-from readers.ubx.refusal import refusal
+from readers.ubx.refusal import held_messages, refusal
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -76,7 +76,7 @@ from spooflens.epoch_table import (
     gps_seconds_of_unix_ns,
     unix_ns_of_gps_ns,
 )
-from spooflens.errors import ReaderError
+from spooflens.errors import NothingToJudgeError, ReaderError
 from spooflens.gnss.ephemeris import GpsEphemerides
 from spooflens.schema import SpoofingFlag
 
@@ -805,6 +805,10 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         n_reports = len(state.navsat or state.svinfo)
         streams.append(StreamInfo("satellites", RECEIVER, "UBX", f"UBX {kind}", n_reports))
     if fixes is None and obs is None and imu is None and satellites is None and headings is None and status is None:
+        # a sound capture of messages none of which is a fix (a timing receiver's, navigation messages
+        # alone, a configuration session) is analysed to a NO VERDICT naming them; one of no message refused
+        if held_messages(state) or frames.nmea:
+            raise NothingToJudgeError(path, refusal(state, frames, nmea), "ubx", skipped)
         raise ReaderError(path, refusal(state, frames, nmea), "ubx")
     metadata = {**_header_metadata(frames.comments), **state.metadata, **metadata}
     metadata |= {

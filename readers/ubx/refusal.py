@@ -43,12 +43,18 @@ def _listed(counts: Counter[str], limit: int = 8) -> str:
     return ", ".join(f"{n} x{counts[n]}" for n in names[:limit]) + (" ..." if len(names) > limit else "")
 
 
-def refusal(state: _State, frames: Frames, nmea: Assembled | None) -> str:
-    """One line: what the capture holds, and that it holds no position, velocity or raw observation."""
+def held_messages(state: _State) -> Counter[str]:
+    """How many of each UBX message the capture holds, used or not."""
     held: Counter[str] = Counter()
     for counts in (state.used, state.unused, state.polls, state.bad):
         held.update(counts)
     held.update({name: n for name, n in state.unused_as_repeat.items()})
+    return held
+
+
+def refusal(state: _State, frames: Frames, nmea: Assembled | None) -> str:
+    """One line: what the capture holds, and that it holds no position, velocity or raw observation."""
+    held = held_messages(state)
     nothing = "no position, velocity or raw observations"
     time_only = state.time_only + state.not_fixes[TIME_ONLY]
     if time_only or (held and all(n in m.TIME_ONLY or n.startswith("TIM-") for n in held)):

@@ -13,8 +13,7 @@ from paths import REAL, real_log
 
 from readers import read_log, sniff_format
 from spooflens.cli import main
-from spooflens.epoch_table import EpochTable
-from spooflens.errors import ReaderError
+from spooflens.epoch_table import HOLDS, EpochTable
 from spooflens.schema import FixType
 
 BOATS = REAL / "nmea_boats"
@@ -248,13 +247,20 @@ def test_a_zda_year_beyond_64_bits_is_no_date_not_an_overflow(tmp_path: Path) ->
     assert len(table.fixes) == len(read_log(_write(tmp_path / "base.log", BASE_BODIES)).fixes)
 
 
-def test_bad_input_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_sentences_of_nothing_to_judge_say_what_they_are(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     only_unused = tmp_path / "wind.log"
     only_unused.write_text(_sentence("WIMWV,57.5,R,13.0,N,A") + "\n")
-    with pytest.raises(ReaderError, match=r"wind.log \[nmea\]: no usable NMEA sentence"):
-        read_log(only_unused)
-    assert main(["inspect", str(only_unused)]) == 2
-    assert "no usable NMEA sentence" in capsys.readouterr().err
+    # sound sentences of a wind instrument: nothing to judge, said (not a refusal)
+    assert read_log(only_unused).metadata[HOLDS] == (
+        "only sentences spooflens does not read ($WIMWV x1): no position, heading or satellite report"
+    )
+    empty = tmp_path / "empty.log"  # a receiver without a fix: its position sentence empty
+    empty.write_text(_sentence("GPGGA,,,,,,,,,,,,,,") + "\n" + _sentence("WIMWV,57.5,R,13.0,N,A") + "\n")
+    assert read_log(empty).metadata[HOLDS] == (
+        "no position, heading or satellite report in its sentences ($GPGGA x1, $WIMWV x1; 1 of them empty: no fix)"
+    )
+    assert main(["inspect", str(empty)]) == 0
+    assert "no GNSS data to judge: no position" in capsys.readouterr().out
 
 
 def test_inspect_and_analyze_real_logs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

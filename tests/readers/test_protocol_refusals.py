@@ -40,7 +40,6 @@ GPSD = "corpus/gpsd"
         (f"{GPSD}/rtcm2.log", "RTCM 2"),
         (f"{GPSD}/ntrip_sourcetable.log", "an NTRIP source table"),
         (f"{GPSD}/passthrough.log", "gpsd JSON reports"),
-        ("corpus/pynmeagps/quectel_nmea_response.log", "proprietary NMEA-style sentences only ($PQTMVER"),
     ],
 )
 def test_other_protocols_are_refused_by_name(log: str, protocol: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -91,6 +90,25 @@ def test_instruments_with_a_heading_and_no_fix_are_read_as_headings(log: str, st
         (f"{GPSD}/ublox-lea-5q.log", "receiver GP never had a fix: 10 epochs without a valid position"),
         (f"{GPSD}/eXplorist110.log", "receiver GP never had a fix: 29 epochs without a valid position"),
         ("corpus/px4-pyulog/sample.ulg", "the log holds imu sensor_combined (17070)"),
+        # sound logs of messages none of which spooflens reads: what they hold, named
+        (
+            f"{GPSD}/ais-18-27.log",
+            "AIS messages only (276 VDM: other stations' reports; none of its own station's, VDO)",
+        ),
+        # a base station's own reports (!BSVDO, !AIVDO): one class A position report among them, two fragments
+        # of one binary message counted as the sentences they are
+        (
+            f"{GPSD}/ais-nmea-type6-fid55.log",
+            "1474 VDM: other stations' reports; 6 VDO sentences, its own station's, 1 of",
+        ),
+        (
+            "corpus/pynmeagps/quectel_nmea_response.log",
+            "only sentences spooflens does not read ($PQTMCFGMSGRATE x17, $PQTMCFGUART x6,",
+        ),
+        (f"{GPSD}/skytraq-err.log", "only sentences spooflens does not read ($STI x6)"),
+        (f"{GPSD}/tnt-revolution.log", "($PTNTHTM x50, $HCXDR x10): no position, heading or satellite report"),
+        ("corpus/pynmeagps/pygpsdata-maritime.log", "($IIALF x3, $AIEPV x2,"),
+        (f"{GPSD}/ublox-ned-m8t-sbfrx3.log", "it holds navigation messages only (RXM-SFRBX x165)"),
     ],
 )
 def test_a_log_without_gnss_data_is_analysed_to_no_verdict(
@@ -113,24 +131,26 @@ def test_doubled_dollar_sentences() -> None:
 
 
 @pytest.mark.parametrize(
-    ("log", "holds"),
-    [
-        ("ais-18-27.log", "AIS messages only (276 VDM: other stations' reports; none of its own station's, VDO)"),
-        # a base station's own reports (!BSVDO, !AIVDO): one class A position report among them, two fragments
-        # of one binary message counted as the sentences they are
-        (
-            "ais-nmea-type6-fid55.log",
-            "1474 VDM: other stations' reports; 6 VDO sentences, its own station's, 1 of them",
-        ),
-    ],
+    "log", [f"{GPSD}/ais-18-27.log", f"{GPSD}/ublox-ned-m8t-sbfrx3.log", "corpus/pynmeagps/quectel_nmea_response.log"]
 )
-def test_ais_traffic_is_said_to_be_ais(log: str, holds: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["inspect", str(real_log(f"{GPSD}/{log}"))]) == 2
+def test_a_log_with_nothing_to_judge_is_inspected_and_never_spoofed(
+    log: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`inspect` says what it holds (exit 0); `inject` has nothing to spoof: one line, exit 2."""
+    path = real_log(log)
+    assert main(["inspect", str(path)]) == 0
+    assert "no GNSS data to judge: " in capsys.readouterr().out
+    assert main(["inject", str(path), "-o", str(tmp_path / path.name), "--attack", "ramp:rate=2,axes=en,start=1"]) == 2
     err = capsys.readouterr().err
-    assert holds in err and len(err.strip().splitlines()) == 1
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and path.name in err
+    assert not (tmp_path / path.name).exists()
 
 
-def test_a_long_list_of_proprietary_sentences_is_cut_between_names() -> None:
+def test_a_long_list_of_proprietary_sentences_is_cut_between_names(tmp_path: Path) -> None:
+    """Lines shaped as proprietary sentences whose checksums all fail are no NMEA log: named, cut between names."""
+    names = [f"PQTMCFG{chr(65 + i)}{chr(65 + j)}" for i in range(4) for j in range(10)]
+    path = tmp_path / "config.log"
+    path.write_text("".join(f"${name},OK*00\r\n" for name in names))
     with pytest.raises(UnsupportedFormatError) as refusal:
-        sniff_format(real_log("corpus/pynmeagps/quectel_nmea_response.log"))
-    assert "$PQTMCFGUART and 36 more), no standard sentence" in str(refusal.value)
+        sniff_format(path)
+    assert "$PQTMCFGAF and 34 more), no standard sentence" in str(refusal.value)

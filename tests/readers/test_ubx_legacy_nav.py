@@ -17,7 +17,7 @@ from readers import read_log
 from readers.ubx import messages as m
 from readers.ubx.frames import UbxFrame, fletcher, split_frames
 from spooflens.cli import main
-from spooflens.errors import ReaderError
+from spooflens.epoch_table import HOLDS
 from spooflens.schema import FixType
 
 Edit = Callable[[str, UbxFrame], bytes | None]  # (message name, frame) -> payload to write, None to drop
@@ -95,15 +95,15 @@ def test_antaris_4_timing_kit_of_2007_is_dated_and_read() -> None:
 
 def test_a_timing_receiver_says_it_holds_time_only(tmp_path: Path) -> None:
     """u-blox M8T in surveyed-in timing mode: every epoch a time-only fix (gpsFix 5). With its NAV-SAT the
-    satellites are read and the time-only epochs listed; without it, one true line, exit 2."""
+    satellites are read and the time-only epochs listed; without it, a NO VERDICT that says so."""
     src = real_log("corpus/gpsd/u-blox-m8t-time.log")
     t = read_log(src)
     assert not len(t.fixes) and len(t.satellites)
     assert any("time-only fix" in s.reason and s.count == 151 for s in t.skipped)
     timing = _reframed(src, tmp_path / "timing.ubx", lambda n, f: None if n == "NAV-SAT" else f.payload)
-    with pytest.raises(ReaderError, match="this capture holds time only: no position, velocity or raw observations"):
-        read_log(timing)
-    assert main(["inspect", str(timing)]) == 2
+    holds = read_log(timing).metadata[HOLDS]
+    assert holds.startswith("this capture holds time only: no position, velocity or raw observations")
+    assert main(["inspect", str(timing)]) == 0
 
 
 def test_mon_ver_polls_and_a_sensor_fusion_drive(tmp_path: Path) -> None:

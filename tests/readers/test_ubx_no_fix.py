@@ -4,11 +4,14 @@ capture with nothing usable is still refused by what it holds."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from paths import real_log
 
 from readers import read_log
+from spooflens.epoch_table import HOLDS
 from spooflens.errors import ReaderError
 from spooflens.pipeline.run import analyze_table
 
@@ -65,9 +68,19 @@ def test_a_capture_whose_nmea_reports_its_sky_but_no_fix_is_read_for_its_cn0() -
     assert not analysis.verdict.spoofed
 
 
-def test_a_capture_with_no_sky_no_monitor_and_no_fix_is_still_refused() -> None:
-    with pytest.raises(ReaderError, match="navigation messages only"):
-        read_log(real_log("corpus/gpsd/ublox-ned-m8t-sbfrx3.log"))
+def test_a_capture_of_navigation_messages_alone_holds_nothing_to_judge() -> None:
+    table = read_log(real_log("corpus/gpsd/ublox-ned-m8t-sbfrx3.log"))
+    assert not table.streams and table.format == "ubx"
+    assert table.metadata[HOLDS].endswith("it holds navigation messages only (RXM-SFRBX x165)")
+    headline = analyze_table(table).verdict.headline
+    assert headline.startswith("NO VERDICT: no GNSS data to judge: no fix, raw observation or IMU sample")
+
+
+def test_a_capture_of_no_message_is_still_refused(tmp_path: Path) -> None:
+    path = tmp_path / "torn.ubx"
+    path.write_bytes(b"\xb5\x62\x01\x07\x5c\x00" + bytes(40))  # a NAV-PVT header, its payload cut
+    with pytest.raises(ReaderError, match=r"torn\.ubx"):
+        read_log(path)
 
 
 def test_a_capture_fixed_by_its_nmea_keeps_the_sky_its_gsv_states() -> None:
