@@ -14,7 +14,6 @@ the observations in a zip).
 
 from __future__ import annotations
 
-import bz2
 import lzma
 import shutil
 import tarfile
@@ -26,32 +25,19 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import IO, Any
+from typing import IO
 
 from readers import Progress, ReaderFormat
-from readers.rinex.packaging import packing_of as rinex_packing_of
+from readers.compression import CHUNK, inflate, packing_of, zip_members
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
 
 MAX_UNPACKED_BYTES = 16 * 2**30  # a day-long multi-gigabyte ULog or bag fits; a decompression bomb does not
 SPARE_BYTES = 2**30  # left free on the temporary folder's disk
+CUT_ZIP_IN_MEMORY = 512 * 2**20  # a zip without its directory is read whole, from its members' own headers
 MAX_DEPTH = 3  # a tar in a gzip in a zip; a zip that unpacks to itself does not go on for ever
-CHUNK = 1 << 20
-XZ = b"\xfd7zXZ\x00"
 SUFFIXES = (".gz", ".gzip", ".bz2", ".xz", ".Z", ".tgz", ".tbz2", ".txz")  # what a compressed stream's name ends in
 JUNK = ("__MACOSX", ".DS_Store", "Thumbs.db")  # what archivers add beside the files
-
-
-def packing_of(head: bytes) -> str | None:
-    """The packing a file's first bytes show: the RINEX reader's (gzip, bzip2, zip, compress (.Z)), xz,
-    or a tar archive; None for none."""
-    if (packing := rinex_packing_of(head)) is not None:
-        return packing
-    if head.startswith(XZ):
-        return "xz"
-    if head[257:262] == b"ustar":
-        return "tar"
-    return None
 
 
 def _sniff(path: Path, head: bytes) -> bool:
@@ -112,56 +98,13 @@ def _unpack_stream(path: Path, packing: str, folder: Path) -> tuple[Path, list[s
             target.write(data)
             written = len(data)
         else:
-            written, damage = _inflate(path, packing, target, limit)
+            with path.open("rb") as source:
+                written, damage = inflate(path, packing, source, target, limit, _too_big)
             if damage:
                 losses.append(damage)
     if not written:
         raise ReaderError(path, f"{packing} stream holds nothing" + (f" readable: {losses[0]}" if losses else ""))
     return inner, losses
-
-
-Decompressor = Any  # zlib's, bz2's or lzma's decompressor object
-
-
-def _decompressor(packing: str) -> Decompressor:
-    if packing == "gzip":
-        return zlib.decompressobj(16 + zlib.MAX_WBITS)
-    return bz2.BZ2Decompressor() if packing == "bzip2" else lzma.LZMADecompressor()
-
-
-def _inflate(path: Path, packing: str, target: IO[bytes], limit: int) -> tuple[int, str | None]:
-    """A gzip, bzip2 or xz stream (members one after another) written out a bounded piece at a time;
-    (bytes written, the damage or cut that ended it, None when whole). A stream cut or damaged keeps
-    every byte decoded before the cut, not only whole pieces."""
-    written = 0
-    dec = _decompressor(packing)
-    pending = b""  # input read and not yet taken by the decompressor
-    with path.open("rb") as source:
-        while True:
-            more_output = not getattr(dec, "needs_input", not getattr(dec, "unconsumed_tail", b""))
-            if not pending and not more_output:
-                pending = source.read(CHUNK)
-                if not pending:
-                    break
-            try:
-                out = dec.decompress(pending, CHUNK)
-            except (zlib.error, OSError, EOFError, lzma.LZMAError, ValueError) as err:
-                return written, f"{packing} stream damaged ({err}): what came after the damage is lost"
-            pending = getattr(dec, "unconsumed_tail", b"")
-            written += len(out)
-            if written > limit:
-                raise _too_big(path, packing, limit)
-            target.write(out)
-            if dec.eof:  # a member ended: another may follow (gzip -c a >> b), else only padding
-                rest = dec.unused_data + pending + source.read(CHUNK)
-                if not rest.strip(b"\0"):
-                    return written, None
-                dec, pending = _decompressor(packing), rest
-    if isinstance(dec, type(zlib.decompressobj())):
-        tail = dec.flush()
-        written += len(tail)
-        target.write(tail)
-    return written, f"{packing} stream cut short: what came after the cut is lost"
 
 
 def _safe_parts(name: str) -> tuple[str, ...] | None:
@@ -207,14 +150,12 @@ def _unpack_zip(path: Path, folder: Path) -> list[str]:
 
 def _unpack_cut_zip(path: Path, folder: Path, why: str) -> list[str]:
     """A zip whose directory at its end is lost (cut short): its members read from their own headers."""
-    from readers.rinex.packaging import MAX_UNPACKED_BYTES as IN_MEMORY
-    from readers.rinex.packaging import Unpacked, zip_members
-
-    if path.stat().st_size > IN_MEMORY:
+    if path.stat().st_size > CUT_ZIP_IN_MEMORY:
         raise ReaderError(path, f"zip archive damaged or cut short, its directory unreadable ({why})")
-    out = Unpacked(b"")
+    found: list[str] = []
     losses: list[str] = []
-    for name, body in zip_members(path, path.read_bytes(), min(IN_MEMORY, _ceiling(folder)), out).items():
+    limit = min(CUT_ZIP_IN_MEMORY, _ceiling(folder))
+    for name, body in zip_members(path, path.read_bytes(), limit, found, _too_big).items():
         if (target := _member_target(folder, "zip", name, losses)) is None:
             continue
         try:
@@ -222,7 +163,7 @@ def _unpack_cut_zip(path: Path, folder: Path, why: str) -> list[str]:
             target.write_bytes(body)
         except OSError as err:  # a name this file system cannot hold
             losses.append(f"zip member {name!r} not unpacked ({err})")
-    return [*out.losses, *losses]
+    return [*found, *losses]
 
 
 def _unpack_tar(path: Path, folder: Path) -> list[str]:

@@ -48,6 +48,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from readers import ReaderFormat
+from readers.compression import packing_of
 from readers.rinex.assembly import APPROX_POSITION_KEY, obs_files, read_rinex
 from readers.rinex.navigation import NavFile, find_nav_files, is_broadcast_nav, read_rinex_nav, read_rinex_nav_file
 from readers.rinex.observation import (
@@ -63,7 +64,7 @@ from readers.rinex.observation import (
     rinex_approx_position,
     scan_obs,
 )
-from readers.rinex.packaging import is_compact, packing_of
+from readers.rinex.packaging import is_compact
 from readers.rinex.text import GPS_EPOCH, SUPPORTED_VERSIONS, TextLines, first_line, parse_fixed
 
 __all__ = [

@@ -5,6 +5,7 @@ is refused in one line."""
 from __future__ import annotations
 
 import gzip
+import lzma
 import zipfile
 from pathlib import Path
 
@@ -114,3 +115,16 @@ def test_an_absurd_size_is_refused_in_one_line(tmp_path: Path, monkeypatch: pyte
     monkeypatch.setattr(packaging, "MAX_UNPACKED_BYTES", 2**20)
     with pytest.raises(ReaderError, match=r"unpacks to more than 1 MiB"):
         read_log(bomb)
+
+
+def test_compact_rinex_inside_xz_is_the_rinex_readers_own(tmp_path: Path) -> None:
+    """xz (the packing `readers.compression` shares with the packed-log reader): read in memory by the RINEX
+    reader, the packing named, the same observations as the `.crx` itself."""
+    crx = real_log(f"{GEORINEX}/P43300USA_R_20190012056_17M_15S_MO.crx")
+    packed = tmp_path / "P43300USA_R_20190012056_17M_15S_MO.crx.xz"
+    packed.write_bytes(lzma.compress(crx.read_bytes()))
+    assert sniff_format(packed) == "rinex"
+    t = read_log(packed)
+    unpacked = [s.reason for s in t.skipped if s.action == "unpacked"]
+    assert unpacked == ["read as shipped: Compact RINEX (Hatanaka) inside xz, unpacked in memory"]
+    _same_observations(crx, packed)
