@@ -174,14 +174,20 @@ def _unpack_tar(path: Path, folder: Path) -> list[str]:
             for member in archive:
                 if member.isdir():
                     continue
-                if (target := _member_target(folder, "tar", member.name, losses)) is None or not member.isfile():
-                    continue  # links, devices, fifos: never made
+                if (target := _member_target(folder, "tar", member.name, losses)) is None:
+                    continue
+                if not member.isfile():
+                    losses.append(f"tar member {member.name!r} not unpacked (a link or a device: never made)")
+                    continue
                 source = archive.extractfile(member)
                 if source is None:
                     continue
-                target.parent.mkdir(parents=True, exist_ok=True)
-                with target.open("wb") as out:
-                    written, damage = _copy(path, "tar", source, out, limit, written)
+                try:
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    with target.open("wb") as out:
+                        written, damage = _copy(path, "tar", source, out, limit, written)
+                except OSError as err:  # a name this file system cannot hold, or a folder a member made a file
+                    damage = f"tar member {member.name!r} not unpacked ({err})"
                 if damage:
                     losses.append(damage)
     except (tarfile.TarError, OSError, EOFError, ValueError) as err:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import bz2
 import gzip
+import io
 import lzma
 import shutil
 import tarfile
@@ -117,6 +118,30 @@ def test_a_member_whose_path_leaves_the_folder_is_dropped_and_said(tmp_path: Pat
     assert len(table.fixes) > 0 and table.metadata["packing"] == "zip (logs)"
     assert any(s.action == "lost" and "'../../escaped.log' not unpacked" in s.reason for s in table.skipped)
     assert not list(tmp_path.rglob("escaped.log"))
+
+
+def test_a_tar_members_link_and_a_name_that_collides_are_dropped_and_said(tmp_path: Path) -> None:
+    """A link is never made and a member whose folder an earlier member made a file is not written: each
+    listed, and the rest of the archive still unpacked (a collision once stopped the unpacking)."""
+    nmea = real_log("nmea_boats/gpsd_saab-r4.log")
+    archive = tmp_path / "odd.tar"
+    with tarfile.open(archive, "w") as tar:
+        link = tarfile.TarInfo("logs/latest.log")
+        link.type, link.linkname = tarfile.SYMTYPE, "/etc/passwd"
+        tar.addfile(link)
+        blocker = tarfile.TarInfo("logs/notes")
+        blocker.size = 2
+        tar.addfile(blocker, io.BytesIO(b"hi"))
+        clash = tarfile.TarInfo("logs/notes/inner.txt")
+        clash.size = 2
+        tar.addfile(clash, io.BytesIO(b"ho"))
+        tar.add(nmea, "logs/r4.log")
+    with packed.unpacked(archive) as content:
+        reasons = " ".join(content.losses)
+        assert "'logs/latest.log' not unpacked (a link or a device: never made)" in reasons
+        assert "'logs/notes/inner.txt' not unpacked" in reasons
+        assert (content.folder / "logs" / "r4.log").read_bytes() == nmea.read_bytes()
+        assert not (content.folder / "logs" / "latest.log").exists()
 
 
 def test_what_would_unpack_past_the_ceiling_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
