@@ -218,10 +218,10 @@ def cn0_steps(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm],
     # one satellite alone: no other satellite fell at the same time, and fewer than half rose with it (the
     # antenna turned or the vehicle moved: several satellites change, some down)
     half = 0.5 * opts.step_db
-    by_t = steps.groupby("t")["change"]
-    n_down = by_t.transform(lambda c: int((c <= -half).sum()))
-    n_up = by_t.transform(lambda c: int((c >= half).sum()))
-    n = by_t.transform("count")
+    epoch = steps["t"]
+    n_down = (steps["change"] <= -half).groupby(epoch).transform("sum")
+    n_up = (steps["change"] >= half).groupby(epoch).transform("sum")
+    n = steps.groupby("t")["change"].transform("count")
     isolated = (n_down == 0) & (n_up - 1 <= 0.5 * (n - 1))
     steps["hit"] = isolated & (steps["jump"] >= opts.step_db) & (steps["after"] >= opts.above_median_db)
     alarms, findings = [], []
