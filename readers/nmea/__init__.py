@@ -29,7 +29,7 @@ from readers import ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
 from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences
 from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
-from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, is_empty
+from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, forget_parsed, is_empty
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import NothingToJudgeError, ReaderError
 
@@ -63,25 +63,28 @@ def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
     bad: dict[str, int] = {}
     first_error = ""
     not_read: dict[tuple[str, str], int] = {}
-    for s in scan.sentences:
-        what = sentence_name(s)
-        family = family_of(s)
-        standard = s.kind in WANTED and not s.talker.startswith("P")
-        if not standard and family is None:
-            reason = not_read_reason(s)
-            if reason is None:
-                unused[what] = unused.get(what, 0) + 1
-            else:
-                not_read[(what, reason)] = not_read.get((what, reason), 0) + 1
-            continue
-        if is_empty(s):
-            empty[what] = empty.get(what, 0) + 1
-            continue
-        try:
-            decoded.append(decode(s) if family is None else decode_variant(s, family))
-        except ParseErrors as err:
-            bad[what] = bad.get(what, 0) + 1
-            first_error = first_error or f"line {s.line + 1}: {err}"
+    try:
+        for s in scan.sentences:
+            what = sentence_name(s)
+            family = family_of(s)
+            standard = s.kind in WANTED and not s.talker.startswith("P")
+            if not standard and family is None:
+                reason = not_read_reason(s)
+                if reason is None:
+                    unused[what] = unused.get(what, 0) + 1
+                else:
+                    not_read[(what, reason)] = not_read.get((what, reason), 0) + 1
+                continue
+            if is_empty(s):
+                empty[what] = empty.get(what, 0) + 1
+                continue
+            try:
+                decoded.append(decode(s) if family is None else decode_variant(s, family))
+            except ParseErrors as err:
+                bad[what] = bad.get(what, 0) + 1
+                first_error = first_error or f"line {s.line + 1}: {err}"
+    finally:
+        forget_parsed()  # the sentences remembered are this file's
     skipped += [Skipped(w, "sentence type spooflens does not use", n) for w, n in sorted(unused.items())]
     skipped += [Skipped(w, reason, n) for (w, reason), n in sorted(not_read.items())]
     skipped += [Skipped(w, EMPTY, n) for w, n in sorted(empty.items())]

@@ -15,6 +15,7 @@ import datetime as dt
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 from pynmeagps import NMEAReader
@@ -344,11 +345,24 @@ def with_checksum(text: bytes) -> bytes:
 
 def parse(sentence: Sentence) -> Any:
     """pynmeagps' message of a sentence; raises one of ParseErrors when its fields are not valid."""
-    # checksum already verified (lines.py), or absent from the whole file
-    msg = NMEAReader.parse(with_checksum(sentence.text), validate=VALNONE)
+    msg = _parsed(sentence.text)
     if msg is None:
         raise NMEAParseError(f"pynmeagps does not know {sentence.talker}{sentence.kind}")
     return msg
+
+
+@lru_cache(maxsize=1 << 14)
+def _parsed(text: bytes) -> Any:
+    """pynmeagps' message of a sentence's text, remembered: a receiver repeats sentences (a sky's GSV while
+    it holds still, a GSA's satellites, an instrument's steady HDT), and pynmeagps takes ~0.2 ms for each.
+    The message is only read from, never changed, so one is shared by every sentence of the same text.
+    `forget_parsed` empties it once a file is decoded (16k messages hold ~40 MB)."""
+    # checksum already verified (lines.py), or absent from the whole file
+    return NMEAReader.parse(with_checksum(text), validate=VALNONE)
+
+
+def forget_parsed() -> None:
+    _parsed.cache_clear()
 
 
 def decode(sentence: Sentence) -> Decoded:
