@@ -4,6 +4,7 @@ unrelated alarm opened a few seconds before it is still confirmed by coasting th
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 from pathlib import Path
 
@@ -131,6 +132,12 @@ def test_the_clean_envelope_leaves_out_coasts_into_incidents_not_judged_yet() ->
     assert placebo.envelope((0.0, 200.0), [], 1.0).runs == 0
 
 
+@pytest.fixture(scope="module")
+def real_pair() -> EpochTable:
+    """The real pair of receivers of one drive, read once for the tests below (each takes a copy)."""
+    return read_log(real_log("corpus/gps-measurement-tools"))
+
+
 def _with_wander(table: EpochTable, receiver: str, every: int, wander_m: float, seed: int) -> EpochTable:
     """`receiver`'s fixes thinned to every `every`-th and moved by a horizontal Gauss-Markov wander of
     `wander_m` per axis (tau 60 s): a phone-like chip beside a good receiver (semi-synthetic)."""
@@ -172,12 +179,12 @@ def _collapse_alarms(table: EpochTable) -> list[Alarm]:
     return result.alarms
 
 
-def test_a_drag_of_a_real_receiver_pair_collapses_its_baseline() -> None:
+def test_a_drag_of_a_real_receiver_pair_collapses_its_baseline(real_pair: EpochTable) -> None:
     """The real pair of one 29-min drive: a u-blox ZED-F9K and the NovAtel SPAN reference, two files in
     one folder, read as one log of two receivers aligned on UTC. Their antennas are 0.49 m apart (median);
     the baseline is not known to spooflens. Clean: no collapse. A single-antenna drag of 1 m/s from 600 s:
     the baseline collapses, an incident of second-receiver evidence from 10 s after the start."""
-    table = read_log(real_log("corpus/gps-measurement-tools"))
+    table = copy.deepcopy(real_pair)
     assert len(table.receivers()) == 2
     assert _collapse_alarms(table) == []
     spoofed, _ = apply_attack(table, parse_attack("single_antenna:rate=1,start=600"))
@@ -190,19 +197,21 @@ def test_a_drag_of_a_real_receiver_pair_collapses_its_baseline() -> None:
 
 
 @pytest.mark.parametrize("start_s", [600.0, 1200.0])
-def test_a_drag_of_the_real_pair_with_each_receivers_tracking_noise_under_it_is_caught(start_s: float) -> None:
+def test_a_drag_of_the_real_pair_with_each_receivers_tracking_noise_under_it_is_caught(
+    real_pair: EpochTable, start_s: float
+) -> None:
     """The same pair, each receiver with 0.1 m of its own tracking noise under the spoofer: their distance
     falls from its 0.46 m floor to 0.14 m. Its excursions above the floor (one receiver's jumps) made a
     moment-fitted null 6 times wider than the floor's scatter and the threshold 0.057 m: missed. The null
     is now matched to the lower tail: caught within 15 s."""
-    table = read_log(real_log("corpus/gps-measurement-tools"))
+    table = copy.deepcopy(real_pair)
     spoofed, _ = apply_attack(table, parse_attack(f"single_antenna:rate=1,start={start_s:g}"))
     alarms = _collapse_alarms(_tracking_noise(spoofed, start_s, 0.1, seed=3))
     assert alarms and start_s <= alarms[0].start_s <= start_s + 15.0
     assert abs((alarms[0].onset_s or 0.0) - start_s) <= 10.0
 
 
-def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_before_it() -> None:
+def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_before_it(real_pair: EpochTable) -> None:
     """The drive's first 10 minutes are one long anomaly of natural causes (HDOP x55, satellites 12 -> 6,
     mode switches: an urban canyon), and the drag from 600 s joins it: the incident read "SPOOFING from
     46 s". Nothing corroborated before 601 s, and the unexplained one-class alarms before it end at 414 s:
@@ -210,7 +219,7 @@ def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_be
     alarm comes at 611 s: on this receiver, whose residual is heavier-tailed than Gaussian, the GNSS-only
     test's threshold is raised, and the drag crosses it 10 m in; the satellites' alarms of the first minutes
     are then anomalies apart, and the degradation from 383 s leads into the spoofing.)"""
-    table = read_log(real_log("corpus/gps-measurement-tools"))
+    table = copy.deepcopy(real_pair)
     spoofed, _ = apply_attack(table, parse_attack("single_antenna:rate=1,start=600"))
     verdict = analyze_table(_tracking_noise(spoofed, 600.0, 0.1, seed=3)).verdict
     (attack,) = [i for i in verdict.incidents if i.is_spoofing]
@@ -223,13 +232,15 @@ def test_the_spoofing_begins_with_its_evidence_not_with_the_urban_degradation_be
 
 
 @pytest.mark.parametrize("start_s", [600.0, 1200.0])
-def test_a_drag_is_caught_beside_a_sparse_receiver_that_wanders_by_metres(start_s: float) -> None:
+def test_a_drag_is_caught_beside_a_sparse_receiver_that_wanders_by_metres(
+    real_pair: EpochTable, start_s: float
+) -> None:
     """Semi-synthetic: the same pair with the reference thinned to 0.5 Hz and moved by a 3 m wander (a
     phone chip beside a u-blox: the clean distance is the chip's error, Rayleigh scale 2.7 m, and 10 s of
     it are one effectively independent sample), and 0.1 m of tracking noise per receiver under the drag.
     The window grows until it holds 3 effective samples (120 s here), and the calibration starts from the
     side of the scale's change point that did not collapse: caught within 150 s; clean, nothing."""
-    table = read_log(real_log("corpus/gps-measurement-tools"))
+    table = copy.deepcopy(real_pair)
     chip = _with_wander(table, table.receivers()[0], 2, 3.0, seed=1)
     assert _collapse_alarms(chip) == []
     spoofed, _ = apply_attack(chip, parse_attack(f"single_antenna:rate=1,start={start_s:g}"))
