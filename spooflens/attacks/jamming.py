@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 from scipy.special import ndtr
 
 from spooflens.attacks.capture import apply_capture
@@ -19,6 +18,7 @@ from spooflens.attacks.spec import KINDS, AttackError, AttackSpec, AttackTruth, 
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import add_enu_offset
 from spooflens.gnss.ephemeris import C_MPS
+from spooflens.simulation.gauss_markov import stationary_ar1
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -105,11 +105,7 @@ def _sky_counts(rows: pd.DataFrame, tracked: BoolArray) -> pd.DataFrame:
 
 def _smoothed_noise(n: int, dt: float, rng: np.random.Generator) -> FloatArray:
     """(n, 3) unit-variance noise filtered over FIX_SMOOTHING_S: a receiver's solution is not white."""
-    a = np.exp(-dt / FIX_SMOOTHING_S)
-    s = np.sqrt(1.0 - a * a)
-    white = rng.normal(0.0, 1.0, (n, 3))
-    x, _ = lfilter([s], [1.0, -a], white, axis=0, zi=((1.0 - s) * white[0])[None, :])
-    return np.asarray(x)
+    return stationary_ar1(rng.normal(0.0, 1.0, (n, 3)), float(np.exp(-dt / FIX_SMOOTHING_S)))
 
 
 def apply_jam(table: EpochTable, spec: AttackSpec) -> tuple[EpochTable, AttackTruth]:

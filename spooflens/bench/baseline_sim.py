@@ -24,9 +24,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from spooflens.epoch_table import EpochTable
+from spooflens.simulation.gauss_markov import gauss_markov
 from spooflens.simulation.sensors import ReceiverModel
 
 # vehicle -> (scenario, seconds of log)
@@ -143,14 +143,6 @@ def _px4_signature(clean: EpochTable, attacked: EpochTable) -> EpochTable:
     return out
 
 
-def _gauss_markov(n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator) -> np.ndarray:
-    a = np.exp(-dt / tau)
-    s = np.sqrt(1.0 - a * a)
-    w = rng.normal(0.0, 1.0, n)
-    x, _ = lfilter([s], [1.0, -a], w, zi=[(1.0 - s) * w[0]])
-    return np.asarray(x) * sigma
-
-
 def _robust_sd(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     return float(1.4826 * np.median(np.abs(x - np.median(x)))) if len(x) else 0.0
@@ -177,7 +169,7 @@ def _held(table: EpochTable, seed: int) -> EpochTable:
         vel_white = [_robust_sd(np.diff(v[:, k], 2)) / np.sqrt(6.0) for k in range(3)]
         offset = np.stack(
             [
-                rng.normal(0.0, white[k], len(t)) + _gauss_markov(len(t), dt, HOLD_WANDER_M[k // 2], HOLD_TAU_S, rng)
+                rng.normal(0.0, white[k], len(t)) + gauss_markov(len(t), dt, HOLD_WANDER_M[k // 2], HOLD_TAU_S, rng)
                 for k in range(3)
             ],
             axis=1,

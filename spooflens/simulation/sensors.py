@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 
 from spooflens.geodesy import OMEGA_IE, normal_gravity, radii
 from spooflens.navigation.imu_models import ImuGrade
 from spooflens.navigation.rotations import matrix_to_quat, quat_to_rotvec, rotvec_to_matrix, skew
+from spooflens.simulation.gauss_markov import gauss_markov, stationary_ar1
 from spooflens.simulation.trajectories import Truth
 
 FloatArray = NDArray[np.float64]
@@ -88,13 +88,8 @@ def gnss_errors(n: int, dt: float, noise: GnssNoise, rng: np.random.Generator) -
     """(position error ENU (n, 3), velocity error (n, 3)) with the stationary standard deviations given."""
     sigma = np.asarray(noise.sigma_enu_m, dtype=float)
     white = rng.normal(0.0, 1.0, (n, 3))
-    if noise.correlation_s > 0:
-        a = np.exp(-dt / noise.correlation_s)
-        s = np.sqrt(1.0 - a * a)
-        # x_k = a x_{k-1} + s w_k, started stationary (x_0 = w_0)
-        pos, _ = lfilter([s], [1.0, -a], white, axis=0, zi=((1.0 - s) * white[0])[None, :])
-    else:
-        pos = white
+    correlated = noise.correlation_s > 0
+    pos = stationary_ar1(white, float(np.exp(-dt / noise.correlation_s))) if correlated else white
     vel = rng.normal(0.0, noise.sigma_vel_mps, (n, 3))
     return pos * sigma, vel
 
@@ -142,15 +137,6 @@ def realistic_receiver(rng: np.random.Generator) -> ReceiverModel:
         agc=float(rng.uniform(1500.0, 6000.0)),
         cn0_dbhz=float(rng.uniform(36.0, 45.0)),
     )
-
-
-def gauss_markov(n: int, dt: float, sigma: FloatArray, tau: float, rng: np.random.Generator) -> FloatArray:
-    """(n, k) first-order Gauss-Markov series of standard deviations `sigma`, started stationary."""
-    a = np.exp(-dt / tau)
-    s = np.sqrt(1.0 - a * a)
-    white = rng.normal(0.0, 1.0, (n, len(sigma)))
-    x, _ = lfilter([s], [1.0, -a], white, axis=0, zi=((1.0 - s) * white[0])[None, :])
-    return np.asarray(x) * sigma
 
 
 def receiver_fix_errors(

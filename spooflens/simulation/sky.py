@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from spooflens.gnss.ephemeris import GpsEphemerides, satellite_states
 from spooflens.gnss.geometry import azimuth_elevation
-from spooflens.simulation.sensors import gauss_markov
+from spooflens.simulation.gauss_markov import gauss_markov
 
 FloatArray = NDArray[np.float64]
 MASK_DEG = 5.0
