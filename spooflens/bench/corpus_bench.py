@@ -63,6 +63,8 @@ from spooflens.bench.corpus_runs import (
 from spooflens.bench.fuzz import REAL_LOGS
 from spooflens.bench.realworld_bench import ATTACKS
 from spooflens.bench.sandbox import Limits
+from spooflens.detectors.raim import NAME as RAIM
+from spooflens.detectors.system_agreement import NAME as SYSTEM_AGREEMENT
 from spooflens.output.console import console, err_console, progress, show_progress
 
 DEFAULT_TIMEOUT_S = 120.0
@@ -113,7 +115,7 @@ BATTERY: tuple[AttackKind, ...] = (
         "pr_delay:count=1,delay=300,cn0=6",
         "raw observations",
         frozenset({"raw_measurement"}),
-        frozenset({"raim", "system_agreement"}),
+        frozenset({RAIM, SYSTEM_AGREEMENT}),
     ),
     AttackKind("single antenna", "single_antenna:rate=1", "two receivers with fixes", frozenset({"second_receiver"})),
 )

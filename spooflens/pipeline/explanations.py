@@ -48,8 +48,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spooflens.detectors.base import Alarm, DetectorResult
+from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.detectors.gnss_consistency import ConsistencyOptions
+from spooflens.detectors.receiver_evidence import NAME as RECEIVER_EVIDENCE
 from spooflens.epoch_table import EpochTable
+from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.evidence import Evidence, Span
 from spooflens.pipeline.indicators import BoolArray, FloatArray, Receiver, Window, running_median
 from spooflens.pipeline.verdict import Explanation, Incident, Kind
@@ -57,12 +60,9 @@ from spooflens.schema import FixType
 
 WEEK_S = 604_800.0
 ROLLOVER_S = 1024 * WEEK_S
-RECEIVER_EVIDENCE = "receiver_evidence"
-GNSS_CONSISTENCY = "gnss_consistency"
 JAMMED = "jammed receiver's noise"
 # a coast starts this long before the onset of the incident it checks (`CoastingOptions.margin_s`, and more)
 DEPARTURE_LEAD_S = 2.0
-NAVIGATION = "navigation"  # the GNSS/INS filter's result (`spooflens.navigation.product`): its innovations
 # the alarms a receiver's indicators can account for: the fix against itself, the receiver's indicators
 INDICATOR_DETECTORS = frozenset({GNSS_CONSISTENCY, RECEIVER_EVIDENCE})
 FIX_NAMES = {
