@@ -19,7 +19,7 @@ from paths import SAMPLE_LOGS, real_log
 
 from readers import packed, read_log, sniff_format
 from spooflens.cli import main
-from spooflens.epoch_table import EpochTable
+from spooflens.epoch_table import HOLDS, EpochTable
 from spooflens.errors import ReaderError
 from spooflens.pipeline.run import analyze_table
 
@@ -166,3 +166,12 @@ def test_inject_writes_the_log_inside_a_packed_file_back_unpacked(tmp_path: Path
     )
     attacked = before["t_s"].to_numpy() >= 5.0
     assert np.all(moved[~attacked] < 0.5) and np.all(np.abs(moved[attacked] - 50.0) < 1.0)
+
+
+def test_a_packed_log_with_nothing_to_judge_says_what_it_holds_and_its_packing(tmp_path: Path) -> None:
+    packed_ais = tmp_path / "ais.log.gz"
+    packed_ais.write_bytes(gzip.compress(real_log("corpus/gpsd/ais-18-27.log").read_bytes()))
+    table = read_log(packed_ais)
+    assert not table.streams and table.metadata["packing"] == "gzip (ais.log)"
+    assert table.metadata[HOLDS].startswith("AIS messages only (276 VDM")
+    assert analyze_table(table).verdict.headline.startswith("NO VERDICT: no GNSS data to judge: AIS messages only")
