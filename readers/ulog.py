@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import contextlib
 import io
+import mmap
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -68,13 +70,39 @@ def _topics_defined(ulog: ULog) -> set[str]:
     return set(formats) - nested
 
 
+class _MappedFile:
+    """A ULog read through a memory map, as the file object pyulog takes. After damage pyulog looks for the
+    next message one byte at a time, seeking back for each; on a file every seek is a system call (a 5 MB
+    damaged stretch took 33 s, 12 s mapped). mmap's seek returns None where pyulog needs the position."""
+
+    def __init__(self, mapped: mmap.mmap) -> None:
+        self._mapped = mapped
+
+    def read(self, n: int | None = -1) -> bytes:
+        return self._mapped.read(n if n is not None and n >= 0 else None)
+
+    def seek(self, pos: int, whence: Literal[0, 1, 2] = 0) -> int:
+        self._mapped.seek(pos, whence)
+        return self._mapped.tell()
+
+    def tell(self) -> int:
+        return self._mapped.tell()
+
+    def close(self) -> None:
+        """The map is closed by whoever opened it."""
+
+
 def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
     said = io.StringIO()  # pyulog prints its warnings; they belong in the damage note, not on stdout
     try:
-        with contextlib.redirect_stdout(said):
+        with (
+            path.open("rb") as f,
+            mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped,
+            contextlib.redirect_stdout(said),
+        ):
             ulog = ULog(
-                str(path),
+                _MappedFile(mapped),
                 [IMU_TOPIC, ATTITUDE_TOPIC, SATELLITE_TOPIC, *GPS_TOPICS, *EKF_TOPICS],
                 disable_str_exceptions=True,
             )
