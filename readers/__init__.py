@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from readers.buffers import release_freed_memory
-from spooflens.epoch_table import EpochTable, holding_nothing
-from spooflens.errors import NothingToJudgeError, ReaderError, UnsupportedFormatError
+from spooflens.epoch_table import EpochTable, Skipped, holding_nothing
+from spooflens.errors import ReaderError, UnsupportedFormatError
 
 Progress = Callable[[int, int], None]
 ReaderFn = Callable[[Path, Mapping[str, str] | None, Progress | None], EpochTable]
@@ -86,6 +86,19 @@ def _declared() -> Iterator[ReaderFormat]:
 
 def supported() -> str:
     return "; ".join(f.description for f in formats().values())
+
+
+class NothingToJudgeError(ReaderError):
+    """The log is sound and was read whole, but holds nothing any detector reads (other stations' AIS
+    reports, a receiver's configuration replies, navigation messages alone). `read_log` turns it into an
+    empty table that says what the log holds: analysed, it gets a NO VERDICT saying so, not a refusal;
+    `inject` refuses it (nothing to spoof). `skipped`: what the reader skipped or lost on the way."""
+
+    def __init__(
+        self, path: Path | str, problem: str, stream: str | None = None, skipped: list[Skipped] | None = None
+    ) -> None:
+        super().__init__(path, problem, stream)
+        self.skipped = list(skipped or [])
 
 
 class _Registry(dict[str, ReaderFn]):

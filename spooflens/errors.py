@@ -6,10 +6,6 @@ Every message names the file, the stream and the problem, so the CLI can print i
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from spooflens.epoch_table import Skipped
 
 
 class SpooflensError(Exception):
@@ -29,19 +25,6 @@ class ReaderError(SpooflensError):
 
 class UnsupportedFormatError(ReaderError):
     """No reader knows this file."""
-
-
-class NothingToJudgeError(ReaderError):
-    """The log is sound and was read whole, but holds nothing any detector reads (other stations' AIS
-    reports, a receiver's configuration replies, navigation messages alone). `read_log` turns it into an
-    empty table that says what the log holds: analysed, it gets a NO VERDICT saying so, not a refusal;
-    `inject` refuses it (nothing to spoof). `skipped`: what the reader skipped or lost on the way."""
-
-    def __init__(
-        self, path: Path | str, problem: str, stream: str | None = None, skipped: list[Skipped] | None = None
-    ) -> None:
-        super().__init__(path, problem, stream)
-        self.skipped = list(skipped or [])
 
 
 class NoGnssError(ReaderError):

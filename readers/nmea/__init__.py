@@ -25,13 +25,13 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from readers import ReaderFormat
+from readers import NothingToJudgeError, ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
 from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences
 from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
 from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, forget_parsed, is_empty
 from spooflens.epoch_table import EpochTable, Skipped
-from spooflens.errors import NothingToJudgeError, ReaderError
+from spooflens.errors import ReaderError
 
 Progress = Callable[[int, int], None]
 

@@ -56,7 +56,7 @@ import numpy as np
 import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
-from readers import ReaderFormat
+from readers import NothingToJudgeError, ReaderFormat
 from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
 from readers.nmea.assembly import Assembled
@@ -65,8 +65,8 @@ from readers.raw_states import add_satellite_states, ephemeris_stream, nav_strea
 from readers.rtcm_ephemeris import RTCM_EPHEMERIS, rtcm_ephemerides
 from readers.ubx import messages as m
 from readers.ubx.frames import Frames, UbxFrame, fletcher, split_frames
-from readers.ubx.legacy import legacy_fix
-from readers.ubx.refusal import held_messages, refusal
+from readers.ubx.legacy import TIME_ONLY, legacy_fix
+from readers.ubx.refusal import refusal
 from spooflens.epoch_table import (
     EpochTable,
     Skipped,
@@ -76,7 +76,7 @@ from spooflens.epoch_table import (
     gps_seconds_of_unix_ns,
     unix_ns_of_gps_ns,
 )
-from spooflens.errors import NothingToJudgeError, ReaderError
+from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import GpsEphemerides
 from spooflens.schema import SpoofingFlag
 
@@ -134,6 +134,13 @@ class _State:
     monitor_cycle: set[str] = field(default_factory=set)
     anchor_of: str = ""  # the message that dated the capture first
     stored: list[_Stored] = field(default_factory=list)  # the stored log's records, as retrieved
+
+    def held(self) -> Counter[str]:
+        """How many of each UBX message the capture holds, used or not."""
+        held: Counter[str] = Counter()
+        for counts in (self.used, self.unused, self.polls, self.bad, self.unused_as_repeat):
+            held.update(counts)
+        return held
 
     def epoch(self, itow: int) -> _Epoch:
         if itow not in self.epochs:
@@ -807,9 +814,12 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
     if fixes is None and obs is None and imu is None and satellites is None and headings is None and status is None:
         # a sound capture of messages none of which is a fix (a timing receiver's, navigation messages
         # alone, a configuration session) is analysed to a NO VERDICT naming them; one of no message refused
-        if held_messages(state) or frames.nmea:
-            raise NothingToJudgeError(path, refusal(state, frames, nmea), "ubx", skipped)
-        raise ReaderError(path, refusal(state, frames, nmea), "ubx")
+        held = state.held()
+        time_only = state.time_only + state.not_fixes[TIME_ONLY]
+        why = refusal(held, time_only, state.no_fix + sum(state.not_fixes.values()), frames, nmea)
+        if held or frames.nmea:
+            raise NothingToJudgeError(path, why, "ubx", skipped)
+        raise ReaderError(path, why, "ubx")
     metadata = {**_header_metadata(frames.comments), **state.metadata, **metadata}
     metadata |= {
         "enum.spoofing_state": m.SPOOF_MEANING,

@@ -12,11 +12,9 @@ from collections import Counter
 from typing import TYPE_CHECKING
 
 from readers.ubx import messages as m
-from readers.ubx.legacy import TIME_ONLY
 
 if TYPE_CHECKING:
     from readers.nmea.assembly import Assembled
-    from readers.ubx import _State
     from readers.ubx.frames import Frames
 
 # what each UBX class is, for naming what a capture holds
@@ -43,25 +41,15 @@ def _listed(counts: Counter[str], limit: int = 8) -> str:
     return ", ".join(f"{n} x{counts[n]}" for n in names[:limit]) + (" ..." if len(names) > limit else "")
 
 
-def held_messages(state: _State) -> Counter[str]:
-    """How many of each UBX message the capture holds, used or not."""
-    held: Counter[str] = Counter()
-    for counts in (state.used, state.unused, state.polls, state.bad):
-        held.update(counts)
-    held.update({name: n for name, n in state.unused_as_repeat.items()})
-    return held
-
-
-def refusal(state: _State, frames: Frames, nmea: Assembled | None) -> str:
-    """One line: what the capture holds, and that it holds no position, velocity or raw observation."""
-    held = held_messages(state)
+def refusal(held: Counter[str], time_only: int, epochs_without_fix: int, frames: Frames, nmea: Assembled | None) -> str:
+    """One line: what the capture holds (`held`: each UBX message's count, used or not), and that it holds
+    no position, velocity or raw observation; `time_only`: its time-only fixes, `epochs_without_fix`: the
+    epochs it had with no fix at all."""
     nothing = "no position, velocity or raw observations"
-    time_only = state.time_only + state.not_fixes[TIME_ONLY]
     if time_only or (held and all(n in m.TIME_ONLY or n.startswith("TIM-") for n in held)):
         extra = f" ({time_only} time-only fixes of a receiver at a fixed position)" if time_only else ""
         return f"this capture holds time only: {nothing}{extra}; it holds {_listed(held)}"
     none = "no fix, raw observation or IMU sample in the capture"
-    epochs_without_fix = state.no_fix + sum(state.not_fixes.values())
     if epochs_without_fix:
         return f"{none}: the receiver had no fix in any of its {epochs_without_fix} epochs; it holds {_listed(held)}"
     if nmea is not None and nmea.fixes is None and frames.nmea:

@@ -26,7 +26,7 @@ from spooflens.constants import NMEA_GNSS_TALKERS
 from spooflens.epoch_table import EpochTable
 
 if TYPE_CHECKING:
-    from spooflens.pipeline.registry import AnalysisContext
+    from spooflens.pipeline.context import AnalysisContext
 
 IDENTICAL_FRACTION = 0.9  # of common epochs, for the same fixes
 MIN_COMMON_EPOCHS = 10  # fewer: too few to tell (and too few for the dual-receiver tests)

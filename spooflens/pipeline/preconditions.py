@@ -24,7 +24,7 @@ from spooflens.gnss.time_tags import TimeTagFit, TimeTagOptions, time_tag_fit
 
 if TYPE_CHECKING:
     from spooflens.navigation.segments import ImuSpan
-    from spooflens.pipeline.registry import AnalysisContext
+    from spooflens.pipeline.context import AnalysisContext
 
 # Strapdown integrates each IMU sample over the interval to the next: below tens of Hz a vehicle's
 # rotation between samples is not captured, and across a gap it is lost (a turn at 30 deg/s for 0.5 s

@@ -18,16 +18,15 @@ from __future__ import annotations
 import importlib
 import re
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import partial
-from typing import Any
 
 import numpy as np
 
-from spooflens.baseline.loaded import LoadedBaseline
 from spooflens.detectors.base import DetectorResult, Unmet
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import SpooflensError
+from spooflens.pipeline.context import AnalysisContext, AnalyzeOptions
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.joined import joined, spanned
 from spooflens.pipeline.preconditions import STRAPDOWN_IMU, imu_spans_of, unmet_preconditions
@@ -185,37 +184,6 @@ REQUIREMENTS: dict[str, Requirement] = {
         f"the receiver's time beside the log's own clock ({MIN_TIMED_FIXES} fixes or more)", _has_time_offset
     ),
 }
-
-
-@dataclass
-class AnalyzeOptions:
-    """User choices that analyses read (CLI flags map here)."""
-
-    imu_id: str | None = None
-    receiver_id: str | None = None
-    imu_grade: str | None = None
-    extra: dict[str, object] = field(default_factory=dict)
-    # a vehicle's clean-log statistics (`spooflens baseline`, `--baseline`): detectors take yardsticks from it
-    baseline: LoadedBaseline | None = None
-
-
-@dataclass
-class AnalysisContext:
-    """What an analysis runs on; shared work is computed once and cached."""
-
-    table: EpochTable
-    options: AnalyzeOptions
-    cache: dict[str, Any] = field(default_factory=dict)
-    # of the analyses that ran before (one that finishes `Later` joins them when every analysis has run)
-    results: list[DetectorResult] = field(default_factory=list)
-    # the stretch of the log this context holds, when it is one the navigation ran on between the IMU's
-    # gaps (`navigation_parts`); None: the whole log
-    span_s: tuple[float, float] | None = None
-
-    def cached(self, key: str, make: Callable[[], Any]) -> Any:
-        if key not in self.cache:
-            self.cache[key] = make()
-        return self.cache[key]
 
 
 def probability(p: float) -> str:
