@@ -124,6 +124,15 @@ def test_a_log_without_gnss_data_is_analysed_to_no_verdict(
     assert headline.startswith("NO VERDICT: no GNSS data to judge: ") and why in headline
 
 
+def test_the_report_of_a_log_with_nothing_to_judge_draws_no_empty_timeline(tmp_path: Path) -> None:
+    html = tmp_path / "r.html"
+    args = ["analyze", str(real_log(f"{GPSD}/tnt-revolution.log")), "-o", str(tmp_path / "r.rrd"), "--quiet"]
+    assert main([*args, "--html", str(html)]) == 0
+    text = html.read_text()
+    assert "No stream spooflens reads: nothing to draw." in text and "<svg" not in text
+    assert "only sentences spooflens does not read ($PTNTHTM x50, $HCXDR x10)" in text
+
+
 def test_doubled_dollar_sentences() -> None:
     """ST Teseo LIV4F logged as `$$GNGSA,...`: the sentences are read (was: unknown format)."""
     t = read_log(real_log(f"{GPSD}/st-teseo-liv4f.log"))

@@ -25,7 +25,8 @@ def build_plots(analysis: Analysis) -> list[Plot]:
     table, results, verdict = analysis.table, analysis.results, analysis.verdict
     infos = detector_infos()
     with figures.style():
-        plots = [figures.timeline(table, results, verdict, infos)]
+        # a log of no stream (nothing to judge) has no time axis to draw on
+        plots = [figures.timeline(table, results, verdict, infos)] if table.streams else []
         plots += [p for p in (figures.track(table, results, verdict), figures.departure(table, results, verdict)) if p]
         for r in results:
             plots += figures.detector_plots(r, table)

@@ -453,7 +453,7 @@ def page(analysis: Analysis, plots: Sequence[Plot], identity: InputIdentity, inf
     by = {s: [p for p in plots if p.section == s] for s in ("timeline", "track", "evidence", "receiver", "curves")}
     body = {
         "verdict": verdict_section(analysis),
-        "timeline": _plots(by["timeline"]),
+        "timeline": _plots(by["timeline"]) or '<p class="muted">No stream spooflens reads: nothing to draw.</p>',
         "track": _plots(by["track"]) or '<p class="muted">No GNSS or truth track to draw.</p>',
         "evidence": (
             _plots(by["evidence"])
