@@ -158,7 +158,10 @@ def coarse_time(t: FloatArray, x: FloatArray, scale: float, opts: ReceiverTimeOp
         # of a sawtooth read at its own cycle can be a fifth short, and a stretch holding three wraps 170 s
         # apart in 400 s was then one wrap too many)
         drifted = abs(float(x[-1] - x[0]) + np.sign(drift) * q * wraps) / q
-        if 1 <= wraps <= drifted + 1:
+        # a stretch from just before one wrap to just after the next holds two wraps over one step of drift,
+        # less the drift of its first and last sample: the step's tolerance of each wrap (aava-n2k cut at
+        # 105.3-285.3 s: 2 wraps, 0.971 steps drifted, and was a false clock step)
+        if 1 <= wraps <= drifted + 1 + opts.wrap_tolerance:
             return CoarseTime(q, drift, wraps)
     return None
 
