@@ -21,7 +21,7 @@ names a natural cause and the alarm it accounts for:
   alone: an output or gateway cycle not locked to the fixes dropped (or repeated) one;
 - time faults: the receiver's time moved against the log's clock by whole GPS week epochs (1024 weeks:
   a week rollover) or by a whole number of leap seconds;
-- one satellite's range a reflection's length off (NLOS), its C/N0 not raised;
+- one satellite's range a reflection's length off (NLOS), its C/N0 not raised, or two at once each within it;
 - a satellite the receiver never used in its fix from the log's start cannot have moved it;
 - an inertial shock: the vehicle's own IMU read a tumble or an impact (angular rate or specific force far
   beyond flight, at the gyro's or accelerometer's full scale) just before an inertial alarm began; an
@@ -95,6 +95,8 @@ class ExplanationOptions:
     fix_lost_min_s: float = 2.0
     # NLOS in urban canyons delays a signal by tens of metres, rarely more than 100-200 m
     max_reflection_m: float = 200.0
+    # satellites reflected at once (NLOS on both sides of a street); RAIM's exclusion finds two at most
+    max_reflected_together: int = 2
     # a spoofer's marks
     spoofer_cn0_rise_db: float = 3.0
     max_sky_cn0_dbhz: float = 50.0
@@ -903,12 +905,13 @@ def read_time_fault(scene: _Scene, alarm: Alarm, rid: str) -> Reading:
     )
 
 
-def off_together(scene: _Scene, alarm: Alarm) -> list[str]:
+def off_together(scene: _Scene, alarm: Alarm) -> dict[str, float]:
     """The incident's other satellites named off at the same time as this alarm's (their alarms overlapping
-    half or more of the shorter of the two): a car passing buildings has its satellites reflected one after
-    another (a phone's R14 for 20 s, then R13), a bias moves several at once."""
+    half or more of the shorter of the two), each with the largest range error its alarms gave (NaN when
+    none gave one): a car passing buildings has its satellites reflected one after another (a phone's R14
+    for 20 s, then R13), or two at once in a street; a bias moves several at once, by its own amount."""
     mine, incident = set(alarm.satellites), set(scene.satellites)
-    others: set[str] = set()
+    others: dict[str, float] = {}
     for result in scene.results:
         for a in result.alarms:
             named = set(a.satellites) & incident
@@ -916,16 +919,23 @@ def off_together(scene: _Scene, alarm: Alarm) -> list[str]:
                 continue
             overlap = min(a.end_s, alarm.end_s) - max(a.start_s, alarm.start_s)
             if overlap >= 0.5 * min(a.end_s - a.start_s, alarm.end_s - alarm.start_s):
-                others |= named - mine
-    return sorted(others)
+                size = a.range_error_m if a.range_error_m is not None and len(a.satellites) == 1 else np.nan
+                for sv in named - mine:  # an alarm that gave no size leaves the satellite's unknown
+                    before = others.get(sv, size)
+                    others[sv] = np.nan if np.isnan(before) or np.isnan(size) else max(before, size)
+    return dict(sorted(others.items()))
 
 
 def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Reading:
-    """One satellite's range a reflection's length off, its C/N0 not raised: NLOS or multipath."""
+    """One satellite's range a reflection's length off (or two at once, each within it), its C/N0 not raised:
+    NLOS or multipath."""
     rid = alarm.receiver_id or ""
     sv = alarm.satellites[0]
     others = off_together(scene, alarm)
-    if others:  # reflections delay satellites each by its own path; several off together is a bias
+    # reflections delay satellites each by its own path, two at once in a street; a third off at the same
+    # time, or one off by more than a reflection or by an unknown amount, is a bias on a subset
+    far = [o for o, size in others.items() if not size <= scene.opts.max_reflection_m]
+    if len(others) > scene.opts.max_reflected_together - 1 or far:
         why = f"{sv} is not alone: {'+'.join(others)} off at the same time"
         return _kept("reflection", Kind.DEGRADATION, why, rid)
     # the alarm's own size (a moving receiver passes reflections: its satellites are excluded now and then,
@@ -967,11 +977,19 @@ def read_reflection(scene: _Scene, alarm: Alarm, result: DetectorResult) -> Read
                         "reflection", Kind.DEGRADATION, f"{sv}'s C/N0 rose {_db(rise)}: no reflection does that", rid
                     )
                 cn0 = f"its C/N0 {_db(rise)} against its level before"
-    text = (
-        f"{sv} alone {size:.0f} m off while the other satellites agree ({cn0}): a reflected signal "
-        "(NLOS, multipath), not spoofing"
-    )
-    return Reading("reflection", Kind.DEGRADATION, True, text, (f"{sv} range error {size:.1f} m", cn0), rid)
+    if others:
+        beside = ", ".join(f"{o} {size:.0f} m" for o, size in others.items())
+        text = (
+            f"{sv} {size:.0f} m off, with {beside} off at the same time, each within a reflection's length, "
+            f"while the other satellites agree ({cn0}): reflected signals (NLOS, multipath), not spoofing"
+        )
+    else:
+        text = (
+            f"{sv} alone {size:.0f} m off while the other satellites agree ({cn0}): a reflected signal "
+            "(NLOS, multipath), not spoofing"
+        )
+    facts = (f"{sv} range error {size:.1f} m", *(f"{o} range error {x:.1f} m" for o, x in others.items()), cn0)
+    return Reading("reflection", Kind.DEGRADATION, True, text, facts, rid)
 
 
 def read_never_used(scene: _Scene, alarm: Alarm, rid: str) -> Reading:

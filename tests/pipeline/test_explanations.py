@@ -375,6 +375,26 @@ def test_satellites_reflected_one_after_another_are_not_a_bias() -> None:
     assert set(inc.satellites) == {"R13", "R14"} and [e.cause for e in inc.explanations] == ["reflection"]
 
 
+def test_two_satellites_reflected_at_once_are_no_bias_but_one_a_spoofers_length_off_beside_them_is() -> None:
+    """The same drive cut to 740.9-980.9 s (`bench windows --seed 35`): RAIM excludes R13 over 761-792 s, 37 m
+    off, and G09 over 766-787 s, 40 m off, at the same time (a street's buildings on both sides). "Not alone"
+    made it SPOOFING (medium). Two satellites each within a reflection's length are two reflections; with G09
+    a counterfeit 300 m late beside R13's reflection it stays spoofing."""
+    from spooflens.attacks import apply_attack, parse_attack
+    from spooflens.gnss.solved_fixes import with_solved_fixes
+
+    clean = analyze_table(with_solved_fixes(_pixel4xl()).between(740.9, 980.9))
+    assert not clean.verdict.spoofed, clean.verdict.headline
+    inc = next(i for i in clean.verdict.incidents if set(i.satellites) == {"G09", "R13"})
+    assert [e.cause for e in inc.explanations] == ["reflection"] and inc.kind == Kind.DEGRADATION
+    assert "R13 37 m off, with G09 40 m off at the same time" in inc.explanations[0].text
+    spoofed, _ = apply_attack(_pixel4xl(), parse_attack("pr_delay:svs=G09,delay=300,start=760"))
+    attacked = analyze_table(with_solved_fixes(spoofed).between(740.9, 980.9))
+    assert attacked.verdict.spoofed, attacked.verdict.headline
+    hit = next(i for i in attacked.verdict.incidents if i.is_spoofing)
+    assert "G09" in hit.satellites and not any(e.cause == "reflection" for e in hit.explanations)
+
+
 def test_a_weak_satellite_gaining_a_few_db_is_still_a_reflection() -> None:
     """A 2016 phone log (GnssLogger 1.4) cut to 123.1-168.1 s, where `bench windows` cut it: RAIM excludes G05
     over 127-137 s, 30 m off, and G05's C/N0 goes from 14.8 to 18-20 dB-Hz. "Its C/N0 rose 5 dB: no
