@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import click
 from rich.table import Table
 
-from spooflens.epoch_table import EpochTable
+from spooflens.epoch_table import HOLDS, EpochTable
 from spooflens.errors import NoGnssError
 from spooflens.inventory import has_gnss, without_gnss
 from spooflens.output.console import console, progress, show_progress
@@ -169,6 +169,8 @@ def require_data(log: Path, table: EpochTable) -> None:
 def _no_gnss_found(table: EpochTable) -> str:
     lost = "; ".join(str(s) for s in table.skipped if s.action == "lost")
     why = f"; lost: {lost}" if lost else ""
+    if HOLDS in table.metadata:
+        why = f"; it holds {table.metadata[HOLDS]}{why}"
     return (
         "no GNSS fixes, raw observations or satellite reports found, nor receiver monitor messages "
         f"(streams: {stream_names(table)}{why})"

@@ -158,3 +158,12 @@ def test_a_batch_worker_reads_the_baseline_and_records_it(f9p_baseline: Path, tm
     moved = _edited(f9p_baseline, tmp_path, lambda d: d.update(receivers={"GPS[0]": d["receivers"]["ubx"]}))
     failed = analyse_one(str(log), "digest", str(tmp_path / "out2"), None, str(moved))
     assert failed["status"] == "failed" and "none in common" in failed["error"]
+
+
+def test_a_log_with_nothing_to_judge_is_no_baseline_and_says_what_it_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "ais.baseline.json"
+    assert main(["baseline", str(real_log("corpus/gpsd/ais-18-27.log")), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "it holds AIS messages only (276 VDM" in err and not out.exists()
