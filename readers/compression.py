@@ -18,6 +18,7 @@ from typing import IO, Any
 from spooflens.errors import ReaderError
 
 CHUNK = 1 << 20
+LZW_PACKING = "compress (.Z)"
 GZIP, BZIP2, ZIP, LZW, XZ = b"\x1f\x8b", b"BZh", b"PK\x03\x04", b"\x1f\x9d", b"\xfd7zXZ\x00"
 STREAMS = ("gzip", "bzip2", "xz")  # the packings `inflate` takes off
 
@@ -35,7 +36,7 @@ def packing_of(head: bytes) -> str | None:
     if head.startswith(ZIP):
         return "zip"
     if head.startswith(LZW):
-        return "compress (.Z)"
+        return LZW_PACKING
     if head.startswith(XZ):
         return "xz"
     if head[257:262] == b"ustar":
@@ -85,6 +86,20 @@ def inflate(
         written += len(tail)
         target.write(tail)
     return written, f"{packing} stream cut short: what came after the cut is lost"
+
+
+def expand_lzw(path: Path, data: bytes, limit: int, too_big: TooBig) -> bytes:
+    """A Unix compress (.Z) stream expanded whole by `ncompress` (LZW has no member boundaries to stream
+    by); one that cannot be expanded is refused, one larger than `limit` is `too_big`'s error."""
+    import ncompress
+
+    try:
+        body = ncompress.decompress(data)
+    except (ValueError, RuntimeError, OSError) as err:
+        raise ReaderError(path, f"Unix compress (.Z) stream that cannot be expanded: {err}") from err
+    if len(body) > limit:
+        raise too_big(path, LZW_PACKING, limit)
+    return bytes(body)
 
 
 def zip_members(path: Path, data: bytes, limit: int, losses: list[str], too_big: TooBig) -> dict[str, bytes]:

@@ -28,7 +28,7 @@ from pathlib import Path, PurePosixPath
 from typing import IO
 
 from readers import Progress, ReaderFormat
-from readers.compression import CHUNK, inflate, packing_of, zip_members
+from readers.compression import CHUNK, LZW_PACKING, expand_lzw, inflate, packing_of, zip_members
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
 
@@ -86,15 +86,8 @@ def _unpack_stream(path: Path, packing: str, folder: Path) -> tuple[Path, list[s
     losses: list[str] = []
     limit = _ceiling(folder)
     with inner.open("wb") as target:
-        if packing == "compress (.Z)":
-            import ncompress
-
-            try:
-                data = ncompress.decompress(path.read_bytes())
-            except (ValueError, RuntimeError, OSError) as err:
-                raise ReaderError(path, f"Unix compress (.Z) stream that cannot be expanded: {err}") from err
-            if len(data) > limit:
-                raise _too_big(path, packing, limit)
+        if packing == LZW_PACKING:
+            data = expand_lzw(path, path.read_bytes(), limit, _too_big)
             target.write(data)
             written = len(data)
         else:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
 
-from readers.compression import STREAMS, decompressor, inflate, packing_of, zip_members
+from readers.compression import STREAMS, decompressor, expand_lzw, inflate, packing_of, zip_members
 from spooflens.errors import ReaderError
 
 MAX_UNPACKED_BYTES = 512 * 2**20  # a day of 1 Hz multi-GNSS RINEX 3 is ~300 MB; more is no RINEX we hold
@@ -78,15 +78,7 @@ def _outer(path: Path, data: bytes, out: Unpacked, limit: int) -> bytes:
         name, body = _rinex_member(path, zip_members(path, data, limit, out.losses, _too_big))
         out.packing[-1] = f"zip ({name})"
         return body
-    import ncompress
-
-    try:
-        body = ncompress.decompress(data)
-    except (ValueError, RuntimeError, OSError) as err:
-        raise ReaderError(path, f"Unix compress (.Z) stream that cannot be expanded: {err}") from err
-    if len(body) > limit:
-        raise _too_big(path, kind, limit)
-    return bytes(body)
+    return expand_lzw(path, data, limit, _too_big)
 
 
 def unpack(path: Path) -> Unpacked:
