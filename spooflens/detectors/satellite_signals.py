@@ -218,10 +218,9 @@ def cn0_steps(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm],
     # one satellite alone: no other satellite fell at the same time, and fewer than half rose with it (the
     # antenna turned or the vehicle moved: several satellites change, some down)
     half = 0.5 * opts.step_db
-    epoch = steps["t"]
-    n_down = (steps["change"] <= -half).groupby(epoch).transform("sum")
-    n_up = (steps["change"] >= half).groupby(epoch).transform("sum")
-    n = steps.groupby("t")["change"].transform("count")
+    change = steps["change"]
+    per_epoch = pd.DataFrame({"down": change <= -half, "up": change >= half, "n": change.notna()})
+    n_down, n_up, n = per_epoch.groupby(steps["t"]).transform("sum").T.to_numpy()
     isolated = (n_down == 0) & (n_up - 1 <= 0.5 * (n - 1))
     steps["hit"] = isolated & (steps["jump"] >= opts.step_db) & (steps["after"] >= opts.above_median_db)
     alarms, findings = [], []
