@@ -35,6 +35,15 @@ GPS rows never carry a week (GWk 0, as some do) stays on the boot clock.
 
 **Metadata.** Firmware (`VER.FWS`, else the first `MSG` naming the vehicle), board and receivers
 (`MSG` lines), and the choices above.
+
+**PX4 sdlog2** (`.px4log`, PX4 2013-2017) is the same container, read here as one more revision of its
+fields (`readers.dataflash_eras`): format `px4_sdlog2`, streams labelled `px4_sdlog2/...`. Its `GPS` (and
+`DGPS`, the second receiver: `GPS[1]`) carries its own accuracies `EPH`/`EPV` (h_acc_m, v_acc_m), noise
+`N` and jamming indicator `J` (u-blox MON-HW, as UBX1's) and mean `SNR` (cn0_mean_dbhz; 0 = not
+reported), and no DOP; its `Alt` is AMSL (sdlog2 logs no undulation). `IMU`, `IMU1`, `IMU2` are
+`IMU[0..2]`; `ATT` angles are radians. `VER` (`Arch`, `FwGit`) and `PARM` `SYS_AUTOSTART` (the airframe)
+are the metadata. The autopilot's estimates `GPOS`/`LPOS` are positions, not the innovations and test
+ratios of the `autopilot_ekf` frame: skipped, counted.
 """
 
 from __future__ import annotations
@@ -93,7 +102,8 @@ def _f(cols: Columns | None, name: str, n: int) -> FloatArray:
 def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     """Every GPS row with its instance (GPS2 messages as instance 1), GPA and UBX1 columns joined."""
     parts = []
-    for name, inst in (("GPS", None), ("GPS2", 1)):
+    receivers = (("GPS", None), ("DGPS", 1)) if log.sdlog2 else (("GPS", None), ("GPS2", 1))
+    for name, inst in receivers:
         cols = log.columns(name, GPS_FIELDS)
         if cols is None:
             continue
@@ -125,7 +135,14 @@ def gps_rows(log: DataFlash, skipped: list[Skipped]) -> pd.DataFrame | None:
     # UBX_MAX_AGE_S
     ubx1 = {"noisePerMS": "ubx_noise", "jamInd": "ubx_jam", "agcCnt": "ubx_agc"}
     gps = _join_receiver_message(log, gps, "UBX1", UBX1_FIELDS, ubx1, int(UBX_MAX_AGE_S * 1e6))
-    if not gpa_parts:
+    if log.sdlog2:
+        # PX4's GPS message carries the receiver's accuracies, noise and jamming indicator itself: joined as
+        # GPA's and UBX1's would be, from the same message (`gpa_ofs`: inject writes them back there)
+        sdlog2 = {"HAcc": "gpa_HAcc", "VAcc": "gpa_VAcc", "ofs": "gpa_ofs", "N": "ubx_noise", "J": "ubx_jam"}
+        for src, dst in sdlog2.items():
+            if src in gps and dst not in gps:
+                gps[dst] = gps[src]
+    elif not gpa_parts:
         # before GPA (2016), u-blox receivers' accuracies came as UBX3, logged with each fix: joined as GPA's
         ubx3 = {"hAcc": "gpa_HAcc", "vAcc": "gpa_VAcc", "sAcc": "gpa_SAcc"}
         gps = _join_receiver_message(log, gps, "UBX3", UBX3_FIELDS, ubx3, UBX3_MAX_AGE_US)
@@ -257,6 +274,9 @@ def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: d
     ):
         if src in gps:
             cols[col] = gps[src].to_numpy(float)
+    if "SNR" in gps and "GPSTime" in gps:  # PX4 sdlog2: the receiver's mean C/N0, 0 when it reports none
+        snr = gps["SNR"].to_numpy(float)
+        cols["cn0_mean_dbhz"] = np.where(snr > 0, snr, np.nan)
     if "GWk" in gps and "GMS" in gps:
         cols["time_offset_s"] = _time_offsets(gps)
         meta |= log_clock("TimeUS, the autopilot's boot clock", True)
@@ -311,7 +331,13 @@ def _imu(
 ) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
     """Every IMU instance (primary first) with the ATT attitude as its quaternion columns."""
     parts: dict[str, Columns] = {}
-    for name in ("IMU", "IMU2", "IMU3"):
+    label = _label(log)
+    if log.sdlog2:  # PX4 numbers its IMU messages IMU, IMU1, IMU2
+        for name, iid in (("IMU", "IMU[0]"), ("IMU1", "IMU[1]"), ("IMU2", "IMU[2]")):
+            cols = log.columns(name, IMU_FIELDS)
+            if cols is not None:
+                parts[iid] = cols
+    for name in () if log.sdlog2 else ("IMU", "IMU2", "IMU3"):
         cols = log.columns(name, IMU_FIELDS)
         if cols is None:
             continue
@@ -326,11 +352,13 @@ def _imu(
     ids = sorted(parts)
     first = primary if primary in parts else ids[0]
     if primary and primary not in parts:
-        skipped.append(Skipped("<ardupilot>", f"--topic imu={primary} is not in the log (IMUs {ids})", 1))
+        skipped.append(Skipped(f"<{label}>", f"--topic imu={primary} is not in the log (IMUs {ids})", 1))
     ids = [first, *[i for i in ids if i != first]]
     meta["imu.primary"] = (
         f"{first} (named with --topic imu=)"
         if primary == first
+        else f"{first} (PX4's first IMU)"
+        if log.sdlog2
         else f"{first} (ArduPilot's first IMU, primary while healthy)"
     )
     att = log.columns("ATT", ATT_FIELDS)
@@ -357,7 +385,7 @@ def _imu(
                 }
             )
         )
-        streams.append(StreamInfo("imu", iid, "IMU", "ardupilot/IMU", len(t_us), body_frame="FRD"))
+        streams.append(StreamInfo("imu", iid, "IMU", f"{label}/IMU", len(t_us), body_frame="FRD"))
     return pd.concat(frames, ignore_index=True), streams
 
 
@@ -489,9 +517,35 @@ def _raw_observations(
     return rows, [StreamInfo("observations", "GPS[0]", "GRXH/GRXS", "ardupilot/GRXS (u-blox RXM-RAWX)", epochs)], nav
 
 
+def _label(log: DataFlash) -> str:
+    """The format the log is in, as streams and the table name it: `px4_sdlog2` or `ardupilot`."""
+    return "px4_sdlog2" if log.sdlog2 else "ardupilot"
+
+
+def _sdlog2_metadata(log: DataFlash, meta: dict[str, str], skipped: list[Skipped]) -> None:
+    """VER and PARM of a PX4 sdlog2 log; its estimates (GPOS, LPOS) skipped, counted."""
+    meta["log_format"] = "PX4 sdlog2 (.px4log): DataFlash container, PX4's messages timed by TIME.StartTime"
+    fw, arch = log.strings("VER", "FwGit"), log.strings("VER", "Arch")
+    meta["firmware"] = f"PX4 sdlog2, git {fw[0]}" if fw and fw[0] else "PX4 sdlog2 (no VER message)"
+    if arch and arch[0]:
+        meta["board"] = arch[0]
+    parm = log.columns("PARM")
+    if parm is not None and "Name" in parm and "Value" in parm:
+        names = log.strings("PARM", "Name")
+        airframe = [v for n, v in zip(names, parm["Value"], strict=True) if n == "SYS_AUTOSTART"]
+        if airframe:
+            meta["airframe"] = f"SYS_AUTOSTART {int(airframe[-1])}"
+    for name, what in (("GPOS", "global"), ("LPOS", "local")):
+        if log.count(name):
+            reason = f"the autopilot's {what} position estimate (autopilot_ekf holds innovations and test ratios)"
+            skipped.append(Skipped(name, reason, log.count(name)))
+
+
 def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
     for key, note in log.notes.items():
         meta[f"dataflash.{key}"] = note
+    if log.sdlog2:
+        return
     messages = log.strings("MSG", "Message")
     fws = log.strings("VER", "FWS")
     vehicle = next((m for m in messages if m.startswith("Ardu") or (" V" in m[:20] and m.startswith("Ardu"))), "")
@@ -512,6 +566,7 @@ def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
 def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
     log = open_dataflash(path)
+    label = _label(log)
     skipped: list[Skipped] = []
     meta: dict[str, str] = {}
     gps = gps_rows(log, skipped)
@@ -524,11 +579,10 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     if gps is not None:
         fixes = gps_fixes(gps, offset_ns, skipped, meta)
         frames["fixes"] = fixes.drop(columns=["msg", "ofs"])
+        source = "px4_sdlog2/GPS" if log.sdlog2 else "ardupilot/GPS+GPA"
         for rid in dict.fromkeys(gps["inst"]):
             name = f"GPS[{rid}]"
-            streams.append(
-                StreamInfo("fix", name, "GPS", "ardupilot/GPS+GPA", int((fixes["receiver_id"] == name).sum()))
-            )
+            streams.append(StreamInfo("fix", name, "GPS", source, int((fixes["receiver_id"] == name).sum())))
     status = ubx1_reports(log, offset_ns)
     if status is not None:
         frames["receiver_status"] = status.drop(columns="ofs")
@@ -561,14 +615,17 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     if log.count("UBX2"):
         skipped.append(Skipped("UBX2", "u-blox I/Q imbalance (no schema column)", log.count("UBX2")))
     _metadata(log, meta)
+    if log.sdlog2:
+        _sdlog2_metadata(log, meta, skipped)
     unknown = sorted(set(topics or {}) - {"imu", "nav"})
     if unknown:
         skipped.append(
-            Skipped("<ardupilot>", f"--topic ignored for DataFlash logs except imu=, nav= ({unknown})", len(unknown))
+            Skipped(f"<{label}>", f"--topic ignored for DataFlash logs except imu=, nav= ({unknown})", len(unknown))
         )
     if not frames:
-        raise ReaderError(path, f"no GPS, IMU or EKF message in this DataFlash log (messages: {sorted(log.names())})")
-    table = build_table(path, "ardupilot", reference, frames, streams, [*log.skipped, *skipped], metadata=meta)
+        what = "PX4 sdlog2" if log.sdlog2 else "DataFlash"
+        raise ReaderError(path, f"no GPS, IMU or EKF message in this {what} log (messages: {sorted(log.names())})")
+    table = build_table(path, label, reference, frames, streams, [*log.skipped, *skipped], metadata=meta)
     if nav is not None:
         table.ephemerides = nav.ephemerides
         table.streams.append(nav_stream(nav, table.t0_ns))
@@ -577,11 +634,36 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     return table
 
 
+# (message, first columns) only PX4's sdlog2 defines, in FMTs near the start of its log (IMU is the third);
+# ArduPilot's IMU has GyrX, its TIME none, and its GPSTime is a CAM field
+SDLOG2_FMTS = ((b"IMU", b"AccX,AccY,AccZ,GyroX"), (b"GPS", b"GPSTime,"), (b"TIME", b"StartTime"))
+FMT_BYTES = 89  # A3 95 80, type, length, name[4], format[16], columns[64]
+
+
+def _is_sdlog2(path: Path, head: bytes) -> bool:
+    if not is_dataflash(head):
+        return False
+    pos = head.find(b"\xa3\x95\x80")
+    while 0 <= pos <= len(head) - FMT_BYTES:
+        name, columns = head[pos + 5 : pos + 9].rstrip(b"\0"), head[pos + 25 : pos + FMT_BYTES]
+        if any(name == n and columns.startswith(c) for n, c in SDLOG2_FMTS):
+            return True
+        pos = head.find(b"\xa3\x95\x80", pos + 3)
+    return False
+
+
 def _is_dataflash(path: Path, head: bytes) -> bool:
-    return is_dataflash(head)
+    return is_dataflash(head) and not _is_sdlog2(path, head)
 
 
 FORMATS = (
+    ReaderFormat(
+        "px4_sdlog2",
+        "PX4 sdlog2 log (.px4log, PX4 2013-2017)",
+        read_ardupilot,
+        _is_sdlog2,
+        rewrite="spooflens.writers.dataflash_rewrite:rewrite_dataflash",
+    ),
     ReaderFormat(
         "ardupilot",
         "ArduPilot DataFlash log (.bin)",

@@ -44,6 +44,12 @@ class DataFlash:
     notes: dict[str, str] = field(default_factory=dict)  # how a revision's fields were read, for the metadata
     on_receiver_clock: set[str] = field(default_factory=set)  # GPS messages timed by their own time of week
 
+    @property
+    def sdlog2(self) -> bool:
+        """A PX4 sdlog2 log (`.px4log`): the same container, PX4's messages, timed by `TIME.StartTime`."""
+        t = self.reader.name_to_id.get("TIME")
+        return t is not None and "StartTime" in self.reader.formats[t].columns
+
     def names(self) -> set[str]:
         return {n for n, t in self.reader.name_to_id.items() if self.reader.counts[t] > 0}
 
@@ -131,13 +137,16 @@ class DataFlash:
                 # dividing by 100 or 1e7 rounds like pymavlink (and like the autopilot's own tools)
                 values = values.astype(np.float64) / round(1.0 / scale[col])
             logged[col] = values
-        cols, timed = with_todays_names(logged)
+        sdlog2 = self.sdlog2
+        cols, timed = with_todays_names(logged, sdlog2)
         if not timed and len(ofs):
             board = self.board_time_before(ofs, exclude=name)
             if board is not None:
                 cols["TimeUS"] = board
                 self.notes[f"{name}.TimeUS"] = (
-                    "no boot time in this revision's message: the boot time of the message logged before each"
+                    "PX4 sdlog2: the StartTime of the TIME message logged before each"
+                    if sdlog2
+                    else "no boot time in this revision's message: the boot time of the message logged before each"
                 )
             elif "GMS" in cols:  # nothing in the log has a boot clock: the receiver's time of week is the clock
                 cols["TimeUS"] = cols["GMS"].astype(np.int64) * 1000
@@ -154,11 +163,12 @@ class DataFlash:
     def board_time_before(self, ofs: NDArray[np.int64], exclude: str) -> NDArray[np.int64] | None:
         """Boot time (us) of the timed message written last before each offset in `ofs`: the clock of
         messages that carry none (a 2013 GPS message), within the logging loop's period. The timed type
-        logged most often is the reference (the IMU in every revision)."""
+        logged most often is the reference (the IMU in every revision; TIME, the only timed one, in sdlog2)."""
+        clocks = {"TimeUS", "TimeMS", "StartTime"}
         timed = [
             n
             for n in self.names()
-            if n != exclude and {"TimeUS", "TimeMS"} & set(self.reader.formats[self.reader.name_to_id[n]].columns)
+            if n != exclude and clocks & set(self.reader.formats[self.reader.name_to_id[n]].columns)
         ]
         for ref in sorted(timed, key=self.count, reverse=True):
             cols = self.columns(ref)
