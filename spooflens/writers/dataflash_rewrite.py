@@ -18,6 +18,11 @@ The raw measurements the autopilot logs (GRXS, u-blox RXM-RAWX) get the attacked
 Doppler (doMes) and C/N0 (cno); a measurement the attack removed (a satellite the jammer lost) gets trk
 bit 0 clear, pseudorange not valid, as the receiver marks one it cannot use; the reader drops it.
 
+A PX4 sdlog2 log (`.px4log`) is patched the same way through the names its fields had
+(`readers.dataflash_eras.LOGGED_NAMES`): GPS Lat/Lon/Alt, VelN/VelE/VelD and Cog (radians), Fix, nSat,
+and EPH/EPV (the accuracies it carries itself, joined as GPA's); a moved receiver time moves GPSTime
+(UTC us) by the same amount, a GPSTime of 0 (no time yet) stays 0.
+
 Messages keep their length and place, so pymavlink and every other DataFlash tool read the copy as they
 read the original. The autopilot's own EKF messages (XKF*) are left as logged: the copy shows what the
 receiver was made to report, not what the autopilot would have done with it.
@@ -50,6 +55,7 @@ _PACK = {
     "c": ("<h", 100.0),
     "C": ("<H", 100.0),
     "f": ("<f", 1.0),
+    "Q": ("<Q", 1.0),
     "d": ("<d", 1.0),
     "b": ("<b", 1.0),
     "B": ("<B", 1.0),
@@ -123,6 +129,10 @@ class _Patcher:
             self._writers[(name, column)] = _field_writer(self.log, name, column)
         return self._writers[(name, column)]
 
+    def has(self, ofs: int, column: str) -> bool:
+        """Whether the message at `ofs` has the field (today's name or this revision's)."""
+        return self._writer(self.name_at(ofs), column) is not None
+
     def read(self, ofs: int, column: str) -> float:
         writer = self._writer(self.name_at(ofs), column)
         if writer is None:
@@ -181,6 +191,8 @@ def _gps_values(patcher: _Patcher, r: Mapping[str, Any], velocities: bool) -> di
     velocity_moved = any(moved(r[c], r[f"{c}_0"]) for c in ("vel_e_mps", "vel_n_mps", "vel_u_mps"))
     if velocities and velocity_moved and math.isfinite(ve) and math.isfinite(vn):
         values |= {"Spd": math.hypot(ve, vn), "GCrs": math.degrees(math.atan2(ve, vn)) % 360.0}
+        # PX4 sdlog2's GPS logs the velocity NED and the course in radians (no such fields in ArduPilot's)
+        values |= {"VelN": vn, "VelE": ve, "Cog": math.atan2(ve, vn)}
         if math.isfinite(vu):  # unknown before VZ was logged (2014)
             values["VZ"] = -vu
     for column, field in GPS_INDICATORS.items():
@@ -198,6 +210,10 @@ def _write_gps(patcher: _Patcher, plan: pd.DataFrame, velocities: bool) -> None:
         values = _gps_values(patcher, r, velocities)
         if i in times.index:  # the spoofer's time: GPS week and ms of week moved together
             values |= {"GWk": float(times.at[i, "GWk"]), "GMS": float(times.at[i, "GMS"])}
+            if patcher.has(int(r["ofs"]), "GPSTime"):  # PX4 sdlog2: UTC us since 1970, 0 without time
+                utc_us = patcher.read(int(r["ofs"]), "GPSTime")
+                shift_us = round(float(r["shift_s"]) * 1000) * 1000
+                values["GPSTime"] = utc_us + shift_us if utc_us > 0 else 0.0
         patcher.put(int(r["ofs"]), values)
 
 
