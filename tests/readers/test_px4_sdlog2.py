@@ -134,3 +134,30 @@ def test_inspect_and_analyze_a_clean_flight(tmp_path: Path, capsys: pytest.Captu
     result = json.loads(summary.read_text())
     assert not result["verdict"]["spoofed"], result["verdict"]["headline"]
     assert result["format"] == "px4_sdlog2"
+
+
+def test_inject_patches_the_gps_messages_through_their_sdlog2_fields(tmp_path: Path) -> None:
+    """ramp with a consistent velocity (vel=1): Lat/Lon and VelN/VelE/Cog of PX4's GPS are rewritten, every
+    byte outside the GPS messages is the original's, and the copy reads back as px4_sdlog2."""
+    flight = write_sdlog2(tmp_path / "f.px4log", seconds=20)
+    out = tmp_path / "spoofed.px4log"
+    assert main(["inject", str(flight.path), "--attack", "ramp:rate=2,axes=n,vel=1,start=5", "-o", str(out)]) == 0
+    assert sniff_format(out) == "px4_sdlog2"
+    a, b = read_log(flight.path), read_log(out)
+    assert len(a.fixes) == len(b.fixes)
+    t = a.fixes["t_s"].to_numpy()
+    north = (b.fixes["lat_deg"] - a.fixes["lat_deg"]).to_numpy() * np.radians(1) * 6_367_000
+    np.testing.assert_allclose(north[t <= 5], 0.0, atol=0.02)
+    np.testing.assert_allclose(north[t > 6], 2.0 * (t[t > 6] - 5), rtol=0.01, atol=0.03)
+    np.testing.assert_allclose(b.fixes["lon_deg"], a.fixes["lon_deg"], atol=1e-7)
+    np.testing.assert_allclose(b.fixes["vel_n_mps"].to_numpy()[t > 6], SPEED + 2.0, atol=1e-4)
+    np.testing.assert_allclose(b.fixes["t_s"], a.fixes["t_s"])
+    src, dst = flight.path.read_bytes(), out.read_bytes()
+    assert len(src) == len(dst)
+    from readers.dataflash import open_dataflash
+
+    log = open_dataflash(flight.path)
+    gps = log.offsets("GPS")
+    diff = np.flatnonzero(np.frombuffer(src, np.uint8) != np.frombuffer(dst, np.uint8))
+    k = np.searchsorted(gps, diff, side="right") - 1
+    assert len(diff) and np.all(diff - gps[k] < log.reader.formats[log.reader.name_to_id["GPS"]].len)
