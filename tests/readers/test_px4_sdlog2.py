@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sdlog2_writer import FW_GIT, PITCH, ROLL, SPEED, G, write_sdlog2
+from sdlog2_writer import FW_GIT, IMU, NEW, PITCH, ROLL, SPEED, TIME, G, write_sdlog2
 
 from readers import read_log, sniff_format
 from readers.ardupilot import attitude_quaternion
+from readers.dataflash import open_dataflash
 from spooflens.cli import main
 from spooflens.epoch_table import GPS_EPOCH_UNIX_NS
 from spooflens.schema import FixType
@@ -85,8 +86,6 @@ def test_imu_units_attitude_from_radians_and_metadata(tmp_path: Path) -> None:
 
 def test_imu_gyro_is_rad_per_s(tmp_path: Path) -> None:
     """A gyro rate written in rad/s reads back unscaled (ArduPilot's GyrX is rad/s too)."""
-    from sdlog2_writer import IMU, NEW, TIME
-
     msgs = [f.fmt_message() for f in NEW]
     for k in range(50):
         msgs.append(TIME.message(StartTime=1_000_000 + 10_000 * k))
@@ -154,8 +153,6 @@ def test_inject_patches_the_gps_messages_through_their_sdlog2_fields(tmp_path: P
     np.testing.assert_allclose(b.fixes["t_s"], a.fixes["t_s"])
     src, dst = flight.path.read_bytes(), out.read_bytes()
     assert len(src) == len(dst)
-    from readers.dataflash import open_dataflash
-
     log = open_dataflash(flight.path)
     gps = log.offsets("GPS")
     diff = np.flatnonzero(np.frombuffer(src, np.uint8) != np.frombuffer(dst, np.uint8))
