@@ -258,8 +258,7 @@ def _refine_yaw_with_bias(
         return float(r @ r), coef, (y - design @ coef).reshape(n, 3)
 
     yaws = np.radians(np.arange(-180.0, 180.0, 1.0))
-    costs = np.array([fit(_rotate_yaw(C0, yaw))[0] for yaw in yaws])
-    best = int(np.argmin(costs))
+    best = int(np.argmin(_yaw_grid_costs(C0, base, B, D, dH, target, prior_rows, yaws)))
     C = _rotate_yaw(C0, yaws[best])
     step = np.radians(0.5)
     for _ in range(3):
@@ -315,6 +314,44 @@ def _earth_terms(lat: float, h: float, g: float, tau: FloatArray, P: FloatArray)
 def _yaw_of(C: FloatArray, axis: FloatArray) -> float:
     d = C @ axis
     return float(np.arctan2(d[1], d[0]))
+
+
+def _yaw_grid_costs(
+    C0: FloatArray,
+    base: FloatArray,
+    B: FloatArray,
+    D: FloatArray,
+    dH: FloatArray,
+    target: FloatArray,
+    prior_rows: FloatArray,
+    yaws: FloatArray,
+) -> FloatArray:
+    """The bias model's least-squares misfit with the attitude `Rz(yaw) C0`, for every yaw at once.
+
+    A yaw turns every epoch's residual about the vertical without changing its length, so rotating the
+    targets by -yaw instead leaves one design (that of C0; the biases are in the body frame and keep
+    their priors, and p0, v0 turn with the targets): one factorisation for the whole grid.
+    """
+    n = len(target)
+    design = np.concatenate([base, -np.einsum("ij,njk->nik", C0, B), -np.einsum("ij,njk->nik", C0, D)], axis=2)
+    A = np.vstack([design.reshape(3 * n, 12), prior_rows])
+    c, s = np.cos(yaws), np.sin(yaws)
+    # Rz(-yaw) target_i for every yaw: (n, 3, yaws)
+    turned = np.stack(
+        [
+            c * target[:, :1] + s * target[:, 1:2],
+            -s * target[:, :1] + c * target[:, 1:2],
+            np.repeat(target[:, 2:], len(yaws), 1),
+        ],
+        axis=1,
+    )
+    y = np.vstack(
+        [(turned - (dH @ C0.T)[:, :, None]).reshape(3 * n, len(yaws)), np.zeros((len(prior_rows), len(yaws)))]
+    )
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r = A @ coef - y
+    costs: FloatArray = np.einsum("ij,ij->j", r, r)
+    return costs
 
 
 def _rotate_yaw(C: FloatArray, dyaw: float) -> FloatArray:
