@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from readers import ReaderFormat
+from readers import NothingToJudgeError, ReaderFormat
 from readers.ardupilot import attitude_at
 from spooflens.constants import STANDARD_GRAVITY
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
@@ -61,13 +61,10 @@ _FIX = {
     8: FixType.DGNSS,
 }
 GPS_KINDS = ("GPS_RAW_INT", "GPS2_RAW")  # a fix each; the receiver id is the message's name
+IMU_KINDS = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "RAW_IMU")
 WANTED = [
-    "GPS_RAW_INT",
-    "GPS2_RAW",
-    "SCALED_IMU",
-    "SCALED_IMU2",
-    "SCALED_IMU3",
-    "RAW_IMU",
+    *GPS_KINDS,
+    *IMU_KINDS,
     "ATTITUDE",
     "SYSTEM_TIME",
     "HEARTBEAT",
@@ -103,6 +100,7 @@ class Telemetry:
     messages: dict[str, list[tuple[float, int, dict]]]
     bad: int
     offsets: dict[str, list[int]]
+    counts: dict[str, int] = dataclasses.field(default_factory=dict)  # every kind of message met, wanted or not
 
     def of_system(self, system: int) -> Telemetry:
         """Only the messages (and GPS packet offsets) `system` sent."""
@@ -111,6 +109,7 @@ class Telemetry:
             {k: [self.messages[k][i] for i in idx] for k, idx in kept.items()},
             self.bad,
             {k: [v[i] for i in kept.get(k, [])] for k, v in self.offsets.items()},
+            self.counts,
         )
 
 
@@ -123,17 +122,22 @@ def read_telemetry(path: Path) -> Telemetry:
     out: dict[str, list[tuple[float, int, dict]]] = {}
     offsets: dict[str, list[int]] = {k: [] for k in GPS_KINDS}
     bad = 0
+    counts: dict[str, int] = {}
+    wanted = set(WANTED)
     chatter = io.StringIO()
     try:
         with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
             log = mavutil.mavlogfile(str(path), robust_parsing=True)
             while True:
-                m = log.recv_match(type=WANTED)
+                m = log.recv_match()  # every kind, counted: a log of none wanted says what it holds
                 if m is None:
                     break
                 kind = m.get_type()
                 if kind == "BAD_DATA":
                     bad += 1
+                    continue
+                counts[kind] = counts.get(kind, 0) + 1
+                if kind not in wanted:
                     continue
                 if kind in offsets:
                     offsets[kind].append(_packet_offset(log, m))
@@ -143,7 +147,7 @@ def read_telemetry(path: Path) -> Telemetry:
         raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
     except Exception as err:  # pymavlink raises its own and struct errors on damaged packets
         raise ReaderError(path, f"not a readable MAVLink telemetry log: {type(err).__name__}: {err}") from err
-    return Telemetry(out, bad, offsets)
+    return Telemetry(out, bad, offsets, counts)
 
 
 def _packet_offset(log: Any, m: Any) -> int:
@@ -158,6 +162,15 @@ def _boot_us(fields: dict) -> int | None:
         return int(fields["time_boot_ms"]) * 1000
     t = int(fields.get("time_usec", 0))
     return t if 0 < t < UNIX_US_MIN else None
+
+
+def _nothing_to_judge(path: Path, counts: Mapping[str, int], why: str, skipped: list[Skipped]) -> NothingToJudgeError:
+    """A sound telemetry log holding nothing a detector reads, named by the messages it does hold."""
+    held = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    listed = ", ".join(f"{kind} x{n}" for kind, n in held[:6])
+    if len(held) > 6:
+        listed += f" and {len(held) - 6} more kinds"
+    return NothingToJudgeError(path, f"MAVLink telemetry {why} ({listed})", "tlog", skipped)
 
 
 def vehicle_of(path: Path, msgs: Mapping[str, list[tuple[float, int, dict]]]) -> int:
@@ -261,7 +274,13 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
         skipped.append(
             Skipped("<tlog>", "bytes that are no valid MAVLink packet (bad CRC, cut, garbage)", telemetry.bad, "lost")
         )
-    vehicle = vehicle_of(path, msgs)
+    try:
+        vehicle = vehicle_of(path, msgs)
+    except ReaderError:
+        if telemetry.counts and not telemetry.bad:  # a ground station's own telemetry, its link to no vehicle
+            why = "without a vehicle's heartbeat, GPS or IMU"
+            raise _nothing_to_judge(path, telemetry.counts, why, skipped) from None
+        raise
     others = sum(1 for v in msgs.values() for _, s, _ in v if s != vehicle)
     if others:
         skipped.append(Skipped("<tlog>", f"messages of other systems than vehicle {vehicle}", others))
@@ -269,6 +288,10 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     beats = [f for _, _, f in msgs.get("HEARTBEAT", []) if f.get("type") != MAV_TYPE_GCS]
     ardupilot = any(f.get("autopilot") == MAV_AUTOPILOT_ARDUPILOTMEGA for f in beats)
     meta["vehicle"] = f"system {vehicle}" + (" (ArduPilot)" if ardupilot else "")
+    if not any(kind in msgs for kind in (*GPS_KINDS, *IMU_KINDS)) and not telemetry.bad:
+        # a vehicle that streamed status alone (a link at its slowest rates, a bench session): nothing to time
+        # or judge, though the log is sound
+        raise _nothing_to_judge(path, telemetry.counts, "without a GPS or IMU message", skipped)
     clock = tlog_clock(path, msgs)
     offset_ns, stamp_ns = clock.offset_ns, clock.stamp_ns
     meta["clock"] = clock.description
@@ -294,7 +317,7 @@ def read_tlog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
             )
     if progress:
         progress(1, 2)
-    imu_kinds = [k for k in ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3") if msgs.get(k)]
+    imu_kinds = [k for k in IMU_KINDS[:3] if msgs.get(k)]
     if not imu_kinds and msgs.get("RAW_IMU"):
         if ardupilot:
             imu_kinds = ["RAW_IMU"]

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from pyulog import ULog
 
-from readers import ReaderFormat
+from readers import NothingToJudgeError, ReaderFormat
 from readers.px4 import (
     ATTITUDE_TOPIC,
     BARO_TOPIC,
@@ -197,8 +197,12 @@ def read_ulog(path: Path, topics: Mapping[str, str] | None = None, progress: Pro
     if progress:
         progress(1, 1)
     if not frames:
-        why = f" ({damage.what})" if damage.what else ""
-        raise ReaderError(path, f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)}) in this ULog{why}")
+        lacking = f"no {IMU_TOPIC} or GPS topic ({', '.join(GPS_TOPICS)})"
+        if damage.what:
+            raise ReaderError(path, f"{lacking} in this ULog ({damage.what})")
+        # sound, and logged with a profile or on a bench that recorded none of them
+        listed = ", ".join(sorted(defined)[:8]) + (f" and {len(defined) - 8} more" if len(defined) > 8 else "")
+        raise NothingToJudgeError(path, f"PX4 ULog with {lacking} (topics: {listed or 'none'})", "ulog", skipped)
     if damage.what:
         skipped += _damage_losses(damage, frames, offset_us)
     return build_table(path, "ulog", reference, frames, streams, skipped, metadata=metadata)
