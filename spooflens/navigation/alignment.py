@@ -257,13 +257,16 @@ def _refine_yaw_with_bias(
         r = A @ coef - np.r_[y, y_prior]
         return float(r @ r), coef, (y - design @ coef).reshape(n, 3)
 
+    def costs(C: FloatArray, turns: list[FloatArray]) -> FloatArray:
+        return _turned_costs(C, base, B, D, dH, target, prior_rows, np.stack(turns))
+
     yaws = np.radians(np.arange(-180.0, 180.0, 1.0))
-    best = int(np.argmin(_yaw_grid_costs(C0, base, B, D, dH, target, prior_rows, yaws)))
+    best = int(np.argmin(costs(C0, [_rotate_yaw(np.eye(3), yaw) for yaw in yaws])))
     C = _rotate_yaw(C0, yaws[best])
     step = np.radians(0.5)
     for _ in range(3):
         for axis in np.eye(3):
-            c_minus, c0, c_plus = (fit(rotvec_to_matrix(axis * d) @ C)[0] for d in (-step, 0.0, step))
+            c_minus, c0, c_plus = costs(C, [rotvec_to_matrix(axis * d) for d in (-step, 0.0, step)])
             curvature = c_plus - 2 * c0 + c_minus
             if curvature > 0:
                 d = float(np.clip(0.5 * step * (c_minus - c_plus) / curvature, -step, step))
@@ -275,15 +278,12 @@ def _refine_yaw_with_bias(
     h = np.radians(1.0)
     axes = np.eye(3) * h
 
-    def c(d: FloatArray) -> float:
-        return fit(rotvec_to_matrix(d) @ C)[0]
-
+    pairs = [(i, j) for i in range(3) for j in range(i, 3)]
+    signs = ((1, 1), (1, -1), (-1, 1), (-1, -1))  # the four corners of each second difference
+    corners = costs(C, [rotvec_to_matrix(a * axes[i] + b * axes[j]) for i, j in pairs for a, b in signs])
     hess = np.empty((3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            hess[i, j] = hess[j, i] = (
-                c(axes[i] + axes[j]) - c(axes[i] - axes[j]) - c(axes[j] - axes[i]) + c(-axes[i] - axes[j])
-            ) / (4 * h * h)
+    for (i, j), (pp, pm, mp, mm) in zip(pairs, corners.reshape(len(pairs), 4), strict=True):
+        hess[i, j] = hess[j, i] = (pp - pm - mp + mm) / (4 * h * h)
     noise_var = cost / max(3 * n - 12, 1)
     try:
         cov = 2 * noise_var * np.linalg.inv(hess)
@@ -316,42 +316,32 @@ def _yaw_of(C: FloatArray, axis: FloatArray) -> float:
     return float(np.arctan2(d[1], d[0]))
 
 
-def _yaw_grid_costs(
-    C0: FloatArray,
+def _turned_costs(
+    C: FloatArray,
     base: FloatArray,
     B: FloatArray,
     D: FloatArray,
     dH: FloatArray,
     target: FloatArray,
     prior_rows: FloatArray,
-    yaws: FloatArray,
+    turns: FloatArray,
 ) -> FloatArray:
-    """The bias model's least-squares misfit with the attitude `Rz(yaw) C0`, for every yaw at once.
+    """The bias model's least-squares misfit with the attitude `R C`, for every rotation R of `turns`.
 
-    A yaw turns every epoch's residual about the vertical without changing its length, so rotating the
-    targets by -yaw instead leaves one design (that of C0; the biases are in the body frame and keep
-    their priors, and p0, v0 turn with the targets): one factorisation for the whole grid.
+    R turns every epoch's residual in the navigation frame without changing its length, so turning the
+    targets by R^T instead leaves one design, that of C (the biases are in the body frame and keep their
+    priors; p0 and v0 turn with the targets): one factorisation for all of them.
     """
     n = len(target)
-    design = np.concatenate([base, -np.einsum("ij,njk->nik", C0, B), -np.einsum("ij,njk->nik", C0, D)], axis=2)
+    design = np.concatenate([base, -np.einsum("ij,njk->nik", C, B), -np.einsum("ij,njk->nik", C, D)], axis=2)
     A = np.vstack([design.reshape(3 * n, 12), prior_rows])
-    c, s = np.cos(yaws), np.sin(yaws)
-    # Rz(-yaw) target_i for every yaw: (n, 3, yaws)
-    turned = np.stack(
-        [
-            c * target[:, :1] + s * target[:, 1:2],
-            -s * target[:, :1] + c * target[:, 1:2],
-            np.repeat(target[:, 2:], len(yaws), 1),
-        ],
-        axis=1,
-    )
-    y = np.vstack(
-        [(turned - (dH @ C0.T)[:, :, None]).reshape(3 * n, len(yaws)), np.zeros((len(prior_rows), len(yaws)))]
-    )
+    turned = np.einsum("mji,nj->nim", turns, target)  # R^T target_i for every R: (n, 3, len(turns))
+    y = (turned - (dH @ C.T)[:, :, None]).reshape(3 * n, len(turns))
+    y = np.vstack([y, np.zeros((len(prior_rows), len(turns)))])
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     r = A @ coef - y
-    costs: FloatArray = np.einsum("ij,ij->j", r, r)
-    return costs
+    out: FloatArray = np.einsum("ij,ij->j", r, r)
+    return out
 
 
 def _rotate_yaw(C: FloatArray, dyaw: float) -> FloatArray:
