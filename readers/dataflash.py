@@ -115,9 +115,10 @@ class DataFlash:
             raise ValueError(f"FMT of {name} says {fmt.len - 3} bytes, its format string {dt.itemsize}")
         return dt, scale
 
-    def _decode(self, name: str) -> Columns | None:
-        if self.count(name) == 0:
-            return None
+    def logged(self, name: str) -> tuple[NDArray[np.int64], Columns] | None:
+        """(offset of each row, its fields as logged: the FMT's column names, scaled fields in the units the
+        log shows, e.g. degrees for `L`) of every readable row of message `name`, in file order; None when
+        its format is unusable (counted). The only part of the decoding that depends on the container."""
         try:
             dt, scale = self.dtype(name)
         except (KeyError, ValueError) as err:
@@ -137,6 +138,15 @@ class DataFlash:
                 # dividing by 100 or 1e7 rounds like pymavlink (and like the autopilot's own tools)
                 values = values.astype(np.float64) / round(1.0 / scale[col])
             logged[col] = values
+        return ofs, logged
+
+    def _decode(self, name: str) -> Columns | None:
+        if self.count(name) == 0:
+            return None
+        found = self.logged(name)
+        if found is None:
+            return None
+        ofs, logged = found
         sdlog2 = self.sdlog2
         cols, timed = with_todays_names(logged, sdlog2)
         if not timed and len(ofs):
