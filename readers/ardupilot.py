@@ -56,7 +56,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
-from readers.dataflash import Columns, DataFlash, is_dataflash, open_dataflash
+from readers.dataflash import Columns, DataFlash, is_dataflash
+from readers.dataflash_text import TextDataFlash, is_dataflash_text, open_any_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
 from readers.rinex import NavFile
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
@@ -441,7 +442,7 @@ def _ekf(log: DataFlash, offset_ns: int) -> tuple[pd.DataFrame | None, list[Stre
         frames.append(df.drop(columns=["TimeUS", "core"]))
         for src in dict.fromkeys(df["source"]):
             n = int((df["source"] == src).sum())
-            streams.append(StreamInfo("autopilot_ekf", src, f"{innov}/{ratio}", f"ardupilot/{innov}+{ratio}", n))
+            streams.append(StreamInfo("autopilot_ekf", src, f"{innov}/{ratio}", f"{_label(log)}/{innov}+{ratio}", n))
     if not frames:
         return None, []
     return pd.concat(frames, ignore_index=True), streams
@@ -514,12 +515,17 @@ def _raw_observations(
     elif len(rows):
         skipped.append(Skipped("GPS[0]", "raw observations on the boot clock: no satellite states", len(rows)))
     epochs = int(rows["t_ns"].nunique())
-    return rows, [StreamInfo("observations", "GPS[0]", "GRXH/GRXS", "ardupilot/GRXS (u-blox RXM-RAWX)", epochs)], nav
+    return (
+        rows,
+        [StreamInfo("observations", "GPS[0]", "GRXH/GRXS", f"{_label(log)}/GRXS (u-blox RXM-RAWX)", epochs)],
+        nav,
+    )
 
 
 def _label(log: DataFlash) -> str:
-    """The format the log is in, as streams and the table name it: `px4_sdlog2` or `ardupilot`."""
-    return "px4_sdlog2" if log.sdlog2 else "ardupilot"
+    """The format the log is in, as streams and the table name it: `px4_sdlog2`, `ardupilot` or
+    `ardupilot_text` (a DataFlash log saved as text)."""
+    return "px4_sdlog2" if log.sdlog2 else "ardupilot_text" if isinstance(log, TextDataFlash) else "ardupilot"
 
 
 def _sdlog2_metadata(log: DataFlash, meta: dict[str, str], skipped: list[Skipped]) -> None:
@@ -565,7 +571,7 @@ def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
 
 def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress: Progress | None = None) -> EpochTable:
     path = Path(path)
-    log = open_dataflash(path)
+    log = open_any_dataflash(path)
     label = _label(log)
     skipped: list[Skipped] = []
     meta: dict[str, str] = {}
@@ -579,7 +585,7 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     if gps is not None:
         fixes = gps_fixes(gps, offset_ns, skipped, meta)
         frames["fixes"] = fixes.drop(columns=["msg", "ofs"])
-        source = "px4_sdlog2/GPS" if log.sdlog2 else "ardupilot/GPS+GPA"
+        source = "px4_sdlog2/GPS" if log.sdlog2 else f"{label}/GPS+GPA"
         for rid in dict.fromkeys(gps["inst"]):
             name = f"GPS[{rid}]"
             streams.append(StreamInfo("fix", name, "GPS", source, int((fixes["receiver_id"] == name).sum())))
@@ -588,7 +594,7 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
         frames["receiver_status"] = status.drop(columns="ofs")
         for rid in dict.fromkeys(status["receiver_id"]):
             n = int((status["receiver_id"] == rid).sum())
-            streams.append(StreamInfo("receiver_status", rid, "UBX1", "ardupilot/UBX1 (u-blox MON-HW)", n))
+            streams.append(StreamInfo("receiver_status", rid, "UBX1", f"{label}/UBX1 (u-blox MON-HW)", n))
     if progress:
         progress(1, 4)
     primary = (topics or {}).get("imu")
@@ -615,6 +621,10 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
     if log.count("UBX2"):
         skipped.append(Skipped("UBX2", "u-blox I/Q imbalance (no schema column)", log.count("UBX2")))
     _metadata(log, meta)
+    if isinstance(log, TextDataFlash):
+        meta["log_format"] = (
+            f"ArduPilot DataFlash saved as text (Mission Planner / APM Planner), '{log.delimiter}' delimited"
+        )
     if log.sdlog2:
         _sdlog2_metadata(log, meta, skipped)
     unknown = sorted(set(topics or {}) - {"imu", "nav"})
@@ -656,6 +666,10 @@ def _is_dataflash(path: Path, head: bytes) -> bool:
     return is_dataflash(head) and not _is_sdlog2(path, head)
 
 
+def _is_dataflash_text(path: Path, head: bytes) -> bool:
+    return is_dataflash_text(head)
+
+
 FORMATS = (
     ReaderFormat(
         "px4_sdlog2",
@@ -669,6 +683,13 @@ FORMATS = (
         "ArduPilot DataFlash log (.bin)",
         read_ardupilot,
         _is_dataflash,
+        rewrite="spooflens.writers.dataflash_rewrite:rewrite_dataflash",
+    ),
+    ReaderFormat(
+        "ardupilot_text",
+        "ArduPilot DataFlash text log (.log, Mission Planner / APM Planner)",
+        read_ardupilot,
+        _is_dataflash_text,
         rewrite="spooflens.writers.dataflash_rewrite:rewrite_dataflash",
     ),
 )
