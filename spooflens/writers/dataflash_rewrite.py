@@ -24,8 +24,13 @@ and EPH/EPV (the accuracies it carries itself, joined as GPA's); a moved receive
 (UTC us) by the same amount, a GPSTime of 0 (no time yet) stays 0.
 
 Messages keep their length and place, so pymavlink and every other DataFlash tool read the copy as they
-read the original. The autopilot's own EKF messages (XKF*) are left as logged: the copy shows what the
-receiver was made to report, not what the autopilot would have done with it.
+read the original. A text log (Mission Planner `.log`) gets the same fields rewritten in the same lines:
+only the rewritten values' text changes (integers as integers, scaled fields to their resolution, 0.01 or
+1e-7, floats as the shortest text of the same float); every other line, and every other field of the
+line with its spacing, is copied byte for byte.
+
+The autopilot's own EKF messages (XKF*) are left as logged: the copy shows what the receiver was made to
+report, not what the autopilot would have done with it.
 """
 
 from __future__ import annotations
@@ -41,8 +46,9 @@ import numpy as np
 import pandas as pd
 
 from readers.ardupilot import WEEK_MS, gps_clock, gps_fixes, gps_rows, grxs_rows, ubx1_reports
-from readers.dataflash import DataFlash, open_dataflash
+from readers.dataflash import DataFlash
 from readers.dataflash_eras import logged_name
+from readers.dataflash_text import TextDataFlash, open_any_dataflash
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 from spooflens.writers.fix_changes import fix_changes, moved
@@ -154,6 +160,93 @@ class _Patcher:
         if written:
             self.edited[name] += 1
 
+    def output(self) -> bytes:
+        return bytes(self.data)
+
+
+def _text_value(letter: str, value: float) -> str:
+    """`value` as a text log writes a field of format letter `letter` (the binary log's value, scaled)."""
+    code, scale = _PACK[letter]
+    if code[1] in "fd":
+        if math.isnan(value):
+            return "nan"
+        number = np.float32(value) if code[1] == "f" else np.float64(value)
+        return np.format_float_positional(number, trim="-")
+    stored = _stored(code, value * scale)
+    if scale == 1.0:
+        return str(stored)
+    decimals = round(math.log10(scale))
+    return f"{stored / scale:.{decimals}f}"
+
+
+class _TextPatcher:
+    """A text DataFlash log with fields of its lines rewritten: only the rewritten values' text changes."""
+
+    def __init__(self, log: TextDataFlash) -> None:
+        self.log = log
+        self.edited: Counter[str] = Counter()  # message name -> lines rewritten
+        self._lines: dict[int, list[bytes]] = {}  # line offset -> its comma-separated parts, as rewritten
+        self._ends: dict[int, int] = {}  # line offset -> where its text ends (before CR LF)
+
+    def _parts(self, ofs: int) -> list[bytes]:
+        if ofs not in self._lines:
+            data = self.log.data
+            end = data.find(b"\n", ofs)
+            end = len(data) if end < 0 else end
+            if end > ofs and data[end - 1 : end] == b"\r":
+                end -= 1
+            self._ends[ofs] = end
+            self._lines[ofs] = data[ofs:end].split(b",")
+        return self._lines[ofs]
+
+    def name_at(self, ofs: int) -> str:
+        return self._parts(ofs)[0].strip().decode("ascii")
+
+    def _field(self, name: str, column: str) -> tuple[int, str] | None:
+        """(index among the line's parts, format letter) of one column (today's name) of a message type."""
+        fmt = self.log.reader.formats[self.log.reader.name_to_id[name]]
+        columns = list(fmt.columns)
+        column = logged_name(columns, column)
+        if column not in columns:
+            return None
+        letter = fmt.format[columns.index(column)]
+        if letter not in _PACK:
+            raise WriterError(f"{self.log.path}: {name}.{column} has format letter {letter!r}; cannot write it back")
+        return 1 + columns.index(column), letter
+
+    def has(self, ofs: int, column: str) -> bool:
+        return self._field(self.name_at(ofs), column) is not None
+
+    def read(self, ofs: int, column: str) -> float:
+        field = self._field(self.name_at(ofs), column)
+        if field is None:
+            raise WriterError(f"{self.log.path}: {self.name_at(ofs)} at byte {ofs} has no {column}")
+        return float(self._parts(ofs)[field[0]])
+
+    def put(self, ofs: int, values: Mapping[str, float]) -> None:
+        parts = self._parts(ofs)
+        name = self.name_at(ofs)
+        written = False
+        for column, value in values.items():
+            field = self._field(name, column)
+            if field is None:
+                continue
+            i, letter = field
+            old = parts[i]
+            space = old[: len(old) - len(old.lstrip())]  # the delimiter's space, as the line had it
+            parts[i] = space + _text_value(letter, value).encode("ascii")
+            written = True
+        if written:
+            self.edited[name] += 1
+
+    def output(self) -> bytes:
+        data, out, pos = self.log.data, [], 0
+        for ofs in sorted(self._lines):
+            out += [data[pos:ofs], b",".join(self._lines[ofs])]
+            pos = self._ends[ofs]
+        out.append(data[pos:])
+        return b"".join(out)
+
 
 def _plan(gps: pd.DataFrame, table: EpochTable, spoofed: EpochTable) -> pd.DataFrame:
     """One row per GPS message of a fix of the table: where it and the messages joined to it sit, its values
@@ -179,7 +272,10 @@ def _receiver_time(plan: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"GWk": gps_ms // WEEK_MS, "GMS": gps_ms % WEEK_MS}, index=logged.index)
 
 
-def _gps_values(patcher: _Patcher, r: Mapping[str, Any], velocities: bool) -> dict[str, float]:
+Patcher = _Patcher | _TextPatcher
+
+
+def _gps_values(patcher: Patcher, r: Mapping[str, Any], velocities: bool) -> dict[str, float]:
     """What one kept fix's GPS message gets: what the attack moved of its position, its velocity (if asked)
     and its indicators. An unmoved velocity is left as logged: a stopped receiver's logged course would
     come back as atan2(0, 0)."""
@@ -201,7 +297,7 @@ def _gps_values(patcher: _Patcher, r: Mapping[str, Any], velocities: bool) -> di
     return values
 
 
-def _write_gps(patcher: _Patcher, plan: pd.DataFrame, velocities: bool) -> None:
+def _write_gps(patcher: Patcher, plan: pd.DataFrame, velocities: bool) -> None:
     times = _receiver_time(plan)
     for i, r in zip(plan.index, plan.to_dict("records"), strict=True):
         if r["lost"]:
@@ -228,7 +324,7 @@ def _joined_values(plan: pd.DataFrame, ofs_column: str, columns: list[str]) -> p
     return given.rename(columns={ofs_column: "ofs"})
 
 
-def _write_joined(patcher: _Patcher, plan: pd.DataFrame) -> None:
+def _write_joined(patcher: Patcher, plan: pd.DataFrame) -> None:
     for ofs_column, fields in JOINED.items():
         if ofs_column not in plan:
             continue
@@ -257,7 +353,7 @@ def _report_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoofed: 
     return logged.merge(change, on=["receiver_id", "t_ns", "nth"], how="inner")
 
 
-def _write_reports(patcher: _Patcher, plan: pd.DataFrame) -> None:
+def _write_reports(patcher: Patcher, plan: pd.DataFrame) -> None:
     for r in plan.to_dict("records"):
         values = {field: r[c] for c, field in REPORTED.items() if moved(r[c], r[f"{c}_0"])}
         if values:
@@ -285,7 +381,7 @@ def _measurement_plan(log: DataFlash, gps: pd.DataFrame, table: EpochTable, spoo
     return logged.merge(change, on=["receiver_id", "t_ns", "sv_id", "nth"], how="inner")
 
 
-def _write_measurements(patcher: _Patcher, plan: pd.DataFrame) -> None:
+def _write_measurements(patcher: Patcher, plan: pd.DataFrame) -> None:
     """GRXS: what the attack moved of each pseudorange, Doppler and C/N0; a measurement it removed is
     marked as the receiver marks one it could not use (pseudorange not valid), which the reader drops."""
     for r in plan.to_dict("records"):
@@ -301,21 +397,24 @@ def _write_measurements(patcher: _Patcher, plan: pd.DataFrame) -> None:
 def rewrite_dataflash(src: Path, dst: Path, table: EpochTable, spoofed: EpochTable, velocities: bool) -> str:
     """Write `src` to `dst` with the attacked table's fixes in its GPS messages and the messages joined to
     them; returns the note `inject` prints (what was rewritten)."""
-    log = open_dataflash(Path(src))
+    log = open_any_dataflash(Path(src))
     gps = gps_rows(log, [])
     if gps is None:
         raise WriterError(f"{src}: no GPS message to rewrite")
     plan = _plan(gps, table, spoofed)
-    patcher = _Patcher(log)
+    patcher: Patcher = _TextPatcher(log) if isinstance(log, TextDataFlash) else _Patcher(log)
     _write_gps(patcher, plan, velocities)
     _write_joined(patcher, plan)
     _write_reports(patcher, _report_plan(log, gps, table, spoofed))
     _write_measurements(patcher, _measurement_plan(log, gps, table, spoofed))
-    Path(dst).write_bytes(bytes(patcher.data))
+    Path(dst).write_bytes(patcher.output())
     gps_names = set(plan["msg"])
     n_gps = sum(n for name, n in patcher.edited.items() if name in gps_names)
     others = ", ".join(f"{n} {name}" for name, n in sorted(patcher.edited.items()) if name not in gps_names)
     lost = int(plan["lost"].sum())
     note = f"{n_gps} GPS messages rewritten ({len(spoofed.fixes)} fixes in the table"
     note += f"; {lost} lost: Status 1, no fix)" if lost else ")"
-    return note + (f", {others}" if others else "") + ", every other byte copied"
+    copied = (
+        ", every other line copied byte for byte" if isinstance(log, TextDataFlash) else ", every other byte copied"
+    )
+    return note + (f", {others}" if others else "") + copied
