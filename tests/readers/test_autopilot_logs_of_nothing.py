@@ -1,5 +1,6 @@
 """Sound autopilot logs that hold nothing a detector reads (a ground station's telemetry with no vehicle on
-its link, a vehicle streaming status alone, a ULog logged without sensors or GPS): read, and analysed to
+its link, a vehicle streaming status alone, a ULog logged without sensors or GPS, a DataFlash log of
+a bench session): read, and analysed to
 a NO VERDICT naming what they hold, as sound NMEA and UBX logs of the same kind are; damaged ones are
 still refused."""
 
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dataflash_support import Fmt, write_dataflash
 
 from readers import read_log
 from spooflens.cli import main
@@ -102,3 +104,34 @@ def test_a_damaged_ulog_without_sensors_is_refused(tmp_path: Path, capsys: pytes
     assert main(["inspect", str(log)]) == 2
     err = capsys.readouterr().err
     assert "bench.ulg" in err and "Traceback" not in err
+
+
+BAT = Fmt(129, "BAT", "Qfff", "TimeUS,Volt,Curr,CurrTot")
+MODE = Fmt(130, "MODE", "QMB", "TimeUS,Mode,ModeNum")
+
+
+def _dataflash_of_a_bench_session(path: Path) -> Path:
+    """A DataFlash log of a bench session: battery and mode, no GPS, IMU or EKF message."""
+    messages = [BAT.message(TimeUS=1000 + k, Volt=16.4) for k in range(30)]
+    messages.append(MODE.message(TimeUS=2000))
+    return write_dataflash(path, [BAT, MODE], messages)
+
+
+def test_a_dataflash_log_of_a_bench_session_is_nothing_to_judge(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = _dataflash_of_a_bench_session(tmp_path / "bench.bin")
+    holds = "DataFlash log without a GPS, IMU or EKF message (BAT x30, MODE x1)"
+    assert read_log(log).metadata[HOLDS] == holds
+    assert main(["analyze", str(log), "-o", str(tmp_path / "a.rrd"), "--quiet"]) == 0
+    assert f"NO VERDICT: no GNSS data to judge: {holds}" in capsys.readouterr().out
+
+
+def test_a_damaged_dataflash_log_without_gps_or_imu_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = _dataflash_of_a_bench_session(tmp_path / "bench.bin")
+    log.write_bytes(log.read_bytes()[:-5])  # the last message cut off
+    assert main(["inspect", str(log)]) == 2
+    err = capsys.readouterr().err
+    assert "bench.bin: no GPS, IMU or EKF message in this DataFlash log" in err and "Traceback" not in err
