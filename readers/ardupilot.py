@@ -637,16 +637,14 @@ def read_ardupilot(path: Path, topics: Mapping[str, str] | None = None, progress
         for name in log.names():  # decoded, so that a message cut or unusable among them is counted
             log.columns(name)
         losses = [*log.skipped, *skipped]
-        if any(s.action == "lost" for s in losses) or not log.names():
-            raise ReaderError(path, f"no GPS, IMU or EKF message in this {what} log (messages: {sorted(log.names())})")
-        # sound: a log of parameters and messages alone (a bench session, logging disarmed off)
         held = sorted(((n, log.count(n)) for n in log.names() if n != "FMT"), key=lambda kv: (-kv[1], kv[0]))
+        if any(s.action == "lost" for s in losses) or not held:  # a damaged stretch may have held the GPS
+            raise ReaderError(path, f"no GPS, IMU or EKF message in this {what} log (messages: {sorted(log.names())})")
+        # sound: a log of other messages alone (a bench session's, logging while disarmed)
         listed = ", ".join(f"{n} x{c}" for n, c in held[:6]) + (
             f" and {len(held) - 6} more kinds" if len(held) > 6 else ""
         )
-        raise NothingToJudgeError(
-            path, f"{what} log without a GPS, IMU or EKF message ({listed or 'FMT only'})", label, losses
-        )
+        raise NothingToJudgeError(path, f"{what} log without a GPS, IMU or EKF message ({listed})", label, losses)
     table = build_table(path, label, reference, frames, streams, [*log.skipped, *skipped], metadata=meta)
     if nav is not None:
         table.ephemerides = nav.ephemerides
