@@ -33,6 +33,7 @@ READER_MODULES: tuple[str, ...] = (
     "readers.packed",  # any format packed (after RINEX, which unpacks its own; before text, which a tar holds)
     "readers.ubx",
     "readers.nmea",
+    "readers.gpsd_json",  # after NMEA: a gpspipe -w -r log of mostly NMEA stays NMEA
     "readers.n2k",
     "readers.ardupilot",
     "readers.tlog",

@@ -140,7 +140,9 @@ TEXT_PROTOCOLS: tuple[tuple[str, re.Pattern[bytes]], ...] = (
         "an NTRIP source table or request (a caster's list of streams, no GNSS data)",
         re.compile(rb"^(SOURCETABLE|GET /|STR;)", re.M),
     ),
-    ("gpsd JSON reports", re.compile(rb'^\{"class":', re.M)),
+    # a file of gpsd JSON reports is read (readers.gpsd_json); a few of them before data in no protocol
+    # spooflens reads (a gpsd test log's preamble) are not
+    ("gpsd JSON reports as a preamble to data in another protocol", re.compile(rb'^\{"class":', re.M)),
 )
 
 

@@ -39,7 +39,6 @@ GPSD = "corpus/gpsd"
         (f"{GPSD}/rtcm3.2.log", "RTCM 3"),
         (f"{GPSD}/rtcm2.log", "RTCM 2"),
         (f"{GPSD}/ntrip_sourcetable.log", "an NTRIP source table"),
-        (f"{GPSD}/passthrough.log", "gpsd JSON reports"),
     ],
 )
 def test_other_protocols_are_refused_by_name(log: str, protocol: str, capsys: pytest.CaptureFixture[str]) -> None:
