@@ -13,6 +13,7 @@ I/NAV record sends them, so F/NAV records (the same orbit, re-broadcast on E5a) 
 from __future__ import annotations
 
 import re
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -173,8 +174,63 @@ def _klobuchar(lines: list[str]) -> Klobuchar | None:
     return Klobuchar(alpha, beta) if alpha and beta else None
 
 
+# RINEX 4 message types whose records carry RINEX 3's layout for the systems read (GPS LNAV, Galileo I/NAV and
+# F/NAV, BeiDou D1/D2); CNAV, CNV1-3 and the others have more lines and other fields
+V4_READ = {"G": ("LNAV",), "E": ("INAV", "FNAV"), "C": ("D1", "D2")}
+
+
+def _v4_records(path: Path, body: list[str]) -> tuple[list[str], Klobuchar | None, list[Skipped]]:
+    """RINEX 4's navigation body as RINEX 3's: the lines of each `> EPH` record of a message type read (each
+    opens with its satellite's line, as in 3.x), the GPS Klobuchar terms from its first `> ION G.. LNAV`
+    record (4.x moved them out of the header), and what was passed over, counted."""
+    kept: list[str] = []
+    passed: Counter[str] = Counter()
+    iono: Klobuchar | None = None
+    block: list[str] = []
+    marker: list[str] = []
+
+    def close() -> None:
+        nonlocal iono
+        if not marker:
+            return
+        kind, sv, message = (*marker, "", "", "")[:3]  # `> EPH G01 LNAV`
+        if kind == "EPH" and message in V4_READ.get(sv[:1], ()):
+            kept.extend(block)
+        elif kind == "ION" and sv[:1] == "G" and message == "LNAV" and iono is None:
+            iono = _v4_klobuchar(block)
+        else:
+            passed[f"{kind} {sv[:1]} {message}".strip()] += 1
+
+    for line in body:
+        if line.startswith(">"):
+            close()
+            marker, block = line[1:].split(), []
+        elif marker:
+            block.append(line)
+    close()
+    skipped = [
+        Skipped(path.name, f"RINEX 4 records not read ({what}: other message types, or not orbits)", n)
+        for what, n in sorted(passed.items())
+    ]
+    return kept, iono, skipped
+
+
+def _v4_klobuchar(block: list[str]) -> Klobuchar | None:
+    """alpha0-3, beta0-3 of a RINEX 4 `> ION G.. LNAV` record: 3 numbers after its epoch, then 4 a line."""
+    fields = [block[0][23 + 19 * k : 42 + 19 * k] for k in range(3)] if block else []
+    fields += [line[4 + 19 * k : 23 + 19 * k] for line in block[1:3] for k in range(4)]
+    try:
+        values = [_nav_number(f) for f in fields]
+    except ValueError:
+        return None
+    if len(values) < 8 or any(v is None for v in values[:8]):
+        return None
+    alpha, beta = values[:4], values[4:8]
+    return Klobuchar((alpha[0], alpha[1], alpha[2], alpha[3]), (beta[0], beta[1], beta[2], beta[3]))  # type: ignore[arg-type]
+
+
 def read_rinex_nav_file(path: Path | str) -> NavFile:
-    """Read a RINEX 2 GPS or RINEX 3 (GPS, Galileo, BeiDou or mixed) navigation file, keeping the GPS,
+    """Read a RINEX 2 GPS or RINEX 3 or 4 (GPS, Galileo, BeiDou or mixed) navigation file, keeping the GPS,
     Galileo I/NAV and BeiDou records.
 
     Records that are cut short or hold a field that is not a number are skipped and counted; other
@@ -185,13 +241,20 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
     end = end_of_header(text)
     lines = [text.line(i) for i in range(len(text))]
     first = lines[0]
-    version = checked_version(path, first, "navigation ", "2.x GPS, 3.x")
+    version = checked_version(path, first, "navigation ", "2.x GPS, 3.x, 4.x")
     ftype, fsys = first[20:21].upper(), first[40:41].upper()
     if version < 3 and ftype != "N":
         raise ReaderError(path, f"RINEX 2 navigation type {ftype!r}: only GPS navigation ('N') files carry GPS orbits")
     if version >= 3 and fsys not in _RINEX3_SYSTEMS:
-        raise ReaderError(path, f"RINEX 3 navigation file of system {fsys!r}: no GPS, Galileo or BeiDou records")
+        raise ReaderError(
+            path, f"RINEX {int(version)} navigation file of system {fsys!r}: no GPS, Galileo or BeiDou records"
+        )
     body = lines[end + 1 :]
+    iono = _klobuchar(lines[: end + 1])
+    v4_skipped: list[Skipped] = []
+    if version >= 4:
+        body, v4_iono, v4_skipped = _v4_records(path, body)
+        iono = iono or v4_iono
     is_start = [(ln[:2].strip() != "") if version < 3 else (ln[:1].strip() != "") for ln in body]
     starts = [i for i, s in enumerate(is_start) if s]
     records: list[dict[str, float | int | str]] = []
@@ -213,7 +276,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
         except (ValueError, IndexError, OverflowError) as err:
             bad += 1
             first_bad = first_bad or (end + 2 + a, str(err))
-    skipped = []
+    skipped = list(v4_skipped)
     if bad and first_bad:
         skipped.append(
             Skipped(
@@ -235,7 +298,7 @@ def read_rinex_nav_file(path: Path | str) -> NavFile:
     unique = {(r["sv_id"], r["week"], r["toe_sow"], r["iode"]): r for r in reversed(records)}
     if len(unique) < len(records):
         skipped.append(Skipped(path.name, "duplicate navigation records", len(records) - len(unique)))
-    eph = GpsEphemerides.from_records(list(unique.values()), iono=_klobuchar(lines[: end + 1]))
+    eph = GpsEphemerides.from_records(list(unique.values()), iono=iono)
     return NavFile(path, version, eph, len(eph), skipped)
 
 

@@ -24,7 +24,7 @@ BoolArray = NDArray[np.bool_]
 NS = 1_000_000_000
 GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
 SYSTEMS = "GRESCJI"
-SUPPORTED_VERSIONS = "2.10, 2.11 and 3.02-3.05 observation files"
+SUPPORTED_VERSIONS = "2.10, 2.11, 3.02-3.05 and 4.00-4.02 observation files"
 
 
 @dataclass(frozen=True)
@@ -241,10 +241,11 @@ def _version(path: Path, first: str) -> float:
 
 
 def checked_version(path: Path, first: str, kind: str, supported: str) -> float:
-    """The version of a RINEX file from its first line; ReaderError unless it is a RINEX 2 or 3 file."""
+    """The version of a RINEX file from its first line; ReaderError unless it is a RINEX 2, 3 or 4 file (4's
+    observation records are 3's; its navigation records are 3's behind a `> EPH` line)."""
     if "RINEX VERSION / TYPE" not in first:
         raise ReaderError(path, "first line is not RINEX VERSION / TYPE")
     version = _version(path, first)
-    if not 2.0 <= version < 4.0:
+    if not 2.0 <= version < 5.0:
         raise ReaderError(path, f"unsupported RINEX {kind}version {version:g}; supported: {supported}")
     return version
