@@ -134,6 +134,14 @@ class Envelope:
     # the log standard deviation of the clean coasts' peaks (floored at the model, 1): how far apart this
     # log's own clean coasts fall; None with fewer than two
     peak_log_sd: float | None = None
+    # how many independent coasts the `runs` are worth (None: each is one); nested calibration coasts,
+    # all run up to the same incident, share most of their span
+    independent: float | None = None
+
+    @property
+    def samples(self) -> float:
+        """The number of clean coasts the bound of a next one rests on (`independent`, else `runs`)."""
+        return float(self.runs) if self.independent is None else self.independent
 
     def margin(self, opts: CoastingOptions) -> float:
         """How far a departure must exceed this envelope: `opts.margin`, or where few clean coasts measured it
@@ -143,7 +151,7 @@ class Envelope:
             return opts.margin
         if not self.runs:
             return opts.uncalibrated_margin
-        return max(opts.margin, clean_coast_bound(self.runs, opts, self.peak_log_sd))
+        return max(opts.margin, clean_coast_bound(self.samples, opts, self.peak_log_sd))
 
     def at(self, h: FloatArray) -> FloatArray:
         """The envelope at horizons `h`. Beyond the longest horizon a clean coast measured, nothing says how
@@ -161,7 +169,7 @@ class Envelope:
         return np.where(h > last, self.kappa[-1] * (np.asarray(h, dtype=float) / last) ** 2, inside)
 
 
-def clean_coast_bound(n: int, opts: CoastingOptions, peak_log_sd: float | None = None) -> float:
+def clean_coast_bound(n: float, opts: CoastingOptions, peak_log_sd: float | None = None) -> float:
     """How far above the largest of `n` clean coasts' peaks the next clean coast stays, but for a share
     `p_next_coast` of them: the peaks as log-normal, the largest of n near their mean plus the expected
     largest of n standard normals (Blom's approximation), and the next one's bound from the mean over the
@@ -323,6 +331,9 @@ class Placebo:
     starts: FloatArray
     grid: FloatArray  # horizon, s
     curves: FloatArray  # (runs, len(grid)) running maximum of the NIS-over-threshold ratio
+    # every coast runs up to the same time (`calibration_coasts`): they share most of their span, and the
+    # peaks of coasts that integrate the same seconds are not independent draws of the INS's clean departure
+    nested: bool = False
 
     def envelope(
         self,
@@ -375,7 +386,10 @@ class Placebo:
         kappa = np.where(counted[:, None], held, -np.inf).max(axis=0)
         logs = np.log(np.maximum(peaks[counted], 1.0))
         spread = float(np.std(logs, ddof=1)) if len(logs) >= 2 else None
-        return Envelope(self.grid, np.maximum(kappa, 1.0), int(counted.sum()), peak_log_sd=spread)
+        independent = _independent(self.starts[counted], usable[counted]) if self.nested else None
+        return Envelope(
+            self.grid, np.maximum(kappa, 1.0), int(counted.sum()), peak_log_sd=spread, independent=independent
+        )
 
     def _clean(self, span: tuple[float, float], margin_s: float) -> FloatArray:
         """How long each coast runs before it reaches `span` (its full horizon if it never does, 0 if it
@@ -385,6 +399,23 @@ class Placebo:
         inside = (self.starts >= a) & (self.starts <= b)
         before = self.starts < a
         return np.where(inside, 0.0, np.where(before, np.minimum(H, a - self.starts), H))
+
+
+def _independent(starts: FloatArray, horizons: FloatArray) -> float:
+    """How many independent coasts overlapping ones are worth: the time they cover together over their mean
+    horizon, between 1 and their number. Calibration coasts every 5 s, each run up to the same incident,
+    cover 40 s with a mean horizon of 22 s: under 2, not 8 (counted as 8, they made a bound of 2.5 times
+    their envelope, and the real log171 copter cut at 146.8 s for 75 s was SPOOFING at 4.4 times through its
+    manoeuvres just before its crash, where the same log cut a few seconds earlier or later raised nothing)."""
+    order = np.argsort(starts)
+    a, b = starts[order], (starts + horizons)[order]
+    covered, reach = 0.0, -np.inf
+    for lo, hi in zip(a, b, strict=True):
+        if hi > reach:
+            covered += hi - max(lo, reach)
+            reach = hi
+    mean = float(np.mean(horizons))
+    return float(np.clip(covered / mean, 1.0, len(starts))) if mean > 0 else 1.0
 
 
 def shocks_of(nav: Navigation) -> list[Shock]:
@@ -415,6 +446,7 @@ def _coasted(
     starts: FloatArray,
     ends: FloatArray,
     grid: FloatArray,
+    nested: bool = False,
 ) -> Placebo:
     """The coasts from `starts` to `ends`, each as the running maximum of its ratio on `grid`."""
     kept, curves = [], []
@@ -429,7 +461,7 @@ def _coasted(
         running = np.maximum.accumulate(np.where(fine, r, 0.0))
         kept.append(float(s))
         curves.append(np.interp(grid, sol.t - s, running))
-    return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)))
+    return Placebo(np.array(kept), grid, np.array(curves).reshape(len(curves), len(grid)), nested)
 
 
 def calibration_coasts(nav: Navigation, opts: CoastingOptions, until_s: float, shocks: Sequence[Shock] = ()) -> Placebo:
@@ -441,7 +473,7 @@ def calibration_coasts(nav: Navigation, opts: CoastingOptions, until_s: float, s
     first = max(float(nav.solution.t[0]) + opts.converge_s, until_s - opts.margin_s - horizon)
     starts = np.arange(first, until_s - opts.margin_s - opts.calibrating_s, opts.calibration_step_s)
     grid = np.arange(0.0, max(min(until_s - first, horizon), 0.0) + 1.0, 1.0)
-    return _coasted(nav, opts, shocks, starts, np.minimum(starts + horizon, until_s), grid)
+    return _coasted(nav, opts, shocks, starts, np.minimum(starts + horizon, until_s), grid, nested=True)
 
 
 def clean_envelope(nav: Navigation, left_out: list[tuple[float, float]]) -> Envelope:
@@ -776,6 +808,7 @@ def _on_navigation(
             "departure_s": c.departure_s,
             "end_s": c.end_s,
             "clean_coasts": e.runs,
+            "independent_coasts": e.samples if e.runs else None,
             "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
             "peak_ratio_over_envelope": c.peak_over_envelope,
             # an inertial alarm the coast cleared is no incident: this record is where it shows
@@ -972,13 +1005,16 @@ def _not_confirmed(
     elif peak > 1.0 and envelope.runs:
         # above what the clean coasts showed: say how far, and why that confirmed nothing
         margin = envelope.margin(opts)
+        coasts = f"{envelope.runs} clean coast(s)"
+        if envelope.independent is not None and envelope.independent < envelope.runs:
+            coasts += f", nested: worth {envelope.independent:.1f} independent ones,"
         why = (
             f"inertial alarm not confirmed: GNSS departed up to {peak:.1f} times this log's own clean departures, "
             + (
-                f"within the {margin:.1f} times that {envelope.runs} clean coast(s) allow (the next clean coast of a "
+                f"within the {margin:.1f} times that {coasts} allow (the next clean coast of a "
                 "real INS may depart that far)"
                 if peak <= margin
-                else f"beyond the {margin:.1f} times that {envelope.runs} clean coast(s) allow only briefly, by less "
+                else f"beyond the {margin:.1f} times that {coasts} allow only briefly, by less "
                 f"than {opts.min_departure_m:g} m or after the confirmation window"
             )
         )

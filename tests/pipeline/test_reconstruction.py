@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from itertools import pairwise
+from pathlib import Path
 
 import numpy as np
 
@@ -23,7 +24,9 @@ from spooflens.pipeline.reconstruction import (
     placebo_coasts,
 )
 from spooflens.pipeline.registry import AnalyzeOptions
+from spooflens.pipeline.run import analyze_segments
 from spooflens.pipeline.verdict import Incident
+from spooflens.service import read_table
 from spooflens.simulation.simulate import simulate
 
 
@@ -125,6 +128,34 @@ def test_the_margin_over_few_clean_coasts_is_a_next_clean_coasts_bound() -> None
     assert Envelope(grid, np.ones_like(grid), 40, peak_log_sd=0.2).margin(opts) == opts.margin
     assert Envelope(grid, np.ones_like(grid), 1, from_baseline=True).margin(opts) == opts.margin
     assert Envelope(np.array([]), np.array([]), 0).margin(opts) == opts.uncalibrated_margin
+
+
+def test_nested_calibration_coasts_count_as_the_independent_coasts_they_are_worth() -> None:
+    """Calibration coasts every 5 s, each run up to the same incident, share most of their span: eight over
+    40 s are worth under two independent coasts, and the bound of a next clean coast rests on that. Coasts
+    that do not overlap each count one; placebo coasts (not nested) keep their count."""
+    opts = CoastingOptions()
+    grid = np.arange(0.0, 41.0)
+    starts = np.arange(0.0, 40.0, 5.0)
+    curves = np.ones((len(starts), len(grid)))
+    nested = Placebo(starts, grid, curves, nested=True).envelope((45.0, 50.0), [], 0.0)
+    assert nested.runs == 8 and 1.5 < nested.samples < 2.0
+    assert nested.margin(opts) == clean_coast_bound(nested.samples, opts) > 3 * clean_coast_bound(8, opts)
+    apart = Placebo(np.array([0.0, 100.0, 200.0]), np.arange(0.0, 11.0), np.ones((3, 11)), nested=True)
+    assert apart.envelope((500.0, 510.0), [], 0.0).samples == 3.0
+    assert Placebo(starts, grid, curves).envelope((45.0, 50.0), [], 0.0).samples == 8.0
+
+
+def test_a_copters_manoeuvres_before_its_crash_against_nested_coasts_are_no_spoofing(real: Path) -> None:
+    """The real log171 copter cut at 146.8 s for 75 s (`bench windows --seed 61`): its INS alarmed through
+    the manoeuvres just before the crash, 4.4 times the envelope of 8 calibration coasts all run up to the
+    alarm. Counted as 8 independent coasts they allowed 2.5 times, and the stretch was SPOOFING (medium)
+    where the same log cut a few seconds earlier or later raised nothing; worth 1.8, they allow 9."""
+    table = read_table(real / "corpus/dronekit-la-testdata/log171.bin", {}, False)
+    analysis = analyze_segments(table.between(146.8, 221.8))[0]
+    assert not analysis.verdict.spoofed, analysis.verdict.headline
+    (check,) = [c for c in analysis.verdict.coasting_checks if c["incident_onset_s"] > 208.0]
+    assert check["clean_coasts"] == 8 and check["independent_coasts"] < 2.0 and not check["confirmed"]
 
 
 def test_beyond_its_longest_clean_horizon_the_envelope_grows_as_its_square() -> None:
