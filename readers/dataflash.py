@@ -115,15 +115,22 @@ class DataFlash:
             raise ValueError(f"FMT of {name} says {fmt.len - 3} bytes, its format string {dt.itemsize}")
         return dt, scale
 
+    def usable_dtype(self, name: str) -> tuple[np.dtype, dict[str, float]] | None:
+        """`dtype(name)`, or None with the message's rows counted as lost when its format is unusable."""
+        try:
+            return self.dtype(name)
+        except (KeyError, ValueError) as err:
+            self.skipped.append(Skipped(name, f"message format unusable: {err}", self.count(name), "lost"))
+            return None
+
     def logged(self, name: str) -> tuple[NDArray[np.int64], Columns] | None:
         """(offset of each row, its fields as logged: the FMT's column names, scaled fields in the units the
         log shows, e.g. degrees for `L`) of every readable row of message `name`, in file order; None when
         its format is unusable (counted). The only part of the decoding that depends on the container."""
-        try:
-            dt, scale = self.dtype(name)
-        except (KeyError, ValueError) as err:
-            self.skipped.append(Skipped(name, f"message format unusable: {err}", self.count(name), "lost"))
+        layout = self.usable_dtype(name)
+        if layout is None:
             return None
+        dt, scale = layout
         ofs = self.offsets(name)
         whole = ofs + 3 + dt.itemsize <= len(self.data)
         if not whole.all():

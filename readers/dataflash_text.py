@@ -62,11 +62,10 @@ class TextDataFlash(DataFlash):
     delimiter: str = ", "
 
     def logged(self, name: str) -> tuple[NDArray[np.int64], Columns] | None:
-        try:
-            dt, scale = self.dtype(name)
-        except (KeyError, ValueError) as err:
-            self.skipped.append(Skipped(name, f"message format unusable: {err}", self.count(name), "lost"))
+        layout = self.usable_dtype(name)
+        if layout is None:
             return None
+        dt, scale = layout
         ofs = self.offsets(name)
         rows = self.fields[name]
         table = np.array(rows, dtype=object).reshape(len(rows), len(dt.names or ()))

@@ -94,8 +94,21 @@ FieldWriter = tuple[int, str, float]
 def _field_writer(log: DataFlash, name: str, column: str) -> FieldWriter | None:
     """(byte offset inside the message, struct code, scale) of one column (today's name) of one message type;
     None when this revision's message has no such field (GPS VZ before 2014, a GPA without VDop)."""
-    fmt = log.reader.formats[log.reader.name_to_id[name]]
+    found = _logged_column(log, name, column)
+    if found is None:
+        return None
+    index, letter = found
     dt, _ = log.dtype(name)
+    code, scale = _PACK[letter]
+    if dt.fields is None or dt.names is None:
+        raise WriterError(f"{log.path}: {name} has no field layout; cannot write it back")
+    return HEADER_BYTES + int(dt.fields[dt.names[index]][1]), code, scale  # the dtype's names are the FMT's
+
+
+def _logged_column(log: DataFlash, name: str, column: str) -> tuple[int, str] | None:
+    """(index among the message's fields, format letter) of one column (today's name) of a message type, as
+    this revision logs it; None when it has no such field. A letter no writer packs is refused."""
+    fmt = log.reader.formats[log.reader.name_to_id[name]]
     columns = list(fmt.columns)
     column = logged_name(columns, column)
     if column not in columns:
@@ -103,10 +116,7 @@ def _field_writer(log: DataFlash, name: str, column: str) -> FieldWriter | None:
     letter = fmt.format[columns.index(column)]
     if letter not in _PACK:
         raise WriterError(f"{log.path}: {name}.{column} has format letter {letter!r}; cannot write it back")
-    code, scale = _PACK[letter]
-    if dt.fields is None:
-        raise WriterError(f"{log.path}: {name} has no field layout; cannot write it back")
-    return HEADER_BYTES + int(dt.fields[column][1]), code, scale
+    return columns.index(column), letter
 
 
 def _stored(code: str, value: float) -> float | int:
@@ -204,15 +214,8 @@ class _TextPatcher:
 
     def _field(self, name: str, column: str) -> tuple[int, str] | None:
         """(index among the line's parts, format letter) of one column (today's name) of a message type."""
-        fmt = self.log.reader.formats[self.log.reader.name_to_id[name]]
-        columns = list(fmt.columns)
-        column = logged_name(columns, column)
-        if column not in columns:
-            return None
-        letter = fmt.format[columns.index(column)]
-        if letter not in _PACK:
-            raise WriterError(f"{self.log.path}: {name}.{column} has format letter {letter!r}; cannot write it back")
-        return 1 + columns.index(column), letter
+        found = _logged_column(self.log, name, column)
+        return None if found is None else (1 + found[0], found[1])
 
     def has(self, ofs: int, column: str) -> bool:
         return self._field(self.name_at(ofs), column) is not None
