@@ -384,8 +384,12 @@ class Placebo:
         # had shown 6x by 10 s)
         held = np.where(valid, self.curves, peaks[:, None])
         kappa = np.where(counted[:, None], held, -np.inf).max(axis=0)
-        logs = np.log(np.maximum(peaks[counted], 1.0))
-        spread = float(np.std(logs, ddof=1)) if len(logs) >= 2 else None
+        # a coast that stayed within the model peaks at the floor (1): it says the coast stayed within, not how
+        # far below, so floored peaks tell nothing of the spread (the real husky bag cut at 191.5 s for 180 s:
+        # three clean coasts all within the model made a spread of 0, a bound of 3.8, and a glrt alarm at
+        # 4.6 times near the stretch's end was SPOOFING)
+        above = np.log(peaks[counted][peaks[counted] > 1.0])
+        spread = float(np.std(above, ddof=1)) if len(above) >= 2 else None
         independent = _independent(self.starts[counted], usable[counted]) if self.nested else None
         return Envelope(
             self.grid, np.maximum(kappa, 1.0), int(counted.sum()), peak_log_sd=spread, independent=independent

@@ -146,6 +146,31 @@ def test_nested_calibration_coasts_count_as_the_independent_coasts_they_are_wort
     assert Placebo(starts, grid, curves).envelope((45.0, 50.0), [], 0.0).samples == 8.0
 
 
+def test_coasts_that_stayed_within_the_model_say_nothing_of_the_spread() -> None:
+    """A clean coast's peak is floored at the model (1): coasts that all stayed within it are censored there,
+    not a spread of 0 that would narrow the bound of the next one; the spread comes from peaks above it."""
+    grid = np.arange(0.0, 31.0)
+    starts = np.array([0.0, 40.0, 80.0])
+    within = Placebo(starts, grid, np.full((3, len(grid)), 0.6)).envelope((200.0, 210.0), [], 0.0)
+    assert within.runs == 3 and within.peak_log_sd is None
+    assert within.margin(CoastingOptions()) == clean_coast_bound(3, CoastingOptions())
+    curves = np.ones((3, len(grid))) * np.array([[0.6], [2.0], [3.0]])
+    mixed = Placebo(starts, grid, curves).envelope((200.0, 210.0), [], 0.0)
+    assert mixed.peak_log_sd is not None and abs(mixed.peak_log_sd - float(np.std(np.log([2.0, 3.0]), ddof=1))) < 1e-12
+
+
+def test_the_husky_bags_late_glrt_alarm_against_coasts_within_the_model_is_no_spoofing(husky_bag: Path) -> None:
+    """The real husky bag cut at 191.5 s for 180 s (`bench windows --seed 64`): a glrt alarm 20 s before the
+    stretch's end departed 4.6 times the envelope of three clean coasts that all stayed within the model.
+    Their floored peaks were read as a spread of 0 (bound 3.8): SPOOFING (medium); censored, the husky's
+    prior spread holds (bound 5.1)."""
+    table = read_table(husky_bag, {}, False)
+    analysis = analyze_segments(table.between(191.5, 371.5))[0]
+    assert not analysis.verdict.spoofed, analysis.verdict.headline
+    (check,) = [c for c in analysis.verdict.coasting_checks if c["incident_start_s"] > 350.0]
+    assert check["clean_coasts"] == 3 and not check["confirmed"] and 4.0 < check["peak_ratio_over_envelope"] < 5.1
+
+
 def test_a_copters_manoeuvres_before_its_crash_against_nested_coasts_are_no_spoofing(real: Path) -> None:
     """The real log171 copter cut at 146.8 s for 75 s (`bench windows --seed 61`): its INS alarmed through
     the manoeuvres just before the crash, 4.4 times the envelope of 8 calibration coasts all run up to the
