@@ -31,6 +31,7 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from readers import NothingToJudgeError, ReaderFormat
+from readers.ubx.messages import sv_ids
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
@@ -71,7 +73,6 @@ ACCURACY = (
 # gpsd's own PRN numbering when a satellite has no gnssid/svid: (first, last, RINEX letter, offset)
 _PRN_RANGES = ((1, 63, "G", 0), (65, 96, "R", 64), (120, 158, "S", 100), (193, 202, "J", 192), (201, 263, "C", 200))
 _PRN_RANGES_NEW = ((301, 336, "E", 300), (401, 437, "C", 400))
-_GNSS_LETTER = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
 
 
 @dataclass
@@ -197,18 +198,18 @@ def _num(obj: Mapping[str, Any], key: str, bad: Counter[str], cls: str) -> float
     return float(v)
 
 
+@lru_cache(maxsize=4096)
+def _ublox_sv_id(gnss_id: int, sv: int) -> str | None:
+    """u-blox numbering, as the UBX reader maps it (a few hundred pairs: each mapped once)."""
+    ids, ok = sv_ids(np.array([gnss_id]), np.array([sv]))
+    return str(ids[0]) if ok[0] else None
+
+
 def sv_id(sat: Mapping[str, Any]) -> str | None:
     """RINEX-style id of a SKY satellite: u-blox gnssid/svid when given, else gpsd's PRN numbering."""
     g, s = sat.get("gnssid"), sat.get("svid")
     if isinstance(g, int) and isinstance(s, int) and not isinstance(g, bool) and not isinstance(s, bool):
-        letter = _GNSS_LETTER.get(g)
-        if g == 1:
-            s -= 100
-        if g == 5 and s > 192:
-            s -= 192
-        if letter is None or not 1 <= s <= 99:
-            return None
-        return f"{letter}{s:02d}"
+        return _ublox_sv_id(g, s) if 0 <= g < 256 and 0 <= s < 1024 else None
     prn = sat.get("PRN")
     if isinstance(prn, bool) or not isinstance(prn, int):
         return None
