@@ -197,6 +197,7 @@ class _TextPatcher:
         self.edited: Counter[str] = Counter()  # message name -> lines rewritten
         self._lines: dict[int, list[bytes]] = {}  # line offset -> its comma-separated parts, as rewritten
         self._ends: dict[int, int] = {}  # line offset -> where its text ends (before CR LF)
+        self._fields: dict[tuple[str, str], tuple[int, str] | None] = {}
 
     def _parts(self, ofs: int) -> list[bytes]:
         if ofs not in self._lines:
@@ -214,8 +215,10 @@ class _TextPatcher:
 
     def _field(self, name: str, column: str) -> tuple[int, str] | None:
         """(index among the line's parts, format letter) of one column (today's name) of a message type."""
-        found = _logged_column(self.log, name, column)
-        return None if found is None else (1 + found[0], found[1])
+        if (name, column) not in self._fields:
+            found = _logged_column(self.log, name, column)
+            self._fields[(name, column)] = None if found is None else (1 + found[0], found[1])
+        return self._fields[(name, column)]
 
     def has(self, ofs: int, column: str) -> bool:
         return self._field(self.name_at(ofs), column) is not None
