@@ -131,8 +131,8 @@ class Envelope:
     kappa: FloatArray
     runs: int
     from_baseline: bool = False  # capped by the vehicle's baseline (`capped`): its clean logs calibrate it
-    # the log standard deviation of the clean coasts' peaks (floored at the model, 1): how far apart this
-    # log's own clean coasts fall; None with fewer than two
+    # the log standard deviation of the clean coasts' peaks above the model (a peak floored at 1 says nothing of
+    # it): how far apart this log's own clean coasts fall; None with fewer than two above it
     peak_log_sd: float | None = None
     # how many independent coasts the `runs` are worth (None: each is one); nested calibration coasts,
     # all run up to the same incident, share most of their span
