@@ -128,8 +128,12 @@ def sniff_format(path: Path) -> str:
     if path.is_dir():
         what = "directory holds no log this tool reads"
     else:
+        from readers.nmea import damaged_nmea
         from readers.protocols import identify
 
+        damaged = damaged_nmea(head)
+        if damaged is not None:
+            raise ReaderError(path, damaged, "nmea")
         protocol = identify(path, head)
         what = f"{protocol}: not supported" if protocol else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")

@@ -12,6 +12,8 @@ import re
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from pynmeagps.nmeatypes_core import NMEA_MSGIDS, NMEA_TALKERS
+
 HEAD = 64 * 1024
 MIN_FRAMES = 3
 
@@ -172,7 +174,16 @@ def _proprietary_sentences(data: bytes) -> str | None:
     addresses = [m.group(1).decode() for ln in lines if (m := re.match(rb"^\$([A-Z][A-Z0-9]{2,15}),", ln))]
     if not lines or len(addresses) * 2 < len(lines):
         return None
+    if any(standard_address(a) for a in addresses):
+        return None  # standard sentences too damaged to read: the NMEA reader says how (`damaged_nmea`)
     return f"proprietary NMEA-style sentences only ({_first_names(dict.fromkeys(addresses))}), no standard sentence"
+
+
+def standard_address(address: str) -> bool:
+    """A standard talker and sentence ($GPRMC, $SDDBT), not a maker's own ($PUBX, $PQTMVER, $STI)."""
+    return (
+        len(address) == 5 and address[:2] in NMEA_TALKERS and address[2:] in NMEA_MSGIDS and not address.startswith("P")
+    )
 
 
 def _first_names(addresses: Iterable[str], width: int = 80) -> str:

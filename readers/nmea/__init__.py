@@ -21,28 +21,30 @@ skipped. `inject` writes a spoofed copy with GGA/GNS/RMC/GLL positions edited in
 
 from __future__ import annotations
 
+import re
 from collections import Counter
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from readers import NothingToJudgeError, ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
-from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences
+from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences, split_lines
 from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
 from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, forget_parsed, is_empty
+from readers.protocols import standard_address
 from spooflens.epoch_table import EpochTable, Skipped
 from spooflens.errors import ReaderError
 
 Progress = Callable[[int, int], None]
 
-# scan counts that mean the file is damaged (listed as "lost"), the others are routine skips
-_LOST = (
-    "file cut inside its last sentence",
+# scan counts of lines that are sentences, but broken ones
+_BROKEN_SENTENCES = (
     "sentences with a bad checksum",
     "sentences with a broken checksum field",
     "sentences without a checksum (cut short?)",
-    "binary garbage (not text)",
 )
+# scan counts that mean the file is damaged (listed as "lost"), the others are routine skips
+_LOST = ("file cut inside its last sentence", *_BROKEN_SENTENCES, "binary garbage (not text)")
 
 
 EMPTY = "empty sentences (no data in their fields)"
@@ -183,17 +185,34 @@ def _head(path: Path) -> bytes:
 
 def looks_like_nmea(head: bytes) -> bool:
     """Most data lines of the head are NMEA sentences (after logger prefixes) with valid checksums."""
-    from readers.nmea.lines import scan_sentences as scan
-
-    lines = head.split(b"\n")
-    if len(lines) > 1 and not head.endswith(b"\n"):
+    lines = split_lines(head)
+    if len(lines) > 1 and not head.endswith((b"\n", b"\r")):
         lines = lines[:-1]  # the head may end inside a line
-    text = b"\n".join(lines) + b"\n"
-    result = scan(Path("<head>"), text)
-    data_lines = sum(1 for ln in lines if ln.strip() and not ln.startswith(b"#"))
+    text = b"".join(line + b"\n" for _, line in lines)
+    result = scan_sentences(Path("<head>"), text)
+    data_lines = sum(1 for _, ln in lines if ln.strip() and not ln.startswith(b"#"))
     good = len(result.sentences)  # verified, or unverified in a head where no sentence has a checksum
-    # half the lines, or a damaged log's many sentences among broken ones (gpsd's gp-320fw cold boot)
-    return good >= 1 and (good * 2 >= data_lines or (good >= 8 and good * 4 >= data_lines))
+    attempts = good + sum(result.counts[reason] for reason in _BROKEN_SENTENCES)
+    # half the lines, or a damaged log's many sentences among broken ones (gpsd's gp-320fw cold boot, a
+    # research vessel's garbled serial capture: a sixth of its lines intact, most of the rest sentences
+    # that fail their checksum)
+    return good >= 1 and (good * 2 >= data_lines or (good >= 8 and max(good * 4, attempts * 2) >= data_lines))
+
+
+def damaged_nmea(head: bytes) -> str | None:
+    """Why a file of standard NMEA sentences is not read as one (too few pass their checksum: a tool that
+    computes them wrongly, a garbled serial line), or None when it is no such file."""
+    result = scan_sentences(Path("<head>"), head)
+    attempts = len(result.sentences) + sum(result.counts[reason] for reason in _BROKEN_SENTENCES)
+    if attempts * 2 < result.lines or not any(
+        standard_address(m.group(1).decode()) for m in re.finditer(rb"^\$([A-Z][A-Z0-9]{4}),", head[:8192], re.M)
+    ):
+        return None
+    what = ", ".join(f"{n} {reason}" for reason, n in result.counts.most_common())
+    return (
+        f"NMEA 0183 sentences, too few of them intact to read: {len(result.sentences)} of the first "
+        f"{result.lines} lines pass their checksum ({what})"
+    )
 
 
 def _is_nmea(path: Path, head: bytes) -> bool:

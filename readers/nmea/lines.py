@@ -11,6 +11,9 @@ logger that recorded it:
 - Android GnssLogger's `NMEA,$GPRMC,...*hh,1699400577561` (a trailing logger time in ms after the
   checksum; AIS loggers append `,<unix seconds>` the same way).
 
+Lines end in LF, CR LF or a bare CR (classic Mac OS and some serial loggers); sentences written back to
+back with no line break between them (`...*4B$GPGGA,...`) are split after the checksum.
+
 Checksums are verified for every sentence (vectorised over the file); a sentence whose checksum does
 not match is skipped and counted. A sentence without a checksum is accepted only in a file where no
 sentence carries one (an old talker that never sends them); elsewhere it is most likely cut short.
@@ -41,6 +44,9 @@ _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
 # loader writes three letters ($STI)
 _ADDRESS = re.compile(rb"^[$!](P[A-Z0-9]{3,15}|[A-Z0-9][A-Z0-9]{2,5}),")
 _HEX = b"0123456789ABCDEFabcdef"
+# where a line may end other than in LF or CR LF: a bare CR, or the next sentence glued to a checksum
+_ODD_BREAK = re.compile(rb"\r(?!\n)|\*[0-9A-Fa-f]{2}[$!]")
+_BREAK = re.compile(rb"\r\n|\n|\r|(?<=\*[0-9A-Fa-f]{2})(?=[$!])")
 _HEX_VALUE = np.full(256, -256, dtype=np.int64)  # byte -> its hex digit value (negative: not one)
 for _i, _c in enumerate(b"0123456789ABCDEF"):
     _HEX_VALUE[_c] = _i
@@ -156,6 +162,28 @@ def _hex_value(text: bytes) -> int:
         return -1
 
 
+def split_lines(data: bytes) -> list[tuple[int, bytes]]:
+    """(file offset, line without its break) of each line of `data`; the empty line after a final break is
+    no line."""
+    if not _ODD_BREAK.search(data):
+        out: list[tuple[int, bytes]] = []
+        offset = 0
+        raw_lines = data.split(b"\n")
+        if data.endswith(b"\n"):
+            raw_lines.pop()
+        for raw in raw_lines:
+            out.append((offset, raw[:-1] if raw.endswith(b"\r") else raw))
+            offset += len(raw) + 1
+        return out
+    out, start = [], 0
+    for m in _BREAK.finditer(data):
+        out.append((start, data[start : m.start()]))
+        start = m.end()
+    if start < len(data):
+        out.append((start, data[start:]))
+    return out
+
+
 def scan_sentences(path: Path, data: bytes | None = None) -> SentenceScan:
     """Split one file into sentences; every line that is not one is counted by why."""
     if data is None:
@@ -166,17 +194,10 @@ def scan_sentences(path: Path, data: bytes | None = None) -> SentenceScan:
     counts: Counter[str] = Counter()
     comments: list[str] = []
     candidates: list[_Candidate] = []
-    offset = 0
-    n_lines = 0
-    terminated = data.endswith(b"\n")
-    raw_lines = data.split(b"\n")
-    if terminated:
-        raw_lines.pop()
-    for i, raw in enumerate(raw_lines):
-        n_lines += 1
-        line_start = offset
-        offset += len(raw) + 1
-        line = raw[:-1] if raw.endswith(b"\r") else raw
+    terminated = data.endswith((b"\n", b"\r"))
+    lines = split_lines(data)
+    n_lines = len(lines)
+    for i, (line_start, line) in enumerate(lines):
         if not line.strip():
             continue
         if line[:1] == b"#":
@@ -209,7 +230,7 @@ def scan_sentences(path: Path, data: bytes | None = None) -> SentenceScan:
                     counts["text after the checksum (ignored)"] += 1
         elif star >= 0:
             star = -2  # a '*' without two hex digits after it: cut inside the checksum
-        cut = i == len(raw_lines) - 1 and not terminated
+        cut = i == n_lines - 1 and not terminated
         star_at = line_start + star if star >= 0 else star
         candidates.append(_Candidate(i, line_start + pos, line_start + end, star_at, source, host))
         if cut and star < 0:

@@ -14,6 +14,7 @@ from paths import REAL, real_log
 from readers import read_log, sniff_format
 from spooflens.cli import main
 from spooflens.epoch_table import HOLDS, EpochTable
+from spooflens.errors import ReaderError
 from spooflens.schema import FixType
 
 BOATS = REAL / "nmea_boats"
@@ -353,3 +354,57 @@ def test_a_gn_talkers_gsa_lists_are_of_the_system_their_id_names() -> None:
     assert galileo == {"E01", "E11", "E12", "E24", "E31", "E33"}
     assert {sv for sv in first.index if sv.startswith("C") and first[sv] == 1.0} == {"C27", "C28", "C30", "C36", "C37"}
     assert first["G30"] == 0.0 and first["E05"] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("layout", "sep"),
+    [("bare CR (classic Mac OS, serial loggers)", b"\r"), ("no line break at all", b""), ("CR LF", b"\r\n")],
+)
+def test_lines_ending_in_a_bare_cr_or_in_nothing_read_as_the_same_log(
+    bundg: EpochTable, tmp_path: Path, layout: str, sep: bytes
+) -> None:
+    """A real u-blox M8 log kept with CR-only line ends (and stored with none) was read as one sentence and
+    judged NO VERDICT: no GNSS data. Its sentences are the same whatever ends its lines."""
+    path = tmp_path / "relaid.log"
+    path.write_bytes(sep.join(BUNDG.read_bytes().splitlines()) + sep)
+    assert sniff_format(path) == "nmea", layout
+    table = read_log(path)
+    assert table.fixes.equals(bundg.fixes), layout
+    assert table.satellites.equals(bundg.satellites), layout
+    assert table.headings.equals(bundg.headings), layout
+    assert not [s for s in table.skipped if s.action == "lost"], layout
+    out = tmp_path / "spoofed.log"  # inject rewrites in place: every line end kept as it was
+    assert main(["inject", str(path), "--attack", "step:start=60,offset=200", "-o", str(out)]) == 0
+    assert out.read_bytes().count(b"\r") == path.read_bytes().count(b"\r")
+    assert out.read_bytes().count(b"\n") == path.read_bytes().count(b"\n")
+    assert not [s for s in read_log(out).skipped if s.action == "lost"]
+
+
+def test_standard_sentences_whose_checksums_all_fail_are_refused_saying_so(tmp_path: Path) -> None:
+    """A bus-route simulator wrote every checksum wrong: it was refused as "proprietary NMEA-style
+    sentences only ($GPRMC, $GPGGA)", which hid the cause."""
+    path = tmp_path / "wrong_sums.nmea"
+    path.write_text("".join(_sentence(b)[:-2] + "00\n" for b in BASE_BODIES if b.startswith("GP")))
+    expected = (
+        r"NMEA 0183 sentences, too few of them intact to read: 0 of the first 6 lines pass their checksum "
+        r"\(6 sentences with a bad checksum\)"
+    )
+    with pytest.raises(ReaderError, match=expected):
+        sniff_format(path)
+
+
+def test_a_garbled_serial_capture_is_read_as_a_damaged_nmea_log(tmp_path: Path) -> None:
+    """A research vessel's capture over a noisy serial line: a fifth of the lines intact, most others sentences
+    that fail their checksum or lost their `$`. It was refused as proprietary sentences; what is intact is
+    read and the rest counted as lost."""
+    lines = []
+    for body in BASE_BODIES:
+        intact = _sentence(body)
+        lines += [intact, intact.replace(",", "", 1), intact.replace(",", ";", 1), intact[1:], intact[1:-3]]
+    path = tmp_path / "garbled.log"
+    path.write_text("\n".join(lines) + "\n")
+    assert sniff_format(path) == "nmea"
+    table = read_log(path)
+    lost = {s.reason: s.count for s in table.skipped if s.action == "lost"}
+    assert lost["sentences with a bad checksum"] == 2 * len(BASE_BODIES)
+    assert list(table.fixes["t_s"]) == [0.0, 1.0, 2.0, 3.0]
