@@ -163,7 +163,8 @@ def align(
         tau = pre.t[k] - pre.t[s]
         dH = quat_rotate(qs_inv, pre.integrals(k)[2] - H_s - G_s * tau[:, None])
         P = p[idx] - p[first]
-        grav = np.outer(0.5 * tau**2, [0.0, 0.0, -g]) + _earth_terms(np.radians(lat0), h0, g, tau, P)
+        earth = _earth_terms(np.radians(lat0), h0, g, tau, P, tf[idx] - tf[first])
+        grav = np.outer(0.5 * tau**2, [0.0, 0.0, -g]) + earth
         # p0 and v0 enter linearly: project them out (onto the complement of [1, tau]), then the
         # rotation is a single Kabsch problem on the projected vector pairs
         design = np.c_[np.ones_like(tau), tau]
@@ -293,16 +294,20 @@ def _refine_yaw_with_bias(
     return C, coef[3:6], misfit, yaw_sigma
 
 
-def _earth_terms(lat: float, h: float, g: float, tau: FloatArray, P: FloatArray) -> FloatArray:
-    """Position change from the local-level frame's rotation and Coriolis over the window.
+def _earth_terms(lat: float, h: float, g: float, tau: FloatArray, P: FloatArray, fix_tau: FloatArray) -> FloatArray:
+    """Position change from the local-level frame's rotation and Coriolis over the window (`tau`: the IMU
+    samples' times, `fix_tau`: the fixes' own, which the velocity is taken over).
 
     The specific force seen in the initial body frame is, to first order, gravity rotating with the
     local-level frame at omega_in: -(omega_in x [0, 0, g]) tau^3 / 6; Coriolis adds
     -double integral of (2 omega_ie + omega_en) x v, with v from the GNSS positions. At aircraft speeds
     and 40 s windows each is tens of metres, the size of the heading signal itself.
     """
+    # over the fixes' times: two fixes closer than an IMU period share its sample (a 25 Hz IMU beside a
+    # receiver whose 5 Hz fixes jitter by 20 ms: the real log171 copter's IMU logged at half its rate), which
+    # made the velocity between them infinite and the alignment refused
     with np.errstate(divide="ignore", invalid="ignore"):  # repeated stamps (damaged logs): NaN, refused later
-        v = np.gradient(P, tau, axis=0) if len(tau) > 2 else np.zeros_like(P)
+        v = np.gradient(P, fix_tau, axis=0) if len(fix_tau) > 2 else np.zeros_like(P)
     w_ie, w_en, _, _ = rates(lat, h, np.mean(v, axis=0))
     rotation = -np.outer(tau**3 / 6.0, np.cross(w_ie + w_en, [0.0, 0.0, g]))
     cor = np.cross(2 * w_ie + w_en, v)

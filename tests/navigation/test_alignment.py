@@ -3,11 +3,17 @@ whole stream, whether the orientations are dense, sparse or absent."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
+import pytest
+from paths import real_log
 
-from spooflens.navigation.alignment import _imu_orientation
+from spooflens.navigation.alignment import _imu_orientation, align
+from spooflens.navigation.loosely_coupled import prepare
 from spooflens.navigation.rotations import quat_to_matrix
+from spooflens.service import read_table
 
 
 def test_the_nearest_orientation_is_the_whole_streams_nearest() -> None:
@@ -37,3 +43,22 @@ def test_body_axes_to_flu_from_rows_or_columns_equal_the_convention_matrix() -> 
         expected = rows @ M.T
         np.testing.assert_array_equal(np.stack(flu_axes(rows, frame), axis=1), expected)
         np.testing.assert_array_equal(np.stack(flu_axes([rows[:, 0], rows[:, 1], rows[:, 2]], frame), axis=1), expected)
+
+
+def test_an_imu_logged_at_half_the_rate_still_aligns_on_log171() -> None:
+    """log171's IMU at every other sample (25 Hz, the rate many 2014-era ArduPilot logs carry) beside its
+    5 Hz fixes, which jitter by 20 ms: two fixes then fell on one IMU sample, the velocity between them was
+    infinite and the alignment refused with "values ... not finite"; the INS never ran. The velocity of the
+    earth-rate terms is the fixes' own, over their own times."""
+    table = read_table(real_log("corpus/dronekit-la-testdata/log171.bin"), {}, False)
+    imu = table.imu_of("IMU[0]")
+    every_other = imu[np.isin(imu["t_s"], np.unique(imu["t_s"])[::2])].reset_index(drop=True)
+    half = replace(table, imu=every_other).between(63.16, 243.0)  # after the IMU's gap at 61.1 s
+    inputs = prepare(half, "IMU[0]", "GPS[0]")
+    assert float(np.median(np.diff(inputs.pre.t))) == pytest.approx(0.04, abs=2e-3)
+    alignment = align(inputs.pre, inputs.imu, inputs.fixes, 0.0)
+    assert alignment.method.startswith("velocity matching over")
+    assert np.isfinite(alignment.C0).all() and np.isfinite(alignment.v0).all()
+    # a vibrating IMU sampled at half its rate aliases: the window is wider and the yaw less certain than
+    # from every sample, and the alignment says so
+    assert alignment.residual_m > 1.0 and "yaw sigma" in alignment.method
