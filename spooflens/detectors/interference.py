@@ -559,15 +559,24 @@ def run_interference(table: EpochTable, opts: InterferenceOptions | None = None)
             monitor = facts["jamming_monitor"]["reported"]
             notes.append(f"{rec.rid}: C/N0 from {rec.sky_source}; {rf}; jamming monitor {monitor}")
     if not receivers:
-        return DetectorResult.skipped(
-            NAME,
-            "no C/N0 (per satellite or mean), AGC, noise, jamming indicator or jamming state in the log",
-            Evidence.INTERFERENCE,
-        )
+        return DetectorResult.skipped(NAME, _nothing_usable(table), Evidence.INTERFERENCE)
     result.reason = "; ".join(notes)
     result.alarms.sort(key=lambda x: x.start_s)
     result.extras = {"receivers": receivers, "events": events, "rejected": rejected}
     return result
+
+
+def _nothing_usable(table: EpochTable) -> str:
+    """Why no receiver of the log has anything this test reads."""
+    for frame in (table.satellites, table.observations):
+        cn0 = frame["cn0_dbhz"].to_numpy(float) if len(frame) else np.array([])
+        if np.isfinite(cn0).any():
+            epochs = len(np.unique(frame["t_s"].to_numpy()))
+            return (
+                f"the satellites' C/N0 never changes over the log's {epochs} epoch(s) (a writer's placeholder, "
+                "or too short a log to tell); no AGC, noise, jamming indicator or jamming state"
+            )
+    return "no C/N0 (per satellite or mean), AGC, noise, jamming indicator or jamming state in the log"
 
 
 def _run(ctx: AnalysisContext) -> list[DetectorResult]:

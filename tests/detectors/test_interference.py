@@ -174,6 +174,16 @@ def test_a_log_without_any_signal_level_is_not_judged() -> None:
     assert not r.ran and "no C/N0" in r.reason
 
 
+def test_a_c_n0_that_never_changes_is_said_to_be_one_not_missing() -> None:
+    """A 6 s excerpt of a real receiver's NMEA: its GSV carried C/N0 that had not yet changed, and the test
+    said the log had no C/N0 at all."""
+    t = np.arange(0.0, 5.0)
+    steady = sky_rows(5.0).assign(cn0_dbhz=np.tile(40.0 + np.arange(N_SATS), 5))
+    r = run_interference(table_of(steady, fix_rows(t)))
+    assert not r.ran
+    assert r.reason.startswith("the satellites' C/N0 never changes over the log's 5 epoch(s)")
+
+
 def test_the_verdict_keeps_interference_apart_from_spoofing() -> None:
     from spooflens.detectors.base import Alarm, DetectorResult
     from spooflens.pipeline.verdict import decide
