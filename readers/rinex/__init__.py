@@ -1,4 +1,4 @@
-"""RINEX observation files (2.10/2.11, 3.02-3.05) to an EpochTable, RINEX navigation files to GPS orbits.
+"""RINEX observation files (2.10/2.11, 3.02-3.05, 4.00-4.02) to an EpochTable, RINEX navigation files to GPS orbits.
 
 A log is one observation file or a directory holding several (one receiver per file: MARKER NAME, else
 the file stem; duplicates get the file name appended). Each satellite of each epoch becomes one row of
@@ -109,7 +109,7 @@ def _is_rinex(path: Path, head: bytes) -> bool:
 FORMATS = (
     ReaderFormat(
         "rinex",
-        "RINEX observation file (2.10, 2.11, 3.02-3.05; plain, gzip, bzip2, .Z, zip or Hatanaka .crx) or a "
+        "RINEX observation file (2.10, 2.11, 3.02-3.05, 4.00-4.02; plain, gzip, bzip2, .Z, zip or Hatanaka .crx) or a "
         "directory of them, navigation file beside",
         read_rinex,
         _is_rinex,
