@@ -573,7 +573,7 @@ def _nothing_usable(table: EpochTable) -> str:
         if np.isfinite(cn0).any():
             epochs = len(np.unique(frame["t_s"].to_numpy()))
             return (
-                f"the satellites' C/N0 never changes over the log's {epochs} epoch(s) (a writer's placeholder, "
+                f"the C/N0 of most satellites never changes over the log's {epochs} epoch(s) (a writer's placeholder, "
                 "or too short a log to tell); no AGC, noise, jamming indicator or jamming state"
             )
     return "no C/N0 (per satellite or mean), AGC, noise, jamming indicator or jamming state in the log"

@@ -307,11 +307,15 @@ def joint_level(zs: dict[str, FloatArray], opts: ReceiverEvidenceOptions) -> Flo
     return np.where((logged >= opts.joint_min_families) & (agreeing >= opts.joint_each), together, np.nan)
 
 
+# fixes an indicator needs before its own baseline means anything
+MIN_EPOCHS = 10
+
+
 def check_receiver(
     rid: str, fx: pd.DataFrame, opts: ReceiverEvidenceOptions, baseline: Baseline | None = None
 ) -> DetectorResult | None:
     t = fx["t_s"].to_numpy(dtype=float)
-    if len(t) < 10:
+    if len(t) < MIN_EPOCHS:
         return None
     z_cols: dict[str, FloatArray] = {}
     not_interference: dict[str, FloatArray] = {}  # each indicator's z the way interference does not move it
@@ -319,7 +323,7 @@ def check_receiver(
     reference, reference_end = reference_epochs(t, fx, opts)
     for ind in INDICATORS:
         x = fx[ind.column].to_numpy(dtype=float)
-        if np.isfinite(x).sum() < 10 or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
+        if np.isfinite(x).sum() < MIN_EPOCHS or (np.nanstd(x) == 0.0 and ind.column != "sats_used"):
             continue
         q = baseline.indicator(rid, ind.column) if baseline is not None else None
         floor = max(ind.floor, q.within or 0.0) if q is not None and q.agree is not False else ind.floor
@@ -417,12 +421,15 @@ def run_receiver_evidence(
         merged.findings += r.findings
         notes.append(r.reason)
     if not notes:
-        return DetectorResult.skipped(
-            NAME,
-            "the receiver logs no quality indicators (accuracy, satellites, DOP, "
-            "noise, jamming, AGC, C/N0, spoofing state)",
-            Evidence.RECEIVER,
-        )
+        most = int(fixes.groupby("receiver_id", sort=False).size().max()) if len(fixes) else 0
+        if most < MIN_EPOCHS:
+            why = f"needs {MIN_EPOCHS} fixes of a receiver for its indicators' own baseline ({most} found)"
+        else:
+            why = (
+                "the receiver logs no quality indicator, or none that moves (accuracy, satellites, DOP, noise, "
+                "jamming, AGC, C/N0, spoofing state)"
+            )
+        return DetectorResult.skipped(NAME, why, Evidence.RECEIVER)
     merged.reason = "; ".join(notes)
     merged.alarms.sort(key=lambda a: a.start_s)
     return merged

@@ -109,3 +109,11 @@ def test_three_accuracies_of_one_fix_are_one_witness() -> None:
     assert not run_receiver_evidence(_accuracies_worse(satellites_lost=False)).alarms
     (alarm,) = run_receiver_evidence(_accuracies_worse(satellites_lost=True)).alarms
     assert 150.0 <= alarm.start_s <= 152.0
+
+
+def test_too_few_fixes_are_said_to_be_too_few_not_a_receiver_without_indicators() -> None:
+    """An 8-fix excerpt of a phone's NMEA (satellites, HDOP, C/N0 all logged) was said to log no quality
+    indicators at all."""
+    short = run_receiver_evidence(receiver_fixes(100.0, 60.0, seconds=1.6))
+    assert not short.ran
+    assert short.reason == "needs 10 fixes of a receiver for its indicators' own baseline (8 found)"
