@@ -395,25 +395,43 @@ def line_times(file: DecodedFile, anchors: list[tuple[int, int]], clock: Clock) 
     """Time (ns) of every decoded sentence's line, interpolated by file position between anchors.
 
     Anchors are the GNSS epochs of the file's main receiver, or with the logger's clock the first line
-    of each run of equal logger times (loggers that stamp whole seconds stamp a burst alike; the lines
-    of a run are spread by their position up to the next stamp).
+    of each run of equal logger times. A logger that stamps whole seconds stamps a burst alike: the lines
+    of a run are spread by their position over the stamps' resolution (at most up to the next stamp); a
+    logger that stamps milliseconds (GnssLogger) stamped each line when it came, and its lines keep their
+    stamps (spread up to the next stamp, its fixes came most of a second late).
     """
     lines = np.array([d.sentence.line for d in file.decoded], dtype=np.int64)
+    resolution = np.inf
     if clock.logger:
         stamped = sorted((d.sentence.line, d.sentence.host_ns) for d in file.decoded if d.sentence.host_ns is not None)
         known = [(ln, t) for i, (ln, t) in enumerate(stamped) if i == 0 or t != stamped[i - 1][1]]
+        resolution = _stamp_resolution_ns([t for _, t in known])
     else:
         known = sorted(dict(anchors).items())
     if not known:
         return {}
     x = np.array([k for k, _ in known], dtype=np.float64)
     y = np.maximum.accumulate(np.array([v for _, v in known], dtype=np.float64))
-    t = np.interp(lines, x, y)
-    if len(x) > 1:  # beyond the first/last anchor: extrapolate at the median seconds per line
-        slope = float(np.median(np.diff(y) / np.maximum(np.diff(x), 1)))
+    if len(x) > 1:
+        i = np.clip(np.searchsorted(x, lines, side="right") - 1, 0, len(x) - 2)
+        step = np.minimum(np.diff(y), resolution)[i]
+        t = y[i] + np.clip((lines - x[i]) / np.maximum(x[i + 1] - x[i], 1), 0.0, 1.0) * step
+        # beyond the first/last anchor: extrapolate at the median seconds per line
+        slope = float(np.median(np.minimum(np.diff(y), resolution) / np.maximum(np.diff(x), 1)))
         t = np.where(lines < x[0], y[0] - (x[0] - lines) * slope, t)
-        t = np.where(lines > x[-1], y[-1] + (lines - x[-1]) * slope, t)
+        t = np.where(lines > x[-1], y[-1] + np.minimum((lines - x[-1]) * slope, resolution), t)
+    else:
+        t = np.full(len(lines), y[0])
     return dict(zip(lines.tolist(), np.round(t).astype(np.int64).tolist(), strict=True))
+
+
+def _stamp_resolution_ns(stamps: list[int]) -> float:
+    """The coarsest power of ten (1 ns to 1 s) every logger stamp is a whole multiple of."""
+    values = np.asarray(stamps, dtype=np.int64)
+    for exponent in range(9, 0, -1):
+        if not np.any(values % (10**exponent)):
+            return float(10**exponent)
+    return 1.0
 
 
 @dataclass

@@ -408,3 +408,27 @@ def test_a_garbled_serial_capture_is_read_as_a_damaged_nmea_log(tmp_path: Path) 
     lost = {s.reason: s.count for s in table.skipped if s.action == "lost"}
     assert lost["sentences with a bad checksum"] == 2 * len(BASE_BODIES)
     assert list(table.fixes["t_s"]) == [0.0, 1.0, 2.0, 3.0]
+
+
+def test_lines_stamped_in_milliseconds_keep_their_own_stamps(tmp_path: Path) -> None:
+    """GnssLogger stamps each NMEA line in ms when it came. A burst's GGA after its GSA and VTG lines was
+    spread toward the next burst as if the stamps were whole seconds: its fixes came 0.7 s late and the
+    receiver's clock offset was read as -1.27 s where its lines say -0.59 s."""
+    t0_ms = 1699400577000  # 2023-11-07 23:42:57 UTC
+    lines = []
+    for k in range(12):
+        hhmmss = f"2342{57 + k:02d}" if 57 + k < 60 else f"2343{57 + k - 60:02d}"
+        sky, fix = t0_ms + 1000 * k + 554, t0_ms + 1000 * k + 591
+        lines += [f"NMEA,{_sentence('GPGSV,1,1,01,08,12,287,24')},{sky}"]
+        lines += [f"NMEA,{_sentence('GNGSA,A,3,08,18,23,25,27,,,,,,,,1.0,0.7,0.8')},{fix}"]
+        lines += [f"NMEA,{_sentence('GNVTG,,T,,M,0.0,N,0.0,K,A')},{fix}"]
+        lines += [
+            f"NMEA,{_sentence(f'GNGGA,{hhmmss}.00,3725.590397,N,12210.422534,W,1,12,0.7,51.9,M,-28.4,M,,')},{fix}"
+        ]
+        lines += [f"NMEA,{_sentence(f'GNRMC,{hhmmss}.00,A,3725.590397,N,12210.422534,W,0.0,,071123,,,A')},{fix}"]
+    path = tmp_path / "gnss_log.nmea"
+    path.write_text("\n".join(lines) + "\n")
+    table = read_log(path)
+    assert table.metadata["time_source"] == "logger"
+    assert float(table.metadata["clock.gnss_minus_logger_s"]) == pytest.approx(-0.591, abs=0.002)
+    assert table.absolute_iso(0).startswith("2023-11-07T23:42:57.591")
