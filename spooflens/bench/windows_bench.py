@@ -33,6 +33,7 @@ from rich.table import Table
 
 from spooflens.bench.corpus_bench import default_root
 from spooflens.bench.corpus_logs import CorpusLog, discover
+from spooflens.bench.natural_changes import CHANGES, changed
 from spooflens.output.console import console, progress, show_progress
 
 DEFAULT_LENGTHS_S = (60.0, 150.0, 400.0, 900.0)
@@ -63,6 +64,7 @@ class Cutting:
     draws: int = 2
     min_span_s: float = 240.0
     timeout_s: float = 120.0
+    natural: str = ""  # a natural change made to each log first (`bench.natural_changes`); "" none
 
 
 class _Timeout(Exception):
@@ -94,6 +96,11 @@ def stretches_of(path: str, name: str, cutting: Cutting) -> list[Stretch]:
         table = read_table(Path(path), {}, False)
     except SpooflensError:
         return []
+    if cutting.natural:
+        natural = changed(table, cutting.natural)
+        if natural is None:
+            return []
+        table = natural
     t = table.fixes["t_s"].to_numpy(dtype=float)
     if not has_gnss(table) or len(table.segments) > 1 or len(t) < 20:
         return []
@@ -214,6 +221,12 @@ def print_report(stretches: list[Stretch], seconds: float) -> None:
 @click.option("--timeout", "timeout_s", default=120.0, show_default=True, help="Seconds per stretch.")
 @click.option("--jobs", default=2, show_default=True, help="Worker processes.")
 @click.option("--only", multiple=True, metavar="GLOB", help="Only logs whose relative path matches (repeatable).")
+@click.option(
+    "--natural",
+    type=click.Choice(sorted(CHANGES)),
+    default=None,
+    help="First make this natural change to each log it applies to (never an attack; others are left out).",
+)
 @click.option("--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write everything here.")
 def command(
     dirs: tuple[Path, ...],
@@ -224,6 +237,7 @@ def command(
     timeout_s: float,
     jobs: int,
     only: tuple[str, ...],
+    natural: str | None,
     json_path: Path | None,
 ) -> int:
     """False accusations on stretches of real clean logs cut at random: every clean-sky log of DIRS (default
@@ -235,9 +249,11 @@ def command(
     if any(x <= 0 for x in lengths):
         raise click.BadParameter("lengths must be positive", param_hint="--length")
     t0 = time.perf_counter()
-    cutting = Cutting(seed, lengths, draws, min_span_s, timeout_s)
+    cutting = Cutting(seed, lengths, draws, min_span_s, timeout_s, natural or "")
     stretches = run_windows(clean_logs(roots, only), cutting, jobs, show_progress())
     print_report(stretches, time.perf_counter() - t0)
+    if natural:
+        console().print(f"each log changed first ({natural}): {(CHANGES[natural].__doc__ or '').strip()}")
     if json_path:
         settings = asdict(cutting) | {"roots": roots}
         json_path.write_text(json.dumps(report_json(stretches, settings), indent=1, default=str))
