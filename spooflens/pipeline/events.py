@@ -32,6 +32,7 @@ from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import CORROBORATION_S, EVIDENCE, NOT_SPOOFING, Evidence, confidence, label
 from spooflens.pipeline.explanations import (
+    Excursion,
     ExplanationOptions,
     Weighed,
     alarm_began,
@@ -436,7 +437,15 @@ def classify(table: EpochTable, results: Sequence[DetectorResult], verdict: Verd
         for c in verdict.coasting_checks
         if c.get("confirmed") and c.get("departure_s") is not None
     ]
-    scene = scene_of(table, results, departures_s=departures)
+    excursions = [
+        Excursion(float(c["departure_s"]), float(c["end_s"]), float(c["offset_peak_m"]))
+        for c in verdict.coasting_checks
+        if c.get("confirmed")
+        and c.get("departure_s") is not None
+        and c.get("end_s") is not None
+        and c.get("offset_peak_m") is not None
+    ]
+    scene = scene_of(table, results, departures_s=departures, excursions=excursions)
     spoofing_before = [i for i in verdict.incidents if i.is_spoofing]
     incidents: list[Incident] = []
     events: list[Event] = []

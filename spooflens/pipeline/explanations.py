@@ -157,6 +157,25 @@ class ExplanationOptions:
     # and ends within this after it: a filter that lost its attitude re-converges on GNSS within seconds
     # (ArduPilot's in about 10 s); a departure that outlasts this is not the shock's
     shock_recovery_s: float = 20.0
+    # a glitch: GNSS leaves the coasted INS and comes back. Autopilots ride out exactly this: ArduPilot's EKF3
+    # rejects GNSS that leaves its prediction for up to 7 s (10 s with an airspeed sensor: gpsRetryTimeNoTAS_ms,
+    # gpsRetryTimeUseTAS_ms) before it takes GNSS back as true, a real receiver's multipath or NLOS excursion;
+    # alarms after the return are the filter re-converging
+    max_glitch_s: float = 10.0
+    glitch_recovery_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class Excursion:
+    """GNSS away from the coasted INS and back (a confirmed coast's departure and its end)."""
+
+    departure_s: float
+    end_s: float
+    peak_m: float
+
+    @property
+    def length_s(self) -> float:
+        return self.end_s - self.departure_s
 
 
 @dataclass(frozen=True)
@@ -268,6 +287,8 @@ class _Scene:
     innovations_read: bool = False
     # where the reconstruction stage's coasts confirmed GNSS departing from the coasted INS
     departures_s: tuple[float, ...] = ()
+    # ... and the ones where GNSS came back to it
+    excursions: tuple[Excursion, ...] = ()
 
     def nav(self) -> Innovations | None:
         if not self.innovations_read:
@@ -1067,12 +1088,62 @@ def read_inertial_shock(scene: _Scene, alarm: Alarm) -> Reading:
     return Reading("inertial shock", Kind.UNKNOWN, True, text, facts, None)
 
 
+def _excursion_around(scene: _Scene, start_s: float) -> Excursion | None:
+    """The excursion an alarm interval began in: from its departure (less the lead an onset estimate takes)
+    to the filter's recovery after GNSS came back. It may go on after that: a windowed test (GLRT, MLRT)
+    holds its alarm while its window still spans the excursion, and the incident ends at the return."""
+    return next(
+        (
+            e
+            for e in scene.excursions
+            if e.departure_s - DEPARTURE_LEAD_S <= start_s <= e.end_s + scene.opts.glitch_recovery_s
+        ),
+        None,
+    )
+
+
+def read_glitch(scene: _Scene, start_s: float) -> Reading:
+    """GNSS left the coasted INS for seconds and came back onto it, with no spoofer's mark on the receivers:
+    a glitch, as multipath and NLOS make, that an autopilot rides out; a spoofer who lets go within seconds
+    took nothing. Held for the alarms that began inside the excursion (or the filter's recovery after it)."""
+    e = _excursion_around(scene, start_s)
+    if e is None:
+        return Reading("glitch", Kind.DEGRADATION, False, "")
+    if e.length_s > scene.opts.max_glitch_s:
+        why = (
+            f"GNSS left the coasted INS reference for {e.length_s:.1f} s before it came back, longer than a glitch an "
+            f"autopilot rides out ({scene.opts.max_glitch_s:g} s)"
+        )
+        return Reading("glitch", Kind.DEGRADATION, False, why)
+    if e.peak_m > scene.opts.max_reflection_m:
+        why = f"GNSS left the coasted INS reference by {e.peak_m:,.0f} m, more than multipath or NLOS moves it"
+        return Reading("glitch", Kind.DEGRADATION, False, why)
+    marks = [
+        m
+        for rid in scene.table.receivers()
+        if (w := Window.of(scene.rx(rid), e.departure_s, e.end_s)).fixes
+        for m in spoofer_marks(w, scene.opts)
+    ]
+    if marks:
+        return Reading("glitch", Kind.DEGRADATION, False, "; ".join(marks))
+    facts = (f"{e.peak_m:.0f} m off the coasted INS", f"back on it after {e.length_s:.1f} s")
+    why = (
+        f"GNSS left the coasted INS reference by {e.peak_m:.0f} m for {e.length_s:.1f} s and came back onto it: a "
+        "glitch, as multipath and NLOS make, not spoofing (no spoofer's mark on the receiver)"
+    )
+    return Reading("glitch", Kind.DEGRADATION, True, why, facts)
+
+
 def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Reading]:
     """Every signature that applies to this alarm's class, in the order they are preferred."""
     ev = result.evidence
     out: list[Reading] = []
     if ev == Evidence.INERTIAL:
-        return [read_inertial_shock(scene, alarm), read_jammed_fixes(scene, alarm)]
+        return [
+            read_inertial_shock(scene, alarm),
+            read_jammed_fixes(scene, alarm),
+            read_glitch(scene, alarm.start_s),
+        ]
     if ev == Evidence.LOG_CLOCK:
         return [read_time_fault(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
     if ev in (Evidence.RAW_MEASUREMENT, Evidence.KNOWN_STATION, Evidence.RECEIVER) and len(alarm.satellites) == 1:
@@ -1092,6 +1163,8 @@ def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Read
                 read_interference(scene, alarm, w, marks),
                 read_degradation(scene, alarm, w, marks, result.name == GNSS_CONSISTENCY),
             ]
+    if ev in (Evidence.GNSS_ONLY, Evidence.RECEIVER):
+        out.append(read_glitch(scene, alarm.start_s))
     return out
 
 
@@ -1191,6 +1264,11 @@ def explain(
             upto = min([*elsewhere, first_open, sp[2]])
             if upto > sp[1]:
                 reach[sp] = upto
+    # a glitch's departure interval (the coast's, no alarm behind it) is the glitch too
+    if any(rd.cause == "glitch" for items in held.values() for rd, _ in items):
+        for sp in incident.spans:
+            if sp[0] == Evidence.INERTIAL and sp not in reach and read_glitch(scene, sp[1]).held:
+                reach[sp] = sp[2]
     spans = tuple(sorted(k for k, r in reach.items() if r >= k[2]))
     partly = tuple(sorted((k, r) for k, r in reach.items() if k[1] < r < k[2]))
     return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), partly)
@@ -1201,7 +1279,10 @@ def scene_of(
     results: Sequence[DetectorResult],
     opts: ExplanationOptions | None = None,
     departures_s: Sequence[float] = (),
+    excursions: Sequence[Excursion] = (),
 ) -> _Scene:
     """What `explain` reads, shared by the incidents of one log (each receiver's arrays are made once);
-    `departures_s`: where the reconstruction stage's coasts confirmed GNSS departing from the INS."""
-    return _Scene(table, results, opts or ExplanationOptions(), departures_s=tuple(departures_s))
+    `departures_s`: where the reconstruction stage's coasts confirmed GNSS departing from the INS,
+    `excursions`: those that came back."""
+    opts = opts or ExplanationOptions()
+    return _Scene(table, results, opts, departures_s=tuple(departures_s), excursions=tuple(excursions))

@@ -211,6 +211,16 @@ class CoastingCheck:
         return float(np.nanmax(over)) if np.isfinite(over).any() else None
 
 
+def _offset_peak(check: CoastingCheck) -> float | None:
+    """The largest horizontal GNSS - reference distance from the departure to the end (the log's end if
+    GNSS never came back); None without a departure."""
+    if check.departure_s is None:
+        return None
+    end = check.end_s if check.end_s is not None else np.inf
+    inside = (check.t >= check.departure_s) & (check.t <= end) & np.isfinite(check.offset_m)
+    return float(np.max(check.offset_m[inside])) if inside.any() else None
+
+
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True))
@@ -815,6 +825,8 @@ def _on_navigation(
             "independent_coasts": e.samples if e.runs else None,
             "clean_envelope_max_ratio": float(e.kappa.max()) if e.runs else None,
             "peak_ratio_over_envelope": c.peak_over_envelope,
+            # how far GNSS went from the coasted INS between its departure and its return
+            "offset_peak_m": _offset_peak(c),
             # an inertial alarm the coast cleared is no incident: this record is where it shows
             "cleared": id(inc) in cleared,
         }

@@ -443,3 +443,34 @@ def test_a_cold_start_settles_where_its_first_fixes_do_not_at_jamming_minutes_la
     assert max(settled, default=0.0) < 100.0
     (jam,) = [i for i in incidents if i.start_s <= 101.0 <= i.end_s and "receiver_evidence" in i.detectors]
     assert [e.cause for e in jam.explanations] == ["interference"]
+
+
+HUSKY = "ros1_husky_navsat/test1.bag"
+
+
+@pytest.mark.parametrize(
+    ("attack", "glitch"),
+    [
+        ("step:start=300,end=303,offset=10", True),  # 3 s, 10 m: multipath's size and length
+        ("step:start=200,end=208,offset=25", True),
+        ("step:start=300,end=315,offset=10", False),  # 15 s away: longer than an autopilot rides out
+    ],
+)
+def test_gnss_that_leaves_the_ins_for_seconds_and_comes_back_is_a_glitch(attack: str, glitch: bool) -> None:
+    """The real husky bag's fixes moved for a few seconds and back, nothing else touched: a multipath or NLOS
+    excursion looks exactly like this, and ArduPilot's EKF3 rejects GNSS up to 7-10 s before it takes it back as
+    true. It was SPOOFING (high: the GNSS jump and the INS agreeing on it); a glitch now. One that stays away
+    longer is still spoofing."""
+    spoofed, _ = apply_attack(table_of(HUSKY), parse_attack(attack))
+    start = float(attack.split("start=")[1].split(",")[0])
+    verdict = analyze_table(spoofed).verdict
+    ((k, inc),) = [(k, i) for k, i in enumerate(verdict.incidents) if i.start_s <= start + 1.0 <= i.end_s]
+    (event,) = [e for e in verdict.events if e.incident == k]
+    if glitch:
+        assert not inc.is_spoofing and inc.kind == Kind.DEGRADATION, attack
+        (e,) = inc.explanations
+        assert e.cause == "glitch" and "came back onto it" in e.text
+        assert inc.confidence_of_alarms == "high"  # the alarms alone: what the explanation weighed
+    else:
+        assert inc.is_spoofing and inc.kind == Kind.SPOOFING, attack
+        assert any("ruled out glitch" in x and "longer than a glitch" in x for x in event.evidence_against)
