@@ -28,7 +28,7 @@ from pathlib import Path
 
 from readers import NothingToJudgeError, ReaderFormat
 from readers.nmea.assembly import DecodedFile, build
-from readers.nmea.lines import UNVERIFIED, Sentence, SentenceScan, scan_sentences, split_lines
+from readers.nmea.lines import UNVERIFIED, UNVERIFIED_TYPE, Sentence, SentenceScan, scan_sentences, split_lines
 from readers.nmea.proprietary import decode_variant, family_of, not_read_reason, sentence_name
 from readers.nmea.sentences import WANTED, Decoded, ParseErrors, decode, forget_parsed, is_empty
 from readers.protocols import standard_address
@@ -55,7 +55,12 @@ def decode_scan(scan: SentenceScan, label: str) -> DecodedFile:
     """Decode the sentences spooflens uses; count every other one by type and every failure."""
     name = label or scan.path.name
     skipped = [
-        Skipped(name, reason, n, "lost" if reason in _LOST else "unverified" if reason == UNVERIFIED else "skipped")
+        Skipped(
+            name,
+            reason,
+            n,
+            "lost" if reason in _LOST else "unverified" if reason in (UNVERIFIED, UNVERIFIED_TYPE) else "skipped",
+        )
         for reason, n in scan.counts.items()
         if n
     ]

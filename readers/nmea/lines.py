@@ -7,7 +7,8 @@ logger that recorded it:
 - NMEA 4 TAG blocks `\\s:GPS1,c:1533064290*hh\\$GPRMC,...`: `c:` the logger's UNIX time (seconds, or
   milliseconds when the value is that large), `s:` the source, which makes a receiver of its own;
 - a leading logger time: `1533064290.123 $GPRMC...` (space, tab, `,` or `;` after it), Signal K's
-  multiplexed log `1533064290123;N;$GPRMC...`, or an ISO-8601 UTC time `2018-08-20T09:47:36.123Z $GP...`;
+  multiplexed log `1533064290123;N;$GPRMC...`, a router's `[1494938987296][**] $GPRMC...`, or an ISO-8601
+  UTC time `2018-08-20T09:47:36.123Z $GP...`;
 - Android GnssLogger's `NMEA,$GPRMC,...*hh,1699400577561` (a trailing logger time in ms after the
   checksum; AIS loggers append `,<unix seconds>` the same way).
 
@@ -16,7 +17,8 @@ back with no line break between them (`...*4B$GPGGA,...`) are split after the ch
 
 Checksums are verified for every sentence (vectorised over the file); a sentence whose checksum does
 not match is skipped and counted. A sentence without a checksum is accepted only in a file where no
-sentence carries one (an old talker that never sends them); elsewhere it is most likely cut short.
+sentence carries one (an old talker that never sends them), or where no sentence of its type does (a
+logger's own marks); elsewhere it is most likely cut short.
 """
 
 from __future__ import annotations
@@ -34,9 +36,14 @@ from spooflens.errors import ReaderError
 
 NS = 1_000_000_000
 UNVERIFIED = "sentences without a checksum, taken unverified (no sentence in the file has one)"
+# a device's own sentence that never carries one where the receiver's do (an AMOD logger's `$ADPMB,5,0`
+# button marks): whole, not cut short
+UNVERIFIED_TYPE = "sentences of a type that never carries a checksum in this file, taken unverified"
 
 _TIME = rb"(\d{9,19}(?:\.\d*)?)"
 _NUMERIC_PREFIX = re.compile(rb"^" + _TIME + rb"[ \t;,]+(?:[A-Za-z];)?")
+# a router's `[1494938987296][**] $GPRMC,...`: the logger's time in brackets, then bracketed tags
+_BRACKET_PREFIX = re.compile(rb"^\[" + _TIME + rb"\](?:\[[^\]\r\n]{0,16}\])*[ \t]*")
 _ISO_PREFIX = re.compile(rb"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(?:\.\d+)?)(?:Z|[+-]00:?00)?[ \t;,]+")
 _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
 # a talker is two letters, or a bus address's two digits (canboat's n2kd writes `$04HDM`); a proprietary
@@ -139,10 +146,10 @@ def _unwrap(line: bytes) -> tuple[int, str, int | None, bool]:
         if rest[:5] == b"NMEA,":  # Android GnssLogger
             pos += 5
             continue
-        m = _NUMERIC_PREFIX.match(rest) or _ISO_PREFIX.match(rest)
+        m = _NUMERIC_PREFIX.match(rest) or _BRACKET_PREFIX.match(rest) or _ISO_PREFIX.match(rest)
         if m is None:
             break
-        t = logger_ns(m.group(1)) if m.re is _NUMERIC_PREFIX else _iso_ns(m.group(1))
+        t = _iso_ns(m.group(1)) if m.re is _ISO_PREFIX else logger_ns(m.group(1))
         host = t if host is None else host
         pos += m.end()
     return pos, source, host, tag_ok
@@ -240,6 +247,11 @@ def scan_sentences(path: Path, data: bytes | None = None) -> SentenceScan:
     return SentenceScan(path, data, sentences, comments, n_lines, counts)
 
 
+def _address_at(data: bytes, c: _Candidate) -> bytes | None:
+    m = _ADDRESS.match(data[c.start : c.end])
+    return m.group(1) if m else None
+
+
 def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -> list[Sentence]:
     """Sentences whose checksum matches (XOR of the bytes between `$` and `*`), vectorised."""
     with_sum = [c for c in candidates if c.star >= 0]
@@ -261,7 +273,14 @@ def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -
             counts["sentences with a bad checksum"] += int((~good).sum())
     if no_sum:
         if with_sum:
-            counts["sentences without a checksum (cut short?)"] += len(no_sum)
+            summed = {_address_at(data, c) for c in with_sum}
+            cut = [c for c in no_sum if _address_at(data, c) in summed or _address_at(data, c) is None]
+            if cut:
+                counts["sentences without a checksum (cut short?)"] += len(cut)
+            never = [c for c in no_sum if c not in cut]
+            if never:
+                ok += never
+                counts[UNVERIFIED_TYPE] += len(never)
         else:
             ok += no_sum
             counts[UNVERIFIED] += len(no_sum)

@@ -432,3 +432,32 @@ def test_lines_stamped_in_milliseconds_keep_their_own_stamps(tmp_path: Path) -> 
     assert table.metadata["time_source"] == "logger"
     assert float(table.metadata["clock.gnss_minus_logger_s"]) == pytest.approx(-0.591, abs=0.002)
     assert table.absolute_iso(0).startswith("2023-11-07T23:42:57.591")
+
+
+def test_a_routers_bracketed_logger_time_is_read(tmp_path: Path) -> None:
+    """A boat's NMEA router logs `[1494938987296][**] $GPRMC,...`: it was refused as an unknown format."""
+    lines = [f"[{1577836798000 + 500 * k}][**] {_sentence(b)}" for k, b in enumerate(BASE_BODIES)]
+    path = tmp_path / "router.log"
+    path.write_text("\n".join(lines) + "\n")
+    table = read_log(path)
+    assert table.metadata["time_source"] == "logger"  # the bracketed time is the logger's clock
+    assert len(table.fixes) == 4 and table.absolute_iso(0).startswith("2019-12-31T23:59:58")
+    assert not [s for s in table.skipped if s.action in ("lost", "unverified")]
+
+
+def test_a_loggers_own_marks_without_checksums_are_no_damage(tmp_path: Path) -> None:
+    """An AMOD 3080 logger writes `$ADPMB,5,0` button marks without a checksum among its receiver's checksummed
+    sentences: they were counted as sentences cut short and the log called damaged. A type that never carries
+    one is whole; a GGA without one where other GGAs have theirs is still cut short."""
+    lines = [_sentence(b) for b in BASE_BODIES]
+    lines.insert(2, "$ADPMB,5,0")
+    lines.insert(6, "$ADPMB,5,0")
+    lines.insert(8, "$" + BASE_BODIES[0])  # a GGA without its checksum
+    path = tmp_path / "amod.log"
+    path.write_text("\n".join(lines) + "\n")
+    table = read_log(path)
+    by_action = {(s.action, s.reason): s.count for s in table.skipped if s.action in ("lost", "unverified")}
+    assert by_action == {
+        ("unverified", "sentences of a type that never carries a checksum in this file, taken unverified"): 2,
+        ("lost", "sentences without a checksum (cut short?)"): 1,
+    }
