@@ -572,8 +572,10 @@ def _nothing_usable(table: EpochTable) -> str:
         cn0 = frame["cn0_dbhz"].to_numpy(float) if len(frame) else np.array([])
         if np.isfinite(cn0).any():
             epochs = len(np.unique(frame["t_s"].to_numpy()))
+            if epochs < 2:
+                return "the satellites' C/N0 at one epoch only: too short a log to tell it from a placeholder"
             return (
-                f"the C/N0 of most satellites never changes over the log's {epochs} epoch(s) (a writer's placeholder, "
+                f"the C/N0 of most satellites never changes over the log's {epochs} epochs (a writer's placeholder, "
                 "or too short a log to tell); no AGC, noise, jamming indicator or jamming state"
             )
     return "no C/N0 (per satellite or mean), AGC, noise, jamming indicator or jamming state in the log"

@@ -181,7 +181,7 @@ def test_a_c_n0_that_never_changes_is_said_to_be_one_not_missing() -> None:
     steady = sky_rows(5.0).assign(cn0_dbhz=np.tile(40.0 + np.arange(N_SATS), 5))
     r = run_interference(table_of(steady, fix_rows(t)))
     assert not r.ran
-    assert r.reason.startswith("the C/N0 of most satellites never changes over the log's 5 epoch(s)")
+    assert r.reason.startswith("the C/N0 of most satellites never changes over the log's 5 epochs")
 
 
 def test_the_verdict_keeps_interference_apart_from_spoofing() -> None:
