@@ -56,7 +56,9 @@ class ReaderFormat:
     is a folder of separate logs, not one log (`sniff_format` says so). `companion(path)`: a file of this
     format that is not a log by itself but data a log reads (a RINEX navigation file beside its
     observations, a log's `LOG.truth.csv`): `batch` counts it among the paths that are not logs, not
-    among the failed logs, and it makes no folder a folder of separate logs.
+    among the failed logs, and it makes no folder a folder of separate logs. `damaged(head)`: why a file
+    that looks like this format, and that `sniff` still refused, cannot be read (standard NMEA sentences
+    whose checksums all fail), said in place of "unknown format"; None when it is no such file.
     """
 
     name: str
@@ -66,6 +68,7 @@ class ReaderFormat:
     rewrite: str | None = None
     folder_of_files: bool = False
     companion: Callable[[Path], bool] | None = None
+    damaged: Callable[[bytes], str | None] | None = None
 
 
 def formats() -> dict[str, ReaderFormat]:
@@ -128,12 +131,12 @@ def sniff_format(path: Path) -> str:
     if path.is_dir():
         what = "directory holds no log this tool reads"
     else:
-        from readers.nmea import damaged_nmea
         from readers.protocols import identify
 
-        damaged = damaged_nmea(head)
-        if damaged is not None:
-            raise ReaderError(path, damaged, "nmea")
+        for fmt in formats().values():
+            why = fmt.damaged(head) if fmt.damaged is not None else None
+            if why is not None:
+                raise ReaderError(path, why, fmt.name)
         protocol = identify(path, head)
         what = f"{protocol}: not supported" if protocol else f"unknown format (starts with {head[:12]!r})"
     raise UnsupportedFormatError(path, f"{what}; supported: {supported()}")

@@ -234,5 +234,6 @@ FORMATS = (
         _is_nmea,
         rewrite="spooflens.writers.nmea_rewrite:rewrite_nmea_log",
         folder_of_files=True,
+        damaged=damaged_nmea,
     ),
 )
