@@ -107,10 +107,23 @@ def receivers_of(files: list[DecodedFile], skipped: list[Skipped]) -> list[Recei
     """Every receiver of the log with its sentences (file order), by the association rule above."""
     out: dict[str, Receiver] = {}
     for f in files:
+        sources: dict[str, str] = {}
+        positioned: set[str] = set()
         for d in f.decoded:
             if d.kind in POSITION_KINDS:
                 rid = _rid(_source(f, d), d.receiver)
                 out.setdefault(rid, Receiver(rid, f, d.antenna))
+                sources[rid] = _source(f, d)
+                if math.isfinite(d.lat) and math.isfinite(d.lon):
+                    positioned.add(rid)
+        # a multi-system receiver's per-system lines ($GPGNS, $GLGNS with no position beside its $GNGNS, NMEA
+        # 4.11) are no receiver of their own: read with its GN receiver, they leave it its GPS and GLONASS sky
+        for rid, source in sources.items():
+            gn = _rid(source, "GN" + out[rid].antenna)
+            if rid not in positioned and gn in positioned and rid != gn:
+                n = sum(1 for d in f.decoded if d.kind in POSITION_KINDS and _rid(_source(f, d), d.receiver) == rid)
+                skipped.append(Skipped(rid, f"position sentences without a position, read as {gn}'s", n))
+                del out[rid]
         orphans: Counter[str] = Counter()
         for d in f.decoded:
             if d.kind in HEADING_KINDS:

@@ -461,3 +461,28 @@ def test_a_loggers_own_marks_without_checksums_are_no_damage(tmp_path: Path) -> 
         ("unverified", "sentences of a type that never carries a checksum in this file, taken unverified"): 2,
         ("lost", "sentences without a checksum (cut short?)"): 1,
     }
+
+
+def test_a_receivers_per_system_lines_without_a_position_are_no_receivers_of_their_own(tmp_path: Path) -> None:
+    """A Trimble R2 writes $GNGNS with the fix and, NMEA 4.11, $GPGNS and $GLGNS with each system's count and no
+    position: they became receivers GP and GL, which took the GPS and GLONASS sky away from GN (left with
+    Galileo's 3 satellites while its fix used 10)."""
+    bodies = []
+    for k in range(5):
+        tod = f"2356{47 + k:02d}.00"
+        bodies += [
+            f"GNGNS,{tod},3403.47162394,N,11711.80927093,W,FFNNN,10,1.2,403.600,-32.133,,",
+            f"GPGNS,{tod},,,,,,6,,,,1.0,0",
+            f"GLGNS,{tod},,,,,,4,,,,1.0,0",
+            "GPGSV,1,1,02,26,33,050,38,09,40,314,43",
+            "GLGSV,1,1,02,73,52,022,52,74,62,247,50",
+            "GAGSV,1,1,01,19,82,349,44",
+            f"GNRMC,{tod},A,3403.47162394,N,11711.80927093,W,0.003,0.000,201217,12.0194,E,D",
+        ]
+    table = read_log(_write(tmp_path / "trimble.log", bodies))
+    assert table.receivers() == ["GN"]
+    assert set(table.satellites["sv_id"]) == {"G26", "G09", "R09", "R10", "E19"}
+    per_system = {s.stream: s.reason for s in table.skipped if s.stream in ("GP", "GL")}
+    assert per_system == {"GP": "position sentences without a position, read as GN's"} | {
+        "GL": "position sentences without a position, read as GN's"
+    }
