@@ -351,6 +351,12 @@ def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | N
     signals = DetectorResult(SIGNALS, ran=False, evidence=Evidence.RECEIVER)
     h_notes, s_notes = [], []
     for view in views:
+        epochs = int(view.rows["t_s"].nunique())
+        if epochs < opts.min_epochs:  # every test here holds for that many epochs before it alarms
+            short = f"{view.receiver_id}: its sky at {epochs} epoch(s), {opts.min_epochs} needed"
+            h_notes.append(short)
+            s_notes.append(short)
+            continue
         h_alarms, h_findings, h_series = below_horizon(view, opts)
         if h_series is not None:
             horizon.ran = True

@@ -248,3 +248,13 @@ def test_a_cn0_that_never_moves_is_a_placeholder_not_one_transmitter(tmp_path: P
 
     res = _run(read_log(_capture(tmp_path / "constant.ubx", 120, placeholder)))
     assert res[SIGNALS].ran and not res[SIGNALS].alarms
+
+
+def test_a_sky_of_fewer_epochs_than_any_test_holds_for_is_not_judged(tmp_path: Path) -> None:
+    """A phone log of one epoch (every satellite at 0 dB-Hz, none used) was "NO SPOOFING DETECTED by 2
+    detector(s)": both tests ran on a sky none of whose checks can hold for the 3 epochs they need."""
+    results = _run(read_log(_capture(tmp_path / "two.ubx", 2)))
+    for name in (HORIZON, SIGNALS):
+        assert not results[name].ran, name
+        assert results[name].reason.endswith("its sky at 2 epoch(s), 3 needed"), results[name].reason
+    assert _run(read_log(_capture(tmp_path / "three.ubx", 3)))[SIGNALS].ran
