@@ -108,12 +108,15 @@ def receivers_of(files: list[DecodedFile], skipped: list[Skipped]) -> list[Recei
     out: dict[str, Receiver] = {}
     for f in files:
         sources: dict[str, str] = {}
+        positions: Counter[str] = Counter()  # position sentences per receiver
         positioned: set[str] = set()
         for d in f.decoded:
             if d.kind in POSITION_KINDS:
-                rid = _rid(_source(f, d), d.receiver)
+                source = _source(f, d)
+                rid = _rid(source, d.receiver)
                 out.setdefault(rid, Receiver(rid, f, d.antenna))
-                sources[rid] = _source(f, d)
+                sources[rid] = source
+                positions[rid] += 1
                 if math.isfinite(d.lat) and math.isfinite(d.lon):
                     positioned.add(rid)
         # a multi-system receiver's per-system lines ($GPGNS, $GLGNS with no position beside its $GNGNS, NMEA
@@ -121,8 +124,7 @@ def receivers_of(files: list[DecodedFile], skipped: list[Skipped]) -> list[Recei
         for rid, source in sources.items():
             gn = _rid(source, "GN" + out[rid].antenna)
             if rid not in positioned and gn in positioned and rid != gn:
-                n = sum(1 for d in f.decoded if d.kind in POSITION_KINDS and _rid(_source(f, d), d.receiver) == rid)
-                skipped.append(Skipped(rid, f"position sentences without a position, read as {gn}'s", n))
+                skipped.append(Skipped(rid, f"position sentences without a position, read as {gn}'s", positions[rid]))
                 del out[rid]
         orphans: Counter[str] = Counter()
         for d in f.decoded:

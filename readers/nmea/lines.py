@@ -274,10 +274,13 @@ def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -
     if no_sum:
         if with_sum:
             summed = {_address_at(data, c) for c in with_sum}
-            cut = [c for c in no_sum if _address_at(data, c) in summed or _address_at(data, c) is None]
+            cut: list[_Candidate] = []
+            never: list[_Candidate] = []
+            for c in no_sum:
+                named = _address_at(data, c)
+                (cut if named is None or named in summed else never).append(c)
             if cut:
                 counts["sentences without a checksum (cut short?)"] += len(cut)
-            never = [c for c in no_sum if c not in cut]
             if never:
                 ok += never
                 counts[UNVERIFIED_TYPE] += len(never)
