@@ -65,7 +65,7 @@ from readers.rinex.observation import (
     scan_obs,
 )
 from readers.rinex.packaging import is_compact
-from readers.rinex.text import GPS_EPOCH, SUPPORTED_VERSIONS, TextLines, first_line, parse_fixed
+from readers.rinex.text import GPS_EPOCH, OBSERVATION_VERSIONS, SUPPORTED_VERSIONS, TextLines, first_line, parse_fixed
 
 __all__ = [
     "APPROX_POSITION_KEY",
@@ -109,7 +109,7 @@ def _is_rinex(path: Path, head: bytes) -> bool:
 FORMATS = (
     ReaderFormat(
         "rinex",
-        "RINEX observation file (2.10, 2.11, 3.02-3.05, 4.00-4.02; plain, gzip, bzip2, .Z, zip or Hatanaka .crx) or a "
+        f"RINEX observation file ({OBSERVATION_VERSIONS}; plain, gzip, bzip2, .Z, zip or Hatanaka .crx) or a "
         "directory of them, navigation file beside",
         read_rinex,
         _is_rinex,

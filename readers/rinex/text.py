@@ -24,7 +24,8 @@ BoolArray = NDArray[np.bool_]
 NS = 1_000_000_000
 GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
 SYSTEMS = "GRESCJI"
-SUPPORTED_VERSIONS = "2.10, 2.11, 3.02-3.05 and 4.00-4.02 observation files"
+OBSERVATION_VERSIONS = "2.10, 2.11, 3.02-3.05, 4.00-4.02"
+SUPPORTED_VERSIONS = f"{OBSERVATION_VERSIONS} observation files"
 
 
 @dataclass(frozen=True)
