@@ -14,20 +14,25 @@ import pandas as pd
 from spooflens.epoch_table import EpochTable
 
 
-def _every_other_time(frame: pd.DataFrame, key: str, k: int) -> pd.DataFrame:
-    """Every k-th distinct time of each stream (all rows of a kept time), as a slower logger keeps them."""
+def _kept_times(frame: pd.DataFrame, key: str, pick: Callable[[np.ndarray], np.ndarray]) -> pd.DataFrame:
+    """The rows of the distinct times `pick` keeps of each stream's (all rows of a kept time), as a slower
+    logger keeps them."""
     keep = np.zeros(len(frame), dtype=bool)
     for _, rows in frame.groupby(key, sort=False):
         t = rows["t_s"].to_numpy(dtype=float)
-        keep[rows.index[np.isin(t, np.unique(t)[::k])]] = True
+        keep[rows.index[np.isin(t, pick(np.unique(t)))]] = True
     return frame[keep].reset_index(drop=True)
+
+
+def _first_of_each_second(t: np.ndarray) -> np.ndarray:
+    return t[np.r_[True, np.diff(np.floor(t)) > 0]]
 
 
 def imu_half_rate(table: EpochTable) -> EpochTable | None:
     """Every other IMU sample (a 50 Hz log's IMU at 25 Hz, as 2014-era ArduPilot logs carry it)."""
     if not len(table.imu):
         return None
-    return replace(table, imu=_every_other_time(table.imu, "imu_id", 2))
+    return replace(table, imu=_kept_times(table.imu, "imu_id", lambda t: t[::2]))
 
 
 def fixes_one_hz(table: EpochTable) -> EpochTable | None:
@@ -37,13 +42,7 @@ def fixes_one_hz(table: EpochTable) -> EpochTable | None:
     t = np.unique(table.fixes["t_s"].to_numpy(dtype=float))
     if len(t) < 2 or float(np.median(np.diff(t))) > 0.75:
         return None
-    keep = np.zeros(len(table.fixes), dtype=bool)
-    for _, rows in table.fixes.groupby("receiver_id", sort=False):
-        ts = rows["t_s"].to_numpy(dtype=float)
-        epochs = np.unique(ts)
-        firsts = epochs[np.r_[True, np.diff(np.floor(epochs)) > 0]]
-        keep[rows.index[np.isin(ts, firsts)]] = True
-    return replace(table, fixes=table.fixes[keep].reset_index(drop=True))
+    return replace(table, fixes=_kept_times(table.fixes, "receiver_id", _first_of_each_second))
 
 
 def fixes_late(table: EpochTable, lag_s: float = 0.2) -> EpochTable | None:
