@@ -287,8 +287,9 @@ class _Scene:
     innovations_read: bool = False
     # where the reconstruction stage's coasts confirmed GNSS departing from the coasted INS
     departures_s: tuple[float, ...] = ()
-    # ... and the ones where GNSS came back to it
+    # ... and the ones where GNSS came back to it, each read as a glitch or not (`read_glitch`)
     excursions: tuple[Excursion, ...] = ()
+    glitches: dict[Excursion, Reading] = field(default_factory=dict)
 
     def nav(self) -> Innovations | None:
         if not self.innovations_read:
@@ -1109,6 +1110,12 @@ def read_glitch(scene: _Scene, start_s: float) -> Reading:
     e = _excursion_around(scene, start_s)
     if e is None:
         return Reading("glitch", Kind.DEGRADATION, False, "")
+    if e not in scene.glitches:  # every alarm of the excursion reads the same
+        scene.glitches[e] = _glitch(scene, e)
+    return scene.glitches[e]
+
+
+def _glitch(scene: _Scene, e: Excursion) -> Reading:
     if e.length_s > scene.opts.max_glitch_s:
         why = (
             f"GNSS left the coasted INS reference for {e.length_s:.1f} s before it came back, longer than a glitch an "
