@@ -24,6 +24,7 @@ import pandas as pd
 
 from spooflens.constants import NMEA_GNSS_TALKERS
 from spooflens.epoch_table import EpochTable
+from spooflens.gnss.resolution import angle_step_deg
 
 if TYPE_CHECKING:
     from spooflens.pipeline.context import AnalysisContext
@@ -87,14 +88,6 @@ def nmea_talkers(table: EpochTable, a: str, b: str) -> str | None:
     return f"NMEA talkers of one stream ({sa.topic})"
 
 
-def resolution_deg(x: np.ndarray) -> float:
-    """The step a coordinate is written with: its smallest change between fixes (degrees; 0 when it
-    never changes)."""
-    d = np.abs(np.diff(x[np.isfinite(x)]))
-    d = d[d > 1e-10]  # below the float noise of a decimal written as degrees and minutes
-    return float(d.min()) if len(d) else 0.0
-
-
 def relayed(fa: pd.DataFrame, fb: pd.DataFrame, a: str, b: str) -> str | None:
     """b's fixes are a's: identical horizontal positions (within the coarser resolution of the two) at
     IDENTICAL_FRACTION of the common epochs, at the constant delay (within MAX_DELAY_S) that matches most."""
@@ -103,7 +96,7 @@ def relayed(fa: pd.DataFrame, fb: pd.DataFrame, a: str, b: str) -> str | None:
         return None
     pa = fa[["lat_deg", "lon_deg"]].to_numpy(dtype=float)
     pb = fb[["lat_deg", "lon_deg"]].to_numpy(dtype=float)
-    tol = np.array([max(resolution_deg(pa[:, j]), resolution_deg(pb[:, j])) for j in range(2)]) * 1.01 + 1e-9
+    tol = np.array([max(angle_step_deg(pa[:, j]), angle_step_deg(pb[:, j])) for j in range(2)]) * 1.01 + 1e-9
     period = float(np.median(np.diff(tb))) if len(tb) > 1 else 1.0
     best = (0.0, 0, 0.0)  # (fraction identical, common epochs, delay)
     for delay in _delays(ta, pa, tb, pb, tol):
