@@ -19,5 +19,6 @@ WGS84_K_SOMIGLIANA = 0.00193185265241
 WGS84_M_GEO = WGS84_OMEGA_IE**2 * WGS84_A_M**2 * WGS84_B_M / WGS84_GM
 SPEED_OF_LIGHT_MPS = 299792458.0
 STANDARD_GRAVITY = 9.80665  # m/s^2, the g of "specific force in g"
+KNOT_MPS = 1852.0 / 3600.0  # the nautical mile an hour
 # NMEA talker ids that name a satellite system (GN: several), not a device: a GNSS receiver's sentences
 NMEA_GNSS_TALKERS = frozenset({"GP", "GL", "GA", "GB", "BD", "GN", "GQ", "QZ", "GI"})

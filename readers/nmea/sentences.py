@@ -24,9 +24,9 @@ from pynmeagps.nmeahelpers import calc_checksum
 from pynmeagps.nmeatypes_core import VALNONE
 
 from readers.nmea.lines import Sentence
+from spooflens.constants import KNOT_MPS
 from spooflens.schema import FixType
 
-KNOT_MPS = 1852.0 / 3600.0
 # position sentences that carry their own height, satellites and velocity, no GSA/GSV/VTG beside them
 # (proprietary.py): Trimble PTNL,GGK, Feyman FMI, Fugro FUGDP, Unicore HPD
 SELF_CONTAINED_KINDS = ("GGK", "FMI", "FUGDP", "HPD")

@@ -183,8 +183,8 @@ def measure(analysis: Analysis, name: str, sha256: str) -> LogMeasurement:
             if sat_levels:
                 m.satellite_cn0[rid] = sat_levels
         if ok.sum() >= MIN_EPOCHS:
-            mode, _, _, scale = residual(fx[ok].reset_index(drop=True), ConsistencyOptions())
-            m.consistency[rid] = (mode, scale)
+            res = residual(fx[ok].reset_index(drop=True), ConsistencyOptions())
+            m.consistency[rid] = (res.mode, res.scale)
     learned = analysis.learned_noise
     if learned is not None and not learned.noise.source.startswith("prior"):
         m.noise = _noise_parameters(learned)

@@ -4,6 +4,7 @@ a velocity, the way a vehicle can)? Declared in `ANALYSIS` (docs/detectors.md)."
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -13,6 +14,7 @@ from spooflens.baseline.use import consistency_caps, note
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
 from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import enu_rotation, geodetic_to_ecef, geodetic_to_enu
+from spooflens.gnss.resolution import position_steps_m, speed_step_mps, velocity_step_mps
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
@@ -110,8 +112,38 @@ def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: f
     return out
 
 
-def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, FloatArray, FloatArray, FloatArray]:
-    """One receiver's residual: (mode, t, residual (N, 3), its robust scale per ENU axis)."""
+class Residual(NamedTuple):
+    """One receiver's residual: its mode, times, residual (N, 3), robust scale per ENU axis (never below
+    `floor`), and the floor the log's written resolution sets on that scale (`written_floor`)."""
+
+    mode: str
+    t: FloatArray
+    r: FloatArray
+    scale: FloatArray
+    floor: FloatArray
+
+
+def written_floor(
+    lat: FloatArray, lon: FloatArray, h: FloatArray, v: FloatArray | None, t: FloatArray, opts: ConsistencyOptions
+) -> FloatArray:
+    """The residual's noise scale per ENU axis (m, or m/s^2 without velocity) that rounding alone gives,
+    from the steps the log writes position and velocity with (`spooflens.gnss.resolution`).
+
+    With velocity, the residual is a position change less a velocity integral over `window_s`: two
+    rounded positions (variance q^2/12 each) and a speed whose rounding error can hold over the window
+    (a moored boat reporting 0.0 kn while its fix creeps by 0.0001'), (W q_v)^2/12. Without velocity it is
+    a second difference of three rounded positions: q / (sqrt(2) dt^2)."""
+    q_pos = position_steps_m(lat, lon, h)
+    if v is None:
+        dt = float(np.median(np.diff(t))) if len(t) > 1 else np.inf
+        return np.asarray(q_pos / (np.sqrt(2.0) * dt**2) if dt > 0 else np.zeros(3), dtype=float)
+    horizontal = max(speed_step_mps(np.hypot(v[:, 0], v[:, 1])), velocity_step_mps(v[:, 0]), velocity_step_mps(v[:, 1]))
+    q_vel = np.array([horizontal, horizontal, velocity_step_mps(v[:, 2])])
+    return np.asarray(np.sqrt(q_pos**2 / 6.0 + (opts.window_s * q_vel) ** 2 / 12.0), dtype=float)
+
+
+def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
+    """One receiver's residual and its robust scale."""
     t = fixes["t_s"].to_numpy(dtype=float)
     lat, lon, h = (fixes[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "height_m"))
     v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
@@ -121,35 +153,41 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> tuple[str, FloatA
         vertical = np.isfinite(v[:, 2]).mean() >= 0.5
         mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
         good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
-        t, v = t[good], v[good]
-        ecef, to_enu = geodetic_to_ecef(lat[good], lon[good], h[good]), enu_rotation(lat[good], lon[good])
+        t, v, lat, lon, h = t[good], v[good], lat[good], lon[good], h[good]
+        ecef, to_enu = geodetic_to_ecef(lat, lon, h), enu_rotation(lat, lon)
         if not vertical:
             v = v.copy()
             v[:, 2] = 0.0
         r = _window_velocity_residual(t, ecef, to_enu, v, opts)
         if not vertical:
             r[:, 2] = np.nan
+        floor = written_floor(lat, lon, h, v, t, opts)
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))
-    return mode, t, r, _robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m)
+        floor = written_floor(lat, lon, h, None, t, opts)
+    floor = np.maximum(floor, opts.min_scale_m)
+    return Residual(
+        mode, t, r, np.maximum(_robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m), floor), floor
+    )
 
 
 def check_receiver(
     fixes: pd.DataFrame, opts: ConsistencyOptions, scale_cap: tuple[str, FloatArray] | None = None
-) -> tuple[str, FloatArray, FloatArray, FloatArray, FloatArray | None]:
-    """Run the check on one receiver's fixes: (mode, t, normalised residual (N,3), statistic (N,), the scale
-    when a cap applied, else None). `scale_cap`: (mode, per-axis largest scale the vehicle's clean logs
+) -> tuple[Residual, FloatArray, FloatArray, FloatArray | None]:
+    """Run the check on one receiver's fixes: (its residual, normalised residual (N,3), statistic (N,), the
+    scale when a cap applied, else None). `scale_cap`: (mode, per-axis largest scale the vehicle's clean logs
     allow), from a baseline, applied when its mode is the log's: a log attacked throughout cannot teach
-    the check that the attack is its noise."""
-    mode, t, r, scale = residual(fixes, opts)
-    capped = scale_cap is not None and scale_cap[0] == mode
+    the check that the attack is its noise; never below what the log's rounding alone gives."""
+    res = residual(fixes, opts)
+    scale = res.scale
+    capped = scale_cap is not None and scale_cap[0] == res.mode
     if scale_cap is not None and capped:
         cap = scale_cap[1]
-        scale = np.where(np.isfinite(cap), np.minimum(scale, cap), scale)
-    z = r / scale
+        scale = np.maximum(np.where(np.isfinite(cap), np.minimum(scale, cap), scale), res.floor)
+    z = res.r / scale
     stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
-    return mode, t, z, stat, scale if capped else None
+    return res, z, stat, scale if capped else None
 
 
 def run_gnss_consistency(
@@ -166,7 +204,15 @@ def run_gnss_consistency(
     for rid, rx in fixes.groupby("receiver_id", sort=False):
         if len(rx) < 3:
             continue
-        mode, t, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
+        res, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
+        mode, t = res.mode, res.t
+        checked = np.isfinite(res.r).any(axis=0)
+        if np.any(checked & (res.floor > opts.min_scale_m) & (res.scale <= res.floor)):
+            unit = "m" if res.mode.startswith("position change") else "m/s^2"
+            floors = "/".join(f"{f:.2g}" for f in res.floor[checked])
+            axes = "/".join(a for a, c in zip(("east", "north", "up"), checked, strict=True) if c)
+            mode += f"; residual scale held at {floors} {unit} ({axes}) or more, what the log's rounding of "
+            mode += "position" + (" and velocity" if unit == "m" else "") + " alone gives"
         if scale is not None:
             axes = "/".join(f"{s:.2g}" for s in scale)
             note(result, f"{rid}: residual scale at most the baseline's allowance: {axes} (east/north/up)")

@@ -29,7 +29,8 @@ from pynmeagps.nmeahelpers import calc_checksum
 
 from readers.nmea import decode_log
 from readers.nmea.assembly import Epoch, assemble, nmea_sv_id
-from readers.nmea.sentences import KNOT_MPS, Decoded
+from readers.nmea.sentences import Decoded
+from spooflens.constants import KNOT_MPS
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import WriterError
 
