@@ -206,11 +206,11 @@ def run_gnss_consistency(
             continue
         res, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
         mode, t = res.mode, res.t
-        checked = np.isfinite(res.r).any(axis=0)
+        checked: NDArray[np.bool_] = np.asarray(np.isfinite(res.r).any(axis=0), dtype=bool)
         if np.any(checked & (res.floor > opts.min_scale_m) & (res.scale <= res.floor)):
             unit = "m" if res.mode.startswith("position change") else "m/s^2"
             floors = "/".join(f"{f:.2g}" for f in res.floor[checked])
-            axes = "/".join(a for a, c in zip(("east", "north", "up"), checked, strict=True) if c)
+            axes = "/".join(a for a, c in zip(("east", "north", "up"), list(checked), strict=True) if c)
             mode += f"; residual scale held at {floors} {unit} ({axes}) or more, what the log's rounding of "
             mode += "position" + (" and velocity" if unit == "m" else "") + " alone gives"
         if scale is not None:
