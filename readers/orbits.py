@@ -7,10 +7,12 @@ keeps its measurements without a satellite position, and the reader's skipped li
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
+
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.epoch_table import Skipped
+from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, Skipped
 from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
 
 ORBIT_SYSTEMS = {"G": "GPS", "E": "Galileo", "C": "BeiDou"}
@@ -20,6 +22,21 @@ FloatArray = NDArray[np.float64]
 def _system_names(systems: set[str]) -> str:
     names = [ORBIT_SYSTEMS[s] for s in ORBIT_SYSTEMS if s in systems]
     return ", ".join(names[:-1]) + " and " + names[-1] if len(names) > 1 else "".join(names)
+
+
+def _gps_minute(t_gps_s: float) -> str:
+    return datetime.fromtimestamp(GPS_EPOCH_UNIX_NS / 1e9 + float(t_gps_s), UTC).strftime("%Y-%m-%d %H:%M")
+
+
+def _other_span(ephemerides: GpsEphemerides, system: str, t_gps_s: FloatArray) -> str:
+    """Why no row of a system with orbits got one: the orbits are of another time than the observations (a
+    navigation file of another day, or hours that do not cover the log's)."""
+    toe = ephemerides.toe_s[np.char.startswith(ephemerides.sv_id.astype(str), system)]
+    return (
+        f"the navigation data's {ORBIT_SYSTEMS[system]} orbits are for {_gps_minute(toe.min())} to "
+        f"{_gps_minute(toe.max())}, the observations {_gps_minute(t_gps_s.min())} to {_gps_minute(t_gps_s.max())} "
+        "GPS time (a navigation file of another day or hour?)"
+    )
 
 
 def state_columns(
@@ -49,11 +66,12 @@ def state_columns(
             missing = int((rows & ~states.valid).sum())
             if not missing:
                 continue
-            why = (
-                "without a valid broadcast ephemeris; satellite states NaN"
-                if s in have
-                else "without satellite states: the navigation data holds no orbit of this system"
-            )
+            if s not in have:
+                why = "without satellite states: the navigation data holds no orbit of this system"
+            elif not states.valid[rows].any():
+                why = "without satellite states: " + _other_span(ephemerides, s, t_gps_s[g][rows])
+            else:
+                why = "without a valid broadcast ephemeris; satellite states NaN"
             skipped.append(Skipped(receiver_id, f"{name} rows {why}", missing, "no ephemeris"))
     elif modelled.any():
         skipped.append(Skipped(receiver_id, none_reason, int(modelled.sum()), "no ephemeris"))

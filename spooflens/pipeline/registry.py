@@ -82,7 +82,11 @@ def _has_satellite_states(table: EpochTable) -> str | None:
     if not len(obs):
         return "raw GNSS observations (pseudoranges)"
     ok = np.isfinite(obs[["sv_x_m", "sv_y_m", "sv_z_m"]].to_numpy(dtype=float)).all(axis=1)
-    return None if ok.any() else "satellite positions (a navigation file or logged ephemerides)"
+    if ok.any():
+        return None
+    if table.ephemerides is not None and len(table.ephemerides):
+        return "satellite positions: no orbit of the navigation data given is of the observations' time (see skipped)"
+    return "satellite positions (a navigation file or logged ephemerides)"
 
 
 def _has_satellite_view(table: EpochTable) -> str | None:

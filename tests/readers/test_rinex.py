@@ -31,6 +31,7 @@ from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
 from spooflens.errors import ReaderError, UnsupportedFormatError, WriterError
 from spooflens.gnss.ephemeris import C_MPS, GM_GPS, OMEGA_E_GPS, satellite_states
+from spooflens.pipeline.registry import REQUIREMENTS
 from spooflens.writers.rinex_rewrite import COMMENT, rewrite_rinex
 
 GSI = REAL / "rinex_gsi_pair"
@@ -336,10 +337,15 @@ def test_nav_topic_overrides_the_search(tmp_path: Path) -> None:
     broken = read_log(obs)
     assert broken.observations["sv_x_m"].isna().all() and len(broken.observations) == 948
     assert any(s.stream == "alone.05n" and s.reason.startswith("navigation file unusable") for s in broken.skipped)
-    # a nav file of another day: every GPS row counted, none dropped
+    # a nav file of another day: every GPS row counted, none dropped, and the two spans named
     stale = read_log(_need(PIXEL), topics={"nav": str(NAV_0759)})
-    (miss,) = [s for s in stale.skipped if s.reason.startswith("GPS rows without a valid broadcast ephemeris")]
+    (miss,) = [s for s in stale.skipped if s.reason.startswith("GPS rows without satellite states")]
     assert miss.action == "no ephemeris" and miss.count == int((stale.observations["sv_id"].str[0] == "G").sum())
+    assert "the navigation data's GPS orbits are for 2005-04-01 23:59 to 2005-04-03 00:00" in miss.reason
+    assert "the observations 2023-" in miss.reason
+    assert "no orbit of the navigation data given is of the observations' time" in str(
+        REQUIREMENTS["satellite_states"].missing(stale)
+    )
 
 
 # --- directories and sniffing -----------------------------------------------------------------------------
