@@ -34,13 +34,30 @@ BOM = b"\xef\xbb\xbf"
 STREAM = "<ardupilot_text>"
 FMT_COLUMNS = "Type,Length,Name,Format,Columns"
 _NAME = re.compile(rb"[A-Za-z0-9_]{1,4}")
-_FIRST_LINE = re.compile(rb"\A(?:\xef\xbb\xbf)?\s*FMT,\s?128\s*,")
+_FMT_OF_FMT = re.compile(rb"^[ \t]*FMT,\s?128\s*,", re.MULTILINE)
+# Mission Planner writes what the board's CLI printed before the log when it downloads one over the
+# console (APM 2.x, 2012-2014): `1`, `ArduCopter V3.0.1 (5c6503e2)`, `Free RAM: 1331`, `ArduPilot 2`
+_BANNER_LINE = re.compile(rb"[ -~\t\r]{0,120}")
+MAX_BANNER_LINES = 16
 STRING_LETTERS = "nNZ"
 
 
+def log_start(head: bytes) -> int | None:
+    """Offset of the FMT of FMT (`FMT, 128, ...`) that opens a text DataFlash log in `head` (its first
+    bytes), after a BOM and at most `MAX_BANNER_LINES` short lines of plain text; None when it does not."""
+    start = len(BOM) if head.startswith(BOM) else 0
+    found = _FMT_OF_FMT.search(head[start:])
+    if found is None:
+        return None
+    banner = head[start : start + found.start()].split(b"\n")[:-1]
+    if len(banner) > MAX_BANNER_LINES or not all(_BANNER_LINE.fullmatch(line) for line in banner):
+        return None
+    return start + found.start()
+
+
 def is_dataflash_text(head: bytes) -> bool:
-    """The first non-empty line (after a BOM and blank lines) is the FMT of FMT: `FMT, 128, ...`."""
-    return _FIRST_LINE.match(head) is not None
+    """The log opens with the FMT of FMT, `FMT, 128, ...` (after a BOM, blank lines or a download banner)."""
+    return log_start(head) is not None
 
 
 @dataclass
@@ -134,7 +151,9 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
         data = path.read_bytes()
     except OSError as err:
         raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
-    start = len(BOM) if data.startswith(BOM) else 0
+    opening = log_start(data[:4096])
+    start = opening if opening is not None else len(BOM) if data.startswith(BOM) else 0
+    banner = [line.strip() for line in data[:start].removeprefix(BOM).split(b"\n") if line.strip()]
     lines = data[start:].split(b"\n")
     cut = lines.pop() if lines else b""  # what follows the last newline: a line cut short, or nothing
     grouped: dict[bytes, tuple[list[int], list[list[bytes]]]] = {}
@@ -156,6 +175,14 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
     if not grouped.get(b"FMT"):
         raise ReaderError(path, "no FMT line: not an ArduPilot DataFlash text log")
     skipped: list[Skipped] = []
+    if banner:
+        said = (
+            banner[0].decode("ascii", "replace")
+            if len(banner) == 1
+            else " / ".join(b.decode("ascii", "replace") for b in banner[:4])
+        )
+        what = f"line of text before the log's first FMT (a ground station's download banner: {said})"
+        skipped.append(Skipped(STREAM, what, len(banner), "skipped"))
     if junk:
         skipped.append(Skipped(STREAM, "line that is not a message (binary junk or damaged text)", junk, "lost"))
     if cut.strip(b"\r\n\t \0"):

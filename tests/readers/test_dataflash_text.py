@@ -21,7 +21,7 @@ from readers import read_log, sniff_format
 from readers.dataflash_text import open_text_dataflash
 from spooflens.cli import main
 from spooflens.epoch_table import EpochTable
-from spooflens.errors import ReaderError
+from spooflens.errors import ReaderError, UnsupportedFormatError
 
 FRAMES = ("fixes", "imu", "autopilot_ekf", "receiver_status", "observations")
 GPS_2014 = Fmt(130, "GPS", "BIHBcLLeeEefI", "Status,TimeMS,Week,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs,VZ,T")
@@ -130,6 +130,30 @@ def test_a_hand_written_log_as_the_documentation_shows_it(tmp_path: Path) -> Non
     np.testing.assert_allclose(t.fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].iloc[0], [5.0, 0.0, 0.5], atol=1e-12)
     assert t.metadata["firmware"] == "ArduCopter V3.2.1 (36b405fb)"
     assert t.metadata["receivers"] == "GPS 1: u-blox, found at 38400 baud"  # the commas are the message's text
+
+
+def test_a_log_downloaded_over_the_console_with_its_banner(tmp_path: Path) -> None:
+    """Mission Planner saved an APM 2.x log downloaded over the CLI with what the board printed first (as
+    ArduPilot's own LogAnalyzer examples of 2013-2014 open): read, the banner listed, not called damage."""
+    binary = log_2014(tmp_path)
+    plain = write_text_log(binary, tmp_path / "plain.log")
+    banner = b"1\r\n\r\nArduCopter V3.0.1 (5c6503e2)\r\nFree RAM: 1331\r\nArduPilot 2\r\n"
+    downloaded = tmp_path / "downloaded.log"
+    downloaded.write_bytes(banner + plain.read_bytes())
+    assert sniff_format(downloaded) == "ardupilot_text"
+    table = read_log(downloaded)
+    (said,) = [s for s in table.skipped if "download banner" in s.reason]
+    assert said.count == 4 and said.action == "skipped" and "ArduCopter V3.0.1 (5c6503e2)" in said.reason
+    table.skipped.remove(said)
+    assert_same_table(read_log(binary), table)
+    # more than a banner's worth of text, or binary, before the FMT: not a text DataFlash log
+    chatter = tmp_path / "chatter.log"
+    chatter.write_bytes(b"hello\n" * 17 + plain.read_bytes())
+    junk = tmp_path / "junk.log"
+    junk.write_bytes(b"\x00\xff\x13\n" + plain.read_bytes())
+    for refused in (chatter, junk):
+        with pytest.raises(UnsupportedFormatError, match="unknown format"):
+            sniff_format(refused)
 
 
 def test_damaged_lines_are_skipped_counted_and_the_rest_read(tmp_path: Path) -> None:
