@@ -143,7 +143,10 @@ class Records:
     rows: list[list[str]] = field(default_factory=list)
 
     def frame(self) -> pd.DataFrame:
-        return pd.DataFrame(self.rows, columns=self.columns, dtype=object)
+        """The rows by column name; of a name the header gives twice (v2.0.0.x's `CarrierFrequencyHz` in
+        Raw), the first column."""
+        df = pd.DataFrame(self.rows, columns=self.columns, dtype=object)
+        return df.loc[:, ~df.columns.duplicated()]
 
 
 GPS_L1CA_NAV = 0x0101  # GnssNavigationMessage TYPE_GPS_L1CA
@@ -196,6 +199,9 @@ def split_file(
             name = body.split(",", 1)[0].strip()
             if (name in RECORDS or re.fullmatch(r"[A-Za-z]\w*", name)) and "," in body:
                 headers[name] = [c.strip() for c in body.split(",")][1:]
+                twice = sorted({c for c in headers[name] if headers[name].count(c) > 1})
+                if twice and name in USED:
+                    skipped.append(Skipped(name, f"header names {', '.join(twice)} twice: the first column read", 1))
             elif body.startswith("Version:"):
                 meta["firmware"] = body[len("Version:") :].strip()
             continue

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from paths import REAL
+from paths import REAL, real_log
 
 from readers import read_log, sniff_format
 from readers.gnsslogger import _orientation_quaternion
@@ -311,3 +311,26 @@ def test_status_records_give_the_satellites_frame(tmp_path: Path) -> None:
     counted = {s.reason: s.count for s in table.skipped if s.stream == "Status"}
     assert counted == {"no UnixTimeMillis": 1, "no satellite id (constellation, svid)": 20}
     assert next(s for s in table.streams if s.role == "satellites").count == 20
+
+
+def test_a_header_naming_a_column_twice_reads_the_first(tmp_path: Path) -> None:
+    """GnssLogger v2.0.0.x writes `CarrierFrequencyHz` twice in its Raw header (a Samsung S10's log of 2020):
+    read as the first of the two, said once, never an internal error."""
+    original = real_log("android_gnsslogger/gnss_lib_py/pixel6.txt")
+    lines = original.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("# Raw,"))
+    k = lines[header].split(",").index("CarrierFrequencyHz")
+    doubled = [
+        line + ",CarrierFrequencyHz,UserLatitude"
+        if i == header
+        else line + f",{line.split(',')[k]},NaN"
+        if line.startswith("Raw,")
+        else line
+        for i, line in enumerate(lines)
+    ]
+    copy = tmp_path / "v2001.txt"
+    copy.write_text("\n".join(doubled) + "\n")
+    table = read_log(copy)
+    pd.testing.assert_frame_equal(table.observations, read_log(original).observations)
+    (said,) = [s for s in table.skipped if "twice" in s.reason]
+    assert said.stream == "Raw" and said.reason == "header names CarrierFrequencyHz twice: the first column read"
