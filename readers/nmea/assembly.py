@@ -56,6 +56,7 @@ from spooflens.plausibility import STRAY_GAP_NS
 from spooflens.schema import FixType
 
 DAY_S = 86_400
+STALE_REPEATS = 5
 GNSS_TALKERS = ("GN", "GP", "GL", "GA", "GB", "BD", "GQ", "QZ", "GI")
 POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3, **{k: 4 for k in SELF_CONTAINED_KINDS}}
 
@@ -189,6 +190,39 @@ def assign_epochs(rx: Receiver) -> None:
                 pending = []
             current = key
     rx.untimed = len(pending)
+
+
+def drop_stale_epochs(rxs: list[Receiver], skipped: list[Skipped]) -> None:
+    """Drop the epochs in which a receiver repeats one fix while the log goes on: a relay (an autopilot's
+    `$APGLL`, a multiplexer) re-sending a position it took long before, under that position's old time.
+    Read as a fix it would be one epoch minutes off the log, its start or end. An epoch is stale when one
+    position sentence kind comes STALE_REPEATS times or more in it, spread over as many epochs of another
+    receiver of the file (a receiver at 5 Hz writing whole seconds repeats its time within one second)."""
+    for rx in rxs:
+        others = np.sort(
+            [e.first_line for o in rxs if o is not rx and o.file is rx.file for e in o.epochs.values()]
+        ).astype(np.int64)
+        for key, epoch in list(rx.epochs.items()):
+            kinds = Counter(d.kind for d in epoch.sentences if d.kind in POSITION_KINDS)
+            if not kinds or max(kinds.values()) < STALE_REPEATS:
+                continue
+            lines = [d.sentence.line for d in epoch.sentences if d.kind in POSITION_KINDS]
+            between = int(np.searchsorted(others, max(lines), "right") - np.searchsorted(others, min(lines), "left"))
+            if between < STALE_REPEATS:
+                continue
+            del rx.epochs[key]
+            kind, n = kinds.most_common(1)[0]
+            hours, minutes = int(epoch.key // 3_600_000) % 24, int(epoch.key // 60_000) % 60
+            stamp = f"{hours:02d}:{minutes:02d}:{epoch.key / 1000 % 60:04.1f}"
+            what = "its time of day" if epoch.gnss else "one logger time"
+            skipped.append(
+                Skipped(
+                    rx.receiver_id,
+                    f"{kind} repeating one fix at {stamp} ({what}) {n} times across {between} epochs of other "
+                    "receivers: a relay holding a stale fix, not read as one",
+                    len(epoch.sentences),
+                )
+            )
 
 
 def _own_time_ns(rx: Receiver, epoch: Epoch) -> int:
@@ -468,6 +502,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
     rxs = receivers_of(files, skipped)
     for rx in rxs:
         assign_epochs(rx)
+    drop_stale_epochs(rxs, skipped)
     dated = [rx for rx in rxs if math.isfinite(rx.day_anchor_s)]
     log_anchor = dated[0].day_anchor_s if dated else math.nan
     for rx in rxs:

@@ -486,3 +486,25 @@ def test_a_receivers_per_system_lines_without_a_position_are_no_receivers_of_the
     assert per_system == {"GP": "position sentences without a position, read as GN's"} | {
         "GL": "position sentences without a position, read as GN's"
     }
+
+
+def test_a_relay_repeating_a_stale_fix_is_not_read_as_one(tmp_path: Path) -> None:
+    """A boat's autopilot re-sends one `$APGLL` taken six minutes before the capture, under that old time, with
+    every second of the GPS's own sentences: read as a fix, the 43 s capture became 402 s starting at
+    05:52:10. The stale epoch is dropped and said; a receiver repeating its fix a few times is read."""
+    bodies = []
+    for k in range(20):
+        hhmmss = f"0558{10 + k:02d}"
+        bodies += [
+            f"GPGGA,{hhmmss},3806.969,N,12137.458,W,1,10,1.7,0,M,,M,,",
+            f"GPRMC,{hhmmss},A,3806.969,N,12137.458,W,0.1,191.5,130504,15.1,E",
+            "APGLL,3806.9680,N,12137.4580,W,055210.00,A",
+        ]
+    table = read_log(_write(tmp_path / "relay.nmea", bodies))
+    assert set(table.fixes["receiver_id"]) == {"GP"} and len(table.fixes) == 20
+    assert table.duration_s == pytest.approx(19.0)
+    (said,) = [s for s in table.skipped if "stale" in s.reason]
+    assert said.stream == "AP" and "GLL repeating one fix at 05:52:10.0 (its time of day) 20 times" in said.reason
+    # the same GLL twice within one second of the GPS: a repeat, not a stale relay
+    twice = read_log(_write(tmp_path / "twice.nmea", bodies[:3] + bodies[2:4] + bodies[5:9]))
+    assert not [s for s in twice.skipped if "stale" in s.reason] and "AP" in set(twice.fixes["receiver_id"])
