@@ -313,3 +313,45 @@ def test_a_stream_made_only_of_small_groups_far_apart_keeps_them_all() -> None:
     assert not stray_stamps(scattered).any()
     recording = np.r_[np.arange(10, dtype=np.int64) * 1_000_000_000, 20 * hour]  # ten rows and one far off
     assert stray_stamps(recording).tolist() == [False] * 10 + [True]
+
+
+def test_a_course_held_at_rest_is_no_measured_direction() -> None:
+    """Receivers hold their last course below a speed threshold and scale it by the speed (a 2013 copter's
+    GPS at 127.73 deg for 8 fixes while it drifted west at 0.1-0.2 m/s; a moored yacht's 188.0 for a minute):
+    those fixes' horizontal velocity is cleared. A measured course at low speed, a straight course at speed
+    and a velocity repeated once (a 5 Hz log's half-rate velocity) are kept."""
+    from spooflens.plausibility import held_course
+
+    def velocity(course_deg: list[float], speed: list[float]) -> tuple[np.ndarray, np.ndarray]:
+        c, s = np.radians(course_deg), np.asarray(speed)
+        return s * np.sin(c), s * np.cos(c)
+
+    held = held_course(
+        *velocity([127.73] * 8 + [251.2, 262.9, 266.0], [0.12, 0.18, 0.19, 0.19, 0.2, 0.1, 0.1, 0.1, 0.2, 0.3, 0.3])
+    )
+    assert held.tolist() == [True] * 8 + [False] * 3
+    assert not held_course(*velocity([90.0] * 10, [5.0] * 10)).any()  # a straight road at speed
+    assert not held_course(
+        *velocity([268.4, 268.4, 270.1, 271.5, 271.5, 272.0], [0.75, 0.75, 0.8, 0.8, 0.8, 0.9])
+    ).any()
+    assert not held_course(*velocity([0.0] * 5, [0.0] * 5)).any()  # at rest and saying so: zero is measured
+
+
+def test_a_held_course_is_cleared_where_every_reader_hands_its_fixes_over(tmp_path: Path) -> None:
+    def sentence(body: str) -> str:
+        check = 0
+        for c in body.encode():
+            check ^= c
+        return f"${body}*{check:02X}"
+
+    lines = [
+        sentence(f"GPRMC,0706{k:02d},A,6009.{2030 + k % 2},N,02453.{6519 + k // 3},E,000.{k % 4 + 1},188.0,150510,,,A")
+        for k in range(30)
+    ]
+    path = tmp_path / "moored.nmea"
+    path.write_text("\n".join(lines) + "\n")
+    table = read_log(path)
+    assert table.fixes[["vel_e_mps", "vel_n_mps"]].isna().all().all()
+    assert table.fixes["vel_u_mps"].isna().all()
+    (said,) = [s for s in table.skipped if "holds its course at rest" in s.reason]
+    assert said.count == 30 and said.action == "repaired"
