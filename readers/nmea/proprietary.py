@@ -101,7 +101,9 @@ TRIMBLE_GGK_QUALITY = {
     9: FixType.RTK_FIXED,  # network RTK fixed, 2-D
     10: FixType.DGNSS,  # OmniSTAR HP/XP
     11: FixType.DGNSS,  # OmniSTAR VBS
-    12: FixType.UNKNOWN,  # "Location RTK": an RTK solution degraded on purpose, of no stated accuracy
+    # "Location RTK": an RTK solution held to a set accuracy; a Trimble R2 writes GGA quality 5 (RTK float) for
+    # the same epochs
+    12: FixType.RTK_FLOAT,
     13: FixType.DGNSS,  # beacon DGPS
 }
 

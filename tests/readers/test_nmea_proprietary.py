@@ -191,3 +191,15 @@ def test_secondary_antenna_sentences_never_join_the_primary(tmp_path: Path) -> N
     assert lat["GNH"] == pytest.approx(40 + 4.73874301 / 60)
     assert set(table.satellites["receiver_id"]) == {"GNH"}
     assert math.isnan(table.fixes.set_index("receiver_id").loc["GN", "cn0_mean_dbhz"])
+
+
+def test_trimble_location_rtk_is_an_rtk_float_fix(tmp_path: Path) -> None:
+    """GGK quality 12 ("Location RTK") is the epochs a Trimble R2's GGA calls RTK float (quality 5): its switch to
+    DGPS (4) is a mode switch the explanations can name, not an unknown fix type."""
+    bodies = [
+        "PTNL,GGK,235654.00,122017,3403.47163916,N,11711.80927277,W,12,10,2.9,EHT371.392,M",
+        "PTNL,GGK,235655.00,122017,3403.47141462,N,11711.80952375,W,4,10,2.5,EHT371.078,M",
+    ]
+    path = tmp_path / "r2.nmea"
+    path.write_bytes(b"".join(with_checksum(b"$" + b.encode()) + b"\r\n" for b in bodies))
+    assert read_log(path).fixes["fix_type"].tolist() == [FixType.RTK_FLOAT, FixType.DGNSS]
