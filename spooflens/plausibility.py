@@ -27,8 +27,6 @@ GYRO_LIMIT_RADPS = 200.0
 GYRO_DEGREES_P99 = 35.0  # rad/s; vehicles stay far below (2000 deg/s is a consumer gyro's full scale)
 HEIGHT_RANGE_M = (-2000.0, 100_000.0)
 STRAY_GAP_NS = 3_600_000_000_000  # an hour without a sample of a stream
-HELD_COURSE_SPEED_MPS = 1.0
-HELD_COURSE_RUN = 3
 TURN_SPACING_M = 50.0  # GNSS course taken over this much track, well above position noise
 PSEUDORANGE_RANGE_M = (1e6, 1e8)  # every GNSS orbit, with receiver clock offsets of milliseconds
 SV_ID_PATTERN = r"[GRECJSI]\d{1,3}"
@@ -317,27 +315,6 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
 }
 
 
-def held_course(vel_e: FloatArray, vel_n: FloatArray) -> BoolArray:
-    """Fixes (one receiver's, in time order) whose velocity repeats its course exactly at low speed: below a
-    threshold receivers hold their last course (or write 0) and scale it by the speed, so the direction is no
-    measurement. A course measured at under 1 m/s moves by degrees from fix to fix; HELD_COURSE_RUN equal ones
-    in a row are held."""
-    speed = np.hypot(vel_e, vel_n)
-    course = np.arctan2(vel_e, vel_n)
-    slow = np.isfinite(speed) & (speed > 0) & (speed < HELD_COURSE_SPEED_MPS)
-    same = np.zeros(len(speed), dtype=bool)
-    if len(speed) > 1:
-        same[1:] = slow[1:] & slow[:-1] & (np.abs(np.diff(course)) < 1e-9)
-    # runs of equal courses: a fix is held when it ends or belongs to a run of HELD_COURSE_RUN fixes
-    starts = np.flatnonzero(np.diff(np.r_[0, same.astype(np.int8)]) == 1)
-    ends = np.flatnonzero(np.diff(np.r_[same.astype(np.int8), 0]) == -1)
-    held = np.zeros(len(speed), dtype=bool)
-    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-        if b - a + 2 >= HELD_COURSE_RUN:  # the run's first fix is the one before its first repeat
-            held[a - 1 : b + 1] = True
-    return held
-
-
 def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], BoolArray, Finding]]:
     """Optional values out of range, to be set to NaN ("not known"): (columns, rows, finding) each."""
     out: list[tuple[tuple[str, ...], BoolArray, Finding]] = []
@@ -356,13 +333,6 @@ def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], Boo
             clear(
                 present, np.any([(cols[n] < low) | (cols[n] > high) | np.isinf(cols[n]) for n in present], axis=0), what
             )
-    if frame == "fixes" and "vel_e_mps" in cols and "vel_n_mps" in cols:
-        clear(
-            ("vel_e_mps", "vel_n_mps"),
-            held_course(cols["vel_e_mps"], cols["vel_n_mps"]),
-            f"horizontal velocity whose course stayed the same to the last digit for {HELD_COURSE_RUN} fixes or more "
-            f"at under {HELD_COURSE_SPEED_MPS:g} m/s (a receiver holds its course at rest: its direction not measured)",
-        )
     if frame == "imu" and all(q in cols for q in QUATERNION):
         norm = np.sqrt(sum(cols[n] ** 2 for n in QUATERNION))  # no stacked copy of a day's four columns
         some = np.any([np.isfinite(cols[n]) for n in QUATERNION], axis=0)
