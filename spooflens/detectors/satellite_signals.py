@@ -206,10 +206,14 @@ def cn0_steps(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm],
         full = t[j] - t >= 0.5 * opts.hold_s
         change = np.where(full, after - before_short, np.nan)
         jump = np.where(old, np.minimum(change, after - history), np.nan)
+        # the highest level the satellite held for a window before: a car's satellite shadowed by trees for
+        # most of a minute comes back to its own level, above its median but never above itself
+        held = np.where(t - t[0] >= 0.5 * opts.hold_s, trailing, -np.inf)
+        held_before = np.concatenate([[-np.inf], np.maximum.accumulate(held)[:-1]])
         parts.append(
             pd.DataFrame(
                 {"t": t, "sv": sv, "rel": g["rel"].to_numpy(float), "before": before_short}
-                | {"change": change, "jump": jump, "after": after, "until": t[j]}
+                | {"change": change, "jump": jump, "after": after, "until": t[j], "above_held": after - held_before}
             )
         )
     if not parts:
@@ -226,8 +230,12 @@ def cn0_steps(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm],
     alarms, findings = [], []
     for sv, g in steps.groupby("sv", sort=True):
         t, hit = g["t"].to_numpy(float), g["hit"].to_numpy(bool)
-        jump, after, until, rel, before = (g[c].to_numpy(float) for c in ("jump", "after", "until", "rel", "before"))
+        jump, after, until, rel, before, above_held = (
+            g[c].to_numpy(float) for c in ("jump", "after", "until", "rel", "before", "above_held")
+        )
         for a, b in _runs(t, hit, 1):
+            if not np.any(above_held[a : b + 1] >= opts.step_db):
+                continue  # back to a level it held before: no rise of its own
             k = a + int(np.nanargmax(jump[a : b + 1]))
             # the window's median crosses before the step: the step is the first epoch half-way up
             up = np.flatnonzero((t >= t[a]) & (t <= until[a]) & (rel >= before[a] + half))

@@ -108,6 +108,27 @@ def test_one_satellite_stepping_above_the_others_is_named_and_a_common_change_is
     assert not _run(read_log(_capture(tmp_path / "rising.ubx", 120, rising)))[SIGNALS].alarms
 
 
+def test_a_satellite_back_from_shadow_to_its_own_level_is_no_rise(tmp_path: Path) -> None:
+    """A car's satellite off the roadside: at its level for 12 s, shadowed 16 dB for 14 s, back 7 s, shadowed 14 s,
+    back for good (a real dashcam log's G06). Its median is the shadowed level by then, so the last return
+    stood 13 dB "above its history" and, with one more class, made a medium SPOOFING incident. A satellite
+    that rises above any level it held before is still named."""
+
+    def shadowed(s: int, sats: list[Sat]) -> list[Sat]:
+        # G20, the strongest, 8 dB above the others' median in the open
+        bump = 4 - (16 if 12 <= s < 26 or 33 <= s < 47 else 0)
+        return [(sv, el, az, cno + bump if sv == 20 else cno, u, h) for sv, el, az, cno, u, h in sats]
+
+    assert not _run(read_log(_capture(tmp_path / "shadow.ubx", 90, shadowed)))[SIGNALS].alarms
+
+    def shadowed_then_taken(s: int, sats: list[Sat]) -> list[Sat]:
+        bump = 4 - (16 if 12 <= s < 26 or 33 <= s < 47 else 0) + (11 if s >= 60 else 0)
+        return [(sv, el, az, cno + bump if sv == 20 else cno, u, h) for sv, el, az, cno, u, h in sats]
+
+    alarms = _run(read_log(_capture(tmp_path / "taken.ubx", 90, shadowed_then_taken)))[SIGNALS].alarms
+    assert [a.satellites for a in alarms] == [("G20",)] and alarms[0].onset_s == pytest.approx(60.0, abs=1.01)
+
+
 def test_a_strong_healthy_satellite_the_receiver_refuses_is_named(tmp_path: Path) -> None:
     def refuse(s: int, sats: list[Sat]) -> list[Sat]:
         return [(sv, el, az, cno, 0 if sv == 7 else u, h) for sv, el, az, cno, u, h in sats]
