@@ -48,8 +48,8 @@ _ISO_PREFIX = re.compile(rb"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(?:\.\d+)?)(?:Z|[
 _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
 # a talker is two letters, or a bus address's two digits (canboat's n2kd writes `$04HDM`); a proprietary
 # address is P, a maker's three letters and its own sentence name, often longer ($PQTMCFGUART); SkyTraq's
-# loader writes three letters ($STI)
-_ADDRESS = re.compile(rb"^[$!](P[A-Z0-9]{3,15}|[A-Z0-9][A-Z0-9]{2,5}),")
+# loader writes three letters ($STI); a device's own sentences may be longer (a dashcam's $GSENSORD)
+_ADDRESS = re.compile(rb"^[$!](P[A-Z0-9]{3,15}|[A-Z0-9][A-Z0-9]{2,9}),")
 _HEX = b"0123456789ABCDEFabcdef"
 # where a line may end other than in LF or CR LF: a bare CR, or the next sentence glued to a checksum
 _ODD_BREAK = re.compile(rb"\r(?!\n)|\*[0-9A-Fa-f]{2}[$!]")

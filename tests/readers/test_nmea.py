@@ -445,13 +445,15 @@ def test_a_routers_bracketed_logger_time_is_read(tmp_path: Path) -> None:
     assert not [s for s in table.skipped if s.action in ("lost", "unverified")]
 
 
-def test_a_loggers_own_marks_without_checksums_are_no_damage(tmp_path: Path) -> None:
+@pytest.mark.parametrize("mark", ["$ADPMB,5,0", "$GSENSORD,-0.120,-0.060,0.060"])
+def test_a_loggers_own_marks_without_checksums_are_no_damage(mark: str, tmp_path: Path) -> None:
     """An AMOD 3080 logger writes `$ADPMB,5,0` button marks without a checksum among its receiver's checksummed
-    sentences: they were counted as sentences cut short and the log called damaged. A type that never carries
-    one is whole; a GGA without one where other GGAs have theirs is still cut short."""
+    sentences, a dashcam its accelerometer as `$GSENSORD` (an address of 8 letters): they were counted as
+    sentences cut short and the log called damaged. A type that never carries one is whole; a GGA without
+    one where other GGAs have theirs is still cut short."""
     lines = [_sentence(b) for b in BASE_BODIES]
-    lines.insert(2, "$ADPMB,5,0")
-    lines.insert(6, "$ADPMB,5,0")
+    lines.insert(2, mark)
+    lines.insert(6, mark)
     lines.insert(8, "$" + BASE_BODIES[0])  # a GGA without its checksum
     path = tmp_path / "amod.log"
     path.write_text("\n".join(lines) + "\n")
