@@ -28,6 +28,7 @@ class ConsistencyOptions:
     p_false_alarm: float = 1e-5  # per epoch, as seed 000's KF test
     min_scale_m: float = 0.05  # floor on the robust scale: simulated or quantised logs can have MAD 0
     max_gap_factor: float = 3.0  # a window containing a gap this many median periods long is not judged
+    velocity_with_every_fix: float = 0.9  # fraction of fixes with a velocity above which a missing one is unknown
     # more separate bursts over the threshold than this (and than 5 times the design's count): the
     # receiver's residual is heavier-tailed than Gaussian and the threshold is raised (`tail_offset`)
     min_bursts_to_recalibrate: int = 5
@@ -51,12 +52,18 @@ def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
 
 
 def _window_velocity_residual(
-    t: FloatArray, ecef: FloatArray, to_enu: FloatArray, v: FloatArray, opts: ConsistencyOptions
+    t: FloatArray,
+    ecef: FloatArray,
+    to_enu: FloatArray,
+    v: FloatArray,
+    opts: ConsistencyOptions,
+    unknown_t: FloatArray | None = None,
 ) -> FloatArray:
-    """D_k for every epoch; NaN where the window is incomplete or spans a gap. The displacement is taken in
-    the local frame at fix k (`to_enu`, ECEF -> ENU per fix), where the receiver states its velocity: in
-    the first fix's frame an aircraft 50 km on would see its frame tilted by 0.45 degrees, 7 m over a
-    900 m window."""
+    """D_k for every epoch; NaN where the window is incomplete, spans a gap or a fix without velocity
+    (`unknown_t`: a receiver stopping writes its speed without a course; a velocity drawn straight across
+    it moved a braking car 3.6 m it never went). The displacement is taken in the local frame at fix k
+    (`to_enu`, ECEF -> ENU per fix), where the receiver states its velocity: in the first fix's frame an
+    aircraft 50 km on would see its frame tilted by 0.45 degrees, 7 m over a 900 m window."""
     dt = np.diff(t)
     integral = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)])
     j = np.searchsorted(t, t - opts.window_s, side="left")
@@ -64,6 +71,9 @@ def _window_velocity_residual(
     period = np.median(dt) if len(dt) else np.inf
     gap = np.concatenate([[0.0], np.maximum.accumulate(np.where(dt > opts.max_gap_factor * period, t[1:], 0.0))])
     incomplete = (t - t[0] < opts.window_s * 0.999) | (gap > t[j]) | ~np.all(np.isfinite(d), axis=1)
+    if unknown_t is not None and len(unknown_t):
+        unknown = np.sort(unknown_t)
+        incomplete |= np.searchsorted(unknown, t) > np.searchsorted(unknown, t[j], side="right")
     d[incomplete] = np.nan
     return d
 
@@ -153,12 +163,15 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         vertical = np.isfinite(v[:, 2]).mean() >= 0.5
         mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
         good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
+        # a receiver writing its velocity with (nearly) every fix and leaving it out at some did not know it
+        # then; one writing it at a lower rate than its fixes is interpolated between them
+        unknown_t = t[~good] if good.mean() >= opts.velocity_with_every_fix else None
         t, v, lat, lon, h = t[good], v[good], lat[good], lon[good], h[good]
         ecef, to_enu = geodetic_to_ecef(lat, lon, h), enu_rotation(lat, lon)
         if not vertical:
             v = v.copy()
             v[:, 2] = 0.0
-        r = _window_velocity_residual(t, ecef, to_enu, v, opts)
+        r = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
         if not vertical:
             r[:, 2] = np.nan
         floor = written_floor(lat, lon, h, v, t, opts)

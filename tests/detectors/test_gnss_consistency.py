@@ -208,3 +208,36 @@ def test_a_moored_boat_rounded_to_its_written_resolution_is_quiet(seed: int) -> 
 def test_a_drag_of_a_moored_boat_is_still_caught_above_its_rounding(seed: int) -> None:
     (alarm,) = run_gnss_consistency(_moored_boat(seed, drag_mps=0.5)).alarms
     assert 30.0 <= alarm.start_s <= 34.0
+
+
+def _braking_car(velocity_every: int = 1) -> pd.DataFrame:
+    """A car at 10 m/s brakes hard to a stop at 60 s, waits two fixes, pulls away; 1 Hz fixes with 5 cm of
+    noise. Stopped, its receiver writes a speed without a course: no velocity at those two fixes."""
+    rng = np.random.default_rng(2)
+    t = np.arange(0.0, 120.0, 0.5)
+    speed = np.interp(t, [0.0, 57.0, 60.0, 62.0, 66.0, 120.0], [10.0, 10.0, 0.0, 0.0, 5.0, 5.0])
+    north = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))])
+    t, speed, north = t[::2], speed[::2], north[::2]
+    lat, lon, h = enu_to_geodetic(np.c_[0 * t, north, 0 * t] + rng.normal(0.0, 0.05, (len(t), 3)), 59.9, 30.2, 20.0)
+    v_n = np.where((t >= 60.0) & (t < 62.0), np.nan, speed)
+    v_n[np.arange(len(t)) % velocity_every != 0] = np.nan
+    return pd.DataFrame(
+        {"t_s": t, "receiver_id": "GP", "lat_deg": lat, "lon_deg": lon, "height_m": h}
+        | {"vel_e_mps": np.where(np.isfinite(v_n), 0.0, np.nan), "vel_n_mps": v_n, "vel_u_mps": np.nan}
+    )
+
+
+def test_a_stop_without_velocity_is_not_judged_by_a_velocity_drawn_across_it() -> None:
+    """Drawn straight from the last velocity before the stop to the first after it, the car moved metres it
+    never went: a real dashcam drive's braking stop read 36.7 against 25.9. A window holding a fix whose
+    velocity the receiver did not give is not judged; a drag elsewhere still is."""
+    assert not run_gnss_consistency(_braking_car()).alarms
+    dragged = _braking_car()
+    dragged["lat_deg"] += np.clip(dragged["t_s"] - 90.0, 0.0, None) * 1.0 / 111_000.0
+    (alarm,) = run_gnss_consistency(dragged).alarms
+    assert 90.0 <= alarm.start_s <= 95.0
+
+
+def test_a_velocity_written_at_half_the_fix_rate_is_still_judged_between_its_values() -> None:
+    result = run_gnss_consistency(_braking_car(velocity_every=2))
+    assert np.isfinite(result.series[0].values).sum() > 80
