@@ -29,6 +29,8 @@ class ConsistencyOptions:
     min_scale_m: float = 0.05  # floor on the robust scale: simulated or quantised logs can have MAD 0
     max_gap_factor: float = 3.0  # a window containing a gap this many median periods long is not judged
     velocity_with_every_fix: float = 0.9  # fraction of fixes with a velocity above which a missing one is unknown
+    held_course_speed_mps: float = 1.0  # below this, a course repeated exactly is held, not measured
+    held_course_run: int = 3
     # more separate bursts over the threshold than this (and than 5 times the design's count): the
     # receiver's residual is heavier-tailed than Gaussian and the threshold is raised (`tail_offset`)
     min_bursts_to_recalibrate: int = 5
@@ -124,13 +126,34 @@ def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: f
 
 class Residual(NamedTuple):
     """One receiver's residual: its mode, times, residual (N, 3), robust scale per ENU axis (never below
-    `floor`), and the floor the log's written resolution sets on that scale (`written_floor`)."""
+    `floor`), the floor the log's written resolution sets on that scale (`written_floor`), and per epoch the
+    distance its window travelled on a course the receiver held rather than measured (`held_course`, m)."""
 
     mode: str
     t: FloatArray
     r: FloatArray
     scale: FloatArray
     floor: FloatArray
+    held: NDArray[np.bool_]
+    held_m: FloatArray
+
+
+def held_course(v: FloatArray, opts: ConsistencyOptions) -> NDArray[np.bool_]:
+    """Fixes whose velocity repeats its course exactly at low speed: below a threshold receivers hold their
+    last course and scale it by the speed (a 2013 copter's GPS at 127.73 deg for 8 fixes while it drifted
+    west at 0.2 m/s; a moored yacht's 188.0 for a minute), so its direction is no measurement. A course
+    measured at under 1 m/s moves by degrees from fix to fix; `held_course_run` equal ones in a row are held."""
+    speed = np.hypot(v[:, 0], v[:, 1])
+    course = np.arctan2(v[:, 0], v[:, 1])
+    slow = np.isfinite(speed) & (speed > 0) & (speed < opts.held_course_speed_mps)
+    same = np.zeros(len(speed), dtype=bool)
+    same[1:] = slow[1:] & slow[:-1] & (np.abs(np.diff(course)) < 1e-9)
+    edges = np.diff(np.r_[0, same.astype(np.int8), 0])
+    held = np.zeros(len(speed), dtype=bool)
+    for a, b in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True):
+        if b - a + 1 >= opts.held_course_run:  # repeats a..b-1 of the fix before a
+            held[a - 1 : b] = True
+    return held
 
 
 def written_floor(
@@ -175,14 +198,20 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         if not vertical:
             r[:, 2] = np.nan
         floor = written_floor(lat, lon, h, v, t, opts)
+        # the distance each window covered on a held course: known in length, not in direction
+        held = held_course(v, opts)
+        held_speed = np.where(held, np.hypot(v[:, 0], v[:, 1]), 0.0)
+        travel = np.concatenate([[0.0], np.cumsum(0.5 * (held_speed[1:] + held_speed[:-1]) * np.diff(t))])
+        held_m = travel - travel[np.searchsorted(t, t - opts.window_s, side="left")]
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))
         floor = written_floor(lat, lon, h, None, t, opts)
+        held, held_m = np.zeros(len(t), dtype=bool), np.zeros(len(t))
     floor = np.maximum(floor, opts.min_scale_m)
-    return Residual(
-        mode, t, r, np.maximum(_robust_scale(np.where(np.isfinite(r), r, 0.0), opts.min_scale_m), floor), floor
-    )
+    clean = np.where(np.isfinite(r), r, 0.0)
+    scale = np.maximum(_robust_scale(clean, opts.min_scale_m), floor)
+    return Residual(mode, t, r, scale, floor, held, held_m)
 
 
 def check_receiver(
@@ -198,7 +227,9 @@ def check_receiver(
     if scale_cap is not None and capped:
         cap = scale_cap[1]
         scale = np.maximum(np.where(np.isfinite(cap), np.minimum(scale, cap), scale), res.floor)
-    z = res.r / scale
+    # a held course leaves the window's velocity integral off by up to the distance travelled on it
+    held = np.c_[res.held_m, res.held_m, np.zeros_like(res.held_m)]
+    z = res.r / np.sqrt(scale**2 + held**2)
     stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
     return res, z, stat, scale if capped else None
 
@@ -219,6 +250,9 @@ def run_gnss_consistency(
             continue
         res, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
         mode, t = res.mode, res.t
+        if res.held.any():
+            mode += f"; {int(res.held.sum())} fixes on a course held at rest (no measured direction: the window "
+            mode += "allows the distance travelled on it)"
         checked: NDArray[np.bool_] = np.asarray(np.isfinite(res.r).any(axis=0), dtype=bool)
         if np.any(checked & (res.floor > opts.min_scale_m) & (res.scale <= res.floor)):
             unit = "m" if res.mode.startswith("position change") else "m/s^2"

@@ -241,3 +241,56 @@ def test_a_stop_without_velocity_is_not_judged_by_a_velocity_drawn_across_it() -
 def test_a_velocity_written_at_half_the_fix_rate_is_still_judged_between_its_values() -> None:
     result = run_gnss_consistency(_braking_car(velocity_every=2))
     assert np.isfinite(result.series[0].values).sum() > 80
+
+
+def _hovering_copter(seed: int) -> pd.DataFrame:
+    """A minute of a copter holding position at 5 Hz as a 2013 ArduPilot log writes it (1e-7 deg, 1 cm/s): it
+    drifts at up to 0.3 m/s, and below 0.25 m/s its GPS holds the last course it measured, scaled by the
+    speed (a real one at 127.73 deg for 8 fixes while it drifted west)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 60.0, 0.2)
+    angle = np.cumsum(rng.normal(0.0, 0.15, len(t)))
+    speed = 0.15 + 0.15 * np.sin(2 * np.pi * t / 17.0) ** 2
+    v_true = np.c_[speed * np.sin(angle), speed * np.cos(angle)]
+    p = np.concatenate([[[0.0, 0.0]], np.cumsum(0.5 * (v_true[1:] + v_true[:-1]) * 0.2, axis=0)])
+    course = np.arctan2(v_true[:, 0], v_true[:, 1])
+    for k in range(1, len(t)):
+        if speed[k] < 0.25:
+            course[k] = course[k - 1]
+    reported = np.round(speed, 2)
+    lat, lon, h = enu_to_geodetic(np.c_[p, 0 * t] + rng.normal(0.0, 0.02, (len(t), 3)), 44.029, -77.737, 90.0)
+    return pd.DataFrame(
+        {"t_s": t, "receiver_id": "GPS[0]", "lat_deg": np.round(lat, 7), "lon_deg": np.round(lon, 7), "height_m": h}
+        | {"vel_e_mps": reported * np.sin(course), "vel_n_mps": reported * np.cos(course), "vel_u_mps": np.nan}
+    )
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_course_held_at_rest_is_allowed_the_distance_travelled_on_it(seed: int) -> None:
+    """The held course's direction is no measurement: each window allows the distance travelled on it (known
+    in length, not in direction), and says how many fixes held it (these seeds alarmed at 24-79 before). A
+    drag of 1 m/s of the same hover still alarms, within 7 s where it took 1 s."""
+    result = run_gnss_consistency(_hovering_copter(seed))
+    assert not result.alarms
+    assert "fixes on a course held at rest" in result.reason
+    dragged = _hovering_copter(seed)
+    dragged["lat_deg"] += np.clip(dragged["t_s"] - 30.0, 0.0, None) * 1.0 / 111_000.0
+    assert [a.start_s for a in run_gnss_consistency(dragged).alarms if 30.0 <= a.start_s <= 40.0]
+
+
+def test_which_courses_are_held() -> None:
+    from spooflens.detectors.gnss_consistency import held_course
+
+    def velocity(course_deg: list[float], speed: list[float]) -> np.ndarray:
+        c, s = np.radians(course_deg), np.asarray(speed)
+        return np.c_[s * np.sin(c), s * np.cos(c), 0 * s]
+
+    opts = ConsistencyOptions()
+    speeds = [0.12, 0.18, 0.19, 0.19, 0.2, 0.1, 0.1, 0.1, 0.2, 0.3, 0.3]
+    assert (
+        held_course(velocity([127.73] * 8 + [251.2, 262.9, 266.0], speeds), opts).tolist() == [True] * 8 + [False] * 3
+    )
+    assert not held_course(velocity([90.0] * 10, [5.0] * 10), opts).any()  # a straight road at speed
+    pairs = velocity([268.4, 268.4, 270.1, 271.5, 271.5, 272.0], [0.75, 0.75, 0.8, 0.8, 0.8, 0.9])
+    assert not held_course(pairs, opts).any()  # a velocity repeated once (a 5 Hz log's half-rate velocity)
+    assert not held_course(velocity([0.0] * 5, [0.0] * 5), opts).any()  # at rest and saying so: a measurement
