@@ -280,7 +280,7 @@ def gps_fixes(gps: pd.DataFrame, offset_ns: int, skipped: list[Skipped], meta: d
         cols["cn0_mean_dbhz"] = np.where(snr > 0, snr, np.nan)
     if "GWk" in gps and "GMS" in gps:
         cols["time_offset_s"] = _time_offsets(gps)
-        meta |= log_clock("TimeUS, the autopilot's boot clock", True)
+        meta |= log_clock("the autopilot's boot clock (TimeUS; TimeMS before 2015)", True)
     fixes = pd.DataFrame(cols)
     no_fix = fix_type == FixType.NO_FIX
     for rid in dict.fromkeys(names[no_fix]):
@@ -554,7 +554,9 @@ def _metadata(log: DataFlash, meta: dict[str, str]) -> None:
         return
     messages = log.strings("MSG", "Message")
     fws = log.strings("VER", "FWS")
-    vehicle = next((m for m in messages if m.startswith("Ardu") or (" V" in m[:20] and m.startswith("Ardu"))), "")
+    vehicle = next((m for m in messages if m.startswith("Ardu")), "")
+    if not vehicle:  # a 2013 log names its firmware only in the banner the board printed before it
+        vehicle = next((b for b in log.banner if b.startswith("Ardu") and " V" in b), "")
     if fws and fws[0]:
         meta["firmware"] = fws[0]
     elif vehicle:

@@ -43,6 +43,7 @@ class DataFlash:
     _incomplete: set[str] = field(default_factory=set)
     notes: dict[str, str] = field(default_factory=dict)  # how a revision's fields were read, for the metadata
     on_receiver_clock: set[str] = field(default_factory=set)  # GPS messages timed by their own time of week
+    banner: list[str] = field(default_factory=list)  # text before a text log's first FMT (the board's banner)
 
     @property
     def sdlog2(self) -> bool:

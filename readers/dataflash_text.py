@@ -234,7 +234,10 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
         index.offsets[t] = kept_ofs
         per_name[name] = kept
     delimiter = ", " if b", " in data[start : start + 200] else ","
-    return TextDataFlash(path, data, index, skipped=skipped, fields=per_name, delimiter=delimiter)  # type: ignore[arg-type]
+    banner_text = [b.decode("ascii", "replace") for b in banner]
+    return TextDataFlash(  # type: ignore[arg-type]
+        path, data, index, skipped=skipped, fields=per_name, delimiter=delimiter, banner=banner_text
+    )
 
 
 def open_any_dataflash(path: Path) -> DataFlash:

@@ -168,7 +168,7 @@ def test_real_ardupilot_log_with_a_spoofer_clock_injected(tmp_path: Path) -> Non
     assert incident["confidence"] == "high" and incident["evidence"] == ["gnss_only", "receiver", "log_clock"]
     assert incident["onset_s"] == pytest.approx(24.0, abs=0.3) and incident["ongoing_at_end"]
     assert any(
-        "time moved +3600.5" in str(f) and "against TimeUS, the autopilot's boot clock" in str(f)
+        "time moved +3600.5" in str(f) and "against the autopilot's boot clock (TimeUS; TimeMS before 2015)" in str(f)
         for f in spoofed["findings"]
     )
 

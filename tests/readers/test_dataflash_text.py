@@ -145,6 +145,7 @@ def test_a_log_downloaded_over_the_console_with_its_banner(tmp_path: Path) -> No
     (said,) = [s for s in table.skipped if "download banner" in s.reason]
     assert said.count == 4 and said.action == "skipped" and "ArduCopter V3.0.1 (5c6503e2)" in said.reason
     table.skipped.remove(said)
+    assert table.metadata.pop("firmware") == "ArduCopter V3.0.1 (5c6503e2)"  # named nowhere else in a 2013 log
     assert_same_table(read_log(binary), table)
     # more than a banner's worth of text, or binary, before the FMT: not a text DataFlash log
     chatter = tmp_path / "chatter.log"
