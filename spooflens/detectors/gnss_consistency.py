@@ -283,6 +283,11 @@ def run_gnss_consistency(
         result.series.append(Series(f"{rid}/normalised_residual", t, z, "sigma", None, ("east", "north", "up")))
     if not modes:
         return DetectorResult.skipped(NAME, "no receiver has 3 or more fixes")
+    if not any(np.isfinite(series.values).any() for series in result.series):
+        span = float(fixes["t_s"].max() - fixes["t_s"].min())
+        return DetectorResult.skipped(
+            NAME, f"no epoch to judge: a window holds {opts.window_s:g} s of fixes, the log {span:.1f} s without a gap"
+        )
     result.reason = "; ".join(modes)
     result.alarms.sort(key=lambda a: a.start_s)
     return result

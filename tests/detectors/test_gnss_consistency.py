@@ -294,3 +294,12 @@ def test_which_courses_are_held() -> None:
     pairs = velocity([268.4, 268.4, 270.1, 271.5, 271.5, 272.0], [0.75, 0.75, 0.8, 0.8, 0.8, 0.9])
     assert not held_course(pairs, opts).any()  # a velocity repeated once (a 5 Hz log's half-rate velocity)
     assert not held_course(velocity([0.0] * 5, [0.0] * 5), opts).any()  # at rest and saying so: a measurement
+
+
+def test_a_log_shorter_than_a_window_is_not_counted_as_checked() -> None:
+    """Six seconds of fixes hold no 10 s window: the check judged nothing and said "NO SPOOFING DETECTED"
+    with the others; it now says it could not run, and why."""
+    short = _braking_car().iloc[:7]
+    result = run_gnss_consistency(short)
+    assert not result.ran
+    assert result.reason == "no epoch to judge: a window holds 10 s of fixes, the log 6.0 s without a gap"
