@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 
 from spooflens.errors import ReaderError
 
@@ -51,6 +52,7 @@ _TRAILING_TIME = re.compile(rb"^,?\s*" + _TIME + rb"\s*$")
 # loader writes three letters ($STI); a device's own sentences may be longer (a dashcam's $GSENSORD)
 _ADDRESS = re.compile(rb"^[$!](P[A-Z0-9]{3,15}|[A-Z0-9][A-Z0-9]{2,9}),")
 _HEX = b"0123456789ABCDEFabcdef"
+BoolArray = NDArray[np.bool_]
 # where a line may end other than in LF or CR LF: a bare CR, or the next sentence glued to a checksum
 _ODD_BREAK = re.compile(rb"\r(?!\n)|\*[0-9A-Fa-f]{2}[$!]")
 _BREAK = re.compile(rb"\r\n|\n|\r|(?<=\*[0-9A-Fa-f]{2})(?=[$!])")
@@ -252,6 +254,24 @@ def _address_at(data: bytes, c: _Candidate) -> bytes | None:
     return m.group(1) if m else None
 
 
+def _dollar_in_checksum(
+    data: bytes, with_sum: list[_Candidate], good: BoolArray, with_dollar: BoolArray, counts: Counter[str]
+) -> BoolArray:
+    """Sentences of a type whose every checksum is the XOR with the leading `$` taken in (an LG phone's own
+    `$GPGLG`), two or more: whole, as their type's convention has it. Never a type with right checksums."""
+    if good.all() or not with_dollar.any():
+        return np.zeros(len(with_sum), dtype=bool)
+    addresses = [_address_at(data, c) for c in with_sum]
+    convention: dict[bytes | None, bool] = {}
+    for a, g, d in zip(addresses, good.tolist(), with_dollar.tolist(), strict=True):
+        convention[a] = convention.get(a, True) and not g and d
+    seen = Counter(addresses)
+    kept = np.array([a is not None and convention[a] and seen[a] >= 2 for a in addresses], dtype=bool)
+    if kept.any():
+        counts["sentences of a type whose checksums take in the '$', taken as whole"] += int(kept.sum())
+    return kept
+
+
 def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -> list[Sentence]:
     """Sentences whose checksum matches (XOR of the bytes between `$` and `*`), vectorised."""
     with_sum = [c for c in candidates if c.star >= 0]
@@ -268,6 +288,7 @@ def _verified(data: bytes, candidates: list[_Candidate], counts: Counter[str]) -
         body = acc[stars - 1] ^ acc[starts]
         given = (_HEX_VALUE[buf[stars + 1]] << 4) | _HEX_VALUE[buf[stars + 2]]
         good = body.astype(np.int64) == given
+        good |= _dollar_in_checksum(data, with_sum, good, (body ^ ord("$")).astype(np.int64) == given, counts)
         ok = [c for c, g in zip(with_sum, good.tolist(), strict=True) if g]
         if (~good).any():
             counts["sentences with a bad checksum"] += int((~good).sum())

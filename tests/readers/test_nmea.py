@@ -510,3 +510,28 @@ def test_a_relay_repeating_a_stale_fix_is_not_read_as_one(tmp_path: Path) -> Non
     # the same GLL twice within one second of the GPS: a repeat, not a stale relay
     twice = read_log(_write(tmp_path / "twice.nmea", bodies[:3] + bodies[2:4] + bodies[5:9]))
     assert not [s for s in twice.skipped if "stale" in s.reason] and "AP" in set(twice.fixes["receiver_id"])
+
+
+def test_a_type_whose_checksums_take_in_the_dollar_is_whole(tmp_path: Path) -> None:
+    """An LG phone's own `$GPGLG` computes its checksum with the leading `$` taken in: every one of them
+    "failed" and an intact log was called damaged. A type all of whose checksums are that XOR is whole; a
+    standard sentence with such a checksum among right ones is still a bad checksum."""
+
+    def dollar_sum(body: str) -> str:
+        check = ord("$")
+        for c in body.encode():
+            check ^= c
+        return f"${body}*{check:02X}"
+
+    lines = [_sentence(b) for b in BASE_BODIES]
+    lines.insert(1, dollar_sum("GPGLG,1,2,3"))
+    lines.insert(4, dollar_sum("GPGLG,4,5,6"))
+    path = tmp_path / "lg.nmea"
+    path.write_text("\n".join(lines) + "\n")
+    table = read_log(path)
+    assert not [s for s in table.skipped if s.action == "lost"]
+    assert any("checksums take in the '$'" in s.reason and s.count == 2 for s in table.skipped)
+    lines.insert(2, dollar_sum(BASE_BODIES[0]))  # a GGA whose checksum took the '$' in, among right GGAs
+    path.write_text("\n".join(lines) + "\n")
+    lost = {s.reason: s.count for s in read_log(path).skipped if s.action == "lost"}
+    assert lost == {"sentences with a bad checksum": 1}
