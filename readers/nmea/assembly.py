@@ -7,17 +7,18 @@ GSA, GSV) belongs to the receiver of its source with the same talker, else to th
 receiver (a multi-GNSS receiver sends GPGSV, GLGSV, GAGSV... beside GNGGA), else to the source's only
 receiver; otherwise it is counted and skipped.
 
-**Epochs.** Sentences carrying a UTC time of day (GGA, GNS, RMC, GLL, GST, ZDA) are grouped by that
-time; VTG, GSA and GSV join their receiver's latest position epoch in file order (talkers send an epoch
-as a burst). Per epoch: the position from GGA, else GNS, else RMC, else GLL, among the sentences that
-call it valid; height = GGA/GNS MSL altitude + geoid separation (the MSL altitude alone when the
-separation is blank, the receiver's last known height when the epoch has none, 0 m when the receiver
-never gives one: each listed as a repair); velocity from RMC, else VTG (speed over ground and course,
-no vertical); satellites used from GGA/GNS, else the GSA lists; HDOP/VDOP from GSA, else GGA; 1-sigma
-horizontal accuracy sqrt((sigma_lat^2 + sigma_lon^2)/2) and vertical sigma from GST; `cn0_mean_dbhz`
-the mean over the satellites GSV reports with a C/N0 (per satellite the strongest signal). The GSV of
-every epoch with a fix, and of the epochs without one from the receiver's first fix on, is the
-`satellites` frame: a receiver that loses its fix to jamming keeps the C/N0 collapse that lost it
+**Epochs.** Sentences carrying a UTC time of day (GGA, GNS, RMC, GLL, GST, ZDA) are grouped by that time;
+VTG, GSA and GSV join their receiver's latest position epoch in file order (talkers send an epoch as a
+burst), or, where a logger stamped every line finely enough to tell bursts apart, the epoch whose position
+sentence it stamped nearest (a phone's burst ends with its RMC and GGA). Per epoch: the position from GGA,
+else GNS, else RMC, else GLL, among the sentences that call it valid; height = GGA/GNS MSL altitude + geoid
+separation (the MSL altitude alone when the separation is blank, the receiver's last known height when the
+epoch has none, 0 m when the receiver never gives one: each listed as a repair); velocity from RMC, else VTG
+(speed over ground and course, no vertical); satellites used from GGA/GNS, else the GSA lists; HDOP/VDOP
+from GSA, else GGA; 1-sigma horizontal accuracy sqrt((sigma_lat^2 + sigma_lon^2)/2) and vertical sigma from
+GST; `cn0_mean_dbhz` the mean over the satellites GSV reports with a C/N0 (per satellite the strongest
+signal). The GSV of every epoch with a fix, and of the epochs without one from the receiver's first fix on,
+is the `satellites` frame: a receiver that loses its fix to jamming keeps the C/N0 collapse that lost it
 (`_fixless_sky_placed` says which fix-less epochs are placed).
 
 **Time.** A time of day becomes a date with the RMC/ZDA dates of its receiver (or, for a receiver
@@ -190,6 +191,48 @@ def assign_epochs(rx: Receiver) -> None:
                 pending = []
             current = key
     rx.untimed = len(pending)
+    _place_by_logger_time(rx)
+
+
+def _place_by_logger_time(rx: Receiver) -> None:
+    """Move each sentence without a time of day (GSV, GSA, VTG) to the epoch whose position sentence the
+    logger stamped nearest it, where the stamps are fine enough to tell bursts apart: a phone writes its
+    second as GSV, GSA, VTG, then RMC and GGA (GnssLogger's NMEA), so file order put its sky a second early."""
+    anchors: list[tuple[int, tuple[bool, int]]] = []
+    for key, epoch in rx.epochs.items():
+        stamps = [d.sentence.host_ns for d in epoch.sentences if d.kind in POSITION_KINDS]
+        if stamps and all(ns is not None for ns in stamps):
+            anchors.append((min(ns for ns in stamps if ns is not None), key))
+    if len(anchors) < 3:
+        return
+    anchors.sort()
+    at = np.array([a for a, _ in anchors], dtype=np.int64)
+    spacing = float(np.median(np.diff(at)))
+    movable = [
+        (key, d)
+        for key, epoch in rx.epochs.items()
+        for d in epoch.sentences
+        if not math.isfinite(d.tod_s) and d.kind not in POSITION_KINDS and d.sentence.host_ns is not None
+    ]
+    if not movable or spacing <= 0:
+        return
+    if (
+        _stamp_resolution_ns([int(d.sentence.host_ns) for _, d in movable if d.sentence.host_ns is not None])
+        > 0.1 * spacing
+    ):
+        return
+    moved: set[tuple[bool, int]] = set()
+    for key, d in movable:
+        host = int(d.sentence.host_ns) if d.sentence.host_ns is not None else 0
+        k = int(np.clip(np.searchsorted(at, host), 1, len(at) - 1))
+        nearest = k if abs(at[k] - host) < abs(host - at[k - 1]) else k - 1
+        target = anchors[nearest][1]
+        if target != key and abs(int(at[nearest]) - host) < 0.5 * spacing:
+            rx.epochs[key].sentences.remove(d)
+            rx.epochs[target].sentences.append(d)
+            moved |= {key, target}
+    for key in moved:
+        rx.epochs[key].sentences.sort(key=lambda d: d.sentence.line)
 
 
 def drop_stale_epochs(rxs: list[Receiver], skipped: list[Skipped]) -> None:

@@ -535,3 +535,25 @@ def test_a_type_whose_checksums_take_in_the_dollar_is_whole(tmp_path: Path) -> N
     path.write_text("\n".join(lines) + "\n")
     lost = {s.reason: s.count for s in read_log(path).skipped if s.action == "lost"}
     assert lost == {"sentences with a bad checksum": 1}
+
+
+def test_a_phones_burst_ending_with_its_fix_keeps_its_sky_with_that_fix(tmp_path: Path) -> None:
+    """GnssLogger's NMEA writes each second as GSV, GSA, VTG, then RMC and GGA, every line stamped in ms: in
+    file order the sky joined the previous second's fix (every C/N0 a second early, the first fix two
+    seconds of sky, the last none). The logger's stamps place each line with the fix stamped nearest it;
+    whole-second stamps, which cannot tell bursts apart, leave file order."""
+    lines = []
+    for k in range(6):
+        ms = 1701381316874 + 1000 * k
+        hhmmss = f"2155{16 + k:02d}.00"
+        lines += [
+            f"NMEA,{_sentence(f'GPGSV,1,1,01,09,61,139,{20 + k}')},{ms}",
+            f"NMEA,{_sentence('GNGSA,A,3,09,,,,,,,,,,,,1.0,0.6,0.7')},{ms + 3}",
+            f"NMEA,{_sentence(f'GNRMC,{hhmmss},A,3725.345973,N,12214.745114,W,0.0,,301123,15.0,E,A')},{ms + 4}",
+            f"NMEA,{_sentence(f'GNGGA,{hhmmss},3725.345973,N,12214.745114,W,1,12,0.6,107.3,M,-28.0,M,,')},{ms + 4}",
+        ]
+    path = tmp_path / "gnss_log.nmea"
+    path.write_text("\n".join(lines) + "\n")
+    sky = read_log(path).satellites
+    assert sky["cn0_dbhz"].tolist() == [20.0, 21.0, 22.0, 23.0, 24.0, 25.0]
+    np.testing.assert_allclose(sky["t_s"], np.arange(6.0), atol=0.01)
