@@ -195,7 +195,7 @@ def split_file(
         if not line.strip():
             continue
         if line.startswith("#"):
-            body = line[1:].strip()
+            body = line.lstrip("# \t").strip()  # "# # Version: ..." in some v2.0 logs
             name = body.split(",", 1)[0].strip()
             if (name in RECORDS or re.fullmatch(r"[A-Za-z]\w*", name)) and "," in body:
                 headers[name] = [c.strip() for c in body.split(",")][1:]

@@ -334,3 +334,12 @@ def test_a_header_naming_a_column_twice_reads_the_first(tmp_path: Path) -> None:
     pd.testing.assert_frame_equal(table.observations, read_log(original).observations)
     (said,) = [s for s in table.skipped if "twice" in s.reason]
     assert said.stream == "Raw" and said.reason == "header names CarrierFrequencyHz twice: the first column read"
+
+
+def test_a_doubled_hash_before_the_version_still_names_the_phone(tmp_path: Path) -> None:
+    """A Xiaomi MI 8's v2.0.0.1 log writes `# # Version: ...`: the phone and app were lost from the metadata."""
+    original = real_log("android_gnsslogger/gnss_lib_py/pixel6.txt")
+    text = original.read_text().replace("# Version:", "# # Version:", 1)
+    copy = tmp_path / "doubled.txt"
+    copy.write_text(text)
+    assert read_log(copy).metadata["firmware"] == read_log(original).metadata["firmware"]
