@@ -279,6 +279,17 @@ def incident_kind(inc: dict) -> str:
     return f"{KIND_LABELS[Kind(kind)]} (not spoofing)"
 
 
+def _confidences(inc: dict, index: int, events: list[dict]) -> str:
+    """A spoofing incident's confidence; of another kind's, the confidence of spoofing and of the kind (the
+    event's: how sure the cause is), which are two things."""
+    kind = inc.get("kind", "spoofing")
+    if kind in ("spoofing", "unknown"):
+        return f"confidence {inc['confidence']}"
+    sure = next((e["confidence"] for e in events if e.get("incident") == index and e["kind"] == kind), None)
+    of_kind = f", of {KIND_LABELS[Kind(kind)]} {sure}" if sure else ""
+    return f"confidence of spoofing {inc['confidence']}{of_kind}"
+
+
 def stream_names(table: EpochTable) -> str:
     return ", ".join(f"{s.topic} ({s.msgtype})" for s in table.streams) or "none"
 
@@ -287,7 +298,8 @@ def print_analysis(summary: dict, output: Path | None, json_path: Path | None, h
     out = console()
     v = summary["verdict"]
     out.print(f"[bold {'red' if v['spoofed'] else 'green'}]{v['headline']}[/]")
-    for inc in v["incidents"]:
+    events = v.get("events", [])
+    for k, inc in enumerate(v["incidents"]):
         when = f" ({inc['onset_utc']})" if inc.get("onset_utc") else ""
         apart = [e for e in inc["evidence"] if e not in inc.get("corroborating_evidence", inc["evidence"])]
         also = f"; at other times {', '.join(apart)}" if apart else ""
@@ -299,12 +311,11 @@ def print_analysis(summary: dict, output: Path | None, json_path: Path | None, h
             f"  {incident_kind(inc)}: onset {inc['onset_s']:.2f} s{when}, alarm {inc['start_s']:.2f} s to {end}, "
             f"evidence {', '.join(inc.get('corroborating_evidence') or inc['evidence']) or 'none confirmed'}{also} "
             f"({', '.join(inc['detectors'])}){sats}, "
-            f"confidence {inc['confidence']}{alarms_said}"
+            f"{_confidences(inc, k, events)}{alarms_said}"
         )
         for e in inc.get("explanations", []):
             weighed = "weighed, not enough" if inc["spoofing"] else "explained"
             out.print(f"      {weighed}: {e['text']}")
-    events = v.get("events", [])
     for e in events:
         if e.get("sequence") and e["sequence"]["followed_by"] is not None:
             then = events[e["sequence"]["followed_by"]]

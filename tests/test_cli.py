@@ -115,3 +115,20 @@ def test_spoofing_wins_over_jamming_and_both_over_damage() -> None:
     assert finish(log, [analysis(True, jam, spoof)], False, True) == EXIT_JAMMED == 5
     assert finish(log, [analysis(False, jam)], True, False) == EXIT_OK
     assert finish(log, [analysis(False)], True, True) == EXIT_OK
+
+
+def test_a_natural_events_line_names_both_confidences(capsys: pytest.CaptureFixture[str]) -> None:
+    """A receiver fault's incident said "confidence low" (of spoofing) while its event said "confidence medium"
+    (of the fault): the console names which is which."""
+    from spooflens.service import print_analysis
+
+    incident = {
+        "kind": "receiver_fault", "confidence": "low", "confidence_of_alarms": "low", "spoofing": False,
+        "onset_s": 79.6, "start_s": 80.6, "end_s": 80.6, "ongoing_at_end": True, "evidence": ["gnss_only"],
+        "corroborating_evidence": ["gnss_only"], "detectors": ["gnss_consistency"], "explanations": [],
+    }  # fmt: skip
+    event = {"kind": "receiver_fault", "confidence": "medium", "incident": 0, "sequence": None}
+    verdict = {"spoofed": False, "headline": "NO SPOOFING", "incidents": [incident], "events": [event], "findings": []}
+    print_analysis({"verdict": verdict, "analyses": [], "skipped": []}, None, None)
+    out = " ".join(capsys.readouterr().out.split())
+    assert "confidence of spoofing low, of receiver fault medium" in out
