@@ -29,6 +29,7 @@ class ConsistencyOptions:
     min_scale_m: float = 0.05  # floor on the robust scale: simulated or quantised logs can have MAD 0
     max_gap_factor: float = 3.0  # a window containing a gap this many median periods long is not judged
     velocity_with_every_fix: float = 0.9  # fraction of fixes with a velocity above which a missing one is unknown
+    min_epochs_to_learn: int = 10  # judged epochs a receiver's own noise scale is read off (without a baseline)
     held_course_speed_mps: float = 1.0  # below this, a course repeated exactly is held, not measured
     held_course_run: int = 3
     # more separate bursts over the threshold than this (and than 5 times the design's count): the
@@ -250,6 +251,12 @@ def run_gnss_consistency(
             continue
         res, z, stat, scale = check_receiver(rx.reset_index(drop=True), opts, (scale_caps or {}).get(str(rid)))
         mode, t = res.mode, res.t
+        judged = int(np.isfinite(res.r).any(axis=1).sum())
+        if 0 < judged < opts.min_epochs_to_learn and scale is None:
+            # a noise scale read off three residuals is no scale: a phone's 5 fixes over 80 s read 62,187
+            need = opts.min_epochs_to_learn
+            modes.append(f"{rid}: not judged: {judged} epochs to learn its noise from ({mode}), {need} needed")
+            continue
         if res.held.any():
             mode += f"; {int(res.held.sum())} fixes on a course held at rest (no measured direction: the window "
             mode += "allows the distance travelled on it)"
@@ -285,9 +292,9 @@ def run_gnss_consistency(
         return DetectorResult.skipped(NAME, "no receiver has 3 or more fixes")
     if not any(np.isfinite(series.values).any() for series in result.series):
         span = float(fixes["t_s"].max() - fixes["t_s"].min())
-        return DetectorResult.skipped(
-            NAME, f"no epoch to judge: a window holds {opts.window_s:g} s of fixes, the log {span:.1f} s without a gap"
-        )
+        few = [m for m in modes if ": not judged: " in m]
+        why = f"no epoch to judge: no {opts.window_s:g} s of fixes without a gap (the log spans {span:.1f} s)"
+        return DetectorResult.skipped(NAME, "; ".join(few) if few else why)
     result.reason = "; ".join(modes)
     result.alarms.sort(key=lambda a: a.start_s)
     return result

@@ -302,4 +302,17 @@ def test_a_log_shorter_than_a_window_is_not_counted_as_checked() -> None:
     short = _braking_car().iloc[:7]
     result = run_gnss_consistency(short)
     assert not result.ran
-    assert result.reason == "no epoch to judge: a window holds 10 s of fixes, the log 6.0 s without a gap"
+    assert result.reason == "no epoch to judge: no 10 s of fixes without a gap (the log spans 6.0 s)"
+
+
+def test_a_receiver_with_too_few_epochs_to_learn_its_noise_is_not_judged() -> None:
+    """A phone's 5 fixes over 80 s: a noise scale read off the 3 second differences they give is no scale,
+    and its last fix's 5 m read 62,187 against 25.9."""
+    car = _braking_car()
+    few = car[car["t_s"].isin([0.0, 30.0, 79.0, 80.0, 81.0])].assign(vel_e_mps=np.nan, vel_n_mps=np.nan)
+    few.loc[few.index[-1], "lat_deg"] += 5.0 / 111_000.0
+    result = run_gnss_consistency(few)
+    assert not result.ran and not result.alarms
+    assert result.reason == (
+        "GP: not judged: 3 epochs to learn its noise from (kinematic plausibility (no reported velocity)), 10 needed"
+    )
