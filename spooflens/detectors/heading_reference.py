@@ -463,9 +463,14 @@ def run_heading_reference(
     opts = opts or HeadingReferenceOptions()
     ref = reference(headings)
     if ref is None:
-        return DetectorResult.skipped(
-            NAME, "no compass heading in the log (a GNSS receiver's heading is no reference)", Evidence.HEADING
+        streams = ", ".join(f"{h} ({n} rows)" for h, n in headings["heading_id"].value_counts(sort=False).items())
+        why = (
+            f"headings from GNSS talkers only ({streams}): a heading a GNSS receiver or a bus relabelling every "
+            "sentence as GP gives is no reference independent of GNSS"
+            if len(headings)
+            else "no compass heading in the log (a GNSS receiver's heading is no reference)"
         )
+        return DetectorResult.skipped(NAME, why, Evidence.HEADING)
     tests: list[tuple[ReceiverTest, list[Alarm]]] = []
     fixes_of: dict[str, pd.DataFrame] = {}
     for _, rows in fixes.groupby("receiver_id", sort=True):
