@@ -60,6 +60,7 @@ from readers.dataflash import Columns, DataFlash, is_dataflash
 from readers.dataflash_text import TextDataFlash, is_dataflash_text, open_any_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
 from readers.rinex import NavFile
+from readers.ubx.messages import sv_ids
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
 from spooflens.errors import ReaderError
 from spooflens.gnss.ephemeris import C_MPS, SECONDS_PER_WEEK
@@ -85,7 +86,6 @@ UBX3_FIELDS = ("TimeUS", "hAcc", "vAcc", "sAcc")  # u-blox NAV-POSLLH/VELNED acc
 GRXH_FIELDS = ("TimeUS", "week", "rcvTime")
 GRXS_FIELDS = ("TimeUS", "gnss", "sv", "freq", "prMes", "cpMes", "doMes", "cno", "trk")
 # u-blox gnssId -> RINEX system letter
-_UBX_SYSTEM = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
 _L1_HZ = {"G": 1575.42e6, "S": 1575.42e6, "E": 1575.42e6, "J": 1575.42e6, "C": 1561.098e6, "I": 1176.45e6}
 
 
@@ -461,14 +461,13 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
     if orphan.any():
         skipped.append(Skipped("GRXS", "raw measurement before any GRXH header", int(orphan.sum())))
     k = np.where(orphan, 0, k)
-    gnss = sat["gnss"].astype(np.int64)
-    system = np.array([_UBX_SYSTEM.get(int(g), "") for g in gnss])
+    # GRXS is the receiver's RXM-RAWX relayed: u-blox (gnssId, svId) pairs
+    sv_id, known = sv_ids(sat["gnss"].astype(np.int64), sat["sv"].astype(np.int64))
+    system = np.where(known, np.char.ljust(sv_id, 1).astype("U1"), "")
     pr_valid = (sat["trk"].astype(np.int64) & 1) == 1
-    keep = ~orphan & pr_valid & (system != "") & np.isfinite(sat["prMes"]) & (sat["prMes"] > 0)
+    keep = ~orphan & pr_valid & known & np.isfinite(sat["prMes"]) & (sat["prMes"] > 0)
     if (~pr_valid & ~orphan).any():
         skipped.append(Skipped("GRXS", "pseudorange not valid (trkStat bit 0 clear)", int((~pr_valid & ~orphan).sum())))
-    svn = sat["sv"].astype(np.int64)
-    sv_id = np.array([f"{s}{(n - 100 if s == 'S' else n):02d}" for s, n in zip(system, svn, strict=True)])
     if reference == "gps":
         t_gps_ns = np.round(
             (hdr["week"].astype(np.int64)[k] * SECONDS_PER_WEEK + hdr["rcvTime"].astype(float)[k]) * 1e9
