@@ -29,6 +29,7 @@ class ConsistencyOptions:
     min_scale_m: float = 0.05  # floor on the robust scale: simulated or quantised logs can have MAD 0
     max_gap_factor: float = 3.0  # a window containing a gap this many median periods long is not judged
     velocity_with_every_fix: float = 0.9  # fraction of fixes with a velocity above which a missing one is unknown
+    course_unknown_below_mps: float = 2.0  # ... beside a known speed this low (a braking car stops within a second)
     min_epochs_to_learn: int = 10  # judged epochs a receiver's own noise scale is read off (without a baseline)
     held_course_speed_mps: float = 1.0  # below this, a course repeated exactly is held, not measured
     held_course_run: int = 3
@@ -79,6 +80,22 @@ def _window_velocity_residual(
         incomplete |= np.searchsorted(unknown, t) > np.searchsorted(unknown, t[j], side="right")
     d[incomplete] = np.nan
     return d
+
+
+def _velocity_unknown(t: FloatArray, v: FloatArray, good: NDArray[np.bool_], opts: ConsistencyOptions) -> FloatArray:
+    """Times of fixes whose velocity the receiver did not know: missing where it writes velocity with (nearly)
+    every fix, beside a known one slow enough that the receiver may have come to rest (it writes a speed
+    without a course there). Elsewhere a missing velocity is a sentence not sent (a yacht's network relaying
+    a GLL alone) and is interpolated between its neighbours, as one written at a lower rate than the fixes."""
+    if good.mean() < opts.velocity_with_every_fix or good.all() or not good.any():
+        return np.zeros(0)
+    speed = np.hypot(v[good, 0], v[good, 1])
+    known_t = t[good]
+    missing = np.flatnonzero(~good)
+    after = np.clip(np.searchsorted(known_t, t[missing]), 0, len(known_t) - 1)
+    before = np.clip(after - 1, 0, len(known_t) - 1)
+    slow = np.minimum(speed[before], speed[after]) < opts.course_unknown_below_mps
+    return np.asarray(t[missing[slow]], dtype=float)
 
 
 def _second_difference(t: FloatArray, p: FloatArray) -> FloatArray:
@@ -187,9 +204,7 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         vertical = np.isfinite(v[:, 2]).mean() >= 0.5
         mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
         good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
-        # a receiver writing its velocity with (nearly) every fix and leaving it out at some did not know it
-        # then; one writing it at a lower rate than its fixes is interpolated between them
-        unknown_t = t[~good] if good.mean() >= opts.velocity_with_every_fix else None
+        unknown_t = _velocity_unknown(t, v, good, opts)
         t, v, lat, lon, h = t[good], v[good], lat[good], lon[good], h[good]
         ecef, to_enu = geodetic_to_ecef(lat, lon, h), enu_rotation(lat, lon)
         if not vertical:
