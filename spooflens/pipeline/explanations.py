@@ -23,6 +23,9 @@ names a natural cause and the alarm it accounts for:
   a week rollover) or by a whole number of leap seconds;
 - one satellite's range a reflection's length off (NLOS), its C/N0 not raised, or two at once each within it;
 - a satellite the receiver never used in its fix from the log's start cannot have moved it;
+- a known station's antenna moved and put back: its satellites' rates agree on one motion of the receiver
+  that takes it no more than a hand or a knock does (5 m) from the known position and back within 30 s
+  (a rover standing still while its antenna is handled, its header position taken for a station);
 - an inertial shock: the vehicle's own IMU read a tumble or an impact (angular rate or specific force far
   beyond flight, at the gyro's or accelerometer's full scale) just before an inertial alarm began; an
   INS integrating through it, the autopilot's or spooflens', has lost its attitude and departs from GNSS
@@ -50,6 +53,8 @@ import numpy as np
 from spooflens.detectors.base import Alarm, DetectorResult
 from spooflens.detectors.gnss_consistency import NAME as GNSS_CONSISTENCY
 from spooflens.detectors.gnss_consistency import ConsistencyOptions
+from spooflens.detectors.range_rate import NAME as RANGE_RATE
+from spooflens.detectors.range_rate import TTEST as RANGE_RATE_TTEST
 from spooflens.detectors.receiver_evidence import NAME as RECEIVER_EVIDENCE
 from spooflens.epoch_table import EpochTable
 from spooflens.navigation.product import NAVIGATION
@@ -163,6 +168,15 @@ class ExplanationOptions:
     # alarms after the return are the filter re-converging
     max_glitch_s: float = 10.0
     glitch_recovery_s: float = 10.0
+    # a known station's antenna moved and put back (handled, knocked, a mast swaying): the receiver's motion
+    # against the station, integrated, no more than a hand moves an antenna and back within this, all its
+    # satellites' rates agreeing on that one motion
+    max_antenna_move_m: float = 5.0
+    max_antenna_move_s: float = 30.0
+    antenna_back_m: float = 0.5  # or this share of the largest distance
+    antenna_back_fraction: float = 0.3
+    antenna_settle_s: float = 5.0  # read on to this long after the alarm
+    antenna_common_share: float = 0.5  # each satellite's rate within this share of the motion's speed of it
 
 
 @dataclass(frozen=True)
@@ -1141,6 +1155,55 @@ def _glitch(scene: _Scene, e: Excursion) -> Reading:
     return Reading("glitch", Kind.DEGRADATION, True, why, facts)
 
 
+def read_antenna_moved(scene: _Scene, alarm: Alarm) -> Reading:
+    """A known station's receiver moving against its known position and back, all satellites agreeing."""
+    opts, rid = scene.opts, alarm.receiver_id or ""
+    rates = next((r for r in scene.results if r.name == RANGE_RATE and r.ran), None)
+    series = {s.name: s for s in rates.series} if rates is not None else {}
+    motion, residual = series.get(f"{rid}/velocity_error"), series.get(f"{rid}/rate_residual")
+    if motion is None or residual is None:
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, "", rid)
+    t = motion.t
+    a = max(int(np.searchsorted(t, alarm.start_s)) - 1, 0)
+    b = int(np.searchsorted(t, alarm.end_s + opts.antenna_settle_s, side="right"))
+    dv = np.nan_to_num(np.asarray(motion.values, dtype=float)[a:b])
+    if b - a < 2:
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, "", rid)
+    steps = 0.5 * (dv[1:] + dv[:-1]) * np.diff(t[a:b])[:, None]
+    moved = np.linalg.norm(np.cumsum(steps, axis=0), axis=1)
+    peak, back = float(moved.max()), float(moved[-1])
+    lasted = alarm.end_s - alarm.start_s
+    if peak > opts.max_antenna_move_m:
+        why = f"the receiver moved {peak:.1f} m from the known position, more than a hand or a knock moves an antenna"
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, why, rid)
+    if back > max(opts.antenna_back_m, opts.antenna_back_fraction * peak):
+        why = f"the receiver did not come back: {back:.1f} m from the known position after the alarm"
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, why, rid)
+    if lasted > opts.max_antenna_move_s:
+        why = f"the receiver moved for {lasted:.0f} s, longer than an antenna is handled"
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, why, rid)
+    # every satellite's rate follows the one motion: what is left of each (its tracking loop under the jerk
+    # of a hand) is small beside the motion, where one counterfeit satellite's rate would be the motion itself
+    inside = (residual.t >= alarm.start_s) & (residual.t <= alarm.end_s)
+    r = np.asarray(residual.values, dtype=float)[inside]
+    worst = float(np.nanmax(np.abs(r))) if np.isfinite(r).any() else np.nan
+    speed = float(np.max(np.linalg.norm(dv, axis=1)))
+    if not np.isfinite(worst) or worst > opts.antenna_common_share * speed:
+        why = f"a satellite's rate left the receiver's one motion by {worst:.2f} m/s" if np.isfinite(worst) else ""
+        return _kept("antenna moved", Kind.RECEIVER_FAULT, why, rid)
+    text = (
+        f"the receiver moved {peak:.1f} m from its known position and came back within {lasted + 1:.0f} s, every "
+        "satellite's rate following that one motion: its antenna handled or knocked (or the known position a "
+        "rover's standing point), not spoofing"
+    )
+    facts = (
+        f"moved {peak:.1f} m at up to {speed:.2f} m/s",
+        f"back to {back:.2f} m",
+        f"every satellite's rate within {worst:.2f} m/s of the motion",
+    )
+    return Reading("antenna moved", Kind.RECEIVER_FAULT, True, text, facts, rid)
+
+
 def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Reading]:
     """Every signature that applies to this alarm's class, in the order they are preferred."""
     ev = result.evidence
@@ -1155,6 +1218,8 @@ def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Read
         return [read_time_fault(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
     if ev in (Evidence.RAW_MEASUREMENT, Evidence.KNOWN_STATION, Evidence.RECEIVER) and len(alarm.satellites) == 1:
         out.append(read_reflection(scene, alarm, result))
+    if ev == Evidence.KNOWN_STATION and result.name in (RANGE_RATE, RANGE_RATE_TTEST):
+        out.append(read_antenna_moved(scene, alarm))
     if ev == Evidence.RECEIVER and alarm.satellites and result.name != RECEIVER_EVIDENCE:
         out += [read_never_used(scene, alarm, rid) for rid in scene.receivers_of(alarm)]
     if result.name in INDICATOR_DETECTORS:

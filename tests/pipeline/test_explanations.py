@@ -474,3 +474,53 @@ def test_gnss_that_leaves_the_ins_for_seconds_and_comes_back_is_a_glitch(attack:
     else:
         assert inc.is_spoofing and inc.kind == Kind.SPOOFING, attack
         assert any("ruled out glitch" in x and "longer than a glitch" in x for x in event.evidence_against)
+
+
+def _station_motion(motion: np.ndarray, odd_satellite_mps: float = 0.0) -> tuple[DetectorResult, Verdict]:
+    """range_rate against a known station over 48 s at 1 Hz: the receiver's velocity against it (`motion`,
+    east/north/up per epoch) and 8 satellites' rates after the fit of one common motion (3 mm/s of noise, and
+    `odd_satellite_mps` more on one of them while the receiver moves)."""
+    from spooflens.detectors.base import Series
+
+    t = np.arange(48.0)
+    rng = np.random.default_rng(4)
+    residual = rng.normal(0.0, 0.003, (len(t), 8))
+    moving = np.linalg.norm(motion, axis=1) > 0.05
+    residual[moving, 3] += odd_satellite_mps
+    alarm = Alarm(3.0, 6.0, 20.7, 3.0, onset_s=3.0, receiver_id="rover", satellites=("G05",))
+    sats = tuple(f"G{k:02d}" for k in range(1, 9))
+    series = [
+        Series("rover/velocity_error", t, motion, "m/s", None, ("east", "north", "up")),
+        Series("rover/rate_residual", t, residual, "m/s", None, sats),
+    ]
+    result = DetectorResult("range_rate", True, alarms=[alarm], evidence=Evidence.KNOWN_STATION, series=series)
+    return result, decide([result])
+
+
+def _out_and_back(speed_mps: float, back: bool = True) -> np.ndarray:
+    v = np.zeros((48, 3))
+    v[3:5, 0] = -speed_mps  # 2 s west-south-west at 0.4 m/s, as a rover's antenna handled in a real log
+    v[3:5, 1] = -0.5 * speed_mps
+    if back:
+        v[5:7, 0], v[5:7, 1] = speed_mps, 0.5 * speed_mps
+    return v
+
+
+def test_a_stations_antenna_moved_and_put_back_is_no_spoofing() -> None:
+    """A walking rover's RINEX, its header position taken for a station while it stood: its antenna handled,
+    0.8 m west and back in 4 s, every satellite's carrier rate following, read as a medium SPOOFING incident
+    naming one satellite. A station that leaves and stays away, or one satellite off on its own, stays
+    evidence."""
+    table = table_of("rinex_gsi_pair")
+    result, verdict = _station_motion(_out_and_back(0.4))
+    (inc,) = verdict.incidents
+    (moved,) = [e for e in explain(table, [result], inc).explanations if e.cause == "antenna moved"]
+    assert moved.kind == Kind.RECEIVER_FAULT and "moved 0.7 m from its known position and came back" in moved.text
+    result, verdict = _station_motion(_out_and_back(0.4, back=False))
+    weighed = explain(table, [result], verdict.incidents[0])
+    assert "antenna moved" not in {e.cause for e in weighed.explanations}
+    assert any("did not come back" in r for r in weighed.ruled_out)
+    result, verdict = _station_motion(_out_and_back(0.4), odd_satellite_mps=0.4)
+    weighed = explain(table, [result], verdict.incidents[0])
+    assert "antenna moved" not in {e.cause for e in weighed.explanations}
+    assert any("left the receiver's one motion" in r for r in weighed.ruled_out)
