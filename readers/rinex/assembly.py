@@ -84,7 +84,12 @@ def _add_satellite_states(
 ) -> None:
     """Fill the sv_* columns of the modelled systems' rows from the broadcast orbits; count every row left without."""
     eph = (navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)) if navs else None
-    reason = f"no navigation file found for {obs_name} (give one with --topic nav=FILE); no satellite states"
+    unusable = [s.stream for s in skipped if s.reason.startswith("navigation file unusable")]
+    reason = (
+        f"the navigation file found for {obs_name} ({', '.join(unusable)}) could not be read; no satellite states"
+        if unusable
+        else f"no navigation file found for {obs_name} (give one with --topic nav=FILE); no satellite states"
+    )
     rows |= state_columns(eph, rows["sv_id"], rows["t_ns"] / 1e9, rows["pseudorange_m"], receiver_id, skipped, reason)
 
 

@@ -87,6 +87,24 @@ def _nav_number(text: str) -> float | None:
     return float(s.replace("D", "E").replace("d", "e"))
 
 
+# a number as some writers put it, narrower than the format's 19 columns (goGPS: `4.800000000000D+1`, a
+# one-digit exponent, so the fields of a line shift)
+_NUMBER = re.compile(r"[+-]?(?:\d+\.\d*|\.\d+)(?:[DdEe][+-]?\d+)?")
+
+
+def _row(text: str, count: int) -> list[float | None]:
+    """The `count` numbers of one record line's data part: in the format's 19-column fields, else (a writer
+    with narrower fields) split at the numbers themselves when they are exactly `count` (blanks then not
+    allowed, as nothing says which field is blank)."""
+    try:
+        return [_nav_number(text[19 * k : 19 * k + 19]) for k in range(count)]
+    except ValueError:
+        found = _NUMBER.findall(text)
+        if len(found) != count or "".join(found).replace(" ", "") != "".join(text.split()):
+            raise
+        return [float(v.replace("D", "E").replace("d", "e")) for v in found]
+
+
 def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str]:
     """One GPS, Galileo or BeiDou broadcast record (first line + 7 orbit lines) -> GpsEphemerides.from_records
     keys."""
@@ -105,17 +123,15 @@ def _nav_record(lines: list[str], version: float) -> dict[str, float | int | str
         head, col0 = first[23:80], 4
     toc = datetime(year, mo, d, h, mi, tzinfo=UTC) + timedelta(seconds=sec)
     rec: dict[str, float | int | str] = {"sv_id": sv, "toc_s": (toc - GPS_EPOCH).total_seconds()}
-    for key, k in zip(("af0", "af1", "af2"), range(3), strict=True):
-        v = _nav_number(head[19 * k : 19 * k + 19])
+    for key, v in zip(("af0", "af1", "af2"), _row(head, 3), strict=True):
         if v is None:
             raise ValueError(f"{key} is blank")
         rec[key] = v
     for row, keys in enumerate({"E": _GALILEO_KEYS, "C": _BEIDOU_KEYS}.get(system, _NAV_KEYS)):
         line = lines[row + 1] if row + 1 < len(lines) else ""
-        for k, name in enumerate(keys):
+        for name, v in zip(keys, _row(line[col0:], len(keys)), strict=True):
             if name is None:
                 continue
-            v = _nav_number(line[col0 + 19 * k : col0 + 19 * k + 19])
             if v is None and name not in _OPTIONAL:
                 raise ValueError(f"{name} is blank")
             rec[name] = 0.0 if v is None else v

@@ -277,6 +277,22 @@ def test_rinex3_mixed_nav_gives_the_same_gps_records(tmp_path: Path) -> None:
     assert galileo.reason.endswith("implausible orbit (sqrt(A) or e out of range))") and galileo.count == 1
 
 
+def test_a_nav_file_written_with_one_digit_exponents_reads_the_same(tmp_path: Path) -> None:
+    """goGPS writes `4.800000000000D+1`: 18 columns where the format has 19, the fields of a line shifted.
+    Cut at the format's columns, an intact file was "unreadable or cut navigation records" (exit 3, then "no
+    navigation file found"); split at its numbers, it gives the standard file's records."""
+    import re
+
+    text = _need(NAV_0759).read_text()
+    head, body = text.split("END OF HEADER", 1)
+    narrow = tmp_path / "gogps.05n"
+    narrow.write_text(head + "END OF HEADER" + re.sub(r"([DE][+-])0(\d)", r"\1\2", body))
+    standard, written = read_rinex_nav_file(_need(NAV_0759)), read_rinex_nav_file(narrow)
+    assert written.records == standard.records == 162 and not written.skipped
+    for name in ("sv_id", "week", "toe_sow", "toc_s", "af0", "af1", "sqrt_a", "m0", "omega_dot", "tgd", "iode"):
+        assert np.array_equal(getattr(written.ephemerides, name), getattr(standard.ephemerides, name)), name
+
+
 def test_bad_and_cut_nav_records_are_counted(tmp_path: Path) -> None:
     text = _need(NAV_0759).read_text()
     lines = text.splitlines()
@@ -337,6 +353,10 @@ def test_nav_topic_overrides_the_search(tmp_path: Path) -> None:
     broken = read_log(obs)
     assert broken.observations["sv_x_m"].isna().all() and len(broken.observations) == 948
     assert any(s.stream == "alone.05n" and s.reason.startswith("navigation file unusable") for s in broken.skipped)
+    # and says the file was found, not "no navigation file found"
+    assert any(
+        "the navigation file found for alone.05o (alone.05n) could not be read" in s.reason for s in broken.skipped
+    )
     # a nav file of another day: every GPS row counted, none dropped, and the two spans named
     stale = read_log(_need(PIXEL), topics={"nav": str(NAV_0759)})
     (miss,) = [s for s in stale.skipped if s.reason.startswith("GPS rows without satellite states")]
