@@ -774,14 +774,19 @@ def read_convergence(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     for column, label, ratio, rise, direction in (
         ("hdop", "HDOP", 1.5, 0.5, +1),
         ("h_acc_m", "reported accuracy (m)", 2.0, 2.0, +1),
-        ("sats_used", "satellites used", 0.0, 2.0, -1),
+        ("sats_used", "satellites used", 0.75, 2.0, -1),
     ):
         x = rx.col(column)
         level = float(np.nanmedian(x[settled])) if np.isfinite(x[settled]).any() else float("nan")
         if not np.isfinite(level) or not np.isfinite(x[first]).any():
             continue
-        start = float(np.nanmax(x[first]) if direction > 0 else np.nanmin(x[first]))
-        off = (start >= ratio * level and start - level >= rise) if direction > 0 else (level - start >= rise)
+        # the first fixes' middle value: one of them off alone is the sky's own flicker (a car's 9, 7, 9
+        # satellites against 11 later was no cold start), a receiver converging has them all off
+        start = float(np.nanmedian(x[first]))
+        if direction > 0:
+            off = start >= ratio * level and start - level >= rise
+        else:
+            off = start <= ratio * level and level - start >= rise
         if off:
             digits = 0 if column == "sats_used" else 1
             unsettled.append(f"{label} {start:.{digits}f} -> {level:.{digits}f}")
