@@ -160,12 +160,18 @@ def run_raim(ctx: AnalysisContext, opts: RaimDetectorOptions | None = None) -> D
     table = ctx.table
     result = DetectorResult(NAME, True, evidence=Evidence.RAW_MEASUREMENT)
     notes = []
+    judged = 0
     tags_off = time_tags_off(ctx)
     for rid, rows, t_gps in ranged_by_receiver(table):
         if rid in tags_off:
             notes.append(f"{rid}: not judged, {tags_off[rid].describe()}")
             continue
         res = raim_of(rows, t_gps, table.ionosphere, opts)
+        if not (res.dof >= 1).any():
+            # as many satellites as unknowns: the residuals are zero whatever the ranges, nothing is tested
+            notes.append(f"{rid}: not judged, no epoch with a satellite more than the position and clock it solves")
+            continue
+        judged += 1
         alarms, findings, series = check_receiver(rid, rows, res, opts)
         own_series, own_findings = fix_against_own_solution(rid, res.solution, table.fixes_of(rid), opts)
         series += own_series
@@ -180,6 +186,8 @@ def run_raim(ctx: AnalysisContext, opts: RaimDetectorOptions | None = None) -> D
         )
     if not notes:
         return DetectorResult.skipped(NAME, "no pseudoranges with satellite positions", Evidence.RAW_MEASUREMENT)
+    if not judged:
+        return DetectorResult.skipped(NAME, "; ".join(notes), Evidence.RAW_MEASUREMENT)
     result.reason = "; ".join(notes)
     result.alarms.sort(key=lambda a: a.start_s)
     return result

@@ -63,3 +63,15 @@ def test_each_alarm_carries_the_size_of_its_own_run_of_exclusions() -> None:
     assert first.range_error_m is not None and 1900.0 < first.range_error_m < 2100.0
     assert second.range_error_m is not None and 250.0 < second.range_error_m < 350.0
     assert second.peak_statistic < 400.0 < first.peak_statistic
+
+
+def test_as_many_satellites_as_unknowns_is_no_test() -> None:
+    """A reference station's file with 4 satellites with orbits at each epoch: the residuals are zero whatever
+    the ranges, and RAIM was counted among the detectors behind "NO SPOOFING"."""
+    table = read_log(real_log(LOG), {"nav": str(real_log(NAV))})
+    obs = table.observations
+    with_orbit = obs[np.isfinite(obs["sv_x_m"].to_numpy(dtype=float))]
+    four = with_orbit.groupby("t_s", group_keys=False).head(4)
+    result = run_raim(AnalysisContext(replace(table, observations=four.reset_index(drop=True)), AnalyzeOptions()))
+    assert not result.ran
+    assert result.reason == "phone: not judged, no epoch with a satellite more than the position and clock it solves"
