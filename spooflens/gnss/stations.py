@@ -71,9 +71,11 @@ def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
         k = np.flatnonzero(ok)
         speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
     moving = float(np.mean(speed > STATIC_SPEED_MPS))
+    judged = (
+        f"its first {STATIC_WINDOW_S / 60:g} min" if t[-1] - t[0] >= STATIC_WINDOW_S else f"its {t[-1] - t[0]:.0f} s"
+    )
     return moving <= 1.0 - STATIC_FRACTION, (
-        f"{100 * moving:.0f}% of 30 s spans of its first {STATIC_WINDOW_S / 60:g} min faster than "
-        f"{STATIC_SPEED_MPS} m/s"
+        f"{100 * moving:.0f}% of 30 s spans of {judged} faster than {STATIC_SPEED_MPS} m/s"
     )
 
 

@@ -205,6 +205,10 @@ def test_a_station_whose_fixes_a_spoofer_drags_away_later_stays_a_known_station(
     late = _dragged(table, "0759", 600.0, 2.0)
     found, _ = pc.known_stations(_ctx(late))
     assert "0759" in found and "first 5 min" in found["0759"].source  # type: ignore[attr-defined]
+    # a log shorter than those minutes says how much of it was judged, not "its first 5 min"
+    short = replace(table, fixes=table.fixes[table.fixes["t_s"] <= 240.0].reset_index(drop=True))
+    found, _ = pc.known_stations(_ctx(short))
+    assert "0% of 30 s spans of its 240 s" in found["0759"].source  # type: ignore[attr-defined]
     # moving from the start, it is no station: its header is only where it started
     early = _dragged(table, "0759", 0.0, 2.0)
     unmet = _check(pc.INDEPENDENT_REFERENCE, early)
