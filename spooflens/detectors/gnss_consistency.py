@@ -14,7 +14,7 @@ from spooflens.baseline.use import consistency_caps, note
 from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
 from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import enu_rotation, geodetic_to_ecef, geodetic_to_enu
-from spooflens.gnss.resolution import position_steps_m, speed_step_mps, velocity_step_mps
+from spooflens.gnss.resolution import decimal_step, position_steps_m, speed_step_mps
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalysisSpec, DetectorInfo, probability
 
@@ -188,8 +188,8 @@ def written_floor(
     if v is None:
         dt = float(np.median(np.diff(t))) if len(t) > 1 else np.inf
         return np.asarray(q_pos / (np.sqrt(2.0) * dt**2) if dt > 0 else np.zeros(3), dtype=float)
-    horizontal = max(speed_step_mps(np.hypot(v[:, 0], v[:, 1])), velocity_step_mps(v[:, 0]), velocity_step_mps(v[:, 1]))
-    q_vel = np.array([horizontal, horizontal, velocity_step_mps(v[:, 2])])
+    horizontal = max(speed_step_mps(np.hypot(v[:, 0], v[:, 1])), decimal_step(v[:, 0]), decimal_step(v[:, 1]))
+    q_vel = np.array([horizontal, horizontal, decimal_step(v[:, 2])])
     return np.asarray(np.sqrt(q_pos**2 / 6.0 + (opts.window_s * q_vel) ** 2 / 12.0), dtype=float)
 
 

@@ -19,7 +19,7 @@ FloatArray = NDArray[np.float64]
 # the grids logs write on: a unit and its decimals (degrees or arc-minutes; m/s, knots or km/h)
 _ANGLE_UNITS_DEG = (1.0, 1.0 / 60.0)
 _SPEED_UNITS_MPS = (1.0, KNOT_MPS, 1.0 / 3.6)
-_LENGTH_UNITS_M = (1.0,)
+_SI_UNITS = (1.0,)
 _DECIMALS = range(0, 10)
 # a value on the grid is within this fraction of a step of a grid point (a decimal read into a double and
 # converted, e.g. minutes to degrees, is off by far less)
@@ -57,14 +57,10 @@ def speed_step_mps(speed_mps: FloatArray) -> float:
     return written_step(speed_mps, _SPEED_UNITS_MPS)
 
 
-def velocity_step_mps(x: FloatArray) -> float:
-    """Step of a velocity component in m/s (written in m/s: mm/s or cm/s integers, or decimals)."""
-    return written_step(x, _LENGTH_UNITS_M)
-
-
-def length_step_m(x: FloatArray) -> float:
-    """Step of a height in metres."""
-    return written_step(x, _LENGTH_UNITS_M)
+def decimal_step(x: FloatArray) -> float:
+    """Step of a value written in decimals of its SI unit: a height in m, a velocity component in m/s (mm/s
+    or cm/s integers scaled, or decimals)."""
+    return written_step(x, _SI_UNITS)
 
 
 def position_steps_m(lat_deg: FloatArray, lon_deg: FloatArray, height_m: FloatArray) -> FloatArray:
@@ -75,6 +71,6 @@ def position_steps_m(lat_deg: FloatArray, lon_deg: FloatArray, height_m: FloatAr
         [
             angle_step_deg(lon_deg) * metres_per_deg * math.cos(math.radians(lat0)),
             angle_step_deg(lat_deg) * metres_per_deg,
-            length_step_m(height_m),
+            decimal_step(height_m),
         ]
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from spooflens.constants import KNOT_MPS
-from spooflens.gnss.resolution import angle_step_deg, position_steps_m, speed_step_mps, velocity_step_mps
+from spooflens.gnss.resolution import angle_step_deg, decimal_step, position_steps_m, speed_step_mps
 
 
 def test_nmea_minutes_and_knots_are_found() -> None:
@@ -17,7 +17,7 @@ def test_nmea_minutes_and_knots_are_found() -> None:
 
 def test_integer_scaled_degrees_and_centimetres() -> None:
     assert np.isclose(angle_step_deg(np.array([471234567, 471234569, 471234999]) * 1e-7), 1e-7)
-    assert np.isclose(velocity_step_mps(np.array([1234, -5, 17]) * 0.01), 0.01)
+    assert np.isclose(decimal_step(np.array([1234, -5, 17]) * 0.01), 0.01)
 
 
 def test_doubles_written_in_full_have_no_step() -> None:
