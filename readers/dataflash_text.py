@@ -153,7 +153,9 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
         raise ReaderError(path, f"cannot read: {err.strerror or err}") from err
     opening = log_start(data[:4096])
     start = opening if opening is not None else len(BOM) if data.startswith(BOM) else 0
-    banner = [line.strip() for line in data[:start].removeprefix(BOM).split(b"\n") if line.strip()]
+    banner = [
+        line.strip().decode("ascii", "replace") for line in data[:start].removeprefix(BOM).split(b"\n") if line.strip()
+    ]
     lines = data[start:].split(b"\n")
     cut = lines.pop() if lines else b""  # what follows the last newline: a line cut short, or nothing
     grouped: dict[bytes, tuple[list[int], list[list[bytes]]]] = {}
@@ -176,12 +178,7 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
         raise ReaderError(path, "no FMT line: not an ArduPilot DataFlash text log")
     skipped: list[Skipped] = []
     if banner:
-        said = (
-            banner[0].decode("ascii", "replace")
-            if len(banner) == 1
-            else " / ".join(b.decode("ascii", "replace") for b in banner[:4])
-        )
-        what = f"line of text before the log's first FMT (a ground station's download banner: {said})"
+        what = f"line of text before the log's first FMT (a ground station's download banner: {' / '.join(banner[:4])})"
         skipped.append(Skipped(STREAM, what, len(banner), "skipped"))
     if junk:
         skipped.append(Skipped(STREAM, "line that is not a message (binary junk or damaged text)", junk, "lost"))
@@ -234,9 +231,8 @@ def open_text_dataflash(path: Path) -> TextDataFlash:
         index.offsets[t] = kept_ofs
         per_name[name] = kept
     delimiter = ", " if b", " in data[start : start + 200] else ","
-    banner_text = [b.decode("ascii", "replace") for b in banner]
     return TextDataFlash(  # type: ignore[arg-type]
-        path, data, index, skipped=skipped, fields=per_name, delimiter=delimiter, banner=banner_text
+        path, data, index, skipped=skipped, fields=per_name, delimiter=delimiter, banner=banner
     )
 
 

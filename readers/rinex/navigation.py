@@ -100,7 +100,7 @@ def _row(text: str, count: int) -> list[float | None]:
         return [_nav_number(text[19 * k : 19 * k + 19]) for k in range(count)]
     except ValueError:
         found = _NUMBER.findall(text)
-        if len(found) != count or "".join(found).replace(" ", "") != "".join(text.split()):
+        if len(found) != count or "".join(found) != "".join(text.split()):
             raise
         return [float(v.replace("D", "E").replace("d", "e")) for v in found]
 

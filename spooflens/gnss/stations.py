@@ -63,17 +63,15 @@ def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
     p = geodetic_to_enu(fx["lat_deg"], fx["lon_deg"], fx["height_m"], lat0, lon0, h0)
     j = np.searchsorted(t, t - STATIC_SPAN_S, side="right") - 1
     ok = (j >= 0) & (t - t[np.maximum(j, 0)] > 0.5 * STATIC_SPAN_S)
+    span_s = float(t[-1] - t[0])
     if not ok.any():
-        span = t[-1] - t[0]
-        ok_all = span > 0
-        speed = np.array([np.linalg.norm(p[-1, :2] - p[0, :2]) / span]) if ok_all else np.array([np.inf])
+        ok_all = span_s > 0
+        speed = np.array([np.linalg.norm(p[-1, :2] - p[0, :2]) / span_s]) if ok_all else np.array([np.inf])
     else:
         k = np.flatnonzero(ok)
         speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
     moving = float(np.mean(speed > STATIC_SPEED_MPS))
-    judged = (
-        f"its first {STATIC_WINDOW_S / 60:g} min" if t[-1] - t[0] >= STATIC_WINDOW_S else f"its {t[-1] - t[0]:.0f} s"
-    )
+    judged = f"its first {STATIC_WINDOW_S / 60:g} min" if span_s >= STATIC_WINDOW_S else f"its {span_s:.0f} s"
     return moving <= 1.0 - STATIC_FRACTION, (
         f"{100 * moving:.0f}% of 30 s spans of {judged} faster than {STATIC_SPEED_MPS} m/s"
     )
