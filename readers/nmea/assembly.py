@@ -209,25 +209,23 @@ def _place_by_logger_time(rx: Receiver) -> None:
     at = np.array([a for a, _ in anchors], dtype=np.int64)
     spacing = float(np.median(np.diff(at)))
     movable = [
-        (key, d)
+        (key, d, d.sentence.host_ns)
         for key, epoch in rx.epochs.items()
         for d in epoch.sentences
         if not math.isfinite(d.tod_s) and d.kind not in POSITION_KINDS and d.sentence.host_ns is not None
     ]
     if not movable or spacing <= 0:
         return
-    if (
-        _stamp_resolution_ns([int(d.sentence.host_ns) for _, d in movable if d.sentence.host_ns is not None])
-        > 0.1 * spacing
-    ):
+    host = np.array([ns for _, _, ns in movable], dtype=np.int64)
+    if _stamp_resolution_ns(host.tolist()) > 0.1 * spacing:
         return
+    k = np.clip(np.searchsorted(at, host), 1, len(at) - 1)
+    nearest = np.where(np.abs(at[k] - host) < np.abs(host - at[k - 1]), k, k - 1)
+    close = np.abs(at[nearest] - host) < 0.5 * spacing
     moved: set[tuple[bool, int]] = set()
-    for key, d in movable:
-        host = int(d.sentence.host_ns) if d.sentence.host_ns is not None else 0
-        k = int(np.clip(np.searchsorted(at, host), 1, len(at) - 1))
-        nearest = k if abs(at[k] - host) < abs(host - at[k - 1]) else k - 1
-        target = anchors[nearest][1]
-        if target != key and abs(int(at[nearest]) - host) < 0.5 * spacing:
+    for (key, d, _), i, near in zip(movable, nearest.tolist(), close.tolist(), strict=True):
+        target = anchors[i][1]
+        if near and target != key:
             rx.epochs[key].sentences.remove(d)
             rx.epochs[target].sentences.append(d)
             moved |= {key, target}
