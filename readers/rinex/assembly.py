@@ -80,11 +80,16 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
 
 
 def _add_satellite_states(
-    rows: dict[str, np.ndarray], navs: list[NavFile], obs_name: str, receiver_id: str, skipped: list[Skipped]
+    rows: dict[str, np.ndarray],
+    navs: list[NavFile],
+    unusable: list[str],
+    obs_name: str,
+    receiver_id: str,
+    skipped: list[Skipped],
 ) -> None:
-    """Fill the sv_* columns of the modelled systems' rows from the broadcast orbits; count every row left without."""
+    """Fill the sv_* columns of the modelled systems' rows from the broadcast orbits; count every row left
+    without. `unusable`: the navigation files found for it that could not be read."""
     eph = (navs[0].ephemerides if len(navs) == 1 else merge_navs(navs)) if navs else None
-    unusable = [s.stream for s in skipped if s.reason.startswith("navigation file unusable")]
     reason = (
         f"the navigation file found for {obs_name} ({', '.join(unusable)}) could not be read; no satellite states"
         if unusable
@@ -95,13 +100,13 @@ def _add_satellite_states(
 
 def _navigation(
     obs: Path, topics: Mapping[str, str] | None, cache: dict[Path, NavFile | None], skipped: list[Skipped]
-) -> list[NavFile]:
-    """The navigation files for `obs`, each read once per log.
+) -> tuple[list[NavFile], list[str]]:
+    """The navigation files for `obs`, each read once per log, and the names of those found unreadable.
 
     A nav file the search found that cannot be read costs only the satellite states (listed as lost);
     one named with --topic nav= is the user's explicit choice, so its problem is an error.
     """
-    navs = []
+    navs, unusable = [], []
     for nav_path in find_nav_files(obs, topics):
         if nav_path not in cache:
             try:
@@ -114,7 +119,9 @@ def _navigation(
         nav = cache[nav_path]
         if nav is not None:
             navs.append(nav)
-    return navs
+        else:
+            unusable.append(nav_path.name)
+    return navs, unusable
 
 
 def _read_obs_file(
@@ -123,8 +130,8 @@ def _read_obs_file(
     scan = scan_obs(path)
     skipped = list(scan.skipped)
     rows = _observation_rows(scan, receiver_id, skipped)
-    navs = _navigation(path, topics, nav_cache, skipped)
-    _add_satellite_states(rows, navs, path.name, receiver_id, skipped)
+    navs, unusable = _navigation(path, topics, nav_cache, skipped)
+    _add_satellite_states(rows, navs, unusable, path.name, receiver_id, skipped)
     epochs = len(np.unique(rows["t_ns"]))
     stream = StreamInfo("observations", receiver_id, path.name, f"RINEX {scan.version:.2f} obs", epochs)
     xyz = scan.header.approx_xyz
