@@ -71,6 +71,14 @@ def state_columns(
             elif not states.valid[rows].any():
                 why = "without satellite states: " + _other_span(ephemerides, s, t_gps_s[g][rows])
             else:
+                sick = rows & ~states.valid & np.isin(sv[g], ephemerides.unhealthy_satellites())
+                if sick.any():
+                    flagged = ", ".join(sorted(set(sv[g][sick].tolist())))
+                    why = f"of satellites the broadcast flags unhealthy ({flagged}): not used, satellite states NaN"
+                    skipped.append(Skipped(receiver_id, f"{name} rows {why}", int(sick.sum()), "unhealthy"))
+                    missing -= int(sick.sum())
+                    if not missing:
+                        continue
                 why = "without a valid broadcast ephemeris; satellite states NaN"
             skipped.append(Skipped(receiver_id, f"{name} rows {why}", missing, "no ephemeris"))
     elif modelled.any():

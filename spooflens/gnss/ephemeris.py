@@ -137,6 +137,11 @@ class GpsEphemerides:
     def satellites(self) -> list[str]:
         return sorted(set(self.sv_id.tolist()))
 
+    def unhealthy_satellites(self) -> list[str]:
+        """The satellites every record of which the broadcast flags unhealthy: never used, by choice."""
+        healthy = set(self.sv_id[self.health == 0].tolist())
+        return sorted(set(self.sv_id.tolist()) - healthy)
+
     def take(self, idx: NDArray[np.int64]) -> GpsEphemerides:
         return replace(self, **{f.name: getattr(self, f.name)[idx] for f in fields(self) if f.name != "iono"})
 

@@ -847,3 +847,23 @@ def test_rewrite_drops_emptied_epochs_and_refuses_a_foreign_table(tmp_path: Path
         rewrite_rinex(tmp_path / "v3.rnx", tmp_path / "x.rnx", foreign, foreign.observations)
     with pytest.raises(WriterError, match="must not overwrite its source"):
         rewrite_rinex(tmp_path / "v2.05o", tmp_path / "v2.05o", foreign, foreign.observations)
+
+
+def test_rows_of_a_satellite_the_broadcast_flags_unhealthy_are_said_so(tmp_path: Path) -> None:
+    """A real F9P file's G07 carried SV health 63 in its navigation record: its rows were reported as "without a
+    valid broadcast ephemeris", which reads as a missing or broken record, not the broadcast's own flag."""
+    obs = tmp_path / "flagged.05o"
+    shutil.copyfile(_need(OBS_0759), obs)
+    lines = NAV_0759.read_text().splitlines()
+    end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    sick = read_log(obs, topics={"nav": str(NAV_0759)}).observations["sv_id"].value_counts().index[0]
+    for i in range(end + 1, len(lines), 8):  # RINEX 2 GPS records: 8 lines, health in line 6's second field
+        if int(lines[i][:2]) == int(sick[1:]):
+            lines[i + 6] = lines[i + 6][:22] + " 6.300000000000D+01" + lines[i + 6][41:]
+    (tmp_path / "flagged.05n").write_text("\n".join(lines) + "\n")
+    table = read_log(obs)
+    (flag,) = [s for s in table.skipped if s.action == "unhealthy"]
+    assert f"GPS rows of satellites the broadcast flags unhealthy ({sick})" in flag.reason
+    assert flag.count == int((table.observations["sv_id"] == sick).sum())
+    assert table.observations.loc[table.observations["sv_id"] == sick, "sv_x_m"].isna().all()
+    assert not any("without a valid broadcast ephemeris" in s.reason for s in table.skipped)
