@@ -105,6 +105,10 @@ class ExplanationOptions:
     # a spoofer's marks
     spoofer_cn0_rise_db: float = 3.0
     max_sky_cn0_dbhz: float = 50.0
+    # but a sky covered before and usually (a fuselage, a garage, a pocket) that rises to an open sky's level is
+    # the antenna uncovered: a skydiver's exit from the aircraft, a car out of a parking deck
+    covered_sky_dbhz: float = 30.0
+    open_sky_dbhz: float = 45.0
     equal_cn0_db: float = 2.0
     equal_min_satellites: int = 6
     equal_min_epochs: int = 3
@@ -339,6 +343,14 @@ def _db(x: float) -> str:
     return f"{x:+.1f} dB"
 
 
+def uncovered(w: Window, opts: ExplanationOptions) -> bool:
+    """The sky covered before the window and for most of the log, at an open sky's level in the window, and no
+    satellite lost from the fix (an antenna uncovered sees more of the sky, never less)."""
+    before, usual, now = w.cn0_level_before(), w.cn0_usual_level(), w.cn0_level_now()
+    kept = not w.worst("sats_used", -1) < w.level("sats_used")  # NaN (not logged) keeps
+    return before < opts.covered_sky_dbhz and usual < opts.covered_sky_dbhz and now <= opts.open_sky_dbhz and kept
+
+
 def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     """What a spoofer's signal does to the receiver's indicators and nature does not."""
     marks = []
@@ -348,7 +360,7 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     if strongest > opts.max_sky_cn0_dbhz:
         marks.append(f"mean C/N0 up to {strongest:.1f} dB-Hz, more than the sky gives ({opts.max_sky_cn0_dbhz:g})")
     _, rise, what = w.cn0_change_db()
-    if rise >= opts.spoofer_cn0_rise_db:
+    if rise >= opts.spoofer_cn0_rise_db and not uncovered(w, opts):
         marks.append(
             f"{what} rose {_db(rise)} above its level {w.base_where} and its usual level: a stronger signal than the "
             "sky's"

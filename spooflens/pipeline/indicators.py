@@ -303,6 +303,11 @@ class Window:
             return _finite_median(sky.ravel())
         return _finite_median(self.rx.col("cn0_mean_dbhz")[self.now])
 
+    def cn0_usual_level(self) -> float:
+        """The receiver's usual C/N0 over the whole log (`Sky.usual_cn0`), else the median of its fixes' mean C/N0."""
+        usual = self.rx.sky.usual_cn0
+        return usual if np.isfinite(usual) else _finite_median(self.rx.col("cn0_mean_dbhz"))
+
     def cn0_level_before(self) -> float:
         """The baseline's median satellite C/N0, else the median of its fixes' mean C/N0 (NaN unknown or
         without a baseline)."""

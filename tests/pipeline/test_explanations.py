@@ -7,6 +7,7 @@ from dataclasses import replace
 from functools import cache
 
 import numpy as np
+import pandas as pd
 import pytest
 from paths import REAL, real_log
 
@@ -207,6 +208,31 @@ def test_a_stronger_signal_is_no_degradation() -> None:
     assert verdict.spoofed and verdict.incidents[0].kind == Kind.SPOOFING
     against = verdict.events[0].evidence_against
     assert any("rose" in x and "a stronger signal than the sky's" in x for x in against)
+
+
+def test_a_sky_uncovered_to_an_open_skys_level_is_no_spoofers_signal() -> None:
+    """A skydiver's receiver (a real log from outside the corpus): 17 s inside the aircraft at 21-24 dB-Hz, then
+    out of the door at 36-43 dB-Hz, the same 12 satellites used. The rise above its level before and its usual
+    level (the aircraft's, most of the log) was named a spoofer's stronger signal. Modelled on the navisys
+    receiver: its sky flat and covered until 25 s, then 14 dB louder with nothing lost from the fix."""
+    a = analysed("corpus/gpsd/navisys-gr8013.log")
+    sats, fixes = a.table.satellites.copy(), a.table.fixes.copy()
+    covered = sats.groupby("sv_id")["cn0_dbhz"].transform("median")
+    sats["cn0_dbhz"] = covered + np.where(sats["t_s"] >= 25.0, 14.0, 0.0)
+    fixes["sats_used"] = 10.0
+    alarm = Alarm(26.0, 30.0, 20.0, 27.0, onset_s=25.0, receiver_id="ubx")
+
+    def marks(satellites: pd.DataFrame, fix_rows: pd.DataFrame) -> list[str]:
+        scene = scene_of(replace(a.table, satellites=satellites, fixes=fix_rows), a.results)
+        return spoofer_marks(scene.window(alarm, "ubx"), scene.opts)
+
+    assert not marks(sats, fixes)
+    # the same rise from a sky that was open before and usually, or with satellites lost from the fix: marks
+    assert any(
+        "a stronger signal than the sky's" in m for m in marks(sats.assign(cn0_dbhz=sats["cn0_dbhz"] + 12.0), fixes)
+    )
+    lost = fixes.assign(sats_used=np.where(fixes["t_s"] >= 25.0, 6.0, 10.0))
+    assert any("a stronger signal than the sky's" in m for m in marks(sats, lost))
 
 
 def _blocked_whole(sats_used: bool) -> EpochTable:
