@@ -36,6 +36,14 @@ class ConsistencyOptions:
     # more separate bursts over the threshold than this (and than 5 times the design's count): the
     # receiver's residual is heavier-tailed than Gaussian and the threshold is raised (`tail_offset`)
     min_bursts_to_recalibrate: int = 5
+    # a receiver whose velocity lags its fixes (a filtered or relayed velocity: a car's NMEA speed 1 s behind its
+    # positions, read as a steady residual on every on-ramp): the velocity taken this much later, in steps of
+    # `lag_step_s`, where that lowers the residual's mean square (`velocity_lag`) by at least `lag_min_gain`
+    max_velocity_lag_s: float = 2.0
+    lag_step_s: float = 0.25
+    lag_min_gain: float = 0.3
+    lag_cap_sigma: float = 5.0
+    lag_min_speed_change_mps: float = 2.0
 
 
 # 25th percentile of |N(0, 1)|: the scale is read off the quietest quarter of the residuals, which
@@ -80,6 +88,42 @@ def _window_velocity_residual(
         incomplete |= np.searchsorted(unknown, t) > np.searchsorted(unknown, t[j], side="right")
     d[incomplete] = np.nan
     return d
+
+
+def velocity_lag(
+    t: FloatArray,
+    ecef: FloatArray,
+    to_enu: FloatArray,
+    v: FloatArray,
+    opts: ConsistencyOptions,
+    unknown_t: FloatArray | None = None,
+) -> tuple[float, FloatArray]:
+    """(lag, velocity): how much later the receiver's velocity belongs to its fixes (0: as written), and the
+    velocity read that much later. A lag shows only while the vehicle's speed changes (the residual's quiet
+    quarter never sees it), so it is weighed by the mean square of the horizontal residual, each epoch's held
+    at `lag_cap_sigma` of the scale as written (a step or a drag of the position counts the same at every lag:
+    it does not follow the vehicle's own accelerations), and taken where that falls by `lag_min_gain`."""
+    as_written = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)[:, :2]
+    judged = np.isfinite(as_written).all(axis=1)
+    # windows over which the velocity changed enough for a lag to show (a receiver at rest has none to read)
+    j = np.searchsorted(t, t - opts.window_s, side="left")
+    changing = judged & (np.hypot(*(v[:, :2] - v[j, :2]).T) >= opts.lag_min_speed_change_mps)
+    if changing.sum() < opts.min_epochs_to_learn:
+        return 0.0, v
+    cap = opts.lag_cap_sigma * _robust_scale(np.where(np.isfinite(as_written), as_written, 0.0), opts.min_scale_m)
+
+    def loss(r: FloatArray) -> float:
+        return float(np.mean(np.minimum(np.abs(r[judged]), cap) ** 2))
+
+    def later(lag: float) -> FloatArray:
+        return np.stack([np.interp(t + lag, t, v[:, i]) for i in range(3)], axis=1)
+
+    lags = np.arange(opts.lag_step_s, opts.max_velocity_lag_s + 1e-9, opts.lag_step_s)
+    losses = [loss(_window_velocity_residual(t, ecef, to_enu, later(lag), opts, unknown_t)[:, :2]) for lag in lags]
+    if not losses or min(losses) > (1.0 - opts.lag_min_gain) * loss(as_written):
+        return 0.0, v
+    best = float(lags[int(np.argmin(losses))])
+    return best, later(best)
 
 
 def _velocity_unknown(t: FloatArray, v: FloatArray, good: NDArray[np.bool_], opts: ConsistencyOptions) -> FloatArray:
@@ -210,6 +254,9 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         if not vertical:
             v = v.copy()
             v[:, 2] = 0.0
+        lag, v = velocity_lag(t, ecef, to_enu, v, opts, unknown_t)
+        if lag:
+            mode += f"; velocity {lag:g} s behind the fixes (read {lag:g} s later: a filtered or relayed velocity)"
         r = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
         if not vertical:
             r[:, 2] = np.nan
@@ -349,7 +396,13 @@ ANALYSIS = AnalysisSpec(
             f"{_O.min_epochs_to_learn} epochs to read it from is not judged. A course repeated exactly at under "
             f"{_O.held_course_speed_mps:g} m/s for {_O.held_course_run} fixes is held, not measured (receivers "
             "hold their last course at rest): each window allows, per horizontal axis, the distance travelled on "
-            "it. The sum of squares against chi-square with one degree of freedom per axis "
+            "it. A receiver whose velocity lags its fixes (a filtered or relayed NMEA speed) leaves a residual "
+            "wherever the vehicle speeds up or turns: its velocity is read up to "
+            f"{_O.max_velocity_lag_s:g} s later, in {_O.lag_step_s:g} s steps, where that lowers the mean square of "
+            f"the horizontal residual (each epoch's held at {_O.lag_cap_sigma:g} scales, so a step or a drag counts "
+            f"the same at every lag) by {_O.lag_min_gain:.0%} over at least {_O.min_epochs_to_learn} windows whose "
+            f"velocity changed by {_O.lag_min_speed_change_mps:g} m/s. "
+            "The sum of squares against chi-square with one degree of freedom per axis "
             "(3, or 2 for a receiver without vertical velocity). Without reported velocity: kinematic "
             "plausibility, the acceleration implied by three consecutive fixes, normalised the same way (steps "
             "and jumps, not slow ramps). Real receivers' residuals are heavier-tailed than that Gaussian "

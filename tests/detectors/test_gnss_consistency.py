@@ -316,3 +316,33 @@ def test_a_receiver_with_too_few_epochs_to_learn_its_noise_is_not_judged() -> No
     assert result.reason == (
         "GP: not judged: 3 epochs to learn its noise from (kinematic plausibility (no reported velocity)), 10 needed"
     )
+
+
+def _lagging_car(lag_s: float, step_m: float = 0.0) -> pd.DataFrame:
+    """A car along a straight road at 20 m/s, on an on-ramp's 0.5 m/s^2 from 100 s to 116 s and braking at
+    1 m/s^2 from 200 s to 218 s, whose receiver writes the velocity of `lag_s` before each fix (a filtered or
+    relayed NMEA speed: a real car's receiver read 0.75-1.25 s behind on three drives), and a position step of
+    `step_m` from 150 s."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 300.0, 1.0)
+    fine = np.arange(-5.0, 300.0, 0.01)
+    accel = np.where((fine >= 100) & (fine < 116), 0.5, 0.0) - np.where((fine >= 200) & (fine < 218), 1.0, 0.0)
+    speed = 20.0 + np.cumsum(accel) * 0.01
+    along = np.interp(t, fine, np.cumsum(speed) * 0.01)
+    p = np.c_[along * 0.6, along * 0.8, np.zeros_like(t)] + rng.normal(0, 0.3, (len(t), 3))
+    p[t >= 150.0, :2] += step_m / np.sqrt(2)
+    lat, lon, h = enu_to_geodetic(p, 45.0, 7.0, 300.0)
+    v = np.interp(t - lag_s, fine, speed) + rng.normal(0, 0.05, len(t))
+    cols = {"t_s": t, "receiver_id": ["rx"] * len(t), "lat_deg": lat, "lon_deg": lon, "height_m": h}
+    cols |= {"fix_type": np.full(len(t), 2), "vel_e_mps": v * 0.6, "vel_n_mps": v * 0.8, "vel_u_mps": 0 * v}
+    return make_frame("fixes", cols)
+
+
+def test_a_velocity_behind_the_fixes_is_read_that_much_later() -> None:
+    assert run_gnss_consistency(_lagging_car(1.0), ConsistencyOptions(max_velocity_lag_s=0.0)).alarms
+    lagging = run_gnss_consistency(_lagging_car(1.0))
+    assert not lagging.alarms and "velocity 1 s behind the fixes" in lagging.reason
+    assert "behind" not in run_gnss_consistency(_lagging_car(0.0)).reason
+    # the lag read off the vehicle's own accelerations absorbs no step of its position
+    stepped = run_gnss_consistency(_lagging_car(1.0, step_m=50.0))
+    assert "velocity 1 s behind" in stepped.reason and stepped.alarms[0].start_s == pytest.approx(150.0, abs=1.0)
