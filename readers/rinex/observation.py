@@ -128,7 +128,10 @@ def read_obs_header(text: TextLines) -> ObsHeader:
             except ValueError:
                 xyz = None
         elif label == "TIME OF FIRST OBS":
-            tsys = line[48:51].strip().upper()
+            # the word after the seconds, at columns 49-51 by the format; some writers (a Hatanaka sample file)
+            # widen the seconds by a character and push it right
+            word = re.search(r"[A-Za-z]{3}", line[30:60])
+            tsys = word.group(0).upper() if word else ""
         elif label == "SYS / SCALE FACTOR" and line[2:6].strip() not in ("", "1"):
             factor = line[2:6].strip()
             raise ReaderError(path, f"observations scaled by {factor} (SYS / SCALE FACTOR) are not supported")

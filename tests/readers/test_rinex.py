@@ -867,3 +867,14 @@ def test_rows_of_a_satellite_the_broadcast_flags_unhealthy_are_said_so(tmp_path:
     assert flag.count == int((table.observations["sv_id"] == sick).sum())
     assert table.observations.loc[table.observations["sv_id"] == sick, "sv_x_m"].isna().all()
     assert not any("without a valid broadcast ephemeris" in s.reason for s in table.skipped)
+
+
+def test_a_time_system_pushed_right_by_a_wider_seconds_field_is_read(tmp_path: Path) -> None:
+    """A Hatanaka sample file writes TIME OF FIRST OBS's seconds one character wider than the format: its time
+    system sat at columns 50-52, was read as 'GP', and the intact file was refused."""
+    lines = _need(OBS_0759).read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln[60:].strip() == "TIME OF FIRST OBS")
+    lines[k] = f"{'  2005     4     2     0     0     0.0000000     GPS':<60}TIME OF FIRST OBS"
+    (tmp_path / "wide.05o").write_text("\n".join(lines) + "\n")
+    wide, plain = read_log(tmp_path / "wide.05o"), read_log(OBS_0759)
+    assert wide.t0_ns == plain.t0_ns and wide.observations["t_s"].equals(plain.observations["t_s"])
