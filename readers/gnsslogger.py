@@ -695,7 +695,7 @@ def _decoded_ephemerides(
         skipped.append(
             Skipped("Nav", "navigation messages of other signals (GPS L1 C/A and Galileo I/NAV are decoded)", other)
         )
-    skipped.extend(lnav.losses("Nav") + inav.losses("Nav"))
+    skipped.extend(lnav.dropped("Nav") + inav.dropped("Nav"))
     records = lnav.records() + inav.records()
     return GpsEphemerides.from_records(records, lnav.iono) if records else None
 

@@ -116,7 +116,7 @@ _DECODE = {1: _word1, 2: _word2, 3: _word3, 4: _word4, 5: _word5}
 @dataclass
 class InavDecoder:
     """Collects I/NAV pages (`add`: an RXM-SFRBX payload; `add_word`: a checked 128-bit word);
-    `records()` gives the ephemerides assembled, `losses()` what was dropped."""
+    `records()` gives the ephemerides assembled, `dropped()` what was dropped."""
 
     words: dict[int, dict[int, tuple[dict[str, float], float | None]]] = field(default_factory=dict)
     assembled: dict[tuple[object, ...], dict[str, float | int | str]] = field(default_factory=dict)
@@ -219,9 +219,10 @@ class InavDecoder:
     def records(self) -> list[dict[str, float | int | str]]:
         return list(self.assembled.values())
 
-    def losses(self, stream: str) -> list[Skipped]:
+    def dropped(self, stream: str) -> list[Skipped]:
+        """Skipped, not lost: pages the receiver decoded wrong, in messages the file carried whole (`LnavDecoder`)."""
         return [
-            Skipped(stream, f"Galileo I/NAV pages dropped: {what}", self.counts[what], "lost")
+            Skipped(stream, f"Galileo I/NAV pages dropped: {what}", self.counts[what], "skipped")
             for what in ("CRC failed", "implausible orbit", "word 4 of another satellite")
             if self.counts[what]
         ]

@@ -135,7 +135,7 @@ def _klobuchar(b: BitReader) -> Klobuchar | None:
 @dataclass
 class LnavDecoder:
     """Collects subframes (`add`: an RXM-SFRBX payload; `add_words`: any receiver's ten words);
-    `ephemerides()` gives the records assembled, `losses()` what was dropped."""
+    `ephemerides()` gives the records assembled, `dropped()` what was dropped."""
 
     # per satellite, the latest decoded subframe of each id 1-3 (with its transmission time)
     satellites: dict[str, dict[int, dict[str, float]]] = field(default_factory=dict)
@@ -243,11 +243,13 @@ class LnavDecoder:
         records = self.records()
         return GpsEphemerides.from_records(records, self.iono) if records else None
 
-    def losses(self, stream: str) -> list[Skipped]:
+    def dropped(self, stream: str) -> list[Skipped]:
         """What was dropped, for the reader's skipped list: subframes that failed parity, orbits out of
-        range, subframes without a GPS time to resolve their week."""
+        range, subframes without a GPS time to resolve their week. Skipped, not lost: each came in a message
+        the file carried whole (its checksum or its line intact); the bits are the receiver's decoding, which
+        fails on a weak signal (a 2016 phone's every navigation message)."""
         return [
-            Skipped(stream, f"GPS subframes dropped: {what}", self.counts[what], "lost")
+            Skipped(stream, f"GPS subframes dropped: {what}", self.counts[what], "skipped")
             for what in ("parity failed", "implausible orbit", "no GPS time to resolve the week")
             if self.counts[what]
         ]

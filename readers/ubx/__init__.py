@@ -500,7 +500,7 @@ def _broadcast_ephemerides(state: _State, ref_s: float | None, skipped: list[Ski
             bad += 1
     if bad:
         skipped.append(Skipped("RXM-SFRBX", "subframe messages of impossible length", bad, "lost"))
-    skipped.extend(lnav.losses("RXM-SFRBX") + inav.losses("RXM-SFRBX"))
+    skipped.extend(lnav.dropped("RXM-SFRBX") + inav.dropped("RXM-SFRBX"))
     records = lnav.records() + inav.records()
     return GpsEphemerides.from_records(records, lnav.iono) if records else None
 

@@ -215,7 +215,7 @@ def test_a_damaged_page_fails_its_crc_and_never_becomes_an_orbit() -> None:
     assert decoder.records() == []
     assert decoder.counts["CRC failed"] == 1 and decoder.counts["alert page"] == 1
     assert decoder.counts["word 4 of another satellite"] == 1
-    assert [s.reason for s in decoder.losses("RXM-SFRBX")] == [
+    assert [s.reason for s in decoder.dropped("RXM-SFRBX")] == [
         "Galileo I/NAV pages dropped: CRC failed",
         "Galileo I/NAV pages dropped: word 4 of another satellite",
     ]

@@ -83,6 +83,9 @@ def test_a_damaged_subframe_fails_parity_and_is_never_an_orbit() -> None:
             words[5] ^= 1 << 20  # one bit of M0 flipped
         decoder.add(sfrbx(int(str(rec["sv_id"])[1:]), words)[6:-2], ref)
     assert decoder.counts["parity failed"] == 1 and decoder.records() == []
+    # a receiver's wrongly decoded bits in a message the file carried whole: skipped, no damage to the file
+    (dropped,) = decoder.dropped("G01")
+    assert dropped.reason == "GPS subframes dropped: parity failed" and dropped.action == "skipped"
 
 
 def _capture(tmp_path: Path, pr_offset: dict[str, float] | None = None) -> Path:
