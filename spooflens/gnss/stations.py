@@ -22,6 +22,7 @@ FloatArray = NDArray[np.float64]
 APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"  # readers.rinex.APPROX_POSITION_KEY
 STATIC_WINDOW_S = 300.0  # whether a station stayed put is judged on its first minutes (module notes)
 STATION_OPTION = "station"  # AnalyzeOptions.extra key: list of (receiver id or None, lat deg, lon deg, h m)
+STATIC_MIN_FIXES = 10
 STATIC_SPAN_S = 30.0
 STATIC_SPEED_MPS = 0.5
 STATIC_FRACTION = 0.9
@@ -50,14 +51,16 @@ def parse_station(text: str) -> tuple[str | None, float, float, float]:
     return (rid.strip() or None) if sep else None, lat, lon, h
 
 
-def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
-    """Whether the receiver's fixes of its first STATIC_WINDOW_S stay put (see the module notes), with the
-    measured figure."""
+def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool | None, str]:
+    """Whether the receiver's fixes of its first STATIC_WINDOW_S (and at least its first STATIC_MIN_FIXES: a
+    station logging every 5 min has two in them) stay put (see the module notes), with the measured figure;
+    None when it has too few fixes to tell."""
     fx = table.fixes_of(receiver_id)
     t = fx["t_s"].to_numpy(float)
-    fx = fx[t <= t[0] + STATIC_WINDOW_S] if len(t) else fx
+    if len(t):
+        fx = fx[(t <= t[0] + STATIC_WINDOW_S) | (np.arange(len(t)) < STATIC_MIN_FIXES)]
     if len(fx) < 3:
-        return False, f"{len(fx)} fixes"
+        return None, f"{len(fx)} fix(es), too few to tell whether it stayed put"
     t = fx["t_s"].to_numpy(float)
     lat0, lon0, h0 = (float(fx[c].iloc[0]) for c in ("lat_deg", "lon_deg", "height_m"))
     p = geodetic_to_enu(fx["lat_deg"], fx["lon_deg"], fx["height_m"], lat0, lon0, h0)
@@ -71,9 +74,13 @@ def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool, str]:
         k = np.flatnonzero(ok)
         speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
     moving = float(np.mean(speed > STATIC_SPEED_MPS))
-    judged = f"its first {STATIC_WINDOW_S / 60:g} min" if span_s >= STATIC_WINDOW_S else f"its {span_s:.0f} s"
+    if span_s > STATIC_WINDOW_S:
+        judged = f"its first {len(t)} fixes ({span_s / 60:.0f} min)"
+    else:
+        judged = f"its first {STATIC_WINDOW_S / 60:g} min" if span_s == STATIC_WINDOW_S else f"its {span_s:.0f} s"
+    spans = f"{STATIC_SPAN_S:g} s spans" if np.median(np.diff(t)) <= STATIC_SPAN_S else "spans between fixes"
     return moving <= 1.0 - STATIC_FRACTION, (
-        f"{100 * moving:.0f}% of 30 s spans of {judged} faster than {STATIC_SPEED_MPS} m/s"
+        f"{100 * moving:.0f}% of {spans} of {judged} faster than {STATIC_SPEED_MPS} m/s"
     )
 
 
@@ -86,6 +93,8 @@ def surveyed_station(table: EpochTable, receiver_id: str) -> tuple[Station | Non
     if not 6.2e6 < np.linalg.norm(xyz) < 6.5e6:
         return None, f"RINEX header position {text} is not on the Earth's surface"
     static, figure = _is_static(table, receiver_id)
+    if static is None:
+        return None, f"{figure}: its RINEX header position is not used as a station"
     if not static:
         return None, f"the receiver moves ({figure}): its RINEX header position is not a station"
     fx = table.fixes_of(receiver_id).iloc[:10]

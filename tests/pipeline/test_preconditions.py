@@ -12,6 +12,7 @@ from paths import HUSKY_BAG, SAMPLE_LOGS, real_log
 
 from spooflens.epoch_table import EpochTable
 from spooflens.gnss.same_receiver import group_receivers
+from spooflens.gnss.stations import surveyed_station
 from spooflens.output.summary import build_summary
 from spooflens.pipeline import preconditions as pc
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_analyses
@@ -209,6 +210,15 @@ def test_a_station_whose_fixes_a_spoofer_drags_away_later_stays_a_known_station(
     short = replace(table, fixes=table.fixes[table.fixes["t_s"] <= 240.0].reset_index(drop=True))
     found, _ = pc.known_stations(_ctx(short))
     assert "0% of 30 s spans of its 240 s" in found["0759"].source  # type: ignore[attr-defined]
+    # a station logging every 5 min has 2 fixes in those minutes: judged on its first 10, and with fewer than 3
+    # fixes not judged at all (it was said to move)
+    fx = table.fixes[table.fixes["receiver_id"] == "0759"]
+    sparse = replace(table, fixes=fx.iloc[::10].reset_index(drop=True))
+    found, _ = pc.known_stations(_ctx(sparse))
+    assert "0% of spans between fixes of its first 10 fixes (45 min)" in found["0759"].source  # type: ignore[attr-defined]
+    two = replace(sparse, fixes=sparse.fixes.iloc[:2])
+    reason = "2 fix(es), too few to tell whether it stayed put: its RINEX header position is not used as a station"
+    assert surveyed_station(two, "0759") == (None, reason)
     # moving from the start, it is no station: its header is only where it started
     early = _dragged(table, "0759", 0.0, 2.0)
     unmet = _check(pc.INDEPENDENT_REFERENCE, early)
