@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 from spooflens.docs import DETECTORS_MD, main, render_detectors
 from spooflens.pipeline.registry import detector_infos
 
@@ -16,3 +18,10 @@ def test_every_detector_declares_what_it_tests_and_how() -> None:
         assert info.summary and info.method, name
         if info.evidence is not None:  # a detector, not an analysis product
             assert info.threshold and info.p_false_alarm, name
+
+
+def test_no_detector_text_shows_a_placeholder_left_unformatted() -> None:
+    # a line of a method text without its f-prefix printed `{_O.min_satellites}` into the page
+    for name, info in detector_infos().items():
+        for text in (info.summary, info.method, info.threshold, info.p_false_alarm):
+            assert not re.search(r"\{_?[A-Za-z][\w.]*(![rs])?(:[^{}]*)?\}", text or ""), (name, text)

@@ -429,7 +429,7 @@ ANALYSIS = AnalysisSpec(
             "moves several, some down; a rising satellite climbs slowly; one leaving an obstruction returns to its "
             f"history), and above the highest level it held for {_O.hold_s:g} s before (a car's satellite shadowed "
             "for most of a minute comes back to its own level, above its median, never above itself). One C/N0 "
-            "for all: {_O.min_satellites} or more satellites within {_O.uniform_cn0_db:g} dB "
+            f"for all: {_O.min_satellites} or more satellites within {_O.uniform_cn0_db:g} dB "
             f"(standard deviation, 5-s median) for {_O.hold_s:g} s, the channels of one transmitter (the real logs "
             "at hand never go below 2.5 dB). Refused by the receiver: a healthy satellite with a known orbit at "
             f"least {_O.refused_min_elevation_deg:g} deg high and as strong as the median used one that the "
