@@ -497,6 +497,7 @@ def _fixes(path: Path, fix: pd.DataFrame, skipped: list[Skipped]) -> pd.DataFram
             "height_m": _float(f["alt"], n),
             "vel_e_mps": ve,
             "vel_n_mps": vn,
+            "speed_mps": np.where(np.isfinite(ve), np.nan, speed),
             "h_acc_m": _float(f["accuracy"], n),
             "v_acc_m": _float(f["v_acc"], n),
             "vel_acc_mps": _float(f["speed_acc"], n),

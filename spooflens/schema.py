@@ -80,6 +80,14 @@ FIX_COLUMNS: tuple[Column, ...] = (
     Column("vel_e_mps", "float64", "m/s", "velocity east (ENU), NaN if the log has none", False),
     Column("vel_n_mps", "float64", "m/s", "velocity north (ENU), NaN if absent", False),
     Column("vel_u_mps", "float64", "m/s", "velocity up (ENU), NaN if absent", False),
+    Column(
+        "speed_mps",
+        "float64",
+        "m/s",
+        "ground speed where the receiver wrote one without a direction (NMEA RMC/VTG, Android Fix without a "
+        "bearing: slow or at rest), NaN elsewhere (the velocity columns carry it)",
+        False,
+    ),
     Column("h_acc_m", "float64", "m", "reported horizontal accuracy (1 sigma), NaN if absent", False),
     Column("v_acc_m", "float64", "m", "reported vertical accuracy (1 sigma), NaN if absent", False),
     Column("vel_acc_mps", "float64", "m/s", "reported speed accuracy (1 sigma), NaN if absent", False),

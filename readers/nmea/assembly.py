@@ -329,6 +329,7 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
         "geoid_sep_m": sep,
         "vel_e_mps": speed * math.sin(math.radians(course)),
         "vel_n_mps": speed * math.cos(math.radians(course)),
+        "speed_mps": speed if not math.isfinite(course) else math.nan,  # a speed without a course
         "sats_used": _first([*(d.sats_used for d in gga), float(gsa_used) if gsa_used else math.nan]),
         "hdop": _first([*(g.hdop for g in gsa), *(d.hdop for d in gga)]),
         "vdop": _first(g.vdop for g in gsa),

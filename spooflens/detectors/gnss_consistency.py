@@ -196,8 +196,9 @@ class Residual(NamedTuple):
     r: FloatArray
     scale: FloatArray
     floor: FloatArray
-    held: NDArray[np.bool_]
+    held: NDArray[np.bool_]  # no measured direction: a course held at rest, or a speed alone
     held_m: FloatArray
+    speed_only: NDArray[np.bool_]
 
 
 def held_course(v: FloatArray, opts: ConsistencyOptions) -> NDArray[np.bool_]:
@@ -241,7 +242,12 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
     """One receiver's residual and its robust scale."""
     t = fixes["t_s"].to_numpy(dtype=float)
     lat, lon, h = (fixes[c].to_numpy(dtype=float) for c in ("lat_deg", "lon_deg", "height_m"))
-    v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float)
+    v = fixes[["vel_e_mps", "vel_n_mps", "vel_u_mps"]].to_numpy(dtype=float, copy=True)
+    speed = fixes["speed_mps"].to_numpy(dtype=float) if "speed_mps" in fixes else np.full(len(t), np.nan)
+    # a speed written without a direction (slow or at rest: an NMEA RMC with a blank course) gives no velocity
+    # to integrate but a distance the window allows, as a course held at rest does
+    speed_only = ~np.isfinite(v[:, :2]).all(axis=1) & np.isfinite(speed)
+    v[speed_only, :2] = 0.0
     has_velocity = np.isfinite(v[:, :2]).all(axis=1).mean() >= 0.5
     if has_velocity:
         # a receiver that reports east/north velocity only is checked horizontally (not discarded)
@@ -249,7 +255,7 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         mode = "position change vs reported velocity" + ("" if vertical else " (horizontal: no vertical velocity)")
         good = np.isfinite(v[:, :2]).all(axis=1) & (np.isfinite(v[:, 2]) | ~vertical)
         unknown_t = _velocity_unknown(t, v, good, opts)
-        t, v, lat, lon, h = t[good], v[good], lat[good], lon[good], h[good]
+        t, v, lat, lon, h, speed, speed_only = (x[good] for x in (t, v, lat, lon, h, speed, speed_only))
         ecef, to_enu = geodetic_to_ecef(lat, lon, h), enu_rotation(lat, lon)
         if not vertical:
             v = v.copy()
@@ -260,21 +266,21 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         r = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
         if not vertical:
             r[:, 2] = np.nan
-        floor = written_floor(lat, lon, h, v, t, opts)
-        # the distance each window covered on a held course: known in length, not in direction
-        held = held_course(v, opts)
-        held_speed = np.where(held, np.hypot(v[:, 0], v[:, 1]), 0.0)
+        floor = written_floor(lat, lon, h, np.where(speed_only[:, None], np.c_[speed, 0 * v[:, 1:]], v), t, opts)
+        # the distance each window covered on a held course or at a speed alone: known in length, not direction
+        held = held_course(v, opts) | speed_only
+        held_speed = np.where(speed_only, speed, np.where(held, np.hypot(v[:, 0], v[:, 1]), 0.0))
         travel = np.concatenate([[0.0], np.cumsum(0.5 * (held_speed[1:] + held_speed[:-1]) * np.diff(t))])
         held_m = travel - travel[np.searchsorted(t, t - opts.window_s, side="left")]
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))
         floor = written_floor(lat, lon, h, None, t, opts)
-        held, held_m = np.zeros(len(t), dtype=bool), np.zeros(len(t))
+        held, held_m, speed_only = np.zeros(len(t), dtype=bool), np.zeros(len(t)), np.zeros(len(t), dtype=bool)
     floor = np.maximum(floor, opts.min_scale_m)
     clean = np.where(np.isfinite(r), r, 0.0)
     scale = np.maximum(_robust_scale(clean, opts.min_scale_m), floor)
-    return Residual(mode, t, r, scale, floor, held, held_m)
+    return Residual(mode, t, r, scale, floor, held, held_m, speed_only)
 
 
 def check_receiver(
@@ -295,6 +301,10 @@ def check_receiver(
     z = res.r / np.sqrt(scale**2 + held**2)
     stat = np.where(np.isfinite(z).any(axis=1), np.nansum(z**2, axis=1), np.nan)
     return res, z, stat, scale if capped else None
+
+
+def _fixes(n: int) -> str:
+    return "fix" if n == 1 else "fixes"
 
 
 def run_gnss_consistency(
@@ -320,8 +330,10 @@ def run_gnss_consistency(
             modes.append(f"{rid}: not judged: {judged} epochs to learn its noise from ({mode}), {need} needed")
             continue
         if res.held.any():
-            mode += f"; {int(res.held.sum())} fixes on a course held at rest (no measured direction: the window "
-            mode += "allows the distance travelled on it)"
+            course, alone = int((res.held & ~res.speed_only).sum()), int(res.speed_only.sum())
+            which = [f"{course} {_fixes(course)} on a course held at rest"] * bool(course)
+            which += [f"{alone} {_fixes(alone)} with a speed alone"] * bool(alone)
+            mode += f"; {' and '.join(which)} (no measured direction: the window allows the distance travelled)"
         checked: NDArray[np.bool_] = np.asarray(np.isfinite(res.r).any(axis=0), dtype=bool)
         if np.any(checked & (res.floor > opts.min_scale_m) & (res.scale <= res.floor)):
             unit = "m" if res.mode.startswith("position change") else "m/s^2"
@@ -395,7 +407,8 @@ ANALYSIS = AnalysisSpec(
             "while up to three quarters of the log is attacked; a receiver with fewer than "
             f"{_O.min_epochs_to_learn} epochs to read it from is not judged. A course repeated exactly at under "
             f"{_O.held_course_speed_mps:g} m/s for {_O.held_course_run} fixes is held, not measured (receivers "
-            "hold their last course at rest): each window allows, per horizontal axis, the distance travelled on "
+            "hold their last course at rest), and so is a speed written without a course (an NMEA RMC at rest, an "
+            "Android fix without a bearing): each window allows, per horizontal axis, the distance travelled on "
             "it. A receiver whose velocity lags its fixes (a filtered or relayed NMEA speed) leaves a residual "
             "wherever the vehicle speeds up or turns: its velocity is read up to "
             f"{_O.max_velocity_lag_s:g} s later, in {_O.lag_step_s:g} s steps, where that lowers the mean square of "

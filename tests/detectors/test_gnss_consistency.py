@@ -346,3 +346,29 @@ def test_a_velocity_behind_the_fixes_is_read_that_much_later() -> None:
     # the lag read off the vehicle's own accelerations absorbs no step of its position
     stepped = run_gnss_consistency(_lagging_car(1.0, step_m=50.0))
     assert "velocity 1 s behind" in stepped.reason and stepped.alarms[0].start_s == pytest.approx(150.0, abs=1.0)
+
+
+def _standing_with_speed_alone(seed: int, drag_mps: float = 0.0) -> pd.DataFrame:
+    """A receiver at rest writing a speed with no course (as a FLARM ground station's RMC does), its fix
+    wandering by decimetres, its height by metres over tens of seconds; `drag_mps` east from 60 s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 120.0, 1.0)
+    p = np.cumsum(rng.normal(0, 0.05, (len(t), 3)), axis=0) * np.array([1.0, 1.0, 0.0])
+    p[:, 2] = 3.0 * np.sin(t / 8.0) + rng.normal(0, 0.3, len(t))
+    p[:, 0] += np.clip(t - 60.0, 0, None) * drag_mps
+    lat, lon, h = enu_to_geodetic(p, 45.0, 7.0, 90.0)
+    speed = np.abs(rng.normal(0.15, 0.1, len(t)))
+    cols = {"t_s": t, "receiver_id": ["rx"] * len(t), "lat_deg": lat, "lon_deg": lon, "height_m": h}
+    cols |= {"fix_type": np.full(len(t), 2), "speed_mps": speed}
+    return make_frame("fixes", cols)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_speed_alone_is_the_distance_a_window_allows(seed: int) -> None:
+    # without it the fixes had no velocity and the height's wander read as accelerations
+    quiet = run_gnss_consistency(_standing_with_speed_alone(seed))
+    assert quiet.reason.startswith("rx: position change vs reported velocity (horizontal: no vertical velocity)")
+    assert "120 fixes with a speed alone" in quiet.reason and not quiet.alarms
+    # a drag beyond the speeds written is still caught
+    dragged = run_gnss_consistency(_standing_with_speed_alone(seed, drag_mps=1.0))
+    assert dragged.alarms and 60.0 <= dragged.alarms[0].start_s <= 72.0

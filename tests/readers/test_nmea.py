@@ -13,6 +13,7 @@ from paths import REAL, real_log
 
 from readers import read_log, sniff_format
 from spooflens.cli import main
+from spooflens.constants import KNOT_MPS
 from spooflens.epoch_table import HOLDS, EpochTable
 from spooflens.errors import ReaderError
 from spooflens.schema import FixType
@@ -557,3 +558,20 @@ def test_a_phones_burst_ending_with_its_fix_keeps_its_sky_with_that_fix(tmp_path
     sky = read_log(path).satellites
     assert sky["cn0_dbhz"].tolist() == [20.0, 21.0, 22.0, 23.0, 24.0, 25.0]
     np.testing.assert_allclose(sky["t_s"], np.arange(6.0), atol=0.01)
+
+
+def test_a_speed_written_without_a_course_is_kept_as_a_speed(tmp_path: Path) -> None:
+    """A FLARM ground station's u-blox writes RMC's speed (0.045-0.7 kn) with a blank course while it barely
+    moves: the speed is a measurement, its direction unknown; a course gives the velocity as before."""
+    bodies = [
+        "GPRMC,120000.00,A,4807.0380,N,01131.0000,E,0.045,,230394,,,A",
+        "GPGGA,120000.00,4807.0380,N,01131.0000,E,1,08,0.9,545.4,M,46.9,M,,",
+        "GPRMC,120001.00,A,4807.0381,N,01131.0000,E,0.694,,230394,,,A",
+        "GPGGA,120001.00,4807.0381,N,01131.0000,E,1,08,0.9,545.6,M,46.9,M,,",
+        "GPRMC,120002.00,A,4807.0382,N,01131.0000,E,0.700,90.0,230394,,,A",
+        "GPGGA,120002.00,4807.0382,N,01131.0000,E,1,08,0.9,545.5,M,46.9,M,,",
+    ]
+    fixes = read_log(_write(tmp_path / "flarm.nmea", bodies)).fixes
+    assert fixes["speed_mps"].iloc[:2].tolist() == pytest.approx([0.045 * KNOT_MPS, 0.694 * KNOT_MPS])
+    assert fixes[["vel_e_mps", "vel_n_mps"]].iloc[:2].isna().all().all()
+    assert np.isnan(fixes["speed_mps"].iloc[2]) and fixes["vel_e_mps"].iloc[2] == pytest.approx(0.7 * KNOT_MPS)
