@@ -123,6 +123,8 @@ def _receivers(table: EpochTable) -> list[_Receiver]:
             cn0 = fx["cn0_mean_dbhz"].to_numpy(float)[ok][:, None]
             sky = SkyMatrix(t, ("mean",), cn0, np.full(cn0.shape, np.nan), np.full(1, np.nan))
             source = "the mean C/N0 of its fixes"
+        elif any(len(f) and np.isfinite(f["cn0_dbhz"].to_numpy(float)).any() for f in (mine, raw)):
+            source = "none (each satellite's C/N0 the same throughout: a single epoch, or a writer's placeholder)"
         out.append(_Receiver(rid, fx, sky, source, monitor))
     return out
 

@@ -137,7 +137,8 @@ def _has_time_offset(table: EpochTable) -> str | None:
         None
         if n >= MIN_TIMED_FIXES
         else "the receiver's time beside the log's own clock (PX4 time_utc_usec, ArduPilot GWk/GMS, GnssLogger "
-        f"Fix, NMEA with logger times, ROS TimeReference, tlog GPS_RAW_INT; {n} fixes, {MIN_TIMED_FIXES} needed)"
+        f"Fix, NMEA with logger times, ROS TimeReference, tlog GPS_RAW_INT; {n} of {len(fixes)} fixes have both, "
+        f"{MIN_TIMED_FIXES} needed)"
     )
 
 

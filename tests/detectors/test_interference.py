@@ -182,6 +182,9 @@ def test_a_c_n0_that_never_changes_is_said_to_be_one_not_missing() -> None:
     r = run_interference(table_of(steady, fix_rows(t)))
     assert not r.ran
     assert r.reason.startswith("the C/N0 of most satellites never changes over the log's 5 epochs")
+    # with the front end's gain to judge it runs, and says why its sky gives no C/N0 (it said "from none")
+    r = run_interference(table_of(steady, fix_rows(t, agc=np.linspace(3000.0, 3010.0, 5))))
+    assert r.ran and "C/N0 from none (each satellite's C/N0 the same throughout" in r.reason
 
 
 def test_the_verdict_keeps_interference_apart_from_spoofing() -> None:

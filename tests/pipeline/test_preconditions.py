@@ -15,7 +15,7 @@ from spooflens.gnss.same_receiver import group_receivers
 from spooflens.gnss.stations import surveyed_station
 from spooflens.output.summary import build_summary
 from spooflens.pipeline import preconditions as pc
-from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions, run_analyses
+from spooflens.pipeline.registry import REQUIREMENTS, AnalysisContext, AnalyzeOptions, run_analyses
 from spooflens.pipeline.verdict import decide
 from spooflens.service import read_table
 
@@ -232,3 +232,11 @@ def test_the_baseline_error_keeps_running_when_a_spoofer_moves_one_station_of_th
     assert _check(pc.SURVEYED_SITES, moved) is None
     by = {r.name: r for r in run_analyses(moved) if r.name.startswith("baseline")}
     assert by["baseline_error"].ran and by["baseline_error"].alarms
+
+
+def test_a_receiver_time_not_beside_the_log_clock_says_how_many_fixes_had_both() -> None:
+    # a GnssLogger v1.4 log's Fix lines carry no elapsedRealtimeNanos: "0 fixes" beside 8 fixes read
+    table = read_table(real_log("rinex_gsi_pair/07590920.05o"), {}, show_progress=False)
+    n = len(table.fixes)
+    missing = REQUIREMENTS["time_offset"].missing(table)
+    assert missing is not None and missing.endswith(f"; 0 of {n} fixes have both, 20 needed)")
