@@ -39,6 +39,9 @@ class SatelliteSignalOptions:
     residual_m: float = 100.0
     uniform_cn0_db: float = 1.5
     min_satellites: int = 6
+    # a writer's placeholder holds every satellite's C/N0 (PX4 drivers without it write 1); a simulator
+    # feeding a real receiver left 4 of its 7 at 51 dB-Hz and moved the others
+    placeholder_varying_fraction: float = 0.2
     fix_gap_s: float = 2.0
 
 
@@ -320,7 +323,7 @@ def uniform_cn0(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm
     in the real logs at hand), the channels of one transmitter do not."""
     rows = view.rows[np.isfinite(view.rows["cn0_dbhz"].to_numpy(float))]
     varies = rows.groupby("sv_id")["cn0_dbhz"].nunique() > 1
-    if not len(varies) or varies.mean() < 0.5:
+    if not len(varies) or varies.mean() <= opts.placeholder_varying_fraction:
         return [], [], None  # C/N0 that never moves is a writer's placeholder, not a measurement
     by_t = rows.groupby("t_s")["cn0_dbhz"]
     n = by_t.count()

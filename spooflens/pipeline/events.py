@@ -54,6 +54,7 @@ class _Decided:
     confidence: str
     evidence_for: tuple[str, ...]
     evidence_against: tuple[str, ...]
+    spoofer_marks: tuple[str, ...] = ()
 
 
 def _classes_text(classes: Sequence[Evidence]) -> str:
@@ -127,7 +128,14 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
         if classes
         else f"alarms no check confirmed ({', '.join(incident.detectors)})"
     )
-    return _Decided(Kind.UNKNOWN, "low", (alone, *support), (_not_spoofing(incident), *ruled_out))
+    marked = tuple(f"a spoofer's mark (one evidence class: not confirmed): {m}" for m in weighed.spoofer_marks)
+    return _Decided(
+        Kind.UNKNOWN,
+        "low",
+        (alone, *support, *marked),
+        (_not_spoofing(incident), *ruled_out),
+        weighed.spoofer_marks,
+    )
 
 
 def _off_baseline(incident: Incident, results: Sequence[DetectorResult], ruled_out: tuple[str, ...]) -> _Decided:
@@ -190,6 +198,7 @@ def _event(
         incident.satellites,
         _alarm_names(incident, results, "systems"),
         _alarm_names(incident, results, "bands"),
+        spoofer_marks=decided.spoofer_marks,
     )
 
 

@@ -192,6 +192,15 @@ class Event:
     bands: tuple[str, ...] = ()
     follows: int | None = None  # index in Verdict.events of the event this one followed in one attack sequence
     followed_by: int | None = None
+    # an anomaly's marks that a spoofer's signal leaves and nature does not (C/N0 above the sky's, satellites
+    # at one C/N0, ...): one evidence class still, so not confirmed, but named in the headline
+    spoofer_marks: tuple[str, ...] = ()
+
+
+def unknown_marks(events: list[Event]) -> str:
+    """The first marked anomaly's spoofer's marks, each cut to its claim ("...: one transmitter")."""
+    first = next(e for e in events if e.spoofer_marks)
+    return "; ".join(m.rsplit(": ", 1)[-1] for m in first.spoofer_marks)
 
 
 def _interval_text(start_s: float, end_s: float, ongoing: bool) -> str:
@@ -280,7 +289,11 @@ class Verdict:
                 "(one evidence class, not confirmed)"
             )
         if len(unknown) > len(apart):
-            parts.append(f"{len(unknown) - len(apart)} anomaly(ies) of one evidence class noted, not confirmed")
+            marked = sum(bool(e.spoofer_marks) for e in unknown if not self.incidents[e.incident].kept_apart)
+            with_marks = f" ({marked} with a spoofer's marks: {unknown_marks(unknown)})" if marked else ""
+            parts.append(
+                f"{len(unknown) - len(apart)} anomaly(ies) of one evidence class noted, not confirmed{with_marks}"
+            )
         return "".join(f"; {p}" for p in parts)
 
 

@@ -19,6 +19,7 @@ from spooflens.detectors.satellite_signals import HORIZON, SIGNALS, horizon_dip_
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
+from spooflens.pipeline.run import analyze_table
 
 GSI = REAL / "rinex_gsi_pair" / "07590920.05o"
 F9R = REAL / "ubx_receivers" / "gpsd_ublox-zed-f9r.log"
@@ -279,3 +280,27 @@ def test_a_sky_of_fewer_epochs_than_any_test_holds_for_is_not_judged(tmp_path: P
         assert not results[name].ran, name
         assert results[name].reason.endswith("its sky at 2 epoch(s), 3 needed"), results[name].reason
     assert _run(read_log(_capture(tmp_path / "three.ubx", 3)))[SIGNALS].ran
+
+
+def test_a_sky_at_one_c_n0_with_some_satellites_held_is_still_one_transmitter(tmp_path: Path) -> None:
+    """A real receiver fed by a signal simulator: 4 of its 7 satellites held at 51 dB-Hz, the others moving
+    by a dB around them. Fewer than half moved, so the sky was taken for a writer's placeholder and the one
+    transmitter's signature was never looked at; a placeholder holds them all."""
+    rng = np.random.default_rng(3)
+
+    def simulator(s: int, sats: list[Sat]) -> list[Sat]:
+        return [
+            (sv, el, az, 51 + (int(rng.integers(-1, 2)) if k >= 5 else 0), u, h)
+            for k, (sv, el, az, _, u, h) in enumerate(sats)
+        ]
+
+    table = read_log(_capture(tmp_path / "simulator.ubx", 120, simulator))
+    res = _run(table)
+    assert res[SIGNALS].alarms and res[SIGNALS].alarms[0].satellites == ()
+    assert "satellites at one C/N0" in res[SIGNALS].findings[0].text
+    # one evidence class: no spoofing confirmed, but the headline says the anomaly bears a spoofer's marks
+    verdict = analyze_table(table).verdict
+    assert not verdict.spoofed and verdict.headline.startswith("NO SPOOFING DETECTED")
+    assert "(1 with a spoofer's marks: " in verdict.headline and "one transmitter" in verdict.headline
+    (event,) = verdict.events
+    assert any(m.endswith("one transmitter") for m in event.spoofer_marks)
