@@ -271,3 +271,54 @@ def test_cli_inspect_analyze_inject(tmp_path: Path, capsys: pytest.CaptureFixtur
     # one receiver, no IMU: the step is an anomaly of GNSS-only consistency from 100 s, not confirmed spoofing
     assert any("gnss_consistency" in i["detectors"] and abs(i["start_s"] - 100.0) <= 2.0 for i in incidents)
     assert "Traceback" not in capsys.readouterr().err
+
+
+def _sky_of(i: int, sats: list[dict[str, Any]], device: str = "/dev/ttyAMA0", **fields: Any) -> str:
+    """A gpsd 3.16 SKY (PRN only, no gnssid/svid), as `gpspipe -w` wrote it from a u-blox on a Raspberry Pi."""
+    obj: dict[str, Any] = {"class": "SKY", "device": device, "xdop": 1.31, "ydop": 1.62, "vdop": 2.78}
+    if i >= 0:
+        obj["time"] = (T0 + timedelta(seconds=i)).strftime("%Y-%m-%dT%H:%M:%S.000Z")
+    obj |= fields
+    obj["satellites"] = sats
+    return _line(obj)
+
+
+def _pi_capture(n: int = 60) -> list[str]:
+    """A static u-blox behind gpsd 3.16 (a real `gpspipe -w` capture's shape): two TPV without a fix and two SKY
+    with no time before the first fix, then 1 Hz TPV and SKY. From 20 s on the receiver tracks G07 and an
+    unidentified GLONASS signal (PRN 255) it has no almanac position for: gpsd writes `el:-91, az:0`."""
+    dev = "/dev/ttyAMA0"
+    lines = [
+        _line({"class": "VERSION", "release": "3.16", "rev": "3.16-4", "proto_major": 3, "proto_minor": 11}),
+        _line({"class": "DEVICE", "path": dev, "driver": "u-blox", "native": 1, "bps": 9600}),
+        _line({"class": "TPV", "device": dev, "mode": 1}),
+        _line({"class": "TPV", "device": dev, "mode": 1}),
+    ]
+    known = [
+        {"PRN": 2, "el": 57, "az": 146, "ss": 30, "used": True},
+        {"PRN": 5, "el": 66, "az": 20, "ss": 34, "used": True},
+        {"PRN": 30, "el": 30, "az": 76, "ss": 28, "used": True},
+        {"PRN": 129, "el": 45, "az": 159, "ss": 29, "used": False},
+        {"PRN": 80, "el": 18, "az": 66, "ss": 31, "used": True},
+    ]
+    lines += [_sky_of(-1, known[:3]), _sky_of(-1, known)]  # before the first fix: no time, no TPV to join
+    for i in range(n):
+        fix = tpv(i, dev, mode=2, lat=36.622516, lon=127.348676, altHAE=None, altMSL=None, geoidSep=None)
+        unknown = [{"PRN": 7, "el": -91, "az": 0, "ss": 20, "used": False}]
+        unknown += [{"PRN": 255, "el": -91, "az": 0, "ss": 18, "used": False}]
+        lines += [_line(fix), _sky_of(-1, known + (unknown if i >= 20 else []))]
+    return lines
+
+
+def test_unknown_elevation_is_no_measurement(tmp_path: Path) -> None:
+    """gpsd (and u-blox under it) writes elevation -91 for a satellite tracked with no position known (u-blox:
+    "elevation range +/-90, unknown if out of range; azimuth unknown if elevation is out of range"). Read as
+    a measurement it was G07 "tracked 91 deg below the horizon" (a real gpsd 3.16 capture, an anomaly)."""
+    table = read_log(write(tmp_path / "pi.json", _pi_capture()))
+    g07 = table.satellites[table.satellites["sv_id"] == "G07"]
+    assert len(g07) == 40 and g07["elevation_deg"].isna().all() and g07["azimuth_deg"].isna().all()
+    assert (g07["cn0_dbhz"] == 20).all()  # the signal itself is still read
+    assert table.satellites["elevation_deg"].between(-90, 90).sum() == 5 * 60
+    (note,) = [s for s in table.skipped if "elevation" in s.reason]
+    assert note.count == int(table.satellites["elevation_deg"].isna().sum()) >= 40 and note.action != "lost"
+
