@@ -322,3 +322,24 @@ def test_unknown_elevation_is_no_measurement(tmp_path: Path) -> None:
     (note,) = [s for s in table.skipped if "elevation" in s.reason]
     assert note.count == int(table.satellites["elevation_deg"].isna().sum()) >= 40 and note.action != "lost"
 
+
+def test_prn_255_is_no_satellite_named(tmp_path: Path) -> None:
+    """PRN 255 is u-blox's GLONASS signal whose slot is not known yet (gpsd passes it through; newer gpsd
+    drops it): it was named BeiDou "C55" (no such satellite). Skipped and counted, saying why; PRNs
+    outside gpsd's numbering are not named either."""
+    lines = _pi_capture()
+    # 40: SBAS in NMEA numbering, BeiDou in u-blox's (was "G40"); 100: no system; 263: past BeiDou (was "C63")
+    weird = [{"PRN": p, "el": 10, "az": 10, "ss": 30, "used": False} for p in (40, 100, 263)]
+    weird += [{"gnssid": 6, "svid": 255, "PRN": 255, "el": 5, "az": 5, "ss": 25, "used": False}]
+    lines.append(_sky_of(60, [*weird, {"PRN": 2, "el": 57, "az": 146, "ss": 30, "used": True}]))
+    table = read_log(write(tmp_path / "pi.json", lines))
+    ids = set(table.satellites["sv_id"])
+    assert ids == {"G02", "G05", "G30", "S29", "R16", "G07"}, ids
+    assert not any(i.startswith("C") for i in ids)
+    reasons = {s.reason: s for s in table.skipped if "SKY satellites" in s.reason}
+    (slot,) = [s for r, s in reasons.items() if "255" in r]
+    assert slot.count == 40 + 1 and "GLONASS" in slot.reason and slot.action == "skipped"
+    (ambiguous,) = [s for r, s in reasons.items() if "33-64" in r]
+    assert ambiguous.count == 1 and "SBAS" in ambiguous.reason and "BeiDou" in ambiguous.reason
+    (other,) = [s for r, s in reasons.items() if "255" not in r and "33-64" not in r]
+    assert other.count == 2 and other.action == "skipped"
