@@ -92,6 +92,11 @@ PRN_33_64 = (
     "SKY satellites PRN 33-64 without gnssid/svid: SBAS in gpsd's NMEA numbering, BeiDou in the u-blox numbering "
     "older gpsd passed through (not told apart)"
 )
+TPV_TIME_LOST = ("TPV fixes with no time", "TPV fixes with a time that is no ISO 8601 date")
+SKY_BEFORE_FIX = (
+    "SKY reports before the device's first fix, with no time of their own (gpspipe -w writes gpsd's sky from "
+    "the start): nothing places them in time"
+)
 UNMAPPED = "SKY satellites with no id spooflens can map (a PRN outside gpsd's numbering, or gnssid/svid of no system)"
 
 
@@ -355,7 +360,7 @@ def assemble(scan: Scan) -> Assembled:
                 t = latest.get(rid)
             sats = r.obj.get("satellites")
             if t is None:
-                why[(rid, "SKY reports with no time before any fix of its device")] += 1
+                why[(rid, SKY_BEFORE_FIX)] += 1
             elif not isinstance(sats, list):
                 if sats is not None:
                     bad["SKY satellites"] += 1
@@ -380,7 +385,8 @@ def assemble(scan: Scan) -> Assembled:
         else:
             other[cls] += 1
     for (rid, reason), n in why.items():
-        skipped.append(Skipped(rid, reason, n, "lost" if "time" in reason and "fix" in reason else "skipped"))
+        # a fix whose time is missing or unreadable is lost; a sky gpsd sent before any fix is not damage
+        skipped.append(Skipped(rid, reason, n, "lost" if reason in TPV_TIME_LOST else "skipped"))
     for what, n in sorted(bad.items()):
         skipped.append(Skipped(what, "fields of the wrong type or not finite (value left out)", n, "lost"))
     for cls, n in sorted(other.items()):

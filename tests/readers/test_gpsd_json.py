@@ -343,3 +343,19 @@ def test_prn_255_is_no_satellite_named(tmp_path: Path) -> None:
     assert ambiguous.count == 1 and "SBAS" in ambiguous.reason and "BeiDou" in ambiguous.reason
     (other,) = [s for r, s in reasons.items() if "255" not in r and "33-64" not in r]
     assert other.count == 2 and other.action == "skipped"
+
+
+def test_sky_before_the_first_fix_is_no_damage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """gpspipe -w writes the sky gpsd has before the receiver's first fix, with no `time`: nothing places
+    those reports in time. A real intact capture was said to be damaged (exit 3) for its first two SKY."""
+    path = write(tmp_path / "pi.json", _pi_capture())
+    table = read_log(path)
+    (early,) = [s for s in table.skipped if "SKY" in s.reason and "before" in s.reason]
+    assert early.count == 2 and early.action == "skipped"
+    assert not [s for s in table.skipped if s.action == "lost"]
+    assert main(["inspect", str(path)]) == 0
+    # a cut line stays damage
+    cut = tmp_path / "cut.json"
+    cut.write_text(path.read_text() + '{"class":"SKY","device":"/dev/ttyAMA0","satel')
+    assert main(["inspect", str(cut)]) == 3
+    assert "Traceback" not in capsys.readouterr().err
