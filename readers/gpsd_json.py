@@ -10,7 +10,8 @@ header. `gpspipe -t/-u/-uu/-Z` prefix each line with the logging host's time ("2
   `speed`/`track` (+ `climb` up); `eph` (else the RMS of `epx`, `epy`), `epv` and `eps` as the accuracies,
   as gpsd reports them (its documentation: "certainty unknown"; no scaling applied, said in metadata);
   `status` maps the fix type (dead reckoning, surveyed time and simulated fixes kept as UNKNOWN).
-- `SKY`: the `satellites` frame (sv ids from `gnssid`/`svid`, u-blox numbering, else gpsd's `PRN`;
+- `SKY`: the `satellites` frame (sv ids from `gnssid`/`svid`, u-blox numbering, else gpsd's `PRN`, only in
+  its real ranges: PRN 255, a GLONASS signal of unknown slot, and the ambiguous 33-64 are skipped, counted;
   `el`, `az`, `ss` as C/N0, `used`, `health`), and its `hdop`, `vdop`, `uSat` and mean C/N0 joined to
   the receiver's TPV of the same time (a SKY without `time`: the receiver's latest TPV).
 - `VERSION`, `DEVICES`, `DEVICE`, `WATCH`: metadata (the gpsd release, each device's driver and subtype);
@@ -70,9 +71,33 @@ ACCURACY = (
     "h_acc_m = TPV eph (else sqrt((epx^2+epy^2)/2)), v_acc_m = epv, vel_acc_mps = eps, as gpsd reports "
     "them: gpsd documents their certainty as unknown (older releases: 95 %); not scaled to 1 sigma"
 )
-# gpsd's own PRN numbering when a satellite has no gnssid/svid: (first, last, RINEX letter, offset)
-_PRN_RANGES = ((1, 63, "G", 0), (65, 96, "R", 64), (120, 158, "S", 100), (193, 202, "J", 192), (201, 263, "C", 200))
-_PRN_RANGES_NEW = ((301, 336, "E", 300), (401, 437, "C", 400))
+# gpsd's own PRN numbering when a satellite has no gnssid/svid (its NMEA driver's table: GPS 1-32, GLONASS
+# 65-96, SBAS 120-158, QZSS 193-197 (u-blox to 199), BeiDou 201-235 and 401-437, Galileo 301-336; BeiDou to 37
+# as gpsd maps u-blox's): (first, last, RINEX letter, offset). 33-64 is SBAS in gpsd's NMEA numbering but
+# BeiDou in the u-blox numbering older gpsd passed through, so not named; 255 is u-blox's GLONASS signal whose
+# slot is not known yet (newer gpsd drops it): no satellite to name.
+_PRN_RANGES = (
+    (1, 32, "G", 0),
+    (65, 96, "R", 64),
+    (120, 158, "S", 100),
+    (193, 200, "J", 192),
+    (201, 237, "C", 200),
+    (301, 336, "E", 300),
+    (401, 437, "C", 400),
+)
+UNKNOWN_SLOT = (
+    "SKY satellites PRN 255: a GLONASS signal whose slot the u-blox has not identified (no satellite to name)"
+)
+PRN_33_64 = (
+    "SKY satellites PRN 33-64 without gnssid/svid: SBAS in gpsd's NMEA numbering, BeiDou in the u-blox numbering "
+    "older gpsd passed through (not told apart)"
+)
+TPV_TIME_LOST = ("TPV fixes with no time", "TPV fixes with a time that is no ISO 8601 date")
+SKY_BEFORE_FIX = (
+    "SKY reports before the device's first fix, with no time of their own (gpspipe -w writes gpsd's sky from "
+    "the start): nothing places them in time"
+)
+UNMAPPED = "SKY satellites with no id spooflens can map (a PRN outside gpsd's numbering, or gnssid/svid of no system)"
 
 
 @dataclass
@@ -213,10 +238,20 @@ def sv_id(sat: Mapping[str, Any]) -> str | None:
     prn = sat.get("PRN")
     if isinstance(prn, bool) or not isinstance(prn, int):
         return None
-    for first, last, letter, offset in _PRN_RANGES_NEW + _PRN_RANGES:
+    for first, last, letter, offset in _PRN_RANGES:
         if first <= prn <= last:
             return f"{letter}{prn - offset:02d}"
     return None
+
+
+def unmapped_reason(sat: Mapping[str, Any]) -> str:
+    """Why `sv_id` names no satellite for this SKY satellite."""
+    g, s, prn = sat.get("gnssid"), sat.get("svid"), sat.get("PRN")
+    if (g == 6 and s == 255) or (not isinstance(g, int) and prn == 255):
+        return UNKNOWN_SLOT
+    if not isinstance(g, int) and isinstance(prn, int) and 33 <= prn <= 64:
+        return PRN_33_64
+    return UNMAPPED
 
 
 @dataclass
@@ -325,7 +360,7 @@ def assemble(scan: Scan) -> Assembled:
                 t = latest.get(rid)
             sats = r.obj.get("satellites")
             if t is None:
-                why[(rid, "SKY reports with no time before any fix of its device")] += 1
+                why[(rid, SKY_BEFORE_FIX)] += 1
             elif not isinstance(sats, list):
                 if sats is not None:
                     bad["SKY satellites"] += 1
@@ -350,7 +385,8 @@ def assemble(scan: Scan) -> Assembled:
         else:
             other[cls] += 1
     for (rid, reason), n in why.items():
-        skipped.append(Skipped(rid, reason, n, "lost" if "time" in reason and "fix" in reason else "skipped"))
+        # a fix whose time is missing or unreadable is lost; a sky gpsd sent before any fix is not damage
+        skipped.append(Skipped(rid, reason, n, "lost" if reason in TPV_TIME_LOST else "skipped"))
     for what, n in sorted(bad.items()):
         skipped.append(Skipped(what, "fields of the wrong type or not finite (value left out)", n, "lost"))
     for cls, n in sorted(other.items()):
@@ -393,7 +429,7 @@ def _sky_rows(
     the SKY values the fixes carry."""
     rows: list[tuple[Any, ...]] = []
     per_epoch: dict[tuple[str, int], dict[str, float]] = {}
-    unknown: Counter[str] = Counter()
+    unknown: Counter[tuple[str, str]] = Counter()
     bad: Counter[str] = Counter()
     for r, rid, t in a.sky:
         at = r.host_ns if a.logger else t
@@ -407,7 +443,7 @@ def _sky_rows(
                 continue
             sv = sv_id(sat)
             if sv is None:
-                unknown[rid] += 1
+                unknown[(rid, unmapped_reason(sat))] += 1
                 continue
             el, az, ss = (_num(sat, k, bad, "SKY") for k in ("el", "az", "ss"))
             cn0 = ss if ss > 0 else math.nan
@@ -426,8 +462,8 @@ def _sky_rows(
             "sats_used": u_sat if math.isfinite(u_sat) else float(used) if r.obj["satellites"] else math.nan,
             "cn0_mean_dbhz": float(np.mean(cn0s)) if cn0s else math.nan,
         }
-    for rid, n in unknown.items():
-        skipped.append(Skipped(rid, "SKY satellites with no id spooflens can map (gnssid/svid, PRN)", n))
+    for (rid, why), n in unknown.items():
+        skipped.append(Skipped(rid, why, n))
     for what, n in sorted(bad.items()):
         skipped.append(Skipped(what, "fields of the wrong type or not finite (value left out)", n, "lost"))
     return rows, per_epoch

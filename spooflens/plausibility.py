@@ -338,6 +338,18 @@ def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], Boo
         some = np.any([np.isfinite(cols[n]) for n in QUATERNION], axis=0)
         bad = (np.isfinite(norm) & (np.abs(norm - 1.0) > 0.1)) | (some & ~np.isfinite(norm))
         clear(QUATERNION, bad, "orientation quaternion not of unit length")
+    if frame == "satellites" and "elevation_deg" in cols:
+        # an elevation outside +/-90 deg is a receiver's "not known" (u-blox and gpsd write -91: "unknown if out
+        # of range; azimuth unknown if elevation is out of range"), never a satellite below the horizon
+        el = cols["elevation_deg"]
+        clear(
+            tuple(n for n in ("elevation_deg", "azimuth_deg") if n in cols),
+            (el < -90) | (el > 90) | np.isinf(el),
+            "elevation outside -90 .. 90 deg (the receiver's 'not known', e.g. u-blox/gpsd -91): elevation and azimuth",
+        )
+    if frame == "satellites" and "azimuth_deg" in cols:
+        az = cols["azimuth_deg"]
+        clear(("azimuth_deg",), (az < 0) | (az >= 360) | np.isinf(az), "azimuth outside 0 .. 359 deg")
     if frame == "observations" and all(n in cols for n in SV_STATE[:3]):
         with np.errstate(over="ignore"):  # 1e300 squared is inf, which is out of orbit all the same
             r = np.sqrt(sum(cols[n] ** 2 for n in SV_STATE[:3]))

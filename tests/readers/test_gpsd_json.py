@@ -271,3 +271,91 @@ def test_cli_inspect_analyze_inject(tmp_path: Path, capsys: pytest.CaptureFixtur
     # one receiver, no IMU: the step is an anomaly of GNSS-only consistency from 100 s, not confirmed spoofing
     assert any("gnss_consistency" in i["detectors"] and abs(i["start_s"] - 100.0) <= 2.0 for i in incidents)
     assert "Traceback" not in capsys.readouterr().err
+
+
+def _sky_of(i: int, sats: list[dict[str, Any]], device: str = "/dev/ttyAMA0", **fields: Any) -> str:
+    """A gpsd 3.16 SKY (PRN only, no gnssid/svid), as `gpspipe -w` wrote it from a u-blox on a Raspberry Pi."""
+    obj: dict[str, Any] = {"class": "SKY", "device": device, "xdop": 1.31, "ydop": 1.62, "vdop": 2.78}
+    if i >= 0:
+        obj["time"] = (T0 + timedelta(seconds=i)).strftime("%Y-%m-%dT%H:%M:%S.000Z")
+    obj |= fields
+    obj["satellites"] = sats
+    return _line(obj)
+
+
+def _pi_capture(n: int = 60) -> list[str]:
+    """A static u-blox behind gpsd 3.16 (a real `gpspipe -w` capture's shape): two TPV without a fix and two SKY
+    with no time before the first fix, then 1 Hz TPV and SKY. From 20 s on the receiver tracks G07 and an
+    unidentified GLONASS signal (PRN 255) it has no almanac position for: gpsd writes `el:-91, az:0`."""
+    dev = "/dev/ttyAMA0"
+    lines = [
+        _line({"class": "VERSION", "release": "3.16", "rev": "3.16-4", "proto_major": 3, "proto_minor": 11}),
+        _line({"class": "DEVICE", "path": dev, "driver": "u-blox", "native": 1, "bps": 9600}),
+        _line({"class": "TPV", "device": dev, "mode": 1}),
+        _line({"class": "TPV", "device": dev, "mode": 1}),
+    ]
+    known = [
+        {"PRN": 2, "el": 57, "az": 146, "ss": 30, "used": True},
+        {"PRN": 5, "el": 66, "az": 20, "ss": 34, "used": True},
+        {"PRN": 30, "el": 30, "az": 76, "ss": 28, "used": True},
+        {"PRN": 129, "el": 45, "az": 159, "ss": 29, "used": False},
+        {"PRN": 80, "el": 18, "az": 66, "ss": 31, "used": True},
+    ]
+    lines += [_sky_of(-1, known[:3]), _sky_of(-1, known)]  # before the first fix: no time, no TPV to join
+    for i in range(n):
+        fix = tpv(i, dev, mode=2, lat=36.622516, lon=127.348676, altHAE=None, altMSL=None, geoidSep=None)
+        unknown = [{"PRN": 7, "el": -91, "az": 0, "ss": 20, "used": False}]
+        unknown += [{"PRN": 255, "el": -91, "az": 0, "ss": 18, "used": False}]
+        lines += [_line(fix), _sky_of(-1, known + (unknown if i >= 20 else []))]
+    return lines
+
+
+def test_unknown_elevation_is_no_measurement(tmp_path: Path) -> None:
+    """gpsd (and u-blox under it) writes elevation -91 for a satellite tracked with no position known (u-blox:
+    "elevation range +/-90, unknown if out of range; azimuth unknown if elevation is out of range"). Read as
+    a measurement it was G07 "tracked 91 deg below the horizon" (a real gpsd 3.16 capture, an anomaly)."""
+    table = read_log(write(tmp_path / "pi.json", _pi_capture()))
+    g07 = table.satellites[table.satellites["sv_id"] == "G07"]
+    assert len(g07) == 40 and g07["elevation_deg"].isna().all() and g07["azimuth_deg"].isna().all()
+    assert (g07["cn0_dbhz"] == 20).all()  # the signal itself is still read
+    assert table.satellites["elevation_deg"].between(-90, 90).sum() == 5 * 60
+    (note,) = [s for s in table.skipped if "elevation" in s.reason]
+    assert note.count == int(table.satellites["elevation_deg"].isna().sum()) >= 40 and note.action != "lost"
+
+
+def test_prn_255_is_no_satellite_named(tmp_path: Path) -> None:
+    """PRN 255 is u-blox's GLONASS signal whose slot is not known yet (gpsd passes it through; newer gpsd
+    drops it): it was named BeiDou "C55" (no such satellite). Skipped and counted, saying why; PRNs
+    outside gpsd's numbering are not named either."""
+    lines = _pi_capture()
+    # 40: SBAS in NMEA numbering, BeiDou in u-blox's (was "G40"); 100: no system; 263: past BeiDou (was "C63")
+    weird = [{"PRN": p, "el": 10, "az": 10, "ss": 30, "used": False} for p in (40, 100, 263)]
+    weird += [{"gnssid": 6, "svid": 255, "PRN": 255, "el": 5, "az": 5, "ss": 25, "used": False}]
+    lines.append(_sky_of(60, [*weird, {"PRN": 2, "el": 57, "az": 146, "ss": 30, "used": True}]))
+    table = read_log(write(tmp_path / "pi.json", lines))
+    ids = set(table.satellites["sv_id"])
+    assert ids == {"G02", "G05", "G30", "S29", "R16", "G07"}, ids
+    assert not any(i.startswith("C") for i in ids)
+    reasons = {s.reason: s for s in table.skipped if "SKY satellites" in s.reason}
+    (slot,) = [s for r, s in reasons.items() if "255" in r]
+    assert slot.count == 40 + 1 and "GLONASS" in slot.reason and slot.action == "skipped"
+    (ambiguous,) = [s for r, s in reasons.items() if "33-64" in r]
+    assert ambiguous.count == 1 and "SBAS" in ambiguous.reason and "BeiDou" in ambiguous.reason
+    (other,) = [s for r, s in reasons.items() if "255" not in r and "33-64" not in r]
+    assert other.count == 2 and other.action == "skipped"
+
+
+def test_sky_before_the_first_fix_is_no_damage(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """gpspipe -w writes the sky gpsd has before the receiver's first fix, with no `time`: nothing places
+    those reports in time. A real intact capture was said to be damaged (exit 3) for its first two SKY."""
+    path = write(tmp_path / "pi.json", _pi_capture())
+    table = read_log(path)
+    (early,) = [s for s in table.skipped if "SKY" in s.reason and "before" in s.reason]
+    assert early.count == 2 and early.action == "skipped"
+    assert not [s for s in table.skipped if s.action == "lost"]
+    assert main(["inspect", str(path)]) == 0
+    # a cut line stays damage
+    cut = tmp_path / "cut.json"
+    cut.write_text(path.read_text() + '{"class":"SKY","device":"/dev/ttyAMA0","satel')
+    assert main(["inspect", str(cut)]) == 3
+    assert "Traceback" not in capsys.readouterr().err

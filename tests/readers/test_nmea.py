@@ -575,3 +575,28 @@ def test_a_speed_written_without_a_course_is_kept_as_a_speed(tmp_path: Path) -> 
     assert fixes["speed_mps"].iloc[:2].tolist() == pytest.approx([0.045 * KNOT_MPS, 0.694 * KNOT_MPS])
     assert fixes[["vel_e_mps", "vel_n_mps"]].iloc[:2].isna().all().all()
     assert np.isnan(fixes["speed_mps"].iloc[2]) and fixes["vel_e_mps"].iloc[2] == pytest.approx(0.7 * KNOT_MPS)
+
+
+def test_gsv_elevation_or_azimuth_out_of_range_is_no_measurement(tmp_path: Path) -> None:
+    """NMEA GSV elevation is 00-90 and azimuth 000-359: a receiver's 95 or -91 elevation (a "not known"), or
+    an azimuth of 360 and more, is no satellite position: NaN, counted, never a satellite below the horizon
+    (gpsd's -91 made a real capture's G07 "tracked 91 deg below the horizon")."""
+    bodies = []
+    for k in range(10):
+        hhmmss = f"1200{k:02d}"
+        bodies += [
+            f"GPGGA,{hhmmss},4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,",
+            "GPGSV,2,1,05,02,57,146,30,05,66,020,34,07,95,000,20,09,-91,000,21",
+            "GPGSV,2,2,05,12,40,400,33",
+            f"GPRMC,{hhmmss},A,4807.038,N,01131.000,E,0.0,0.0,010524,,",
+        ]
+    table = read_log(_write(tmp_path / "gsv.nmea", bodies))
+    sats = table.satellites.set_index(["t_s", "sv_id"]).loc[0.0]
+    assert sats.loc["G02", "elevation_deg"] == 57 and sats.loc["G05", "azimuth_deg"] == 20
+    assert np.isnan(sats.loc["G07", ["elevation_deg", "azimuth_deg"]].astype(float)).all()
+    assert sats.loc["G07", "cn0_dbhz"] == 20  # the signal is still read
+    assert np.isnan(float(sats.loc["G12", "azimuth_deg"])) and sats.loc["G12", "elevation_deg"] == 40
+    assert not (table.satellites["elevation_deg"].abs() > 90).any()
+    assert not (table.satellites["azimuth_deg"] >= 360).any()
+    notes = [s for s in table.skipped if "elevation" in s.reason or "azimuth" in s.reason]
+    assert notes and all(s.action != "lost" for s in notes)
