@@ -349,7 +349,8 @@ def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], Boo
         )
     if frame == "satellites" and "azimuth_deg" in cols:
         az = cols["azimuth_deg"]
-        clear(("azimuth_deg",), (az < 0) | (az >= 360) | np.isinf(az), "azimuth outside 0 .. 359 deg")
+        # 360 is north to receivers that write 0 .. 360; trigonometry reads it as 0
+        clear(("azimuth_deg",), (az < 0) | (az > 360) | np.isinf(az), "azimuth outside 0 .. 360 deg")
     if frame == "observations" and all(n in cols for n in SV_STATE[:3]):
         with np.errstate(over="ignore"):  # 1e300 squared is inf, which is out of orbit all the same
             r = np.sqrt(sum(cols[n] ** 2 for n in SV_STATE[:3]))

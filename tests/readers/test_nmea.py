@@ -579,8 +579,8 @@ def test_a_speed_written_without_a_course_is_kept_as_a_speed(tmp_path: Path) -> 
 
 def test_gsv_elevation_or_azimuth_out_of_range_is_no_measurement(tmp_path: Path) -> None:
     """NMEA GSV elevation is 00-90 and azimuth 000-359: a receiver's 95 or -91 elevation (a "not known"), or
-    an azimuth of 360 and more, is no satellite position: NaN, counted, never a satellite below the horizon
-    (gpsd's -91 made a real capture's G07 "tracked 91 deg below the horizon")."""
+    an azimuth beyond 360 (north, to receivers that write 0-360), is no satellite position: NaN, counted,
+    never a satellite below the horizon (gpsd's -91 made a real capture's G07 "tracked 91 deg below the horizon")."""
     bodies = []
     for k in range(10):
         hhmmss = f"1200{k:02d}"
@@ -597,6 +597,6 @@ def test_gsv_elevation_or_azimuth_out_of_range_is_no_measurement(tmp_path: Path)
     assert sats.loc["G07", "cn0_dbhz"] == 20  # the signal is still read
     assert np.isnan(float(sats.loc["G12", "azimuth_deg"])) and sats.loc["G12", "elevation_deg"] == 40
     assert not (table.satellites["elevation_deg"].abs() > 90).any()
-    assert not (table.satellites["azimuth_deg"] >= 360).any()
+    assert not (table.satellites["azimuth_deg"] > 360).any()
     notes = [s for s in table.skipped if "elevation" in s.reason or "azimuth" in s.reason]
     assert notes and all(s.action != "lost" for s in notes)
