@@ -128,13 +128,13 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
         if classes
         else f"alarms no check confirmed ({', '.join(incident.detectors)})"
     )
-    marked = tuple(f"a spoofer's mark (one evidence class: not confirmed): {m}" for m in weighed.spoofer_marks)
+    marked = tuple(f"a spoofer's mark (one evidence class: not confirmed): {m}" for m in weighed.strong_marks)
     return _Decided(
         Kind.UNKNOWN,
         "low",
         (alone, *support, *marked),
         (_not_spoofing(incident), *ruled_out),
-        weighed.spoofer_marks,
+        weighed.strong_marks,
     )
 
 

@@ -351,8 +351,10 @@ def uncovered(w: Window, opts: ExplanationOptions) -> bool:
     return before < opts.covered_sky_dbhz and usual < opts.covered_sky_dbhz and now <= opts.open_sky_dbhz and kept
 
 
-def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
-    """What a spoofer's signal does to the receiver's indicators and nature does not."""
+def spoofer_marks(w: Window, opts: ExplanationOptions, strong_only: bool = False) -> list[str]:
+    """What a spoofer's signal does to the receiver's indicators and nature does not. `strong_only`: without a
+    C/N0 risen by a few dB, which bars a natural reading but is no sign of its own (a sky returning after a
+    loss of fix does it)."""
     marks = []
     if w.spoofing_flag_raised():
         marks.append("the receiver's own spoofing flag was raised")
@@ -360,7 +362,7 @@ def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     if strongest > opts.max_sky_cn0_dbhz:
         marks.append(f"mean C/N0 up to {strongest:.1f} dB-Hz, more than the sky gives ({opts.max_sky_cn0_dbhz:g})")
     _, rise, what = w.cn0_change_db()
-    if rise >= opts.spoofer_cn0_rise_db and not uncovered(w, opts):
+    if rise >= opts.spoofer_cn0_rise_db and not uncovered(w, opts) and not strong_only:
         marks.append(
             f"{what} rose {_db(rise)} above its level {w.base_where} and its usual level: a stronger signal than the "
             "sky's"
@@ -1279,6 +1281,7 @@ class Weighed:
     # over the whole incident, per receiver: what the receiver says drowned its signals, and a spoofer's marks
     interference: tuple[str, ...] = ()
     spoofer_marks: tuple[str, ...] = ()
+    strong_marks: tuple[str, ...] = ()  # those a headline names (`spoofer_marks(strong_only=True)`)
     # intervals accounted for from their start up to a time only, not beyond
     partly_explained: tuple[tuple[Span, float], ...] = ()
 
@@ -1327,12 +1330,14 @@ def explain(
     ruled_out = tuple(text for cause, text in refused.items() if cause not in held_causes)
     interference: list[str] = []
     marks: list[str] = []
+    strong: list[str] = []
     for rid in incident.receivers or tuple(table.receivers()):
         named = (lambda x, r=rid: f"{r}: {x}") if len(table.receivers()) > 1 else (lambda x: x)
         w = scene.incident_window(rid)
         interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
         if w.fixes:
             marks += [named(x) for x in spoofer_marks(w, scene.opts)]
+            strong += [named(x) for x in spoofer_marks(w, scene.opts, strong_only=True)]
     # the coasts' departure intervals (no alarm behind them): GNSS agreed with the coasted INS until its
     # departure. Where the jammed receiver's noise accounts for the inertial alarms, a departure that began
     # under the jamming is that noise (the coast weighs GNSS with its clean noise), and the interval counts
@@ -1360,7 +1365,7 @@ def explain(
                 reach[sp] = sp[2]
     spans = tuple(sorted(k for k, r in reach.items() if r >= k[2]))
     partly = tuple(sorted((k, r) for k, r in reach.items() if k[1] < r < k[2]))
-    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), partly)
+    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), tuple(strong), partly)
 
 
 def scene_of(
