@@ -418,22 +418,24 @@ def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> n
     return h
 
 
-def _fixless_sky_placed(fix_ns: list[int], fixless_ns: list[int]) -> list[bool]:
+def _fixless_sky_placed(fix_ns: list[int], fixless_ns: list[int]) -> tuple[list[bool], list[bool]]:
     """Which fix-less epochs' sky goes into the satellites frame: those from the receiver's first fix on that no
     hour of silence separates from its fixes (every one of a receiver that never had a fix). Before its first
     fix a receiver is acquiring: a cold start's sky, no level a later loss is measured against. And a receiver
     that does not know the time stamps its epochs with its own default clock (gpsd's MTK-3301 and RGM3800
     logs: 1980-01-05 23:59, hours from their fixes; GP-320FW's after a reboot): such a time would stretch
-    the log over hours it never recorded."""
+    the log over hours it never recorded. Also which of those not placed are on such a clock: an hour of
+    silence from every fix, before the first or after it (the others are the acquisition before it)."""
     if not fix_ns:
-        return [True] * len(fixless_ns)
+        return [True] * len(fixless_ns), [False] * len(fixless_ns)
     t = np.array(fix_ns + fixless_ns, dtype=np.int64)
     is_fix = np.arange(len(t)) < len(fix_ns)
     order = np.argsort(t, kind="stable")
     run = np.empty(len(t), dtype=np.int64)
     run[order] = np.cumsum(np.concatenate(([0], np.diff(t[order]) > STRAY_GAP_NS)))
     placed = np.isin(run, run[is_fix]) & (t >= min(fix_ns))
-    return placed[len(fix_ns) :].tolist()
+    acquiring = (run == run[is_fix].min()) & (t < min(fix_ns))
+    return placed[len(fix_ns) :].tolist(), (~placed & ~acquiring)[len(fix_ns) :].tolist()
 
 
 SatRow = tuple[int, str, str, float, float, float, float]  # t_ns, receiver, sv, elevation, azimuth, C/N0, used
@@ -451,14 +453,14 @@ def _receiver_sky(
     recordings."""
     fix_ns = [t for t, _, has_fix in sky_epochs if has_fix]
     fixless_ns = [t for t, _, has_fix in sky_epochs if not has_fix]
-    placed = iter(_fixless_sky_placed(fix_ns, fixless_ns))
-    first_fix = min(fix_ns, default=None)
+    placed_fixless, other_clock_fixless = (iter(x) for x in _fixless_sky_placed(fix_ns, fixless_ns))
     out: list[SatRow] = []
-    astray = 0  # on another clock: an hour or more from the fixes (before the first fix: acquiring, not counted)
+    astray = 0  # on another clock: an hour or more from the fixes (the acquisition before the first fix: not counted)
     for at_ns, epoch, has_fix in sky_epochs:
-        keep = has_fix or next(placed)
+        keep = has_fix or next(placed_fixless)
+        other_clock = not has_fix and next(other_clock_fixless)
         sky = epoch_satellites(epoch)
-        if sky and not keep and first_fix is not None and at_ns >= first_fix:
+        if sky and other_clock:
             astray += 1
         elif sky and keep:
             out += [(at_ns, rx.receiver_id, *sat) for sat in sky]
