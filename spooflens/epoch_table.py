@@ -139,15 +139,23 @@ class StreamInfo:
 
 @dataclass(frozen=True)
 class Skipped:
-    """Messages or rows a reader skipped or repaired, with the reason and how many."""
+    """Messages or rows a reader skipped or repaired, with the reason and how many. `span_ns`: where a
+    reader knows it, the first and last time (the log's own clock, as its rows are stamped) of what the
+    line is about, so that a log joining several recordings lists it in its own recording only (it is not
+    part of the JSON summary: a recording's summary lists its own lines)."""
 
     stream: str
     reason: str
     count: int
     action: str = "skipped"
+    span_ns: tuple[int, int] | None = field(default=None, compare=False)
 
     def __str__(self) -> str:
         return f"{self.stream}: {self.action} {self.count} ({self.reason})"
+
+    def as_dict(self) -> dict[str, Any]:
+        """The line as the JSON summary lists it."""
+        return {"stream": self.stream, "reason": self.reason, "count": self.count, "action": self.action}
 
 
 @dataclass(frozen=True)
@@ -203,12 +211,22 @@ class EpochTable:
             seg.t0_ns,
             self.time_reference,
             streams=[],
-            skipped=[x for x in self.skipped if x.action != "segmented"],
+            skipped=[x for x in self.skipped if x.action != "segmented" and self._in_segment(x, index)],
             ephemerides=self.ephemerides,
             metadata={**self.metadata, "segment": f"{index + 1} of {len(self.segments)}"},
         )
         self._rows_into(out, seg.start_s, seg.end_s, seg.start_s)
         return out
+
+    def _in_segment(self, line: Skipped, index: int) -> bool:
+        """Whether a skipped line belongs to recording `index`: a line without a span to every recording,
+        one with a span to the recording its span overlaps most, else to the nearest."""
+        if line.span_ns is None:
+            return True
+        a, b = line.span_ns
+        own = [(sg.t0_ns, sg.t0_ns + round((sg.end_s - sg.start_s) * NS)) for sg in self.segments]
+        overlap = [min(b, hi) - max(a, lo) for lo, hi in own]
+        return int(np.argmax(overlap)) == index
 
     def between(self, start_s: float, end_s: float) -> EpochTable:
         """The rows from `start_s` to `end_s` on the same time axis, as a log of their own (the navigation

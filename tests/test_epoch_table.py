@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from spooflens.epoch_table import StreamInfo, build_table
+from spooflens.epoch_table import Skipped, StreamInfo, build_table
 from spooflens.errors import SchemaError
 from spooflens.schema import FRAMES, empty_frame, make_frame, schema_markdown
 
@@ -52,6 +52,28 @@ def test_backwards_time_duplicates_and_empty_fixes_are_repaired_and_reported() -
     assert table.fixes["lat_deg"].tolist() == [42.1, 42.2, 42.0, 42.3]
     reasons = " | ".join(str(s) for s in table.skipped)
     assert "backwards" in reasons and "duplicate" in reasons and "NaN or zero" in reasons
+
+
+def test_a_recording_lists_the_skipped_lines_of_its_own_span_only() -> None:
+    """A log joining two recordings (its clock goes back a minute): a reader's line with a span goes to
+    the recording it covers (the nearest where it covers none); a line without one to both."""
+    t0 = 1_553_076_516_000_000_000  # 2019-03-20T10:08:36Z
+    first = [t0 + k * 10**9 for k in range(30)]
+    second = [t0 - 60 * 10**9 + k * 10**9 for k in range(30)]
+    own = Skipped("/fix", "the first's", 1, "repaired", span_ns=(first[2], first[3]))
+    near = Skipped("/fix", "near the second", 1, span_ns=(second[-1] + 10**9, second[-1] + 2 * 10**9))
+    table = build_table(
+        Path("x.nmea"),
+        "test",
+        "unix",
+        {"fixes": _fixes(first + second, [42.0] * 60)},
+        [StreamInfo("fix", "/fix", "/fix", "NMEA", 60)],
+        [own, near, Skipped("/fix", "everywhere", 2)],
+    )
+    assert len(table.segments) == 2
+    assert [s.reason for s in table.segment(0).skipped] == ["the first's", "everywhere"]
+    assert [s.reason for s in table.segment(1).skipped] == ["near the second", "everywhere"]
+    assert own.as_dict() == {"stream": "/fix", "reason": "the first's", "count": 1, "action": "repaired"}
 
 
 def test_schema_check_names_every_problem() -> None:

@@ -21,10 +21,15 @@ signal). The GSV of every epoch with a fix, and of the epochs without one from t
 is the `satellites` frame: a receiver that loses its fix to jamming keeps the C/N0 collapse that lost it
 (`_fixless_sky_placed` says which fix-less epochs are placed).
 
-**Time.** A time of day becomes a date with the RMC/ZDA dates of its receiver (or, for a receiver
-that sends none, of the log), across midnight by unwrapping the time of day (a drop of more than 12 h
-is the next day). A date that disagrees with that continuous clock is counted ("date jumps"), not
-followed. When most sentences carry a logger's time (see lines.py), the logger's clock is the time
+**Time.** A receiver's time of day is unwrapped across midnight (a drop of more than 12 h is the next
+day) and cut into stretches where it goes back (a log joining recordings) or on after an hour without
+a sentence (a log appended from another day, a receiver's default clock before it knew the time). Each
+stretch takes the date most of its RMC/ZDA sentences give it (a stretch without one, and a receiver that
+sends none, the receiver's or the log's most common date), so the recordings of a joined log keep their
+own days. A date that disagrees with its stretch's continuous clock is not followed, and said where it
+jumps, by how much and which date the stretch is read on: a GPS week rollover, a receiver's default date
+before its almanac, a simulator's date under a time of day that carries on all look like this. When most
+sentences carry a logger's time (see lines.py), the logger's clock is the time
 base (independent of GNSS: a spoofer cannot move it) and the median GNSS-minus-logger offset is kept
 in the metadata; otherwise the GNSS time is. Without any date or logger time, times are seconds of
 the first day (`relative`). Headings have no time field: they take the logger's time of their line or
@@ -34,6 +39,7 @@ talker sends in real time, so file order is time order).
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from collections import Counter, defaultdict
 from collections.abc import Iterable
@@ -60,6 +66,13 @@ DAY_S = 86_400
 STALE_REPEATS = 5
 GNSS_TALKERS = ("GN", "GP", "GL", "GA", "GB", "BD", "GQ", "QZ", "GI")
 POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3, **{k: 4 for k in SELF_CONTAINED_KINDS}}
+# a new stretch of a receiver's time of day: where it goes back by more than 2 s and 20 of its steps (as
+# the table's recordings are cut), or on after an hour without a sentence
+STRETCH_BACK_MS, STRETCH_BACK_STEPS = 2_000, 20
+STRETCH_GAP_MS = STRAY_GAP_NS // 1_000_000
+JUMPS_SAID = 3  # a stretch's date jumps said one by one, the rest counted
+WEEK_ROLLOVER_S = 1024 * 7 * DAY_S  # a receiver that counts the GPS week in 10 bits dates a day this far off
+EpochKey = tuple[bool, int, int]  # (keyed by the receiver's time of day, its stretch, key)
 
 
 @dataclass
@@ -79,7 +92,21 @@ class Epoch:
     key: int  # unwrapped time of day in ms; logger time in ms when `gnss` is False
     first_line: int
     gnss: bool = True  # keyed by the receiver's own time of day (else by the logger's time)
+    stretch: int = 0  # the stretch of the receiver's time of day it is in (its date)
     sentences: list[Decoded] = field(default_factory=list)
+
+
+@dataclass
+class Stretch:
+    """A run of a receiver's timed sentences (file order) on one continuous time of day, and its date."""
+
+    first_key: int
+    last_key: int
+    anchor_s: float = math.nan  # its date: unwrapped time of day + anchor = seconds since 1970
+    dated: int = 0  # its sentences with a date (RMC, ZDA)
+    followed: int = 0  # those whose date it is read on
+    jumps: list[str] = field(default_factory=list)  # where its date jumps against its time of day, said
+    rolled_s: float = math.nan  # its own date, where that was a whole number of GPS week rollovers off
 
 
 @dataclass
@@ -88,13 +115,19 @@ class Receiver:
     file: DecodedFile
     antenna: str = ""  # "H": a Unicore receiver's secondary antenna
     sentences: list[Decoded] = field(default_factory=list)
-    epochs: dict[tuple[bool, int], Epoch] = field(default_factory=dict)
-    day_anchor_s: float = math.nan  # unwrapped time of day + anchor = seconds since 1970
-    date_jumps: int = 0
+    epochs: dict[EpochKey, Epoch] = field(default_factory=dict)
+    stretches: list[Stretch] = field(default_factory=list)
+    day_anchor_s: float = math.nan  # the most common date of its sentences (or the log's): stretches without one
     untimed: int = 0  # sentences without a time of day in a receiver that never gave one
 
-    def clock_s(self, key_ms: int) -> float:
-        return key_ms / 1000 + (self.day_anchor_s if math.isfinite(self.day_anchor_s) else 0.0)
+    def anchor_s(self, epoch: Epoch) -> float:
+        """The date an epoch of the receiver's own time of day is read on (NaN: none known)."""
+        own = self.stretches[epoch.stretch].anchor_s if epoch.stretch < len(self.stretches) else math.nan
+        return own if math.isfinite(own) else self.day_anchor_s
+
+    def clock_s(self, epoch: Epoch) -> float:
+        anchor = self.anchor_s(epoch)
+        return epoch.key / 1000 + (anchor if math.isfinite(anchor) else 0.0)
 
 
 def _source(file: DecodedFile, d: Decoded) -> str:
@@ -159,31 +192,89 @@ def _unwrapped_ms(tods: np.ndarray) -> np.ndarray:
     return np.round((tods + days * DAY_S) * 1000).astype(np.int64)
 
 
+def _stretch_runs(keys: np.ndarray) -> np.ndarray:
+    """The stretch of each unwrapped time of day (file order): a new one where it goes back by more than
+    STRETCH_BACK_MS and STRETCH_BACK_STEPS of its steps, or on by more than STRETCH_GAP_MS."""
+    if len(keys) < 2:
+        return np.zeros(len(keys), dtype=np.int64)
+    d = np.diff(keys)
+    steps = d[d > 0]
+    back = max(STRETCH_BACK_MS, STRETCH_BACK_STEPS * int(np.median(steps))) if len(steps) else STRETCH_BACK_MS
+    return np.r_[0, np.cumsum((d < -back) | (d > STRETCH_GAP_MS))].astype(np.int64)
+
+
+def _iso_day(day: float) -> str:
+    try:
+        return (dt.date(1970, 1, 1) + dt.timedelta(days=math.floor(day))).isoformat()
+    except OverflowError:
+        return f"day {math.floor(day)} since 1970"
+
+
+def _tod(key_ms: int) -> str:
+    """An unwrapped time of day as hh:mm:ss (its fraction where it has one)."""
+    ms = key_ms % (DAY_S * 1000)
+    text = f"{ms // 3_600_000:02d}:{ms // 60_000 % 60:02d}:{ms // 1000 % 60:02d}"
+    return text + (f".{ms % 1000:03d}".rstrip("0") if ms % 1000 else "")
+
+
+def _days(delta_s: float) -> str:
+    n = round(delta_s / DAY_S)
+    weeks = f" ({abs(n) // 7} weeks)" if n % 7 == 0 and abs(n) >= 14 else ""
+    return f"{abs(n)} day{'s' if abs(n) != 1 else ''}{weeks} {'forward' if n > 0 else 'back'}"
+
+
+def _date_stretch(stretch: Stretch, dated: list[tuple[Decoded, int]]) -> Counter[float]:
+    """Date one stretch by its dated sentences (and their unwrapped times of day), file order: the date
+    most of them give it; every place its date changes against its time of day is said. Its dates, counted."""
+    anchors = [round(((d.day or 0) * DAY_S + d.tod_s - k / 1000) / DAY_S) * DAY_S for d, k in dated]
+    counts = Counter(float(a) for a in anchors)
+    if not counts:
+        return counts
+    stretch.anchor_s, stretch.followed = counts.most_common(1)[0]
+    stretch.dated = len(anchors)
+    for (before, k0), (after, k1), a0, a1 in zip(dated, dated[1:], anchors, anchors[1:], strict=False):
+        if a1 != a0 and before.day is not None and after.day is not None:
+            stretch.jumps.append(
+                f"at {_tod(k1)} {after.kind}'s date is {_iso_day(after.day)} where the time of day, carried on "
+                f"from {_iso_day(before.day)} {_tod(k0)}, gives {_iso_day((a0 + k1 / 1000) / DAY_S)}: {_days(a1 - a0)}"
+            )
+    return counts
+
+
 def assign_epochs(rx: Receiver) -> None:
-    """Group the receiver's sentences into epochs (by unwrapped time of day) and find its date anchor."""
+    """Group the receiver's sentences into epochs (by unwrapped time of day) and date its stretches."""
     timed = [d for d in rx.sentences if math.isfinite(d.tod_s)]
     keys = _unwrapped_ms(np.array([d.tod_s for d in timed])) if timed else np.zeros(0, dtype=np.int64)
-    key_of = {id(d): int(k) for d, k in zip(timed, keys.tolist(), strict=True)}
-    anchors = [d.day * DAY_S + d.tod_s - key_of[id(d)] / 1000 for d in timed if d.day is not None]
-    if anchors:
-        rounded = Counter(round(a / DAY_S) * DAY_S for a in anchors)
-        rx.day_anchor_s = float(rounded.most_common(1)[0][0])
-        rx.date_jumps = sum(n for a, n in rounded.items() if a != rx.day_anchor_s)
-    current: tuple[bool, int] | None = None
+    runs = _stretch_runs(keys)
+    key_of = {id(d): (int(r), int(k)) for d, r, k in zip(timed, runs.tolist(), keys.tolist(), strict=True)}
+    members: dict[int, list[tuple[Decoded, int]]] = defaultdict(list)
+    for d, r, k in zip(timed, runs.tolist(), keys.tolist(), strict=True):
+        members[r].append((d, k))
+    dates: Counter[float] = Counter()
+    for r in range(len(members)):
+        rx.stretches.append(Stretch(min(k for _, k in members[r]), max(k for _, k in members[r])))
+        dates += _date_stretch(rx.stretches[r], [(d, k) for d, k in members[r] if d.day is not None])
+    if dates:
+        rx.day_anchor_s = float(dates.most_common(1)[0][0])
+    for stretch in rx.stretches:  # a GPS week rollover: the receiver's own day, read on its other date
+        off = stretch.anchor_s - rx.day_anchor_s
+        if math.isfinite(off) and off and off % WEEK_ROLLOVER_S == 0:
+            stretch.rolled_s, stretch.anchor_s = stretch.anchor_s, rx.day_anchor_s
+    current: EpochKey | None = None
     pending: list[Decoded] = []
     for d in rx.sentences:
-        key: tuple[bool, int] | None = None
+        key: EpochKey | None = None
         if id(d) in key_of:
-            key = (True, key_of[id(d)])
+            key = (True, *key_of[id(d)])
         elif d.kind in POSITION_KINDS and d.sentence.host_ns is not None:
-            key = (False, d.sentence.host_ns // 1_000_000)  # a talker that sends no time: logger time
+            key = (False, 0, d.sentence.host_ns // 1_000_000)  # a talker that sends no time: logger time
         if key is None:
             if current is None:
                 pending.append(d)
             else:
                 rx.epochs[current].sentences.append(d)
             continue
-        epoch = rx.epochs.setdefault(key, Epoch(key[1], d.sentence.line, key[0]))
+        epoch = rx.epochs.setdefault(key, Epoch(key[2], d.sentence.line, key[0], key[1]))
         epoch.sentences.append(d)
         if d.kind in POSITION_KINDS:
             if current is None and pending:
@@ -198,7 +289,7 @@ def _place_by_logger_time(rx: Receiver) -> None:
     """Move each sentence without a time of day (GSV, GSA, VTG) to the epoch whose position sentence the
     logger stamped nearest it, where the stamps are fine enough to tell bursts apart: a phone writes its
     second as GSV, GSA, VTG, then RMC and GGA (GnssLogger's NMEA), so file order put its sky a second early."""
-    anchors: list[tuple[int, tuple[bool, int]]] = []
+    anchors: list[tuple[int, EpochKey]] = []
     for key, epoch in rx.epochs.items():
         stamps = [d.sentence.host_ns for d in epoch.sentences if d.kind in POSITION_KINDS]
         if stamps and all(ns is not None for ns in stamps):
@@ -222,7 +313,7 @@ def _place_by_logger_time(rx: Receiver) -> None:
     k = np.clip(np.searchsorted(at, host), 1, len(at) - 1)
     nearest = np.where(np.abs(at[k] - host) < np.abs(host - at[k - 1]), k, k - 1)
     close = np.abs(at[nearest] - host) < 0.5 * spacing
-    moved: set[tuple[bool, int]] = set()
+    moved: set[EpochKey] = set()
     for (key, d, _), i, near in zip(movable, nearest.tolist(), close.tolist(), strict=True):
         target = anchors[i][1]
         if near and target != key:
@@ -268,11 +359,11 @@ def drop_stale_epochs(rxs: list[Receiver], skipped: list[Skipped]) -> None:
 
 def _own_time_ns(rx: Receiver, epoch: Epoch) -> int:
     """The receiver's time of an epoch with its own date where a sentence of the epoch carries one (RMC,
-    ZDA): a spoofer's date moves it, while the log's clock follows the date most of the log has."""
+    ZDA): a spoofer's date moves it, while the log's clock follows the date most of its stretch has."""
     dated = next((d for d in epoch.sentences if d.day is not None and math.isfinite(d.tod_s)), None)
     if dated is not None and dated.day is not None:
         return round((dated.day * DAY_S + dated.tod_s) * NS)
-    return round(rx.clock_s(epoch.key) * NS)
+    return round(rx.clock_s(epoch) * NS)
 
 
 @dataclass
@@ -391,6 +482,46 @@ def epoch_satellites(epoch: Epoch) -> list[tuple[str, float, float, float, float
     return [(sv, el, az, c, (1.0 if sv in used else 0.0) if has_gsa else math.nan) for sv, (el, az, c) in sky.items()]
 
 
+def _stretch_dates_said(rx: Receiver, spans: dict[int, list[int]]) -> list[Skipped]:
+    """What the dating of the receiver's stretches repaired, each line with its stretch's span on the log's
+    clock (so a log joining recordings lists it in its own): the dates not followed in a stretch, where and
+    by how much they jumped and which date the stretch is read on; and, where its stretches are on more than
+    one date, the stretches with no date of their own, given the receiver's most common one."""
+    out: list[Skipped] = []
+    days = {s.anchor_s for s in rx.stretches if math.isfinite(s.anchor_s)}
+    for i, s in enumerate(rx.stretches):
+        span = (min(spans[i]), max(spans[i])) if spans.get(i) else None
+        start, end = s.anchor_s + s.first_key / 1000, s.anchor_s + s.last_key / 1000
+        if math.isfinite(s.rolled_s):
+            own_day = _iso_day(s.rolled_s / DAY_S + s.first_key / 1000 / DAY_S)
+            why = (
+                f"dates of a stretch of the time of day ({_tod(s.first_key)} to {_tod(s.last_key)}) "
+                f"{_days(s.rolled_s - s.anchor_s)} from the receiver's most common date, whole GPS week rollovers "
+                f"(1024 weeks each): read on {_iso_day(start / DAY_S)} as the rest, not on {own_day}"
+            )
+            out.append(Skipped(rx.receiver_id, why, s.followed, "repaired", span_ns=span))
+        if s.jumps:
+            said = "; ".join(s.jumps[:JUMPS_SAID])
+            if len(s.jumps) > JUMPS_SAID:
+                said += f"; and {len(s.jumps) - JUMPS_SAID} more"
+            end_day = "" if math.floor(start / DAY_S) == math.floor(end / DAY_S) else _iso_day(end / DAY_S) + " "
+            on = f"{_iso_day(start / DAY_S)} {_tod(s.first_key)} to {end_day}{_tod(s.last_key)}"
+            why = (
+                f"dates that jump against the continuous time of day, not followed: {said}. The stretch is read as "
+                f"{on}, the date of {s.followed} of its {s.dated} dated sentences"
+            )
+            out.append(Skipped(rx.receiver_id, why, s.dated - s.followed, "repaired", span_ns=span))
+        elif len(days) > 1 and not math.isfinite(s.anchor_s) and math.isfinite(rx.day_anchor_s):
+            n = sum(e.stretch == i and e.gnss for e in rx.epochs.values())
+            why = (
+                f"epochs of a stretch of the time of day without a date of its own ({_tod(s.first_key)} to "
+                f"{_tod(s.last_key)}) among stretches of other dates: the receiver's most common date "
+                f"({_iso_day(rx.day_anchor_s / DAY_S)}) taken"
+            )
+            out.append(Skipped(rx.receiver_id, why, n, "repaired", span_ns=span))
+    return out
+
+
 def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> np.ndarray:
     """Ellipsoidal heights: MSL altitude + geoid separation, with the repairs the docstring lists."""
     alt, sep = cols.pop("alt_msl_m"), cols.pop("geoid_sep_m")
@@ -419,22 +550,24 @@ def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> n
     return h
 
 
-def _fixless_sky_placed(fix_ns: list[int], fixless_ns: list[int]) -> list[bool]:
+def _fixless_sky_placed(fix_ns: list[int], fixless_ns: list[int]) -> tuple[list[bool], list[bool]]:
     """Which fix-less epochs' sky goes into the satellites frame: those from the receiver's first fix on that no
     hour of silence separates from its fixes (every one of a receiver that never had a fix). Before its first
     fix a receiver is acquiring: a cold start's sky, no level a later loss is measured against. And a receiver
     that does not know the time stamps its epochs with its own default clock (gpsd's MTK-3301 and RGM3800
     logs: 1980-01-05 23:59, hours from their fixes; GP-320FW's after a reboot): such a time would stretch
-    the log over hours it never recorded."""
+    the log over hours it never recorded. Also which of those not placed are on such a clock: an hour of
+    silence from every fix, before the first or after it (the others are the acquisition before it)."""
     if not fix_ns:
-        return [True] * len(fixless_ns)
+        return [True] * len(fixless_ns), [False] * len(fixless_ns)
     t = np.array(fix_ns + fixless_ns, dtype=np.int64)
     is_fix = np.arange(len(t)) < len(fix_ns)
     order = np.argsort(t, kind="stable")
     run = np.empty(len(t), dtype=np.int64)
     run[order] = np.cumsum(np.concatenate(([0], np.diff(t[order]) > STRAY_GAP_NS)))
     placed = np.isin(run, run[is_fix]) & (t >= min(fix_ns))
-    return placed[len(fix_ns) :].tolist()
+    acquiring = (run == run[is_fix].min()) & (t < min(fix_ns))
+    return placed[len(fix_ns) :].tolist(), (~placed & ~acquiring)[len(fix_ns) :].tolist()
 
 
 SatRow = tuple[int, str, str, float, float, float, float]  # t_ns, receiver, sv, elevation, azimuth, C/N0, used
@@ -452,14 +585,14 @@ def _receiver_sky(
     recordings."""
     fix_ns = [t for t, _, has_fix in sky_epochs if has_fix]
     fixless_ns = [t for t, _, has_fix in sky_epochs if not has_fix]
-    placed = iter(_fixless_sky_placed(fix_ns, fixless_ns))
-    first_fix = min(fix_ns, default=None)
+    placed_fixless, other_clock_fixless = (iter(x) for x in _fixless_sky_placed(fix_ns, fixless_ns))
     out: list[SatRow] = []
-    astray = 0  # on another clock: an hour or more from the fixes (before the first fix: acquiring, not counted)
+    astray = 0  # on another clock: an hour or more from the fixes (the acquisition before the first fix: not counted)
     for at_ns, epoch, has_fix in sky_epochs:
-        keep = has_fix or next(placed)
+        keep = has_fix or next(placed_fixless)
+        other_clock = not has_fix and next(other_clock_fixless)
         sky = epoch_satellites(epoch)
-        if sky and not keep and first_fix is not None and at_ns >= first_fix:
+        if sky and other_clock:
             astray += 1
         elif sky and keep:
             out += [(at_ns, rx.receiver_id, *sat) for sat in sky]
@@ -553,12 +686,6 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
             skipped.append(Skipped(rx.receiver_id, "no RMC/ZDA date: the log's date taken", len(rx.epochs), "repaired"))
         if rx.untimed:
             skipped.append(Skipped(rx.receiver_id, "sentences without a time of day, in no epoch", rx.untimed))
-        if rx.date_jumps:
-            skipped.append(
-                Skipped(
-                    rx.receiver_id, "dates that jump against the continuous time of day (not followed)", rx.date_jumps
-                )
-            )
     all_sentences = [d for f in files for d in f.decoded]
     with_host = sum(d.sentence.host_ns is not None for d in all_sentences)
     logger = bool(all_sentences) and with_host >= len(all_sentences) / 2
@@ -583,7 +710,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         mine = [rx for rx in rxs if rx.file is f and rx.epochs]
         main = max(mine, key=lambda r: len(r.epochs), default=None)
         anchors = (
-            [(e.first_line, round(main.clock_s(e.key) * NS)) for e in main.epochs.values() if e.gnss]
+            [(e.first_line, round(main.clock_s(e) * NS)) for e in main.epochs.values() if e.gnss]
             if main is not None
             else []
         )
@@ -595,22 +722,25 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         kinds = Counter(d.kind for d in rx.sentences)
         line_t = times_by_file[id(rx.file)]
         sky_epochs: list[tuple[int, Epoch, bool]] = []  # every timed epoch in file order, and whether it has a fix
+        spans: dict[int, list[int]] = defaultdict(list)  # each stretch's epochs' times on the log's clock
         for epoch in rx.epochs.values():
             got = epoch_fix(epoch)
             if got is None:
                 continue
             values, _ = got
-            gnss_ns = round(rx.clock_s(epoch.key) * NS) if epoch.gnss else epoch.key * 1_000_000
+            gnss_ns = round(rx.clock_s(epoch) * NS) if epoch.gnss else epoch.key * 1_000_000
             if not values:  # no fix, but its sky (GSV) is what the receiver saw: a fix lost to jamming shows there
                 invalid += 1
                 at_ns = line_t.get(epoch.first_line) if logger else gnss_ns
                 if at_ns is not None:
                     sky_epochs.append((int(at_ns), epoch, False))
+                    if epoch.gnss:
+                        spans[epoch.stretch].append(int(at_ns))
                 continue
             own: int | None = None
             if logger:
                 t_ns = line_t.get(epoch.first_line)
-                if t_ns is not None and epoch.gnss and math.isfinite(rx.day_anchor_s):
+                if t_ns is not None and epoch.gnss and math.isfinite(rx.anchor_s(epoch)):
                     offsets.append((gnss_ns - t_ns) / NS)
                     own = _own_time_ns(rx, epoch)
             else:
@@ -618,6 +748,8 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
             if t_ns is None:
                 continue
             rows.append((int(t_ns), values))
+            if epoch.gnss:
+                spans[epoch.stretch].append(int(t_ns))
             own_ns.append(own)
             fix_epochs.setdefault((rx.receiver_id, int(t_ns)), (epoch, rx.file.scan.path))
             sky_epochs.append((int(t_ns), epoch, True))
@@ -625,6 +757,7 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
             skipped.append(
                 Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
             )
+        skipped += _stretch_dates_said(rx, spans)
         sat_rows += _receiver_sky(rx, sky_epochs, fixless_epochs, skipped)
         msgtype = "NMEA " + " ".join(f"{k}" for k in sorted(kinds))
         if not rows:  # a receiver that never had a fix

@@ -237,8 +237,8 @@ def build_summary(
         "t0_utc": table.absolute_iso(0.0) if table.unix_ns(0.0) is not None else None,
         "duration_s": round(table.duration_s, 6),
         "streams": [asdict(s) | {"rate_hz": s.rate_hz} for s in table.streams],
-        "skipped": [asdict(s) for s in skipped_or_repaired(table)],
-        "computed": [asdict(s) for s in computed(table)],
+        "skipped": [s.as_dict() for s in skipped_or_repaired(table)],
+        "computed": [s.as_dict() for s in computed(table)],
         "verdict": {
             "spoofed": verdict.spoofed,
             "headline": verdict.headline,
