@@ -66,6 +66,7 @@ from spooflens.schema import FixType
 WEEK_S = 604_800.0
 ROLLOVER_S = 1024 * WEEK_S
 JAMMED = "jammed receiver's noise"
+HELD_FIX = "held fix"
 # a coast starts this long before the onset of the incident it checks (`CoastingOptions.margin_s`, and more)
 DEPARTURE_LEAD_S = 2.0
 # the alarms a receiver's indicators can account for: the fix against itself, the receiver's indicators
@@ -139,6 +140,11 @@ class ExplanationOptions:
     # mode switch
     mode_switch_within_s: float = 3.0
     max_mode_switch_jump_m: float = 30.0
+    # a fix held through an outage: frozen while the receiver reports at least this speed; the catch-up within
+    # this fraction of the distance its speed covered (or a tenth of a reflection's length)
+    held_min_speed_mps: float = 1.0
+    held_catch_up_tolerance: float = 0.3
+    held_catch_up_fixes: int = 3
     # time faults
     rollover_tolerance_s: float = 60.0
     max_leap_s: int = 18  # GPS - UTC since 2017
@@ -861,6 +867,57 @@ def read_mode_switch(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     return Reading("mode switch", Kind.RECEIVER_FAULT, True, text, facts, rid)
 
 
+def read_held_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
+    """A receiver that lost its satellites and kept writing its last position as a valid fix (a car's receiver
+    under an overpass: quality 1, status A, 0 satellites used, its position frozen while it reported 53 kn),
+    then jumped ahead to where the vehicle had got to. The held fixes are those with no satellite used, or the
+    very position of the fix before while the receiver reports a speed; the jump after them must be the
+    distance the reported speed covers over the hold (within `held_catch_up_tolerance`, and a reflection's
+    length): a spoofer's jump is not where the vehicle's own speed took it."""
+    opts, rx = scene.opts, w.rx
+    rid = rx.receiver_id
+    lo = max(w.now.start - 1, 0)
+    idx = np.arange(lo + 1, w.now.stop)
+    if not len(idx) or marks:
+        return _kept(HELD_FIX, Kind.DEGRADATION, "; ".join(marks), rid)
+    lat, lon, used = rx.col("lat_deg"), rx.col("lon_deg"), rx.col("sats_used")
+    speed = np.hypot(rx.col("vel_e_mps"), rx.col("vel_n_mps"))
+    frozen = (lat[idx] == lat[idx - 1]) & (lon[idx] == lon[idx - 1]) & (speed[idx - 1] >= opts.held_min_speed_mps)
+    held = frozen | (used[idx] == 0)
+    runs = np.flatnonzero(np.diff(np.r_[0, held.astype(np.int8), 0]))
+    for a, b in zip(runs[::2], runs[1::2], strict=True):
+        first, end = int(idx[a]), int(idx[b - 1]) + 1  # the first held fix, the fix that ends the hold
+        if end >= len(rx.t) or not np.isfinite(speed[first - 1]):
+            continue
+        # the receiver catches up within a few fixes (a first fix on 3 satellites at HDOP 20 may lag)
+        caught = None
+        for after in range(end, min(end + opts.held_catch_up_fixes, len(rx.t))):
+            span = float(rx.t[after] - rx.t[first - 1])
+            north = (lat[after] - lat[first - 1]) * 110_540.0
+            east = (lon[after] - lon[first - 1]) * 111_320.0 * np.cos(np.radians(lat[after]))
+            moved = float(np.hypot(east, north))
+            travel = float(np.nanmean(speed[[first - 1, after]])) * span
+            if abs(moved - travel) <= max(opts.held_catch_up_tolerance * travel, opts.max_reflection_m / 10):
+                caught = (after, span, moved, travel)
+                break
+        if caught is None:
+            continue
+        after, span, moved, travel = caught
+        n, lost = end - first, used[first:end]
+        sats = f"{np.nanmin(lost):.0f} satellites used" if np.isfinite(lost).any() else "no satellite count"
+        text = (
+            f"the receiver held its fix for {rx.t[end] - rx.t[first]:.1f} s from {rx.t[first]:.1f} s ({sats}, its "
+            f"position frozen at {speed[first - 1]:.1f} m/s), then caught up {moved:.0f} m by {rx.t[after]:.1f} s, "
+            "what its speed covered: an outage (an overpass, a tunnel), not spoofing"
+        )
+        facts = (
+            f"{n} fix(es) held at {rx.t[first]:.1f}-{rx.t[end - 1]:.1f} s ({sats})",
+            f"catch-up {moved:.0f} m against {travel:.0f} m at the reported speed over {span:.1f} s",
+        )
+        return Reading(HELD_FIX, Kind.DEGRADATION, True, text, facts, rid)
+    return _kept(HELD_FIX, Kind.DEGRADATION, "", rid)
+
+
 def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> Reading:
     """A fix dropped (or sent twice) by an output cycle that is not locked to the receiver's fixes (an NMEA
     2000 gateway sending 129029 every 1.005 s of 1 Hz fixes drops one every 200 s): between two messages
@@ -1249,6 +1306,7 @@ def read_alarm(scene: _Scene, alarm: Alarm, result: DetectorResult) -> list[Read
             marks = spoofer_marks(w, scene.opts)
             out += [
                 read_convergence(scene, alarm, w, marks),
+                read_held_fix(scene, alarm, w, marks),
                 read_mode_switch(scene, alarm, w, marks),
                 *([read_skipped_fix(scene, alarm, w, marks)] if result.name == GNSS_CONSISTENCY else []),
                 read_interference(scene, alarm, w, marks),

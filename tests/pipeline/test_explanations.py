@@ -550,3 +550,29 @@ def test_a_stations_antenna_moved_and_put_back_is_no_spoofing() -> None:
     weighed = explain(table, [result], verdict.incidents[0])
     assert "antenna moved" not in {e.cause for e in weighed.explanations}
     assert any("left the receiver's one motion" in r for r in weighed.ruled_out)
+
+
+def _held_fix(table: EpochTable, at_s: float, offset_m: float = 0.0) -> EpochTable:
+    """The receiver's fix held for 2 s from `at_s` (its position frozen, 0 satellites used), then where the car
+    was; `offset_m` north from there on (a spoofer's jump out of the hold)."""
+    fx = table.fixes.copy()
+    held = fx.index[fx["t_s"].between(at_s, at_s + 1.5)]
+    before = fx.index[fx["t_s"] < at_s][-1]
+    fx.loc[held, ["lat_deg", "lon_deg"]] = fx.loc[before, ["lat_deg", "lon_deg"]].to_numpy(float)
+    fx.loc[held, "sats_used"] = 0.0
+    fx.loc[fx["t_s"] >= at_s + 2.0, "lat_deg"] += offset_m / 110_540.0
+    return replace(table, fixes=fx)
+
+
+def test_a_fix_held_through_an_outage_then_caught_up_is_degradation(mtv: Analysis) -> None:
+    """A car's receiver under an overpass (a real Denver drive from outside the corpus) wrote its last position
+    for 2 s with 0 satellites used, then jumped 87 m to where its 27 m/s took it: it was told as a 3D->2D mode
+    switch "moving 27 m". The same hold ending 300 m off the car's track is no outage."""
+    cut = mtv.table.between(600.0, 900.0)
+    held = analyze_table(_held_fix(cut, 725.0))
+    (inc,) = [i for i in held.verdict.incidents if any(e.cause == "held fix" for e in i.explanations)]
+    (e,) = [e for e in inc.explanations if e.cause == "held fix"]
+    assert e.text.startswith("the receiver held its fix for 2.0 s from 725.0 s (0 satellites used")
+    assert "what its speed covered: an outage" in e.text and inc.kind == Kind.DEGRADATION
+    jumped = analyze_table(_held_fix(cut, 725.0, offset_m=300.0))
+    assert not any(e.cause == "held fix" for i in jumped.verdict.incidents for e in i.explanations)
