@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pipeline_support import circling_table
+from shared_inputs import read_shared
 
 from readers import read_log
 from spooflens.attacks import AttackError, AttackTruth, apply_attack, parse_attack, sidecar_path
@@ -129,7 +130,7 @@ def test_inject_writes_a_spoofed_copy_in_the_same_format(fmt: str, tmp_path: Pat
 def test_inject_into_the_real_husky_bag(husky_bag: Path, tmp_path: Path) -> None:
     out = tmp_path / "husky_spoofed.bag"
     assert main(["inject", str(husky_bag), "--attack", "ramp:rate=2,start=200", "-o", str(out)]) == 0
-    original, spoofed = read_log(husky_bag), read_log(out)
+    original, spoofed = read_shared(husky_bag), read_log(out)
     pd.testing.assert_frame_equal(spoofed.imu, original.imu)
     pd.testing.assert_frame_equal(spoofed.odometry, original.odometry)
     shift = _enu_shift(original.fixes, spoofed.fixes)

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from paths import SAMPLE_LOGS
+from shared_inputs import simulated
 
 from readers import read_log
 from spooflens.attacks import AttackError, AttackTruth, apply_attack, parse_attack, sidecar_path
@@ -27,7 +28,7 @@ START = 60.0
 
 @cache
 def _table() -> EpochTable:
-    return simulate("ground_raw", seed=3, duration_s=120.0).table
+    return simulated("ground_raw", 3, 120.0).table
 
 
 def _offsets(truth: AttackTruth) -> np.ndarray:

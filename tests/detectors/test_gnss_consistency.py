@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from paths import real_log
+from shared_inputs import read_shared
 
-from readers import read_log
 from spooflens.attacks import apply_attack
 from spooflens.attacks.spec import parse_attack
 from spooflens.constants import KNOT_MPS
@@ -134,7 +134,7 @@ def test_a_baseline_caps_the_scale_a_log_attacked_throughout_would_learn() -> No
 @cache
 def _yacht() -> EpochTable:
     """A yacht's 4 h NMEA log: GLL positions at 0.001 arcmin, VTG relayed by the instrument bus."""
-    return read_log(real_log("nmea_boats/signalk_plaka.log"))
+    return read_shared(real_log("nmea_boats/signalk_plaka.log"))
 
 
 def test_a_receiver_heavier_tailed_than_gaussian_has_its_threshold_raised_from_its_own_bursts() -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from paths import REAL
+from shared_inputs import read_shared
 
 from readers import read_log
 from readers.rinex import rinex_approx_position
@@ -28,7 +29,7 @@ def _surveyed(receiver: str) -> np.ndarray:
 
 
 def test_solved_fixes_sit_on_the_surveyed_stations() -> None:
-    table = with_solved_fixes(read_log(GSI))
+    table = with_solved_fixes(read_shared(GSI))
     assert table.ionosphere is not None  # the nav file's Klobuchar coefficients travel with the table
     means = {}
     for rid in STATIONS:
@@ -49,7 +50,7 @@ def test_inject_on_real_pseudoranges_moves_the_solution_and_is_caught(tmp_path: 
     assert main(["inject", str(GSI), "--attack", attack, "-o", str(out)]) == 0
     truth = AttackTruth.read(sidecar_path(out))
     assert truth.satellites == ["G07", "G28"] and set(truth.receivers) == set(STATIONS)
-    clean, spoofed = read_log(GSI), read_log(out)
+    clean, spoofed = read_shared(GSI), read_log(out)
     obs = clean.observations
     hit = obs["sv_id"].isin(truth.satellites) & (obs["t_s"] >= 1800.0)
     d_pr = spoofed.observations["pseudorange_m"] - obs["pseudorange_m"]

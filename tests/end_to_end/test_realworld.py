@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from paths import REAL, ROOT
+from shared_inputs import read_shared
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
@@ -134,7 +135,7 @@ def test_raim_excludes_and_names_a_counterfeit_satellite_on_the_real_pair() -> N
     from readers.rinex import rinex_approx_position
     from spooflens.gnss.solved_fixes import with_solved_fixes
 
-    table = read_log(GSI)
+    table = read_shared(GSI)
     spoofed, _ = apply_attack(table, parse_attack("pr_delay:delay=100000,svs=G07,start=0"))
     analysis = analyze_table(with_solved_fixes(spoofed))
     texts = [f.text for f in analysis.verdict.findings]
@@ -164,7 +165,7 @@ def test_one_satellite_a_reflection_long_at_a_station_is_nlos_but_a_second_recei
     from spooflens.gnss.solved_fixes import with_solved_fixes
 
     attack = "pr_delay:delay=100,svs=G07,start=0,receiver=0759"
-    spoofed, _ = apply_attack(read_log(GSI), parse_attack(attack))
+    spoofed, _ = apply_attack(read_shared(GSI), parse_attack(attack))
     verdict = analyze_table(with_solved_fixes(spoofed)).verdict
     raim_alone, later = verdict.incidents
     # RAIM alone (an independent class, medium until now): the reflection explains it
@@ -177,7 +178,7 @@ def test_one_satellite_a_reflection_long_at_a_station_is_nlos_but_a_second_recei
 
 
 def test_an_injected_ramp_on_the_real_husky_bag_is_an_incident_that_ends_with_the_attack(husky_bag: Path) -> None:
-    table = read_log(husky_bag)
+    table = read_shared(husky_bag)
     spoofed, _ = apply_attack(table, parse_attack("ramp:rate=2,start=200,end=300"))
     verdict = analyze_table(spoofed).verdict
     spoofing = [i for i in verdict.incidents if i.is_spoofing]
@@ -192,7 +193,7 @@ def test_a_step_on_the_real_husky_bag_opens_its_own_incident_and_leaves_the_clea
     """A 50 m step from 157.4 s: the fixes before it are the clean bag's. Its alarms are its incident's
     start, not the end of one confirmed from the bag's own wander at 102 s (which the coasts cut short by
     the attack left the clean envelope's long horizons too few to bound)."""
-    table = read_log(husky_bag)
+    table = read_shared(husky_bag)
     spoofed, _ = apply_attack(table, parse_attack("step:offset=50,start=157.4"))
     verdict = analyze_table(spoofed).verdict
     spoofing = [i for i in verdict.incidents if i.is_spoofing]
@@ -203,7 +204,7 @@ def test_a_step_on_the_real_husky_bag_opens_its_own_incident_and_leaves_the_clea
 
 
 def test_the_clean_real_husky_bag_is_not_called_spoofed(husky_bag: Path) -> None:
-    verdict = analyze_table(read_log(husky_bag)).verdict
+    verdict = analyze_table(read_shared(husky_bag)).verdict
     assert not verdict.spoofed, verdict.incidents
     # its start (SBAS converging: receiver flags, then a GNSS-only jump half a minute later) is noted
     assert verdict.incidents and all(i.confidence == "low" for i in verdict.incidents)

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from paths import real_log
+from shared_inputs import read_shared
 
 from readers import read_log
 from spooflens.attacks import apply_attack, parse_attack
@@ -46,7 +47,7 @@ def test_a_short_real_log_says_what_it_could_not_learn_and_still_catches_a_ramp(
     horizon), which the navigation result says. Clean, its one inertial alarm (28 s, before any clean coast
     could run) is not confirmed and says why; with a 5 m/s ramp from 30 s, a coast from the reference's
     convergence at 20 s up to the ramp calibrates the check, and the ramp is spoofing to the end of the log."""
-    table = _first(read_log(husky_bag), seconds)
+    table = _first(read_shared(husky_bag), seconds)
     clean = analyze_table(table)
     navigation = next(r for r in clean.results if r.name == "navigation")
     assert navigation.extras["noise_learned"] is False
@@ -261,7 +262,7 @@ def test_a_short_stretch_judges_its_coasts_against_a_widened_margin(
     clean, no spoofing. A 2 m/s ramp 30 s into the 60 s stretch departs 9.6 times the one calibration coast
     before it: that is not told from this INS's drift, and the anomaly says so; in the 150 s stretch it is
     caught."""
-    stretch = read_log(husky_bag).between(start_s, start_s + seconds)
+    stretch = read_shared(husky_bag).between(start_s, start_s + seconds)
     assert not analyze_table(stretch).verdict.spoofed
     ramped, _ = apply_attack(stretch, parse_attack(f"ramp:rate=2,start={ramp_s}"))
     verdict = analyze_table(ramped).verdict

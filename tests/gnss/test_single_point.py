@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+from shared_inputs import simulated
 
 from spooflens.geodesy import ecef_to_geodetic, geodetic_to_ecef, geodetic_to_enu
 from spooflens.gnss.ephemeris import (
@@ -142,7 +143,7 @@ def test_an_epoch_of_degenerate_geometry_is_left_unsolved_not_a_singular_matrix(
 
 
 def test_simulated_receiver_fixes_are_its_own_solution_near_the_truth() -> None:
-    sim = simulate("ground_raw", seed=3, duration_s=120.0)
+    sim = simulated("ground_raw", 3, 120.0)
     table = sim.table
     assert len(table.observations) > 6 * len(table.fixes)
     truth = table.truth

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from filterpy.kalman import KalmanFilter
+from shared_inputs import read_shared, simulated
 
-from readers import read_log
 from spooflens.epoch_table import EpochTable
 from spooflens.geodesy import geodetic_to_enu
 from spooflens.navigation.imu_models import grade
@@ -21,7 +21,7 @@ from spooflens.simulation.simulate import SCENARIOS, simulate
 
 @pytest.fixture(scope="module")
 def ground() -> tuple[EpochTable, NavSolution]:
-    sim = simulate("ground", seed=3)
+    sim = simulated("ground", 3)
     return sim.table, run_filter(sim.table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade))
 
 
@@ -266,7 +266,7 @@ def test_excluding_gnss_coasts_on_the_ins() -> None:
 
 
 def test_husky_bag_end_to_end_with_the_rotated_imu(husky_bag: Path) -> None:
-    table = read_log(husky_bag)
+    table = read_shared(husky_bag)
     sol = run_filter(table, options=FilterOptions(grade=grade("consumer_mems")))
     assert sol.alignment is not None
     assert len(sol.t) > 900 and set(np.unique(sol.dof)) == {3}  # NavSatFix: position only

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_inputs import simulated
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.cli import main
@@ -20,7 +21,6 @@ from spooflens.pipeline.joined import NAVIGATED_SPANS
 from spooflens.pipeline.preconditions import MAX_IMU_GAP_S
 from spooflens.pipeline.run import Analysis, analyze_table
 from spooflens.service import read_table
-from spooflens.simulation.simulate import simulate
 
 LOG171 = "corpus/dronekit-la-testdata/log171.bin"  # ArduCopter 3.3: IMU stops 2.02 s at 61.1 s, crashes at 227.7 s
 
@@ -51,7 +51,7 @@ def _holed(table: EpochTable, start_s: float, seconds: float) -> EpochTable:
 @pytest.fixture(scope="module")
 def simulated_gap() -> Analysis:
     # the simulated car (consumer IMU at 100 Hz, GNSS at 10 Hz, 300 s) with its IMU silent for 2 s at 150 s
-    return analyze_table(_holed(simulate("ground", seed=3).table, 150.0, 2.0))
+    return analyze_table(_holed(simulated("ground", 3).table, 150.0, 2.0))
 
 
 def test_a_simulated_log_with_a_gap_navigates_both_stretches_and_the_gap_raises_nothing(
@@ -81,7 +81,7 @@ def test_a_simulated_log_with_a_gap_navigates_both_stretches_and_the_gap_raises_
 def test_an_attack_ending_where_the_imu_stops_is_not_coasted_over_the_gap() -> None:
     # a 5 m/s ramp from 100 s to the end: confirmed on the first stretch; its coast stops where the IMU
     # does, and the incident ends there (the log goes on, unnavigated by that filter), not at the log's end
-    table, _ = apply_attack(_holed(simulate("ground", seed=3).table, 150.0, 2.0), parse_attack("ramp:rate=5,start=100"))
+    table, _ = apply_attack(_holed(simulated("ground", 3).table, 150.0, 2.0), parse_attack("ramp:rate=5,start=100"))
     v = analyze_table(table).verdict
     (attack,) = [i for i in v.incidents if i.is_spoofing]
     assert Evidence.INERTIAL in attack.evidence and 99.0 <= attack.onset_s <= 101.0

@@ -9,6 +9,7 @@ from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
+from shared_inputs import simulated
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.product import solve_navigation
@@ -27,11 +28,10 @@ from spooflens.pipeline.registry import AnalyzeOptions
 from spooflens.pipeline.run import analyze_segments
 from spooflens.pipeline.verdict import Incident
 from spooflens.service import read_table
-from spooflens.simulation.simulate import simulate
 
 
 def test_a_short_first_look_decides_as_the_coast_to_the_end() -> None:
-    clean = simulate("multirotor", seed=2, duration_s=600.0).table
+    clean = simulated("multirotor", 2, 600.0).table
     table, _ = apply_attack(clean, parse_attack("step:offset=30,start=500"))
     nav = solve_navigation(table, AnalyzeOptions())
     opts = CoastingOptions()
@@ -61,7 +61,7 @@ def test_a_gnss_outage_longer_than_a_coast_leaves_nothing_to_compare_and_the_ana
     from spooflens.pipeline.reconstruction import coast
     from spooflens.pipeline.run import analyze_table
 
-    table = simulate("multirotor", seed=2, duration_s=600.0).table
+    table = simulated("multirotor", 2, 600.0).table
     table, _ = apply_attack(table, parse_attack("step:offset=30,start=500"))
     t = table.fixes["t_s"].to_numpy()
     table.fixes = table.fixes[(t < 205.0) | (t > 320.0)].reset_index(drop=True)

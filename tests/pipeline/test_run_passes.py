@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from shared_inputs import simulated
 
 from spooflens.attacks import apply_attack, parse_attack
 from spooflens.navigation.loosely_coupled import ANALYSIS_NEEDS, run_prepared
@@ -22,7 +23,7 @@ from spooflens.simulation.simulate import simulate
 def test_an_attack_after_the_learning_window_needs_no_second_pass_and_keeps_its_own_onset() -> None:
     # 10 Hz GNSS: the noise is learned on the first 300 s; a 30 m step at 500 s. This clean flight has
     # an inertial glitch (GLRT alone, not confirmed) at 465 s, 35 s before the attack
-    clean = simulate("multirotor", seed=2, duration_s=600.0).table
+    clean = simulated("multirotor", 2, 600.0).table
     table, _ = apply_attack(clean, parse_attack("step:offset=30,start=500"))
     analysis = analyze_table(table)
     assert analysis.passes == 1 and analysis.suspected_s == ()

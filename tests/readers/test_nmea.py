@@ -10,6 +10,7 @@ import numpy as np
 import pymap3d
 import pytest
 from paths import REAL, real_log
+from shared_inputs import read_shared
 
 from readers import read_log, sniff_format
 from spooflens.cli import main
@@ -35,7 +36,7 @@ def bundg() -> EpochTable:
 
 @pytest.fixture(scope="module")
 def plaka() -> EpochTable:
-    return read_log(_need(PLAKA))
+    return read_shared(_need(PLAKA))
 
 
 def _write(path: Path, bodies: list[str]) -> Path:
