@@ -838,7 +838,7 @@ def _headings(
         skipped.append(Skipped(hid, "headings where the file has no time to give them", n))
     for hid, n in magnetic.items():
         if n:
-            why = "magnetic headings without a variation (HDM, HDG), taken as true: off by the local variation"
+            why = "magnetic headings without a variation (HDM, HDG, VHW), taken as true: off by the local variation"
             skipped.append(Skipped(hid, why, n, "repaired"))
     if not rows:
         return None, []

@@ -302,8 +302,12 @@ def _hdm(d: Decoded, msg: Any) -> None:
 
 
 def _vhw(d: Decoded, msg: Any) -> None:
-    """The speed log's sentence: true heading (when the compass feeds it) and speed through the water."""
+    """The speed log's sentence: true heading (when the compass feeds it), else its magnetic heading (as HDM:
+    an NKE or Garmin bus writes `$IIVHW,,T,15.0,M,3.3,N,6.0,K`), and speed through the water."""
     d.heading_deg = field_number(msg, "hdgT")
+    if not math.isfinite(d.heading_deg):
+        d.heading_deg = field_number(msg, "hdgM")
+        d.magnetic_only = math.isfinite(d.heading_deg)
     knots, kmh = field_number(msg, "spdN"), field_number(msg, "spdK")
     d.water_speed_mps = knots * KNOT_MPS if math.isfinite(knots) else kmh / 3.6
 

@@ -601,3 +601,22 @@ def test_gsv_elevation_or_azimuth_out_of_range_is_no_measurement(tmp_path: Path)
     assert not (table.satellites["azimuth_deg"] > 360).any()
     notes = [s for s in table.skipped if "elevation" in s.reason or "azimuth" in s.reason]
     assert notes and all(s.action != "lost" for s in notes)
+
+
+def test_a_speed_logs_magnetic_heading_keeps_its_water_speed(tmp_path: Path) -> None:
+    """A yacht's instrument bus writes VHW with the magnetic heading only (`$IIVHW,,T,15.0,M,3.3,N,6.0,K`): its
+    86 water speeds were dropped as "headings without a value" and the heading test said "no speed log"."""
+    bodies = []
+    for k in range(5):
+        hhmmss = f"1200{k:02d}"
+        bodies += [
+            f"GPRMC,{hhmmss},A,5752.000,N,01148.000,E,3.3,15.0,010615,,",
+            f"GPGGA,{hhmmss},5752.000,N,01148.000,E,1,08,0.9,5.0,M,30.0,M,,",
+            "IIVHW,,T,15.0,M,3.3,N,6.1,K",
+        ]
+    table = read_log(_write(tmp_path / "vhw.nmea", bodies))
+    vhw = table.headings[table.headings["heading_id"] == "IIVHW"]
+    assert len(vhw) == 5 and (vhw["heading_deg"] == 15.0).all()
+    assert vhw["water_speed_mps"].to_numpy() == pytest.approx(3.3 * KNOT_MPS)
+    (note,) = [s for s in table.skipped if s.stream == "IIVHW"]
+    assert note.action == "repaired" and "magnetic headings without a variation (HDM, HDG, VHW)" in note.reason
