@@ -114,10 +114,11 @@ def relayed(fa: pd.DataFrame, fb: pd.DataFrame, a: str, b: str) -> str | None:
     if fraction < IDENTICAL_FRACTION:
         return None
     metres = tol[0] * 111_320.0
-    return (
-        f"{b} repeats {a}'s fixes at {100 * fraction:.0f}% of {n} common epochs (within the coarser resolution, "
-        f"{metres:.2g} m), {delay:+.2f} s later: one receiver relayed twice"
-    )
+    common = f"at {100 * fraction:.0f}% of {n} common epochs (within the coarser resolution, {metres:.2g} m)"
+    if abs(delay) < 0.25 * period:  # the same time tags: which one relays the other, the fixes cannot tell
+        return f"{a} and {b} write the same fixes {common} at the same times: one receiver relayed twice"
+    first, later = (a, b) if delay > 0 else (b, a)
+    return f"{later} repeats {first}'s fixes {common}, {abs(delay):.2f} s later: one receiver relayed twice"
 
 
 def _delays(ta: np.ndarray, pa: np.ndarray, tb: np.ndarray, pb: np.ndarray, tol: np.ndarray) -> list[float]:

@@ -153,8 +153,11 @@ def test_one_receiver_relayed_under_a_second_source_with_a_delay_and_coarser_rou
     relayed = _relayed_copy(table, rid, delay_s=1.0, decimals_of_minutes=3)
     (group,) = group_receivers(relayed)
     assert group.receivers == (rid, "mux/GP")
-    assert "+1.00 s later: one receiver relayed twice" in group.why[0]
+    assert "mux/GP repeats " in group.why[0] and "1.00 s later: one receiver relayed twice" in group.why[0]
     assert _check(pc.INDEPENDENT_RECEIVERS, relayed) is not None
+    # at the same time tags nothing says which one relays the other (a yacht's GP and its instrument bus's II)
+    (same,) = group_receivers(_relayed_copy(table, rid, delay_s=0.0, decimals_of_minutes=3))
+    assert f"{rid} and mux/GP write the same fixes at " in same.why[0] and "at the same times" in same.why[0]
 
 
 def test_two_real_receivers_and_two_under_one_spoofer_antenna_stay_two() -> None:
