@@ -600,8 +600,8 @@ def _receiver_sky(
                 fixless_epochs.setdefault((rx.receiver_id, at_ns), (epoch, rx.file.scan.path))
     if astray:
         why = (
-            "sky (GSV) of epochs without a fix an hour or more of silence from any fix (the receiver's own clock "
-            "before it knew the time): not placed"
+            "sky (GSV) of epochs without a fix, an hour or more from any fix (the receiver's own clock before it "
+            "knew the time): not placed"
         )
         skipped.append(Skipped(rx.receiver_id, why, astray))
     return out
