@@ -596,18 +596,22 @@ _ROLE_FRAME = {
 }
 
 
-def _runs_of(t_ns: np.ndarray, min_jump_ns: int = 2_000_000_000, periods: float = 20.0) -> np.ndarray:
+def clock_runs(
+    t_ns: np.ndarray, min_jump_ns: int = 2_000_000_000, periods: float = 20.0, max_gap_ns: int | None = None
+) -> np.ndarray:
     """Run index of every row (in the order read): a new run where the clock jumps back by more than
-    `min_jump_ns` and `periods` typical steps. Smaller steps back are jitter, repaired by sorting."""
+    `min_jump_ns` and `periods` typical steps (smaller steps back are jitter, repaired by sorting), and, given
+    `max_gap_ns`, where it goes on by more than that (the NMEA reader's stretches of a time of day)."""
     if len(t_ns) < 2:
         return np.zeros(len(t_ns), dtype=np.int64)
     d = np.diff(t_ns.astype(np.int64, copy=False))
-    if d.min() >= -min_jump_ns:  # no step back as long as the shortest jump: one run, whatever the steps
+    gap = d > max_gap_ns if max_gap_ns is not None else np.zeros(len(d), dtype=bool)
+    if d.min() >= -min_jump_ns and not gap.any():  # no step back as long as the shortest jump: one run
         return np.zeros(len(t_ns), dtype=np.int64)
     pos = d[d > 0]
     step = int(np.median(pos)) if len(pos) else 0
     back = d < -max(min_jump_ns, int(periods * step))
-    return np.r_[0, np.cumsum(back)].astype(np.int64)
+    return np.r_[0, np.cumsum(back | gap)].astype(np.int64)
 
 
 MAX_STAMP_NS = 1 << 62  # 146 years either side of any clock's zero: differences of stamps fit in int64
@@ -723,7 +727,7 @@ def _segment_frames(
                 stray = np.zeros(len(pos), dtype=bool)
                 stray[slice(None) if order is None else order] = stray_sorted
                 pos, t = np.asarray(pos)[~stray], t[~stray]
-            runs[(name, str(sid))] = (pos, _runs_of(t))
+            runs[(name, str(sid))] = (pos, clock_runs(t))
     n_seg = 1 + max((int(r.max()) for _, r in runs.values() if len(r)), default=0)
     seg_of: dict[str, np.ndarray] = {
         name: np.full(len(df), -1, dtype=np.int64) for name, df in frames_ns.items() if df is not None

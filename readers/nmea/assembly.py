@@ -58,7 +58,7 @@ from readers.nmea.sentences import (
     SELF_CONTAINED_KINDS,
     Decoded,
 )
-from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, log_clock, time_offset_s
+from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, clock_runs, log_clock, time_offset_s
 from spooflens.plausibility import STRAY_GAP_NS
 from spooflens.schema import FixType
 
@@ -66,10 +66,6 @@ DAY_S = 86_400
 STALE_REPEATS = 5
 GNSS_TALKERS = ("GN", "GP", "GL", "GA", "GB", "BD", "GQ", "QZ", "GI")
 POSITION_PRIORITY = {"GGA": 0, "GNS": 1, "RMC": 2, "GLL": 3, **{k: 4 for k in SELF_CONTAINED_KINDS}}
-# a new stretch of a receiver's time of day: where it goes back by more than 2 s and 20 of its steps (as
-# the table's recordings are cut), or on after an hour without a sentence
-STRETCH_BACK_MS, STRETCH_BACK_STEPS = 2_000, 20
-STRETCH_GAP_MS = STRAY_GAP_NS // 1_000_000
 JUMPS_SAID = 3  # a stretch's date jumps said one by one, the rest counted
 WEEK_ROLLOVER_S = 1024 * 7 * DAY_S  # a receiver that counts the GPS week in 10 bits dates a day this far off
 EpochKey = tuple[bool, int, int]  # (keyed by the receiver's time of day, its stretch, key)
@@ -192,17 +188,6 @@ def _unwrapped_ms(tods: np.ndarray) -> np.ndarray:
     return np.round((tods + days * DAY_S) * 1000).astype(np.int64)
 
 
-def _stretch_runs(keys: np.ndarray) -> np.ndarray:
-    """The stretch of each unwrapped time of day (file order): a new one where it goes back by more than
-    STRETCH_BACK_MS and STRETCH_BACK_STEPS of its steps, or on by more than STRETCH_GAP_MS."""
-    if len(keys) < 2:
-        return np.zeros(len(keys), dtype=np.int64)
-    d = np.diff(keys)
-    steps = d[d > 0]
-    back = max(STRETCH_BACK_MS, STRETCH_BACK_STEPS * int(np.median(steps))) if len(steps) else STRETCH_BACK_MS
-    return np.r_[0, np.cumsum((d < -back) | (d > STRETCH_GAP_MS))].astype(np.int64)
-
-
 def _iso_day(day: float) -> str:
     try:
         return (dt.date(1970, 1, 1) + dt.timedelta(days=math.floor(day))).isoformat()
@@ -245,7 +230,8 @@ def assign_epochs(rx: Receiver) -> None:
     """Group the receiver's sentences into epochs (by unwrapped time of day) and date its stretches."""
     timed = [d for d in rx.sentences if math.isfinite(d.tod_s)]
     keys = _unwrapped_ms(np.array([d.tod_s for d in timed])) if timed else np.zeros(0, dtype=np.int64)
-    runs = _stretch_runs(keys)
+    # a new stretch where the time of day goes back as the table's recordings are cut, or on after an hour
+    runs = clock_runs(keys * 1_000_000, max_gap_ns=STRAY_GAP_NS)
     key_of = {id(d): (int(r), int(k)) for d, r, k in zip(timed, runs.tolist(), keys.tolist(), strict=True)}
     members: dict[int, list[tuple[Decoded, int]]] = defaultdict(list)
     for d, r, k in zip(timed, runs.tolist(), keys.tolist(), strict=True):
