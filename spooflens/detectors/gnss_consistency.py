@@ -97,33 +97,34 @@ def velocity_lag(
     v: FloatArray,
     opts: ConsistencyOptions,
     unknown_t: FloatArray | None = None,
-) -> tuple[float, FloatArray]:
-    """(lag, velocity): how much later the receiver's velocity belongs to its fixes (0: as written), and the
-    velocity read that much later. A lag shows only while the vehicle's speed changes (the residual's quiet
-    quarter never sees it), so it is weighed by the mean square of the horizontal residual, each epoch's held
-    at `lag_cap_sigma` of the scale as written (a step or a drag of the position counts the same at every lag:
-    it does not follow the vehicle's own accelerations), and taken where that falls by `lag_min_gain`."""
-    as_written = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)[:, :2]
-    judged = np.isfinite(as_written).all(axis=1)
+) -> tuple[float, FloatArray, FloatArray]:
+    """(lag, velocity, residual): how much later the receiver's velocity belongs to its fixes (0: as written),
+    the velocity read that much later, and the window residual with it. A lag shows only while the vehicle's
+    speed changes (the residual's quiet quarter never sees it), so it is weighed by the mean square of the
+    horizontal residual, each epoch's held at `lag_cap_sigma` of the scale as written (a step or a drag of the
+    position counts the same at every lag: it does not follow the vehicle's own accelerations), and taken
+    where that falls by `lag_min_gain`."""
+    as_written = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
+    judged = np.isfinite(as_written[:, :2]).all(axis=1)
     # windows over which the velocity changed enough for a lag to show (a receiver at rest has none to read)
     j = np.searchsorted(t, t - opts.window_s, side="left")
     changing = judged & (np.hypot(*(v[:, :2] - v[j, :2]).T) >= opts.lag_min_speed_change_mps)
     if changing.sum() < opts.min_epochs_to_learn:
-        return 0.0, v
-    cap = opts.lag_cap_sigma * _robust_scale(np.where(np.isfinite(as_written), as_written, 0.0), opts.min_scale_m)
+        return 0.0, v, as_written
+    horizontal = np.where(np.isfinite(as_written[:, :2]), as_written[:, :2], 0.0)
+    cap = opts.lag_cap_sigma * _robust_scale(horizontal, opts.min_scale_m)
 
     def loss(r: FloatArray) -> float:
-        return float(np.mean(np.minimum(np.abs(r[judged]), cap) ** 2))
+        return float(np.mean(np.minimum(np.abs(r[judged, :2]), cap) ** 2))
 
-    def later(lag: float) -> FloatArray:
-        return np.stack([np.interp(t + lag, t, v[:, i]) for i in range(3)], axis=1)
-
-    lags = np.arange(opts.lag_step_s, opts.max_velocity_lag_s + 1e-9, opts.lag_step_s)
-    losses = [loss(_window_velocity_residual(t, ecef, to_enu, later(lag), opts, unknown_t)[:, :2]) for lag in lags]
-    if not losses or min(losses) > (1.0 - opts.lag_min_gain) * loss(as_written):
-        return 0.0, v
-    best = float(lags[int(np.argmin(losses))])
-    return best, later(best)
+    best = (0.0, v, as_written)
+    best_loss = (1.0 - opts.lag_min_gain) * loss(as_written)
+    for lag in np.arange(opts.lag_step_s, opts.max_velocity_lag_s + 1e-9, opts.lag_step_s):
+        later = np.stack([np.interp(t + lag, t, v[:, i]) for i in range(3)], axis=1)
+        r = _window_velocity_residual(t, ecef, to_enu, later, opts, unknown_t)
+        if (this := loss(r)) < best_loss or (not best[0] and this <= best_loss):  # the first of the least
+            best, best_loss = (float(lag), later, r), this
+    return best
 
 
 def _velocity_unknown(t: FloatArray, v: FloatArray, good: NDArray[np.bool_], opts: ConsistencyOptions) -> FloatArray:
@@ -260,10 +261,9 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         if not vertical:
             v = v.copy()
             v[:, 2] = 0.0
-        lag, v = velocity_lag(t, ecef, to_enu, v, opts, unknown_t)
+        lag, v, r = velocity_lag(t, ecef, to_enu, v, opts, unknown_t)
         if lag:
             mode += f"; velocity {lag:g} s behind the fixes (read {lag:g} s later: a filtered or relayed velocity)"
-        r = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
         if not vertical:
             r[:, 2] = np.nan
         floor = written_floor(lat, lon, h, np.where(speed_only[:, None], np.c_[speed, 0 * v[:, 1:]], v), t, opts)
