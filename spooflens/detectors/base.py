@@ -194,6 +194,23 @@ def nearest(t: NDArray[np.float64], samples: NDArray[np.float64]) -> tuple[NDArr
     return near, np.abs(samples[near] - t)
 
 
+def onsets_after_quiet(
+    t: FloatArray, quiet: NDArray[np.bool_], raised: NDArray[np.bool_], alarms: list[Alarm], receiver_id: str
+) -> list[Alarm]:
+    """Each alarm with its onset: the last quiet epoch before it. Where no epoch before it was quiet (a log
+    that starts disturbed, or one whose own baseline the attack set: half of a short log spoofed), the last
+    epoch before it where its alarm condition did not hold, not the log's first epoch, which would date the
+    attack to the start of the log against the log's own evidence."""
+    out = []
+    for a in alarms:
+        before = np.flatnonzero((t < a.start_s) & quiet)
+        if not len(before):
+            before = np.flatnonzero((t < a.start_s) & ~raised)
+        onset = float(t[before[-1]]) if len(before) else float(t[0])
+        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=receiver_id))
+    return out
+
+
 def rise_start(t: FloatArray, score: FloatArray, start_s: float, quiet_level: float) -> tuple[int, int]:
     """Where the rise of `score` that led to an alarm at `start_s` began, and the last quiet epoch before
     the alarm (below `quiet_level`; 0 if none): from that epoch back down the rise while the statistic

@@ -11,7 +11,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from spooflens.baseline.use import consistency_caps, note
-from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals
+from spooflens.detectors.base import Alarm, DetectorResult, Series, alarm_intervals, onsets_after_quiet
 from spooflens.estimation.quantiles import chi2_isf, halfnorm_ppf
 from spooflens.geodesy import enu_rotation, geodetic_to_ecef, geodetic_to_enu
 from spooflens.gnss.resolution import decimal_step, position_steps_m, speed_step_mps
@@ -175,16 +175,6 @@ def tail_offset(bursts: list[Alarm], n_epochs: int, opts: ConsistencyOptions) ->
         return 0.0
     beta = float(np.median(excess)) / np.log(2.0)
     return beta * float(np.log(n / max(design, 1e-12)))
-
-
-def _onsets(t: FloatArray, stat: FloatArray, alarms: list[Alarm], quiet_level: float, rid: str) -> list[Alarm]:
-    """Onset = the last epoch before each alarm where the statistic was at its no-attack level."""
-    out = []
-    for a in alarms:
-        before = np.flatnonzero((t < a.start_s) & (stat <= quiet_level))
-        onset = float(t[before[-1]]) if len(before) else float(t[0])
-        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=rid))
-    return out
 
 
 class Residual(NamedTuple):
@@ -359,7 +349,7 @@ def run_gnss_consistency(
             alarms = alarm_intervals(t, excess, excess > raised, merge_gap_s=opts.window_s)
         modes.append(f"{rid}: {mode}")
         alarms = [replace(a, peak_statistic=float(stat[np.searchsorted(t, a.peak_s)])) for a in alarms]
-        result.alarms += _onsets(t, np.nan_to_num(stat), alarms, quiet_level=3.0, rid=str(rid))
+        result.alarms += onsets_after_quiet(t, np.nan_to_num(stat) <= 3.0, excess > raised, alarms, str(rid))
         result.series.append(Series(f"{rid}/statistic", t, stat, "chi2(3)", threshold + raised))
         result.series.append(Series(f"{rid}/normalised_residual", t, z, "sigma", None, ("east", "north", "up")))
     if not modes:
@@ -425,7 +415,8 @@ ANALYSIS = AnalysisSpec(
             "threshold; the mean excess from their median) and the threshold raised to where the design's count "
             "of bursts is expected above it; longer bursts (a drag holds the alarm) never teach it, nor does a "
             "log whose scale a baseline lowered. Onset: the last epoch before the alarm where the statistic was "
-            f"at its quiet level (3); alarms closer than {_O.window_s:g} s are one.",
+            "at its quiet level (3), or where none was, the last one under its threshold; alarms closer than "
+            f"{_O.window_s:g} s are one.",
             p_false_alarm=f"{_P} per epoch",
             threshold=f"chi-square(3) at {_P}: {float(chi2_isf(_O.p_false_alarm, 3)):.1f} "
             f"(2 axes: {float(chi2_isf(_O.p_false_alarm, 2)):.1f}), raised on a heavy-tailed receiver",

@@ -22,6 +22,7 @@ from spooflens.detectors.base import (
     Series,
     alarm_intervals,
     center_scale,
+    onsets_after_quiet,
     robust_z,
     trailing_max,
 )
@@ -152,15 +153,6 @@ def _fix_gaps(t: FloatArray, factor: float) -> FloatArray:
     dt = np.diff(t)
     period = float(np.median(dt))
     return np.r_[0.0, np.clip(dt / max(period, 1e-9) - 1.0, 0.0, None)] * (6.0 / max(factor - 1.0, 1e-9))
-
-
-def _onsets(t: FloatArray, quiet: NDArray[np.bool_], alarms: list[Alarm], rid: str) -> list[Alarm]:
-    out = []
-    for a in alarms:
-        before = np.flatnonzero((t < a.start_s) & quiet)
-        onset = float(t[before[-1]]) if len(before) else float(t[0])
-        out.append(Alarm(a.start_s, a.end_s, a.peak_statistic, a.peak_s, onset_s=onset, receiver_id=rid))
-    return out
 
 
 @dataclass
@@ -381,7 +373,7 @@ def check_receiver(
             else ""
         )
         + "; receiver flags and documented ranges",
-        _onsets(t, quiet, alarms, rid),
+        onsets_after_quiet(t, quiet, raised, alarms, rid),
         [
             Series(f"{rid}/joint_score", t, score, "robust z", opts.z_alarm),
             Series(f"{rid}/indicators_beyond", t, count, "count", float(opts.min_indicators)),
@@ -503,7 +495,9 @@ ANALYSIS = AnalysisSpec(
             "spoofing flag (as decoded by the log's "
             "message definition), or a mean C/N0 above "
             f"{_O.max_plausible_cn0_dbhz:g} dB-Hz (stronger than the sky gives a small antenna, so a log "
-            "attacked from its first fix still shows it).",
+            "attacked from its first fix still shows it). Onset: the last fix before the alarm with no indicator "
+            "beyond its level, or where none was (half of a short log attacked sets its own baseline), the last "
+            "fix before it where its alarm condition did not hold.",
             p_false_alarm="rule thresholds (not a calibrated rate)",
             threshold=f"{_O.min_indicators} indicators beyond {_O.z_alarm:g} robust sigma within {_O.window_s:g} s; "
             f"the receiver's spoofing flag; mean C/N0 > {_O.max_plausible_cn0_dbhz:g} dB-Hz",

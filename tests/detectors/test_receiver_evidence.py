@@ -117,3 +117,29 @@ def test_too_few_fixes_are_said_to_be_too_few_not_a_receiver_without_indicators(
     short = run_receiver_evidence(receiver_fixes(100.0, 60.0, seconds=1.6))
     assert not short.ran
     assert short.reason == "needs 10 fixes of a receiver for its indicators' own baseline (8 found)"
+
+
+def test_a_log_half_spoofed_dates_its_onset_after_the_last_real_fix_not_at_its_start() -> None:
+    """A real receiver in Rome (AlexT2594/ml-gps-spoofing-gps-data-analysis, `true_with_spoof`): five fixes of
+    the real sky, 21 s without a fix, then a GPS simulator's signals stronger than any sky. The simulator is
+    half the log, so against the log's own median the real fixes are off too and none is quiet: the onset
+    fell back to the log's first fix (0 s), dating the attack to before the real sky was lost."""
+    t = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 25.0, 26.0, 27.0, 28.0, 29.0, 30.0])
+    cn0 = [26.9, 26.9, 26.45, 26.64, 26.55, 50.56, 50.56, 50.44, 50.33, 50.33, 50.33]
+    fixes = make_frame(
+        "fixes",
+        {
+            "t_s": t,
+            "receiver_id": np.full(len(t), "GP"),
+            "lat_deg": np.r_[np.full(5, 41.9300), np.full(6, 41.9304)],
+            "lon_deg": np.full(len(t), 12.61),
+            "height_m": np.r_[np.full(5, 67.0), np.zeros(6)],
+            "sats_used": np.array([8, 8, 8, 9, 8, 5, 5, 5, 5, 5, 5], dtype=float),
+            "hdop": np.r_[np.full(5, 1.5), np.full(6, 1.6)],
+            "cn0_mean_dbhz": np.array(cn0),
+            "fix_type": np.full(len(t), 3),
+        },
+    )
+    (alarm,) = run_receiver_evidence(fixes).alarms
+    assert alarm.start_s == 25.0
+    assert alarm.onset_s == 4.0
