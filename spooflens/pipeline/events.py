@@ -41,7 +41,7 @@ from spooflens.pipeline.explanations import (
     interference_alarms,
     scene_of,
 )
-from spooflens.pipeline.verdict import Event, Incident, Kind, Verdict
+from spooflens.pipeline.verdict import Event, Incident, Kind, SpooferMark, Verdict
 
 # a takeover within this long of the end of the interference is one attack with it (jam, then spoof):
 # receivers re-acquire within seconds to a minute of losing lock (hot start), the window a spoofer uses
@@ -54,7 +54,7 @@ class _Decided:
     confidence: str
     evidence_for: tuple[str, ...]
     evidence_against: tuple[str, ...]
-    spoofer_marks: tuple[str, ...] = ()
+    spoofer_marks: tuple[SpooferMark, ...] = ()
 
 
 def _classes_text(classes: Sequence[Evidence]) -> str:
@@ -128,7 +128,7 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
         if classes
         else f"alarms no check confirmed ({', '.join(incident.detectors)})"
     )
-    marked = tuple(f"a spoofer's mark (one evidence class: not confirmed): {m}" for m in weighed.strong_marks)
+    marked = tuple(f"a spoofer's mark (one evidence class: not confirmed): {m.text}" for m in weighed.strong_marks)
     return _Decided(
         Kind.UNKNOWN,
         "low",

@@ -60,7 +60,7 @@ from spooflens.epoch_table import EpochTable
 from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.evidence import Evidence, Span
 from spooflens.pipeline.indicators import BoolArray, FloatArray, Receiver, Window, running_median
-from spooflens.pipeline.verdict import Explanation, Incident, Kind
+from spooflens.pipeline.verdict import Explanation, Incident, Kind, SpooferMark
 from spooflens.schema import FixType
 
 WEEK_S = 604_800.0
@@ -357,38 +357,41 @@ def uncovered(w: Window, opts: ExplanationOptions) -> bool:
     return before < opts.covered_sky_dbhz and usual < opts.covered_sky_dbhz and now <= opts.open_sky_dbhz and kept
 
 
-def weighed_marks(w: Window, opts: ExplanationOptions) -> list[tuple[str, bool]]:
+def weighed_marks(w: Window, opts: ExplanationOptions) -> list[SpooferMark]:
     """What a spoofer's signal does to the receiver's indicators and nature does not, each with whether it is
     a strong mark: all but a C/N0 risen by a few dB, which bars a natural reading but is no sign of its own (a
     sky returning after a loss of fix does it)."""
     marks = []
     if w.spoofing_flag_raised():
-        marks.append(("the receiver's own spoofing flag was raised", True))
+        flag = "the receiver's own spoofing flag was raised"
+        marks.append(SpooferMark(flag, flag, True))
     strongest = w.worst("cn0_mean_dbhz", +1)
     if strongest > opts.max_sky_cn0_dbhz:
         above = f"mean C/N0 up to {strongest:.1f} dB-Hz, more than the sky gives ({opts.max_sky_cn0_dbhz:g})"
-        marks.append((above, True))
+        marks.append(SpooferMark(above, above, True))
     _, rise, what = w.cn0_change_db()
     if rise >= opts.spoofer_cn0_rise_db and not uncovered(w, opts):
-        risen = f"{what} rose {_db(rise)} above its level {w.base_where} and its usual level: a stronger signal than "
-        marks.append((risen + "the sky's", False))
+        stronger = "a stronger signal than the sky's"
+        risen = f"{what} rose {_db(rise)} above its level {w.base_where} and its usual level: {stronger}"
+        marks.append(SpooferMark(risen, stronger, False))
     equal = w.equal_cn0(opts.equal_cn0_db, opts.equal_min_satellites, opts.equal_min_epochs)
     if equal is not None and not equal[1] < w.cn0_level_before() - opts.equal_below_level_db:
-        one = f"{opts.equal_min_satellites} or more satellites at one C/N0 (spread {equal[0]:.1f} dB): one transmitter"
-        marks.append((one, True))
+        spread = f"{opts.equal_min_satellites} or more satellites at one C/N0 (spread {equal[0]:.1f} dB)"
+        marks.append(SpooferMark(f"{spread}: one transmitter", "one transmitter", True))
     offset = w.rx.col("time_offset_s")
     if w.base is not None and np.isfinite(offset[w.now]).any():
         moved = w.worst("time_offset_s", +1) - w.level("time_offset_s")
         moved_back = w.worst("time_offset_s", -1) - w.level("time_offset_s")
         step = moved if abs(moved) >= abs(moved_back) else moved_back
         if abs(step) >= opts.time_moved_s + w.rx.time_resolution_s:  # a coarse time saws by its resolution
-            marks.append((f"the receiver's time moved {step:+.3f} s against the log's clock", True))
+            moved_text = f"the receiver's time moved {step:+.3f} s against the log's clock"
+            marks.append(SpooferMark(moved_text, moved_text, True))
     return marks
 
 
 def spoofer_marks(w: Window, opts: ExplanationOptions) -> list[str]:
     """Every mark a spoofer's signal leaves on the receiver's indicators (`weighed_marks`)."""
-    return [text for text, _ in weighed_marks(w, opts)]
+    return [m.text for m in weighed_marks(w, opts)]
 
 
 @dataclass(frozen=True)
@@ -1342,7 +1345,7 @@ class Weighed:
     # over the whole incident, per receiver: what the receiver says drowned its signals, and a spoofer's marks
     interference: tuple[str, ...] = ()
     spoofer_marks: tuple[str, ...] = ()
-    strong_marks: tuple[str, ...] = ()  # those a headline names (`weighed_marks`)
+    strong_marks: tuple[SpooferMark, ...] = ()  # those a headline names (`weighed_marks`)
     # intervals accounted for from their start up to a time only, not beyond
     partly_explained: tuple[tuple[Span, float], ...] = ()
 
@@ -1391,15 +1394,15 @@ def explain(
     ruled_out = tuple(text for cause, text in refused.items() if cause not in held_causes)
     interference: list[str] = []
     marks: list[str] = []
-    strong: list[str] = []
+    strong: list[SpooferMark] = []
     for rid in incident.receivers or tuple(table.receivers()):
         named = (lambda x, r=rid: f"{r}: {x}") if len(table.receivers()) > 1 else (lambda x: x)
         w = scene.incident_window(rid)
         interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
         if w.fixes:
             found = weighed_marks(w, scene.opts)
-            marks += [named(x) for x, _ in found]
-            strong += [named(x) for x, is_strong in found if is_strong]
+            marks += [named(m.text) for m in found]
+            strong += [m._replace(text=named(m.text)) for m in found if m.strong]
     # the coasts' departure intervals (no alarm behind them): GNSS agreed with the coasted INS until its
     # departure. Where the jammed receiver's noise accounts for the inertial alarms, a departure that began
     # under the jamming is that noise (the coast weighs GNSS with its clean noise), and the interval counts

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from enum import StrEnum
-from typing import Any
+from typing import Any, NamedTuple
 
 from spooflens.detectors.base import Alarm, DetectorResult, Finding, Track
 from spooflens.pipeline.evidence import (
@@ -168,6 +168,15 @@ class Incident:
         return bool(self.evidence) and set(self.evidence) <= APART
 
 
+class SpooferMark(NamedTuple):
+    """A mark a spoofer's signal leaves on the receiver's indicators and nature does not
+    (`explanations.weighed_marks`)."""
+
+    text: str  # the fact with its numbers ("12 satellites at one C/N0 (spread 0.9 dB): one transmitter")
+    claim: str  # what it says of the signal, short enough for the headline ("one transmitter")
+    strong: bool  # a sign on its own; a C/N0 risen a few dB only bars a natural reading
+
+
 @dataclass(frozen=True)
 class Event:
     """One incident or anomaly as what it was: its kind, what decided it and what argued against the other
@@ -194,13 +203,13 @@ class Event:
     followed_by: int | None = None
     # an anomaly's marks that a spoofer's signal leaves and nature does not (C/N0 above the sky's, satellites
     # at one C/N0, ...): one evidence class still, so not confirmed, but named in the headline
-    spoofer_marks: tuple[str, ...] = ()
+    spoofer_marks: tuple[SpooferMark, ...] = ()
 
 
 def unknown_marks(events: list[Event]) -> str:
-    """The first marked anomaly's spoofer's marks, each cut to its claim ("...: one transmitter")."""
+    """The first marked anomaly's spoofer's marks, each as its claim."""
     first = next(e for e in events if e.spoofer_marks)
-    return "; ".join(m.rsplit(": ", 1)[-1] for m in first.spoofer_marks)
+    return "; ".join(m.claim for m in first.spoofer_marks)
 
 
 def _interval_text(start_s: float, end_s: float, ongoing: bool) -> str:

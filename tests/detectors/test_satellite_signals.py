@@ -303,4 +303,4 @@ def test_a_sky_at_one_c_n0_with_some_satellites_held_is_still_one_transmitter(tm
     assert not verdict.spoofed and verdict.headline.startswith("NO SPOOFING DETECTED")
     assert "(1 with a spoofer's marks: " in verdict.headline and "one transmitter" in verdict.headline
     (event,) = verdict.events
-    assert any(m.endswith("one transmitter") for m in event.spoofer_marks)
+    assert any(m.text.endswith("one transmitter") and m.claim == "one transmitter" for m in event.spoofer_marks)
