@@ -25,6 +25,13 @@ __all__ = ["A_M", "B_M", "C_MPS", "E2", "GM", "OMEGA_IE", "F"]
 FloatArray = NDArray[np.float64]
 
 
+def small_move_en_m(dlat_deg: ArrayLike, dlon_deg: ArrayLike, lat_deg: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """East and north metres of a small move given in degrees, on a flat earth at `lat_deg`: within a
+    fraction of a percent over the few kilometres between two fixes, where the indicators need no more."""
+    east = np.asarray(dlon_deg, dtype=float) * 111_320.0 * np.cos(np.radians(lat_deg))
+    return east, np.asarray(dlat_deg, dtype=float) * 110_540.0
+
+
 def radii(lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Meridian (R_M) and transverse (R_N) radii of curvature at geodetic latitude `lat` (rad)."""
     s2 = np.sin(np.asarray(lat, dtype=float)) ** 2

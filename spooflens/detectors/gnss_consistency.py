@@ -63,6 +63,11 @@ def _robust_scale(x: FloatArray, floor: float) -> FloatArray:
     return np.asarray(np.maximum(np.nan_to_num(q / _Q25_ABS_NORMAL, nan=floor), floor), dtype=float)
 
 
+def window_first(t: FloatArray, opts: ConsistencyOptions) -> NDArray[np.intp]:
+    """Each epoch's window's first epoch: the first at most `window_s` before it."""
+    return np.searchsorted(t, t - opts.window_s, side="left")
+
+
 def _window_velocity_residual(
     t: FloatArray,
     ecef: FloatArray,
@@ -78,7 +83,7 @@ def _window_velocity_residual(
     aircraft 50 km on would see its frame tilted by 0.45 degrees, 7 m over a 900 m window."""
     dt = np.diff(t)
     integral = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=0)])
-    j = np.searchsorted(t, t - opts.window_s, side="left")
+    j = window_first(t, opts)
     d = np.einsum("kij,kj->ki", to_enu, ecef - ecef[j]) - (integral - integral[j])
     period = np.median(dt) if len(dt) else np.inf
     gap = np.concatenate([[0.0], np.maximum.accumulate(np.where(dt > opts.max_gap_factor * period, t[1:], 0.0))])
@@ -107,7 +112,7 @@ def velocity_lag(
     as_written = _window_velocity_residual(t, ecef, to_enu, v, opts, unknown_t)
     judged = np.isfinite(as_written[:, :2]).all(axis=1)
     # windows over which the velocity changed enough for a lag to show (a receiver at rest has none to read)
-    j = np.searchsorted(t, t - opts.window_s, side="left")
+    j = window_first(t, opts)
     changing = judged & (np.hypot(*(v[:, :2] - v[j, :2]).T) >= opts.lag_min_speed_change_mps)
     if changing.sum() < opts.min_epochs_to_learn:
         return 0.0, v, as_written
@@ -261,7 +266,7 @@ def residual(fixes: pd.DataFrame, opts: ConsistencyOptions) -> Residual:
         held = held_course(v, opts) | speed_only
         held_speed = np.where(speed_only, speed, np.where(held, np.hypot(v[:, 0], v[:, 1]), 0.0))
         travel = np.concatenate([[0.0], np.cumsum(0.5 * (held_speed[1:] + held_speed[:-1]) * np.diff(t))])
-        held_m = travel - travel[np.searchsorted(t, t - opts.window_s, side="left")]
+        held_m = travel - travel[window_first(t, opts)]
     else:
         mode = "kinematic plausibility (no reported velocity)"
         r = _second_difference(t, geodetic_to_enu(lat, lon, h, lat[0], lon[0], h[0]))

@@ -57,6 +57,7 @@ from spooflens.detectors.range_rate import NAME as RANGE_RATE
 from spooflens.detectors.range_rate import TTEST as RANGE_RATE_TTEST
 from spooflens.detectors.receiver_evidence import NAME as RECEIVER_EVIDENCE
 from spooflens.epoch_table import EpochTable
+from spooflens.geodesy import small_move_en_m
 from spooflens.navigation.product import NAVIGATION
 from spooflens.pipeline.evidence import Evidence, Span
 from spooflens.pipeline.indicators import BoolArray, FloatArray, Receiver, Window, running_median
@@ -899,8 +900,7 @@ def read_held_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -> R
         caught = None
         for after in range(end, min(end + opts.held_catch_up_fixes, len(rx.t))):
             span = float(rx.t[after] - rx.t[first - 1])
-            north = (lat[after] - lat[first - 1]) * 110_540.0
-            east = (lon[after] - lon[first - 1]) * 111_320.0 * np.cos(np.radians(lat[after]))
+            east, north = small_move_en_m(lat[after] - lat[first - 1], lon[after] - lon[first - 1], lat[after])
             moved = float(np.hypot(east, north))
             travel = float(np.nanmean(speed[[first - 1, after]])) * span
             if abs(moved - travel) <= max(opts.held_catch_up_tolerance * travel, opts.max_reflection_m / 10):
@@ -940,8 +940,7 @@ def read_skipped_fix(scene: _Scene, alarm: Alarm, w: Window, marks: list[str]) -
     if len(k) < 2:
         return _kept("skipped fix", Kind.RECEIVER_FAULT, "", rid)
     lat, lon = rx.col("lat_deg"), rx.col("lon_deg")
-    north = np.diff(lat) * 110_540.0
-    east = np.diff(lon) * 111_320.0 * np.cos(np.radians(np.nanmean(lat[k])))
+    east, north = small_move_en_m(np.diff(lat), np.diff(lon), np.nanmean(lat[k]))
     ve, vn, dt = rx.col("vel_e_mps"), rx.col("vel_n_mps"), np.diff(rx.t)
     me, mn = 0.5 * (ve[1:] + ve[:-1]), 0.5 * (vn[1:] + vn[:-1])
     ee, en = (east - me * dt)[k], (north - mn * dt)[k]

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from spooflens.detectors.receiver_time import time_resolution_s
 from spooflens.epoch_table import EpochTable
+from spooflens.geodesy import small_move_en_m
 from spooflens.schema import FixType, SpoofingFlag
 
 FloatArray = NDArray[np.float64]
@@ -340,8 +341,7 @@ class Window:
         if len(lat) < 2:
             return 0.0
         t = self.rx.t[lo : self.now.stop]
-        north = np.diff(lat) * 110_540.0
-        east = np.diff(lon) * 111_320.0 * np.cos(np.radians(np.nanmean(lat)))
+        east, north = small_move_en_m(np.diff(lat), np.diff(lon), np.nanmean(lat))
         ve, vn = self.rx.col("vel_e_mps")[lo : self.now.stop], self.rx.col("vel_n_mps")[lo : self.now.stop]
         dt = np.diff(t)
         pe, pn = 0.5 * (ve[1:] + ve[:-1]) * dt, 0.5 * (vn[1:] + vn[:-1]) * dt
