@@ -58,7 +58,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from readers import ReaderFormat
+from readers import NothingToJudgeError, ReaderFormat
 from readers.android_gnss import (
     ADR_CYCLE_SLIP,
     ADR_RESET,
@@ -642,7 +642,14 @@ def read_gnsslogger(
             Skipped("<gnsslogger>", f"--topic ignored for GnssLogger logs except nav= ({other})", len(other))
         )
     if not frames:
-        raise ReaderError(path, "no Raw, Fix or sensor record could be read from this GnssLogger log")
+        held = sorted(((name, len(r.rows)) for name, r in records.items() if len(r.rows)), key=lambda kv: -kv[1])
+        if any(s.action == "lost" for s in skipped) or not held:
+            raise ReaderError(path, "no Raw, Fix or sensor record could be read from this GnssLogger log")
+        # sound: a phone stopped while still acquiring (no time of week decoded, so no pseudorange), indoors
+        listed = ", ".join(f"{name} x{n}" for name, n in held)
+        raise NothingToJudgeError(
+            path, f"GnssLogger log with no usable fix, measurement or sensor ({listed})", None, skipped
+        )
     _truth_beside(path, reference, frames, streams, skipped)
     meta["receiver"] = "phone: the GPS-provider fixes and the Raw measurements of one phone"
     table = build_table(path, "gnsslogger", reference, frames, streams, skipped, metadata=meta)

@@ -484,7 +484,7 @@ def read_gpsd_json(path: Path, topics: Mapping[str, str] | None = None, progress
         classes = Counter(r.cls for r in scan.reports)
         listed = ", ".join(f"{c} x{n}" for c, n in classes.most_common(6))
         raise NothingToJudgeError(
-            path, f"gpsd JSON reports without a fix (TPV) or sky view (SKY): {listed}", FORMAT, skipped
+            path, f"gpsd JSON reports without a fix (TPV mode 2 or 3) or sky view (SKY): {listed}", FORMAT, skipped
         )
     metadata = {
         **a.metadata,

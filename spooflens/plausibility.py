@@ -300,6 +300,7 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
         (("vdop",), 0.0, 1e4, "VDOP outside 0 .. 10,000"),
         (("cn0_mean_dbhz",), 0.0, 100.0, "mean C/N0 outside 0 .. 100 dB-Hz"),
     ),
+    "satellites": ((("cn0_dbhz",), 0.0, 100.0, "C/N0 outside 0 .. 100 dB-Hz"),),
     "headings": ((("water_speed_mps",), 0.0, 50.0, "speed through the water outside 0 .. 50 m/s"),),
     "truth": ((("vel_e_mps", "vel_n_mps", "vel_u_mps"), -1e4, 1e4, "velocity above 10 km/s"),),
     "observations": (
@@ -315,6 +316,28 @@ _OPTIONAL_BOUNDS: dict[str, tuple[tuple[tuple[str, ...], float, float, str], ...
 }
 
 
+# signal strengths written as C/N0 (RINEX 2's S observations are "as given by the receiver", in its own units)
+_CN0_COLUMNS = {"observations": "cn0_dbhz", "satellites": "cn0_dbhz", "fixes": "cn0_mean_dbhz"}
+_DBHZ_MIN_VALUES = 5  # fewer values say nothing of their units
+_DBHZ_MAX_SHARE_ABOVE_100 = 0.1  # a rare corrupt value is cleared alone; a tenth is the column's units
+_DBHZ_MIN_MEDIAN = 10.0  # no receiver tracks below ~10 dB-Hz: a median under it is a 1-9 strength scale
+
+
+def not_dbhz(x: np.ndarray) -> str:
+    """Why a stream's signal strengths are not C/N0 in dB-Hz ('' when they may be): a tenth of them above
+    100 (a spacecraft receiver's raw counts: 359, 631 ...), or a median under 10 (RINEX 2's 1-9 scale)."""
+    v = x[np.isfinite(x)]
+    if len(v) < _DBHZ_MIN_VALUES:
+        return ""
+    above = int(np.sum(v > 100.0))
+    if above >= _DBHZ_MAX_SHARE_ABOVE_100 * len(v):
+        return f"signal strengths not in dB-Hz ({above} of {len(v)} above 100: the receiver's own units)"
+    tracked = v[v > 0]
+    if len(tracked) >= _DBHZ_MIN_VALUES and (median := float(np.median(tracked))) < _DBHZ_MIN_MEDIAN:
+        return f"signal strengths not in dB-Hz (median {median:.1f}, below any C/N0 a receiver tracks: a 1-9 scale)"
+    return ""
+
+
 def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], BoolArray, Finding]]:
     """Optional values out of range, to be set to NaN ("not known"): (columns, rows, finding) each."""
     out: list[tuple[tuple[str, ...], BoolArray, Finding]] = []
@@ -327,6 +350,9 @@ def clean_optional(frame: str, cols: Columns) -> list[tuple[tuple[str, ...], Boo
             for n in names:
                 cleared[n] = cleared[n] | new if n in cleared else new
 
+    cn0 = _CN0_COLUMNS.get(frame, "")
+    if cn0 in cols and (units := not_dbhz(cols[cn0])):
+        clear((cn0,), np.isfinite(cols[cn0]), units)
     for names, low, high, what in _OPTIONAL_BOUNDS.get(frame, ()):
         present = tuple(n for n in names if n in cols)
         if present:

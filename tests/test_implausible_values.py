@@ -18,6 +18,7 @@ from spooflens.detectors.base import DetectorResult
 from spooflens.epoch_table import EpochTable, checked
 from spooflens.errors import AnalysisError
 from spooflens.pipeline.run import analyze_table
+from spooflens.plausibility import clean_optional
 from spooflens.writers import write_log
 
 EXTREMES = (1e300, -1e308, 1e308, np.nan, np.inf, -np.inf)
@@ -313,3 +314,25 @@ def test_a_stream_made_only_of_small_groups_far_apart_keeps_them_all() -> None:
     assert not stray_stamps(scattered).any()
     recording = np.r_[np.arange(10, dtype=np.int64) * 1_000_000_000, 20 * hour]  # ten rows and one far off
     assert stray_stamps(recording).tolist() == [False] * 10 + [True]
+
+
+# S1 of a spacecraft's receiver (ICESat's BlackJack, RINEX 2.20 `ice12720.07o` in CS-SI/Orekit's test data), four
+# epochs of its seven satellites: RINEX 2 writes signal strengths "as given by the receiver", here raw counts
+ICESAT_S1 = [30, 359, 46, 171, 183, 231, 631, 27, 336, 42, 162, 180, 230, 620]
+ICESAT_S1 += [26, 330, 40, 160, 178, 228, 610, 26, 325, 38, 158, 175, 225, 600]
+
+
+def test_signal_strengths_in_a_receivers_own_units_are_not_read_as_c_n0() -> None:
+    """Clearing only the counts above 100 kept 30, 46, 27 ... of two satellites as dB-Hz, and satellite_signals
+    judged "7 satellites" on them."""
+    (cleared,) = clean_optional("observations", {"cn0_dbhz": np.array(ICESAT_S1, dtype=float)})
+    names, rows, finding = cleared
+    assert names == ("cn0_dbhz",) and rows.all()
+    assert finding.reason.startswith("signal strengths not in dB-Hz (20 of 28 above 100")
+    one_to_nine = np.array([5, 6, 7, 7, 8, 6, 5, 9, 7, 6], dtype=float)  # RINEX 2's strength scale written as S
+    (cleared,) = clean_optional("satellites", {"cn0_dbhz": one_to_nine})
+    assert cleared[1].all() and "median 6.5" in cleared[2].reason
+    # a C/N0 column with one corrupt value loses that value only
+    sky = np.array([42.0, 45.0, 38.0, 255.0, 40.0, 44.0, 47.0, 39.0, 41.0, 43.0, 0.0, 36.0])
+    (cleared,) = clean_optional("satellites", {"cn0_dbhz": sky})
+    assert np.flatnonzero(cleared[1]).tolist() == [3] and "outside 0 .. 100 dB-Hz" in cleared[2].reason

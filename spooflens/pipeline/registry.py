@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
+import pandas as pd
 
 from spooflens.detectors.base import DetectorResult, Unmet
 from spooflens.epoch_table import EpochTable
@@ -95,7 +96,7 @@ def _has_satellite_view(table: EpochTable) -> str | None:
     obs = table.observations
     if len(obs) and (np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any() or _has_satellite_states(table) is None):
         return None
-    return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions"
+    return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions" + _no_cn0(obs)
 
 
 def _has_signal_levels(table: EpochTable) -> str | None:
@@ -104,7 +105,12 @@ def _has_signal_levels(table: EpochTable) -> str | None:
     obs = table.observations
     if len(obs) and np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any():
         return None
-    return "GNSS fixes, monitor messages, satellite reports or raw observations with C/N0"
+    return "GNSS fixes, monitor messages, satellite reports or raw observations with C/N0" + _no_cn0(obs)
+
+
+def _no_cn0(obs: pd.DataFrame) -> str:
+    """Why raw observations that are there do not count: they carry no C/N0 (none written, or none in dB-Hz)."""
+    return f" (its {len(obs)} raw observations carry no C/N0 in dB-Hz)" if len(obs) else ""
 
 
 def _has_received_ephemerides(table: EpochTable) -> str | None:

@@ -343,3 +343,51 @@ def test_a_doubled_hash_before_the_version_still_names_the_phone(tmp_path: Path)
     copy = tmp_path / "doubled.txt"
     copy.write_text(text)
     assert read_log(copy).metadata["firmware"] == read_log(original).metadata["firmware"]
+
+
+# a Samsung S8's log (nnanthi/android_rinex `SensorLog20171005.txt`) stopped seconds after the phone began
+# tracking: State 17 (code lock, no time of week yet) on every measurement, so no pseudorange can be formed
+S8_ACQUIRING = (
+    "# \n"
+    "# Header Description:\n"
+    "# \n"
+    "# Version: v2.0.0.1 Platform: 7.0 Manufacturer: samsung Model: SM-G950F\n"
+    "# \n"
+    "# Raw,ElapsedRealtimeMillis,TimeNanos,LeapSecond,TimeUncertaintyNanos,FullBiasNanos,BiasNanos,BiasUn"
+    "certaintyNanos,DriftNanosPerSecond,DriftUncertaintyNanosPerSecond,HardwareClockDiscontinuityCount,Sv"
+    "id,TimeOffsetNanos,State,ReceivedSvTimeNanos,ReceivedSvTimeUncertaintyNanos,Cn0DbHz,PseudorangeRateM"
+    "etersPerSecond,PseudorangeRateUncertaintyMetersPerSecond,AccumulatedDeltaRangeState,AccumulatedDelta"
+    "RangeMeters,AccumulatedDeltaRangeUncertaintyMeters,CarrierFrequencyHz,CarrierCycles,CarrierPhase,Car"
+    "rierPhaseUncertainty,MultipathIndicator,SnrInDb,ConstellationType,AgcDb,CarrierFrequencyHz\n"
+    "Raw,5530968,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,2,0.0,17,19123676,15,35.62"
+    "989807128906,446.5701240515798,0.08057168442293733,4,8.474382443931574,3.4028234663852886E38,,,,,0,,"
+    "1,,\n"
+    "Raw,5530969,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,3,0.0,17,14166631,39,27.51"
+    "0974884033203,890.327422966332,0.19896549295536636,4,16.89538740722486,3.4028234663852886E38,,,,,0,,"
+    "1,,\n"
+    "Raw,5530969,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,5,0.0,17,16294234,26,31.15"
+    "4491424560547,-444.89766382754897,0.13205398388274375,4,-8.442644936378741,3.4028234663852886E38,,,,"
+    ",0,,1,,\n"
+    "Raw,5530970,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,6,0.0,17,19975255,15,35.44"
+    "3382263183594,672.496150427181,0.0823990566011325,4,13.392772426654858,3.4028234663852886E38,,,,,0,,"
+    "1,,\n"
+    "Raw,5530970,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,7,0.0,17,10522288,8,40.561"
+    "40899658203,400.69026378059425,0.045610477161056456,4,7.603738807459948,3.4028234663852886E38,,,,,0,"
+    ",1,,\n"
+    "Raw,5530971,2123000000,,,-1191199253693999999,0.0,5.968969500122643E9,,,0,9,0.0,17,26952278,8,40.910"
+    "614013671875,373.91484735907875,0.04684307053254985,4,7.09563233230385,3.4028234663852886E38,,,,,0,,"
+    "1,,\n"
+)
+
+
+def test_a_phone_log_stopped_while_acquiring_is_nothing_to_judge_not_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It was refused (exit 2) with "no Raw, Fix or sensor record could be read", though the reader had said why
+    it read none: a sound log with nothing to judge is a NO VERDICT saying what it holds."""
+    log = tmp_path / "SensorLog.txt"
+    log.write_text(S8_ACQUIRING)
+    assert main(["analyze", str(log), "-o", str(tmp_path / "x.rrd")]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "NO VERDICT: no GNSS data to judge: GnssLogger log with no usable fix, measurement or sensor (Raw x6)" in out
+    assert "time of week/day not decoded" in out

@@ -239,6 +239,8 @@ def test_reports_without_fix_or_sky_are_nothing_to_judge(tmp_path: Path) -> None
     assert {s.stream for s in table.skipped} >= {"XXX", "YYY", "ZZZ"}
     idle = write(tmp_path / "idle.json", [*preamble(), *[_line(tpv(i, mode=1)) for i in range(5)]])
     table = read_log(idle)
+    # a TPV without a fix is a TPV all the same: "without a fix (TPV)" beside "TPV x5" read as a contradiction
+    assert table.metadata["holds"].startswith("gpsd JSON reports without a fix (TPV mode 2 or 3) or sky view")
     assert "TPV x5" in table.metadata["holds"]
     assert any("mode 0/1" in s.reason and s.count == 5 for s in table.skipped)
 
