@@ -529,9 +529,11 @@ def _heights(rid: str, cols: dict[str, np.ndarray], skipped: list[Skipped]) -> n
         return np.zeros(len(h))
     if missing.any():
         filled = pd.Series(h).ffill().bfill().to_numpy()
-        skipped.append(
-            Skipped(rid, "epochs without altitude: the receiver's last known height", int(missing.sum()), "repaired")
+        before_first = int(np.argmax(~missing))  # epochs before the receiver's first height have no last one
+        reason = "epochs without altitude: the receiver's last known height" + (
+            f" (the {before_first} before its first: that first height)" if before_first else ""
         )
+        skipped.append(Skipped(rid, reason, int(missing.sum()), "repaired"))
         return filled
     return h
 

@@ -353,6 +353,16 @@ def uniform_cn0(view: SkyView, opts: SatelliteSignalOptions) -> tuple[list[Alarm
     return alarms, findings, series
 
 
+def satellites_heard_text(rows: pd.DataFrame) -> str:
+    """How many satellites the receiver gave a C/N0, and how many more it only listed (a receiver's GSV slots
+    filled with placeholders: PRNs 33-51 at elevation 0 or below, never a C/N0)."""
+    listed = int(rows["sv_id"].nunique())
+    heard = int(rows.loc[np.isfinite(rows["cn0_dbhz"].to_numpy(float)), "sv_id"].nunique())
+    if heard in (0, listed):
+        return f"{listed} satellites"
+    return f"{heard} satellites with a C/N0 ({listed - heard} more listed without one)"
+
+
 def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | None = None) -> list[DetectorResult]:
     opts = opts or SatelliteSignalOptions()
     views = sky_views(ctx.table, opts)
@@ -386,7 +396,7 @@ def run_satellite_signals(ctx: AnalysisContext, opts: SatelliteSignalOptions | N
             signals.alarms += c_alarms + u_alarms + r_alarms
             signals.findings += c_findings + u_findings + r_findings
             signals.series += [x for x in (c_series, u_series) if x is not None]
-            s_notes.append(f"{view.receiver_id}: {view.rows['sv_id'].nunique()} satellites")
+            s_notes.append(f"{view.receiver_id}: {satellites_heard_text(view.rows)}")
     horizon.reason = "; ".join(h_notes) or "no satellite elevations (no satellite reports, or orbits and fixes)"
     signals.reason = "; ".join(s_notes) or "no per-satellite C/N0 or use flags"
     for r in (horizon, signals):

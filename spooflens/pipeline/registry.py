@@ -90,13 +90,16 @@ def _has_satellite_states(table: EpochTable) -> str | None:
     return "satellite positions (a navigation file or logged ephemerides)"
 
 
+SATELLITE_REPORTS = "per-satellite reports (NAV-SAT, GSV, PX4 satellite_info, GnssLogger Status)"
+
+
 def _has_satellite_view(table: EpochTable) -> str | None:
     if len(table.satellites):
         return None
     obs = table.observations
     if len(obs) and (np.isfinite(obs["cn0_dbhz"].to_numpy(dtype=float)).any() or _has_satellite_states(table) is None):
         return None
-    return "per-satellite reports (NAV-SAT) or raw observations with C/N0 or satellite positions" + _no_cn0(obs)
+    return f"{SATELLITE_REPORTS} or raw observations with C/N0 or satellite positions" + _no_cn0(obs)
 
 
 def _has_signal_levels(table: EpochTable) -> str | None:
@@ -171,8 +174,7 @@ REQUIREMENTS: dict[str, Requirement] = {
         "raw observations with satellite positions (a navigation file or logged ephemerides)", _has_satellite_states
     ),
     "satellite_view": Requirement(
-        "per-satellite reports (NAV-SAT, GSV, PX4 satellite_info, GnssLogger Status) or raw observations with "
-        "C/N0 or satellite positions",
+        f"{SATELLITE_REPORTS} or raw observations with C/N0 or satellite positions",
         _has_satellite_view,
     ),
     "signal_levels": Requirement(

@@ -9,13 +9,20 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from paths import REAL
 from pyubx2 import GET, UBXMessage
 
 from readers import read_log
 from spooflens.detectors.base import DetectorResult
-from spooflens.detectors.satellite_signals import HORIZON, SIGNALS, horizon_dip_deg, run_satellite_signals
+from spooflens.detectors.satellite_signals import (
+    HORIZON,
+    SIGNALS,
+    horizon_dip_deg,
+    run_satellite_signals,
+    satellites_heard_text,
+)
 from spooflens.epoch_table import EpochTable
 from spooflens.pipeline.evidence import Evidence
 from spooflens.pipeline.registry import AnalysisContext, AnalyzeOptions
@@ -304,3 +311,16 @@ def test_a_sky_at_one_c_n0_with_some_satellites_held_is_still_one_transmitter(tm
     assert "(1 with a spoofer's marks: " in verdict.headline and "one transmitter" in verdict.headline
     (event,) = verdict.events
     assert any(m.text.endswith("one transmitter") and m.claim == "one transmitter" for m in event.spoofer_marks)
+
+
+def test_satellites_listed_without_a_c_n0_are_counted_apart() -> None:
+    """A handheld MTK receiver (mjuenema/python-gpsdshm `tests/test.nmea`) fills its GSV's last slots with
+    placeholders (PRNs 33-51, elevation 0 or below, never a C/N0): "19 satellites" counted them with the sky."""
+    rows = pd.DataFrame(
+        {
+            "sv_id": ["G09", "G07", "G23", "G05", "G44", "G45", "G09", "G07", "G23", "G05", "G44", "G45"],
+            "cn0_dbhz": [19.0, 13.0, 36.0, np.nan, np.nan, np.nan, 20.0, 14.0, 35.0, np.nan, np.nan, np.nan],
+        }
+    )
+    assert satellites_heard_text(rows) == "3 satellites with a C/N0 (3 more listed without one)"
+    assert satellites_heard_text(rows.assign(cn0_dbhz=30.0)) == "6 satellites"

@@ -620,3 +620,22 @@ def test_a_speed_logs_magnetic_heading_keeps_its_water_speed(tmp_path: Path) -> 
     assert vhw["water_speed_mps"].to_numpy() == pytest.approx(3.3 * KNOT_MPS)
     (note,) = [s for s in table.skipped if s.stream == "IIVHW"]
     assert note.action == "repaired" and "magnetic headings without a variation (HDM, HDG, VHW)" in note.reason
+
+
+def test_an_epoch_before_the_first_altitude_is_said_to_take_the_first_not_the_last(tmp_path: Path) -> None:
+    """A handheld MTK receiver's log (mjuenema/python-gpsdshm `tests/test.nmea`) opens with an RMC whose GGA is
+    not in the file: that epoch took the next height and was said to take "the receiver's last known height",
+    which it had none of yet."""
+    log = tmp_path / "mtk.nmea"
+    log.write_text(
+        "$GPRMC,185132.000,A,3745.5274,S,14459.9666,E,1.28,124.66,280116,,,A*7C\n"
+        "$GPGGA,185133.000,3745.5270,S,14459.9662,E,1,5,1.70,85.7,M,-3.9,M,,*61\n"
+        "$GPRMC,185133.000,A,3745.5270,S,14459.9662,E,1.26,122.38,280116,,,A*7E\n"
+        "$GPGGA,185134.000,3745.5274,S,14459.9658,E,1,5,1.70,85.7,M,-3.9,M,,*6B\n"
+        "$GPRMC,185134.000,A,3745.5274,S,14459.9658,E,1.06,163.52,280116,,,A*7F\n"
+    )
+    table = read_log(log)
+    assert np.allclose(table.fixes["height_m"], 85.7 - 3.9)
+    (filled,) = [s for s in table.skipped if s.reason.startswith("epochs without altitude")]
+    assert filled.count == 1
+    assert filled.reason.endswith("last known height (the 1 before its first: that first height)")
