@@ -37,7 +37,8 @@ base (independent of GNSS: a spoofer cannot move it) and the median GNSS-minus-l
 in the metadata; otherwise the GNSS time is. Without any date or logger time, times are seconds of
 the first day (`relative`). Headings have no time field: they take the logger's time of their line or
 one interpolated by their position in the file between the epochs of the file's main receiver (a
-talker sends in real time, so file order is time order).
+talker sends in real time, so file order is time order). A magnetic heading without a variation of its own
+is made true with the variation of the log's RMC nearest in time (`Variations`).
 """
 
 from __future__ import annotations
@@ -849,15 +850,68 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
     )
 
 
+VARIATION_MAX_AGE_S = 600  # an RMC's magnetic variation is applied to magnetic headings this close in time
+
+
+@dataclass
+class Variations:
+    """The magnetic variation (east positive) of every valid RMC of a log on the log's clock, and which
+    sentences gave it.
+
+    RMC's variation is the receiver's own: a model (WMM) or a chart's table at the position it fixed. So it
+    follows that position, a spoofed one too; but it changes slowly with the place (some degrees over hundreds
+    of km at mid latitudes), far less than the course a spoofer's track sets against the compass, and the
+    variations applied to a log's headings are said with their range."""
+
+    t_ns: np.ndarray
+    deg: np.ndarray
+    names: list[str]
+
+    @classmethod
+    def of(cls, files: list[DecodedFile], times_by_file: dict[int, dict[int, int]]) -> Variations:
+        found = sorted(
+            (t, d.variation_deg, d.name)
+            for f in files
+            for d in f.decoded
+            if d.kind == "RMC" and d.valid and math.isfinite(d.variation_deg)
+            if (t := times_by_file[id(f)].get(d.sentence.line)) is not None
+        )
+        return cls(
+            np.array([t for t, _, _ in found], dtype=np.int64),
+            np.array([v for _, v, _ in found], dtype=float),
+            sorted({n for _, _, n in found}),
+        )
+
+    def at(self, t_ns: int) -> float:
+        """The variation of the RMC nearest in time, NaN when none is within VARIATION_MAX_AGE_S."""
+        if not len(self.t_ns):
+            return math.nan
+        k = int(np.searchsorted(self.t_ns, t_ns))
+        near = min((i for i in (k - 1, k) if 0 <= i < len(self.t_ns)), key=lambda i: abs(int(self.t_ns[i]) - t_ns))
+        return float(self.deg[near]) if abs(int(self.t_ns[near]) - t_ns) <= VARIATION_MAX_AGE_S * NS else math.nan
+
+
+def _variation_text(deg: list[float]) -> str:
+    """A variation, or the range of them, as `15.0 deg E` (`1.5 deg W to 2.0 deg E`)."""
+
+    def one(v: float) -> str:
+        return f"{abs(v):.1f} deg {'W' if v < 0 else 'E'}"
+
+    low, high = min(deg), max(deg)
+    return one(low) if low == high else f"{one(low)} to {one(high)}"
+
+
 def _headings(
     files: list[DecodedFile], times_by_file: dict[int, dict[int, int]], skipped: list[Skipped]
 ) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
     rows: list[tuple[int, str, float, str, float]] = []
     no_value: Counter[str] = Counter()
     untimed: Counter[str] = Counter()
-    magnetic: Counter[str] = Counter()
+    magnetic: Counter[str] = Counter()  # magnetic headings with no variation near them: taken as true
+    made_true: dict[str, list[float]] = defaultdict(list)  # magnetic headings made true: the variations applied
     outside: Counter[str] = Counter()
     labels: dict[str, str] = {}  # heading id -> its sentence (HDT, THS2, ASHR, SSNHRP)
+    variations = Variations.of(files, times_by_file)
     for f in files:
         line_t = times_by_file[id(f)]
         for d in f.decoded:
@@ -874,8 +928,13 @@ def _headings(
             elif t is None:
                 outside[hid] += 1
                 continue
-            magnetic[hid] += d.magnetic_only
-            rows.append((t, hid, d.heading_deg % 360.0, d.heading_talker or d.talker, d.water_speed_mps))
+            heading = d.heading_deg
+            if d.magnetic_only and math.isfinite(variation := variations.at(t)):
+                heading += variation
+                made_true[hid].append(variation)
+            else:
+                magnetic[hid] += d.magnetic_only
+            rows.append((t, hid, heading % 360.0, d.heading_talker or d.talker, d.water_speed_mps))
             labels[hid] = d.name[len(d.talker) :]
     for hid, n in no_value.items():
         reason = "headings without a value (invalid, or a speed log without heading)"
@@ -885,9 +944,18 @@ def _headings(
         skipped.append(Skipped(hid, why, n, "repaired"))
     for hid, n in outside.items():
         skipped.append(Skipped(hid, "headings where the file has no time to give them", n))
+    for hid, applied in made_true.items():
+        why = (
+            f"magnetic headings (HDM, HDG, VHW) made true with {'/'.join(variations.names)}'s magnetic variation "
+            f"({_variation_text(applied)}), the nearest in time"
+        )
+        skipped.append(Skipped(hid, why, len(applied), "repaired"))
     for hid, n in magnetic.items():
         if n:
-            why = "magnetic headings without a variation (HDM, HDG, VHW), taken as true: off by the local variation"
+            far = f"; no RMC variation within {VARIATION_MAX_AGE_S // 60} min" if len(variations.t_ns) else ""
+            why = (
+                f"magnetic headings without a variation (HDM, HDG, VHW{far}), taken as true: off by the local variation"
+            )
             skipped.append(Skipped(hid, why, n, "repaired"))
     if not rows:
         return None, []

@@ -130,3 +130,21 @@ def test_fixes_under_one_time_beside_another_receiver_are_no_stale_relay(tmp_pat
     table = _read(tmp_path / "two.nmea", lines)
     assert not [s for s in table.skipped if "stale" in s.reason]
     assert len(table.fixes[table.fixes["receiver_id"] == "EC"]) == 2
+
+
+@pytest.mark.parametrize(("hemisphere", "true_deg"), [("E", 306.0 + 15.0), ("W", 306.0 - 15.0)])
+def test_magnetic_headings_are_made_true_with_rmcs_variation(hemisphere: str, true_deg: float, tmp_path: Path) -> None:
+    """HDM and VHW's magnetic heading were taken as true "without a variation" though every RMC of the log gives
+    it: 15 degrees off. They are made true with the variation of the RMC nearest in time (east added, west
+    taken off), and the repair says which variation."""
+    lines = _log()
+    if hemisphere == "W":
+        lines = [_sentence(ln[1:-3].replace("015.0,E", "015.0,W")) if "RMC" in ln else ln for ln in lines]
+    table = _read(tmp_path / "headings.nmea", lines)
+    headings = table.headings
+    assert set(headings["heading_id"]) == {"IIHDM", "IIVHW"} and len(headings) == 20
+    assert headings["heading_deg"].tolist() == pytest.approx([true_deg] * 20)
+    notes = {s.stream: s for s in table.skipped if s.stream.startswith("II")}
+    for note in notes.values():
+        assert note.action == "repaired" and note.count == 10
+        assert f"made true with ECRMC's magnetic variation (15.0 deg {hemisphere})" in note.reason
