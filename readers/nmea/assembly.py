@@ -10,11 +10,14 @@ receiver; otherwise it is counted and skipped.
 **Epochs.** Sentences carrying a UTC time of day (GGA, GNS, RMC, GLL, GST, ZDA) are grouped by that time;
 VTG, GSA and GSV join their receiver's latest position epoch in file order (talkers send an epoch as a
 burst), or, where a logger stamped every line finely enough to tell bursts apart, the epoch whose position
-sentence it stamped nearest (a phone's burst ends with its RMC and GGA). Per epoch: the position from GGA,
-else GNS, else RMC, else GLL, among the sentences that call it valid; height = GGA/GNS MSL altitude + geoid
+sentence it stamped nearest (a phone's burst ends with its RMC and GGA). A receiver whose time of day moves
+in coarser steps than its fixes puts several fixes in one epoch: the first is kept, the others are said
+(`extra_fixes`). Per epoch: the position from GGA, else GNS, else RMC, else GLL (the first of its kind),
+among the sentences that call it valid; height = GGA/GNS MSL altitude + geoid
 separation (the MSL altitude alone when the separation is blank, the receiver's last known height when the
 epoch has none, 0 m when the receiver never gives one: each listed as a repair); velocity from RMC, else VTG
-(speed over ground and course, no vertical); satellites used from GGA/GNS, else the GSA lists; HDOP/VDOP
+(speed over ground and course, no vertical); satellites used from GGA/GNS, else the GSA lists (each
+satellite once: one system's list repeated in an epoch is not summed); HDOP/VDOP
 from GSA, else GGA; 1-sigma horizontal accuracy sqrt((sigma_lat^2 + sigma_lon^2)/2) and vertical sigma from
 GST; `cn0_mean_dbhz` the mean over the satellites GSV reports with a C/N0 (per satellite the strongest
 signal). The GSV of every epoch with a fix, and of the epochs without one from the receiver's first fix on,
@@ -34,7 +37,8 @@ base (independent of GNSS: a spoofer cannot move it) and the median GNSS-minus-l
 in the metadata; otherwise the GNSS time is. Without any date or logger time, times are seconds of
 the first day (`relative`). Headings have no time field: they take the logger's time of their line or
 one interpolated by their position in the file between the epochs of the file's main receiver (a
-talker sends in real time, so file order is time order).
+talker sends in real time, so file order is time order). A magnetic heading without a variation of its own
+is made true with the variation of the log's RMC nearest in time (`Variations`).
 """
 
 from __future__ import annotations
@@ -310,26 +314,34 @@ def _place_by_logger_time(rx: Receiver) -> None:
         rx.epochs[key].sentences.sort(key=lambda d: d.sentence.line)
 
 
+def _same_fix(d: Decoded) -> tuple[str, str, str]:
+    """A position sentence's kind and position, alike for every repeat of one fix (a blank position too)."""
+    return d.kind, repr(d.lat), repr(d.lon)
+
+
 def drop_stale_epochs(rxs: list[Receiver], skipped: list[Skipped]) -> None:
     """Drop the epochs in which a receiver repeats one fix while the log goes on: a relay (an autopilot's
     `$APGLL`, a multiplexer) re-sending a position it took long before, under that position's old time.
     Read as a fix it would be one epoch minutes off the log, its start or end. An epoch is stale when one
     position sentence kind comes STALE_REPEATS times or more in it, spread over as many epochs of another
-    receiver of the file (a receiver at 5 Hz writing whole seconds repeats its time within one second)."""
+    receiver of the file (a receiver at 5 Hz writing whole seconds repeats its time within one second). One
+    fix: the same position each time; a receiver whose time moves in coarser steps than its fixes writes
+    several positions under one time, each a fix of its own (`extra_fixes`), no relay."""
     for rx in rxs:
         others = np.sort(
             [e.first_line for o in rxs if o is not rx and o.file is rx.file for e in o.epochs.values()]
         ).astype(np.int64)
         for key, epoch in list(rx.epochs.items()):
-            kinds = Counter(d.kind for d in epoch.sentences if d.kind in POSITION_KINDS)
-            if not kinds or max(kinds.values()) < STALE_REPEATS:
+            repeats = Counter(_same_fix(d) for d in epoch.sentences if d.kind in POSITION_KINDS)
+            if not repeats or max(repeats.values()) < STALE_REPEATS:
                 continue
-            lines = [d.sentence.line for d in epoch.sentences if d.kind in POSITION_KINDS]
+            repeated = repeats.most_common(1)[0][0]
+            lines = [d.sentence.line for d in epoch.sentences if d.kind in POSITION_KINDS and _same_fix(d) == repeated]
             between = int(np.searchsorted(others, max(lines), "right") - np.searchsorted(others, min(lines), "left"))
             if between < STALE_REPEATS:
                 continue
             del rx.epochs[key]
-            kind, n = kinds.most_common(1)[0]
+            (kind, _, _), n = repeats.most_common(1)[0]
             hours, minutes = int(epoch.key // 3_600_000) % 24, int(epoch.key // 60_000) % 60
             stamp = f"{hours:02d}:{minutes:02d}:{epoch.key / 1000 % 60:04.1f}"
             what = "its time of day" if epoch.gnss else "one logger time"
@@ -364,6 +376,53 @@ def _first(values: Iterable[float]) -> float:
     return next((v for v in values if math.isfinite(v)), math.nan)
 
 
+def _gsa_used(gsa: list[Decoded]) -> set[tuple[str, int]]:
+    """The satellites an epoch's GSA list as used, each once: the lists of distinct systems add up (a GN
+    receiver sends one GSA per system), a system's list repeated in one epoch does not (an epoch holding
+    several of the receiver's cycles under one time of day)."""
+    return {(_GSA_SYSTEM_TALKER.get(g.gsa_system, g.talker), v) for g in gsa for v in g.used_svids}
+
+
+def extra_fixes(epoch: Epoch) -> int:
+    """How many fixes of an epoch beyond its first have a position of their own: a receiver whose time of day
+    moves in coarser steps than its fixes writes several under one time (a chartplotter's GGA, GLL and RMC
+    every ~2 s under a time moving in 10 s steps). Counted per sentence kind, the most any kind has: the GGA
+    and the RMC of one cycle may differ in their last digit; a sentence repeated word for word (a relay, a bus
+    echo) is no fix of its own."""
+    positions: dict[str, set[tuple[float, float]]] = defaultdict(set)
+    for d in epoch.sentences:
+        if d.kind in POSITION_KINDS and d.valid and math.isfinite(d.lat) and math.isfinite(d.lon):
+            positions[d.kind].add((d.lat, d.lon))
+    return max((len(p) - 1 for p in positions.values()), default=0)
+
+
+def _extra_fixes_said(rx: Receiver, per_epoch: list[tuple[Epoch, int]]) -> Skipped | None:
+    """The line for the fixes `extra_fixes` counts: the epoch keeps its first fix, whose time its time field
+    states best (the first written under a new time); the others' times are not known finer than the
+    receiver's time step, and a time made up for them (spread over the step) would set a position change
+    against a time the receiver never gave, which the detectors that weigh position change against velocity
+    would read as an error of the receiver. Said with the receiver's time step and fix interval where its
+    times hold several fixes as a rule (median), else with how many of its times hold several."""
+    extra = sum(n for _, n in per_epoch)
+    if not extra:
+        return None
+    crowded = sum(n > 0 for _, n in per_epoch)
+    gnss = all(e.gnss for e, n in per_epoch if n)
+    what = "a time of day" if gnss else "a logger time"
+    keys = np.unique([e.key for e, _ in per_epoch if e.gnss == gnss])
+    per_time = float(np.median([n + 1 for _, n in per_epoch]))
+    if per_time > 1 and len(keys) > 1:
+        step_s = float(np.median(np.diff(keys))) / 1000
+        how = (
+            f"the receiver's time moves in {step_s:g} s steps, its fixes come every ~{step_s / per_time:.2g} s; "
+            f"{crowded} of its {len(per_epoch)} times hold several"
+        )
+    else:
+        how = f"{crowded} of the receiver's {len(per_epoch)} times hold several"
+    why = f"fixes with a position of their own under {what} already used ({how}): their times are not known, not used"
+    return Skipped(rx.receiver_id, why, extra)
+
+
 def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
     """The fix of one epoch (schema names, height still MSL + separation), or None (no valid position)."""
     positions = sorted(
@@ -388,7 +447,7 @@ def epoch_fix(epoch: Epoch) -> tuple[dict[str, float], str] | None:
     if speed == 0.0 and not math.isfinite(course):
         course = 0.0
     gga = by_kind["GGA"] + by_kind["GNS"] + own
-    gsa_used = sum(len(g.used_svids) for g in gsa)
+    gsa_used = len(_gsa_used(gsa))
     gst = by_kind["GST"]
     std_lat, std_lon = _first(g.std_lat_m for g in gst), _first(g.std_lon_m for g in gst)
     cn0: dict[tuple[str, int], float] = {}
@@ -711,11 +770,14 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
         line_t = times_by_file[id(rx.file)]
         sky_epochs: list[tuple[int, Epoch, bool]] = []  # every timed epoch in file order, and whether it has a fix
         spans: dict[int, list[int]] = defaultdict(list)  # each stretch's epochs' times on the log's clock
+        crowded: list[tuple[Epoch, int]] = []  # every epoch with a fix, and its fixes beyond its first
         for epoch in rx.epochs.values():
             got = epoch_fix(epoch)
             if got is None:
                 continue
             values, _ = got
+            if values:
+                crowded.append((epoch, extra_fixes(epoch)))
             gnss_ns = round(rx.clock_s(epoch) * NS) if epoch.gnss else epoch.key * 1_000_000
             if not values:  # no fix, but its sky (GSV) is what the receiver saw: a fix lost to jamming shows there
                 invalid += 1
@@ -745,6 +807,8 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
             skipped.append(
                 Skipped(rx.receiver_id, "epochs without a valid position (GGA quality 0, RMC/GLL void)", invalid)
             )
+        if (said := _extra_fixes_said(rx, crowded)) is not None:
+            skipped.append(said)
         skipped += _stretch_dates_said(rx, spans)
         sat_rows += _receiver_sky(rx, sky_epochs, fixless_epochs, skipped)
         msgtype = "NMEA " + " ".join(f"{k}" for k in sorted(kinds))
@@ -788,15 +852,68 @@ def assemble(files: list[DecodedFile], skipped: list[Skipped]) -> Assembled:
     )
 
 
+VARIATION_MAX_AGE_S = 600  # an RMC's magnetic variation is applied to magnetic headings this close in time
+
+
+@dataclass
+class Variations:
+    """The magnetic variation (east positive) of every valid RMC of a log on the log's clock, and which
+    sentences gave it.
+
+    RMC's variation is the receiver's own: a model (WMM) or a chart's table at the position it fixed. So it
+    follows that position, a spoofed one too; but it changes slowly with the place (some degrees over hundreds
+    of km at mid latitudes), far less than the course a spoofer's track sets against the compass, and the
+    variations applied to a log's headings are said with their range."""
+
+    t_ns: np.ndarray
+    deg: np.ndarray
+    names: list[str]
+
+    @classmethod
+    def of(cls, files: list[DecodedFile], times_by_file: dict[int, dict[int, int]]) -> Variations:
+        found = sorted(
+            (t, d.variation_deg, d.name)
+            for f in files
+            for d in f.decoded
+            if d.kind == "RMC" and d.valid and math.isfinite(d.variation_deg)
+            if (t := times_by_file[id(f)].get(d.sentence.line)) is not None
+        )
+        return cls(
+            np.array([t for t, _, _ in found], dtype=np.int64),
+            np.array([v for _, v, _ in found], dtype=float),
+            sorted({n for _, _, n in found}),
+        )
+
+    def at(self, t_ns: int) -> float:
+        """The variation of the RMC nearest in time, NaN when none is within VARIATION_MAX_AGE_S."""
+        if not len(self.t_ns):
+            return math.nan
+        k = int(np.searchsorted(self.t_ns, t_ns))
+        near = min((i for i in (k - 1, k) if 0 <= i < len(self.t_ns)), key=lambda i: abs(int(self.t_ns[i]) - t_ns))
+        return float(self.deg[near]) if abs(int(self.t_ns[near]) - t_ns) <= VARIATION_MAX_AGE_S * NS else math.nan
+
+
+def _variation_text(deg: list[float]) -> str:
+    """A variation, or the range of them, as `15.0 deg E` (`1.5 deg W to 2.0 deg E`)."""
+
+    def one(v: float) -> str:
+        return f"{abs(v):.1f} deg {'W' if v < 0 else 'E'}"
+
+    low, high = min(deg), max(deg)
+    return one(low) if low == high else f"{one(low)} to {one(high)}"
+
+
 def _headings(
     files: list[DecodedFile], times_by_file: dict[int, dict[int, int]], skipped: list[Skipped]
 ) -> tuple[pd.DataFrame | None, list[StreamInfo]]:
     rows: list[tuple[int, str, float, str, float]] = []
     no_value: Counter[str] = Counter()
     untimed: Counter[str] = Counter()
-    magnetic: Counter[str] = Counter()
+    magnetic: Counter[str] = Counter()  # magnetic headings with no variation near them: taken as true
+    made_true: dict[str, list[float]] = defaultdict(list)  # magnetic headings made true: the variations applied
     outside: Counter[str] = Counter()
     labels: dict[str, str] = {}  # heading id -> its sentence (HDT, THS2, ASHR, SSNHRP)
+    variations = Variations.of(files, times_by_file)
     for f in files:
         line_t = times_by_file[id(f)]
         for d in f.decoded:
@@ -813,8 +930,13 @@ def _headings(
             elif t is None:
                 outside[hid] += 1
                 continue
-            magnetic[hid] += d.magnetic_only
-            rows.append((t, hid, d.heading_deg % 360.0, d.heading_talker or d.talker, d.water_speed_mps))
+            heading = d.heading_deg
+            if d.magnetic_only and math.isfinite(variation := variations.at(t)):
+                heading += variation
+                made_true[hid].append(variation)
+            else:
+                magnetic[hid] += d.magnetic_only
+            rows.append((t, hid, heading % 360.0, d.heading_talker or d.talker, d.water_speed_mps))
             labels[hid] = d.name[len(d.talker) :]
     for hid, n in no_value.items():
         reason = "headings without a value (invalid, or a speed log without heading)"
@@ -824,9 +946,18 @@ def _headings(
         skipped.append(Skipped(hid, why, n, "repaired"))
     for hid, n in outside.items():
         skipped.append(Skipped(hid, "headings where the file has no time to give them", n))
+    for hid, applied in made_true.items():
+        why = (
+            f"magnetic headings (HDM, HDG, VHW) made true with {'/'.join(variations.names)}'s magnetic variation "
+            f"({_variation_text(applied)}), the nearest in time"
+        )
+        skipped.append(Skipped(hid, why, len(applied), "repaired"))
     for hid, n in magnetic.items():
         if n:
-            why = "magnetic headings without a variation (HDM, HDG, VHW), taken as true: off by the local variation"
+            far = f"; no RMC variation within {VARIATION_MAX_AGE_S // 60} min" if len(variations.t_ns) else ""
+            why = (
+                f"magnetic headings without a variation (HDM, HDG, VHW{far}), taken as true: off by the local variation"
+            )
             skipped.append(Skipped(hid, why, n, "repaired"))
     if not rows:
         return None, []

@@ -1,10 +1,11 @@
 """NMEA sentences decoded with pynmeagps into plain values with units (the one NMEA mapping).
 
 Read: GGA and GNS (position, MSL altitude and geoid separation, quality, satellites, HDOP), RMC
-(position, speed, course, date), GLL (position), VTG (speed, course), GSA (satellites used, DOPs),
-GSV (per-satellite elevation, azimuth, C/N0), GST (position error sigmas), ZDA (date), and the
+(position, speed, course, date, magnetic variation), GLL (position), VTG (speed, course), GSA (satellites
+used, DOPs), GSV (per-satellite elevation, azimuth, C/N0), GST (position error sigmas), ZDA (date), and the
 headings HDT and THS (true) and HDG (magnetic; made true with the deviation and variation it carries);
-HDM and an HDG without variation are magnetic headings taken as true, said so where they are assembled.
+HDM, VHW's magnetic heading and an HDG without variation are magnetic headings, made true where they are
+assembled with the variation of the log's RMC nearest in time (taken as true where there is none, said so).
 Proprietary and variant sentences (Unicore, Trimble, Septentrio, Feyman, Fugro) are read in
 `proprietary.py` into the same values. Every other sentence type is counted and skipped.
 """
@@ -107,6 +108,7 @@ class Decoded:
     height_m: float = math.nan  # ellipsoidal height, where the sentence gives that (PTNL,GGK "EHT")
     speed_mps: float = math.nan
     course_deg: float = math.nan
+    variation_deg: float = math.nan  # RMC: magnetic variation, east positive
     sats_used: float = math.nan
     used_svids: tuple[int, ...] = ()
     # GSA's system ID (NMEA 4.10: 1 GPS, 2 GLONASS, 3 Galileo, 4 BeiDou, 5 QZSS, 6 NavIC; 0 absent): a GN
@@ -120,7 +122,7 @@ class Decoded:
     std_alt_m: float = math.nan
     heading_deg: float = math.nan
     water_speed_mps: float = math.nan  # VHW: the vessel's log, speed through the water
-    magnetic_only: bool = False  # HDM, or HDG without variation: a magnetic heading, taken as true
+    magnetic_only: bool = False  # HDM, VHW magnetic, HDG without variation: a magnetic heading, no variation
     heading_talker: str = ""  # the talker a heading row is filed under when not the sentence's own
     satellites: list[tuple[int, float, float, float, int]] = field(default_factory=list)  # svid, el, az, C/N0, sig
 
@@ -190,6 +192,9 @@ def _gns(d: Decoded, msg: Any) -> None:
     d.alt_msl_m, d.geoid_sep_m = field_number(msg, "alt"), field_number(msg, "sep")
 
 
+_EAST = {"E": 1.0, "W": -1.0}  # a variation's or deviation's sign: east is added to a magnetic heading
+
+
 def _rmc(d: Decoded, msg: Any) -> None:
     d.tod_s = time_of_day(msg)
     _position(d, msg)
@@ -200,6 +205,7 @@ def _rmc(d: Decoded, msg: Any) -> None:
     date = getattr(msg, "date", None)
     if isinstance(date, dt.date):
         d.day = (date - dt.date(1970, 1, 1)).days
+    d.variation_deg = field_number(msg, "mv") * _EAST.get(field_text(msg, "mvEW"), math.nan)
 
 
 def _gll(d: Decoded, msg: Any) -> None:
@@ -280,23 +286,23 @@ def _ths(d: Decoded, msg: Any) -> None:
 
 
 def _hdg(d: Decoded, msg: Any) -> None:
-    """Magnetic sensor heading + deviation + variation (east positive) = true heading; NaN without variation."""
+    """Magnetic sensor heading + deviation + variation (east positive) = true heading; without a variation, the
+    magnetic heading (+ deviation), `magnetic_only`."""
     heading, deviation, variation = (
         field_number(msg, "headingM"),
         field_number(msg, "deviation"),
         field_number(msg, "variation"),
     )
-    sign = {"E": 1.0, "W": -1.0}
-    dev = deviation * sign.get(field_text(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
-    if not math.isfinite(variation) or field_text(msg, "variationEW") not in sign:
+    dev = deviation * _EAST.get(field_text(msg, "deviationEW"), 0.0) if math.isfinite(deviation) else 0.0
+    if not math.isfinite(variation) or field_text(msg, "variationEW") not in _EAST:
         d.heading_deg = heading + dev
         d.magnetic_only = True
         return
-    d.heading_deg = heading + dev + variation * sign[field_text(msg, "variationEW")]
+    d.heading_deg = heading + dev + variation * _EAST[field_text(msg, "variationEW")]
 
 
 def _hdm(d: Decoded, msg: Any) -> None:
-    """A magnetic heading (an autopilot's, a fluxgate's), no deviation or variation to make it true."""
+    """A magnetic heading (an autopilot's, a fluxgate's), no variation of its own to make it true."""
     d.heading_deg = field_number(msg, "headingM")
     d.magnetic_only = True
 
