@@ -417,6 +417,8 @@ def _extra_fixes_said(rx: Receiver, per_epoch: list[tuple[Epoch, int]]) -> Skipp
             f"the receiver's time moves in {step_s:g} s steps, its fixes come every ~{step_s / per_time:.2g} s; "
             f"{crowded} of its {len(per_epoch)} times hold several"
         )
+    elif len(per_epoch) == 1:
+        how = f"the receiver's only time holds {extra + 1}"
     else:
         how = f"{crowded} of the receiver's {len(per_epoch)} times hold several"
     why = f"fixes with a position of their own under {what} already used ({how}): their times are not known, not used"

@@ -100,6 +100,9 @@ def test_fixes_under_a_time_already_used_keep_the_first_and_say_the_others(tmp_p
     assert said.count == 8 and said.action == "skipped"
     assert "under a time of day already used" in said.reason and "their times are not known, not used" in said.reason
     assert "time moves in 10 s steps, its fixes come every ~2 s" in said.reason
+    # a log of one time (pynmeagps' fixture writes twenty positions under one) says so, not "1 of its 1 times"
+    (said,) = [s for s in _read(tmp_path / "one.nmea", _log()[:30]).skipped if s.stream == "EC"]
+    assert said.count == 4 and "(the receiver's only time holds 5)" in said.reason
 
 
 def test_a_bus_echo_of_identical_sentences_is_no_fix_of_its_own(tmp_path: Path) -> None:
