@@ -67,12 +67,14 @@ def _is_static(table: EpochTable, receiver_id: str) -> tuple[bool | None, str]:
     j = np.searchsorted(t, t - STATIC_SPAN_S, side="right") - 1
     ok = (j >= 0) & (t - t[np.maximum(j, 0)] > 0.5 * STATIC_SPAN_S)
     span_s = float(t[-1] - t[0])
-    if not ok.any():
-        ok_all = span_s > 0
-        speed = np.array([np.linalg.norm(p[-1, :2] - p[0, :2]) / span_s]) if ok_all else np.array([np.inf])
-    else:
-        k = np.flatnonzero(ok)
-        speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
+    if not ok.any():  # shorter than a span: its first fix to its last
+        speed = np.array([np.linalg.norm(p[-1, :2] - p[0, :2]) / span_s]) if span_s > 0 else np.array([np.inf])
+        return bool(speed[0] <= STATIC_SPEED_MPS), (
+            f"{speed[0]:.2g} m/s from its first fix to its last, {span_s:.0f} s later (no {STATIC_SPAN_S:g} s span "
+            f"in it), {'within' if speed[0] <= STATIC_SPEED_MPS else 'beyond'} {STATIC_SPEED_MPS} m/s"
+        )
+    k = np.flatnonzero(ok)
+    speed = np.linalg.norm(p[k, :2] - p[j[k], :2], axis=1) / (t[k] - t[j[k]])
     moving = float(np.mean(speed > STATIC_SPEED_MPS))
     if span_s > STATIC_WINDOW_S:
         judged = f"its first {len(t)} fixes ({span_s / 60:.0f} min)"

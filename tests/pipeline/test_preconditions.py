@@ -213,6 +213,11 @@ def test_a_station_whose_fixes_a_spoofer_drags_away_later_stays_a_known_station(
     short = replace(table, fixes=table.fixes[table.fixes["t_s"] <= 240.0].reset_index(drop=True))
     found, _ = pc.known_stations(_ctx(short))
     assert "0% of 30 s spans of its 240 s" in found["0759"].source  # type: ignore[attr-defined]
+    # shorter than a span (a 24 s static u-blox was said to have "0% of 30 s spans of its 24 s"): first to last fix
+    first = table.fixes[table.fixes["receiver_id"] == "0759"].iloc[:25].reset_index(drop=True)
+    brief = replace(table, fixes=first.assign(t_s=np.arange(25.0)))  # its first 25 fixes taken 1 s apart
+    found, _ = pc.known_stations(_ctx(brief))
+    assert "from its first fix to its last, 24 s later (no 30 s span in it), within 0.5 m/s" in found["0759"].source  # type: ignore[attr-defined]
     # a station logging every 5 min has 2 fixes in those minutes: judged on its first 10, and with fewer than 3
     # fixes not judged at all (it was said to move)
     fx = table.fixes[table.fixes["receiver_id"] == "0759"]

@@ -74,6 +74,9 @@ class RateResiduals:
     slip: BoolArray  # (E, S) carrier slipped (replaced by Doppler, or dropped)
     delay_step: BoolArray  # (E, S) code and carrier jumped together (a change of the signal's delay)
     step_m: FloatArray  # (E, S) size of that jump (carrier change minus what was expected), m
+    # (E, S) measured by the Doppler where the carrier is the source (it slipped): noisier than an intact carrier
+    from_doppler: BoolArray | None = None
+    doppler_noise_mps: float = 0.0  # the Doppler's scatter about intact carriers' rates, robust, m/s
 
 
 def row_median(x: FloatArray, mask: BoolArray | None = None) -> FloatArray:
@@ -137,7 +140,13 @@ def rate_residuals(
         big = np.abs(jump_c) > max(opts.slip_sigmas * cmc_scale, opts.min_step_m)
         delay_step = off_doppler & code_follows & big
         slip = (off_doppler & ~(code_follows & big)) | (~has_doppler & np.isfinite(d_cmc) & ~code_follows)
-        measured = np.where(np.isfinite(d_carrier) & ~slip, d_carrier, doppler_change) / dt[:, None]
+        intact = np.isfinite(d_carrier) & ~slip
+        measured = np.where(intact, d_carrier, doppler_change) / dt[:, None]
+        from_doppler = ~intact & has_doppler
+        # the Doppler trapezoid's own error, read where the carrier is intact: a Doppler standing in for a
+        # slipped carrier is that much noisier than the carrier rates the unit-weight scale is learned from
+        intact_jump = np.where(intact & has_doppler, jump_c, np.nan) / dt[:, None]
+        doppler_noise = robust_scale(intact_jump[np.isfinite(intact_jump)], 1e-6) if from_doppler.any() else 0.0
         # a delay step's size, for the report: the carrier change beyond what the Doppler (else the
         # reference) expected, receiver clock removed
         expected = np.where(has_doppler, doppler_change, pred_change)
@@ -153,10 +162,20 @@ def rate_residuals(
             step_m = np.where(delay_step, dev, np.nan)
     else:
         y = grid.rate_mps - predicted_rate(grid, ref.pos, ref.vel)
+        from_doppler, doppler_noise = np.zeros((E, S), dtype=bool), 0.0
     usable = grid.usable & ref.valid[:, None] & (now.elevation_rad >= np.radians(opts.elevation_mask_deg))
     y = np.where(usable & np.isfinite(y), y, np.nan)
     return RateResiduals(
-        grid.t_s, source, y, now.los_enu, now.elevation_rad, slip & usable, delay_step & usable, step_m
+        grid.t_s,
+        source,
+        y,
+        now.los_enu,
+        now.elevation_rad,
+        slip & usable,
+        delay_step & usable,
+        step_m,
+        from_doppler & usable & np.isfinite(y),
+        doppler_noise,
     )
 
 
@@ -248,6 +267,13 @@ def fit_velocity_error(
     w = elevation_weight(res.elevation_rad)
     full = fit_epochs(res.y, res.los_enu, systems, w)
     sigma = robust_scale(full.standardised, 1e-6)
+    if res.from_doppler is not None and res.from_doppler.any() and res.doppler_noise_mps > 0:
+        # a Doppler standing in for a slipped carrier: its variance is the cell's plus the Doppler's own (a
+        # clean static receiver's one 0.11 m/s Doppler on a weak satellite, weighed as a 2 mm/s carrier, was
+        # a known-station alarm)
+        w = np.where(res.from_doppler, w / (1.0 + w * (res.doppler_noise_mps / sigma) ** 2), w)
+        full = fit_epochs(res.y, res.los_enu, systems, w)
+        sigma = robust_scale(full.standardised, 1e-6)
     chi2 = np.where(full.dof > 0, full.weighted_sq / sigma**2, np.nan)
 
     def failing(fit: EpochFit) -> BoolArray:
