@@ -109,6 +109,10 @@ def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() 
     sim = simulate("ground", seed=5, duration_s=120.0)
     table, _ = apply_attack(sim.table, parse_attack("ramp:rate=1.5,axes=en,start=60"))
     model = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade)).error_model()
+    # H per epoch (a log with odometry's layout; the kernels read a block's copy of the one broadcast H the
+    # same): the last block of 100 is one epoch, whose slice of the broadcast H is a read-only C array that
+    # no analysis of the warm-up makes, a minute of numba compiling in this test alone
+    model = replace(model, C=np.ascontiguousarray(model.C))
     opts = MlrtOptions()
     fwd = forward_filter(model, keep_states=False)
     sigma = np.array(opts.sigma_rate_mps)
