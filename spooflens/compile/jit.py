@@ -7,6 +7,8 @@ import threading
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
+import numpy as np
+
 from spooflens.compile import aot
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -65,6 +67,14 @@ class LazyKernel:
 
     def __repr__(self) -> str:
         return f"<kernel {self.__module__}.{self.__qualname__}>"
+
+
+def kernel_array(x: np.ndarray) -> np.ndarray:
+    """`x` as the kernels are built for it: C-contiguous and writeable (a view when it is both already). A
+    one-epoch slice of a broadcast array is contiguous but read-only: `np.ascontiguousarray` hands it over
+    as it is, an argument type no kernel is built for, which cost the first analysis of such a log a
+    minute of compiling."""
+    return np.require(x, requirements=["C", "W"])
 
 
 def njit(**options: Any) -> Callable[[F], F]:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.compile.jit import njit
+from spooflens.compile.jit import kernel_array, njit
 from spooflens.estimation.kalman_update import masked_update_into, observed_parts, update_scratch
 from spooflens.estimation.sparse_products import (
     add_block_diagonal,
@@ -127,13 +127,13 @@ def _forward(
     return eps, S_out, Sinv_out, K_out, xp, Pp, xu, Pu, nis, logdet, dof, x_carry, P_carry
 
 
-_ModelArrays = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+ModelArrays = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
-def _model_arrays(model: LinearGaussianModel, epochs: slice = slice(None)) -> _ModelArrays:
-    """The arrays `_forward` reads, of `epochs` (views where the model's are contiguous already)."""
+def model_arrays(model: LinearGaussianModel, epochs: slice = slice(None)) -> ModelArrays:
+    """The arrays `_forward` reads, of `epochs` (views where the model's are as the kernels take them)."""
     A, Q = model.A[epochs], model.Q[epochs]
-    c = np.ascontiguousarray
+    c = kernel_array
     return c(A.head), c(A.tail), c(Q.head), c(Q.tail), c(model.C[epochs]), c(model.R[epochs]), c(model.y[epochs])
 
 
@@ -146,7 +146,7 @@ def forward_filter(model: LinearGaussianModel, keep_states: bool = True) -> Forw
     """The forward filter; without `keep_states` the state estimates and their covariances are not kept
     (x_pred, P_pred, x_upd, P_upd come back empty: two (N, n, n) arrays a detector that reads only the
     innovations, gains and S does without)."""
-    out = _forward(*_model_arrays(model), *prior(model), keep_states)
+    out = _forward(*model_arrays(model), *prior(model), keep_states)
     return ForwardResult(*out[:-2])
 
 
@@ -162,7 +162,7 @@ def forward_blocks(
     for lo in range(0, N, block):
         hi = min(lo + block, N)
         end = max(hi, min(reach(hi), N))
-        *out, x, P = _forward(*_model_arrays(model, slice(lo, end)), x, P, False, lo > 0, hi - 1 - lo)
+        *out, x, P = _forward(*model_arrays(model, slice(lo, end)), x, P, False, lo > 0, hi - 1 - lo)
         yield lo, hi, ForwardResult(*out)
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from spooflens.compile.jit import njit
+from spooflens.compile.jit import kernel_array, njit
 from spooflens.estimation.kalman import ForwardResult
 from spooflens.estimation.kalman_update import cholesky_logdet
 from spooflens.estimation.sparse_products import pattern
@@ -304,12 +304,12 @@ class RampPass:
         epochs = slice(lo, end)
         A, C = self.model.A[epochs], self.model.C[epochs]
         _ramp_pass(
-            np.ascontiguousarray(A.head),
-            np.ascontiguousarray(A.tail),
-            np.ascontiguousarray(C),
-            np.ascontiguousarray(fwd.K),
-            np.ascontiguousarray(fwd.Sinv),
-            np.ascontiguousarray(fwd.eps),
+            kernel_array(A.head),
+            kernel_array(A.tail),
+            kernel_array(C),
+            kernel_array(fwd.K),
+            kernel_array(fwd.Sinv),
+            kernel_array(fwd.eps),
             self.t[epochs],
             self.rows,
             self.cands[c0:c1],

@@ -103,16 +103,17 @@ def test_statistics_a_block_at_a_time_equal_the_whole_logs_filter_bit_for_bit() 
     ramp statistics, NIS and whiteness are those of one filter and one pass over the whole log."""
     from spooflens.detectors.innovation_tests import position_nis
     from spooflens.detectors.mlrt import normalised_position_innovations, statistics
-    from spooflens.estimation.kalman import forward_filter
+    from spooflens.estimation.kalman import forward_filter, model_arrays
     from spooflens.estimation.ramp_signature import RampPass
 
     sim = simulate("ground", seed=5, duration_s=120.0)
     table, _ = apply_attack(sim.table, parse_attack("ramp:rate=1.5,axes=en,start=60"))
     model = run_filter(table, options=FilterOptions(grade=SCENARIOS["ground"].imu_grade)).error_model()
-    # H per epoch (a log with odometry's layout; the kernels read a block's copy of the one broadcast H the
-    # same): the last block of 100 is one epoch, whose slice of the broadcast H is a read-only C array that
-    # no analysis of the warm-up makes, a minute of numba compiling in this test alone
-    model = replace(model, C=np.ascontiguousarray(model.C))
+    # the last block of 100 is one epoch, whose slice of the broadcast H is contiguous but read-only: handed
+    # over as it is, it was an argument type no kernel is built for (a minute of compiling in an analysis)
+    assert model.C.strides[0] == 0 and model.n_epochs % 100 == 1
+    last = model_arrays(model, slice(model.n_epochs - 1, model.n_epochs))
+    assert all(x.flags.c_contiguous and x.flags.writeable for x in last)
     opts = MlrtOptions()
     fwd = forward_filter(model, keep_states=False)
     sigma = np.array(opts.sigma_rate_mps)
