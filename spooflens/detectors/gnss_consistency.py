@@ -326,8 +326,8 @@ def run_gnss_consistency(
             continue
         if res.held.any():
             course, alone = int((res.held & ~res.speed_only).sum()), int(res.speed_only.sum())
-            slow = f"under {opts.held_course_speed_mps:g} m/s"
-            which = [f"{course} {_fixes(course)} on a course held at low speed ({slow})"] * bool(course)
+            slow = f"below {opts.held_course_speed_mps:g} m/s"
+            which = [f"{course} {_fixes(course)} on a course held {slow}"] * bool(course)
             which += [f"{alone} {_fixes(alone)} with a speed alone"] * bool(alone)
             mode += f"; {' and '.join(which)} (no measured direction: the window allows the distance travelled)"
         checked: NDArray[np.bool_] = np.asarray(np.isfinite(res.r).any(axis=0), dtype=bool)
