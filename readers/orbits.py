@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spooflens.epoch_table import GPS_EPOCH_UNIX_NS, Skipped
-from spooflens.gnss.ephemeris import GpsEphemerides, states_at_transmission
+from spooflens.gnss.ephemeris import FIT_INTERVAL_S, GpsEphemerides, states_at_transmission
 
 ORBIT_SYSTEMS = {"G": "GPS", "E": "Galileo", "C": "BeiDou"}
 FloatArray = NDArray[np.float64]
@@ -28,14 +28,27 @@ def _gps_minute(t_gps_s: float) -> str:
     return datetime.fromtimestamp(GPS_EPOCH_UNIX_NS / 1e9 + float(t_gps_s), UTC).strftime("%Y-%m-%d %H:%M")
 
 
-def _other_span(ephemerides: GpsEphemerides, system: str, t_gps_s: FloatArray) -> str:
+def _other_span(ephemerides: GpsEphemerides, system: str, t_gps_s: FloatArray, observed: NDArray[np.str_]) -> str:
     """Why no row of a system with orbits got one: the orbits are of another time than the observations (a
-    navigation file of another day, or hours that do not cover the log's)."""
-    toe = ephemerides.toe_s[np.char.startswith(ephemerides.sv_id.astype(str), system)]
+    navigation file of another day, or hours that do not cover the log's), or of the same hours but of other
+    satellites than those observed (a navigation file cut, or kept from another receiver)."""
+    ids = ephemerides.sv_id.astype(str)
+    toe = ephemerides.toe_s[np.char.startswith(ids, system)]
+    orbits, observations = (
+        f"{_gps_minute(toe.min())} to {_gps_minute(toe.max())}",
+        f"{_gps_minute(t_gps_s.min())} to {_gps_minute(t_gps_s.max())}",
+    )
+    reach = FIT_INTERVAL_S / 2  # a broadcast orbit serves its fit interval about its reference time
+    if toe.min() - reach <= t_gps_s.max() and toe.max() + reach >= t_gps_s.min():
+        without = sorted(set(observed.tolist()) - set(ids.tolist()))
+        listed = ", ".join(without[:8]) + (f" and {len(without) - 8} more" if len(without) > 8 else "")
+        return (
+            f"the navigation data's {ORBIT_SYSTEMS[system]} orbits ({orbits}) are of the observations' hours "
+            f"({observations} GPS time) but none is of a satellite observed ({listed})"
+        )
     return (
-        f"the navigation data's {ORBIT_SYSTEMS[system]} orbits are for {_gps_minute(toe.min())} to "
-        f"{_gps_minute(toe.max())}, the observations {_gps_minute(t_gps_s.min())} to {_gps_minute(t_gps_s.max())} "
-        "GPS time (a navigation file of another day or hour?)"
+        f"the navigation data's {ORBIT_SYSTEMS[system]} orbits are for {orbits}, the observations {observations} "
+        + ("GPS time (a navigation file of another day or hour?)")
     )
 
 
@@ -69,7 +82,7 @@ def state_columns(
             if s not in have:
                 why = "without satellite states: the navigation data holds no orbit of this system"
             elif not states.valid[rows].any():
-                why = "without satellite states: " + _other_span(ephemerides, s, t_gps_s[g][rows])
+                why = "without satellite states: " + _other_span(ephemerides, s, t_gps_s[g][rows], sv[g][rows])
             else:
                 sick = rows & ~states.valid & np.isin(sv[g], ephemerides.unhealthy_satellites())
                 if sick.any():

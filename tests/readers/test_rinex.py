@@ -366,6 +366,19 @@ def test_nav_topic_overrides_the_search(tmp_path: Path) -> None:
     assert "no orbit of the navigation data given is of the observations' time" in str(
         REQUIREMENTS["satellite_states"].missing(stale)
     )
+    # a nav file of the same hours but of other satellites (a static base's nav cut to its first records, whose
+    # one GPS orbit was of a satellite it never saw, was said to be "of another day or hour?")
+    head, body = NAV_0759.read_text().split("END OF HEADER\n", 1)
+    lines = body.splitlines(keepends=True)
+    records = ["".join(lines[i : i + 8]) for i in range(0, len(lines) - 7, 8)]
+    seen = {int(sv[1:]) for sv in with_nav.observations["sv_id"].unique()}
+    unseen = [r for r in records if int(r[:2]) not in seen]
+    assert unseen and len(unseen) < len(records)
+    (tmp_path / "other.05n").write_text(head + "END OF HEADER\n" + "".join(unseen))
+    others = read_log(obs, topics={"nav": str(tmp_path / "other.05n")})
+    (miss,) = [s for s in others.skipped if s.reason.startswith("GPS rows without satellite states")]
+    assert "are of the observations' hours (2005-04-02" in miss.reason
+    assert "but none is of a satellite observed (G" in miss.reason and "another day" not in miss.reason
 
 
 # --- directories and sniffing -----------------------------------------------------------------------------
