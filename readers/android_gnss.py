@@ -8,6 +8,18 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 ADR_VALID, ADR_RESET, ADR_CYCLE_SLIP = 1, 2, 4  # GnssMeasurement.accumulatedDeltaRangeState bits
+ADR_HALF_CYCLE_RESOLVED, ADR_HALF_CYCLE_REPORTED = 8, 16  # (API 28+)
+HALF_CYCLE_ANDROID = (
+    "carriers with an unresolved half-cycle ambiguity (Android ADR state HALF_CYCLE_REPORTED without "
+    "HALF_CYCLE_RESOLVED)"
+)
+
+
+def adr_half_cycle_unresolved(state: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Where the phone reports its half-cycle state (bit 16) and says it is not resolved (bit 8 clear)."""
+    return ((state & ADR_HALF_CYCLE_REPORTED) != 0) & ((state & ADR_HALF_CYCLE_RESOLVED) == 0)
+
+
 # GnssStatus constellation types -> RINEX letter
 SYSTEM = {1: "G", 2: "S", 3: "R", 4: "J", 5: "C", 6: "E", 7: "I"}
 

@@ -15,7 +15,8 @@ Columns are found by name, so each dialect is a list of aliases (`ALIASES`). One
 `ublox` for smartLoc). Observations: the raw pseudorange less the table's inter-signal range bias (a
 receiver-side bias, as gnss_lib_py's corrected pseudorange removes it), satellite ECEF position and
 velocity at transmission and clock bias/drift where the table has them, C/N0, pseudorange rate or
-Doppler, carrier phase from a valid accumulated delta range; one L1-band signal per satellite and epoch
+Doppler, carrier phase from a valid accumulated delta range (smartLoc: cpMes with cpValid), none the
+receiver says is not continuous (`readers.carrier_arcs`); one L1-band signal per satellite and epoch
 (L5/E5a rows are counted and left out). Fixes: the table's receiver position per epoch (the dataset's
 weighted-least-squares solution, not the phone's own). Time: GPS time (`ArrivalTimeNanosSinceGpsEpoch`,
 `millisSinceGpsEpoch`, `gps_millis`, week + time of week), else UNIX (`utcTimeMillis`).
@@ -37,7 +38,17 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import ReaderFormat
-from readers.android_gnss import ADR_CYCLE_SLIP, ADR_RESET, ADR_VALID, L1_BAND_HZ, SYSTEM, android_sv_ids
+from readers.android_gnss import (
+    ADR_CYCLE_SLIP,
+    ADR_RESET,
+    ADR_VALID,
+    HALF_CYCLE_ANDROID,
+    L1_BAND_HZ,
+    SYSTEM,
+    adr_half_cycle_unresolved,
+    android_sv_ids,
+)
+from readers.carrier_arcs import CP_VALID, clear_carriers, ublox_breaks
 from readers.csv_text import read_rows
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns
 from spooflens.errors import ReaderError
@@ -70,6 +81,7 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "adr_state": ("AccumulatedDeltaRangeState", "accumulated_delta_range_state"),
     "cn0": ("Cn0DbHz", "cn0_dbhz", "Carrier-to-noise density ratio (cno) [dbHz]"),
     "trk": ("Tracking status (trkStat) []",),
+    "locktime": ("Carrier phase locktime counter (locktime) [ms]",),
     "sv_x": ("SvPositionXEcefMeters", "xSatPosM", "x_sv_m"),
     "sv_y": ("SvPositionYEcefMeters", "ySatPosM", "y_sv_m"),
     "sv_z": ("SvPositionZEcefMeters", "zSatPosM", "z_sv_m"),
@@ -250,10 +262,15 @@ def _observations(
     prr = np.where(np.isfinite(prr), prr, -doppler * C_MPS / freq)
     doppler = np.where(np.isfinite(doppler), doppler, -prr * freq / C_MPS)
     phase = _f(df, "phase_cycles")
+    trk = np.nan_to_num(_f(df, "trk")).astype(np.int64)
+    if "trk" in df:  # u-blox trkStat bit 1: the carrier phase is valid
+        phase = np.where(trk & CP_VALID, phase, np.nan)
+    half_cycle = np.zeros(len(df), dtype=bool)
     if "adr" in df:
         state = np.nan_to_num(_f(df, "adr_state")).astype(np.int64)
         ok = ((state & ADR_VALID) != 0) & ((state & (ADR_RESET | ADR_CYCLE_SLIP)) == 0)
         phase = np.where(ok, _f(df, "adr") * freq / C_MPS, np.nan)
+        half_cycle = adr_half_cycle_unresolved(state)
     out = pd.DataFrame(
         {
             "t_ns": t_ns,
@@ -273,6 +290,9 @@ def _observations(
             "sv_vz_mps": _f(df, "sv_vz"),
             "sv_clock_bias_m": _f(df, "sv_clk"),
             "sv_clock_drift_mps": _f(df, "sv_drift"),
+            "half_cycle": half_cycle,
+            "trk": trk,
+            "locktime": _f(df, "locktime"),
         }
     )
     keep = np.ones(len(out), dtype=bool)
@@ -291,7 +311,21 @@ def _observations(
         skipped.append(
             Skipped(rid, "a second L1 signal of the same satellite and epoch (the first kept)", int(dup.sum()))
         )
-    return out[~dup].reset_index(drop=True)
+    return _continuous_carriers(out[~dup].reset_index(drop=True), "trk" in df, "locktime" in df, rid, skipped)
+
+
+def _continuous_carriers(
+    out: pd.DataFrame, ublox: bool, has_locktime: bool, rid: str, skipped: list[Skipped]
+) -> pd.DataFrame:
+    """The carriers the receiver says are not continuous cleared (`readers.carrier_arcs`): the phone's
+    unresolved half-cycle state; u-blox rows' half-cycle bits and lock time (smartLoc)."""
+    half, trk, lock = (out.pop(c).to_numpy() for c in ("half_cycle", "trk", "locktime"))
+    breaks = {HALF_CYCLE_ANDROID: half.astype(bool)}
+    if ublox:
+        sv, t_ns = out["sv_id"].to_numpy(), out["t_ns"].to_numpy(np.int64)
+        breaks |= ublox_breaks(sv, t_ns, trk, np.nan_to_num(lock).astype(np.int64) if has_locktime else None)
+    out["carrier_phase_cycles"] = clear_carriers(rid, out["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
+    return out
 
 
 def _fixes(df: pd.DataFrame, t_ns: NDArray[np.int64], rid: str, meta: dict[str, str]) -> pd.DataFrame | None:

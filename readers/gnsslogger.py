@@ -21,8 +21,9 @@ GnssClock/GnssMeasurement documentation, as Google's gps-measurement-tools apply
   is counted. One L1-band signal per satellite (L5/E5a rows are counted and left out), as for RINEX.
 - pseudorange rate: PseudorangeRateMetersPerSecond; Doppler = -rate * f / c; carrier phase (cycles)
   = AccumulatedDeltaRangeMeters * f / c where AccumulatedDeltaRangeState is valid and not reset or
-  cycle-slipped; C/N0: Cn0DbHz. Satellite ids RINEX style (SBAS svid - 100, QZSS svid - 192; GLONASS
-  rows without a known slot are skipped).
+  cycle-slipped, and not half-cycle unresolved (HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED:
+  `readers.carrier_arcs`, counted as repaired); C/N0: Cn0DbHz. Satellite ids RINEX style (SBAS
+  svid - 100, QZSS svid - 192; GLONASS rows without a known slot are skipped).
 - GPS satellite states from a RINEX navigation file: `--topic nav=FILE`, else one in the log's
   directory that covers its time (`readers.raw_states`).
 
@@ -63,10 +64,13 @@ from readers.android_gnss import (
     ADR_CYCLE_SLIP,
     ADR_RESET,
     ADR_VALID,
+    HALF_CYCLE_ANDROID,
     L1_BAND_HZ,
+    adr_half_cycle_unresolved,
     android_sv_ids,
     android_systems,
 )
+from readers.carrier_arcs import clear_carriers
 from readers.inav import InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
@@ -415,6 +419,7 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
             "carrier_phase_cycles": np.where(adr_ok, adr * carrier_hz / C_MPS, np.nan),
             "carrier_freq_hz": carrier_hz,
             "cn0_dbhz": cn0,
+            "half_cycle": adr_half_cycle_unresolved(adr_state),
         }
     )
     bad = np.any(list(reasons.values()), axis=0) if reasons else np.zeros(n, dtype=bool)
@@ -430,7 +435,10 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
         .groupby("t_ns", as_index=False)
         .mean()
     )
-    return RawResult(good[~dup].reset_index(drop=True), epochs)
+    kept = good[~dup].reset_index(drop=True)
+    half = {HALF_CYCLE_ANDROID: kept.pop("half_cycle").to_numpy(bool)}
+    kept["carrier_phase_cycles"] = clear_carriers(RECEIVER, kept["carrier_phase_cycles"].to_numpy(), half, skipped)
+    return RawResult(kept, epochs)
 
 
 def agc_epochs(agc: pd.DataFrame) -> pd.DataFrame:

@@ -13,6 +13,12 @@ signal (`L`, `D`, `S` with the code's band and attribute), never mixed across si
   Galileo `C1C C1X C1B C1A C1Z`; QZSS `C1C C1X C1L C1S C1Z C1E C1B`; SBAS `C1C`; BeiDou B1I
   `C2I C2X C2Q` (3.03+) or `C1I C1Q` (3.02), then B1C `C1P C1X C1D`; NavIC `C5A C5X C5B C5C` (L5).
 
+**Carrier continuity.** A phase whose loss-of-lock indicator (the digit after the F14.3 value) has bit 0
+set (lock lost since the previous epoch), or bit 1 (half-cycle ambiguity or slip possible), and every
+phase of an epoch with flag 1 (power failure since the previous epoch), is cleared (NaN), counted as
+repaired: the range-rate detector then takes no carrier difference across it (`readers.carrier_arcs`).
+Bit 2 (BOC tracking; anti-spoofing in 2.x) is no slip.
+
 Carrier frequency: 1575.42 MHz for GPS/Galileo/QZSS/SBAS L1/E1 and BeiDou B1C, 1561.098 MHz for
 B1I, 1176.45 MHz for NavIC L5; GLONASS G1 from the header's GLONASS SLOT / FRQ # (NaN without it).
 `pseudorange_rate_mps = -doppler_hz * c / carrier_freq_hz`.

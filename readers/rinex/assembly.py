@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from readers.carrier_arcs import clear_carriers
 from readers.orbits import state_columns
 from readers.rinex.navigation import NavFile, find_nav_files, read_rinex_nav_file
 from readers.rinex.observation import ObsScan, extract_l1, is_rinex_obs, scan_obs
@@ -40,6 +41,9 @@ def obs_files(path: Path) -> list[tuple[Path, str]]:
     return [(f, f"{m}_{f.name}" if m in dup else m) for f, m in zip(files, markers, strict=True)]
 
 
+LOST_LOCK_RINEX = "carriers across a loss of lock (RINEX LLI bit 0, or epoch flag 1: power failure)"
+HALF_CYCLE_RINEX = "carriers with a half-cycle ambiguity or slip possible (RINEX LLI bit 1)"
+
 # table.metadata key (+ ".<receiver id>") holding the header's APPROX POSITION XYZ, "x y z" in ECEF metres
 APPROX_POSITION_KEY = "rinex.approx_position_xyz_m"
 
@@ -67,13 +71,19 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
         )
     idx = np.flatnonzero(np.isfinite(cols.pr) & ~cols.bad)
     doppler, freq = cols.doppler[idx], cols.freq[idx]
+    lli = cols.lli[idx]
+    breaks = {
+        LOST_LOCK_RINEX: ((lli & 1) != 0) | scan.epoch_power_failure[scan.row_epoch[idx]],
+        HALF_CYCLE_RINEX: (lli & 2) != 0,
+    }
+    phase = clear_carriers(receiver_id, cols.phase[idx], breaks, skipped)
     return {
         "t_ns": scan.epoch_ns[scan.row_epoch[idx]],
         "sv_id": scan.row_sv[idx],
         "pseudorange_m": cols.pr[idx],
         "pseudorange_rate_mps": -doppler * C_MPS / freq,
         "doppler_hz": doppler,
-        "carrier_phase_cycles": cols.phase[idx],
+        "carrier_phase_cycles": phase,
         "carrier_freq_hz": freq,
         "cn0_dbhz": cols.cn0[idx],
     }

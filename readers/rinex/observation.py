@@ -186,6 +186,8 @@ class ObsScan:
     row_nlines: IntArray
     row_sv: NDArray[np.str_]
     row_sys: NDArray[np.uint8]
+    # epoch flag 1: power failure between the previous epoch and this one (every carrier restarts)
+    epoch_power_failure: BoolArray
     skipped: list[Skipped] = field(default_factory=list)
 
     @property
@@ -298,7 +300,7 @@ def _scan_v2(text: TextLines, header: ObsHeader) -> ObsScan:
     counts = _Counts()
     count = counts.add
 
-    ep_line, ep_hdr, ep_data0, ep_ns, ep_k, ep_layout = [], [], [], [], [], []
+    ep_line, ep_hdr, ep_data0, ep_ns, ep_k, ep_layout, ep_flag = [], [], [], [], [], [], []
     i = body0
     while i < n:
         k = cidx_l[i]
@@ -342,11 +344,12 @@ def _scan_v2(text: TextLines, header: ObsHeader) -> ObsScan:
             ep_ns.append(int(cal_ns[k]))
             ep_k.append(ns)
             ep_layout.append(len(layouts) - 1)
+            ep_flag.append(f)
         i = end
     ends_at_cut = bool(ep_line) and ep_data0[-1] + ep_k[-1] * lps[ep_layout[-1]] == n
     if ends_at_cut and not text.terminated and not _clean_end(int(text.lens[-1]), header.version):
         count("file cut mid-epoch; kept every epoch before", "lost")
-        for arr in (ep_line, ep_hdr, ep_data0, ep_ns, ep_k, ep_layout):
+        for arr in (ep_line, ep_hdr, ep_data0, ep_ns, ep_k, ep_layout, ep_flag):
             arr.pop()
     e_line = np.asarray(ep_line, dtype=np.int64)
     nsat = np.asarray(ep_k, dtype=np.int64)
@@ -374,6 +377,7 @@ def _scan_v2(text: TextLines, header: ObsHeader) -> ObsScan:
         row_nlines=e_lps[row_epoch][ok],
         row_sv=sv[ok],
         row_sys=sys[ok],
+        epoch_power_failure=np.asarray(ep_flag, dtype=np.int64) == 1,
         skipped=skipped,
     )
 
@@ -465,6 +469,7 @@ def _scan_v3(text: TextLines, header: ObsHeader) -> ObsScan:
         row_nlines=np.ones(int(ok.sum()), dtype=np.int64),
         row_sv=sv[ok],
         row_sys=sys[ok],
+        epoch_power_failure=flag[epochs] == 1,
         skipped=skipped,
     )
 
@@ -517,13 +522,16 @@ class _Columns:
     cn0: FloatArray
     freq: FloatArray
     bad: BoolArray
+    lli: IntArray  # the phase's loss-of-lock indicator (0 where blank or no phase)
 
 
 def extract_l1(scan: ObsScan) -> _Columns:
     """Pick each row's L1 signal by the priority list and read its code, phase, Doppler and C/N0."""
     n = len(scan.row_sv)
     nan = np.full(n, np.nan)
-    cols = _Columns(nan.copy(), nan.copy(), nan.copy(), nan.copy(), nan.copy(), np.zeros(n, dtype=bool))
+    cols = _Columns(
+        nan.copy(), nan.copy(), nan.copy(), nan.copy(), nan.copy(), np.zeros(n, dtype=bool), np.zeros(n, np.int64)
+    )
     version = scan.version
     row_layout = scan.epoch_layout[scan.row_epoch]
     glo = scan.header.glonass_k
@@ -549,6 +557,8 @@ def extract_l1(scan: ObsScan) -> _Columns:
                         v, _, b = _values(scan, got, types.index(t))
                         cols.bad[got[b]] = True
                         arr[got] = v
+                        if kind == "L":
+                            cols.lli[got] = _lli(scan, got, types.index(t))
                 if sys == "R":
                     k = pd.Series(scan.row_sv[got]).map(glo).to_numpy(dtype=float)
                     base, step = GLONASS_FDMA.get(code[1], (np.nan, np.nan))
@@ -557,6 +567,13 @@ def extract_l1(scan: ObsScan) -> _Columns:
                     cols.freq[got] = carrier_frequency_hz(sys, code if version >= 3 else "C1C", version)
                 todo = todo[blank]
     return cols
+
+
+def _lli(scan: ObsScan, rows: IntArray, type_index: int) -> IntArray:
+    """The loss-of-lock indicator digit after an observation's F14.3 (column 15 of its field); 0 if blank."""
+    line, col = scan.field_at(rows, type_index)
+    c = scan.text.field(line, col + 14, 1)[:, 0].astype(np.int64)
+    return np.where((c >= 48) & (c <= 57), c - 48, 0)
 
 
 def _values(scan: ObsScan, rows: IntArray, type_index: int) -> tuple[FloatArray, BoolArray, BoolArray]:

@@ -22,7 +22,10 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
 - `satellites` from NAV-SVINFO (u-blox's single satellite numbering) when there is no NAV-SAT.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
-  RINEX-style. GPS, Galileo and BeiDou satellite states from the broadcast ephemerides in the capture's
+  RINEX-style. A carrier only with cpValid, and none the receiver says is not continuous with the
+  satellite's previous epoch (`readers.carrier_arcs`, counted as repaired): halfCyc 0 (half-cycle
+  unresolved), subHalfCyc toggled, lock time restarted, or another signal tracked. GPS, Galileo and
+  BeiDou satellite states from the broadcast ephemerides in the capture's
   own RXM-SFRBX messages (`readers/lnav.py`, `readers/inav.py`) and in the RTCM3 stream fed to it
   (`readers/rtcm_ephemeris.py`), else from a RINEX navigation file
   (`--topic nav=FILE`, or one beside the capture covering its time), so RAIM and the raw-measurement
@@ -57,6 +60,7 @@ import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
 from readers import NothingToJudgeError, ReaderFormat
+from readers.carrier_arcs import clear_carriers, ublox_breaks
 from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
 from readers.nmea.assembly import Assembled
@@ -453,7 +457,7 @@ def _receiver_status(state: _State, ref_s: float | None) -> tuple[pd.DataFrame |
     return pd.DataFrame(cols), how
 
 
-def _observations(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | None, int]:
+def _observations(state: _State, ref_s: float | None, skipped: list[Skipped]) -> tuple[pd.DataFrame | None, int]:
     parts = []
     no_pr = 0
     for epoch in state.rawx:
@@ -468,6 +472,11 @@ def _observations(state: _State, ref_s: float | None) -> tuple[pd.DataFrame | No
         return None, 0
     df = pd.concat(parts, ignore_index=True)
     df["receiver_id"] = RECEIVER
+    # the receiver's word on each carrier's continuity: lock time, half-cycle state, signal tracked
+    sv, t_ns = df["sv_id"].to_numpy(), df["t_ns"].to_numpy(np.int64)
+    trk, lock, sig = (df.pop(c).to_numpy() for c in m.RAWX_TRACKING)
+    breaks = ublox_breaks(sv, t_ns, trk, lock, sig)
+    df["carrier_phase_cycles"] = clear_carriers(RECEIVER, df["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
     return df, no_pr
 
 
@@ -727,7 +736,7 @@ def read_ubx(path: Path, topics: Mapping[str, str] | None = None, progress: Prog
         metadata["clock"] = why
         skipped.append(Skipped("<ubx>", why, max(epochs, 1), "undated"))
     fixes = stored_fixes if stored_fixes is not None else _fixes(state, fix_epochs, ref_s)
-    obs, no_pr = _observations(state, ref_s)
+    obs, no_pr = _observations(state, ref_s, skipped)
     nav_info, ephemerides = None, None
     if obs is not None:
         obs, nav_info, ephemerides = _with_satellite_states(

@@ -402,6 +402,7 @@ SYSTEM_LETTER = {0: "G", 1: "S", 2: "E", 3: "C", 5: "J", 6: "R", 7: "I"}
 # Galileo E1C, E1B; BeiDou B1I D1, D2, then B1C; QZSS L1C/A, L1S; GLONASS L1OF; NavIC L5A (no L1 signal)
 L1_SIGNALS = {0: (0,), 1: (0,), 2: (0, 1), 3: (0, 1, 5, 6), 5: (0, 1), 6: (0,), 7: (0,)}
 L1_HZ, B1I_HZ, L5_HZ = 1575.42e6, 1561.098e6, 1176.45e6
+RAWX_TRACKING = ("trk_stat", "locktime_ms", "sig_id")  # rawx_rows' columns for the carrier's continuity only
 
 
 @dataclass
@@ -436,7 +437,8 @@ def sv_ids(gnss_id: np.ndarray, sv_id: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 def rawx_rows(epoch: RawxEpoch) -> dict[str, np.ndarray]:
-    """One row per satellite: its L1-band signal's code, phase, Doppler and C/N0 (RINEX-style sv id)."""
+    """One row per satellite: its L1-band signal's code, phase, Doppler and C/N0 (RINEX-style sv id), and
+    what says whether its carrier is continuous (`RAWX_TRACKING`: trkStat, locktime, sigId)."""
     m = epoch.meas
     sv, ok = sv_ids(m["gnssId"], m["svId"])
     rank = np.full(len(m), 99)
@@ -467,6 +469,9 @@ def rawx_rows(epoch: RawxEpoch) -> dict[str, np.ndarray]:
         "carrier_phase_cycles": np.where(trk & 2, m["cpMes"][idx], np.nan),
         "carrier_freq_hz": freq,
         "cn0_dbhz": m["cno"][idx].astype(np.float64),
+        "trk_stat": trk,
+        "locktime_ms": m["locktime"][idx],
+        "sig_id": sig,
     }
 
 

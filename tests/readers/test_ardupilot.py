@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dataflash_support import WEEK, Fmt, flight, write_dataflash
 from mavlink_support import write_tlog
 from paths import REAL, real_log
 
@@ -296,3 +297,43 @@ def test_a_message_whose_fmt_lost_a_field_is_counted_lost_not_an_error(
     else:
         assert len(t.fixes) and len(t.imu) and np.isnan(t.imu["qw"]).all()
     assert main(["inspect", str(damaged)]) == 3  # damaged: what could be read is analysed, and said so
+
+
+GPS_2016 = Fmt(130, "GPS", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U")
+GRXH = Fmt(161, "GRXH", "QdHbBB", "TimeUS,rcvTime,week,leapS,numMeas,recStat")
+GRXS = Fmt(162, "GRXS", "QddfBBBHBBBBB", "TimeUS,prMes,cpMes,doMes,gnss,sv,freq,lock,cno,prD,cpD,doD,trk")
+
+
+def test_grxs_carriers_the_receiver_says_are_not_continuous_are_cleared(tmp_path: Path) -> None:
+    """GRXS is RXM-RAWX as the autopilot logs it: its trkStat (`trk`) and lock time (`lock`) say where a
+    carrier is not continuous (half-cycle unresolved, half-cycle correction toggled, lock restarted)."""
+    trk = {1: [7] * 5, 2: [7, 3, 7, 7, 7], 3: [7, 7, 15, 15, 15], 4: [7] * 5}
+    lock = {4: [64500, 64500, 64500, 300, 1300]}
+    msgs = []
+    for i, (boot_ms, tow, lat, lon) in enumerate(flight(25)):
+        us = boot_ms * 1000
+        fix = {"Status": 3, "GMS": tow, "GWk": WEEK, "NSats": 8, "HDop": 0.9, "Lat": lat, "Lng": lon}
+        msgs.append(GPS_2016.message(TimeUS=us, I=0, **fix, Alt=584, Spd=5, VZ=0.1, U=1))
+        if i % 5 == 0:
+            s = i // 5
+            msgs.append(GRXH.message(TimeUS=us + 1000, rcvTime=tow / 1000, week=WEEK, leapS=18, numMeas=4))
+            for sv in trk:
+                measured = {"prMes": 2.1e7 + 1e5 * sv, "cpMes": 1.1e8 + 10 * s, "doMes": -500.0, "cno": 40}
+                status = {"trk": trk[sv][s], "lock": lock.get(sv, [64500] * 5)[s]}
+                msgs.append(GRXS.message(TimeUS=us + 1000, **measured, gnss=0, sv=sv, **status))
+    table = read_log(write_dataflash(tmp_path / "raw.bin", [GPS_2016, GRXH, GRXS], msgs))
+    obs = table.observations
+    assert len(obs) == 20
+    cleared = obs[obs["carrier_phase_cycles"].isna()]
+    t1 = sorted(obs["t_s"].unique())
+    assert sorted(zip(cleared["t_s"], cleared["sv_id"], strict=True)) == [
+        (t1[1], "G02"),
+        (t1[2], "G03"),
+        (t1[3], "G04"),
+    ]
+    said = {s.reason.split(" (")[0]: s.count for s in table.skipped if "continuous" in s.reason}
+    assert said == {
+        "carriers across a loss of lock": 1,
+        "carriers with an unresolved half-cycle ambiguity": 1,
+        "carriers whose half-cycle correction changed since the previous epoch": 1,
+    }

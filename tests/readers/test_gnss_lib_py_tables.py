@@ -153,3 +153,20 @@ def test_header_names_shifted_by_one_is_one_line_not_an_internal_error(tmp_path:
     shifted = tmp_path / "shifted.csv"
     shifted.write_text("\n".join([",".join([*names[1:], "extra"]), *lines[1:]]) + "\n")
     assert main(["inspect", str(shifted)]) == 2
+
+
+def test_carriers_the_receiver_says_are_not_continuous_are_cleared() -> None:
+    """smartLoc's u-blox rows: a carrier only with cpValid (trkStat bit 1), and none with the half-cycle
+    unresolved (bit 2 clear) or across a restarted lock time; the GSDC 2023 table's phone flags ten valid
+    carriers HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED (ADR state 17)."""
+    path = real_log(f"{LIB}/smartloc_tu_chemnitz_berlin_1_raw.csv")
+    raw = pd.read_csv(path, sep=";")
+    trk = raw["Tracking status (trkStat) []"].fillna(0).astype(int)
+    assert ((trk & 2) != 0).sum() == 277 and ((trk & 6) == 2).sum() == 128  # cpValid; of them halfCyc 0
+    t = read_log(path)
+    said = {s.reason.split(" (")[0]: s.count for s in t.skipped if "continuous" in s.reason}
+    assert said == {"carriers across a loss of lock": 5, "carriers with an unresolved half-cycle ambiguity": 123}
+    assert int(t.observations["carrier_phase_cycles"].notna().sum()) == 149
+    phone = read_log(real_log(f"{LIB}/gsdc2023_pixel7pro_device_gnss.csv"))
+    (said_phone,) = [s for s in phone.skipped if "continuous" in s.reason]
+    assert "HALF_CYCLE_REPORTED" in said_phone.reason and said_phone.count == 10

@@ -391,3 +391,34 @@ def test_a_phone_log_stopped_while_acquiring_is_nothing_to_judge_not_refused(
     out = " ".join(capsys.readouterr().out.split())
     assert "NO VERDICT: no GNSS data to judge: GnssLogger log with no usable fix, measurement or sensor (Raw x6)" in out
     assert "time of week/day not decoded" in out
+
+
+def _adr_states(path: Path, change: dict[int, int]) -> str:
+    """The log's text with AccumulatedDeltaRangeState values replaced (old -> new) on every Raw line."""
+    lines = path.read_text().splitlines()
+    k = next(line for line in lines if line.startswith("# Raw,"))[2:].split(",").index("AccumulatedDeltaRangeState")
+    out = []
+    for line in lines:
+        if line.startswith("Raw,"):
+            f = line.split(",")
+            f[k] = str(change.get(int(f[k]), int(f[k])))
+            line = ",".join(f)
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def test_carriers_with_an_unresolved_half_cycle_are_not_taken_as_continuous(tmp_path: Path) -> None:
+    """ADR state HALF_CYCLE_REPORTED (16) without HALF_CYCLE_RESOLVED (8): the phone says the carrier may
+    still jump by half a cycle (0.095 m on L1, under the Doppler screen's 0.1 m). The Pixel 7 Pro's log
+    has ten such valid carriers (state 17) beside 25 (valid, resolved)."""
+    src = real_log("corpus/gnss_lib_py/gsdc2023_pixel7pro_gnss_log.txt")
+    table = read_log(src)
+    (said,) = [s for s in table.skipped if "half-cycle" in s.reason]
+    assert (said.stream, said.count, said.action) == ("phone", 10, "repaired")
+    assert int(table.observations["carrier_phase_cycles"].notna().sum()) == 86
+    copy = tmp_path / "unresolved.txt"
+    copy.write_text(_adr_states(src, {25: 17}))  # every valid carrier reported unresolved
+    table = read_log(copy)
+    assert table.observations["carrier_phase_cycles"].isna().all()
+    (said,) = [s for s in table.skipped if "half-cycle" in s.reason]
+    assert said.count == 96 and "every carrier the receiver gave" in said.reason

@@ -78,7 +78,12 @@ def test_gsi_pair_reads_as_two_receivers(gsi: EpochTable) -> None:
     assert (obs["carrier_freq_hz"] == L1).all()
     assert obs["doppler_hz"].isna().all() and obs["cn0_dbhz"].isna().all()  # C1 L1 L2 P2 only
     assert np.isfinite(obs[["sv_x_m", "sv_clock_bias_m"]].to_numpy()).all()
-    assert [s.reason for s in gsi.skipped] == ["event records (epoch flags 2-5) with their header lines"] * 2
+    events = [s for s in gsi.skipped if s.reason.startswith("event records")]
+    assert [(s.stream, s.count) for s in events] == [("07590920.05o", 3), ("30400920.05o", 1)]
+    # the receivers' own loss-of-lock flags (LLI 1 on the L1 phase): those carriers are not taken as continuous
+    lost = {s.stream: s.count for s in gsi.skipped if s.reason.startswith("carriers across a loss of lock")}
+    assert lost == {"0759": 10, "3040": 6}
+    assert len(gsi.skipped) == 4
 
 
 def test_gsi_values_are_the_files_fields(gsi: EpochTable) -> None:
@@ -324,7 +329,11 @@ def test_android_rinex3_mixed_constellations(pixel: EpochTable) -> None:
     first = obs[obs["t_s"] == 0].set_index("sv_id")
     assert len(first) == 19
     assert first.loc["G04", "pseudorange_m"] == 23440243.757 and first.loc["G04", "cn0_dbhz"] == 29.972
-    assert first.loc["G04", "doppler_hz"] == -3537.656 and first.loc["G04", "carrier_phase_cycles"] == 150559.526
+    assert first.loc["G04", "doppler_hz"] == -3537.656
+    # the phone flags every phase (G04's 150559.526 too) LLI 2, half-cycle ambiguity possible: none is used
+    assert obs["carrier_phase_cycles"].isna().all()
+    (half,) = [s for s in pixel.skipped if "half-cycle" in s.reason]
+    assert half.count == len(obs) and half.action == "repaired" and "every carrier the receiver gave" in half.reason
     # GLONASS G1 from the header's slot/channel table (R01 +1, R02 -4)
     assert first.loc["R01", "carrier_freq_hz"] == 1602e6 + 0.5625e6
     assert first.loc["R02", "carrier_freq_hz"] == 1602e6 - 4 * 0.5625e6
@@ -891,3 +900,52 @@ def test_a_time_system_pushed_right_by_a_wider_seconds_field_is_read(tmp_path: P
     (tmp_path / "wide.05o").write_text("\n".join(lines) + "\n")
     wide, plain = read_log(tmp_path / "wide.05o"), read_log(OBS_0759)
     assert wide.t0_ns == plain.t0_ns and wide.observations["t_s"].equals(plain.observations["t_s"])
+
+
+def _with_lli(text: str, edits: dict[tuple[int, str], str], field: int, first_col: int) -> str:
+    """`text` with the LLI digit (column 15 of observation field `field`) set at (epoch, satellite)."""
+    epoch, out = -1, []
+    for line in text.splitlines(keepends=True):
+        if line.startswith(">"):
+            epoch += 1
+        elif (epoch, line[:3]) in edits:
+            col = first_col + 16 * field + 14
+            line = line[:col] + edits[(epoch, line[:3])] + line[col + 1 :]
+        out.append(line)
+    return "".join(out)
+
+
+def test_carriers_the_receiver_flags_lost_lock_or_half_cycle_are_not_taken_as_continuous(tmp_path: Path) -> None:
+    """LLI bit 0 (lost lock since the previous epoch) and bit 1 (half-cycle ambiguity possible) clear the
+    carrier: a half-cycle slip (0.095 m on L1) passes the Doppler screen and would read as a rate error.
+    Bit 2 (BOC tracking) is no slip; epoch flag 1 (power failure) restarts every carrier."""
+    edits = {(1, "G01"): "1", (2, "E02"): "2", (2, "G03"): "4", (3, "G05"): "3"}
+    text = _with_lli(_v3_obs(6), edits, field=1, first_col=3)
+    lines = text.splitlines(keepends=True)
+    k = [i for i, line in enumerate(lines) if line.startswith(">")][4]
+    lines[k] = lines[k][:31] + "1" + lines[k][32:]  # epoch 4: power failure since epoch 3
+    path = tmp_path / "flags.rnx"
+    path.write_text("".join(lines))
+    table = read_log(path)
+    obs = table.observations.set_index(["t_s", "sv_id"])["carrier_phase_cycles"]
+    cleared = set(obs[obs.isna()].index)
+    power = {(4.0, sv) for sv in obs.loc[4.0].index}
+    assert cleared == {(1.0, "G01"), (2.0, "E02"), (3.0, "G05")} | power
+    assert obs.loc[(2.0, "G03")] == 1.1e8 + 2  # BOC tracking: no slip
+    said = {s.reason.split(" (")[0]: (s.count, s.action) for s in table.skipped if "continuous" in s.reason}
+    assert said == {
+        "carriers across a loss of lock": (1 + 1 + 10, "repaired"),
+        "carriers with a half-cycle ambiguity or slip possible": (1, "repaired"),
+    }
+
+
+def test_rinex2_lli_digits_clear_carriers(tmp_path: Path) -> None:
+    text = _v2_obs(3)
+    lines = text.splitlines(keepends=True)
+    data = [i for i, line in enumerate(lines) if line.startswith(" 05  4  2")]
+    g05 = data[1] + 2 + 2 * 4  # epoch 1: two epoch-header lines, then two lines per satellite; G05 is the 5th
+    lines[g05] = lines[g05][:30] + "1" + lines[g05][31:]  # L1 is the 2nd field: LLI at column 31
+    path = tmp_path / "lli.05o"
+    path.write_text("".join(lines))
+    obs = read_log(path).observations.set_index(["t_s", "sv_id"])["carrier_phase_cycles"]
+    assert list(obs[obs.isna()].index) == [(10.0, "G05")]

@@ -9,10 +9,12 @@ import struct
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pymap3d
 import pytest
 from paths import REAL, real_log
 from pyubx2 import GET, UBXMessage, UBXReader
+from ubx_support import rawx as rawx_message
 
 from readers import read_log, sniff_format
 from readers.ubx.frames import split_frames
@@ -258,3 +260,39 @@ def test_a_capture_whose_fixes_come_from_its_nmea_lists_one_fix_stream_the_nmeas
     table = read_log(_need(F9P))
     fix_streams = [s for s in table.streams if s.role == "fix"]
     assert [(s.topic, s.count) for s in fix_streams] == [("NMEA in the UBX stream", len(table.fixes))]
+
+
+def test_rawx_carriers_the_receiver_says_are_not_continuous_are_cleared(tmp_path: Path) -> None:
+    """trkStat halfCyc 0 (half-cycle unresolved), subHalfCyc toggling (half a cycle taken off the phase)
+    and a lock time that restarted: the carrier is not taken as continuous with the previous epoch. A
+    half-cycle slip on L1 (0.095 m) passes the Doppler screen and would read as a 0.095 m/s rate error."""
+    week_s = 2304 * 604_800 + 186_400  # the NAV-PVT epochs of _capture(): 2024-03-05
+    trk = {"G01": [7] * 5, "G02": [7, 3, 7, 7, 7], "G03": [7, 7, 15, 15, 15], "G04": [7] * 5}
+    lock = {"G04": [64500, 64500, 64500, 300, 1300]}
+    raw = b""
+    for s in range(5):
+        rows = pd.DataFrame(
+            {
+                "sv_id": list(trk),
+                "pseudorange_m": [2.1e7 + 1e5 * k for k in range(4)],
+                "carrier_phase_cycles": [1.1e8 + 10.0 * s + k for k in range(4)],
+                "doppler_hz": -500.0,
+                "cn0_dbhz": 40.0,
+                "trk_stat": [trk[sv][s] for sv in trk],
+                "locktime_ms": [lock.get(sv, [64500] * 5)[s] for sv in trk],
+            }
+        )
+        raw += rawx_message(week_s + s, rows)
+    path = tmp_path / "slips.ubx"
+    path.write_bytes(_capture(5) + raw)
+    table = read_log(path)
+    obs = table.observations.set_index(["t_s", "sv_id"])["carrier_phase_cycles"]
+    assert len(obs) == 20
+    assert set(obs[obs.isna()].index) == {(1.0, "G02"), (2.0, "G03"), (3.0, "G04")}
+    said = {s.reason.split(" (")[0]: s.count for s in table.skipped if "continuous" in s.reason}
+    assert said == {
+        "carriers across a loss of lock": 1,
+        "carriers with an unresolved half-cycle ambiguity": 1,
+        "carriers whose half-cycle correction changed since the previous epoch": 1,
+    }
+    assert all(s.action == "repaired" for s in table.skipped if "continuous" in s.reason)

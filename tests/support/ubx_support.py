@@ -206,7 +206,9 @@ GNSS_ID = {"G": 0, "E": 2, "C": 3}  # u-blox gnssId; signal 0 is GPS L1 C/A, Gal
 
 def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
     """One RXM-RAWX epoch of GPS L1 C/A and Galileo E1C rows (sv_id, pseudorange_m, carrier_phase_cycles,
-    doppler_hz, cn0_dbhz)."""
+    doppler_hz, cn0_dbhz). A carrier is tracked as a receiver in steady lock reports it: cpValid with the
+    half-cycle resolved (trkStat 7), lock time saturated (64500 ms); columns `trk_stat` and `locktime_ms`,
+    where given, say otherwise."""
     week, tow = divmod(gps_s, WEEK_S)
     head = struct.pack("<dHbBBB2x", tow, int(week), 18, len(rows), 1, 1)
     meas = b""
@@ -214,9 +216,10 @@ def rawx(gps_s: float, rows: pd.DataFrame) -> bytes:
         cp = r.carrier_phase_cycles if np.isfinite(r.carrier_phase_cycles) else 0.0
         do = r.doppler_hz if np.isfinite(r.doppler_hz) else 0.0
         cn0 = int(r.cn0_dbhz) if np.isfinite(r.cn0_dbhz) else 32 + (7 * int(r.sv_id[1:])) % 17  # a spread sky
-        trk = 1 | (2 if np.isfinite(r.carrier_phase_cycles) else 0)
+        trk = int(getattr(r, "trk_stat", 1 | (6 if np.isfinite(r.carrier_phase_cycles) else 0)))
+        lock = int(getattr(r, "locktime_ms", 64500))
         ids = (GNSS_ID[r.sv_id[0]], int(r.sv_id[1:]))
-        meas += struct.pack("<ddfBBBBHBBBBBx", r.pseudorange_m, cp, do, *ids, 0, 0, 64000, cn0, 4, 2, 3, trk)
+        meas += struct.pack("<ddfBBBBHBBBBBx", r.pseudorange_m, cp, do, *ids, 0, 0, lock, cn0, 4, 2, 3, trk)
     return UBXMessage("RXM", "RXM-RAWX", GET, payload=head + meas).serialize()
 
 
