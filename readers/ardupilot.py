@@ -22,9 +22,9 @@ q(ENU<-NED) = (0, 1/sqrt2, 1/sqrt2, 0), so q rotates FRD body vectors into ENU; 
 to the IMU stamps within 0.5 s of an ATT row.
 
 **Raw observations.** `GRXH`/`GRXS` (u-blox RXM-RAWX logged by the autopilot): pseudorange, carrier
-phase, Doppler, C/N0 per satellite of valid pseudoranges (trkStat bit 0); a carrier only with cpValid, and
-none the receiver says is not continuous (half-cycle unresolved or its correction toggled, lock time
-restarted: `readers.carrier_arcs`, counted as repaired); stamped with the receiver's
+phase, Doppler, C/N0 per satellite of valid pseudoranges (trkStat bit 0); a carrier only with cpValid, one
+the receiver says is not continuous marked (half-cycle unresolved or its correction toggled, lock time
+restarted: `carrier_arc_start`, `readers.carrier_arcs`, counted as flagged); stamped with the receiver's
 own time (GRXH week and rcvTime) when the log has the GPS clock; satellite states from a navigation
 file given with `--topic nav=FILE`.
 
@@ -58,7 +58,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import NothingToJudgeError, ReaderFormat
-from readers.carrier_arcs import clear_carriers, ublox_breaks
+from readers.carrier_arcs import arc_starts, ublox_breaks
 from readers.dataflash import Columns, DataFlash, is_dataflash
 from readers.dataflash_text import TextDataFlash, is_dataflash_text, open_any_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
@@ -482,9 +482,8 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
     freq[glo] = 1602.0e6 + (sat["freq"].astype(float)[glo] - 7.0) * 0.5625e6
     doppler = sat["doMes"].astype(float)
     cp_valid = (sat["trk"].astype(np.int64) & 2) == 2
-    carrier = _continuous_carriers(
-        sv_id, t_gps_ns, sat, np.where(cp_valid, sat["cpMes"].astype(float), np.nan), keep, skipped
-    )
+    carrier = np.where(cp_valid, sat["cpMes"].astype(float), np.nan)
+    arc_start = _carrier_arc_starts(sv_id, t_gps_ns, sat, carrier, keep, skipped)
     return pd.DataFrame(
         {
             "t_ns": t_gps_ns,
@@ -494,6 +493,7 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
             "pseudorange_rate_mps": -doppler * C_MPS / freq,
             "doppler_hz": doppler,
             "carrier_phase_cycles": carrier,
+            "carrier_arc_start": arc_start,
             "carrier_freq_hz": freq,
             "cn0_dbhz": sat["cno"].astype(float),
             "ofs": s_ofs,
@@ -501,7 +501,7 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
     )[keep].reset_index(drop=True)
 
 
-def _continuous_carriers(
+def _carrier_arc_starts(
     sv_id: NDArray[np.str_],
     t_ns: NDArray[np.int64],
     sat: Columns,
@@ -509,7 +509,7 @@ def _continuous_carriers(
     keep: NDArray[np.bool_],
     skipped: list[Skipped],
 ) -> FloatArray:
-    """GRXS carriers with those the receiver says are not continuous cleared (`readers.carrier_arcs`: the
+    """GRXS `carrier_arc_start`: the carriers the receiver says are not continuous (`readers.carrier_arcs`: the
     u-blox trkStat half-cycle bits and lock time). GRXS logs no sigId: the signals of one satellite in an
     epoch are told apart by their order, as the rewriter tells them apart."""
     rows = pd.DataFrame({"t": t_ns[keep], "sv": sv_id[keep]})
@@ -517,7 +517,7 @@ def _continuous_carriers(
     key = np.char.add(np.char.add(sv_id[keep].astype(str), "/"), nth)
     lock = sat["lock"][keep] if "lock" in sat else None
     out = np.full(len(carrier), np.nan)
-    out[keep] = clear_carriers("GPS[0]", carrier[keep], ublox_breaks(key, t_ns[keep], sat["trk"][keep], lock), skipped)
+    out[keep] = arc_starts("GPS[0]", carrier[keep], ublox_breaks(key, t_ns[keep], sat["trk"][keep], lock), skipped)
     return out
 
 

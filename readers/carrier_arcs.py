@@ -1,18 +1,20 @@
-"""Where a receiver says its carrier phase is not continuous: the carrier is then cleared (NaN).
+"""Where a receiver says its carrier phase is not continuous: the epoch table's `carrier_arc_start`.
 
 The range-rate detector differences each satellite's carrier between epochs (a 2 mm/s velocity
 measurement) and screens slips by the Doppler only down to `doppler_slip_m` (0.1 m): a half-cycle slip
 on L1 (0.095 m) would pass and read as a 0.095 m/s rate error. Receivers flag such carriers themselves;
-the readers honour the flags by clearing the carrier of an observation
+the readers mark (`carrier_arc_start` 1) the carrier of an observation
 
 - whose lock was lost since the previous one (RINEX LLI bit 0 or epoch flag 1; u-blox lock time that
   did not run on by the time between the epochs; a change of the tracked signal), and
 - whose half-cycle ambiguity is unresolved or changed (RINEX LLI bit 1; u-blox halfCyc 0, or
   subHalfCyc toggling; Android HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED).
 
-A cleared carrier takes both intervals it bounds out of the carrier differences: there the Doppler
-stands in (weighed with its own noise), as for a slip the screening finds. The readers count each kind
-under action "repaired" (`cleared`).
+The carrier is kept as logged: a method in metres (the pseudorange-change test, which smooths code with
+carrier) needs no fractional-cycle continuity, and clearing it there made a clean station's reflected code
+an alarm. The range-rate test takes no carrier difference into a marked observation: the Doppler stands
+in (weighed with its own noise), as for a slip its own screening finds. The readers count each kind
+under action "flagged" (`arc_starts`).
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ LOST_LOCK_UBLOX = "carriers across a loss of lock (u-blox lock time restarted si
 SIGNAL_CHANGED_UBLOX = "carriers of another signal than the satellite's previous epoch (u-blox sigId changed)"
 HALF_CYCLE_UBLOX = "carriers with an unresolved half-cycle ambiguity (u-blox trkStat halfCyc 0)"
 SUB_HALF_UBLOX = "carriers whose half-cycle correction changed since the previous epoch (u-blox subHalfCyc toggled)"
-CONTINUITY = ": not taken as continuous"
-EVERY_CARRIER = "; that is every carrier the receiver gave: none is used, rates come from the Doppler (if any)"
+CONTINUITY = ": not taken as continuous by the rate test (the Doppler stands in; the carrier is kept)"
+EVERY_CARRIER = "; that is every carrier the receiver gave: its rates come from the Doppler (if any)"
 
 
 @dataclass(frozen=True)
@@ -90,14 +92,15 @@ def ublox_breaks(
     return out
 
 
-def clear_carriers(
+def arc_starts(
     stream: str,
     carrier: NDArray[np.float64],
     breaks: dict[str, BoolArray],
     skipped: list[Skipped],
 ) -> NDArray[np.float64]:
-    """The carrier with every marked row cleared; each reason counted once per row (first reason wins)
-    as "repaired". A reason that takes every carrier the receiver gave says so."""
+    """`carrier_arc_start` of each row: 1 where a carrier is marked, 0 where one is not, NaN without a carrier.
+    Each reason counted once per row (first reason wins) as "flagged"; a reason that marks every carrier the
+    receiver gave says so."""
     present = np.isfinite(carrier)
     total = int(present.sum())
     left = present.copy()
@@ -106,6 +109,6 @@ def clear_carriers(
         n = int(hit.sum())
         if n:
             why = reason + CONTINUITY + (EVERY_CARRIER if n == total else "")
-            skipped.append(Skipped(stream, why, n, "repaired"))
+            skipped.append(Skipped(stream, why, n, "flagged"))
         left &= ~hit
-    return np.where(left, carrier, np.nan)
+    return np.where(present, np.where(left, 0.0, 1.0), np.nan)

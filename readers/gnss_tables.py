@@ -15,8 +15,9 @@ Columns are found by name, so each dialect is a list of aliases (`ALIASES`). One
 `ublox` for smartLoc). Observations: the raw pseudorange less the table's inter-signal range bias (a
 receiver-side bias, as gnss_lib_py's corrected pseudorange removes it), satellite ECEF position and
 velocity at transmission and clock bias/drift where the table has them, C/N0, pseudorange rate or
-Doppler, carrier phase from a valid accumulated delta range (smartLoc: cpMes with cpValid), none the
-receiver says is not continuous (`readers.carrier_arcs`); one L1-band signal per satellite and epoch
+Doppler, carrier phase from a valid accumulated delta range (smartLoc: cpMes with cpValid), those the
+receiver says are not continuous marked (`carrier_arc_start`, `readers.carrier_arcs`); one L1-band
+signal per satellite and epoch
 (L5/E5a rows are counted and left out). Fixes: the table's receiver position per epoch (the dataset's
 weighted-least-squares solution, not the phone's own). Time: GPS time (`ArrivalTimeNanosSinceGpsEpoch`,
 `millisSinceGpsEpoch`, `gps_millis`, week + time of week), else UNIX (`utcTimeMillis`).
@@ -48,7 +49,7 @@ from readers.android_gnss import (
     adr_half_cycle_unresolved,
     android_sv_ids,
 )
-from readers.carrier_arcs import CP_VALID, clear_carriers, ublox_breaks
+from readers.carrier_arcs import CP_VALID, arc_starts, ublox_breaks
 from readers.csv_text import read_rows
 from spooflens.epoch_table import EpochTable, Skipped, StreamInfo, build_table, gps_ns_of_unix_ns
 from spooflens.errors import ReaderError
@@ -311,20 +312,20 @@ def _observations(
         skipped.append(
             Skipped(rid, "a second L1 signal of the same satellite and epoch (the first kept)", int(dup.sum()))
         )
-    return _continuous_carriers(out[~dup].reset_index(drop=True), "trk" in df, "locktime" in df, rid, skipped)
+    return _carrier_arc_starts(out[~dup].reset_index(drop=True), "trk" in df, "locktime" in df, rid, skipped)
 
 
-def _continuous_carriers(
+def _carrier_arc_starts(
     out: pd.DataFrame, ublox: bool, has_locktime: bool, rid: str, skipped: list[Skipped]
 ) -> pd.DataFrame:
-    """The carriers the receiver says are not continuous cleared (`readers.carrier_arcs`): the phone's
+    """The carriers the receiver says are not continuous marked (`readers.carrier_arcs`): the phone's
     unresolved half-cycle state; u-blox rows' half-cycle bits and lock time (smartLoc)."""
     half, trk, lock = (out.pop(c).to_numpy() for c in ("half_cycle", "trk", "locktime"))
     breaks = {HALF_CYCLE_ANDROID: half.astype(bool)}
     if ublox:
         sv, t_ns = out["sv_id"].to_numpy(), out["t_ns"].to_numpy(np.int64)
         breaks |= ublox_breaks(sv, t_ns, trk, np.nan_to_num(lock).astype(np.int64) if has_locktime else None)
-    out["carrier_phase_cycles"] = clear_carriers(rid, out["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
+    out["carrier_arc_start"] = arc_starts(rid, out["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
     return out
 
 

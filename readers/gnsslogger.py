@@ -21,8 +21,9 @@ GnssClock/GnssMeasurement documentation, as Google's gps-measurement-tools apply
   is counted. One L1-band signal per satellite (L5/E5a rows are counted and left out), as for RINEX.
 - pseudorange rate: PseudorangeRateMetersPerSecond; Doppler = -rate * f / c; carrier phase (cycles)
   = AccumulatedDeltaRangeMeters * f / c where AccumulatedDeltaRangeState is valid and not reset or
-  cycle-slipped, and not half-cycle unresolved (HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED:
-  `readers.carrier_arcs`, counted as repaired); C/N0: Cn0DbHz. Satellite ids RINEX style (SBAS
+  cycle-slipped; a carrier half-cycle unresolved (HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED) is
+  marked (`carrier_arc_start`, `readers.carrier_arcs`, counted as flagged); C/N0: Cn0DbHz. Satellite ids
+  RINEX style (SBAS
   svid - 100, QZSS svid - 192; GLONASS rows without a known slot are skipped).
 - GPS satellite states from a RINEX navigation file: `--topic nav=FILE`, else one in the log's
   directory that covers its time (`readers.raw_states`).
@@ -70,7 +71,7 @@ from readers.android_gnss import (
     android_sv_ids,
     android_systems,
 )
-from readers.carrier_arcs import clear_carriers
+from readers.carrier_arcs import arc_starts
 from readers.inav import InavDecoder
 from readers.lnav import LnavDecoder
 from readers.raw_states import add_satellite_states, ephemeris_stream, nav_stream, navigation_for
@@ -437,7 +438,7 @@ def pseudoranges(raw: pd.DataFrame, skipped: list[Skipped]) -> RawResult:
     )
     kept = good[~dup].reset_index(drop=True)
     half = {HALF_CYCLE_ANDROID: kept.pop("half_cycle").to_numpy(bool)}
-    kept["carrier_phase_cycles"] = clear_carriers(RECEIVER, kept["carrier_phase_cycles"].to_numpy(), half, skipped)
+    kept["carrier_arc_start"] = arc_starts(RECEIVER, kept["carrier_phase_cycles"].to_numpy(), half, skipped)
     return RawResult(kept, epochs)
 
 

@@ -125,6 +125,14 @@ OBSERVATION_COLUMNS: tuple[Column, ...] = (
     Column("doppler_hz", "float64", "Hz", "Doppler, NaN if absent", False),
     Column("carrier_phase_cycles", "float64", "cycles", "carrier phase, NaN if absent", False),
     Column("carrier_freq_hz", "float64", "Hz", "carrier frequency, NaN if absent", False),
+    Column(
+        "carrier_arc_start",
+        "float64",
+        "-",
+        "1 where the receiver says this carrier is not continuous with its signal's previous one (lock lost, "
+        "half-cycle ambiguity unresolved or changed), 0 where it does not, NaN if it does not say",
+        False,
+    ),
     Column("cn0_dbhz", "float64", "dB-Hz", "carrier to noise density, NaN if absent", False),
     Column(
         "sv_x_m",

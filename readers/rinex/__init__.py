@@ -15,8 +15,8 @@ signal (`L`, `D`, `S` with the code's band and attribute), never mixed across si
 
 **Carrier continuity.** A phase whose loss-of-lock indicator (the digit after the F14.3 value) has bit 0
 set (lock lost since the previous epoch), or bit 1 (half-cycle ambiguity or slip possible), and every
-phase of an epoch with flag 1 (power failure since the previous epoch), is cleared (NaN), counted as
-repaired: the range-rate detector then takes no carrier difference across it (`readers.carrier_arcs`).
+phase of an epoch with flag 1 (power failure since the previous epoch), is marked (`carrier_arc_start`),
+counted as flagged: the range-rate detector then takes no carrier difference into it (`readers.carrier_arcs`).
 Bit 2 (BOC tracking; anti-spoofing in 2.x) is no slip.
 
 Carrier frequency: 1575.42 MHz for GPS/Galileo/QZSS/SBAS L1/E1 and BeiDou B1C, 1561.098 MHz for

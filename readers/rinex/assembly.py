@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from readers.carrier_arcs import clear_carriers
+from readers.carrier_arcs import arc_starts
 from readers.orbits import state_columns
 from readers.rinex.navigation import NavFile, find_nav_files, read_rinex_nav_file
 from readers.rinex.observation import ObsScan, extract_l1, is_rinex_obs, scan_obs
@@ -76,7 +76,8 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
         LOST_LOCK_RINEX: ((lli & 1) != 0) | scan.epoch_power_failure[scan.row_epoch[idx]],
         HALF_CYCLE_RINEX: (lli & 2) != 0,
     }
-    phase = clear_carriers(receiver_id, cols.phase[idx], breaks, skipped)
+    phase = cols.phase[idx]
+    arc_start = arc_starts(receiver_id, phase, breaks, skipped)
     return {
         "t_ns": scan.epoch_ns[scan.row_epoch[idx]],
         "sv_id": scan.row_sv[idx],
@@ -84,6 +85,7 @@ def _observation_rows(scan: ObsScan, receiver_id: str, skipped: list[Skipped]) -
         "pseudorange_rate_mps": -doppler * C_MPS / freq,
         "doppler_hz": doppler,
         "carrier_phase_cycles": phase,
+        "carrier_arc_start": arc_start,
         "carrier_freq_hz": freq,
         "cn0_dbhz": cols.cn0[idx],
     }

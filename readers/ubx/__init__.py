@@ -22,8 +22,9 @@ not UBX counted), and each message the reader uses is mapped in `messages.py`:
 - `satellites` from NAV-SVINFO (u-blox's single satellite numbering) when there is no NAV-SAT.
 - `observations` from RXM-RAWX: one row per satellite (its L1-band signal, as the RINEX reader picks),
   pseudorange, Doppler (`pseudorange_rate_mps` = -Doppler x wavelength), carrier phase, C/N0, ids
-  RINEX-style. A carrier only with cpValid, and none the receiver says is not continuous with the
-  satellite's previous epoch (`readers.carrier_arcs`, counted as repaired): halfCyc 0 (half-cycle
+  RINEX-style. A carrier only with cpValid; one the receiver says is not continuous with the
+  satellite's previous epoch is marked (`carrier_arc_start`, `readers.carrier_arcs`, counted as
+  flagged): halfCyc 0 (half-cycle
   unresolved), subHalfCyc toggled, lock time restarted, or another signal tracked. GPS, Galileo and
   BeiDou satellite states from the broadcast ephemerides in the capture's
   own RXM-SFRBX messages (`readers/lnav.py`, `readers/inav.py`) and in the RTCM3 stream fed to it
@@ -60,7 +61,7 @@ import pandas as pd
 from pyubx2.ubxtypes_core import UBX_MSGIDS
 
 from readers import NothingToJudgeError, ReaderFormat
-from readers.carrier_arcs import clear_carriers, ublox_breaks
+from readers.carrier_arcs import arc_starts, ublox_breaks
 from readers.inav import GALILEO_GNSS_ID, InavDecoder
 from readers.lnav import LnavDecoder
 from readers.nmea.assembly import Assembled
@@ -476,7 +477,7 @@ def _observations(state: _State, ref_s: float | None, skipped: list[Skipped]) ->
     sv, t_ns = df["sv_id"].to_numpy(), df["t_ns"].to_numpy(np.int64)
     trk, lock, sig = (df.pop(c).to_numpy() for c in m.RAWX_TRACKING)
     breaks = ublox_breaks(sv, t_ns, trk, lock, sig)
-    df["carrier_phase_cycles"] = clear_carriers(RECEIVER, df["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
+    df["carrier_arc_start"] = arc_starts(RECEIVER, df["carrier_phase_cycles"].to_numpy(float), breaks, skipped)
     return df, no_pr
 
 

@@ -54,6 +54,9 @@ class ObservationGrid:
     sv_clock_bias_m: FloatArray
     sv_clock_drift_mps: FloatArray
     row: NDArray[np.int64]  # (E, S) index of the observations-frame row, -1 where absent
+    # (E, S) the receiver says this carrier is not continuous with its signal's previous one (lock lost,
+    # half-cycle): no carrier difference into it is a rate
+    carrier_arc_start: NDArray[np.bool_] | None = None
 
     @property
     def n_epochs(self) -> int:
@@ -109,6 +112,7 @@ def observation_grid(table: EpochTable, receiver_id: str) -> ObservationGrid:
         sv_clock_bias_m=grid(rows["sv_clock_bias_m"].to_numpy(float)),
         sv_clock_drift_mps=grid(rows["sv_clock_drift_mps"].to_numpy(float)),
         row=row,
+        carrier_arc_start=grid(rows["carrier_arc_start"].to_numpy(float)) == 1.0,
     )
 
 

@@ -222,6 +222,8 @@ def _count_differenced(ctx: AnalysisContext) -> dict[bool, dict[str, int]]:
             both = np.zeros_like(ok)
             both[1:] = ok[1:] & ok[:-1] & (dt <= limit)[:, None]
             if carrier:
+                if grid.carrier_arc_start is not None:  # the receiver says the carrier is not continuous there
+                    both &= ~grid.carrier_arc_start
                 both |= grid.usable & np.isfinite(grid.rate_mps)
             out[carrier][rid] = int(np.sum(both.sum(axis=1) >= MIN_DIFFERENCED_SATELLITES))
     return out

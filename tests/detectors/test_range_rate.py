@@ -173,6 +173,27 @@ def test_a_doppler_standing_in_for_a_carrier_is_weighed_as_a_doppler(ground_raw)
     assert largest_z(fit_velocity_error(res, grid.systems)) < 5.0
 
 
+def test_a_carrier_the_receiver_says_starts_a_new_arc_gives_no_rate_into_it(ground_raw) -> None:
+    """A half-cycle slip (0.095 m on L1) passes the Doppler screen's 0.1 m and reads as a 0.095 m/s rate error
+    on one satellite, a known-station alarm on a clean station; receivers flag it (RINEX LLI, u-blox halfCyc,
+    Android ADR state): the reader's `carrier_arc_start`, which the rate test takes as a slip."""
+    grid = observation_grid(ground_raw.table, "/gps/fix")
+    ref = _truth_reference(ground_raw, grid)
+    j = 2
+    carrier = grid.carrier_m.copy()
+    carrier[100:, j] += 0.5 * grid.wavelength_m[100, j]  # half a cycle
+    unflagged = rate_residuals(replace(grid, carrier_m=carrier), ref, None)
+    assert not unflagged.slip[100, j]  # under the screen
+    flags = np.zeros(grid.carrier_m.shape, dtype=bool)
+    flags[100, j] = True
+    flagged = rate_residuals(replace(grid, carrier_m=carrier, carrier_arc_start=flags), ref, None)
+    assert flagged.slip[100, j] and flagged.from_doppler is not None and flagged.from_doppler[100, j]
+    assert not flagged.slip[101, j]  # the new arc continues
+    assert abs(flagged.y[100, j] - np.nanmedian(flagged.y[100])) < abs(
+        unflagged.y[100, j] - np.nanmedian(unflagged.y[100])
+    )
+
+
 # --- the detector on logs ---------------------------------------------------------------------------------
 
 

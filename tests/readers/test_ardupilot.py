@@ -304,7 +304,7 @@ GRXH = Fmt(161, "GRXH", "QdHbBB", "TimeUS,rcvTime,week,leapS,numMeas,recStat")
 GRXS = Fmt(162, "GRXS", "QddfBBBHBBBBB", "TimeUS,prMes,cpMes,doMes,gnss,sv,freq,lock,cno,prD,cpD,doD,trk")
 
 
-def test_grxs_carriers_the_receiver_says_are_not_continuous_are_cleared(tmp_path: Path) -> None:
+def test_grxs_carriers_the_receiver_says_are_not_continuous_are_marked(tmp_path: Path) -> None:
     """GRXS is RXM-RAWX as the autopilot logs it: its trkStat (`trk`) and lock time (`lock`) say where a
     carrier is not continuous (half-cycle unresolved, half-cycle correction toggled, lock restarted)."""
     trk = {1: [7] * 5, 2: [7, 3, 7, 7, 7], 3: [7, 7, 15, 15, 15], 4: [7] * 5}
@@ -324,7 +324,8 @@ def test_grxs_carriers_the_receiver_says_are_not_continuous_are_cleared(tmp_path
     table = read_log(write_dataflash(tmp_path / "raw.bin", [GPS_2016, GRXH, GRXS], msgs))
     obs = table.observations
     assert len(obs) == 20
-    cleared = obs[obs["carrier_phase_cycles"].isna()]
+    assert obs["carrier_phase_cycles"].notna().all()  # kept as logged
+    cleared = obs[obs["carrier_arc_start"] == 1]
     t1 = sorted(obs["t_s"].unique())
     assert sorted(zip(cleared["t_s"], cleared["sv_id"], strict=True)) == [
         (t1[1], "G02"),

@@ -155,7 +155,7 @@ def test_header_names_shifted_by_one_is_one_line_not_an_internal_error(tmp_path:
     assert main(["inspect", str(shifted)]) == 2
 
 
-def test_carriers_the_receiver_says_are_not_continuous_are_cleared() -> None:
+def test_carriers_the_receiver_says_are_not_continuous_are_marked() -> None:
     """smartLoc's u-blox rows: a carrier only with cpValid (trkStat bit 1), and none with the half-cycle
     unresolved (bit 2 clear) or across a restarted lock time; the GSDC 2023 table's phone flags ten valid
     carriers HALF_CYCLE_REPORTED without HALF_CYCLE_RESOLVED (ADR state 17)."""
@@ -166,7 +166,8 @@ def test_carriers_the_receiver_says_are_not_continuous_are_cleared() -> None:
     t = read_log(path)
     said = {s.reason.split(" (")[0]: s.count for s in t.skipped if "continuous" in s.reason}
     assert said == {"carriers across a loss of lock": 5, "carriers with an unresolved half-cycle ambiguity": 123}
-    assert int(t.observations["carrier_phase_cycles"].notna().sum()) == 149
+    assert int((t.observations["carrier_arc_start"] == 0).sum()) == 149
+    assert int(t.observations["carrier_phase_cycles"].notna().sum()) == 277  # kept as logged
     phone = read_log(real_log(f"{LIB}/gsdc2023_pixel7pro_device_gnss.csv"))
     (said_phone,) = [s for s in phone.skipped if "continuous" in s.reason]
     assert "HALF_CYCLE_REPORTED" in said_phone.reason and said_phone.count == 10

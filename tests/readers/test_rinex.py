@@ -329,11 +329,11 @@ def test_android_rinex3_mixed_constellations(pixel: EpochTable) -> None:
     first = obs[obs["t_s"] == 0].set_index("sv_id")
     assert len(first) == 19
     assert first.loc["G04", "pseudorange_m"] == 23440243.757 and first.loc["G04", "cn0_dbhz"] == 29.972
-    assert first.loc["G04", "doppler_hz"] == -3537.656
-    # the phone flags every phase (G04's 150559.526 too) LLI 2, half-cycle ambiguity possible: none is used
-    assert obs["carrier_phase_cycles"].isna().all()
+    assert first.loc["G04", "doppler_hz"] == -3537.656 and first.loc["G04", "carrier_phase_cycles"] == 150559.526
+    # the phone flags every phase LLI 2, half-cycle ambiguity possible: no carrier is taken as continuous
+    assert (obs["carrier_arc_start"].dropna() == 1).all()
     (half,) = [s for s in pixel.skipped if "half-cycle" in s.reason]
-    assert half.count == len(obs) and half.action == "repaired" and "every carrier the receiver gave" in half.reason
+    assert half.count == len(obs) and half.action == "flagged" and "every carrier the receiver gave" in half.reason
     # GLONASS G1 from the header's slot/channel table (R01 +1, R02 -4)
     assert first.loc["R01", "carrier_freq_hz"] == 1602e6 + 0.5625e6
     assert first.loc["R02", "carrier_freq_hz"] == 1602e6 - 4 * 0.5625e6
@@ -927,15 +927,16 @@ def test_carriers_the_receiver_flags_lost_lock_or_half_cycle_are_not_taken_as_co
     path = tmp_path / "flags.rnx"
     path.write_text("".join(lines))
     table = read_log(path)
-    obs = table.observations.set_index(["t_s", "sv_id"])["carrier_phase_cycles"]
-    cleared = set(obs[obs.isna()].index)
+    obs = table.observations.set_index(["t_s", "sv_id"])["carrier_arc_start"]
+    cleared = set(obs[obs == 1].index)
     power = {(4.0, sv) for sv in obs.loc[4.0].index}
     assert cleared == {(1.0, "G01"), (2.0, "E02"), (3.0, "G05")} | power
-    assert obs.loc[(2.0, "G03")] == 1.1e8 + 2  # BOC tracking: no slip
+    assert obs.loc[(2.0, "G03")] == 0  # BOC tracking: no slip
+    assert table.observations["carrier_phase_cycles"].notna().all()  # every carrier kept as logged
     said = {s.reason.split(" (")[0]: (s.count, s.action) for s in table.skipped if "continuous" in s.reason}
     assert said == {
-        "carriers across a loss of lock": (1 + 1 + 10, "repaired"),
-        "carriers with a half-cycle ambiguity or slip possible": (1, "repaired"),
+        "carriers across a loss of lock": (1 + 1 + 10, "flagged"),
+        "carriers with a half-cycle ambiguity or slip possible": (1, "flagged"),
     }
 
 
@@ -947,5 +948,5 @@ def test_rinex2_lli_digits_clear_carriers(tmp_path: Path) -> None:
     lines[g05] = lines[g05][:30] + "1" + lines[g05][31:]  # L1 is the 2nd field: LLI at column 31
     path = tmp_path / "lli.05o"
     path.write_text("".join(lines))
-    obs = read_log(path).observations.set_index(["t_s", "sv_id"])["carrier_phase_cycles"]
-    assert list(obs[obs.isna()].index) == [(10.0, "G05")]
+    obs = read_log(path).observations.set_index(["t_s", "sv_id"])["carrier_arc_start"]
+    assert list(obs[obs == 1].index) == [(10.0, "G05")]

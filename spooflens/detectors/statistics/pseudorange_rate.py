@@ -140,6 +140,11 @@ def rate_residuals(
         big = np.abs(jump_c) > max(opts.slip_sigmas * cmc_scale, opts.min_step_m)
         delay_step = off_doppler & code_follows & big
         slip = (off_doppler & ~(code_follows & big)) | (~has_doppler & np.isfinite(d_cmc) & ~code_follows)
+        if grid.carrier_arc_start is not None:
+            # the receiver's own word (a half-cycle slip, 0.095 m on L1, passes the Doppler screen): no rate
+            # across it; a delay step stays one (code and carrier jumping together is the signal's delay, and a
+            # takeover also makes a receiver lose lock)
+            slip |= grid.carrier_arc_start & np.isfinite(d_carrier) & ~delay_step
         intact = np.isfinite(d_carrier) & ~slip
         measured = np.where(intact, d_carrier, doppler_change) / dt[:, None]
         from_doppler = ~intact & has_doppler
