@@ -112,7 +112,10 @@ def observation_grid(table: EpochTable, receiver_id: str) -> ObservationGrid:
         sv_clock_bias_m=grid(rows["sv_clock_bias_m"].to_numpy(float)),
         sv_clock_drift_mps=grid(rows["sv_clock_drift_mps"].to_numpy(float)),
         row=row,
-        carrier_arc_start=grid(rows["carrier_arc_start"].to_numpy(float)) == 1.0,
+        # a frame built without the column (older tables, tests) says nothing of its carriers' arcs
+        carrier_arc_start=grid(rows["carrier_arc_start"].to_numpy(float)) == 1.0
+        if "carrier_arc_start" in rows
+        else None,
     )
 
 
