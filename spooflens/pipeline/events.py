@@ -95,7 +95,7 @@ def _decide(incident: Incident, weighed: Weighed, results: Sequence[DetectorResu
     jamming = [e for e in weighed.explanations if e.kind == Kind.JAMMING]
     detector = Evidence.INTERFERENCE in incident.evidence
     ruled_out = tuple(f"ruled out {r}" for r in weighed.ruled_out)
-    marks = tuple(f"also a spoofer's mark: {m}" for m in weighed.spoofer_marks)
+    marks = tuple(f"also a spoofer's mark: {m.text}" for m in weighed.spoofer_marks)
     if incident.kept_apart:
         return _off_baseline(incident, results, ruled_out)
     if jamming or detector or weighed.interference:

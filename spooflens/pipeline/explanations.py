@@ -1343,10 +1343,14 @@ class Weighed:
     ruled_out: tuple[str, ...]  # causes looked at and refused, with why
     # over the whole incident, per receiver: what the receiver says drowned its signals, and a spoofer's marks
     interference: tuple[str, ...] = ()
-    spoofer_marks: tuple[str, ...] = ()
-    strong_marks: tuple[SpooferMark, ...] = ()  # those a headline names (`weighed_marks`)
+    spoofer_marks: tuple[SpooferMark, ...] = ()
     # intervals accounted for from their start up to a time only, not beyond
     partly_explained: tuple[tuple[Span, float], ...] = ()
+
+    @property
+    def strong_marks(self) -> tuple[SpooferMark, ...]:
+        """The marks a headline names (`weighed_marks`)."""
+        return tuple(m for m in self.spoofer_marks if m.strong)
 
 
 def explain(
@@ -1392,16 +1396,13 @@ def explain(
     held_causes = {e.cause for e in explanations}
     ruled_out = tuple(text for cause, text in refused.items() if cause not in held_causes)
     interference: list[str] = []
-    marks: list[str] = []
-    strong: list[SpooferMark] = []
+    marks: list[SpooferMark] = []
     for rid in incident.receivers or tuple(table.receivers()):
         named = (lambda x, r=rid: f"{r}: {x}") if len(table.receivers()) > 1 else (lambda x: x)
         w = scene.incident_window(rid)
         interference += [named(x) for x in receiver_interference_signs(w, scene.opts.interference_z)]
         if w.fixes:
-            found = weighed_marks(w, scene.opts)
-            marks += [named(m.text) for m in found]
-            strong += [m._replace(text=named(m.text)) for m in found if m.strong]
+            marks += [m._replace(text=named(m.text)) for m in weighed_marks(w, scene.opts)]
     # the coasts' departure intervals (no alarm behind them): GNSS agreed with the coasted INS until its
     # departure. Where the jammed receiver's noise accounts for the inertial alarms, a departure that began
     # under the jamming is that noise (the coast weighs GNSS with its clean noise), and the interval counts
@@ -1429,7 +1430,7 @@ def explain(
                 reach[sp] = sp[2]
     spans = tuple(sorted(k for k, r in reach.items() if r >= k[2]))
     partly = tuple(sorted((k, r) for k, r in reach.items() if k[1] < r < k[2]))
-    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), tuple(strong), partly)
+    return Weighed(explanations, spans, ruled_out, tuple(interference), tuple(marks), partly)
 
 
 def scene_of(
