@@ -58,7 +58,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from readers import NothingToJudgeError, ReaderFormat
-from readers.carrier_arcs import arc_starts, ublox_breaks
+from readers.carrier_arcs import CP_VALID, PR_VALID, arc_starts, ublox_breaks
 from readers.dataflash import Columns, DataFlash, is_dataflash
 from readers.dataflash_text import TextDataFlash, is_dataflash_text, open_any_dataflash
 from readers.raw_states import add_satellite_states, nav_stream, navigation_for
@@ -467,7 +467,7 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
     # GRXS is the receiver's RXM-RAWX relayed: u-blox (gnssId, svId) pairs
     sv_id, known = sv_ids(sat["gnss"].astype(np.int64), sat["sv"].astype(np.int64))
     system = np.where(known, np.char.ljust(sv_id, 1).astype("U1"), "")
-    pr_valid = (sat["trk"].astype(np.int64) & 1) == 1
+    pr_valid = (sat["trk"].astype(np.int64) & PR_VALID) != 0
     keep = ~orphan & pr_valid & known & np.isfinite(sat["prMes"]) & (sat["prMes"] > 0)
     if (~pr_valid & ~orphan).any():
         skipped.append(Skipped("GRXS", "pseudorange not valid (trkStat bit 0 clear)", int((~pr_valid & ~orphan).sum())))
@@ -481,7 +481,7 @@ def grxs_rows(log: DataFlash, offset_ns: int, reference: str, skipped: list[Skip
     glo = system == "R"
     freq[glo] = 1602.0e6 + (sat["freq"].astype(float)[glo] - 7.0) * 0.5625e6
     doppler = sat["doMes"].astype(float)
-    cp_valid = (sat["trk"].astype(np.int64) & 2) == 2
+    cp_valid = (sat["trk"].astype(np.int64) & CP_VALID) != 0
     carrier = np.where(cp_valid, sat["cpMes"].astype(float), np.nan)
     arc_start = _carrier_arc_starts(sv_id, t_gps_ns, sat, carrier, keep, skipped)
     return pd.DataFrame(

@@ -15,6 +15,7 @@ import numpy as np
 from pyubx2 import UBXReader
 from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
+from readers.carrier_arcs import CP_VALID, PR_VALID
 from readers.ubx.frames import UbxFrame, fletcher
 from spooflens.gnss.ephemeris import C_MPS
 from spooflens.schema import FixType, SpoofingFlag
@@ -459,14 +460,14 @@ def rawx_rows(epoch: RawxEpoch) -> dict[str, np.ndarray]:
     glo = g == 6
     freq[glo] = 1602.0e6 + (m["freqId"][idx][glo].astype(float) - 7) * 0.5625e6
     trk = m["trkStat"][idx]
-    pr = np.where(trk & 1, m["prMes"][idx], np.nan)
+    pr = np.where(trk & PR_VALID, m["prMes"][idx], np.nan)
     doppler = m["doMes"][idx].astype(np.float64)
     return {
         "sv_id": sv[idx],
         "pseudorange_m": pr,
         "pseudorange_rate_mps": -doppler * C_MPS / freq,
         "doppler_hz": doppler,
-        "carrier_phase_cycles": np.where(trk & 2, m["cpMes"][idx], np.nan),
+        "carrier_phase_cycles": np.where(trk & CP_VALID, m["cpMes"][idx], np.nan),
         "carrier_freq_hz": freq,
         "cn0_dbhz": m["cno"][idx].astype(np.float64),
         "trk_stat": trk,
